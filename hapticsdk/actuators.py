@@ -1,0 +1,279 @@
+"""Actuators and haptic devices: the output side of the SDK.
+
+:class:`Actuator` is the one interface every output plugin implements (like
+python-can's ``BusABC``). Public methods validate and then call the backend's
+``_open``/``_command``/``_stop``/``_close``; every command passes through the core
+safety layer (:mod:`hapticsdk.safety`) first, so every plugin gets the same limits for
+free. :class:`HapticDevice` is an actuator that also senses (a force arm reports its
+stylus position and velocity).
+
+Actuator plugins are published under the entry-point group ``hapticsdk.actuators`` and
+created by name with :func:`create_actuator` (``"omni-virtual"``, ``"piezo-serial"``).
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import time
+import weakref
+from abc import ABC, abstractmethod
+from dataclasses import asdict, dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .dimensions import ChannelCommand
+from .errors import DeviceError, HapticSDKError, ValidationError
+
+log = logging.getLogger(__name__)
+
+#: every actuator currently open in this process; stopped at interpreter exit
+_OPEN_ACTUATORS: "weakref.WeakSet[Actuator]" = weakref.WeakSet()
+
+
+def stop_all() -> list[str]:
+    """Put every open actuator of this process in its safe state; return their labels."""
+    labels = []
+    for act in list(_OPEN_ACTUATORS):
+        act.stop()
+        labels.append(act.label)
+    return labels
+
+
+atexit.register(stop_all)
+
+#: Channel kinds an actuator can serve.
+CHANNELS = ("force", "vibration", "thermal", "friction", "other")
+
+
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """Declared limits of an actuator (``None``: no such limit / not applicable).
+
+    Attributes:
+        max_force_n: largest force magnitude (N).
+        max_stiffness_n_per_mm: stiffest spring it renders (N/mm).
+        frequency_range_hz: (lowest, highest) drive frequency (Hz).
+        max_amplitude: largest drive amplitude, in ``amplitude_unit``.
+        amplitude_unit: ``"V"`` (piezo), ``"1"`` (normalised drive), ...
+        max_velocity_mm_s: speed above which force output is not trusted (mm/s).
+        max_force_rate_n_per_tick: largest force change per servo tick (N).
+    """
+
+    max_force_n: float | None = None
+    max_stiffness_n_per_mm: float | None = None
+    frequency_range_hz: tuple[float, float] | None = None
+    max_amplitude: float | None = None
+    amplitude_unit: str = ""
+    max_velocity_mm_s: float | None = None
+    max_force_rate_n_per_tick: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+
+@dataclass
+class DeviceState:
+    """Sensed state of a haptic device.
+
+    Attributes:
+        t: device time (s).
+        position_mm: probe position (3,), (mm); y (index 1) is the surface normal, the
+            material surface at y = 0 and inside it at y < 0.
+        velocity_mm_s: probe velocity (3,), (mm/s).
+        force_n: force currently applied by the device (3,), (N).
+        buttons: button bit mask.
+    """
+
+    t: float
+    position_mm: np.ndarray
+    velocity_mm_s: np.ndarray
+    force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    buttons: int = 0
+
+    @property
+    def penetration_mm(self) -> float:
+        """Depth below the surface y = 0 (mm); negative outside."""
+        return float(-self.position_mm[1])
+
+
+class Actuator(ABC):
+    """Base class of every actuator plugin.
+
+    Class attributes a backend sets: ``name`` (its entry-point name), ``channel`` (one of
+    :data:`CHANNELS`), ``limits`` (:class:`ActuatorLimits`), ``simulated``.
+
+    Public API (do not override): :meth:`open`, :meth:`close`, :meth:`command`,
+    :meth:`stop`, context manager. Backend API: ``_open``, ``_command``, ``_stop``,
+    ``_close`` (all but ``_command`` and ``_stop`` optional).
+    """
+
+    name: ClassVar[str] = ""
+    channel: ClassVar[str] = "other"
+    limits: ActuatorLimits = ActuatorLimits()
+    simulated: ClassVar[bool] = False
+
+    def __init__(self, *, label: str | None = None, safety: Any = None, **options: Any) -> None:
+        if options:
+            raise ValidationError(f"unknown option(s) {sorted(options)} for actuator {self.name!r}",
+                                  field="options")
+        self.label = label or self.name or type(self).__name__
+        self._is_open = False
+        self.fault: BaseException | None = None
+        self.last_command: ChannelCommand | None = None
+        if safety is None:
+            from .safety import SafetyLayer
+            safety = SafetyLayer(self.limits)
+        self.safety = safety
+
+    # -- lifecycle ---------------------------------------------------------
+    @property
+    def is_open(self) -> bool:
+        return self._is_open
+
+    def open(self) -> "Actuator":
+        """Open the device (idempotent). Raises :class:`DeviceError` naming what was tried."""
+        if self._is_open:
+            return self
+        try:
+            self._open()
+        except HapticSDKError:
+            raise
+        except Exception as exc:
+            raise DeviceError(f"open failed: {type(exc).__name__}: {exc}", device=self.label) from exc
+        self._is_open = True
+        self.fault = None
+        self.safety.reset(time.monotonic())
+        _OPEN_ACTUATORS.add(self)
+        return self
+
+    def close(self) -> None:
+        """Stop (safe state) and release the device. Never raises."""
+        if not self._is_open:
+            return
+        self.stop()
+        try:
+            self._close()
+        except Exception as exc:  # closing must not mask the caller's error
+            log.warning("%s: close failed: %s", self.label, exc)
+        self._is_open = False
+        _OPEN_ACTUATORS.discard(self)
+
+    def __enter__(self) -> "Actuator":
+        return self.open()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- per tick ----------------------------------------------------------
+    def command(self, cmd: ChannelCommand, *, now: float | None = None) -> ChannelCommand:
+        """Send one tick's command. It is validated and passed through the safety layer
+        (clamped to the declared limits, ramped, counted); the command actually sent is
+        returned. A non-finite value raises :class:`ValidationError`; a device that fails
+        is put in its safe state and the error re-raised as :class:`DeviceError`."""
+        if not self._is_open:
+            raise DeviceError("command on a closed actuator; call open() first", device=self.label)
+        if self.fault is not None:
+            raise DeviceError(f"actuator is faulted ({self.fault}); stop() and open() again",
+                              device=self.label)
+        for attr in ("force_n", "frequency_hz", "amplitude"):
+            v = getattr(cmd, attr)
+            if v is not None and not np.isfinite(v):
+                raise ValidationError(f"{attr} is NaN or infinite", field=f"{self.label}.{attr}")
+        safe = self.safety.filter(cmd, time.monotonic() if now is None else now)
+        try:
+            self._command(safe)
+        except Exception as exc:
+            self.fault = exc
+            self.stop()
+            if isinstance(exc, DeviceError):
+                raise
+            raise DeviceError(f"command failed: {type(exc).__name__}: {exc}", device=self.label) from exc
+        self.last_command = safe
+        return safe
+
+    def stop(self) -> bool:
+        """Put the hardware in its safe state (zero force, vibration off). Never raises;
+        returns False when the backend's stop failed (the failure is logged and kept in
+        :attr:`fault`)."""
+        self.safety.on_stop()
+        try:
+            self._stop()
+            return True
+        except Exception as exc:
+            log.error("%s: stop failed: %s", self.label, exc)
+            self.fault = self.fault or exc
+            return False
+
+    # -- discovery (used by `hapticsdk doctor`) -----------------------------
+    @classmethod
+    def check_available(cls) -> tuple[bool, str]:
+        """Whether this backend can run here (libraries present), and why not.
+        Backends needing a library or driver override it; it must not open devices."""
+        return True, "no external library needed"
+
+    @classmethod
+    def discover(cls) -> list[dict[str, Any]]:
+        """Devices of this backend found on this machine (name, serial, port ...)."""
+        return []
+
+    # -- backend API -------------------------------------------------------
+    def _open(self) -> None:
+        """Acquire the device."""
+
+    def _close(self) -> None:
+        """Release the device."""
+
+    @abstractmethod
+    def _command(self, cmd: ChannelCommand) -> None:
+        """Apply an already validated and limited command."""
+
+    @abstractmethod
+    def _stop(self) -> None:
+        """Zero force / vibration off, as directly as the hardware allows."""
+
+    # -- reporting ---------------------------------------------------------
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "label": self.label, "channel": self.channel,
+                "simulated": self.simulated, "limits": self.limits.to_dict(),
+                "safety": self.safety.report()}
+
+
+class HapticDevice(Actuator):
+    """An actuator that also senses the user's probe (e.g. a force-feedback arm).
+
+    Backends implement ``_read_state``; simulated backends also implement ``_step`` to
+    advance their physics by ``dt`` seconds under the last commanded force.
+    """
+
+    channel: ClassVar[str] = "force"
+
+    def read_state(self) -> DeviceState:
+        """Current state; non-finite readings raise :class:`DeviceError` naming the device."""
+        if not self._is_open:
+            raise DeviceError("read on a closed device; call open() first", device=self.label)
+        st = self._read_state()
+        if not (np.isfinite(st.position_mm).all() and np.isfinite(st.velocity_mm_s).all()):
+            raise DeviceError("device reported a non-finite position or velocity", device=self.label)
+        return st
+
+    @abstractmethod
+    def _read_state(self) -> DeviceState:
+        """Backend read."""
+
+    def step(self, dt: float) -> None:
+        """Advance simulated physics by ``dt`` (s); real devices move on their own."""
+        if dt <= 0 or not np.isfinite(dt):
+            raise ValidationError(f"dt must be a positive number of seconds, got {dt!r}", field="dt")
+        self._step(dt)
+
+    def _step(self, dt: float) -> None:
+        """Simulated devices integrate here; real ones ignore it."""
+
+
+def create_actuator(name: str, **options: Any) -> Actuator:
+    """Instantiate the actuator plugin registered as ``name`` (lazy import)."""
+    from .plugins import registry
+    cls = registry("actuator").load(name)
+    return cls(**options)

@@ -1,0 +1,91 @@
+"""Voice-coil perceived-stiffness calibration, formula (7) of the reference paper.
+
+``GS_coil(f) = a f^2 + b f + c`` (N/mm) over ``f_min <= f <= f_max`` (Hz): the extra
+stiffness a person perceives when the voice coil vibrates at ``f`` while pressing.
+The paper's fit (a, b, c) = (0.00012, 0.01, -0.3045) over 30..120 Hz is the default.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibrationError
+
+PAPER_COEFFICIENTS = (0.00012, 0.01, -0.3045)
+PAPER_RANGE_HZ = (30.0, 120.0)
+
+
+@dataclass(frozen=True)
+class VoiceCoilCalibration:
+    """Quadratic map drive frequency (Hz) -> perceived added stiffness (N/mm).
+
+    Attributes:
+        coefficients: (a, b, c) of ``a f^2 + b f + c``.
+        frequency_range_hz: (f_min, f_max) where the fit holds.
+        source: where the coefficients come from.
+        confidence_intervals: optional 95 % intervals per coefficient.
+    """
+
+    coefficients: tuple[float, float, float] = PAPER_COEFFICIENTS
+    frequency_range_hz: tuple[float, float] = PAPER_RANGE_HZ
+    source: str = "paper formula (7)"
+    confidence_intervals: tuple[tuple[float, float], ...] | None = None
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        a, b, c = (float(v) for v in self.coefficients)
+        lo, hi = (float(v) for v in self.frequency_range_hz)
+        if not all(np.isfinite([a, b, c, lo, hi])) or not 0 < lo < hi:
+            raise CalibrationError(f"invalid voice-coil calibration {self.coefficients} on {self.frequency_range_hz}")
+        f = np.linspace(lo, hi, 256)
+        if np.any(np.diff(self.gs_coil(f)) <= 0):
+            raise CalibrationError("voice-coil calibration must increase over its frequency range "
+                                   f"(coefficients {self.coefficients}, range {self.frequency_range_hz} Hz)")
+
+    @classmethod
+    def paper(cls) -> "VoiceCoilCalibration":
+        return cls()
+
+    def gs_coil(self, f_hz: Any) -> np.ndarray:
+        """Perceived added stiffness (N/mm) at drive frequency ``f_hz``."""
+        a, b, c = self.coefficients
+        f = np.asarray(f_hz, float)
+        return (a * f + b) * f + c
+
+    @property
+    def gs_range(self) -> tuple[float, float]:
+        """(smallest, largest) added stiffness reachable (N/mm)."""
+        lo, hi = self.frequency_range_hz
+        return float(self.gs_coil(lo)), float(self.gs_coil(hi))
+
+    def frequency_for(self, gs_n_per_mm: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Invert formula (7): the drive frequency (Hz) giving added stiffness ``gs``.
+
+        Returns ``(f_hz, residual_n_per_mm)``; outside the reachable stiffness range the
+        frequency is clamped to the range end and ``residual = gs - GS_coil(f)`` says
+        by how much the request is missed (0 inside the range).
+        """
+        a, b, c = self.coefficients
+        lo, hi = self.frequency_range_hz
+        g = np.asarray(gs_n_per_mm, float)
+        if a != 0:
+            disc = np.maximum(b * b - 4 * a * (c - g), 0.0)
+            # numerically stable root of a f^2 + b f + (c - g) = 0 on the increasing branch
+            q = -0.5 * (b + np.sign(b if b != 0 else 1.0) * np.sqrt(disc))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r1 = q / a
+                r2 = np.where(q != 0, (c - g) / np.where(q != 0, q, 1.0), np.inf)
+            f = np.where((r1 >= lo - 1e-9) & (r1 <= hi + 1e-9), r1, r2)
+        else:
+            f = (g - c) / b
+        f = np.clip(np.nan_to_num(f, nan=lo, posinf=hi, neginf=lo), lo, hi)
+        return f, g - self.gs_coil(f)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": "voicecoil", "coefficients": list(self.coefficients),
+                "frequency_range_hz": list(self.frequency_range_hz), "source": self.source,
+                "confidence_intervals": [list(ci) for ci in self.confidence_intervals]
+                if self.confidence_intervals else None}

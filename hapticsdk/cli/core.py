@@ -1,0 +1,168 @@
+"""Core commands: ``plugins``, ``materials``, ``solve``, ``render``."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from . import emit, intensity, positive_float
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plugins", help="list installed plugins (without importing them)")
+    p.add_argument("--kind", choices=["dimension", "actuator", "solver", "model", "importance"],
+                   action="append", help="only these kinds (repeatable)")
+    p.add_argument("--check", action="store_true", help="import each plugin and report import errors")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_plugins)
+
+    p = sub.add_parser("materials", help="list the named material library")
+    p.add_argument("--library", help="a materials JSON file instead of the shipped library")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_materials)
+
+    p = sub.add_parser("solve", help="solve stimulus features for perceptual targets")
+    p.add_argument("--hardness", type=intensity, help="target hardness 0..1")
+    p.add_argument("--roughness", type=intensity, help="target roughness 0..1")
+    p.add_argument("--target", action="append", default=[], metavar="DIM=VALUE",
+                   help="target of any other dimension (repeatable)")
+    p.add_argument("--method", default="ga", help="solver name (see `hapticsdk plugins --kind solver`)")
+    p.add_argument("--model", default=None, help="model name or .onnx path (default: the dimensions' model)")
+    p.add_argument("--penalty", default="paper", choices=["paper", "normalised"])
+    p.add_argument("--tolerance", type=positive_float, default=0.01)
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_solve)
+
+    p = sub.add_parser("render", help="render a named material or a scene on (simulated) devices")
+    p.add_argument("material", nargs="?", help="material name (see `hapticsdk materials`)")
+    p.add_argument("--scene", help="scene JSON file instead of a material")
+    p.add_argument("--hardness", type=intensity, help="render targets instead of a named material")
+    p.add_argument("--roughness", type=intensity)
+    p.add_argument("--seconds", type=positive_float, default=3.0, help="render duration (s)")
+    p.add_argument("--seed", type=int, default=0, help="solver seed")
+    p.add_argument("--plot", metavar="PNG", help="save a figure of the render (needs matplotlib)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_render)
+
+
+def cmd_plugins(args: argparse.Namespace) -> int:
+    from ..plugins import list_plugins
+
+    rows = list_plugins(args.kind, check=args.check)
+    if args.json:
+        emit(rows, True)
+        return 0
+    if not rows:
+        print("no plugins installed")
+        return 0
+    width = max(len(r["name"]) for r in rows)
+    for r in rows:
+        err = f"  BROKEN: {r['error']}" if r.get("error") else ""
+        print(f"{r['kind']:<10} {r['name']:<{width}}  {r['distribution']} {r['version']}{err}")
+    return 0
+
+
+def cmd_materials(args: argparse.Namespace) -> int:
+    from ..materials import load_library
+
+    lib = load_library(args.library)
+    rows = [m.to_dict() for m in lib]
+    if args.json:
+        emit({"generated": lib.generated, "source": lib.source, "materials": rows}, True)
+        return 0
+    note = " (GENERATED data: see docs/perception-models.md)" if lib.generated else ""
+    print(f"{len(rows)} materials{note}")
+    for m in lib:
+        its = ", ".join(f"{k} {v:.3f}" for k, v in m.intensities.items())
+        print(f"{m.name:<5} {m.label:<22} {its}")
+    return 0
+
+
+def _targets(args: argparse.Namespace) -> dict[str, float]:
+    from ..dimensions import check_intensity
+    from ..errors import ValidationError
+
+    targets: dict[str, float] = {}
+    if getattr(args, "hardness", None) is not None:
+        targets["hardness"] = args.hardness
+    if getattr(args, "roughness", None) is not None:
+        targets["roughness"] = args.roughness
+    for item in getattr(args, "target", []) or []:
+        if "=" not in item:
+            raise ValidationError(f"expected DIM=VALUE, got {item!r}", field="target")
+        k, v = item.split("=", 1)
+        targets[k.strip()] = check_intensity(v, f"targets.{k.strip()}")
+    return targets
+
+
+def cmd_solve(args: argparse.Namespace) -> int:
+    from ..errors import ValidationError
+    from ..problems import solve
+
+    targets = _targets(args)
+    if not targets:
+        raise ValidationError("give at least one target: --hardness, --roughness or --target DIM=V",
+                              field="targets")
+    res = solve(targets, method=args.method, seed=args.seed, model=args.model,
+                penalty=args.penalty, tolerance=args.tolerance)
+    out = res.to_json()
+    if args.json:
+        emit(out, True)
+    else:
+        print(format_solve(out))
+    return 0 if res.success else 1
+
+
+def format_solve(out: dict[str, Any]) -> str:
+    feats = ", ".join(f"{k}={v:.4g}" for k, v in out["x"].items())
+    its = ", ".join(f"{k} {v:.4f} (target {out['targets'].get(k, float('nan')):.4f})"
+                    for k, v in out["intensities"].items() if k in out["targets"])
+    return (f"solved by {out['method']}: {'success' if out['success'] else 'NOT REACHED'}\n"
+            f"  features:    {feats}\n  intensities: {its}\n"
+            f"  error {out['error']:.4g} (sum |target - predicted|), constraint violation "
+            f"{out['constraint_violation']:.3g}, {out['nfev']} evaluations in {out['time_s'] * 1e3:.1f} ms\n"
+            f"  {out['message']}")
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from ..errors import ValidationError
+    from ..plan import compile_scene
+    from ..render import render_plan
+    from ..scene import Scene, load_scene
+
+    targets = _targets(args)
+    given = [bool(args.material), bool(args.scene), bool(targets)]
+    if sum(given) != 1:
+        raise ValidationError("give exactly one of MATERIAL, --scene FILE, or --hardness/--roughness",
+                              field="render")
+    if args.scene:
+        scene = load_scene(args.scene)
+    else:
+        scene = Scene.for_material(args.material if args.material else targets, seed=args.seed)
+    plan = compile_scene(scene)
+    report = render_plan(plan, seconds=args.seconds)
+    out = report.to_dict()
+    if args.plot:
+        from ..plotting import plot_render
+        plot_render(report, args.plot)
+        out["plot"] = args.plot
+    if args.json:
+        emit(out, True)
+    else:
+        print(format_render(out))
+    return 0
+
+
+def format_render(out: dict[str, Any]) -> str:
+    lines = []
+    for mat in out.get("materials", [out]):
+        lines.append(f"material {mat['material']}: actuators {', '.join(mat['actuators'])}")
+        if mat.get("solve"):
+            lines.append("  " + format_solve(mat["solve"]).replace("\n", "\n  "))
+    t = out["tick"]
+    lines.append(f"servo loop: {t['ticks']} ticks, compute median {t['median_us']:.1f} us, "
+                 f"p99 {t['p99_us']:.1f} us, overruns {t['overruns']}")
+    if out.get("plot"):
+        lines.append(f"figure saved to {out['plot']}")
+    return "\n".join(lines)

@@ -1,0 +1,167 @@
+"""Perception dimensions: perceptual axes with features, constraints and renderers.
+
+A :class:`PerceptionDimension` (hardness, roughness, ...) is what a person rates on a
+0..1 intensity scale. It contributes the stimulus features that drive it, the physical
+constraints those features must meet (as vectorised penalties), and a renderer that
+turns solved features into per-tick actuator commands. Dimensions are published by
+plugins (entry-point group ``hapticsdk.dimensions``); the core knows none of them.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import ClassVar, Mapping
+
+import numpy as np
+
+from .errors import ValidationError
+from .features import Feature, FeatureSpace
+
+#: Penalty forms a constraint can report. ``"paper"`` is formula (6) of the reference
+#: paper (squared physical units); ``"normalised"`` is the relative violation
+#: (dimensionless, 0 when met), comparable across constraints.
+PENALTY_FORMS = ("paper", "normalised")
+
+
+class Constraint(ABC):
+    """A physical constraint on features, evaluated on whole populations at once.
+
+    Subclasses set ``name`` and ``features`` (the feature names they read) and
+    implement :meth:`_bound_and_value`, returning the lower bound the constrained
+    quantity must reach and the quantity itself, both ``(n,)`` arrays. The base turns
+    them into both penalty forms.
+    """
+
+    name: ClassVar[str] = "constraint"
+    features: ClassVar[tuple[str, ...]] = ()
+
+    @abstractmethod
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``(bound, value)``; the constraint is ``value >= bound``."""
+
+    def penalty(self, cols: Mapping[str, np.ndarray], form: str = "paper") -> np.ndarray:
+        """Penalty per row, 0 where the constraint holds.
+
+        ``paper``: ``bound**2 - value**2`` where ``value < bound`` (formula (6)).
+        ``normalised``: ``(bound - value) / |bound|`` where ``value < bound``.
+        """
+        if form not in PENALTY_FORMS:
+            raise ValidationError(f"unknown penalty form {form!r}; valid: {list(PENALTY_FORMS)}",
+                                  field="penalty")
+        bound, value = self._bound_and_value(cols)
+        short = value < bound
+        if form == "paper":
+            return np.where(short, bound ** 2 - value ** 2, 0.0)
+        scale = np.where(np.abs(bound) > 0, np.abs(bound), 1.0)
+        return np.where(short, (bound - value) / scale, 0.0)
+
+    def violation(self, cols: Mapping[str, np.ndarray]) -> np.ndarray:
+        """Relative violation per row (the ``normalised`` penalty), 0 when met."""
+        return self.penalty(cols, "normalised")
+
+    def describe(self) -> dict:
+        return {"name": self.name, "features": list(self.features), "doc": (self.__doc__ or "").strip().splitlines()[0]}
+
+
+@dataclass
+class TickInput:
+    """What a renderer sees on one servo tick.
+
+    Attributes:
+        t: time since render start (s).
+        dt: measured time since the previous tick (s).
+        penetration_mm: depth of the probe into the material along the normal (mm), >= 0
+            in contact, <= 0 outside.
+        velocity_mm_s: probe velocity, shape (3,), (mm/s); index 0 is the lateral
+            sliding direction x, index 1 the normal y.
+        in_contact: penetration > 0.
+    """
+
+    t: float
+    dt: float
+    penetration_mm: float
+    velocity_mm_s: np.ndarray
+    in_contact: bool
+
+
+@dataclass
+class ChannelCommand:
+    """One command for one actuator role on one tick.
+
+    ``force_n`` for force channels (normal force, N, pushing the probe out);
+    ``frequency_hz`` and ``amplitude`` for vibration channels (amplitude in the
+    actuator's own unit: V for a piezo, 0..1 for a voice coil).
+    """
+
+    role: str
+    force_n: float | None = None
+    frequency_hz: float | None = None
+    amplitude: float | None = None
+
+
+class DimensionRenderer(ABC):
+    """Computes commands for one dimension of one material, per tick.
+
+    Created by :meth:`PerceptionDimension.renderer` with the solved features; must be
+    cheap per tick (no allocation-heavy work, no imports) and must return finite values.
+    """
+
+    #: roles this renderer commands, e.g. ("force", "coil"); mapped to actuators by the scene.
+    roles: tuple[str, ...] = ()
+
+    @abstractmethod
+    def tick(self, inp: TickInput) -> list[ChannelCommand]:
+        """Commands for this tick."""
+
+    def describe(self) -> dict:
+        """Parameters the renderer derived from the features (for reports)."""
+        return {}
+
+
+class PerceptionDimension(ABC):
+    """A perceptual axis with an intensity scale of 0..1.
+
+    Subclasses set ``name``, ``description``, ``features`` (the features it
+    contributes, with default bounds) and ``default_actuators`` (role -> actuator
+    plugin name), and implement :meth:`constraints` and :meth:`renderer`.
+    """
+
+    name: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    features: ClassVar[tuple[Feature, ...]] = ()
+    default_actuators: ClassVar[dict[str, str]] = {}
+    #: Features a material of this dimension needs to be rendered (subset of ``features``).
+    render_features: ClassVar[tuple[str, ...]] = ()
+    #: Name (group ``hapticsdk.models``) of the perception model that covers this dimension
+    #: when a scene names none; dimensions sharing a model are solved with it together.
+    default_model: ClassVar[str] = "default"
+
+    def feature_space(self) -> FeatureSpace:
+        return FeatureSpace(tuple(self.features))
+
+    def constraints(self, **context: float) -> list[Constraint]:
+        """Physical constraints (default: none). ``context`` carries data-set facts (e.g. ``df_hz``)."""
+        return []
+
+    @abstractmethod
+    def renderer(self, features: Mapping[str, float], **options) -> DimensionRenderer:
+        """A renderer for a material with these solved features (physical units)."""
+
+    def describe(self) -> dict:
+        return {"name": self.name, "description": self.description,
+                "features": [f.to_dict() for f in self.features],
+                "default_actuators": dict(self.default_actuators)}
+
+
+def check_intensity(value: object, field: str) -> float:
+    """Return ``value`` as a float in [0, 1] or raise :class:`ValidationError` naming ``field``."""
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValidationError(f"intensity must be a number, got {value!r}", field=field) from None
+    if not np.isfinite(v):
+        raise ValidationError("intensity is NaN or infinite", field=field)
+    if not 0.0 <= v <= 1.0:
+        raise ValidationError(f"intensity {v:g} outside 0..1", field=field)
+    return v

@@ -1,0 +1,76 @@
+"""Error hierarchy of hapticsdk.
+
+Every error the SDK raises on purpose derives from :class:`HapticSDKError`, so an
+application can catch one class. Subclasses also derive from the matching builtin
+(``ValueError``, ``LookupError``, ``RuntimeError``) where that helps callers that
+already catch those.
+"""
+
+from __future__ import annotations
+
+
+class HapticSDKError(Exception):
+    """Base class of every error raised by hapticsdk and its plugins."""
+
+
+class ValidationError(HapticSDKError, ValueError):
+    """Bad input: a value out of range, NaN, a wrong shape, a malformed file.
+
+    ``field`` names the offending field (``"targets.hardness"``, ``"scene.objects[0]"``).
+    """
+
+    def __init__(self, message: str, *, field: str | None = None) -> None:
+        self.field = field
+        super().__init__(f"{field}: {message}" if field else message)
+
+
+class PluginError(HapticSDKError, LookupError):
+    """A plugin could not be found, imported or used.
+
+    ``plugin`` names the plugin (entry point name), ``kind`` its kind.
+    """
+
+    def __init__(self, message: str, *, plugin: str | None = None, kind: str | None = None) -> None:
+        self.plugin = plugin
+        self.kind = kind
+        super().__init__(message)
+
+
+class UnknownPluginError(PluginError):
+    """No installed plugin of that kind has that name; the message lists the valid ones."""
+
+
+class ModelError(HapticSDKError):
+    """A perception model is missing, malformed or inconsistent with a feature space."""
+
+
+class SolverError(HapticSDKError):
+    """A solver failed to run (not: failed to reach a target, which is ``success=False``)."""
+
+
+class DeviceError(HapticSDKError, RuntimeError):
+    """A device or actuator failed: init, transport, fault. ``device`` names it."""
+
+    def __init__(self, message: str, *, device: str | None = None) -> None:
+        self.device = device
+        super().__init__(f"[{device}] {message}" if device else message)
+
+
+class DeviceNotFoundError(DeviceError):
+    """A library, port or device was not found. The message says what was tried."""
+
+
+class TransportError(DeviceError):
+    """A bus or link (serial, USB, I2C) failed: timeout, NAK, corrupted frame."""
+
+
+class SafetyError(DeviceError):
+    """A safety rule stopped the output (fault latched, limit exceeded on start)."""
+
+
+class CalibrationError(HapticSDKError, ValueError):
+    """A calibration file or fit is invalid."""
+
+
+class RecordingError(ValidationError):
+    """A recording (trial data) is broken; the message names file/trial and field."""

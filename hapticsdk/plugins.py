@@ -1,0 +1,280 @@
+"""Plugin discovery: lazy entry-point tables and a pluggy manager.
+
+Two mechanisms, as in python-can and pytest:
+
+* **Tables** (:class:`Registry`): one object is chosen by name (``actuator="omni-virtual"``,
+  ``method="ga"``). The table is read from entry-point *metadata* only; the module behind
+  a name is imported the first time that name is asked for.
+* **Hooks** (:class:`PluginManager`): what many plugins answer at once (materials they
+  contribute, render-loop events). Hook modules come from the ``hapticsdk.hooks`` group;
+  by default only those of distributions already in use are registered.
+
+A plugin that fails to import is reported by name with its error and never stops the
+others (:func:`list_plugins`, :meth:`PluginManager.load_all`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from dataclasses import dataclass
+from importlib import metadata
+from typing import Any, Callable, Iterable
+
+import pluggy
+
+from . import hookspecs
+from .errors import PluginError, UnknownPluginError
+
+log = logging.getLogger(__name__)
+
+#: plugin kind -> entry-point group
+GROUPS: dict[str, str] = {
+    "dimension": "hapticsdk.dimensions",
+    "actuator": "hapticsdk.actuators",
+    "solver": "hapticsdk.solvers",
+    "model": "hapticsdk.models",
+    "importance": "hapticsdk.importance",
+    "hooks": "hapticsdk.hooks",
+}
+
+
+@dataclass(frozen=True)
+class PluginInfo:
+    """What is known of an installed plugin without importing it."""
+
+    kind: str
+    name: str
+    value: str          # "module:attr"
+    distribution: str
+    version: str
+
+    @property
+    def module(self) -> str:
+        return self.value.split(":", 1)[0]
+
+    def to_dict(self) -> dict[str, str]:
+        return {"kind": self.kind, "name": self.name, "distribution": self.distribution,
+                "version": self.version, "value": self.value}
+
+
+def _entry_points(group: str) -> list[metadata.EntryPoint]:
+    return list(metadata.entry_points(group=group))
+
+
+def _info(kind: str, ep: metadata.EntryPoint) -> PluginInfo:
+    dist = getattr(ep, "dist", None)
+    name = dist.metadata["Name"] if dist is not None else "?"
+    version = dist.version if dist is not None else "?"
+    return PluginInfo(kind=kind, name=ep.name, value=ep.value, distribution=name, version=version)
+
+
+class Registry:
+    """Lazy name -> object table over one entry-point group.
+
+    ``extra`` objects can be registered in-process (tests, applications) with
+    :meth:`register`; they take precedence over installed ones.
+    """
+
+    def __init__(self, kind: str) -> None:
+        if kind not in GROUPS:
+            raise PluginError(f"unknown plugin kind {kind!r}; valid: {sorted(GROUPS)}", kind=kind)
+        self.kind = kind
+        self.group = GROUPS[kind]
+        self._eps: dict[str, metadata.EntryPoint] | None = None
+        self._loaded: dict[str, Any] = {}
+        self._local: dict[str, Any] = {}
+
+    def _table(self) -> dict[str, metadata.EntryPoint]:
+        if self._eps is None:
+            self._eps = {}
+            for ep in _entry_points(self.group):
+                self._eps.setdefault(ep.name, ep)
+        return self._eps
+
+    def refresh(self) -> None:
+        """Forget the cached table (after installing or removing a distribution)."""
+        self._eps = None
+        self._loaded.clear()
+
+    def register(self, name: str, obj: Any) -> None:
+        """Register an in-process object under ``name`` (overrides installed ones)."""
+        self._local[name] = obj
+
+    def unregister(self, name: str) -> None:
+        self._local.pop(name, None)
+
+    def names(self) -> list[str]:
+        return sorted(set(self._table()) | set(self._local))
+
+    def info(self, name: str) -> PluginInfo:
+        if name in self._local:
+            obj = self._local[name]
+            return PluginInfo(self.kind, name, f"{getattr(obj, '__module__', '?')}:{getattr(obj, '__qualname__', '?')}",
+                              "(in-process)", "")
+        ep = self._lookup(name)
+        return _info(self.kind, ep)
+
+    def _lookup(self, name: str) -> metadata.EntryPoint:
+        table = self._table()
+        if name not in table:
+            valid = self.names()
+            raise UnknownPluginError(
+                f"no {self.kind} named {name!r}; installed: {', '.join(valid) if valid else '(none)'}",
+                plugin=name, kind=self.kind)
+        return table[name]
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._local or name in self._table()
+
+    def load(self, name: str) -> Any:
+        """Import and return the object behind ``name`` (cached)."""
+        if not isinstance(name, str) or not name:
+            raise UnknownPluginError(f"{self.kind} name must be a non-empty string, got {name!r}",
+                                     plugin=str(name), kind=self.kind)
+        if name in self._local:
+            return self._local[name]
+        if name in self._loaded:
+            return self._loaded[name]
+        ep = self._lookup(name)
+        try:
+            obj = ep.load()
+        except Exception as exc:  # a broken plugin: report it by name, with its error
+            dist = _info(self.kind, ep).distribution
+            raise PluginError(f"{self.kind} plugin {name!r} (distribution {dist}, {ep.value}) "
+                              f"failed to import: {type(exc).__name__}: {exc}",
+                              plugin=name, kind=self.kind) from exc
+        self._loaded[name] = obj
+        return obj
+
+    def distribution_of(self, name: str) -> str | None:
+        if name in self._local:
+            return None
+        ep = self._table().get(name)
+        return _info(self.kind, ep).distribution if ep is not None else None
+
+
+_registries: dict[str, Registry] = {}
+
+
+def registry(kind: str) -> Registry:
+    """The process-wide table for one plugin kind."""
+    if kind not in _registries:
+        _registries[kind] = Registry(kind)
+    return _registries[kind]
+
+
+def load(kind: str, name: str) -> Any:
+    """Shortcut: ``registry(kind).load(name)``."""
+    return registry(kind).load(name)
+
+
+def refresh() -> None:
+    """Re-read entry points for every kind (after ``pip install``/``uninstall`` in-process)."""
+    for r in _registries.values():
+        r.refresh()
+    _manager.reset()
+
+
+def list_plugins(kinds: Iterable[str] | None = None, *, check: bool = False) -> list[dict[str, Any]]:
+    """List installed plugins from entry-point metadata, without importing them.
+
+    With ``check=True`` each one is imported in turn and an ``error`` key holds the import
+    error of a broken plugin (``None`` when it loads); one broken plugin never stops the
+    listing of the others.
+    """
+    out: list[dict[str, Any]] = []
+    for kind in kinds or [k for k in GROUPS if k != "hooks"]:
+        reg = registry(kind)
+        for name in reg.names():
+            info = reg.info(name).to_dict()
+            if check:
+                try:
+                    reg.load(name)
+                    info["error"] = None
+                except PluginError as exc:
+                    info["error"] = str(exc)
+            out.append(info)
+    return out
+
+
+class PluginManager:
+    """pluggy manager for ``hapticsdk.hooks`` modules, registered lazily.
+
+    :meth:`load_for` registers only the hook modules of given distributions (what a
+    scene uses); :meth:`load_all` registers every installed one, recording the
+    failures of broken plugins in :attr:`failures` instead of raising.
+    """
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.pm = pluggy.PluginManager(hookspecs.PROJECT)
+        self.pm.add_hookspecs(hookspecs)
+        self.failures: dict[str, str] = {}
+        self._done: set[str] = set()
+
+    @property
+    def hook(self) -> Any:
+        return self.pm.hook
+
+    def register(self, plugin: Any, name: str | None = None) -> None:
+        """Register an in-process hook object or module."""
+        if name is None or not self.pm.has_plugin(name):
+            self.pm.register(plugin, name=name)
+
+    def _load_ep(self, ep: metadata.EntryPoint) -> None:
+        if ep.name in self._done:
+            return
+        self._done.add(ep.name)
+        try:
+            mod = ep.load()
+            self.pm.register(mod, name=f"hooks:{ep.name}")
+        except Exception as exc:
+            self.failures[ep.name] = f"{type(exc).__name__}: {exc}"
+            log.warning("hapticsdk hook plugin %r failed to load: %s", ep.name, exc)
+
+    def load_all(self) -> "PluginManager":
+        for ep in _entry_points(GROUPS["hooks"]):
+            self._load_ep(ep)
+        return self
+
+    def load_for(self, distributions: Iterable[str]) -> "PluginManager":
+        wanted = {d.lower().replace("_", "-") for d in distributions if d}
+        for ep in _entry_points(GROUPS["hooks"]):
+            dist = getattr(ep, "dist", None)
+            if dist is not None and dist.metadata["Name"].lower().replace("_", "-") in wanted:
+                self._load_ep(ep)
+        return self
+
+    def call_safely(self, hook_name: str, **kwargs: Any) -> list[Any]:
+        """Call a hook; an implementation that raises is logged by plugin name and skipped."""
+        results: list[Any] = []
+        caller = getattr(self.pm.hook, hook_name)
+        for impl in reversed(caller.get_hookimpls()):
+            try:
+                args = {k: kwargs[k] for k in impl.argnames}
+                res = impl.function(**args)
+            except Exception as exc:
+                self.failures[impl.plugin_name] = f"{hook_name}: {type(exc).__name__}: {exc}"
+                log.warning("hook %s of plugin %s failed: %s", hook_name, impl.plugin_name, exc)
+                continue
+            if res is not None:
+                results.append(res)
+        return results
+
+
+_manager = PluginManager()
+
+
+def manager() -> PluginManager:
+    """The process-wide hook manager."""
+    return _manager
+
+
+def make_factory(kind: str) -> Callable[..., Any]:
+    """``make_factory("actuator")("omni-virtual", **opts)`` -> instance."""
+    def create(name: str, **options: Any) -> Any:
+        return registry(kind).load(name)(**options)
+    return create

@@ -1,0 +1,158 @@
+"""Build inverse problems from perceptual targets, and solve them by method name.
+
+``build_problem({"hardness": 0.8, "roughness": 0.3})`` loads the named dimensions
+(lazily, by name), the perception model that covers them, assembles the feature space
+from the dimensions' features with the model's training-range bounds, pins the model
+inputs no requested dimension contributes, and gathers the dimensions' physical
+constraints. ``solve(...)`` then resolves ``method=`` through the solver table, like
+``scipy.optimize.minimize(method=...)``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .dimensions import PerceptionDimension, check_intensity
+from .errors import ModelError, ValidationError
+from .features import FeatureSpace
+from .models import CompositeModel, PerceptionModel
+from .plugins import registry
+from .solvers import BatchSolveResult, SolveProblem, SolveResult, Solver
+
+DEFAULT_METHOD = "ga"
+_model_cache: dict[str, PerceptionModel] = {}
+
+
+def load_dimension(name: str) -> PerceptionDimension:
+    """Instantiate the dimension plugin ``name`` (lazy entry-point lookup)."""
+    cls = registry("dimension").load(name)
+    return cls() if isinstance(cls, type) else cls
+
+
+def load_model(spec: str | PerceptionModel) -> PerceptionModel:
+    """A model by plugin name (``"default"``), by ``.onnx`` path, or passed through."""
+    if isinstance(spec, PerceptionModel):
+        return spec
+    if not isinstance(spec, str) or not spec:
+        raise ValidationError(f"model must be a name, a .onnx path or a PerceptionModel, got {spec!r}",
+                              field="model")
+    if spec in _model_cache:
+        return _model_cache[spec]
+    if spec.endswith(".onnx"):
+        model = registry("model").load("onnx")(spec)
+    else:
+        factory = registry("model").load(spec)
+        model = factory()
+    if not isinstance(model, PerceptionModel):
+        raise ModelError(f"model plugin {spec!r} returned {type(model).__name__}, not a PerceptionModel")
+    _model_cache[spec] = model
+    return model
+
+
+def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.ndarray, tuple[str, ...]]:
+    if isinstance(targets, Mapping):
+        if not targets:
+            raise ValidationError("no targets given", field="targets")
+        dims = tuple(dimensions) if dimensions else tuple(targets)
+        extra = [k for k in targets if k not in dims]
+        missing = [d for d in dims if d not in targets]
+        if extra or missing:
+            raise ValidationError(f"targets name {list(targets)} but dimensions are {list(dims)}",
+                                  field="targets")
+        row = [check_intensity(targets[d], f"targets.{d}") for d in dims]
+        return np.array(row, float), dims
+    if dimensions is None:
+        raise ValidationError("array targets need dimensions=[...] naming their columns", field="dimensions")
+    dims = tuple(dimensions)
+    T = np.asarray(targets, dtype=float)
+    return T, dims
+
+
+def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
+                  dimensions: Sequence[str] | None = None,
+                  model: str | PerceptionModel | None = None,
+                  penalty: str = "paper", tolerance: float = 0.01,
+                  fixed: Mapping[str, float] | None = None,
+                  penalty_weight: float = 1.0) -> SolveProblem:
+    """Assemble a :class:`~hapticsdk.solvers.SolveProblem`.
+
+    Args:
+        targets: ``{"hardness": 0.8, "roughness": 0.3}`` (one target), or an ``(m, k)``
+            array (a batch) whose columns are ``dimensions``.
+        dimensions: dimension names (default: the keys of ``targets``).
+        model: model name, ``.onnx`` path, instance, or ``None`` for the dimensions'
+            ``default_model`` (combined when they differ).
+        penalty: ``"paper"`` (formula (6)) or ``"normalised"``.
+        tolerance: success threshold on the sum of absolute intensity errors.
+        fixed: model inputs to pin (physical units) instead of searching them.
+    """
+    T, dims = _targets_array(targets, dimensions)
+    if len(set(dims)) != len(dims):
+        raise ValidationError(f"repeated dimension in {list(dims)}", field="dimensions")
+    dim_objs = [load_dimension(d) for d in dims]
+    if model is None:
+        names: list[str] = []
+        for d in dim_objs:
+            if d.default_model not in names:
+                names.append(d.default_model)
+        parts = [load_model(n) for n in names]
+        mdl = parts[0] if len(parts) == 1 else CompositeModel(parts)
+    else:
+        mdl = load_model(model)
+    model_inputs = list(mdl.feature_names)
+    space = FeatureSpace(())
+    for d in dim_objs:
+        space = space.union(d.feature_space())
+    absent = [n for n in space.names if n not in model_inputs]
+    if absent:
+        raise ModelError(f"model {mdl.name!r} does not read features {absent} that dimensions "
+                         f"{list(dims)} contribute; its inputs are {model_inputs}")
+    pinned = dict(fixed or {})
+    for n in pinned:
+        if n not in model_inputs:
+            raise ValidationError(f"cannot fix {n!r}: not a model input {model_inputs}", field=f"fixed.{n}")
+    searched = [n for n in model_inputs if n in space and n not in pinned]
+    space = space.subset(searched)
+    if mdl.feature_space is not None:
+        space = space.with_bounds({n: (mdl.feature_space[n].lower, mdl.feature_space[n].upper)
+                                   for n in searched if n in mdl.feature_space})
+    defaults = dict(mdl.metadata.get("feature_defaults") or {})
+    for n in model_inputs:
+        if n in space or n in pinned:
+            continue
+        if n in defaults:
+            pinned[n] = float(defaults[n])
+        elif mdl.feature_space is not None and n in mdl.feature_space:
+            f = mdl.feature_space[n]
+            pinned[n] = 0.5 * (f.lower + f.upper)
+        else:
+            raise ModelError(f"model {mdl.name!r} input {n!r} is not searched and has no default value")
+    context = {}
+    if mdl.metadata.get("df_hz") is not None:
+        context["df_hz"] = float(mdl.metadata["df_hz"])
+    constraints = []
+    for d in dim_objs:
+        constraints.extend(d.constraints(**context))
+    return SolveProblem(targets=T, dimensions=dims, model=mdl, space=space, fixed=pinned,
+                        constraints=tuple(constraints), penalty=penalty, tolerance=tolerance,
+                        penalty_weight=penalty_weight)
+
+
+def get_solver(method: str = DEFAULT_METHOD, **options: Any) -> Solver:
+    """The solver plugin registered as ``method``, configured with ``options``."""
+    cls = registry("solver").load(method)
+    return cls(**options)
+
+
+def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: str = DEFAULT_METHOD,
+          seed: int | None = None, options: Mapping[str, Any] | None = None,
+          **build_kw: Any) -> SolveResult | BatchSolveResult:
+    """Find features whose predicted intensities meet ``targets``.
+
+    >>> res = solve({"hardness": 0.8, "roughness": 0.3}, seed=1)   # doctest: +SKIP
+    >>> res.success, res.error, res.x_dict["GS"]                      # doctest: +SKIP
+    """
+    problem = build_problem(targets, **build_kw)
+    return get_solver(method, **dict(options or {})).solve(problem, seed=seed)

@@ -1,0 +1,363 @@
+"""Inverse problem: find features G whose predicted intensities match targets.
+
+:class:`SolveProblem` holds targets, a perception model, the feature space to search,
+features pinned at fixed values, and the physical constraints; its :meth:`evaluate`
+computes the fitness of formula (6) for whole populations of whole batches of targets in
+one model call. :class:`Solver` is the template every solver plugin follows (public
+``solve`` validates, times and re-evaluates; the backend implements ``_solve``), and
+:class:`SolveResult` follows ``scipy.optimize.OptimizeResult``.
+
+The result's error is always recomputed by the base class from the model at the
+returned ``x``: a solver cannot report an error it did not reach.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+
+from .dimensions import PENALTY_FORMS, Constraint, check_intensity
+from .errors import SolverError, ValidationError
+from .features import FeatureSpace
+from .models import PerceptionModel
+
+#: Violation (relative, normalised form) below which a constraint counts as met.
+CONSTRAINT_TOL = 1e-9
+
+
+class SolveResult(dict):
+    """Result of one target, with attribute access (like scipy's ``OptimizeResult``).
+
+    Keys: ``x`` (solved features, physical units, ``(d,)`` over ``feature_names``),
+    ``x_dict`` (every model input by name, including pinned ones), ``fun`` (objective
+    value, formula (6) in the chosen penalty form), ``success``, ``message``, ``nfev``,
+    ``nit``, ``error`` (sum of absolute intensity errors), ``error_per_dimension``,
+    ``intensities`` (model prediction per output dimension), ``targets``,
+    ``constraint_violation`` (max relative violation, 0 when met),
+    ``constraint_violations`` (per constraint), ``time_s`` (wall time of the solve),
+    ``trace`` (list of ``{time_s, nfev, best_error, constraint_violation}``), ``method``.
+    """
+
+    def __getattr__(self, name: str) -> Any:
+        try:
+            return self[name]
+        except KeyError:
+            raise AttributeError(name) from None
+
+    __setattr__ = dict.__setitem__  # type: ignore[assignment]
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready dict (``x`` as feature name -> value)."""
+        return {"success": bool(self.success), "message": self.message,
+                "x": dict(self.x_dict), "intensities": dict(self.intensities),
+                "targets": dict(self.targets), "error": float(self.error),
+                "error_per_dimension": dict(self.error_per_dimension),
+                "constraint_violation": float(self.constraint_violation),
+                "constraint_violations": dict(self.constraint_violations),
+                "fun": float(self.fun), "time_s": float(self.time_s),
+                "nfev": int(self.nfev), "nit": int(self.nit), "method": self.method}
+
+    def __repr__(self) -> str:
+        return (f"SolveResult(success={self.success}, error={self.error:.3g}, "
+                f"violation={self.constraint_violation:.3g}, nfev={self.nfev}, "
+                f"time_s={self.time_s:.4g}, method={self.method!r})")
+
+
+class BatchSolveResult(list):
+    """Results of a batch of targets solved in one call: a list of :class:`SolveResult`
+    with batch-level ``x`` ``(m, d)``, ``error`` ``(m,)``, ``success`` ``(m,)``,
+    ``time_s`` (wall time of the whole batch), ``nfev`` (model rows evaluated),
+    ``trace`` (per iteration: ``time_s``, ``nfev``, ``best_error`` ``(m,)``) and ``method``."""
+
+    def __init__(self, results: Sequence[SolveResult], **attrs: Any) -> None:
+        super().__init__(results)
+        self.__dict__.update(attrs)
+
+    @property
+    def x(self) -> np.ndarray:
+        return np.array([r.x for r in self])
+
+    @property
+    def error(self) -> np.ndarray:
+        return np.array([r.error for r in self])
+
+    @property
+    def success(self) -> np.ndarray:
+        return np.array([r.success for r in self])
+
+
+class Trace:
+    """Per-iteration record of (wall time, evaluations, best error, violation) for a batch."""
+
+    def __init__(self, n_targets: int) -> None:
+        self.n_targets = n_targets
+        self.t0 = time.perf_counter()
+        self.times: list[float] = []
+        self.nfev: list[int] = []
+        self.best_error: list[np.ndarray] = []
+        self.violation: list[np.ndarray] = []
+
+    def record(self, nfev: int, best_error: np.ndarray, violation: np.ndarray | None = None) -> None:
+        self.times.append(time.perf_counter() - self.t0)
+        self.nfev.append(int(nfev))
+        self.best_error.append(np.array(best_error, float).reshape(self.n_targets))
+        self.violation.append(np.zeros(self.n_targets) if violation is None
+                              else np.array(violation, float).reshape(self.n_targets))
+
+    def rows(self, i: int | None = None) -> list[dict[str, Any]]:
+        """Rows for target ``i`` (scalars), or for the batch (max over targets)."""
+        out = []
+        for t, n, e, v in zip(self.times, self.nfev, self.best_error, self.violation):
+            if i is None:
+                out.append({"time_s": t, "nfev": n, "best_error": float(e.max()),
+                            "best_error_median": float(np.median(e)),
+                            "constraint_violation": float(v.max())})
+            else:
+                out.append({"time_s": t, "nfev": n, "best_error": float(e[i]),
+                            "constraint_violation": float(v[i])})
+        return out
+
+
+@dataclass
+class SolveProblem:
+    """Targets + model + feature space + constraints.
+
+    Attributes:
+        targets: ``(m, k)`` target intensities in 0..1, columns ``dimensions``.
+        dimensions: names of the targeted model outputs.
+        model: the perception model.
+        space: features searched (a subset of the model's inputs), with bounds.
+        fixed: model inputs not searched, pinned at a value (physical units).
+        constraints: physical constraints on the full feature vector.
+        penalty: ``"paper"`` (formula (6), squared physical units) or ``"normalised"``.
+        tolerance: success threshold on the sum of absolute intensity errors.
+        x0: optional ``(m, d)`` starting points (for polishing chains).
+        penalty_weight: multiplier of the penalty term (1 for the paper's form).
+    """
+
+    targets: np.ndarray
+    dimensions: tuple[str, ...]
+    model: PerceptionModel
+    space: FeatureSpace
+    fixed: dict[str, float] = field(default_factory=dict)
+    constraints: tuple[Constraint, ...] = ()
+    penalty: str = "paper"
+    tolerance: float = 0.01
+    x0: np.ndarray | None = None
+    penalty_weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        self.dimensions = tuple(self.dimensions)
+        T = np.asarray(self.targets, dtype=float)
+        #: True when targets were given as one 1-D row: ``Solver.solve`` returns one result.
+        self.single = T.ndim == 1
+        if T.ndim == 1:
+            T = T[None, :]
+        if T.ndim != 2 or T.shape[1] != len(self.dimensions) or T.shape[0] == 0:
+            raise ValidationError(f"targets must have shape (m, {len(self.dimensions)}) for "
+                                  f"{list(self.dimensions)}, got {np.shape(self.targets)}", field="targets")
+        for j, dname in enumerate(self.dimensions):
+            col = T[:, j]
+            if not np.isfinite(col).all():
+                raise ValidationError("NaN or infinite target", field=f"targets.{dname}")
+            if (col < 0).any() or (col > 1).any():
+                bad = col[(col < 0) | (col > 1)][0]
+                raise ValidationError(f"target {bad:g} outside 0..1", field=f"targets.{dname}")
+        self.targets = T
+        missing = [d for d in self.dimensions if d not in self.model.dimension_names]
+        if missing:
+            raise ValidationError(f"model {self.model.name!r} does not predict {missing}; "
+                                  f"it covers {list(self.model.dimension_names)}", field="dimensions")
+        if self.penalty not in PENALTY_FORMS:
+            raise ValidationError(f"unknown penalty {self.penalty!r}; valid: {list(PENALTY_FORMS)}",
+                                  field="penalty")
+        if not (np.isfinite(self.tolerance) and self.tolerance > 0):
+            raise ValidationError("tolerance must be a positive number", field="tolerance")
+        model_in = list(self.model.feature_names)
+        for n in self.space.names:
+            if n not in model_in:
+                raise ValidationError(f"feature {n!r} is not an input of model {self.model.name!r} "
+                                      f"(inputs {model_in})", field="space")
+        unset = [n for n in model_in if n not in self.space and n not in self.fixed]
+        if unset:
+            raise ValidationError(f"model inputs {unset} are neither searched nor fixed", field="fixed")
+        for n, v in self.fixed.items():
+            if not np.isfinite(v):
+                raise ValidationError("fixed value is NaN or infinite", field=f"fixed.{n}")
+        self.constraints = tuple(self.constraints)
+        for c in self.constraints:
+            absent = [f for f in c.features if f not in model_in]
+            if absent:
+                raise ValidationError(f"constraint {c.name!r} reads features {absent} that the model "
+                                      f"does not take", field="constraints")
+        self._out_idx = np.array([self.model.dimension_names.index(d) for d in self.dimensions])
+        self._space_cols = np.array([model_in.index(n) for n in self.space.names], dtype=int)
+        self._fixed_row = np.zeros(len(model_in))
+        for n, v in self.fixed.items():
+            if n in model_in:
+                self._fixed_row[model_in.index(n)] = v
+        if self.x0 is not None:
+            x0 = np.asarray(self.x0, float)
+            if x0.ndim == 1:
+                x0 = np.broadcast_to(x0, (self.n_targets, len(self.space))).copy()
+            self.x0 = self.space.clip(self.space.validate(x0, field="x0"))
+            if self.x0.shape[0] != self.n_targets:
+                raise ValidationError("x0 must have one row per target", field="x0")
+
+    # -- sizes -------------------------------------------------------------
+    @property
+    def n_targets(self) -> int:
+        return int(self.targets.shape[0])
+
+    @property
+    def n_features(self) -> int:
+        return len(self.space)
+
+    @property
+    def feature_names(self) -> tuple[str, ...]:
+        return self.space.names
+
+    def full_inputs(self, X: np.ndarray) -> np.ndarray:
+        """Model input rows ``(n, d_model)`` from searched-feature rows ``(n, d)``."""
+        X = np.asarray(X, float)
+        G = np.broadcast_to(self._fixed_row, X.shape[:-1] + self._fixed_row.shape).copy()
+        G[..., self._space_cols] = X
+        return G
+
+    def columns(self, G: np.ndarray) -> dict[str, np.ndarray]:
+        return {n: G[..., i] for i, n in enumerate(self.model.feature_names)}
+
+    # -- evaluation --------------------------------------------------------
+    def evaluate(self, X: np.ndarray, *, penalty: str | None = None,
+                 details: bool = False) -> Any:
+        """Fitness of formula (6) for ``X`` of shape ``(m, p, d)`` (p candidates per target)
+        or ``(m, d)``; ONE model call for all rows. Returns fitness with the leading shape of
+        ``X``; with ``details``, a dict with ``fitness``, ``error``, ``violation``, ``intensities``."""
+        X = np.asarray(X, float)
+        lead = X.shape[:-1]
+        if X.shape[-1] != self.n_features or lead[0] != self.n_targets:
+            raise ValidationError(f"candidates must have shape (m={self.n_targets}, [p,] "
+                                  f"{self.n_features}), got {X.shape}", field="X")
+        G = self.full_inputs(X.reshape(-1, self.n_features))
+        I = self.model.predict(G).reshape(lead + (self.model.n_outputs,))
+        T = self.targets.reshape((self.n_targets,) + (1,) * (len(lead) - 1) + (len(self.dimensions),))
+        err = np.abs(I[..., self._out_idx] - T).sum(axis=-1)
+        form = penalty or self.penalty
+        cols = self.columns(G)
+        pen = np.zeros(G.shape[0])
+        viol = np.zeros(G.shape[0])
+        for c in self.constraints:
+            pen += c.penalty(cols, form)
+            viol = np.maximum(viol, c.violation(cols))
+        pen = pen.reshape(lead)
+        fitness = err + self.penalty_weight * pen
+        if not details:
+            return fitness
+        return {"fitness": fitness, "error": err, "violation": viol.reshape(lead),
+                "intensities": I}
+
+
+@dataclass
+class SolverOutput:
+    """What a backend's ``_solve`` returns: best ``x`` per target ``(m, d)`` and counters."""
+
+    x: np.ndarray
+    nfev: int
+    nit: int
+    message: str = ""
+
+
+class Solver(ABC):
+    """Template for solver plugins.
+
+    Subclasses set ``name`` and ``default_options`` (every setting, with the paper's
+    values where the paper has one) and implement :meth:`_solve`. Unknown options raise
+    :class:`~hapticsdk.errors.ValidationError` listing the valid ones.
+    """
+
+    name: ClassVar[str] = ""
+    default_options: ClassVar[dict[str, Any]] = {}
+
+    def __init__(self, **options: Any) -> None:
+        unknown = [k for k in options if k not in self.default_options]
+        if unknown:
+            raise ValidationError(f"unknown option(s) {unknown} for solver {self.name!r}; "
+                                  f"valid: {sorted(self.default_options)}", field="options")
+        self.options: dict[str, Any] = {**self.default_options, **options}
+
+    def solve(self, problem: SolveProblem, *, seed: int | None = None) -> SolveResult | BatchSolveResult:
+        """Solve; a 1-target problem returns a :class:`SolveResult`, a batch a
+        :class:`BatchSolveResult`. The error is recomputed from the model at ``x``."""
+        if not isinstance(problem, SolveProblem):
+            raise ValidationError("problem must be a SolveProblem", field="problem")
+        rng = np.random.default_rng(seed)
+        trace = Trace(problem.n_targets)
+        t0 = time.perf_counter()
+        try:
+            out = self._solve(problem, rng, trace)
+        except (ValidationError, SolverError):
+            raise
+        except Exception as exc:
+            raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
+        elapsed = time.perf_counter() - t0
+        x = np.asarray(out.x, float)
+        if x.shape != (problem.n_targets, problem.n_features) or not np.isfinite(x).all():
+            raise SolverError(f"solver {self.name!r} returned x of shape {x.shape} "
+                              f"(expected {(problem.n_targets, problem.n_features)}) or non-finite values")
+        x = problem.space.clip(x)
+        results = assemble_results(problem, x, out, elapsed, trace, self.name)
+        if problem.single:
+            return results[0]
+        return BatchSolveResult(results, time_s=elapsed, nfev=out.nfev, nit=out.nit,
+                                trace=trace.rows(), method=self.name)
+
+    @abstractmethod
+    def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
+        """Search; call ``trace.record`` once per iteration."""
+
+
+def assemble_results(problem: SolveProblem, x: np.ndarray, out: SolverOutput, elapsed: float,
+                     trace: Trace, method: str) -> list[SolveResult]:
+    """Evaluate ``x`` honestly and build one :class:`SolveResult` per target."""
+    ev = problem.evaluate(x, details=True)
+    G = problem.full_inputs(x)
+    cols = problem.columns(G)
+    per_c = {c.name: c.violation(cols) for c in problem.constraints}
+    results = []
+    m = problem.n_targets
+    for i in range(m):
+        I = ev["intensities"][i]
+        err_dims = {d: float(abs(I[problem._out_idx[j]] - problem.targets[i, j]))
+                    for j, d in enumerate(problem.dimensions)}
+        error = float(ev["error"][i])
+        viol = float(ev["violation"][i])
+        ok = error <= problem.tolerance and viol <= CONSTRAINT_TOL
+        preds = {d: float(v) for d, v in zip(problem.model.dimension_names, I)}
+        if ok:
+            msg = f"target reached: error {error:.3g} <= tolerance {problem.tolerance:g}, constraints met"
+        else:
+            parts = []
+            if error > problem.tolerance:
+                parts.append(f"error {error:.3g} > tolerance {problem.tolerance:g}; residual per "
+                             f"dimension {{{', '.join(f'{k}: {v:.3g}' for k, v in err_dims.items())}}}; "
+                             f"nearest intensities found {{{', '.join(f'{k}: {preds[k]:.3g}' for k in problem.dimensions)}}}")
+            if viol > CONSTRAINT_TOL:
+                bad = [k for k, v in per_c.items() if v[i] > CONSTRAINT_TOL]
+                parts.append(f"constraints violated: {bad} (max relative violation {viol:.3g})")
+            msg = "target not reached: " + "; ".join(parts)
+        if out.message:
+            msg += f" [{method}: {out.message}]"
+        results.append(SolveResult(
+            x=x[i].copy(), x_dict={n: float(v) for n, v in zip(problem.model.feature_names, G[i])},
+            feature_names=problem.feature_names, fun=float(ev["fitness"][i]), success=bool(ok),
+            message=msg, nfev=int(out.nfev), nit=int(out.nit), error=error,
+            error_per_dimension=err_dims, intensities=preds,
+            targets={d: float(problem.targets[i, j]) for j, d in enumerate(problem.dimensions)},
+            constraint_violation=viol,
+            constraint_violations={k: float(v[i]) for k, v in per_c.items()},
+            time_s=float(elapsed), trace=trace.rows(i), method=method))
+    return results

@@ -1,0 +1,1 @@
+"""pytest plugin of hapticsdk (fixtures for plugin authors)."""
