@@ -1,0 +1,340 @@
+"""Render plans: what a compiled scene renders, serialisable and renderable later.
+
+A :class:`RenderPlan` is the output of :func:`hapticsdk.scene.compile_scene`. For each
+material it records the perception dimensions kept, those left out and why (with the
+importance model's predicted realism loss), the solved features (physical units), the
+features pinned out of the solve, the actuator chosen for every channel role, and the
+solve's outcome. It is plain data: :meth:`RenderPlan.to_dict` gives JSON that
+``schemas/plan.schema.json`` validates, and :func:`hapticsdk.render.render_plan`
+renders it without solving again.
+
+The plan also carries :data:`PLUGIN_API_VERSION`, the version of the plugin interface
+(base classes, entry-point groups, hook specifications) it was compiled against.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Mapping
+
+from .errors import ValidationError
+
+#: Version of the plugin interface of this core: the base classes of
+#: :mod:`hapticsdk.dimensions`, :mod:`hapticsdk.models`, :mod:`hapticsdk.solvers`,
+#: :mod:`hapticsdk.actuators`, the entry-point groups and the hook specifications.
+#: ``MAJOR.MINOR``: MINOR grows when something is added (old plugins keep working),
+#: MAJOR when something is removed or changes meaning. A plugin declares the range it
+#: supports with a ``hapticsdk_api`` attribute (e.g. ``">=1.0,<2"``); see
+#: :func:`check_plugin_api` and docs/plugin-authors.md.
+PLUGIN_API_VERSION = "1.0"
+
+#: Version of the plan file format (``plan_version`` key).
+PLAN_VERSION = 1
+
+
+def _parse_version(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(p) for p in str(text).strip().split("."))
+    except ValueError:
+        raise ValidationError(f"not a MAJOR.MINOR version: {text!r}", field="hapticsdk_api") from None
+
+
+def api_compatible(spec: str | None, version: str = PLUGIN_API_VERSION) -> bool:
+    """Whether ``version`` satisfies ``spec``, a comma-separated list of clauses
+    ``>=1.0``, ``<2``, ``==1.0``, ``>1.0``, ``<=1.3``, ``!=1.1`` (``None`` or ``""``:
+    any version). Versions compare numerically component by component."""
+    if not spec:
+        return True
+    v = _parse_version(version)
+    ops = {">=": lambda a, b: a >= b, "<=": lambda a, b: a <= b, "==": lambda a, b: a == b,
+           "!=": lambda a, b: a != b, ">": lambda a, b: a > b, "<": lambda a, b: a < b}
+    for clause in str(spec).split(","):
+        clause = clause.strip()
+        if not clause:
+            continue
+        for op in (">=", "<=", "==", "!=", ">", "<"):
+            if clause.startswith(op):
+                ref = _parse_version(clause[len(op):])
+                width = max(len(v), len(ref))
+                a = v + (0,) * (width - len(v))
+                b = ref + (0,) * (width - len(ref))
+                if not ops[op](a, b):
+                    return False
+                break
+        else:
+            raise ValidationError(f"bad version clause {clause!r} (use >=, <=, ==, !=, >, <)",
+                                  field="hapticsdk_api")
+    return True
+
+
+def check_plugin_api(obj: Any, *, name: str | None = None) -> None:
+    """Raise :class:`~hapticsdk.errors.PluginError` when ``obj`` (a plugin class or module)
+    declares a ``hapticsdk_api`` range that :data:`PLUGIN_API_VERSION` does not meet.
+    Objects without the attribute are taken as compatible."""
+    from .errors import PluginError
+    spec = getattr(obj, "hapticsdk_api", None)
+    if spec is None:
+        return
+    label = name or getattr(obj, "name", None) or getattr(obj, "__name__", repr(obj))
+    try:
+        ok = api_compatible(spec)
+    except ValidationError as exc:
+        raise PluginError(f"plugin {label!r} declares an unreadable hapticsdk_api {spec!r}: {exc}",
+                          plugin=str(label)) from None
+    if not ok:
+        raise PluginError(f"plugin {label!r} requires plugin API {spec}, this hapticsdk provides "
+                          f"{PLUGIN_API_VERSION}", plugin=str(label))
+
+
+@dataclass
+class DroppedDimension:
+    """A dimension a material's intensities name but the plan does not render.
+
+    Attributes:
+        dimension: its name.
+        reason: why, in words.
+        predicted_loss_percent: predicted loss of realism (% of the realism with every
+            dimension rendered) when it is left out; ``None`` when not predicted.
+        threshold_percent: the scene's threshold it was compared with.
+        importance_model: name of the importance model that decided.
+        replacement: what renders in its place (``{"renderer": "constant-force",
+            "role": "force", "force_n": 1.0}``), or ``None``.
+    """
+
+    dimension: str
+    reason: str
+    predicted_loss_percent: float | None = None
+    threshold_percent: float | None = None
+    importance_model: str | None = None
+    replacement: dict[str, Any] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"dimension": self.dimension, "reason": self.reason,
+                "predicted_loss_percent": self.predicted_loss_percent,
+                "threshold_percent": self.threshold_percent,
+                "importance_model": self.importance_model,
+                "replacement": dict(self.replacement) if self.replacement else None}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "DroppedDimension":
+        return cls(dimension=d["dimension"], reason=d["reason"],
+                   predicted_loss_percent=d.get("predicted_loss_percent"),
+                   threshold_percent=d.get("threshold_percent"),
+                   importance_model=d.get("importance_model"),
+                   replacement=dict(d["replacement"]) if d.get("replacement") else None)
+
+
+@dataclass
+class MaterialPlan:
+    """What is rendered for one material.
+
+    Attributes:
+        name: material name (library name, or the scene's name for an intensity-only one).
+        targets: target intensity per dimension the material names (0..1).
+        dimensions: dimensions kept, in render order.
+        dropped: dimensions left out, with reasons.
+        features: solved features the kept dimensions read (physical units:
+            GS N/mm, W mJ, Fpeak Hz, AFpeak m/s^2, P (m/s^2)^2, ...).
+        pinned_features: model inputs no kept dimension reads, pinned at the model's
+            defaults during the solve and not rendered.
+        importance_features: the features the importance model was evaluated on (the
+            solve with every dimension, as the paper's regressions use GA features).
+        actuators: channel role -> actuator plugin name.
+        actuator_options: role -> keyword options for that actuator.
+        roles: dimension (or ``"replacement:<dim>"``) -> roles its renderer commands.
+        dimension_distributions: dimension -> distribution that provides it.
+        solve: outcome of the final solve (success, error, intensities, message, ...).
+        source: ``"library"`` or ``"intensities"``.
+        objects: scene objects made of this material.
+    """
+
+    name: str
+    targets: dict[str, float]
+    dimensions: list[str]
+    dropped: list[DroppedDimension] = field(default_factory=list)
+    features: dict[str, float] = field(default_factory=dict)
+    pinned_features: dict[str, float] = field(default_factory=dict)
+    importance_features: dict[str, float] = field(default_factory=dict)
+    actuators: dict[str, str] = field(default_factory=dict)
+    actuator_options: dict[str, dict[str, Any]] = field(default_factory=dict)
+    roles: dict[str, list[str]] = field(default_factory=dict)
+    dimension_distributions: dict[str, str | None] = field(default_factory=dict)
+    solve: dict[str, Any] = field(default_factory=dict)
+    source: str = "intensities"
+    objects: list[str] = field(default_factory=list)
+
+    @property
+    def replacements(self) -> list[DroppedDimension]:
+        return [d for d in self.dropped if d.replacement]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "source": self.source, "objects": list(self.objects),
+                "targets": dict(self.targets), "dimensions": list(self.dimensions),
+                "dropped": [d.to_dict() for d in self.dropped],
+                "features": dict(self.features), "pinned_features": dict(self.pinned_features),
+                "importance_features": dict(self.importance_features),
+                "actuators": dict(self.actuators),
+                "actuator_options": {k: dict(v) for k, v in self.actuator_options.items()},
+                "roles": {k: list(v) for k, v in self.roles.items()},
+                "dimension_distributions": dict(self.dimension_distributions),
+                "solve": dict(self.solve)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "MaterialPlan":
+        return cls(name=d["name"], targets={k: float(v) for k, v in d["targets"].items()},
+                   dimensions=list(d["dimensions"]),
+                   dropped=[DroppedDimension.from_dict(x) for x in d.get("dropped", [])],
+                   features={k: float(v) for k, v in d.get("features", {}).items()},
+                   pinned_features={k: float(v) for k, v in d.get("pinned_features", {}).items()},
+                   importance_features={k: float(v) for k, v in d.get("importance_features", {}).items()},
+                   actuators=dict(d.get("actuators", {})),
+                   actuator_options={k: dict(v) for k, v in d.get("actuator_options", {}).items()},
+                   roles={k: list(v) for k, v in d.get("roles", {}).items()},
+                   dimension_distributions=dict(d.get("dimension_distributions", {})),
+                   solve=dict(d.get("solve", {})), source=d.get("source", "intensities"),
+                   objects=list(d.get("objects", [])))
+
+
+@dataclass
+class RenderPlan:
+    """A compiled scene.
+
+    Attributes:
+        scene: name of the scene.
+        materials: material name -> :class:`MaterialPlan`, in scene order.
+        settings: the scene settings used (importance, solver, servo).
+        plugins: plugins the plan uses, each ``{kind, name, distribution, version, stage}``
+            (``stage`` ``"compile"``: imported to compile; ``"render"``: imported when rendered).
+        unused_plugins: installed plugins no material uses, each with ``kind``, ``name``,
+            ``distribution`` and ``reason`` (never imported).
+        plugin_api_version: :data:`PLUGIN_API_VERSION` of the core that compiled it.
+    """
+
+    scene: str
+    materials: dict[str, MaterialPlan]
+    settings: dict[str, Any] = field(default_factory=dict)
+    plugins: list[dict[str, Any]] = field(default_factory=list)
+    unused_plugins: list[dict[str, Any]] = field(default_factory=list)
+    plugin_api_version: str = PLUGIN_API_VERSION
+
+    # -- access ------------------------------------------------------------
+    def material(self, name: str | None = None) -> MaterialPlan:
+        """The plan of material ``name`` (default: the first)."""
+        if not self.materials:
+            raise ValidationError("the plan has no materials", field="plan.materials")
+        if name is None:
+            return next(iter(self.materials.values()))
+        if name not in self.materials:
+            raise ValidationError(f"no material {name!r} in the plan; it has {list(self.materials)}",
+                                  field="material")
+        return self.materials[name]
+
+    def distributions(self, material: str | None = None) -> list[str]:
+        """Distributions whose plugins the plan (or one material of it) uses."""
+        if material is None:
+            return sorted({p["distribution"] for p in self.plugins if p.get("distribution")})
+        mp = self.material(material)
+        names = {("dimension", d) for d in mp.dimensions}
+        names |= {("dimension", d.dimension) for d in mp.replacements}
+        names |= {("actuator", a) for a in mp.actuators.values()}
+        out = {p["distribution"] for p in self.plugins
+               if p.get("distribution") and ((p["kind"], p["name"]) in names
+                                             or p["kind"] in ("model", "solver", "importance"))}
+        return sorted(out)
+
+    # -- serialisation -----------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        return {"plan_version": PLAN_VERSION, "plugin_api_version": self.plugin_api_version,
+                "scene": self.scene, "settings": json.loads(json.dumps(self.settings)),
+                "materials": {k: v.to_dict() for k, v in self.materials.items()},
+                "plugins_loaded": [dict(p) for p in self.plugins],
+                "unused_plugins": [dict(p) for p in self.unused_plugins]}
+
+    def to_json(self, **kw: Any) -> str:
+        return json.dumps(self.to_dict(), **{"indent": 2, **kw})
+
+    def save(self, path: str | Path) -> Path:
+        p = Path(path)
+        p.write_text(self.to_json() + "\n", encoding="utf-8")
+        return p
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], *, validate: bool = True) -> "RenderPlan":
+        """Rebuild a plan from :meth:`to_dict` output; with ``validate`` it is checked
+        against ``schemas/plan.schema.json`` first (errors name the JSON path)."""
+        if validate:
+            validate_plan_dict(d)
+        api = str(d.get("plugin_api_version", PLUGIN_API_VERSION))
+        if _parse_version(api)[0] != _parse_version(PLUGIN_API_VERSION)[0]:
+            raise ValidationError(f"plan compiled for plugin API {api}, this core provides "
+                                  f"{PLUGIN_API_VERSION}; compile the scene again",
+                                  field="plan.plugin_api_version")
+        return cls(scene=d["scene"],
+                   materials={k: MaterialPlan.from_dict(v) for k, v in d["materials"].items()},
+                   settings=dict(d.get("settings", {})),
+                   plugins=[dict(p) for p in d.get("plugins_loaded", [])],
+                   unused_plugins=[dict(p) for p in d.get("unused_plugins", [])],
+                   plugin_api_version=api)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "RenderPlan":
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ValidationError(f"no such plan file: {p}", field="plan") from None
+        except json.JSONDecodeError as exc:
+            raise ValidationError(f"{p} is not JSON: {exc}", field="plan") from None
+        return cls.from_dict(data)
+
+    def summary(self) -> dict[str, Any]:
+        """The short form printed by ``hapticsdk plan --json``."""
+        return {"scene": self.scene,
+                "materials": {k: {"dimensions": list(m.dimensions),
+                                  "dropped": [{"dimension": x.dimension, "reason": x.reason,
+                                               "predicted_loss_percent": x.predicted_loss_percent,
+                                               "replacement": x.replacement} for x in m.dropped],
+                                  "features": dict(m.features),
+                                  "pinned_features": dict(m.pinned_features),
+                                  "actuators": dict(m.actuators),
+                                  "solve": {k2: m.solve.get(k2) for k2 in
+                                            ("success", "error", "intensities", "message")}}
+                              for k, m in self.materials.items()},
+                "plugins_loaded": [dict(p) for p in self.plugins],
+                "unused_plugins": [dict(p) for p in self.unused_plugins],
+                "plugin_api_version": self.plugin_api_version}
+
+
+def schema_path(name: str) -> Path | None:
+    """Find ``schemas/<name>`` (package data when installed, the repository when editable)."""
+    try:
+        cand = resources.files("hapticsdk").joinpath("schemas", name)
+        if cand.is_file():
+            return Path(str(cand))
+    except (ModuleNotFoundError, FileNotFoundError):  # pragma: no cover
+        pass
+    repo = Path(__file__).resolve().parent.parent / "schemas" / name
+    return repo if repo.is_file() else None
+
+
+def _validate_with_schema(data: Any, name: str, what: str) -> None:
+    path = schema_path(name)
+    if path is None:
+        raise ValidationError(f"schema {name} not found (package data or repository schemas/)",
+                              field=what)
+    import jsonschema
+    schema = json.loads(path.read_text(encoding="utf-8"))
+    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(data),
+                    key=lambda e: list(e.absolute_path))
+    if errors:
+        e = errors[0]
+        loc = ".".join(str(p) for p in e.absolute_path)
+        raise ValidationError(e.message, field=f"{what}.{loc}" if loc else what)
+
+
+def validate_plan_dict(data: Any) -> None:
+    """Validate a plan dict against ``schemas/plan.schema.json``."""
+    _validate_with_schema(data, "plan.schema.json", "plan")

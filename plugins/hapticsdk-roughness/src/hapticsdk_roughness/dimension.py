@@ -1,0 +1,163 @@
+"""The roughness perception dimension: features, constraint (5) and renderer (9).
+
+Features (the paper's G, roughness part):
+
+* ``Fpeak`` (Hz): frequency of the largest FFT peak of the lateral acceleration while
+  sliding. Recordings are sampled at 500 Hz, so ``Fpeak < 250 Hz``.
+* ``AFpeak`` (m/s^2): one-sided amplitude of that peak.
+* ``P`` ((m/s^2)^2): lateral vibration power.
+
+Constraint, formula (5): ``P >= P_F = AFpeak^2 * df`` with ``df`` (Hz) the FFT resolution
+of the recordings the model was trained on, passed as ``df_hz`` in the constraint context
+(the core takes it from the model metadata). Default :data:`DEFAULT_DF_HZ` = 0.5 Hz:
+a 2 s slide at 500 Hz (1000 samples, ``df = fs/n``), the resolution the core's feature
+extraction aims for (``df <= 0.5 Hz``).
+
+Renderer, formula (9): ``V_out = Tab(Fpeak, AFpeak)``; ``f_p = Fpeak * |v_x / 80 mm/s|``;
+the vibration runs only while ``|v_x| >= 20 mm/s`` (amplitude command 0 below: the
+actuator ramps it, never the renderer).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Mapping
+
+import numpy as np
+
+from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from hapticsdk.errors import ValidationError
+from hapticsdk.features import Feature
+
+#: default FFT resolution (Hz) when no ``df_hz`` is given: 2 s recording at 500 Hz
+DEFAULT_DF_HZ = 0.5
+#: reference sliding speed of the recordings (mm/s), ``v_const`` of formula (9)
+V_REF_MM_S = 80.0
+#: below this lateral speed the piezo is silent (mm/s), formula (9)
+V_GATE_MM_S = 20.0
+
+
+class PowerConstraint(Constraint):
+    """P >= AFpeak^2 * df (formula (5)): the peak alone carries at least that power."""
+
+    name: ClassVar[str] = "roughness.power"
+    features: ClassVar[tuple[str, ...]] = ("AFpeak", "P")
+
+    def __init__(self, df_hz: float = DEFAULT_DF_HZ) -> None:
+        df = float(df_hz)
+        if not np.isfinite(df) or df <= 0:
+            raise ValidationError(f"df_hz must be a positive number of Hz, got {df_hz!r}", field="df_hz")
+        self.df_hz = df
+
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        a = np.asarray(cols["AFpeak"], float)
+        return a * a * self.df_hz, np.asarray(cols["P"], float)
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d["df_hz"] = self.df_hz
+        return d
+
+
+class RoughnessRenderer(DimensionRenderer):
+    """Formula (9) per servo tick, role ``"vibration"``.
+
+    ``V_out`` is looked up once (``Tab(Fpeak, AFpeak)``); each tick commands
+    ``frequency_hz = Fpeak * |v_x| / v_ref`` and ``amplitude = V_out`` (V peak) while
+    ``|v_x| >= v_gate`` and the probe is in contact (``require_contact``), else amplitude 0
+    at the last frequency (so the actuator's ramp-down stays at a steady pitch).
+
+    Out-of-table requests are clamped and reported: ``V_out`` outside the table
+    (``table_clamped``), and per tick ``f_p`` outside ``frequency_range_hz``
+    (counter ``frequency_clamps``), both in :meth:`describe`.
+    """
+
+    roles = ("vibration",)
+
+    def __init__(self, fpeak_hz: float, afpeak_m_s2: float, *, table: Any = None,
+                 v_ref_mm_s: float = V_REF_MM_S, v_gate_mm_s: float = V_GATE_MM_S,
+                 frequency_range_hz: tuple[float, float] | None = None,
+                 require_contact: bool = True) -> None:
+        from .table import resolve_table
+        for name, val in (("Fpeak", fpeak_hz), ("AFpeak", afpeak_m_s2)):
+            if not np.isfinite(val) or val < 0:
+                raise ValidationError(f"must be a finite number >= 0, got {val!r}", field=f"features.{name}")
+        if not (v_ref_mm_s > 0 and v_gate_mm_s >= 0):
+            raise ValidationError("v_ref_mm_s must be > 0 and v_gate_mm_s >= 0", field="options")
+        self.table = resolve_table(table)
+        self.fpeak_hz = float(fpeak_hz)
+        self.afpeak_m_s2 = float(afpeak_m_s2)
+        self.v_ref_mm_s = float(v_ref_mm_s)
+        self.v_gate_mm_s = float(v_gate_mm_s)
+        self.require_contact = bool(require_contact)
+        lo, hi = frequency_range_hz if frequency_range_hz is not None else self.table.frequency_range_hz
+        if not 0 <= lo < hi:
+            raise ValidationError(f"frequency_range_hz must be (lo, hi) with 0 <= lo < hi, got {(lo, hi)}",
+                                  field="options.frequency_range_hz")
+        self.f_lo, self.f_hi = float(lo), float(hi)
+        self.v_out, self.in_table = self.table.voltage_for(self.fpeak_hz, self.afpeak_m_s2)
+        #: acceleration the table predicts at Fpeak for the clamped V_out (m/s^2)
+        self.achieved_m_s2 = self.table.acceleration_at(self.fpeak_hz, self.v_out)
+        self.frequency_clamps = 0
+        self.ticks = 0
+        self.active_ticks = 0
+        self._last_f = min(max(self.fpeak_hz, self.f_lo), self.f_hi)
+
+    def frequency_for(self, v_x_mm_s: float) -> float:
+        """Formula (9): ``f_p = Fpeak * |v_x / v_ref|`` (Hz), unclamped."""
+        return self.fpeak_hz * abs(v_x_mm_s) / self.v_ref_mm_s
+
+    def tick(self, inp: TickInput) -> list[ChannelCommand]:
+        self.ticks += 1
+        vx = float(inp.velocity_mm_s[0])
+        active = abs(vx) >= self.v_gate_mm_s and (inp.in_contact or not self.require_contact)
+        if not active:
+            return [ChannelCommand(role="vibration", frequency_hz=self._last_f, amplitude=0.0)]
+        f = self.fpeak_hz * abs(vx) / self.v_ref_mm_s
+        if f < self.f_lo or f > self.f_hi:
+            self.frequency_clamps += 1
+            f = self.f_lo if f < self.f_lo else self.f_hi
+        self._last_f = f
+        self.active_ticks += 1
+        return [ChannelCommand(role="vibration", frequency_hz=f, amplitude=self.v_out)]
+
+    def describe(self) -> dict:
+        return {"Fpeak_hz": self.fpeak_hz, "AFpeak_m_s2": self.afpeak_m_s2, "v_out_v": self.v_out,
+                "table_in_range": self.in_table, "table_clamped": not self.in_table,
+                "achieved_AFpeak_m_s2": self.achieved_m_s2,
+                "table_generated": self.table.generated, "table_source": self.table.source,
+                "v_ref_mm_s": self.v_ref_mm_s, "v_gate_mm_s": self.v_gate_mm_s,
+                "frequency_range_hz": [self.f_lo, self.f_hi],
+                "frequency_clamps": self.frequency_clamps, "ticks": self.ticks,
+                "active_ticks": self.active_ticks}
+
+
+class RoughnessDimension(PerceptionDimension):
+    """Perceived roughness (0 smooth .. 1 rough) rendered by a speed-following piezo vibration."""
+
+    name: ClassVar[str] = "roughness"
+    description: ClassVar[str] = ("perceived roughness while sliding; rendered as a piezo vibration whose "
+                                  "frequency follows the sliding speed (formula (9))")
+    features: ClassVar[tuple[Feature, ...]] = (
+        Feature("Fpeak", "Hz", 1.0, 249.0,
+                "frequency of the largest FFT peak of lateral acceleration (< 250 Hz at 500 Hz sampling)"),
+        Feature("AFpeak", "m/s^2", 0.0, 50.0, "one-sided amplitude of that peak"),
+        Feature("P", "(m/s^2)^2", 0.0, 500.0,
+                "lateral vibration power (mean square of the high-passed acceleration)"),
+    )
+    default_actuators: ClassVar[dict[str, str]] = {"vibration": "piezo-virtual"}
+    render_features: ClassVar[tuple[str, ...]] = ("Fpeak", "AFpeak")
+
+    def constraints(self, **context: float) -> list[Constraint]:
+        """``[PowerConstraint(df_hz)]``; ``df_hz`` defaults to :data:`DEFAULT_DF_HZ`."""
+        df = context.get("df_hz")
+        return [PowerConstraint(DEFAULT_DF_HZ if df is None else df)]
+
+    def renderer(self, features: Mapping[str, float], **options: Any) -> RoughnessRenderer:
+        """Options: ``table`` (PiezoTable, dict or JSON path; default the generated table),
+        ``v_ref_mm_s`` (80), ``v_gate_mm_s`` (20), ``frequency_range_hz`` (default the
+        table's), ``require_contact`` (True)."""
+        missing = [n for n in self.render_features if n not in features]
+        if missing:
+            raise ValidationError(f"missing features {missing} (roughness renders from {list(self.render_features)})",
+                                  field="features")
+        return RoughnessRenderer(float(features["Fpeak"]), float(features["AFpeak"]), **options)
