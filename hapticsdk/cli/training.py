@@ -1,0 +1,149 @@
+"""CLI commands ``features``, ``train`` and ``dataset`` (``generate``, ``growth``).
+
+Registered by ``hapticsdk.cli`` through :func:`register`; every handler returns an
+exit code (0 ok, 2 for a data/validation error, printed to stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from ..errors import HapticSDKError
+
+
+def _fail(exc: Exception) -> int:
+    print(f"error: {exc}", file=sys.stderr)
+    return 2
+
+
+def cmd_features(args: argparse.Namespace) -> int:
+    """Extract features of a recording set; print per-sample mean +- std (or JSON)."""
+    from ..training.extraction import FEATURE_NAMES, FEATURE_UNITS, extract_set
+    from ..training.recordings import load_manifest
+
+    try:
+        rs = load_manifest(args.recordings)
+        ft = extract_set(rs)
+    except HapticSDKError as exc:
+        return _fail(exc)
+    summ = ft.summary()
+    if args.json:
+        print(json.dumps({"df_hz": ft.dataset_df_hz, "generated": bool(rs.manifest.get("generated", False)),
+                          "units": FEATURE_UNITS,
+                          "samples": {s: {f: {"mean": m, "std": d} for f, (m, d) in v.items()}
+                                      for s, v in summ.items()}}, indent=1))
+        return 0
+    if rs.manifest.get("generated"):
+        print("# GENERATED data (simulated, not measured)")
+    print(f"# df = {ft.dataset_df_hz:g} Hz; mean +- std over trials")
+    print("sample  " + "  ".join(f"{f + ' [' + FEATURE_UNITS[f] + ']':>24}" for f in FEATURE_NAMES))
+    for s, v in summ.items():
+        print(f"{s:<7} " + "  ".join(f"{v[f][0]:>13.4g} +- {v[f][1]:<7.3g}" for f in FEATURE_NAMES))
+    return 0
+
+
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train the perception model on DATASET and export it to ONNX."""
+    from ..training import lm
+    from ..training.pipeline import train_dataset
+
+    cfg = lm.with_overrides(lm.TrainConfig(), seed=args.seed, folds=args.folds, restarts=args.restarts)
+    try:
+        report, _ = train_dataset(args.dataset, args.out, cfg)
+    except HapticSDKError as exc:
+        return _fail(exc)
+    if args.json:
+        print(json.dumps(report, indent=1))
+        return 0
+    if report["data_generated"]:
+        print("# trained on GENERATED data (simulated, not measured)")
+    print(f"samples {report['n_samples']}, rows {report['n_rows']}, split {report['split']}")
+    print(f"{'split':<11}{'dimension':<11}{'MSE':>10}{'R':>9}")
+    for split, per in report["metrics"].items():
+        for dim, m in per.items():
+            print(f"{split:<11}{dim:<11}{m['mse']:>10.4f}{m['r']:>9.4f}")
+    print("paper Table 2: MSE 0.0042 (hardness) 0.0073 (roughness); R 0.9715, 0.9343")
+    print(f"ONNX parity max abs {report['onnx_parity_max_abs']:.2e}; time {report['time_s']:.2f} s; "
+          f"wrote {report['out']}")
+    return 0
+
+
+def cmd_generate(args: argparse.Namespace) -> int:
+    """Generate a data set (raw recordings unless --summary-only, plus feature tables)."""
+    from ..training.pipeline import generate_feature_dataset, write_materials
+
+    try:
+        table = generate_feature_dataset(args.out, args.samples, seed=args.seed, n_trials=args.trials,
+                                         n_raters=args.raters,
+                                         raw_format=None if args.summary_only else args.format)
+        if args.materials:
+            write_materials(table, args.materials)
+    except HapticSDKError as exc:
+        return _fail(exc)
+    print(f"wrote GENERATED data set ({len(table.features.sample_names)} samples, "
+          f"{len(table.X)} trials) to {args.out}" + (f"; materials to {args.materials}" if args.materials else ""))
+    return 0
+
+
+def cmd_growth(args: argparse.Namespace) -> int:
+    """Train on generated sets of growing size; print test and CV metrics."""
+    from ..training.pipeline import data_growth
+
+    sizes = [int(s) for s in args.sizes.split(",") if s.strip()]
+    try:
+        rows = data_growth(sizes, seed=args.seed)
+    except HapticSDKError as exc:
+        return _fail(exc)
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{'samples':>8} {'split':<6}{'MSE hard':>10}{'R hard':>9}{'MSE rough':>11}{'R rough':>9}{'time s':>8}")
+    for r in rows:
+        for sp in ("test", "cv"):
+            h, g = r["metrics"][sp]["hardness"], r["metrics"][sp]["roughness"]
+            print(f"{r['n_samples']:>8} {sp:<6}{h['mse']:>10.4f}{h['r']:>9.4f}{g['mse']:>11.4f}{g['r']:>9.4f}"
+                  f"{r['time_s']:>8.1f}")
+    return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``features``, ``train`` and ``dataset`` to the ``hapticsdk`` command."""
+    p = sub.add_parser("features", help="extract the paper's features from a recording set",
+                       description="Extract GS, W, Fpeak, AFpeak, P per trial of RECORDINGS "
+                                   "(directory with recordings.json) and print per-sample mean +- std.")
+    p.add_argument("recordings", type=Path, help="recording set directory or its recordings.json")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_features)
+
+    p = sub.add_parser("train", help="train the perception model and export it to ONNX",
+                       description="Train the 5-20-2 network by Levenberg-Marquardt on DATASET "
+                                   "(feature data set with dataset.json, or recording set) and write ONNX.")
+    p.add_argument("dataset", type=Path, help="data set directory")
+    p.add_argument("--out", type=Path, required=True, help="ONNX file to write")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--seed", type=int, default=None, help="split/initialisation seed (default 0)")
+    p.add_argument("--folds", type=int, default=None, help="k of grouped k-fold CV (default 5, 0 = off)")
+    p.add_argument("--restarts", type=int, default=None, help="initialisations tried (default 5)")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("dataset", help="generated data sets", description="Generated (simulated) data sets.")
+    dsub = p.add_subparsers(dest="dataset_command", required=True)
+    g = dsub.add_parser("generate", help="generate a data set (simulated recordings + ratings)")
+    g.add_argument("out", type=Path, help="output directory")
+    g.add_argument("--samples", type=int, default=23, help="number of samples (default 23)")
+    g.add_argument("--seed", type=int, default=None, help="generator seed (default 20221122)")
+    g.add_argument("--trials", type=int, default=None, help="trials per sample (default 10)")
+    g.add_argument("--raters", type=int, default=None, help="raters (default 10)")
+    g.add_argument("--format", choices=("npz", "csv"), default="npz", help="raw trial file format")
+    g.add_argument("--summary-only", action="store_true",
+                   help="write only the feature tables and ratings (no raw trials)")
+    g.add_argument("--materials", type=Path, default=None, help="also write a materials.json here")
+    g.set_defaults(func=cmd_generate)
+    gr = dsub.add_parser("growth", help="accuracy vs number of generated samples")
+    gr.add_argument("--sizes", default="23,46,92", help="comma-separated sample counts")
+    gr.add_argument("--seed", type=int, default=None)
+    gr.add_argument("--json", action="store_true")
+    gr.set_defaults(func=cmd_growth)

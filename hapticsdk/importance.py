@@ -1,0 +1,178 @@
+"""Importance models: does rendering a dimension change what a person feels?
+
+An :class:`ImportanceModel` predicts, from a material's solved features, the loss of
+realism (percent of the realism rated with every dimension rendered) that leaving one
+dimension out would cause. A scene drops a dimension whose predicted loss is below its
+threshold (``settings.importance.threshold_percent``). Models are plugins of the
+entry-point group ``hapticsdk.importance``; the core registers ``paper``
+(:class:`PaperRegressionImportance`).
+
+Predictions are vectorised: :meth:`ImportanceModel.predict_loss` takes feature columns
+(arrays, one entry per material) and returns one loss per material.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar, Mapping, Sequence
+
+import numpy as np
+
+from .errors import ValidationError
+
+
+class ImportanceModel(ABC):
+    """Predicts the realism loss of leaving a dimension out.
+
+    Subclasses set ``name`` and implement :meth:`_predict_loss`; they may override
+    :meth:`replacement` to render something simpler in a dropped dimension's place.
+    """
+
+    name: ClassVar[str] = ""
+    #: ``hapticsdk_api`` range of the plugin API this model was written for.
+    hapticsdk_api: ClassVar[str] = ">=1.0,<2"
+
+    def features_needed(self, dimension: str, present: Sequence[str]) -> tuple[str, ...]:
+        """Feature names the prediction for ``dimension`` reads (default: none)."""
+        return ()
+
+    def judges(self, dimension: str, present: Sequence[str]) -> bool:
+        """Whether this model predicts the loss of ``dimension`` when the material renders
+        the dimensions ``present`` (which include ``dimension``)."""
+        return False
+
+    def predict_loss(self, dimension: str, features: Mapping[str, Any],
+                     present: Sequence[str]) -> np.ndarray:
+        """Predicted realism loss (%) per row of ``features`` (name -> array of shape
+        ``(m,)`` or scalar) when ``dimension`` is left out of ``present``.
+
+        Raises :class:`ValidationError` when a needed feature is missing or not finite, or
+        when the model does not judge this dimension in this context."""
+        present = list(present)
+        if dimension not in present:
+            raise ValidationError(f"{dimension!r} is not among the rendered dimensions {present}",
+                                  field="dimension")
+        if not self.judges(dimension, present):
+            raise ValidationError(f"importance model {self.name!r} does not judge {dimension!r} "
+                                  f"with {present}", field="dimension")
+        cols: dict[str, np.ndarray] = {}
+        for f in self.features_needed(dimension, present):
+            if f not in features:
+                raise ValidationError(f"importance model {self.name!r} needs feature {f!r}",
+                                      field=f"features.{f}")
+            a = np.atleast_1d(np.asarray(features[f], dtype=float))
+            if not np.isfinite(a).all():
+                raise ValidationError("NaN or infinite feature", field=f"features.{f}")
+            cols[f] = a
+        m = max((len(a) for a in cols.values()), default=1)
+        cols = {k: np.broadcast_to(v, (m,)) for k, v in cols.items()}
+        out = np.asarray(self._predict_loss(dimension, cols, present), dtype=float).reshape(-1)
+        if out.shape != (m,):
+            out = np.broadcast_to(out, (m,)).copy()
+        return out
+
+    @abstractmethod
+    def _predict_loss(self, dimension: str, cols: Mapping[str, np.ndarray],
+                      present: Sequence[str]) -> np.ndarray:
+        """Backend: loss (%) per row of the validated columns."""
+
+    def replacement(self, dimension: str) -> dict[str, Any] | None:
+        """What to render instead of a dropped ``dimension`` (``None``: nothing)."""
+        return None
+
+    def describe(self) -> dict[str, Any]:
+        return {"name": self.name, "doc": (self.__doc__ or "").strip().splitlines()[0]}
+
+
+class PaperRegressionImportance(ImportanceModel):
+    """The multiple regressions of Tables 5 and 6 of the reference paper.
+
+    Loss of realism (% of the realism with hardness and roughness rendered) when one is
+    removed, from the GA features GS (N/mm), Fpeak (Hz) and AFpeak (m/s^2):
+
+    * removing roughness: ``35.009 - 0.075 GS - 0.232 Fpeak + 15.966 AFpeak`` (R^2 0.842)
+    * removing hardness:  ``3.804 + 8.168 GS + 0.060 Fpeak - 9.138 AFpeak``  (R^2 0.952)
+
+    The regressions were measured on materials rendered with both hardness and
+    roughness, so this model judges a dimension only while both are rendered (once one
+    is dropped, the other is kept). A dropped hardness is replaced by a constant normal
+    force of 1 N while in contact (the paper's "No Hardness" condition).
+    """
+
+    name: ClassVar[str] = "paper"
+    PAIR: ClassVar[tuple[str, str]] = ("hardness", "roughness")
+    #: intercept, GS, Fpeak, AFpeak coefficients per removed dimension
+    COEFFICIENTS: ClassVar[dict[str, tuple[float, float, float, float]]] = {
+        "roughness": (35.009, -0.075, -0.232, 15.966),
+        "hardness": (3.804, 8.168, 0.060, -9.138),
+    }
+    #: normal force (N) rendered in place of a dropped hardness
+    NO_HARDNESS_FORCE_N: ClassVar[float] = 1.0
+
+    def features_needed(self, dimension: str, present: Sequence[str]) -> tuple[str, ...]:
+        return ("GS", "Fpeak", "AFpeak")
+
+    def judges(self, dimension: str, present: Sequence[str]) -> bool:
+        return dimension in self.COEFFICIENTS and all(d in present for d in self.PAIR)
+
+    def _predict_loss(self, dimension: str, cols: Mapping[str, np.ndarray],
+                      present: Sequence[str]) -> np.ndarray:
+        b0, bgs, bf, ba = self.COEFFICIENTS[dimension]
+        return b0 + bgs * cols["GS"] + bf * cols["Fpeak"] + ba * cols["AFpeak"]
+
+    def replacement(self, dimension: str) -> dict[str, Any] | None:
+        if dimension == "hardness":
+            return {"renderer": "constant-force", "role": "force",
+                    "force_n": self.NO_HARDNESS_FORCE_N,
+                    "note": "the paper's 'No Hardness' condition: constant 1 N normal force in contact"}
+        return None
+
+
+def load_importance(name: str | ImportanceModel = "paper") -> ImportanceModel:
+    """An importance model by entry-point name (group ``hapticsdk.importance``) or as given."""
+    if isinstance(name, ImportanceModel):
+        return name
+    from .plugins import registry
+    obj = registry("importance").load(name)
+    model = obj() if isinstance(obj, type) or callable(obj) else obj
+    if not isinstance(model, ImportanceModel):
+        raise ValidationError(f"importance plugin {name!r} did not give an ImportanceModel "
+                              f"(got {type(model).__name__})", field="settings.importance.model")
+    return model
+
+
+def decide_drops(model: ImportanceModel, dimensions: Sequence[str],
+                 features: Mapping[str, np.ndarray], thresholds: Mapping[str, float],
+                 default_threshold: float) -> list[list[tuple[str, float, float]]]:
+    """For each material (row of ``features``) the dimensions to drop, in order, as
+    ``(dimension, predicted_loss_percent, threshold_percent)``.
+
+    Rule: among the dimensions the model judges with what is still rendered, the one with
+    the lowest predicted loss below its threshold is dropped; repeat until none is below
+    (a model that judges pairs, like ``paper``, thus drops at most one of the pair). At
+    least one dimension is always kept.
+    """
+    m = len(next(iter(features.values()))) if features else 1
+    out: list[list[tuple[str, float, float]]] = []
+    for i in range(m):
+        row = {k: np.asarray(v, float)[i:i + 1] for k, v in features.items()}
+        present = list(dimensions)
+        drops: list[tuple[str, float, float]] = []
+        while len(present) > 1:
+            cands = []
+            for d in present:
+                if not model.judges(d, present):
+                    continue
+                if any(f not in row for f in model.features_needed(d, present)):
+                    continue
+                loss = float(model.predict_loss(d, row, present)[0])
+                thr = float(thresholds.get(d, default_threshold))
+                if loss < thr:
+                    cands.append((loss, d, thr))
+            if not cands:
+                break
+            loss, d, thr = min(cands)
+            drops.append((d, loss, thr))
+            present.remove(d)
+        out.append(drops)
+    return out
