@@ -128,12 +128,21 @@ class PaperRegressionImportance(ImportanceModel):
         return None
 
 
+#: importance models of the core (also published as entry points of the core distribution)
+BUILTIN: dict[str, type[ImportanceModel]] = {"paper": PaperRegressionImportance}
+
+
 def load_importance(name: str | ImportanceModel = "paper") -> ImportanceModel:
     """An importance model by entry-point name (group ``hapticsdk.importance``) or as given."""
     if isinstance(name, ImportanceModel):
         return name
     from .plugins import registry
-    obj = registry("importance").load(name)
+    reg = registry("importance")
+    if name not in reg and name in BUILTIN:
+        # the core's own model, when the core's entry points are not installed (source tree)
+        obj: Any = BUILTIN[name]
+    else:
+        obj = reg.load(name)
     model = obj() if isinstance(obj, type) or callable(obj) else obj
     if not isinstance(model, ImportanceModel):
         raise ValidationError(f"importance plugin {name!r} did not give an ImportanceModel "
@@ -144,35 +153,35 @@ def load_importance(name: str | ImportanceModel = "paper") -> ImportanceModel:
 def decide_drops(model: ImportanceModel, dimensions: Sequence[str],
                  features: Mapping[str, np.ndarray], thresholds: Mapping[str, float],
                  default_threshold: float) -> list[list[tuple[str, float, float]]]:
-    """For each material (row of ``features``) the dimensions to drop, in order, as
+    """For each material (row of ``features``) the dimensions to drop, as
     ``(dimension, predicted_loss_percent, threshold_percent)``.
 
-    Rule: among the dimensions the model judges with what is still rendered, the one with
-    the lowest predicted loss below its threshold is dropped; repeat until none is below
-    (a model that judges pairs, like ``paper``, thus drops at most one of the pair). At
-    least one dimension is always kept.
+    Rule: every dimension the model judges (with all of ``dimensions`` rendered, the
+    condition its predictions refer to) is dropped when its predicted loss is below its
+    threshold (``thresholds[dim]``, else ``default_threshold``); decisions are independent,
+    one vectorised prediction per dimension for all materials. If that would leave a
+    material with nothing rendered at all (no kept dimension and no replacement), the
+    dropped dimension with the highest predicted loss is kept.
     """
+    dims = list(dimensions)
     m = len(next(iter(features.values()))) if features else 1
+    losses: dict[str, np.ndarray] = {}
+    for d in dims:
+        if not model.judges(d, dims):
+            continue
+        if any(f not in features for f in model.features_needed(d, dims)):
+            continue
+        losses[d] = model.predict_loss(d, features, dims)
     out: list[list[tuple[str, float, float]]] = []
     for i in range(m):
-        row = {k: np.asarray(v, float)[i:i + 1] for k, v in features.items()}
-        present = list(dimensions)
-        drops: list[tuple[str, float, float]] = []
-        while len(present) > 1:
-            cands = []
-            for d in present:
-                if not model.judges(d, present):
-                    continue
-                if any(f not in row for f in model.features_needed(d, present)):
-                    continue
-                loss = float(model.predict_loss(d, row, present)[0])
+        drops = []
+        for d in dims:
+            if d in losses:
                 thr = float(thresholds.get(d, default_threshold))
-                if loss < thr:
-                    cands.append((loss, d, thr))
-            if not cands:
-                break
-            loss, d, thr = min(cands)
-            drops.append((d, loss, thr))
-            present.remove(d)
+                if losses[d][i] < thr:
+                    drops.append((d, float(losses[d][i]), thr))
+        if drops and len(drops) == len(dims) and not any(model.replacement(d) for d, _, _ in drops):
+            keep = max(drops, key=lambda t: t[1])
+            drops.remove(keep)
         out.append(drops)
     return out

@@ -89,9 +89,13 @@ class MaterialLibrary:
         key = str(name).strip().lower()
         if key in self._items:
             return self._items[key]
-        for m in self._items.values():
-            if m.label.lower() == key:
-                return m
+        by_label = [m for m in self._items.values() if m.label.lower() == key]
+        if len(by_label) == 1:
+            return by_label[0]
+        if by_label:
+            raise ValidationError(f"label {name!r} is ambiguous: it names "
+                                  f"{', '.join(m.name for m in by_label)}; use one of these names",
+                                  field="material")
         raise ValidationError(f"unknown material {name!r}; known: {', '.join(self.names())}",
                               field="material")
 

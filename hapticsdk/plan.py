@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -308,31 +307,16 @@ class RenderPlan:
                 "plugin_api_version": self.plugin_api_version}
 
 
-def schema_path(name: str) -> Path | None:
-    """Find ``schemas/<name>`` (package data when installed, the repository when editable)."""
-    try:
-        cand = resources.files("hapticsdk").joinpath("schemas", name)
-        if cand.is_file():
-            return Path(str(cand))
-    except (ModuleNotFoundError, FileNotFoundError):  # pragma: no cover
-        pass
-    repo = Path(__file__).resolve().parent.parent / "schemas" / name
-    return repo if repo.is_file() else None
+def compile_scene(scene: Any) -> RenderPlan:
+    """Compile a scene into a plan (see :func:`hapticsdk.scene.compile_scene`)."""
+    from .scene import compile_scene as _compile
+    return _compile(scene)
 
 
 def _validate_with_schema(data: Any, name: str, what: str) -> None:
-    path = schema_path(name)
-    if path is None:
-        raise ValidationError(f"schema {name} not found (package data or repository schemas/)",
-                              field=what)
-    import jsonschema
-    schema = json.loads(path.read_text(encoding="utf-8"))
-    errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(data),
-                    key=lambda e: list(e.absolute_path))
-    if errors:
-        e = errors[0]
-        loc = ".".join(str(p) for p in e.absolute_path)
-        raise ValidationError(e.message, field=f"{what}.{loc}" if loc else what)
+    """Validate against ``schemas/<name>`` (errors name the JSON path)."""
+    from .schemas_io import validate
+    validate(data, name.split(".")[0])
 
 
 def validate_plan_dict(data: Any) -> None:

@@ -1,67 +1,335 @@
 """The core safety layer every actuator command passes through.
 
-:class:`SafetyLayer` clamps each command to the actuator's declared
-:class:`~hapticsdk.actuators.ActuatorLimits` and counts every limit hit, so that no
-plugin can exceed what it declared, whether or not its own code checks.
+Every :class:`~hapticsdk.actuators.Actuator` owns a :class:`SafetyLayer` (on by
+default) and routes each command ``Actuator.command(cmd, now=...)`` through
+:meth:`SafetyLayer.filter` before its backend sees it, so no plugin can exceed what it
+declared in its :class:`~hapticsdk.actuators.ActuatorLimits`, whether or not its own
+code checks. What the layer enforces (see ``docs/safety.md``):
+
+* **Declared limits** on every command: force magnitude (N), stiffness (N/mm, as
+  ``|F| <= k_max * penetration + stiffness_offset_n``), a force limit that shrinks with
+  probe speed above ``velocity_knee * max_velocity_mm_s`` and is zero (a fault) above
+  ``max_velocity_mm_s``, drive frequency (Hz), amplitude / voltage (actuator unit, never
+  negative), and the force change per tick (N). Each limit hit is counted per command.
+* **Start gate**: after ``open()``, a ``stop()`` or a fault, force output is held at
+  zero while the user is already pushing hard (penetration above
+  ``start_max_penetration_mm`` or a commanded force above ``start_max_force_n``).
+* **Ramp**: once the gate releases, force is scaled by an envelope rising linearly from
+  0 to 1 over ``ramp_time_s``, so it never steps at start or after a fault: for a steady
+  command ``F`` the output changes by at most ``|F| * dt / ramp_time_s`` per tick.
+* **Stale commands**: :meth:`SafetyLayer.current` (what a device-side servo thread or a
+  simulated device applies at time ``now``) returns the last command only while it is
+  younger than ``stale_after_s`` (one servo period); after that it returns zero and the
+  old command is never re-sent. A gap longer than ``restart_after_s`` between commands
+  counts as a fault (gate + ramp again).
+
+Times (``now``, s) are those the caller passes to ``Actuator.command``: simulated time
+in a simulated run, ``time.monotonic()`` otherwise. The layer only compares times it
+received through :meth:`filter` and :meth:`current`, so both clocks work.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+import math
+from dataclasses import asdict, dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from .dimensions import ChannelCommand
+from .errors import ValidationError
+
+#: small slack when comparing times (s): simulated clocks accumulate rounding error
+_TIME_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class SafetySettings:
+    """Tunable behaviour of :class:`SafetyLayer` (defaults are the SDK's defaults).
+
+    Attributes:
+        ramp_time_s: duration of the force ramp at start and after a fault (s); 0 turns
+            the ramp off (not recommended on hardware).
+        stale_after_s: age beyond which :meth:`SafetyLayer.current` replaces the last
+            command by zero (s); one servo period (1 ms at the 1 kHz servo rate).
+            :meth:`SafetyLayer.set_period` sets it from the servo loop's period.
+        restart_after_s: a gap between two commands longer than this (s) is treated as
+            a fault: the start gate and the ramp apply again.
+        start_max_penetration_mm: the start gate holds force at zero while the probe is
+            deeper than this below the surface (mm); ``None``: not checked.
+        start_max_force_n: ... or while the (clamped) commanded force exceeds this (N);
+            ``None``: not checked.
+        velocity_knee: fraction of ``max_velocity_mm_s`` above which the force limit
+            shrinks linearly, reaching 0 at ``max_velocity_mm_s``.
+        stiffness_offset_n: force allowed on top of ``max_stiffness * penetration`` (N),
+            so constant contact forces (the paper's 1 N "no hardness" condition) pass.
+        ramp_amplitude: also ramp vibration amplitude (not only force).
+    """
+
+    ramp_time_s: float = 0.2
+    stale_after_s: float = 0.001
+    restart_after_s: float = 0.05
+    start_max_penetration_mm: float | None = 1.0
+    start_max_force_n: float | None = 1.0
+    velocity_knee: float = 0.5
+    stiffness_offset_n: float = 1.0
+    ramp_amplitude: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("ramp_time_s", "stiffness_offset_n"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ValidationError(f"must be a finite number >= 0, got {v!r}", field=f"safety.{name}")
+        for name in ("stale_after_s", "restart_after_s"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ValidationError(f"must be a finite number > 0, got {v!r}", field=f"safety.{name}")
+        for name in ("start_max_penetration_mm", "start_max_force_n"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ValidationError(f"must be None or a number >= 0, got {v!r}", field=f"safety.{name}")
+        if not 0.0 <= self.velocity_knee < 1.0:
+            raise ValidationError(f"must be in [0, 1), got {self.velocity_knee!r}", field="safety.velocity_knee")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+#: phases of the layer's state machine
+PHASES = ("closed", "waiting", "ramping", "running")
 
 
 class SafetyLayer:
-    """Clamp commands to declared limits; count and report each limit hit."""
+    """Clamp commands to declared limits, gate and ramp force at start and after faults,
+    zero stale commands; count and report each limit hit.
 
-    def __init__(self, limits: Any) -> None:
+    Args:
+        limits: the actuator's :class:`~hapticsdk.actuators.ActuatorLimits`.
+        settings: a :class:`SafetySettings` (default: the SDK defaults).
+        **overrides: individual :class:`SafetySettings` fields, e.g. ``ramp_time_s=0.5``.
+
+    Public attributes: ``limits``, ``settings``, ``hits`` (limit name -> count),
+    ``events`` (``faults``, ``stale_zeroed``, ``start_hold_ticks``, ``ramp_ticks``),
+    ``phase`` (one of :data:`PHASES`).
+    """
+
+    def __init__(self, limits: Any, settings: SafetySettings | None = None, **overrides: Any) -> None:
         self.limits = limits
+        base = settings if settings is not None else SafetySettings()
+        try:
+            self.settings = replace(base, **overrides) if overrides else base
+        except TypeError:
+            valid = sorted(SafetySettings.__dataclass_fields__)
+            raise ValidationError(f"unknown safety setting(s) {sorted(overrides)}; valid: {valid}",
+                                  field="safety") from None
         self.hits: dict[str, int] = {}
+        self.events: dict[str, int] = {"faults": 0, "stale_zeroed": 0, "start_hold_ticks": 0, "ramp_ticks": 0}
+        self.last_fault: str | None = None
+        self.phase = "closed"
+        self._state: Any = None
         self._last: ChannelCommand | None = None
+        self._t_last: float | None = None
+        self._stale_counted = False
+        self._ramp_t0: float | None = None
+        self._prev_force = 0.0
+        self._overspeed = False
 
+    # -- configuration -----------------------------------------------------
+    def configure(self, **changes: Any) -> None:
+        """Change settings (fields of :class:`SafetySettings`)."""
+        self.settings = replace(self.settings, **changes)
+
+    def set_period(self, period_s: float) -> None:
+        """Tell the layer the servo period (s): commands older than it are stale."""
+        self.configure(stale_after_s=float(period_s))
+
+    # -- lifecycle (called by Actuator and the servo loop) ---------------------
     def reset(self, now: float) -> None:
-        """Called when the actuator opens."""
+        """Called when the actuator opens: output zero, start gate armed, then ramp.
+
+        ``now`` may come from a different clock than later commands; it is not used to
+        time the ramp (the ramp is timed from the ``now`` of the command that releases
+        the gate)."""
+        self._restart()
 
     def on_stop(self) -> None:
-        """Called when the actuator is stopped."""
+        """Called when the actuator is stopped (also after a backend fault): the last
+        command is dropped and the next start goes through the gate and the ramp."""
+        self._restart()
+
+    def fault(self, reason: str) -> None:
+        """Record a fault (e.g. a device error flag that does not stop the device):
+        output drops to zero now, then gate and ramp as at start."""
+        self.events["faults"] += 1
+        self.last_fault = reason
+        self._restart()
+
+    def _restart(self) -> None:
+        self.phase = "waiting"
+        self._last = None
+        self._t_last = None
+        self._stale_counted = False
+        self._ramp_t0 = None
+        self._prev_force = 0.0
 
     def observe(self, state: Any) -> None:
-        """Called by the servo loop once per tick with the device state, before commands."""
+        """Called by the servo loop once per tick with the device state
+        (:class:`~hapticsdk.actuators.DeviceState`), before the tick's commands."""
+        self._state = state
+        vmax = getattr(self.limits, "max_velocity_mm_s", None)
+        if vmax is not None:
+            over = self._speed() > vmax
+            if over:
+                self._hit("max_velocity_mm_s")
+                if not self._overspeed:
+                    self.fault("max_velocity_mm_s: probe speed above the declared limit")
+            self._overspeed = over
 
+    # -- per command -------------------------------------------------------
     def current(self, now: float) -> ChannelCommand | None:
-        """The command a device-side servo thread should apply at ``now`` (the last one sent)."""
-        return self._last
-
-    def _hit(self, key: str) -> None:
-        self.hits[key] = self.hits.get(key, 0) + 1
+        """The command a device-side servo thread (or a simulated device) applies at
+        ``now`` (s): the last filtered command while it is at most one servo period old,
+        a zero command (same role, force 0 / amplitude 0) once it is stale, ``None``
+        before the first command."""
+        last = self._last
+        if last is None:
+            return None
+        if now - self._t_last > self.settings.stale_after_s + _TIME_EPS:
+            if not self._stale_counted:
+                self.events["stale_zeroed"] += 1
+                self._stale_counted = True
+            return _zeroed(last)
+        return last
 
     def filter(self, cmd: ChannelCommand, now: float) -> ChannelCommand:
+        """The command to actually send at ``now`` (s): clamped, gated, ramped; every
+        limit that bites is counted in :attr:`hits`."""
+        s = self.settings
         lim = self.limits
+        if self.phase == "closed":
+            self._restart()
+        if self._t_last is not None and now - self._t_last > s.restart_after_s + _TIME_EPS:
+            self.fault(f"command gap of {now - self._t_last:.4f} s (> restart_after_s)")
         out = cmd
-        if cmd.force_n is not None and lim.max_force_n is not None and abs(cmd.force_n) > lim.max_force_n:
-            self._hit("max_force_n")
-            out = replace(out, force_n=float(np.clip(cmd.force_n, -lim.max_force_n, lim.max_force_n)))
+
+        force = cmd.force_n
+        if force is not None:
+            force = self._limit_force(float(force))
+        amp = cmd.amplitude
+        if amp is not None:
+            amp = float(amp)
+            if amp < 0:
+                self._hit("negative_amplitude")
+                amp = 0.0
+            if lim.max_amplitude is not None and amp > lim.max_amplitude:
+                self._hit("max_amplitude")
+                amp = float(lim.max_amplitude)
         if cmd.frequency_hz is not None and lim.frequency_range_hz is not None:
             lo, hi = lim.frequency_range_hz
             if not lo <= cmd.frequency_hz <= hi:
                 self._hit("frequency_range_hz")
                 out = replace(out, frequency_hz=float(np.clip(cmd.frequency_hz, lo, hi)))
-        if cmd.amplitude is not None:
-            a = cmd.amplitude
-            if a < 0:
-                self._hit("negative_amplitude")
-                a = 0.0
-            if lim.max_amplitude is not None and a > lim.max_amplitude:
-                self._hit("max_amplitude")
-                a = lim.max_amplitude
-            if a != cmd.amplitude:
-                out = replace(out, amplitude=float(a))
+
+        gain = self._envelope(force, now)
+        if force is not None:
+            force = gain * force
+            rate = getattr(lim, "max_force_rate_n_per_tick", None)
+            if rate is not None and abs(force - self._prev_force) > rate:
+                self._hit("max_force_rate_n_per_tick")
+                force = self._prev_force + math.copysign(rate, force - self._prev_force)
+            self._prev_force = force
+            out = replace(out, force_n=float(force))
+        if amp is not None:
+            if s.ramp_amplitude:
+                amp = gain * amp
+            out = replace(out, amplitude=float(amp))
         self._last = out
+        self._t_last = now
+        self._stale_counted = False
         return out
 
+    def _limit_force(self, f: float) -> float:
+        """Clamp a force (N) to the force, speed and stiffness limits."""
+        lim = self.limits
+        fmax = lim.max_force_n
+        if fmax is not None and abs(f) > fmax:
+            self._hit("max_force_n")
+            f = math.copysign(fmax, f)
+        vmax = getattr(lim, "max_velocity_mm_s", None)
+        if vmax is not None and self._state is not None:
+            speed = self._speed()
+            if speed > vmax:
+                f = 0.0  # counted in observe() (once per tick)
+            elif fmax is not None:
+                knee = self.settings.velocity_knee * vmax
+                if speed > knee:
+                    cap = fmax * (vmax - speed) / (vmax - knee)
+                    if abs(f) > cap:
+                        self._hit("max_velocity_mm_s")
+                        f = math.copysign(cap, f)
+        kmax = getattr(lim, "max_stiffness_n_per_mm", None)
+        if kmax is not None and self._state is not None:
+            cap = kmax * max(self._penetration(), 0.0) + self.settings.stiffness_offset_n
+            if abs(f) > cap:
+                self._hit("max_stiffness_n_per_mm")
+                f = math.copysign(cap, f)
+        return f
+
+    def _envelope(self, force: float | None, now: float) -> float:
+        """Gate and ramp gain (0..1) for this command; advances the phase machine."""
+        s = self.settings
+        if self._overspeed:
+            self.events["start_hold_ticks"] += 1
+            return 0.0
+        if self.phase == "waiting":
+            pen_ok = (s.start_max_penetration_mm is None or self._state is None
+                      or self._penetration() <= s.start_max_penetration_mm)
+            force_ok = s.start_max_force_n is None or force is None or abs(force) <= s.start_max_force_n
+            if not (pen_ok and force_ok):
+                self.events["start_hold_ticks"] += 1
+                return 0.0
+            self.phase = "ramping"
+            self._ramp_t0 = now
+        if self.phase == "ramping":
+            if s.ramp_time_s <= 0:
+                self.phase = "running"
+                return 1.0
+            if now < self._ramp_t0:  # clock went backwards: restart the ramp from here
+                self._ramp_t0 = now
+            g = (now - self._ramp_t0) / s.ramp_time_s
+            if g >= 1.0 - _TIME_EPS:
+                self.phase = "running"
+                return 1.0
+            self.events["ramp_ticks"] += 1
+            return max(g, 0.0)
+        return 1.0
+
+    # -- helpers -----------------------------------------------------------
+    def _speed(self) -> float:
+        return float(np.linalg.norm(np.asarray(self._state.velocity_mm_s, float)))
+
+    def _penetration(self) -> float:
+        st = self._state
+        pen = getattr(st, "penetration_mm", None)
+        return float(pen if pen is not None else -np.asarray(st.position_mm, float)[1])
+
+    def _hit(self, key: str) -> None:
+        self.hits[key] = self.hits.get(key, 0) + 1
+
+    def clear_counts(self) -> None:
+        """Zero the limit-hit and event counters."""
+        self.hits.clear()
+        for k in self.events:
+            self.events[k] = 0
+
     def report(self) -> dict[str, Any]:
-        return {"limit_hits": dict(self.hits)}
+        """Counters and settings, JSON-ready: ``limit_hits`` (limit name -> number of
+        commands it clamped), ``events``, ``phase``, ``last_fault``, ``settings``."""
+        return {"limit_hits": dict(self.hits), "events": dict(self.events), "phase": self.phase,
+                "last_fault": self.last_fault, "settings": self.settings.to_dict()}
+
+
+def _zeroed(cmd: ChannelCommand) -> ChannelCommand:
+    """``cmd`` with its force and amplitude set to zero (frequency kept)."""
+    return replace(cmd, force_n=0.0 if cmd.force_n is not None else None,
+                   amplitude=0.0 if cmd.amplitude is not None else None)

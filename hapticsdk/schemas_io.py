@@ -43,7 +43,8 @@ def validate(instance: Any, name: str, *, source: str = "") -> None:
 
     schema = load_schema(name)
     cls = jsonschema.validators.validator_for(schema)
-    errors = sorted(cls(schema).iter_errors(instance), key=lambda e: list(e.absolute_path))
+    # the deepest error is the most specific one: report it first
+    errors = sorted(cls(schema).iter_errors(instance), key=lambda e: -len(e.absolute_path))
     if errors:
         err = errors[0]
         path = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in err.absolute_path)

@@ -26,6 +26,7 @@ Per sample: mean and standard deviation over its trials.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -67,6 +68,7 @@ class TrialFeatures:
         return np.array([self.GS, self.W, self.Fpeak, self.AFpeak, self.P])
 
 
+@lru_cache(maxsize=8)
 def _filters(fs: float):
     lp = signal.butter(FILTER_ORDER, LP_HZ, btype="lowpass", fs=fs, output="sos")
     hp = signal.butter(FILTER_ORDER, HP_HZ, btype="highpass", fs=fs, output="sos")

@@ -61,7 +61,8 @@ class Evaluator:
 
 
 def constraint_terms(problem: SolveProblem, G: np.ndarray, margin: float) -> np.ndarray:
-    """Smooth-ish constraint residuals ``(n, c)``: ``max(0, (bound + margin|bound| - value)/|bound|)``.
+    """Signed constraint shortfalls ``(n, c)``: ``(bound + margin|bound| - value)/|bound|``
+    (positive = violated, or within the margin of the bound).
 
     The margin makes a Gauss-Newton iterate that converges onto the constraint land on the
     feasible side (the base class counts a violation above ``CONSTRAINT_TOL`` as failure).
@@ -80,7 +81,7 @@ def constraint_terms(problem: SolveProblem, G: np.ndarray, margin: float) -> np.
         bound = np.broadcast_to(np.asarray(bound, float), (G.shape[0],))
         value = np.broadcast_to(np.asarray(value, float), (G.shape[0],))
         scale = np.where(np.abs(bound) > 0, np.abs(bound), 1.0)
-        out[:, j] = np.maximum(0.0, (bound + margin * scale - value) / scale)
+        out[:, j] = (bound + margin * scale - value) / scale
     return out
 
 

@@ -1,0 +1,91 @@
+"""Scene commands: ``hapticsdk plan SCENE [--json] [-o PLAN.json]``.
+
+``SCENE`` is a scene JSON file (``schemas/scene.schema.json``) or the name of a library
+material (a one-object scene). The plan lists, per material, the dimensions kept, those
+dropped with the importance model's predicted realism loss, the solved features and the
+actuator per channel role; ``-o`` saves the full plan for ``render_plan`` later.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("plan", help="compile a scene into a render plan (what is rendered, what is left out)")
+    p.add_argument("scene", metavar="SCENE", help="scene JSON file, or a library material name (S7)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("-o", "--output", metavar="PLAN", help="save the full plan (JSON) to this file")
+    p.add_argument("--seed", type=int, help="solver seed (overrides the scene's)")
+    p.add_argument("--threshold", type=float, metavar="PERCENT",
+                   help="importance threshold: drop a dimension whose predicted realism loss is below it (%%)")
+    p.add_argument("--no-importance", action="store_true", help="keep every dimension")
+    p.set_defaults(func=cmd_plan)
+
+
+def _scene_from_arg(text: str) -> Any:
+    from ..errors import ValidationError
+    from ..scene import Scene
+
+    path = Path(text)
+    if path.suffix.lower() == ".json" or path.exists():
+        return Scene.load(path)
+    from ..materials import load_library
+    lib = load_library()
+    if text in lib.names():
+        return Scene.for_material(text)
+    raise ValidationError(f"{text!r} is neither a scene file nor a library material "
+                          f"({', '.join(lib.names())})", field="scene")
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    from ..scene import Scene, compile_scene
+
+    scene = _scene_from_arg(args.scene)
+    over: dict[str, Any] = {}
+    if args.seed is not None:
+        over.setdefault("solver", {})["seed"] = args.seed
+    if args.threshold is not None:
+        over.setdefault("importance", {})["threshold_percent"] = args.threshold
+    if args.no_importance:
+        over.setdefault("importance", {})["enabled"] = False
+    if over:
+        from ..scene import _merge
+        scene = Scene(objects=scene.objects, devices=scene.devices,
+                      settings=_merge(scene.settings, over), name=scene.name)
+    plan = compile_scene(scene)
+    if args.output:
+        plan.save(args.output)
+    out = plan.summary()
+    if args.output:
+        out["saved"] = str(args.output)
+    if args.json:
+        from . import emit
+        emit(out, True)
+    else:
+        print(format_plan(out))
+    return 0
+
+
+def format_plan(out: dict[str, Any]) -> str:
+    lines = [f"scene {out['scene']}"]
+    for name, m in out["materials"].items():
+        feats = ", ".join(f"{k}={v:.4g}" for k, v in m["features"].items())
+        acts = ", ".join(f"{r}->{a}" for r, a in m["actuators"].items())
+        lines.append(f"material {name}: renders {', '.join(m['dimensions']) or '(nothing)'} on {acts}")
+        lines.append(f"  features: {feats}")
+        if m["pinned_features"]:
+            lines.append("  left out of the solve (no kept dimension reads them): "
+                         + ", ".join(sorted(m["pinned_features"])))
+        for d in m["dropped"]:
+            lines.append(f"  dropped {d['dimension']}: {d['reason']}")
+        s = m["solve"]
+        if s.get("success") is not None:
+            lines.append(f"  solve: {'success' if s['success'] else 'NOT REACHED'}, error {s['error']:.3g}")
+    used = sorted({f"{p['kind']}:{p['name']}" for p in out["plugins_loaded"]})
+    lines.append("plugins used: " + ", ".join(used))
+    if out.get("saved"):
+        lines.append(f"plan saved to {out['saved']}")
+    return "\n".join(lines)

@@ -1,0 +1,178 @@
+"""``hapticsdk doctor``: what can run on this machine, and why not.
+
+:func:`collect` returns ``{"backends": {...}, "devices": [...], "calibrations": [...],
+"libraries": {...}}``:
+
+* ``backends``: every installed actuator plugin, ``name -> {"available", "reason",
+  "distribution", "simulated"}`` from its class's ``check_available()``. Each plugin is
+  imported on its own; one that fails to import (or whose check raises) is reported by
+  name with its error, and never stops the others.
+* ``devices``: what each available backend's ``discover()`` finds (a failing discover is
+  reported as an entry with ``error``).
+* ``calibrations``: calibrations in use: the core defaults, files in the calibration
+  directory (``$HAPTICSDK_CALIBRATION_DIR``), and what backends report through an
+  optional ``calibration_info()`` classmethod.
+* ``libraries``: optional Python modules and shared libraries, ``name -> {"found", "detail",
+  "needed_by"}``.
+
+Nothing here opens a device.
+"""
+
+from __future__ import annotations
+
+import ctypes.util
+import importlib.util
+import os
+from pathlib import Path
+from typing import Any
+
+#: optional Python modules -> what needs them
+OPTIONAL_MODULES: dict[str, str] = {
+    "serial": "piezo-serial (pyserial)",
+    "usb": "piezo-mcp2221 (pyusb)",
+    "onnxruntime": "ONNX perception models",
+    "onnx": "model export (training extra)",
+    "matplotlib": "plots (plot extra)",
+}
+#: optional shared libraries (ctypes names) -> what needs them
+OPTIONAL_LIBRARIES: dict[str, str] = {
+    "HD": "omni-openhaptics (OpenHaptics libHD)",
+    "usb-1.0": "piezo-mcp2221 (libusb-1.0 behind pyusb)",
+}
+
+
+def _error_text(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+def check_backends() -> tuple[dict[str, dict[str, Any]], dict[str, type]]:
+    """Backends table and the classes that imported."""
+    from .plugins import registry
+
+    reg = registry("actuator")
+    table: dict[str, dict[str, Any]] = {}
+    classes: dict[str, type] = {}
+    for name in reg.names():
+        entry: dict[str, Any] = {"available": False, "reason": "", "distribution": None, "simulated": None}
+        try:
+            entry["distribution"] = reg.info(name).distribution
+        except Exception as exc:  # metadata problems are reported, not raised
+            entry["distribution"] = f"? ({_error_text(exc)})"
+        try:
+            cls = reg.load(name)
+        except Exception as exc:
+            entry["reason"] = f"plugin failed to import: {_error_text(exc)}"
+            table[name] = entry
+            continue
+        entry["simulated"] = bool(getattr(cls, "simulated", False))
+        try:
+            ok, reason = cls.check_available()
+            entry["available"], entry["reason"] = bool(ok), str(reason)
+            classes[name] = cls
+        except Exception as exc:
+            entry["reason"] = f"check_available() raised {_error_text(exc)}"
+        table[name] = entry
+    return table, classes
+
+
+def discover_devices(classes: dict[str, type], backends: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    devices: list[dict[str, Any]] = []
+    for name, cls in classes.items():
+        if not backends[name]["available"]:
+            continue
+        try:
+            for dev in cls.discover() or []:
+                item = {"backend": name}
+                item.update(dev)
+                devices.append(item)
+        except Exception as exc:
+            devices.append({"backend": name, "error": f"discover() raised {_error_text(exc)}"})
+    return devices
+
+
+def check_libraries() -> dict[str, dict[str, Any]]:
+    out: dict[str, dict[str, Any]] = {}
+    for mod, needed in OPTIONAL_MODULES.items():
+        try:
+            spec = importlib.util.find_spec(mod)
+        except (ImportError, ValueError):
+            spec = None
+        out[mod] = {"kind": "python", "found": spec is not None,
+                    "detail": spec.origin if spec is not None else f"not installed (pip install {mod if mod != 'serial' else 'pyserial'})"
+                    if mod != "usb" else (spec.origin if spec else "not installed (pip install pyusb)"),
+                    "needed_by": needed}
+        if mod == "usb" and spec is None:
+            out[mod]["detail"] = "not installed (pip install pyusb)"
+    for lib, needed in OPTIONAL_LIBRARIES.items():
+        path = ctypes.util.find_library(lib)
+        extra = os.environ.get("HAPTICSDK_LIBHD") if lib == "HD" else None
+        found = bool(path) or bool(extra and Path(extra).exists())
+        out[f"lib{lib}"] = {"kind": "shared", "found": found,
+                            "detail": path or (extra if found else "not found by ctypes.util.find_library"),
+                            "needed_by": needed}
+    return out
+
+
+def calibration_dir() -> Path:
+    return Path(os.environ.get("HAPTICSDK_CALIBRATION_DIR", Path.home() / ".config" / "hapticsdk" / "calibration"))
+
+
+def list_calibrations(classes: dict[str, type] | None = None) -> list[dict[str, Any]]:
+    cals: list[dict[str, Any]] = []
+    try:
+        from .calibration import VoiceCoilCalibration
+        vc = VoiceCoilCalibration()
+        cals.append({"kind": "voicecoil", "scope": "default", "source": vc.source, "generated": False,
+                     "coefficients": list(vc.coefficients), "frequency_range_hz": list(vc.frequency_range_hz)})
+    except Exception as exc:
+        cals.append({"kind": "voicecoil", "error": _error_text(exc)})
+    d = calibration_dir()
+    if d.is_dir():
+        for p in sorted(d.glob("*.json")):
+            item: dict[str, Any] = {"kind": "file", "path": str(p)}
+            try:
+                import json
+                data = json.loads(p.read_text())
+                item.update(kind=data.get("kind", "?"), generated=data.get("generated"), source=data.get("source"))
+            except Exception as exc:
+                item["error"] = _error_text(exc)
+            cals.append(item)
+    for name, cls in (classes or {}).items():
+        info = getattr(cls, "calibration_info", None)
+        if info is None:
+            continue
+        try:
+            for c in info() or []:
+                cals.append(dict(c, backend=name))
+        except Exception as exc:
+            cals.append({"backend": name, "error": f"calibration_info() raised {_error_text(exc)}"})
+    return cals
+
+
+def collect() -> dict[str, Any]:
+    """The full doctor report (see module docstring)."""
+    backends, classes = check_backends()
+    return {"backends": backends, "devices": discover_devices(classes, backends),
+            "calibrations": list_calibrations(classes), "libraries": check_libraries()}
+
+
+def format_report(rep: dict[str, Any]) -> str:
+    """Human-readable text of :func:`collect`'s report."""
+    lines = ["backends:"]
+    for name, b in sorted(rep["backends"].items()):
+        mark = "ok " if b["available"] else "-- "
+        sim = " (simulated)" if b.get("simulated") else ""
+        lines.append(f"  {mark}{name}{sim}: {b['reason']}")
+    lines.append("devices:" + ("" if rep["devices"] else " none found"))
+    for dev in rep["devices"]:
+        rest = ", ".join(f"{k}={v}" for k, v in dev.items() if k != "backend")
+        lines.append(f"  {dev['backend']}: {rest}")
+    lines.append("libraries:")
+    for name, lib in rep["libraries"].items():
+        lines.append(f"  {'ok ' if lib['found'] else '-- '}{name}: {lib['detail']}  [{lib['needed_by']}]")
+    lines.append("calibrations:")
+    for c in rep["calibrations"]:
+        tag = " GENERATED" if c.get("generated") else ""
+        where = c.get("backend") or c.get("scope") or c.get("path", "")
+        lines.append(f"  {c.get('kind', '?')} [{where}]{tag}: {c.get('source') or c.get('error', '')}")
+    return "\n".join(lines)

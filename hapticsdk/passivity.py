@@ -1,0 +1,279 @@
+"""Passivity of sampled-data virtual walls: the analytic margin and a time-domain
+passivity observer/controller.
+
+Two tools:
+
+* :func:`passivity_margin` is the Colgate & Schenkel condition for a wall
+  ``F = -(K x + B v)`` computed every ``T`` seconds, held by a zero-order hold and
+  applied ``d`` extra samples late, on a device with physical viscous damping ``b``:
+  ``margin = b - (K T (1/2 + d) + |B|)`` (N*s/m). A positive margin means the device +
+  wall is passive without any help from the hand; :func:`classify_wall` turns it into
+  the label ``"passive"`` or ``"stable-by-assumption (not passive)"``.
+  :func:`critical_stiffness_eig` finds the same boundary from the eigenvalues of the
+  exactly discretised device, as an independent check.
+* :class:`PassivityController` is a time-domain passivity observer (PO) with a
+  variable damper (PC), after Hannaford & Ryu (IEEE TRA 18(1), 2002), with the energy
+  paired to the zero-order hold: the force actually *held* over an interval is
+  multiplied by that interval's displacement, ``E += -F(n-1) * (x(n) - x(n-1))``. The
+  naive pairing ``f(n) v(n)`` never sees the energy the hold generates (see
+  :func:`naive_observer_energy` and the tests). On top of the bounded damper the
+  controller bounds the force it lets the wall push outward with by the energy the
+  observer holds (energy bounding), so a wall far stiffer than the device can hold
+  (a saturated relay on a quantised encoder) cannot feed energy to the user either.
+
+Sign conventions: ``x`` is the probe position along the surface normal (mm, y axis,
+inside the material at x < 0); ``F`` is the force on the probe along +x (N, "pushing the
+probe out" is positive). ``E`` is the energy absorbed by the virtual environment (J); a
+negative ``E`` means the wall has produced energy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy.linalg import expm
+
+from .errors import ValidationError
+
+#: Label of a wall that is passive by the Colgate condition (margin > 0).
+PASSIVE = "passive"
+#: Label of a wall whose stability relies on the hand's impedance (margin <= 0).
+STABLE_BY_ASSUMPTION = "stable-by-assumption (not passive)"
+
+
+def _check_nonneg(name: str, value: float) -> float:
+    v = float(value)
+    if not math.isfinite(v) or v < 0:
+        raise ValidationError(f"must be a finite number >= 0, got {value!r}", field=name)
+    return v
+
+
+def passivity_margin(K: Any, B: Any, b: Any, T: Any, d: Any = 0) -> Any:
+    """Colgate passivity margin of a sampled virtual wall (N*s/m).
+
+    Args:
+        K: wall stiffness (N/mm).
+        B: virtual damping of the wall (N*s/m); its magnitude consumes margin.
+        b: physical viscous damping of the device (N*s/m).
+        T: servo period (s).
+        d: extra samples of computational delay (0 when the force of sample n is
+            computed from the position of sample n).
+
+    Returns:
+        ``b - (K T (1/2 + d) + |B|)`` with K converted to N/m; arrays broadcast.
+        Positive: passive without the hand. The critical stiffness is
+        ``K_crit = (b - |B|) / (T (1/2 + d))``.
+    """
+    K = np.asarray(K, float) * 1000.0
+    out = np.asarray(b, float) - (K * np.asarray(T, float) * (0.5 + np.asarray(d, float)) + np.abs(np.asarray(B, float)))
+    return out if out.ndim else float(out)
+
+
+def critical_stiffness(b: float, T: float, d: int = 0, B: float = 0.0) -> float:
+    """Stiffness (N/mm) where :func:`passivity_margin` crosses zero."""
+    return max(float(b) - abs(float(B)), 0.0) / (float(T) * (0.5 + float(d))) / 1000.0
+
+
+def classify_wall(K: float, b: float, T: float, d: int = 0, B: float = 0.0) -> dict[str, Any]:
+    """Margin (N*s/m), critical stiffness (N/mm) and the label of a wall.
+
+    The label is ``"passive"`` only when the margin is positive; a wall that needs the
+    user's hand to be stable is ``"stable-by-assumption (not passive)"``.
+    """
+    m = float(passivity_margin(K, B, b, T, d))
+    return {"stiffness_n_per_mm": float(K), "virtual_damping_ns_per_m": float(B),
+            "device_damping_ns_per_m": float(b), "period_s": float(T), "delay_ticks": int(d),
+            "margin_ns_per_m": m, "critical_stiffness_n_per_mm": critical_stiffness(b, T, d, B),
+            "label": PASSIVE if m > 0 else STABLE_BY_ASSUMPTION}
+
+
+def _zoh_device(m: float, b: float, T: float) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ZOH discretisation of ``m x'' + b x' = F`` (SI): ``Phi`` (2x2), ``Gamma`` (2,)."""
+    M = np.zeros((3, 3))
+    M[0, 1] = 1.0
+    M[1, 1] = -b / m
+    M[1, 2] = 1.0 / m
+    E = expm(M * T)
+    return E[:2, :2], E[:2, 2]
+
+
+def spectral_radius(K: float, m: float, b: float, T: float, d: int = 0) -> float:
+    """Largest eigenvalue magnitude of the device ``m x'' + b x' = F`` (SI) with the wall
+    ``F_n = -K x_{n-d}`` (K in N/mm) under a zero-order hold. < 1: asymptotically stable."""
+    Phi, G = _zoh_device(m, b, T)
+    n = 2 + d
+    A = np.zeros((n, n))
+    A[:2, :2] = Phi
+    k = float(K) * 1000.0
+    # force uses x delayed by d samples: extra states hold x_{n-1} ... x_{n-d}
+    if d == 0:
+        A[:2, 0] += -k * G
+    else:
+        A[:2, n - 1] += -k * G
+        A[2, 0] = 1.0
+        for i in range(3, n):
+            A[i, i - 1] = 1.0
+    return float(np.max(np.abs(np.linalg.eigvals(A))))
+
+
+def critical_stiffness_eig(m: float, b: float, T: float, d: int = 0, *, rtol: float = 1e-6) -> float:
+    """Stability limit K (N/mm) of the ZOH-discretised device + delayed wall, by bisection
+    on the spectral radius (independent of :func:`passivity_margin`)."""
+    lo, hi = 0.0, max(critical_stiffness(b, T, d) * 4.0, 1e-6)
+    while spectral_radius(hi, m, b, T, d) < 1.0:
+        hi *= 2.0
+    lo = hi * 1e-9
+    while hi - lo > rtol * hi:
+        mid = 0.5 * (lo + hi)
+        if spectral_radius(mid, m, b, T, d) < 1.0:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+@dataclass
+class ControllerSettings:
+    """Parameters of :class:`PassivityController`.
+
+    Attributes:
+        max_damping_ns_per_m: bound on the variable damper alpha (N*s/m); 5 N*s/m is the
+            largest linear damping CHAI3D declares for the PHANTOM Omni. Bounding alpha
+            removes the force spikes of the unbounded controller.
+        velocity_deadband_mm_s: below this |v| the damper is not used (mm/s).
+        energy_bound: also bound the outward force by the observed energy (on by default).
+    """
+
+    max_damping_ns_per_m: float = 5.0
+    velocity_deadband_mm_s: float = 1.0
+    energy_bound: bool = True
+
+
+class PassivityController:
+    """ZOH-paired passivity observer + bounded variable damper + energy bound (scalar,
+    one axis, pure-Python floats for the servo tick).
+
+    Per tick call :meth:`step` with the measured position (mm), the measured period
+    ``dt`` (s) and the wall's force (N); send the returned force; then call
+    :meth:`commit` with the force the device actually applied (after the safety
+    clamp). The observer books ``-F_applied(n-1) * dx(n)``.
+    """
+
+    __slots__ = ("settings", "energy_j", "dissipated_j", "bounded_j", "active_ticks",
+                 "_x_prev", "_f_prev", "_f_pc_prev", "_v")
+
+    def __init__(self, settings: ControllerSettings | None = None, **kw: float) -> None:
+        self.settings = settings or ControllerSettings(**kw)
+        self.reset()
+
+    def reset(self) -> None:
+        self.energy_j = 0.0        # energy absorbed by the wall (J), PO
+        self.dissipated_j = 0.0    # energy removed by the damper (J)
+        self.bounded_j = 0.0       # outward work withheld by the energy bound (J, predicted)
+        self.active_ticks = 0
+        self._x_prev: float | None = None
+        self._f_prev = 0.0
+        self._f_pc_prev = 0.0
+        self._v = 0.0
+
+    def step(self, x_mm: float, dt: float, f_wall: float) -> float:
+        """Observe, then return the force (N) to command this tick."""
+        s = self.settings
+        if self._x_prev is None:
+            self._x_prev = x_mm
+            return f_wall if f_wall <= 0.0 or not s.energy_bound else 0.0
+        dx = (x_mm - self._x_prev) * 1e-3
+        self._x_prev = x_mm
+        self.energy_j -= self._f_prev * dx
+        self.dissipated_j -= self._f_pc_prev * dx
+        v = dx / dt if dt > 0 else 0.0
+        self._v = v
+        f = f_wall
+        e = self.energy_j
+        active = False
+        if s.energy_bound and f > 0.0 and v > 0.0:
+            # outward push over the next interval gives ~ f v dt; allow at most E (>= 0)
+            cap = max(e, 0.0) / (v * dt)
+            if f > cap:
+                self.bounded_j += (f - cap) * v * dt
+                f = cap
+                active = True
+        f_pc = 0.0
+        if e < 0.0 and abs(v) * 1e3 > s.velocity_deadband_mm_s:
+            alpha = -e / (dt * v * v)
+            if alpha > s.max_damping_ns_per_m:
+                alpha = s.max_damping_ns_per_m
+            f_pc = -alpha * v
+            active = True
+        if active:
+            self.active_ticks += 1
+        self._f_pc_prev = f_pc
+        return f + f_pc
+
+    def commit(self, f_applied: float) -> None:
+        """Record the force the device actually held over the coming interval (N)."""
+        if f_applied != f_applied or f_applied in (math.inf, -math.inf):
+            f_applied = 0.0
+        self._f_prev = f_applied
+
+    def report(self) -> dict[str, float]:
+        return {"observed_energy_j": self.energy_j, "dissipated_j": self.dissipated_j,
+                "withheld_j": self.bounded_j, "active_ticks": self.active_ticks}
+
+
+def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: float,
+                          f_wall: np.ndarray, on: np.ndarray,
+                          settings: ControllerSettings | None = None) -> np.ndarray:
+    """Vectorised :class:`PassivityController` over many independent cells.
+
+    ``state`` holds arrays ``energy, dissipated, x_prev, f_prev, f_pc_prev, started``
+    (create with :func:`controller_state_batch`); cells where ``on`` is False pass the
+    wall force through. Call :func:`controller_commit_batch` with the applied force.
+    """
+    s = settings or ControllerSettings()
+    started = state["started"]
+    dx = np.where(started, (x_mm - state["x_prev"]) * 1e-3, 0.0)
+    state["x_prev"] = x_mm.copy()
+    state["energy"] -= state["f_prev"] * dx
+    state["dissipated"] -= state["f_pc_prev"] * dx
+    v = dx / dt
+    e = state["energy"]
+    f = f_wall.copy()
+    if s.energy_bound:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            cap = np.where(v > 0, np.maximum(e, 0.0) / (v * dt), np.inf)
+        cap = np.where(started, cap, np.where(f_wall > 0, 0.0, np.inf))
+        f = np.where((f > 0) & (f > cap), cap, f)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha = np.where((e < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s),
+                         np.minimum(-e / (dt * v * v), s.max_damping_ns_per_m), 0.0)
+    f_pc = np.where(started, -alpha * v, 0.0)
+    state["f_pc_prev"] = np.where(on, f_pc, 0.0)
+    state["started"] = np.ones_like(started)
+    return np.where(on, f + f_pc, f_wall)
+
+
+def controller_state_batch(n: int) -> dict[str, np.ndarray]:
+    z = np.zeros(n)
+    return {"energy": z.copy(), "dissipated": z.copy(), "x_prev": z.copy(), "f_prev": z.copy(),
+            "f_pc_prev": z.copy(), "started": np.zeros(n, bool)}
+
+
+def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray) -> None:
+    state["f_prev"] = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def zoh_observer_energy(x_mm: np.ndarray, f_applied: np.ndarray) -> np.ndarray:
+    """Running ZOH-paired observer energy (J) of a recorded run: ``E_n = -sum F_{k-1} dx_k``."""
+    dx = np.diff(np.asarray(x_mm, float)) * 1e-3
+    return np.concatenate([[0.0], np.cumsum(-np.asarray(f_applied, float)[:-1] * dx)])
+
+
+def naive_observer_energy(x_mm: np.ndarray, f_applied: np.ndarray, dt: float) -> np.ndarray:
+    """Running textbook observer energy (J): ``E_n = -sum f_k v_k dt`` with the *current*
+    force and the backward-difference velocity (blind to the energy of the hold)."""
+    v = np.diff(np.asarray(x_mm, float)) * 1e-3 / dt
+    return np.concatenate([[0.0], np.cumsum(-np.asarray(f_applied, float)[1:] * v * dt)])

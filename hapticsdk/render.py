@@ -1,0 +1,275 @@
+"""Render a compiled plan: open its actuators, run the servo loop, report.
+
+:func:`render_plan` renders one material of a :class:`~hapticsdk.plan.RenderPlan`
+without solving again: it builds each kept dimension's renderer from the plan's
+features (``dimension.renderer(features)``) plus the replacements the plan names (a
+constant 1 N force in place of a dropped hardness), imports and opens only the
+actuators the plan maps the renderers' roles to (each in a context manager, so every
+one is stopped and closed on any error), picks the sensing device (an actuator of the
+plan that is a :class:`~hapticsdk.actuators.HapticDevice`, such as ``omni-virtual``;
+otherwise the kinematic ``probe-virtual``), runs :class:`hapticsdk.runtime.ServoLoop`,
+and calls the ``hapticsdk_render_started`` / ``hapticsdk_render_finished`` hooks of the
+distributions the plan uses only.
+"""
+
+from __future__ import annotations
+
+import inspect
+import json
+import time
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from .actuators import Actuator, HapticDevice
+from .dimensions import ChannelCommand, DimensionRenderer, TickInput
+from .errors import PluginError, ValidationError
+from .plan import MaterialPlan, RenderPlan, check_plugin_api
+
+#: the sensing device used when no actuator of the plan senses
+FALLBACK_SENSOR = "probe-virtual"
+
+
+class ConstantForceRenderer(DimensionRenderer):
+    """A constant normal force while the probe is in contact, 0 outside (role ``force``).
+
+    Renders a dropped hardness the way the paper's "No Hardness" condition did (1 N).
+    """
+
+    def __init__(self, force_n: float = 1.0, *, role: str = "force", replaces: str | None = None) -> None:
+        f = float(force_n)
+        if not (f >= 0 and f < 1e3):
+            raise ValidationError(f"force must be a finite number >= 0 N, got {force_n!r}",
+                                  field="replacement.force_n")
+        self.force_n = f
+        self.roles = (role,)
+        self.role = role
+        self.replaces = replaces
+
+    def tick(self, inp: TickInput) -> list[ChannelCommand]:
+        return [ChannelCommand(role=self.role, force_n=self.force_n if inp.in_contact else 0.0)]
+
+    def describe(self) -> dict:
+        return {"renderer": "constant-force", "force_n": self.force_n, "role": self.role,
+                "replaces": self.replaces}
+
+
+def _make_replacement(rep: Mapping[str, Any], dimension: str) -> DimensionRenderer:
+    kind = rep.get("renderer")
+    if kind == "constant-force":
+        return ConstantForceRenderer(rep.get("force_n", 1.0), role=rep.get("role", "force"),
+                                     replaces=dimension)
+    raise ValidationError(f"unknown replacement renderer {kind!r} (known: constant-force)",
+                          field=f"plan.dropped.{dimension}.replacement")
+
+
+@dataclass
+class RenderReport:
+    """What one render did.
+
+    Attributes:
+        material: the material rendered.
+        scene: the plan's scene name.
+        dimensions: dimensions rendered; ``replacements``: what replaced dropped ones.
+        actuators: role -> actuator name opened; ``sensor``: the sensing device's name.
+        seconds: requested duration (s); ``wall_s``: wall time of the loop (s).
+        tick_median_us, tick_p99_us: tick computation time statistics (us).
+        overruns: ticks that took longer than the period; ``fault``: the fault, if any.
+        renderers: each renderer's ``describe()`` after the run.
+        safety: actuator label -> safety report (limit hits).
+        hooks: distributions whose hook modules were registered.
+        loop: the :class:`~hapticsdk.runtime.LoopReport` (``to_dict`` in JSON).
+    """
+
+    material: str
+    scene: str
+    dimensions: list[str]
+    replacements: list[dict[str, Any]]
+    actuators: dict[str, str]
+    sensor: str
+    seconds: float
+    wall_s: float
+    tick_median_us: float | None
+    tick_p99_us: float | None
+    overruns: int | None
+    fault: dict[str, Any] | None
+    renderers: dict[str, Any] = field(default_factory=dict)
+    safety: dict[str, Any] = field(default_factory=dict)
+    hooks: list[str] = field(default_factory=list)
+    loop: Any = None
+    ticks: int | None = None
+    features: dict[str, float] = field(default_factory=dict)
+    dropped: list[dict[str, Any]] = field(default_factory=list)
+    solve: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        loop = self.loop.to_dict() if hasattr(self.loop, "to_dict") else self.loop
+        return json.loads(json.dumps({
+            "material": self.material, "scene": self.scene, "dimensions": list(self.dimensions),
+            "replacements": list(self.replacements), "actuators": dict(self.actuators),
+            "sensor": self.sensor, "seconds": self.seconds, "wall_s": self.wall_s,
+            "tick_median_us": self.tick_median_us, "tick_p99_us": self.tick_p99_us,
+            "overruns": self.overruns, "fault": self.fault, "renderers": self.renderers,
+            "tick": {"ticks": self.ticks, "median_us": self.tick_median_us,
+                     "p99_us": self.tick_p99_us, "overruns": self.overruns},
+            "features": dict(self.features), "dropped": list(self.dropped), "solve": dict(self.solve),
+            "safety": self.safety, "hooks": list(self.hooks), "loop": loop}, default=_jsonable))
+
+
+def _jsonable(o: Any) -> Any:
+    import numpy as np
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if hasattr(o, "to_dict"):
+        return o.to_dict()
+    return str(o)
+
+
+def _accepts(cls: type, kw: str) -> bool:
+    try:
+        params = inspect.signature(cls.__init__).parameters
+    except (TypeError, ValueError):
+        return False
+    return kw in params or any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()
+                               if p.name != "options")
+
+
+def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None) -> list[DimensionRenderer]:
+    """Renderers of one material plan: kept dimensions from the plan's features, then the
+    replacements of dropped ones (no solving)."""
+    from .plugins import registry
+    ropts = dict((settings or {}).get("renderer_options") or {})
+    out: list[DimensionRenderer] = []
+    for d in mp.dimensions:
+        cls = registry("dimension").load(d)
+        check_plugin_api(cls, name=d)
+        dim = cls() if isinstance(cls, type) else cls
+        r = dim.renderer(dict(mp.features), **dict(ropts.get(d, {})))
+        missing = [role for role in r.roles if role not in mp.actuators]
+        if missing:
+            raise ValidationError(f"renderer of {d!r} commands roles {missing} that the plan maps to "
+                                  f"no actuator (plan roles {sorted(mp.actuators)}); compile again",
+                                  field=f"plan.materials.{mp.name}.actuators")
+        out.append(r)
+    for dd in mp.replacements:
+        out.append(_make_replacement(dd.replacement or {}, dd.dimension))
+    return out
+
+
+def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, material: str | None = None,
+                trajectory: Any = None, recorder: Any = None, realtime: bool | None = None,
+                period_s: float | None = None, hooks: bool = True,
+                raise_on_fault: bool = True) -> RenderReport:
+    """Render one material of ``plan`` for ``seconds`` (s) of servo time.
+
+    Args:
+        plan: a :class:`RenderPlan` or its dict form.
+        seconds: duration (s) of the servo loop.
+        material: which material (default: the plan's first).
+        trajectory: scripted hand path (:class:`hapticsdk.sim.finger.Trajectory`) given to
+            the sensing device when it is simulated and accepts one (default: its own,
+            a press then a slide at 80 mm/s).
+        recorder, realtime, period_s: passed to the servo loop (defaults: the plan's servo
+            settings).
+        hooks: call the render hooks of the plan's distributions.
+        raise_on_fault: re-raise a device fault after the safe stop.
+    """
+    if isinstance(plan, Mapping):
+        plan = RenderPlan.from_dict(plan)
+    if not isinstance(plan, RenderPlan):
+        raise ValidationError("plan must be a RenderPlan or its dict", field="plan")
+    try:
+        secs = float(seconds)
+    except (TypeError, ValueError):
+        raise ValidationError(f"seconds must be a number, got {seconds!r}", field="seconds") from None
+    if not (secs > 0 and secs < 1e6):
+        raise ValidationError(f"seconds must be > 0, got {seconds!r}", field="seconds")
+    mp = plan.material(material)
+    servo = dict(plan.settings.get("servo") or {})
+    period = float(period_s if period_s is not None else servo.get("period_s", 0.001))
+    rt = bool(servo.get("realtime", False) if realtime is None else realtime)
+    passivity = bool(servo.get("passivity", True))
+
+    renderers = build_renderers(mp, plan.settings)
+    roles_used = {role for r in renderers for role in r.roles}
+
+    from .plugins import manager, registry
+    used_dists = plan.distributions(mp.name)
+    pm = manager().load_for(used_dists) if hooks else None
+    one = RenderPlan(scene=plan.scene, materials={mp.name: mp}, settings=plan.settings,
+                     plugins=plan.plugins, unused_plugins=plan.unused_plugins,
+                     plugin_api_version=plan.plugin_api_version)
+
+    try:
+        from .runtime import ServoLoop
+    except ImportError:  # runtime package without re-exports
+        from .runtime.loop import ServoLoop
+
+    with ExitStack() as stack:
+        instances: dict[tuple[str, str], Actuator] = {}
+        by_role: dict[str, Actuator] = {}
+        for role in sorted(roles_used):
+            name = mp.actuators[role]
+            opts = dict(mp.actuator_options.get(role, {}))
+            key = (name, json.dumps(opts, sort_keys=True, default=str))
+            if key not in instances:
+                cls = registry("actuator").load(name)
+                check_plugin_api(cls, name=name)
+                if (trajectory is not None and isinstance(cls, type) and issubclass(cls, HapticDevice)
+                        and getattr(cls, "simulated", False) and _accepts(cls, "trajectory")):
+                    opts.setdefault("trajectory", trajectory)
+                act = cls(**opts)
+                if not isinstance(act, Actuator):
+                    raise PluginError(f"actuator plugin {name!r} did not create an Actuator",
+                                      plugin=name, kind="actuator")
+                stack.enter_context(act)
+                instances[key] = act
+            by_role[role] = instances[key]
+        sensors = [a for a in instances.values() if isinstance(a, HapticDevice)]
+        if sensors:
+            device = sensors[0]
+            sensor_name = device.name
+        else:
+            cls = registry("actuator").load(FALLBACK_SENSOR)
+            device = cls(**({"trajectory": trajectory} if trajectory is not None else {}))
+            stack.enter_context(device)
+            sensor_name = FALLBACK_SENSOR
+        if pm is not None:
+            pm.call_safely("hapticsdk_render_started", plan=one)
+        loop = ServoLoop(device, renderers, by_role, period_s=period, realtime=rt, recorder=recorder,
+                         passivity=passivity, raise_on_fault=raise_on_fault)
+        t0 = time.perf_counter()
+        lr = loop.run(secs)
+        wall = time.perf_counter() - t0
+        safety = {a.label: a.safety.report() for a in list(instances.values()) + [device]}
+    fault = getattr(lr, "fault", None)
+    report = RenderReport(
+        material=mp.name, scene=plan.scene, dimensions=list(mp.dimensions),
+        replacements=[{"dimension": d.dimension, **(d.replacement or {})} for d in mp.replacements],
+        actuators={role: by_role[role].name for role in sorted(by_role)}, sensor=sensor_name,
+        seconds=secs, wall_s=wall,
+        tick_median_us=_num(getattr(lr, "tick_median_us", None)),
+        tick_p99_us=_num(getattr(lr, "tick_p99_us", None)),
+        overruns=int(lr.overruns) if getattr(lr, "overruns", None) is not None else None,
+        fault=None if fault is None else (dict(fault) if isinstance(fault, Mapping) else {"message": str(fault)}),
+        renderers={(getattr(r, "replaces", None) and f"replacement:{r.replaces}") or d: r.describe()
+                   for d, r in zip(list(mp.dimensions) + [x.dimension for x in mp.replacements], renderers)},
+        safety=safety, hooks=used_dists if hooks else [], loop=lr, ticks=_ticks(lr),
+        features=dict(mp.features), dropped=[d.to_dict() for d in mp.dropped], solve=dict(mp.solve))
+    if pm is not None:
+        pm.call_safely("hapticsdk_render_finished", plan=one, report=report)
+    return report
+
+
+def _ticks(lr: Any) -> int | None:
+    for k in ("ticks", "n_ticks"):
+        v = getattr(lr, k, None)
+        if v is not None:
+            return int(v)
+    return None
+
+
+def _num(v: Any) -> float | None:
+    return None if v is None else float(v)

@@ -1,0 +1,481 @@
+"""Scenes: objects made of materials, rendered on devices, compiled into render plans.
+
+A scene (JSON, ``schemas/scene.schema.json``) lists objects and their materials --
+by library name (``"S7"``), or by target intensities (``{"hardness": 0.3}``), or a
+library material with extra or overridden intensities (a warmth added to ``S7``) --
+the devices to render on (channel role -> actuator plugin name and options), and
+settings (importance threshold, solver, servo period).
+
+:func:`compile_scene` turns it into a :class:`~hapticsdk.plan.RenderPlan`:
+
+1. every material's target intensities are solved for features with every dimension it
+   names (:func:`hapticsdk.problems.solve`, materials with the same dimensions in one
+   batch);
+2. the importance model (``settings.importance.model``, default ``paper``) predicts the
+   realism loss of leaving each dimension out, from those features; a dimension below
+   the threshold is dropped (and, if the model says so, replaced by something simpler,
+   e.g. a constant 1 N force for hardness);
+3. materials that lost a dimension are solved again with only the kept ones, so that
+   features no kept dimension reads are pinned at the model's defaults and left out;
+4. each kept dimension's renderer is built once to learn the channel roles it commands;
+   each role is mapped to an actuator (the scene's ``devices`` or the dimension's
+   ``default_actuators``). Actuators are only looked up in the entry-point table here:
+   they are imported and opened by :func:`hapticsdk.render.render_plan`.
+
+Only the plugins a material of the scene names are imported.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .dimensions import check_intensity
+from .errors import PluginError, ValidationError
+from .plan import (DroppedDimension, MaterialPlan, RenderPlan, _validate_with_schema,
+                   check_plugin_api)
+
+#: Default settings of a scene; a scene's ``settings`` are merged into these.
+DEFAULT_SETTINGS: dict[str, Any] = {
+    "importance": {
+        "enabled": True,
+        "model": "paper",
+        # Project choice (not from the paper): leave a dimension out when leaving it out
+        # is predicted to cost less than 10 % of the realism. The paper's mean losses
+        # were 18.4 % (roughness) and 29.1 % (hardness).
+        "threshold_percent": 10.0,
+        "thresholds": {},
+    },
+    "solver": {"method": "ga", "seed": 0, "options": {}, "tolerance": 0.01, "penalty": "paper"},
+    "model": None,
+    "servo": {"period_s": 0.001, "realtime": False, "passivity": True},
+    "dimensions": None,
+    "renderer_options": {},
+}
+
+
+def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(dict(base))
+    for k, v in over.items():
+        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) and k not in ("thresholds", "options"):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+@dataclass
+class DeviceSpec:
+    """The actuator serving one channel role: plugin name and keyword options."""
+
+    actuator: str
+    options: dict[str, Any] = field(default_factory=dict)
+
+    @classmethod
+    def parse(cls, value: Any, role: str) -> "DeviceSpec":
+        if isinstance(value, DeviceSpec):
+            return value
+        if isinstance(value, str) and value:
+            return cls(actuator=value)
+        if isinstance(value, Mapping) and isinstance(value.get("actuator"), str):
+            opts = value.get("options", {})
+            if not isinstance(opts, Mapping):
+                raise ValidationError("options must be an object", field=f"scene.devices.{role}.options")
+            return cls(actuator=value["actuator"], options=dict(opts))
+        raise ValidationError(f"expected an actuator name or {{'actuator': name, 'options': {{}}}}, "
+                              f"got {value!r}", field=f"scene.devices.{role}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"actuator": self.actuator, "options": dict(self.options)}
+
+
+@dataclass
+class SceneObject:
+    """One object of a scene.
+
+    Attributes:
+        name: object name.
+        material: a library material name, or ``{"name": ..., "intensities": {...}}``.
+        intensities: intensities added to / overriding the material's (0..1).
+        dimensions: if given, only these dimensions of the material are rendered.
+    """
+
+    name: str
+    material: str | dict[str, Any]
+    intensities: dict[str, float] = field(default_factory=dict)
+    dimensions: list[str] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"name": self.name, "material": copy.deepcopy(self.material)}
+        if self.intensities:
+            d["intensities"] = dict(self.intensities)
+        if self.dimensions is not None:
+            d["dimensions"] = list(self.dimensions)
+        return d
+
+
+@dataclass
+class Scene:
+    """A scene: objects, devices (role -> :class:`DeviceSpec`) and settings."""
+
+    objects: list[SceneObject]
+    devices: dict[str, DeviceSpec] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+    name: str = "scene"
+
+    def __post_init__(self) -> None:
+        if not self.objects:
+            raise ValidationError("a scene needs at least one object", field="scene.objects")
+        self.devices = {r: DeviceSpec.parse(v, r) for r, v in dict(self.devices).items()}
+        self.settings = _merge(DEFAULT_SETTINGS, self.settings or {})
+        thr = self.settings["importance"]["threshold_percent"]
+        if not isinstance(thr, (int, float)) or not np.isfinite(thr):
+            raise ValidationError(f"threshold must be a finite number (%), got {thr!r}",
+                                  field="scene.settings.importance.threshold_percent")
+        period = self.settings["servo"]["period_s"]
+        if not isinstance(period, (int, float)) or not 0 < period <= 0.1:
+            raise ValidationError(f"servo period must be in (0, 0.1] s, got {period!r}",
+                                  field="scene.settings.servo.period_s")
+        names = [o.name for o in self.objects]
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValidationError(f"duplicate object names {dup}", field="scene.objects")
+
+    # -- construction ------------------------------------------------------
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Scene":
+        """Build from the JSON form; validated against ``schemas/scene.schema.json``."""
+        _validate_with_schema(data, "scene.schema.json", "scene")
+        objs = []
+        for i, o in enumerate(data["objects"]):
+            objs.append(SceneObject(name=o.get("name", f"object{i}"), material=copy.deepcopy(o["material"]),
+                                    intensities=dict(o.get("intensities", {})),
+                                    dimensions=list(o["dimensions"]) if "dimensions" in o else None))
+        return cls(objects=objs, devices=dict(data.get("devices", {})),
+                   settings=dict(data.get("settings", {})), name=data.get("name", "scene"))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Scene":
+        p = Path(path)
+        try:
+            data = json.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ValidationError(f"no such scene file: {p}", field="scene") from None
+        except json.JSONDecodeError as exc:
+            raise ValidationError(f"{p} is not JSON: {exc}", field="scene") from None
+        if isinstance(data, dict) and "name" not in data:
+            data["name"] = p.stem
+        return cls.from_dict(data)
+
+    @classmethod
+    def for_material(cls, material: str | Mapping[str, float], devices: Mapping[str, Any] | None = None,
+                     *, dimensions: Sequence[str] | None = None, seed: int | None = None,
+                     **settings: Any) -> "Scene":
+        """A one-object scene: ``material`` is a library name (``"S7"``) or target
+        intensities (``{"hardness": 0.4, "roughness": 0.8}``). ``seed`` seeds the solver;
+        ``settings`` override :data:`DEFAULT_SETTINGS` keys (``importance=``, ``solver=``,
+        ``servo=`` ...)."""
+        if seed is not None:
+            settings = _merge({"solver": {}}, settings)
+            settings["solver"]["seed"] = int(seed)
+        if isinstance(material, str):
+            mat: str | dict[str, Any] = material
+            name = material
+        elif isinstance(material, Mapping):
+            mat = {"name": "material", "intensities": {k: float(v) for k, v in material.items()}}
+            name = "material"
+        else:
+            raise ValidationError(f"expected a material name or intensities, got {material!r}",
+                                  field="material")
+        return cls(objects=[SceneObject(name="object", material=mat,
+                                        dimensions=list(dimensions) if dimensions else None)],
+                   devices=dict(devices or {}), settings=settings, name=name)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"schema_version": 1, "name": self.name,
+                "objects": [o.to_dict() for o in self.objects],
+                "devices": {r: d.to_dict() for r, d in self.devices.items()},
+                "settings": copy.deepcopy(self.settings)}
+
+    def compile(self) -> RenderPlan:
+        """Shortcut for :func:`compile_scene`."""
+        return compile_scene(self)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a scene JSON file (``schemas/scene.schema.json``)."""
+    return Scene.load(path)
+
+
+# ---------------------------------------------------------------------------
+# compilation
+# ---------------------------------------------------------------------------
+
+@dataclass
+class _Mat:
+    name: str
+    targets: dict[str, float]
+    source: str
+    objects: list[str]
+
+
+def _resolve_materials(scene: Scene) -> list[_Mat]:
+    """Material name -> targets, in scene order; the library is read only if named."""
+    library = None
+    mats: dict[str, _Mat] = {}
+    restrict = scene.settings.get("dimensions")
+    for i, obj in enumerate(scene.objects):
+        where = f"scene.objects[{i}]"
+        if isinstance(obj.material, str):
+            if library is None:
+                from .materials import load_library
+                library = load_library()
+            try:
+                m = library.get(obj.material)
+            except (KeyError, LookupError, ValidationError) as exc:
+                raise ValidationError(f"unknown material {obj.material!r}: {exc}",
+                                      field=f"{where}.material") from None
+            name, source = m.name, "library"
+            targets = {k: float(v) for k, v in m.intensities.items()}
+        elif isinstance(obj.material, Mapping):
+            ints = obj.material.get("intensities")
+            if not isinstance(ints, Mapping) or not ints:
+                raise ValidationError("a material given inline needs 'intensities'",
+                                      field=f"{where}.material.intensities")
+            name = str(obj.material.get("name") or obj.name)
+            source = "intensities"
+            targets = dict(ints)
+        else:
+            raise ValidationError(f"material must be a name or an object, got {obj.material!r}",
+                                  field=f"{where}.material")
+        targets.update(obj.intensities)
+        if obj.intensities and source == "library":
+            name = f"{name}+" + "+".join(f"{k}={float(v):g}" for k, v in sorted(obj.intensities.items()))
+        dims = obj.dimensions if obj.dimensions is not None else restrict
+        if dims is not None:
+            unknown = [d for d in dims if d not in targets]
+            if unknown:
+                raise ValidationError(f"dimensions {unknown} have no target intensity in material "
+                                      f"{name!r} (it has {sorted(targets)})", field=f"{where}.dimensions")
+            targets = {d: targets[d] for d in targets if d in dims}
+        targets = {d: check_intensity(v, f"{where}.intensities.{d}") for d, v in targets.items()}
+        if not targets:
+            raise ValidationError("the material has no dimension to render", field=where)
+        if name in mats:
+            if mats[name].targets != targets:
+                raise ValidationError(f"material name {name!r} is used with different intensities",
+                                      field=f"{where}.material")
+            mats[name].objects.append(obj.name)
+        else:
+            mats[name] = _Mat(name, targets, source, [obj.name])
+    return list(mats.values())
+
+
+def _plugin_entry(kind: str, name: str, stage: str) -> dict[str, Any]:
+    from .plugins import registry
+    try:
+        info = registry(kind).info(name).to_dict()
+    except PluginError:
+        from . import __version__
+        from .importance import BUILTIN
+        core = kind == "importance" and name in BUILTIN
+        info = {"kind": kind, "name": name, "distribution": "hapticsdk" if core else None,
+                "version": __version__ if core else None}
+    info.pop("value", None)
+    info["stage"] = stage
+    return info
+
+
+def _load_dimension(name: str, field: str) -> Any:
+    from .plugins import registry
+    reg = registry("dimension")
+    if name not in reg:
+        raise ValidationError(f"no dimension plugin named {name!r}; installed: {reg.names()}", field=field)
+    cls = reg.load(name)
+    check_plugin_api(cls, name=name)
+    return cls() if isinstance(cls, type) else cls
+
+
+def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[str, Any]
+                  ) -> dict[str, Any]:
+    """Solve each group of materials sharing a dimension tuple in one batch."""
+    from .problems import solve
+    s = settings["solver"]
+    out: dict[str, Any] = {}
+    for dims, mats in groups.items():
+        if not dims:
+            continue
+        T = np.array([[m.targets[d] for d in dims] for m in mats], dtype=float)
+        res = solve(T, dimensions=list(dims), model=settings.get("model"), method=s["method"],
+                    seed=s["seed"], options=dict(s.get("options") or {}),
+                    penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01))
+        results = list(res) if isinstance(res, list) else [res]
+        for m, r in zip(mats, results):
+            out[m.name] = r
+    return out
+
+
+def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed: Any) -> dict[str, Any]:
+    return {"success": bool(r.success), "error": float(r.error),
+            "error_per_dimension": {k: float(v) for k, v in r.error_per_dimension.items()},
+            "intensities": {k: float(r.intensities[k]) for k in dims if k in r.intensities},
+            "constraint_violation": float(r.constraint_violation),
+            "message": str(r.message), "method": str(r.method), "seed": seed,
+            "nfev": int(r.nfev), "time_s": float(r.time_s), "models": list(model_names)}
+
+
+def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
+    """Compile a scene (object, dict, or path of a JSON file) into a render plan."""
+    if isinstance(scene, (str, Path)):
+        scene = Scene.load(scene)
+    elif isinstance(scene, Mapping):
+        scene = Scene.from_dict(scene)
+    settings = scene.settings
+    mats = _resolve_materials(scene)
+
+    # dimensions named by any material: imported (they are used)
+    dim_objs: dict[str, Any] = {}
+    for m in mats:
+        for d in m.targets:
+            if d not in dim_objs:
+                dim_objs[d] = _load_dimension(d, f"materials.{m.name}.intensities.{d}")
+
+    # 1. solve with every named dimension
+    groups: dict[tuple[str, ...], list[_Mat]] = {}
+    for m in mats:
+        groups.setdefault(tuple(m.targets), []).append(m)
+    first = _solve_groups(groups, settings)
+
+    # 2. importance
+    imp_cfg = settings["importance"]
+    imp_model = None
+    drops: dict[str, list[tuple[str, float, float]]] = {m.name: [] for m in mats}
+    imp_features: dict[str, dict[str, float]] = {m.name: {} for m in mats}
+    if imp_cfg.get("enabled", True):
+        from .importance import decide_drops, load_importance
+        imp_model = load_importance(imp_cfg.get("model", "paper"))
+        check_plugin_api(imp_model, name=imp_model.name)
+        for dims, gm in groups.items():
+            if len(dims) < 2:
+                continue
+            keys = sorted(set().union(*(first[m.name].x_dict for m in gm)))
+            cols = {k: np.array([first[m.name].x_dict.get(k, np.nan) for m in gm]) for k in keys}
+            cols = {k: v for k, v in cols.items() if np.isfinite(v).all()}
+            decided = decide_drops(imp_model, dims, cols, imp_cfg.get("thresholds") or {},
+                                   float(imp_cfg["threshold_percent"]))
+            for m, dl in zip(gm, decided):
+                drops[m.name] = dl
+                needed = set()
+                for d in dims:
+                    if imp_model.judges(d, list(dims)):
+                        needed |= set(imp_model.features_needed(d, list(dims)))
+                imp_features[m.name] = {k: float(first[m.name].x_dict[k]) for k in sorted(needed)
+                                        if k in first[m.name].x_dict}
+
+    # 3. solve again without the dropped dimensions
+    regroup: dict[tuple[str, ...], list[_Mat]] = {}
+    for m in mats:
+        if drops[m.name]:
+            gone = {d for d, _, _ in drops[m.name]}
+            regroup.setdefault(tuple(d for d in m.targets if d not in gone), []).append(m)
+    second = _solve_groups(regroup, settings)
+    final = {**first, **second}
+
+    # 4. renderers' roles and actuators
+    model_names = [settings["model"]] if settings.get("model") else None
+    ropts = settings.get("renderer_options") or {}
+    used_dims: set[str] = set()
+    used_actuators: set[str] = set()
+    plans: dict[str, MaterialPlan] = {}
+    for m in mats:
+        gone = [d for d, _, _ in drops[m.name]]
+        kept = [d for d in m.targets if d not in gone]
+        r = final[m.name]
+        read = {f.name for d in kept for f in dim_objs[d].features}
+        feats = {k: float(v) for k, v in r.x_dict.items() if k in read}
+        pinned = {k: float(v) for k, v in r.x_dict.items() if k not in read}
+        roles: dict[str, list[str]] = {}
+        for d in kept:
+            try:
+                rend = dim_objs[d].renderer(dict(feats), **dict(ropts.get(d, {})))
+            except ValidationError:
+                raise
+            except Exception as exc:
+                raise PluginError(f"dimension {d!r} could not build a renderer for material "
+                                  f"{m.name!r}: {type(exc).__name__}: {exc}", plugin=d,
+                                  kind="dimension") from exc
+            roles[d] = list(rend.roles)
+        dropped: list[DroppedDimension] = []
+        for d, loss, thr in drops[m.name]:
+            rep = imp_model.replacement(d) if imp_model is not None else None
+            what = "replaced by " + rep["renderer"] if rep else "not rendered"
+            dropped.append(DroppedDimension(
+                dimension=d, predicted_loss_percent=round(loss, 6), threshold_percent=thr,
+                importance_model=imp_model.name if imp_model else None, replacement=rep,
+                reason=(f"predicted realism loss {loss:.2f} % < threshold {thr:g} % "
+                        f"(importance model {imp_model.name!r}); {what}")))
+            if rep:
+                roles[f"replacement:{d}"] = [rep["role"]]
+        actuators: dict[str, str] = {}
+        options: dict[str, dict[str, Any]] = {}
+        for owner, rl in roles.items():
+            dname = owner.split(":", 1)[1] if owner.startswith("replacement:") else owner
+            for role in rl:
+                if role in actuators:
+                    continue
+                if role in scene.devices:
+                    spec = scene.devices[role]
+                elif role in dim_objs[dname].default_actuators:
+                    spec = DeviceSpec(dim_objs[dname].default_actuators[role])
+                else:
+                    raise ValidationError(f"no actuator for role {role!r} of dimension {dname!r}: "
+                                          f"the scene's devices name none and the dimension has no "
+                                          f"default", field=f"scene.devices.{role}")
+                from .plugins import registry
+                if spec.actuator not in registry("actuator"):
+                    raise ValidationError(f"no actuator plugin named {spec.actuator!r}; installed: "
+                                          f"{registry('actuator').names()}", field=f"scene.devices.{role}")
+                actuators[role] = spec.actuator
+                options[role] = dict(spec.options)
+        used_dims |= set(kept) | set(gone)
+        used_actuators |= set(actuators.values())
+        from .plugins import registry
+        dists = {d: registry("dimension").distribution_of(d) for d in list(kept) + gone}
+        models = model_names or sorted({dim_objs[d].default_model for d in (kept or m.targets)})
+        plans[m.name] = MaterialPlan(
+            name=m.name, targets=dict(m.targets), dimensions=kept, dropped=dropped,
+            features=feats, pinned_features=pinned, importance_features=imp_features[m.name],
+            actuators=actuators, actuator_options=options, roles=roles,
+            dimension_distributions=dists,
+            solve=_solve_summary(r, kept, models, settings["solver"]["seed"]),
+            source=m.source, objects=list(m.objects))
+
+    # plugins used / never imported
+    plugins: list[dict[str, Any]] = [_plugin_entry("dimension", d, "compile") for d in sorted(used_dims)]
+    all_models = model_names or sorted({dim_objs[d].default_model for d in used_dims})
+    plugins += [_plugin_entry("model", n, "compile") for n in all_models]
+    plugins.append(_plugin_entry("solver", settings["solver"]["method"], "compile"))
+    if imp_model is not None:
+        plugins.append(_plugin_entry("importance", imp_model.name, "compile"))
+    plugins += [_plugin_entry("actuator", a, "render") for a in sorted(used_actuators)]
+    from .plugins import registry
+    from .render import FALLBACK_SENSOR
+    if FALLBACK_SENSOR not in used_actuators:
+        e = _plugin_entry("actuator", FALLBACK_SENSOR, "render")
+        e["reason"] = "sensing device when no actuator of the rendered material senses"
+        plugins.append(e)
+    unused: list[dict[str, Any]] = []
+    for kind, used in (("dimension", used_dims), ("actuator", used_actuators | {FALLBACK_SENSOR})):
+        for n in registry(kind).names():
+            if n not in used:
+                e = _plugin_entry(kind, n, "unused")
+                e.pop("stage", None)
+                e["reason"] = f"no material of the scene uses this {kind}; not imported"
+                unused.append(e)
+    return RenderPlan(scene=scene.name, materials=plans, settings=copy.deepcopy(settings),
+                      plugins=plugins, unused_plugins=unused)

@@ -1,0 +1,787 @@
+"""Conformance kit: checks that a plugin keeps the contract of its kind.
+
+Each ``check_<kind>(name_or_factory)`` runs every rule of that kind and returns a list of
+:class:`Violation` (empty: the plugin conforms). A violation names the plugin, its kind,
+the rule and what was wrong, so a failure reads like
+``[actuator 'piezo-virtual'] rule 'limits-enforced': backend received amplitude 250 V
+above max_amplitude 100 V``.
+
+Kinds and rules (``RULES[kind]``):
+
+* ``actuator``: import, class, limits-declared, options, lifecycle, bad-input,
+  limits-enforced, safe-stop, determinism.
+* ``device`` (an actuator that senses): the actuator rules plus state, step.
+* ``dimension``: import, class, features, constraints-vectorised, renderer,
+  renderer-bad-input, determinism.
+* ``model``: import, shapes, vectorised, determinism, bad-input, jacobian, metadata.
+* ``solver``: import, class, options, solves, determinism, batch, bad-input.
+
+The pytest side (classes to subclass, fixtures) is in :mod:`hapticsdk.testing.suites`
+and :mod:`hapticsdk.testing.pytest_plugin`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from ..actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevice
+from ..dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from ..errors import DeviceError, HapticSDKError, PluginError, ValidationError
+from ..features import Feature, FeatureSpace
+from ..models import PerceptionModel
+from ..solvers import SolveProblem, Solver
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One broken rule of one plugin."""
+
+    kind: str
+    plugin: str
+    rule: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"[{self.kind} {self.plugin!r}] rule {self.rule!r}: {self.message}"
+
+
+class _Ctx:
+    """What the rules of one plugin share: its name, how to make it, found violations."""
+
+    def __init__(self, kind: str, name: str, factory: Callable[[], Any] | None, obj: Any = None) -> None:
+        self.kind, self.name, self.factory, self.obj = kind, name, factory, obj
+        self.violations: list[Violation] = []
+        self.by_name = False
+        self.only: set[str] = set()
+
+    def fail(self, rule: str, message: str) -> None:
+        self.violations.append(Violation(self.kind, self.name, rule, message))
+
+    def make(self) -> Any:
+        if self.factory is None:
+            raise PluginError("no factory", plugin=self.name, kind=self.kind)
+        return self.factory()
+
+
+def _load(kind: str, name: str) -> Any:
+    from ..plugins import registry
+    return registry(kind).load(name)
+
+
+def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None) -> tuple[str, Callable[[], Any] | None, Any, str | None]:
+    """(name, factory, class-or-object, import error)."""
+    opts = dict(options or {})
+    if isinstance(target, str):
+        try:
+            obj = _load(kind, target)
+        except PluginError as exc:
+            return target, None, None, str(exc)
+        if kind in ("actuator", "device", "dimension", "solver"):
+            return target, (lambda: obj(**opts)), obj, None
+        if kind == "model":
+            return target, (lambda: obj(**opts) if opts else obj()), obj, None
+    if callable(target) and not isinstance(target, type):
+        name = getattr(target, "__name__", kind)
+        try:
+            probe = target()
+        except Exception as exc:
+            return name, None, None, f"{type(exc).__name__}: {exc}"
+        return getattr(probe, "name", name) or name, target, type(probe), None
+    if isinstance(target, type):
+        return getattr(target, "name", target.__name__) or target.__name__, (lambda: target(**opts)), target, None
+    return getattr(target, "name", kind), (lambda: target), type(target), None
+
+
+def _guard(ctx: _Ctx, rule: str, fn: Callable[[], None]) -> None:
+    try:
+        fn()
+    except AssertionError as exc:
+        ctx.fail(rule, str(exc))
+    except Exception as exc:
+        ctx.fail(rule, f"raised {type(exc).__name__}: {exc}")
+
+
+def _finite(x: Any) -> bool:
+    return x is None or (isinstance(x, (int, float, np.floating, np.integer)) and math.isfinite(float(x)))
+
+
+# ---------------------------------------------------------------------------
+# actuators and devices
+# ---------------------------------------------------------------------------
+
+def _over_limit_commands(act: Actuator) -> list[ChannelCommand]:
+    lim = act.limits
+    cmds = []
+    role = act.channel
+    if lim.max_force_n is not None:
+        cmds += [ChannelCommand(role, force_n=10 * lim.max_force_n + 1),
+                 ChannelCommand(role, force_n=-(10 * lim.max_force_n + 1))]
+    if lim.frequency_range_hz is not None:
+        lo, hi = lim.frequency_range_hz
+        amp = lim.max_amplitude if lim.max_amplitude is not None else 0.5
+        cmds += [ChannelCommand(role, frequency_hz=hi * 10 + 100, amplitude=amp),
+                 ChannelCommand(role, frequency_hz=max(lo / 10.0, 0.0), amplitude=amp)]
+    if lim.max_amplitude is not None:
+        f = float(np.mean(lim.frequency_range_hz)) if lim.frequency_range_hz else 100.0
+        cmds += [ChannelCommand(role, frequency_hz=f, amplitude=10 * lim.max_amplitude + 1),
+                 ChannelCommand(role, frequency_hz=f, amplitude=-1.0)]
+    return cmds
+
+
+def _normal_commands(act: Actuator) -> list[ChannelCommand]:
+    lim = act.limits
+    role = act.channel
+    out = []
+    if lim.max_force_n is not None or act.channel == "force":
+        fmax = lim.max_force_n if lim.max_force_n is not None else 1.0
+        out += [ChannelCommand(role, force_n=v * fmax) for v in (0.0, 0.25, 0.5, 0.25, 0.0)]
+    if lim.frequency_range_hz is not None or lim.max_amplitude is not None:
+        lo, hi = lim.frequency_range_hz or (50.0, 250.0)
+        a = lim.max_amplitude if lim.max_amplitude is not None else 1.0
+        out += [ChannelCommand(role, frequency_hz=lo + (hi - lo) * u, amplitude=a * u)
+                for u in (0.1, 0.5, 0.9, 0.5, 0.0)]
+    if not out:
+        out = [ChannelCommand(role)]
+    return out
+
+
+class _Spy:
+    """Wraps an actuator's backend methods to see what reaches the hardware."""
+
+    def __init__(self, act: Actuator) -> None:
+        self.sent: list[ChannelCommand] = []
+        self.stops = 0
+        cmd, stop = act._command, act._stop
+
+        def _command(c: ChannelCommand) -> None:
+            self.sent.append(c)
+            cmd(c)
+
+        def _stop() -> None:
+            self.stops += 1
+            stop()
+        act._command = _command  # type: ignore[method-assign]
+        act._stop = _stop  # type: ignore[method-assign]
+
+
+def _drive(act: Actuator, cmds: Sequence[ChannelCommand], dt: float = 0.001) -> list[Any]:
+    """Send commands 1 ms apart (stepping simulated devices); return states or sent commands."""
+    out = []
+    t = 0.0
+    for c in cmds:
+        t += dt
+        sent = act.command(c, now=t)
+        if isinstance(act, HapticDevice):
+            act.step(dt)
+            st = act.read_state()
+            out.append((np.array(st.position_mm, float).round(12).tolist(),
+                        np.array(st.force_n, float).round(12).tolist()))
+        else:
+            out.append((sent.force_n, sent.frequency_hz, sent.amplitude))
+    return out
+
+
+def _actuator_rules(ctx: _Ctx, device: bool) -> None:
+    cls = ctx.obj
+
+    def r_class() -> None:
+        assert isinstance(cls, type) and issubclass(cls, Actuator), \
+            f"entry point gives {cls!r}, not an Actuator subclass"
+        if device:
+            assert issubclass(cls, HapticDevice), "a device must subclass HapticDevice (it senses)"
+        assert cls.name, "class attribute 'name' is empty"
+        if ctx.by_name:
+            assert cls.name == ctx.name, \
+                f"class attribute name {cls.name!r} differs from the entry-point name {ctx.name!r}"
+        assert cls.channel in CHANNELS, f"channel {cls.channel!r} not one of {CHANNELS}"
+        assert isinstance(cls.limits, ActuatorLimits), "limits must be an ActuatorLimits"
+        ok, why = cls.check_available()
+        assert isinstance(ok, bool) and isinstance(why, str), "check_available() must return (bool, str)"
+        for k in ("_command", "_stop"):
+            assert not getattr(getattr(cls, k), "__isabstractmethod__", False), f"{k} not implemented"
+
+    def r_limits() -> None:
+        lim = cls.limits
+        for k in ("max_force_n", "max_stiffness_n_per_mm", "max_amplitude", "max_velocity_mm_s",
+                  "max_force_rate_n_per_tick"):
+            v = getattr(lim, k)
+            assert _finite(v) and (v is None or v > 0), f"limit {k}={v!r} must be a finite number > 0 or None"
+        if lim.frequency_range_hz is not None:
+            lo, hi = lim.frequency_range_hz
+            assert _finite(lo) and _finite(hi) and 0 <= lo < hi, f"frequency_range_hz {lim.frequency_range_hz} invalid"
+        if cls.channel == "force" and not (device and not _commands_force(cls)):
+            assert lim.max_force_n is not None, "a force actuator must declare max_force_n"
+        if cls.channel == "vibration":
+            assert lim.frequency_range_hz is not None and lim.max_amplitude is not None, \
+                "a vibration actuator must declare frequency_range_hz and max_amplitude"
+            assert lim.amplitude_unit, "a vibration actuator must name its amplitude_unit"
+
+    def r_options() -> None:
+        try:
+            cls(no_such_option_xyz=1)
+        except ValidationError:
+            return
+        except TypeError as exc:
+            raise AssertionError(f"an unknown option raised TypeError ({exc}), expected ValidationError") from None
+        raise AssertionError("an unknown option was accepted silently")
+
+    def r_lifecycle() -> None:
+        a = ctx.make()
+        assert not a.is_open, "a new actuator must not be open before open()"
+        a.stop()  # stop on a closed actuator must not raise
+        try:
+            a.command(_normal_commands(a)[0])
+        except DeviceError:
+            pass
+        else:
+            raise AssertionError("command() on a closed actuator did not raise DeviceError")
+        with a:
+            assert a.is_open
+            a.open()  # idempotent
+            _drive(a, _normal_commands(a))
+        assert not a.is_open, "the context manager did not close the actuator"
+        a.close()  # twice: no error
+        a.open()
+        _drive(a, _normal_commands(a)[:2])
+        a.close()
+        json.dumps(a.describe(), default=str)
+
+    def r_bad_input() -> None:
+        a = ctx.make()
+        with a:
+            for attr in ("force_n", "frequency_hz", "amplitude"):
+                for bad in (float("nan"), float("inf")):
+                    try:
+                        a.command(ChannelCommand(a.channel, **{attr: bad}))
+                    except ValidationError:
+                        continue
+                    raise AssertionError(f"{attr}={bad} was accepted")
+            if isinstance(a, HapticDevice):
+                for bad in (0.0, -1.0, float("nan")):
+                    try:
+                        a.step(bad)
+                    except ValidationError:
+                        continue
+                    raise AssertionError(f"step({bad}) was accepted")
+
+    def r_limits_enforced() -> None:
+        a = ctx.make()
+        spy = _Spy(a)
+        lim = a.limits
+        with a:
+            for c in _over_limit_commands(a):
+                a.command(c, now=0.0)
+                if isinstance(a, HapticDevice):
+                    a.step(0.001)
+                    st = a.read_state()
+                    if lim.max_force_n is not None:
+                        fn = float(np.linalg.norm(np.asarray(st.force_n, float)))
+                        assert fn <= lim.max_force_n * (1 + 1e-6) + 1e-9, \
+                            f"device reports force {fn:g} N above max_force_n {lim.max_force_n:g} N"
+        for c in spy.sent:
+            if c.force_n is not None and lim.max_force_n is not None:
+                assert abs(c.force_n) <= lim.max_force_n * (1 + 1e-9), \
+                    f"backend received force {c.force_n:g} N above max_force_n {lim.max_force_n:g} N"
+            if c.frequency_hz is not None and lim.frequency_range_hz is not None:
+                lo, hi = lim.frequency_range_hz
+                assert lo - 1e-9 <= c.frequency_hz <= hi + 1e-9, \
+                    f"backend received {c.frequency_hz:g} Hz outside frequency_range_hz {lim.frequency_range_hz}"
+            if c.amplitude is not None:
+                assert c.amplitude >= 0, f"backend received a negative amplitude {c.amplitude:g}"
+                if lim.max_amplitude is not None:
+                    assert c.amplitude <= lim.max_amplitude * (1 + 1e-9), \
+                        f"backend received amplitude {c.amplitude:g} {lim.amplitude_unit} above " \
+                        f"max_amplitude {lim.max_amplitude:g}"
+        assert spy.sent or not _over_limit_commands(a), "no command reached the backend"
+
+    def r_safe_stop() -> None:
+        a = ctx.make()
+        spy = _Spy(a)
+        with a:
+            _drive(a, _normal_commands(a)[:3])
+            assert a.stop() is True, "stop() returned False (backend stop failed)"
+            assert spy.stops >= 1, "stop() did not call the backend _stop"
+            if isinstance(a, HapticDevice):
+                a.step(0.001)
+                f = float(np.linalg.norm(np.asarray(a.read_state().force_n, float)))
+                assert f <= 1e-6, f"force {f:g} N still applied after stop()"
+        n = spy.stops
+        assert n >= 2, "close() did not stop the backend"
+        # a failing backend is stopped by the core and reported as DeviceError
+        b = ctx.make()
+        with b:
+            def broken(c: ChannelCommand) -> None:
+                raise OSError("simulated transport failure")
+            b._command = broken  # type: ignore[method-assign]
+            try:
+                b.command(_normal_commands(b)[0])
+            except DeviceError:
+                pass
+            else:
+                raise AssertionError("a failing backend command was not reported as DeviceError")
+
+    def r_determinism() -> None:
+        runs = []
+        for _ in range(2):
+            a = ctx.make()
+            with a:
+                runs.append(_drive(a, _normal_commands(a) + _over_limit_commands(a)))
+        assert runs[0] == runs[1], "the same command sequence gave different outputs on two instances"
+
+    def r_state() -> None:
+        a = ctx.make()
+        with a:
+            st = a.read_state()
+            for k in ("position_mm", "velocity_mm_s", "force_n"):
+                v = np.asarray(getattr(st, k), float)
+                assert v.shape == (3,), f"state.{k} has shape {v.shape}, expected (3,)"
+                assert np.isfinite(v).all(), f"state.{k} is not finite"
+            assert math.isfinite(st.t), "state.t is not finite"
+            t0 = st.t
+            for _ in range(10):
+                a.step(0.001)
+            assert a.read_state().t >= t0, "device time went backwards"
+        try:
+            a.read_state()
+        except DeviceError:
+            pass
+        else:
+            raise AssertionError("read_state() on a closed device did not raise DeviceError")
+
+    rules: list[tuple[str, Callable[[], None]]] = [
+        ("class", r_class), ("limits-declared", r_limits), ("options", r_options),
+        ("lifecycle", r_lifecycle), ("bad-input", r_bad_input), ("limits-enforced", r_limits_enforced),
+        ("safe-stop", r_safe_stop), ("determinism", r_determinism)]
+    if device:
+        rules.append(("state", r_state))
+    for rule, fn in rules:
+        if ctx.only and rule not in ctx.only:
+            continue
+        _guard(ctx, rule, fn)
+        if rule == "class" and ctx.violations:
+            break
+
+
+def _commands_force(cls: type) -> bool:
+    return getattr(cls, "limits", ActuatorLimits()).max_force_n is not None
+
+
+# ---------------------------------------------------------------------------
+# dimensions
+# ---------------------------------------------------------------------------
+
+def _tick_inputs() -> list[TickInput]:
+    out = []
+    for i, (pen, vx) in enumerate([(-1.0, 0.0), (0.0, 0.0), (0.5, 0.0), (1.5, 10.0), (2.0, 80.0),
+                                   (2.0, -150.0), (1.0, 25.0), (3.0, 400.0), (-0.2, 80.0)]):
+        out.append(TickInput(t=i * 1e-3, dt=1e-3, penetration_mm=pen,
+                             velocity_mm_s=np.array([vx, -5.0 * (i % 3 - 1), 0.0]), in_contact=pen > 0))
+    return out
+
+
+def _dimension_rules(ctx: _Ctx) -> None:
+    holder: dict[str, Any] = {}
+
+    def r_class() -> None:
+        cls = ctx.obj
+        assert isinstance(cls, type) and issubclass(cls, PerceptionDimension), \
+            f"entry point gives {cls!r}, not a PerceptionDimension subclass"
+        if ctx.by_name:
+            assert cls.name == ctx.name, f"class attribute name {cls.name!r} differs from the entry-point name {ctx.name!r}"
+        d = ctx.make()
+        holder["d"] = d
+        json.dumps(d.describe())
+        from ..plugins import registry
+        for role, act in d.default_actuators.items():
+            assert act in registry("actuator"), f"default actuator {act!r} of role {role!r} is not installed"
+        assert d.default_model in registry("model"), f"default_model {d.default_model!r} is not installed"
+
+    def r_features() -> None:
+        d = holder["d"]
+        assert d.features, "the dimension contributes no feature"
+        for f in d.features:
+            assert isinstance(f, Feature), f"{f!r} is not a Feature"
+            assert f.unit, f"feature {f.name} has no unit"
+        FeatureSpace(tuple(d.features))
+        names = {f.name for f in d.features}
+        extra = [n for n in d.render_features if n not in names]
+        assert not extra, f"render_features {extra} are not among its features {sorted(names)}"
+
+    def r_constraints() -> None:
+        d = holder["d"]
+        cons = d.constraints()
+        assert isinstance(cons, list), "constraints() must return a list"
+        space = d.feature_space()
+        rng = np.random.default_rng(0)
+        X = space.random(64, rng)
+        cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        for c in cons:
+            assert isinstance(c, Constraint), f"{c!r} is not a Constraint"
+            missing = [f for f in c.features if f not in space]
+            assert not missing, f"constraint {c.name!r} reads features {missing} the dimension does not contribute"
+            for form in ("paper", "normalised"):
+                p = np.asarray(c.penalty(cols, form))
+                assert p.shape == (64,), f"constraint {c.name!r} penalty has shape {p.shape}, expected (64,)"
+                assert np.isfinite(p).all() and (p >= 0).all(), f"constraint {c.name!r} penalty not finite >= 0"
+                rows = np.array([float(np.asarray(c.penalty({k: v[i:i + 1] for k, v in cols.items()}, form))[0])
+                                 for i in range(0, 64, 9)])
+                np.testing.assert_allclose(rows, p[::9], rtol=1e-9, atol=1e-12,
+                                           err_msg=f"constraint {c.name!r}: batch and row-by-row penalties differ")
+            json.dumps(c.describe())
+
+    def mid() -> dict[str, float]:
+        d = holder["d"]
+        return {f.name: 0.5 * (f.lower + f.upper) for f in d.features}
+
+    def r_renderer() -> None:
+        d = holder["d"]
+        for feats in (mid(), {f.name: f.lower for f in d.features}, {f.name: f.upper for f in d.features}):
+            r = d.renderer(feats)
+            assert isinstance(r, DimensionRenderer), f"renderer() returned {type(r).__name__}"
+            assert r.roles, "renderer declares no roles"
+            for role in r.roles:
+                assert role in d.default_actuators, f"renderer role {role!r} has no default actuator"
+            for inp in _tick_inputs():
+                cmds = r.tick(inp)
+                assert isinstance(cmds, list), "tick() must return a list of ChannelCommand"
+                for c in cmds:
+                    assert isinstance(c, ChannelCommand), f"tick() returned {c!r}"
+                    assert c.role in r.roles, f"tick() commanded role {c.role!r} not in roles {r.roles}"
+                    for k in ("force_n", "frequency_hz", "amplitude"):
+                        assert _finite(getattr(c, k)), f"tick() returned {k}={getattr(c, k)!r} for {feats}"
+                    if c.amplitude is not None:
+                        assert c.amplitude >= 0, f"negative amplitude {c.amplitude}"
+                if not inp.in_contact:
+                    for c in cmds:
+                        assert not c.force_n, f"force {c.force_n} N commanded out of contact"
+            json.dumps(r.describe(), default=str)
+
+    def r_renderer_bad() -> None:
+        d = holder["d"]
+        need = list(d.render_features) or [f.name for f in d.features]
+        feats = mid()
+        bad_sets = [{**feats, need[0]: float("nan")}, {k: v for k, v in feats.items() if k != need[0]}]
+        for bad in bad_sets:
+            try:
+                d.renderer(bad)
+            except ValidationError:
+                continue
+            raise AssertionError(f"renderer() accepted bad features {bad}")
+
+    def r_determinism() -> None:
+        d = holder["d"]
+        outs = []
+        for _ in range(2):
+            r = d.renderer(mid())
+            outs.append([[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)]
+                         for i in _tick_inputs()])
+        assert outs[0] == outs[1], "two renderers of the same features gave different commands"
+
+    for rule, fn in [("class", r_class), ("features", r_features), ("constraints-vectorised", r_constraints),
+                     ("renderer", r_renderer), ("renderer-bad-input", r_renderer_bad),
+                     ("determinism", r_determinism)]:
+        if ctx.only and rule not in ctx.only and rule != "class":
+            continue
+        _guard(ctx, rule, fn)
+        if rule in ("class", "features") and ctx.violations:
+            break
+
+
+# ---------------------------------------------------------------------------
+# perception models
+# ---------------------------------------------------------------------------
+
+def _model_rules(ctx: _Ctx) -> None:
+    holder: dict[str, Any] = {}
+
+    def inputs(n: int, seed: int = 0) -> np.ndarray:
+        m = holder["m"]
+        rng = np.random.default_rng(seed)
+        if m.feature_space is not None:
+            return m.feature_space.random(n, rng)
+        return rng.random((n, m.n_features))
+
+    def r_shapes() -> None:
+        m = ctx.make()
+        assert isinstance(m, PerceptionModel), f"factory returned {type(m).__name__}, not a PerceptionModel"
+        holder["m"] = m
+        assert len(set(m.dimension_names)) == m.n_outputs, "repeated dimension names"
+        for n in (1, 7):
+            Y = m.predict(inputs(n))
+            assert Y.shape == (n, m.n_outputs), f"predict gave shape {Y.shape}, expected {(n, m.n_outputs)}"
+            assert np.isfinite(Y).all(), "non-finite intensities"
+            assert (Y >= -0.05).all() and (Y <= 1.05).all(), \
+                f"intensities outside 0..1 (min {Y.min():.3g}, max {Y.max():.3g}) inside the feature bounds"
+        assert m.predict(inputs(1)[0]).shape == (1, m.n_outputs), "a 1-D input must give one row"
+
+    def r_vectorised() -> None:
+        m = holder["m"]
+        X = inputs(33, 1)
+        Y = m.predict(X)
+        rows = np.concatenate([m.predict(X[i:i + 1]) for i in range(X.shape[0])])
+        np.testing.assert_allclose(Y, rows, rtol=1e-4, atol=1e-5, err_msg="batch and row-by-row predictions differ")
+
+    def r_determinism() -> None:
+        m = holder["m"]
+        X = inputs(16, 2)
+        np.testing.assert_array_equal(m.predict(X), m.predict(X), err_msg="two calls gave different outputs")
+        m2 = ctx.make()
+        np.testing.assert_allclose(m.predict(X), m2.predict(X), rtol=1e-6, atol=1e-7,
+                                   err_msg="two instances gave different outputs")
+
+    def r_bad_input() -> None:
+        m = holder["m"]
+        bads = [np.zeros((3, m.n_features + 1)), np.zeros((2, 2, m.n_features)),
+                np.full((2, m.n_features), np.nan), np.full((1, m.n_features), np.inf)]
+        for bad in bads:
+            try:
+                m.predict(bad)
+            except ValidationError:
+                continue
+            raise AssertionError(f"predict accepted a bad input of shape {bad.shape}")
+
+    def r_jacobian() -> None:
+        m = holder["m"]
+        X = inputs(4, 3)
+        J = np.asarray(m.jacobian(X))
+        assert J.shape == (4, m.n_outputs, m.n_features), f"jacobian shape {J.shape}"
+        assert np.isfinite(J).all(), "non-finite jacobian"
+        span = (m.feature_space.upper - m.feature_space.lower) if m.feature_space is not None else np.ones(m.n_features)
+        for j in range(m.n_features):
+            h = 1e-3 * max(span[j], 1e-6)
+            e = np.zeros(m.n_features)
+            e[j] = h
+            fd = (m.predict(X + e) - m.predict(X - e)) / (2 * h)
+            scale = np.abs(fd).max() + np.abs(J[:, :, j]).max() + 1e-3 / max(span[j], 1e-9)
+            assert np.abs(fd - J[:, :, j]).max() <= 0.05 * scale, \
+                f"jacobian column {m.feature_names[j]} differs from finite differences"
+
+    def r_metadata() -> None:
+        m = holder["m"]
+        json.dumps(m.describe(), default=str)
+        assert m.feature_space is not None, "the model declares no feature_space (training range bounds)"
+        assert tuple(m.feature_space.names) == m.feature_names, "feature_space names differ from inputs"
+        defaults = m.metadata.get("feature_defaults")
+        if defaults is not None:
+            for k, v in defaults.items():
+                assert k in m.feature_names, f"feature_defaults names unknown feature {k!r}"
+                f = m.feature_space[k]
+                assert f.lower - 1e-9 <= float(v) <= f.upper + 1e-9, f"default {k}={v} outside [{f.lower}, {f.upper}]"
+
+    for rule, fn in [("shapes", r_shapes), ("vectorised", r_vectorised), ("determinism", r_determinism),
+                     ("bad-input", r_bad_input), ("jacobian", r_jacobian), ("metadata", r_metadata)]:
+        if ctx.only and rule not in ctx.only and rule != "shapes":
+            continue
+        _guard(ctx, rule, fn)
+        if rule == "shapes" and ctx.violations:
+            break
+
+
+# ---------------------------------------------------------------------------
+# solvers
+# ---------------------------------------------------------------------------
+
+class ReferenceModel(PerceptionModel):
+    """A smooth 3-feature, 2-dimension model with known inverses (kit use only).
+
+    ``I1 = (1 + tanh(2 a - 1)) / 2`` over ``a`` in [0, 1] (unitless),
+    ``I2 = b / (b + c)`` over ``b`` in [0.1, 10] and ``c`` in [1, 5].
+    """
+
+    def __init__(self) -> None:
+        space = FeatureSpace((Feature("a", "1", 0.0, 1.0), Feature("b", "1", 0.1, 10.0),
+                              Feature("c", "1", 1.0, 5.0)))
+        super().__init__(space.names, ("d1", "d2"), feature_space=space,
+                         metadata={"feature_defaults": {"a": 0.5, "b": 1.0, "c": 2.0}}, name="reference")
+
+    def _predict(self, X: np.ndarray) -> np.ndarray:
+        i1 = (1 + np.tanh(2 * X[:, 0] - 1)) / 2
+        i2 = X[:, 1] / (X[:, 1] + X[:, 2])
+        return np.stack([i1, i2], axis=1)
+
+
+class _RefConstraint(Constraint):
+    """b >= 2 c (kit reference constraint)."""
+
+    name = "reference.b-over-c"
+    features = ("b", "c")
+
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        return 2 * np.asarray(cols["c"]), np.asarray(cols["b"])
+
+
+def reference_problem(targets: Any = (0.4, 0.75), *, constrained: bool = True, tolerance: float = 0.02) -> SolveProblem:
+    """A reachable problem on :class:`ReferenceModel` (with ``b >= 2c`` when ``constrained``;
+    ``d2 = 0.75`` needs ``b = 3c``, feasible)."""
+    m = ReferenceModel()
+    return SolveProblem(targets=np.asarray(targets, float), dimensions=("d1", "d2"), model=m,
+                        space=m.feature_space, constraints=(_RefConstraint(),) if constrained else (),
+                        penalty="normalised", tolerance=tolerance)
+
+
+def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
+    def make() -> Solver:
+        return ctx.obj(**dict(options))
+
+    def r_class() -> None:
+        cls = ctx.obj
+        assert isinstance(cls, type) and issubclass(cls, Solver), f"entry point gives {cls!r}, not a Solver subclass"
+        if ctx.by_name:
+            assert cls.name == ctx.name, f"class attribute name {cls.name!r} differs from the entry-point name {ctx.name!r}"
+        assert isinstance(cls.default_options, dict), "default_options must be a dict"
+        json.dumps(cls.default_options, default=str)
+
+    def r_options() -> None:
+        try:
+            ctx.obj(no_such_option_xyz=1)
+        except ValidationError:
+            return
+        raise AssertionError("an unknown option was accepted")
+
+    def r_solves() -> None:
+        s = make()
+        res = s.solve(reference_problem(), seed=0)
+        assert np.shape(res.x) == (3,), f"x has shape {np.shape(res.x)}, expected (3,)"
+        p = reference_problem()
+        assert p.space.contains(res.x).all(), f"x {res.x} outside the feature bounds"
+        assert res.error <= 0.05, f"did not reach an easy reachable target: error {res.error:.3g} ({res.message})"
+        assert res.constraint_violation <= 1e-3, f"constraint violated at the answer ({res.constraint_violation:.3g})"
+
+    def r_determinism() -> None:
+        a = make().solve(reference_problem(), seed=11)
+        b = make().solve(reference_problem(), seed=11)
+        np.testing.assert_array_equal(a.x, b.x, err_msg="the same seed gave different answers")
+
+    def r_batch() -> None:
+        T = np.array([[0.3, 0.7], [0.6, 0.8], [0.5, 0.75]])
+        res = make().solve(reference_problem(T), seed=1)
+        assert isinstance(res, list) and len(res) == 3, "a batch of 3 targets must give 3 results"
+        assert res.x.shape == (3, 3), f"batch x shape {res.x.shape}"
+        assert (res.error <= 0.05).all(), f"batch errors {res.error}"
+
+    def r_bad_input() -> None:
+        try:
+            make().solve("not a problem")  # type: ignore[arg-type]
+        except ValidationError:
+            return
+        raise AssertionError("solve() accepted something that is not a SolveProblem")
+
+    for rule, fn in [("class", r_class), ("options", r_options), ("solves", r_solves),
+                     ("determinism", r_determinism), ("batch", r_batch), ("bad-input", r_bad_input)]:
+        if ctx.only and rule not in ctx.only and rule != "class":
+            continue
+        _guard(ctx, rule, fn)
+        if rule == "class" and ctx.violations:
+            break
+
+
+# ---------------------------------------------------------------------------
+# entry points
+# ---------------------------------------------------------------------------
+
+RULES: dict[str, tuple[str, ...]] = {
+    "actuator": ("import", "class", "limits-declared", "options", "lifecycle", "bad-input",
+                 "limits-enforced", "safe-stop", "determinism"),
+    "device": ("import", "class", "limits-declared", "options", "lifecycle", "bad-input",
+               "limits-enforced", "safe-stop", "determinism", "state"),
+    "dimension": ("import", "class", "features", "constraints-vectorised", "renderer",
+                  "renderer-bad-input", "determinism"),
+    "model": ("import", "shapes", "vectorised", "determinism", "bad-input", "jacobian", "metadata"),
+    "solver": ("import", "class", "options", "solves", "determinism", "batch", "bad-input"),
+}
+
+
+def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
+          rules: Sequence[str] | None = None) -> list[Violation]:
+    """Run the rules of ``kind`` on ``target`` (an entry-point name, a class, or a
+    zero-argument factory); return the violations (empty when it conforms).
+
+    ``options``: keyword options to create it with (a solver's options, an actuator's
+    settings). ``rules``: only these rules (``import`` and ``class`` always run)."""
+    if kind not in RULES:
+        raise ValidationError(f"unknown plugin kind {kind!r}; valid: {sorted(RULES)}", field="kind")
+    if rules:
+        unknown = [r for r in rules if r not in RULES[kind]]
+        if unknown:
+            raise ValidationError(f"unknown rules {unknown} for {kind}; valid: {list(RULES[kind])}", field="rules")
+    reg_kind = "actuator" if kind == "device" else kind
+    name, factory, obj, err = _resolve(reg_kind, target, options if kind != "solver" else None)
+    ctx = _Ctx(kind, name, factory, obj)
+    ctx.only = set(rules or ())
+    ctx.by_name = isinstance(target, str)
+    if err is not None:
+        ctx.fail("import", f"could not be loaded: {err}")
+        return ctx.violations
+    if kind in ("actuator", "device"):
+        _actuator_rules(ctx, device=kind == "device")
+    elif kind == "dimension":
+        _dimension_rules(ctx)
+    elif kind == "model":
+        _model_rules(ctx)
+    else:
+        _solver_rules(ctx, options or {})
+    return ctx.violations
+
+
+def check_actuator(target: Any, **options: Any) -> list[Violation]:
+    """:func:`check` for an actuator (``"piezo-virtual"``, a class or a factory)."""
+    return check("actuator", target, options=options)
+
+
+def check_device(target: Any, **options: Any) -> list[Violation]:
+    """:func:`check` for a haptic device (an actuator that senses, e.g. ``"omni-virtual"``)."""
+    return check("device", target, options=options)
+
+
+def check_dimension(target: Any) -> list[Violation]:
+    return check("dimension", target)
+
+
+def check_model(target: Any) -> list[Violation]:
+    """:func:`check` for a perception model (entry-point name or zero-argument factory)."""
+    return check("model", target)
+
+
+def check_solver(target: Any, **options: Any) -> list[Violation]:
+    return check("solver", target, options=options)
+
+
+def check_installed(kinds: Sequence[str] = ("actuator", "dimension", "model", "solver")) -> dict[str, list[Violation]]:
+    """Check every installed plugin of the given kinds (actuators that are HapticDevices
+    get the device rules). Actuators whose ``check_available()`` is False (hardware
+    libraries missing) are checked with the class rules only."""
+    from ..plugins import registry
+    out: dict[str, list[Violation]] = {}
+    for kind in kinds:
+        for name in registry(kind).names():
+            k = kind
+            rules = None
+            if kind == "actuator":
+                try:
+                    cls = registry(kind).load(name)
+                except PluginError as exc:
+                    out[f"{kind}:{name}"] = [Violation(kind, name, "import", str(exc))]
+                    continue
+                if isinstance(cls, type) and issubclass(cls, HapticDevice):
+                    k = "device"
+                if not getattr(cls, "simulated", False):
+                    rules = ["limits-declared", "options"]
+            if kind == "model" and name == "onnx":
+                continue  # a class taking a path, not a zero-argument factory
+            out[f"{kind}:{name}"] = check(k, name, rules=rules)
+    return out
+
+
+def format_violations(violations: Sequence[Violation]) -> str:
+    return "\n".join(str(v) for v in violations)
+
+
+def assert_conforms(violations: Sequence[Violation]) -> None:
+    """Raise ``AssertionError`` listing every violation (for tests)."""
+    if violations:
+        raise AssertionError(f"{len(violations)} conformance violation(s):\n" + format_violations(violations))

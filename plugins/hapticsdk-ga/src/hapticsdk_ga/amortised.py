@@ -1,0 +1,302 @@
+"""Amortised solving: a precomputed target-grid table answered by interpolation.
+
+Building (once per model/problem setup, then cached):
+
+1. ``build_samples`` feature points are drawn uniformly in the searched bounds (fixed
+   seed) and run through the model; feasible ones (constraints met) give a cloud of
+   reachable intensities.
+2. The target grid (``grid`` nodes per targeted dimension over 0..1; 101 x 101 for
+   hardness x roughness by default) is solved by the batched Levenberg-Marquardt of
+   :mod:`hapticsdk_ga.polish` with *continuation*: the first column (first dimension at 0)
+   is swept node by node along the second dimension, each node started from its
+   neighbour's answer and from the nearest sample; every further column is solved as one
+   batch started from the previous column's answers and from the nearest samples, keeping
+   the continued answer unless the other start is clearly better. Neighbouring nodes thus
+   get neighbouring features, which is what makes interpolation meaningful (the inverse
+   is not unique: 5 features for 2 intensities).
+3. The table (``(grid, grid, d)`` features, per-node error and violation) is cached in
+   memory and on disk (``.npz`` under ``cache_dir`` / ``$HAPTICSDK_CACHE_DIR`` /
+   ``$XDG_CACHE_HOME/hapticsdk`` / ``~/.cache/hapticsdk``, subfolder ``amortised``), keyed
+   by a SHA-256 of the model's outputs on a fixed probe set, the dimensions, bounds, fixed
+   values, the constraints' values on the probe set, and the table options.
+
+Answering: bilinear interpolation of the node features at the targets
+(:meth:`AmortisedTable.lookup`, microseconds, for live retargeting), then optionally
+``polish_steps`` batched LM iterations on the real problem (one ``predict`` and one
+``jacobian`` call each). Targets outside the reachable set get the table's nearest-feasible
+answer and end ``success=False`` like with any other solver.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import os
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hapticsdk.errors import ValidationError
+from hapticsdk.solvers import CONSTRAINT_TOL, SolveProblem, Solver, SolverOutput, Trace
+
+from ._common import check_int, rank_key
+from .polish import levenberg_marquardt
+
+log = logging.getLogger(__name__)
+
+TABLE_VERSION = 1
+_MEMO: dict[str, "AmortisedTable"] = {}
+
+
+def default_cache_dir() -> Path:
+    """``$HAPTICSDK_CACHE_DIR`` or ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk``."""
+    env = os.environ.get("HAPTICSDK_CACHE_DIR")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
+
+
+class AmortisedTable:
+    """Features on a regular target grid, with interpolation.
+
+    Attributes:
+        X: ``(g1, g2, d)`` (two targeted dimensions) or ``(g1, d)`` (one) node features,
+            physical units of ``feature_names``.
+        node_error: per node, the sum of absolute intensity errors reached when building.
+        node_violation: per node, max relative constraint violation.
+        key: the cache key (hex SHA-256).
+    """
+
+    def __init__(self, X: np.ndarray, node_error: np.ndarray, node_violation: np.ndarray,
+                 feature_names: tuple[str, ...], dimensions: tuple[str, ...], key: str,
+                 lower: np.ndarray, upper: np.ndarray) -> None:
+        self.X = np.ascontiguousarray(X, float)
+        self.node_error = node_error
+        self.node_violation = node_violation
+        self.feature_names = tuple(feature_names)
+        self.dimensions = tuple(dimensions)
+        self.key = key
+        self.lower, self.upper = lower, upper
+        self.k = len(self.dimensions)
+        self.shape = self.X.shape[:-1]
+        self._g = [n - 1 for n in self.shape]
+        if self.k == 2:
+            self._flat = self.X.reshape(-1, self.X.shape[-1])
+
+    def lookup(self, targets: Any) -> np.ndarray:
+        """Interpolated features for ``targets`` (``(m, k)`` or one ``(k,)`` row) in 0..1.
+
+        Returns ``(m, d)`` (or ``(d,)`` for one row). No validation beyond clipping to
+        0..1 (this is the live-retargeting fast path; :meth:`AmortisedSolver.solve`
+        validates).
+        """
+        if self.k == 2:
+            if isinstance(targets, (tuple, list)) and len(targets) == 2 and not hasattr(targets[0], "__len__"):
+                return self._one(float(targets[0]), float(targets[1]))
+            T = np.asarray(targets, float)
+            if T.ndim == 1:
+                return self._one(float(T[0]), float(T[1]))
+            return self._many(T)
+        T = np.asarray(targets, float)
+        single = T.ndim == 1
+        t = np.clip(T.reshape(-1), 0.0, 1.0) * self._g[0]
+        i = np.minimum(t.astype(int), self._g[0] - 1)
+        a = (t - i)[:, None]
+        out = (1 - a) * self.X[i] + a * self.X[i + 1]
+        return out[0] if single else out
+
+    def _one(self, h: float, r: float) -> np.ndarray:
+        g1, g2 = self._g
+        fh = min(max(h, 0.0), 1.0) * g1
+        fr = min(max(r, 0.0), 1.0) * g2
+        i = min(int(fh), g1 - 1)
+        j = min(int(fr), g2 - 1)
+        a, b = fh - i, fr - j
+        X = self.X
+        return ((1 - a) * (1 - b)) * X[i, j] + (a * (1 - b)) * X[i + 1, j] + \
+            ((1 - a) * b) * X[i, j + 1] + (a * b) * X[i + 1, j + 1]
+
+    def _many(self, T: np.ndarray) -> np.ndarray:
+        g1, g2 = self._g
+        fh = np.clip(T[:, 0], 0.0, 1.0) * g1
+        fr = np.clip(T[:, 1], 0.0, 1.0) * g2
+        i = np.minimum(fh.astype(int), g1 - 1)
+        j = np.minimum(fr.astype(int), g2 - 1)
+        a = (fh - i)[:, None]
+        b = (fr - j)[:, None]
+        n2 = self.shape[1]
+        base = i * n2 + j
+        F = self._flat
+        return (1 - a) * ((1 - b) * F[base] + b * F[base + 1]) + a * ((1 - b) * F[base + n2] + b * F[base + n2 + 1])
+
+    def reachable_fraction(self, tolerance: float) -> float:
+        """Fraction of grid nodes solved within ``tolerance`` with constraints met."""
+        return float(((self.node_error <= tolerance) & (self.node_violation <= CONSTRAINT_TOL)).mean())
+
+    def save(self, path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + f".tmp{os.getpid()}")
+        with open(tmp, "wb") as fh:
+            np.savez(fh, X=self.X, node_error=self.node_error, node_violation=self.node_violation,
+                     lower=self.lower, upper=self.upper,
+                     meta=np.array(json.dumps({"feature_names": self.feature_names, "dimensions": self.dimensions,
+                                               "key": self.key, "version": TABLE_VERSION})))
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: Path) -> "AmortisedTable":
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            return cls(z["X"], z["node_error"], z["node_violation"], tuple(meta["feature_names"]),
+                       tuple(meta["dimensions"]), meta["key"], z["lower"], z["upper"])
+
+
+def problem_key(problem: SolveProblem, options: dict[str, Any]) -> str:
+    """SHA-256 identifying everything a table depends on (see module doc)."""
+    h = hashlib.sha256()
+    h.update(f"v{TABLE_VERSION}".encode())
+    h.update(json.dumps({"dims": list(problem.dimensions), "space": problem.space.to_dict(),
+                         "fixed": {k: float(v) for k, v in sorted(problem.fixed.items())},
+                         "model_inputs": list(problem.model.feature_names),
+                         "model_outputs": list(problem.model.dimension_names),
+                         "constraints": [type(c).__qualname__ + ":" + c.name for c in problem.constraints],
+                         "grid": options["grid"], "samples": options["build_samples"],
+                         "iter": options["build_iter"]}, sort_keys=True).encode())
+    rng = np.random.default_rng(20240611)
+    X = problem.space.random(64, rng)
+    G = problem.full_inputs(X)
+    h.update(np.round(problem.model.predict(G), 10).tobytes())
+    if problem.constraints:
+        cols = problem.columns(G)
+        for c in problem.constraints:
+            h.update(np.round(c.violation(cols), 10).tobytes())
+    return h.hexdigest()
+
+
+def build_table(problem: SolveProblem, *, grid: int = 101, build_samples: int = 20000,
+                build_iter: int = 15, key: str = "") -> AmortisedTable:
+    """Solve the target grid of ``problem``'s dimensions (see module doc). Deterministic."""
+    k = len(problem.dimensions)
+    if k not in (1, 2):
+        raise ValidationError(f"the amortised table supports 1 or 2 targeted dimensions, got {k}",
+                              field="dimensions")
+    rng = np.random.default_rng(12345)
+    S = problem.space.random(build_samples, rng)
+    G = problem.full_inputs(S)
+    names = problem.model.dimension_names
+    Y = problem.model.predict(G)[:, [names.index(d) for d in problem.dimensions]]
+    if problem.constraints:
+        cols = problem.columns(G)
+        ok = np.ones(len(S), bool)
+        for c in problem.constraints:
+            ok &= c.violation(cols) <= CONSTRAINT_TOL
+        if ok.sum() >= 16:
+            S, Y = S[ok], Y[ok]
+    from scipy.spatial import cKDTree
+    tree = cKDTree(Y)
+    axis = np.linspace(0.0, 1.0, grid)
+    if k == 1:
+        nodes = axis[:, None]
+    else:
+        hh, rr = np.meshgrid(axis, axis, indexing="ij")
+        nodes = np.stack([hh.ravel(), rr.ravel()], axis=1)
+    node_problem = dataclasses.replace(problem, targets=nodes, x0=None)
+    near = S[tree.query(nodes)[1]]
+    d = problem.n_features
+    X = np.empty((len(nodes), d))
+    E = np.empty(len(nodes))
+    V = np.empty(len(nodes))
+
+    def solve_rows(rows: np.ndarray, cont: np.ndarray | None) -> None:
+        starts = [near[rows]] if cont is None else [cont, near[rows]]
+        n_s = len(starts)
+        X0 = np.stack(starts, axis=1).reshape(-1, d)
+        rr = np.repeat(rows, n_s)
+        Xs, es, vs, _, _ = levenberg_marquardt(node_problem, X0, rr, max_iter=build_iter, goal=1e-9)
+        key_ = rank_key(es, vs).reshape(len(rows), n_s)
+        pick = key_.argmin(axis=1)
+        if n_s == 2:  # keep the continued answer unless the other is clearly better
+            keep = key_[:, 0] <= key_[:, 1] + 1e-6
+            pick = np.where(keep, 0, pick)
+        idx = np.arange(len(rows)) * n_s + pick
+        X[rows], E[rows], V[rows] = Xs[idx], es[idx], vs[idx]
+
+    if k == 1:
+        solve_rows(np.arange(grid), None)
+    else:
+        first = np.arange(grid)  # nodes (0, j)
+        solve_rows(first[:1], None)
+        for j in range(1, grid):
+            solve_rows(first[j:j + 1], X[first[j - 1:j]])
+        for i in range(1, grid):
+            rows = i * grid + np.arange(grid)
+            solve_rows(rows, X[rows - grid])
+    shape = (grid,) * k + (d,)
+    return AmortisedTable(X.reshape(shape), E.reshape(shape[:-1]), V.reshape(shape[:-1]),
+                          problem.feature_names, problem.dimensions, key,
+                          problem.space.lower, problem.space.upper)
+
+
+class AmortisedSolver(Solver):
+    """Answer targets from a precomputed grid table, then polish.
+
+    Options: ``grid`` (101 nodes per targeted dimension), ``polish_steps`` (1 LM iteration
+    after the lookup; 0 = pure lookup), ``build_samples`` (20000), ``build_iter`` (15 LM
+    iterations per node when building), ``cache`` (True: read/write the disk cache),
+    ``cache_dir`` (None: see :func:`default_cache_dir`).
+
+    :meth:`table` returns the (cached) :class:`AmortisedTable`; its
+    :meth:`~AmortisedTable.lookup` is the fast path for live retargeting.
+    """
+
+    name: ClassVar[str] = "amortised"
+    default_options: ClassVar[dict[str, Any]] = {
+        "grid": 101, "polish_steps": 1, "build_samples": 20000, "build_iter": 15,
+        "cache": True, "cache_dir": None,
+    }
+
+    def table(self, problem: SolveProblem) -> AmortisedTable:
+        """The table for ``problem`` (memory cache, then disk cache, else built and stored)."""
+        o = self.options
+        opts = {"grid": check_int(o, "grid", 2, 2001), "build_samples": check_int(o, "build_samples", 16),
+                "build_iter": check_int(o, "build_iter", 1)}
+        key = problem_key(problem, opts)
+        tab = _MEMO.get(key)
+        if tab is not None:
+            return tab
+        path = None
+        if o["cache"]:
+            path = Path(o["cache_dir"]) if o["cache_dir"] else default_cache_dir()
+            path = path / "amortised" / f"{key[:40]}.npz"
+            if path.exists():
+                try:
+                    tab = AmortisedTable.load(path)
+                    if tab.key != key:
+                        tab = None
+                except Exception as exc:  # corrupt cache file: rebuild
+                    log.warning("ignoring unreadable amortised table %s: %s", path, exc)
+                    tab = None
+        if tab is None:
+            tab = build_table(problem, key=key, **opts)
+            if path is not None:
+                try:
+                    tab.save(path)
+                except OSError as exc:
+                    log.warning("could not write amortised table cache %s: %s", path, exc)
+        _MEMO[key] = tab
+        return tab
+
+    def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
+        steps = check_int(self.options, "polish_steps", 0)
+        tab = self.table(problem)
+        X = problem.space.clip(tab.lookup(problem.targets))
+        rows = np.arange(problem.n_targets)
+        Xp, err, viol, it, nfev = levenberg_marquardt(
+            problem, X, rows, max_iter=steps, goal=0.0, on_iter=lambda n, e, v: trace.record(n, e, v))
+        return SolverOutput(x=Xp, nfev=nfev, nit=it,
+                            message=f"table {tab.shape} lookup + {it} LM step(s)")

@@ -1,0 +1,133 @@
+"""The hardness dimension: features GS (N/mm) and W (mJ), constraint (4), renderer (8).
+
+Formula (8) of the reference paper splits a material's global stiffness ``GS`` between
+two actuators: the Omni renders the spring ``min(GS, GS_max) * Y`` (Y: penetration in mm,
+force in N, ``GS_max = 2.3`` N/mm) and, when ``GS > GS_max``, a voice coil vibrates at
+the frequency ``f_coil`` whose perceived added stiffness (formula (7)) is
+``GS - GS_max``, with constant amplitude while the probe is in contact. Stiffness above
+the Omni's limit never goes to the arm.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Mapping
+
+import numpy as np
+
+from hapticsdk.calibration import VoiceCoilCalibration
+from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from hapticsdk.errors import ValidationError
+from hapticsdk.features import Feature
+
+#: Omni force at the nominal position (N): MF of formula (4).
+MF_N = 3.3
+#: Stiffest spring the paper renders on the Omni (N/mm): GS_max of formula (8).
+GS_MAX_N_PER_MM = 2.3
+
+
+class WorkConstraint(Constraint):
+    """W >= Wv = MF^2 / (2 GS): the work of pressing to the Omni's maximum force (formula (4)).
+
+    GS in N/mm and MF in N give Wv in mJ. A non-positive GS gives an unbounded Wv.
+    """
+
+    name: ClassVar[str] = "hardness.work"
+    features: ClassVar[tuple[str, ...]] = ("GS", "W")
+
+    def __init__(self, mf_n: float = MF_N) -> None:
+        if not np.isfinite(mf_n) or mf_n <= 0:
+            raise ValidationError(f"MF must be > 0 N, got {mf_n!r}", field="mf_n")
+        self.mf_n = float(mf_n)
+
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        gs = np.asarray(cols["GS"], float)
+        w = np.asarray(cols["W"], float)
+        with np.errstate(divide="ignore"):
+            wv = np.where(gs > 0, self.mf_n ** 2 / (2.0 * np.where(gs > 0, gs, 1.0)), np.inf)
+        return wv, w
+
+
+class HardnessRenderer(DimensionRenderer):
+    """Per-tick commands of formula (8) for one material.
+
+    Args:
+        gs_n_per_mm: the material's global stiffness GS (N/mm), >= 0.
+        calibration: :class:`~hapticsdk.calibration.VoiceCoilCalibration` (formula (7));
+            default the paper's.
+        gs_max_n_per_mm: stiffest spring the force arm renders (N/mm).
+        coil_amplitude: voice-coil drive amplitude while in contact (0..1).
+
+    Attributes:
+        omni_stiffness_n_per_mm: the spring the arm renders.
+        coil_stiffness_n_per_mm: the added stiffness asked of the voice coil (0 if none).
+        coil_frequency_hz: its drive frequency (None if the coil is not used).
+        coil_residual_n_per_mm: the part of the request the calibration range cannot meet.
+    """
+
+    roles = ("force", "coil")
+
+    def __init__(self, gs_n_per_mm: float, *, calibration: VoiceCoilCalibration | None = None,
+                 gs_max_n_per_mm: float = GS_MAX_N_PER_MM, coil_amplitude: float = 0.5) -> None:
+        gs = float(gs_n_per_mm)
+        if not np.isfinite(gs) or gs < 0:
+            raise ValidationError(f"GS must be a finite stiffness >= 0 N/mm, got {gs_n_per_mm!r}", field="GS")
+        if not np.isfinite(gs_max_n_per_mm) or gs_max_n_per_mm <= 0:
+            raise ValidationError("must be > 0 N/mm", field="gs_max_n_per_mm")
+        if not np.isfinite(coil_amplitude) or not 0 <= coil_amplitude <= 1:
+            raise ValidationError("must be in 0..1", field="coil_amplitude")
+        self.calibration = calibration or VoiceCoilCalibration.paper()
+        self.gs = gs
+        self.omni_stiffness_n_per_mm = min(gs, float(gs_max_n_per_mm))
+        self.coil_stiffness_n_per_mm = max(gs - float(gs_max_n_per_mm), 0.0)
+        if self.coil_stiffness_n_per_mm > 0:
+            f, resid = self.calibration.frequency_for(self.coil_stiffness_n_per_mm)
+            self.coil_frequency_hz: float | None = float(f)
+            self.coil_residual_n_per_mm = float(resid)
+            self._amp = float(coil_amplitude)
+        else:
+            self.coil_frequency_hz = None
+            self.coil_residual_n_per_mm = 0.0
+            self._amp = 0.0
+        self._k = self.omni_stiffness_n_per_mm
+        self._f = self.coil_frequency_hz
+
+    def tick(self, inp: TickInput) -> list[ChannelCommand]:
+        if inp.in_contact:
+            return [ChannelCommand("force", force_n=self._k * inp.penetration_mm),
+                    ChannelCommand("coil", frequency_hz=self._f, amplitude=self._amp)]
+        return [ChannelCommand("force", force_n=0.0), ChannelCommand("coil", frequency_hz=self._f, amplitude=0.0)]
+
+    def rendered_stiffness_n_per_mm(self) -> float:
+        """Total stiffness of formula (8): arm spring + calibrated coil stiffness (N/mm)."""
+        if self._f is None:
+            return self.omni_stiffness_n_per_mm
+        return self.omni_stiffness_n_per_mm + float(self.calibration.gs_coil(self._f))
+
+    def describe(self) -> dict[str, Any]:
+        return {"GS": self.gs, "omni_stiffness_n_per_mm": self.omni_stiffness_n_per_mm,
+                "coil_stiffness_n_per_mm": self.coil_stiffness_n_per_mm,
+                "coil_frequency_hz": self.coil_frequency_hz,
+                "coil_residual_n_per_mm": self.coil_residual_n_per_mm,
+                "coil_amplitude": self._amp, "calibration": self.calibration.to_dict()}
+
+
+class HardnessDimension(PerceptionDimension):
+    """Perceived hardness when pressing (0 soft .. 1 hard)."""
+
+    name: ClassVar[str] = "hardness"
+    description: ClassVar[str] = ("perceived hardness while pressing: global stiffness GS and work W; "
+                                  "rendered by a force arm up to 2.3 N/mm plus a voice coil (formula (8))")
+    features: ClassVar[tuple[Feature, ...]] = (
+        Feature("GS", "N/mm", 0.0, 10.0, "global stiffness while pressing"),
+        Feature("W", "mJ", 0.0, 100.0, "work of pressing"),
+    )
+    default_actuators: ClassVar[dict[str, str]] = {"force": "omni-virtual", "coil": "voicecoil-virtual"}
+    render_features: ClassVar[tuple[str, ...]] = ("GS",)
+
+    def constraints(self, **context: float) -> list[Constraint]:
+        return [WorkConstraint(float(context.get("mf_n", MF_N)))]
+
+    def renderer(self, features: Mapping[str, float], **options: Any) -> HardnessRenderer:
+        if "GS" not in features:
+            raise ValidationError(f"hardness needs feature GS; got {sorted(features)}", field="features.GS")
+        return HardnessRenderer(float(features["GS"]), **options)

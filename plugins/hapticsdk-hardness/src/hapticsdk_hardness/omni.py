@@ -1,0 +1,142 @@
+"""``omni-virtual``: a simulated PHANTOM Omni pressed by a simulated finger.
+
+One normal axis (y) is simulated physically (:mod:`hapticsdk.sim.arm`: arm mass +
+viscous damping + force saturation + encoder quantisation, finger as mass-spring-damper
+driven by a scripted trajectory, exact zero-order-hold integration); the lateral axis x
+follows the trajectory kinematically (the finger slides the stylus). Each
+:meth:`step` applies the force the safety layer says is current (so a stale command
+becomes zero once the safety layer implements staleness).
+
+The device carries both published stiffness figures with their sources (2.3 N/mm used
+by the paper; 0.7 N/mm rated by CHAI3D for stable rendering) and reports the passivity
+margin of a wall (:meth:`OmniVirtual.passivity`): with the default damping a 2.3 N/mm
+wall at 1 kHz is ``"stable-by-assumption (not passive)"``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.errors import ValidationError
+from hapticsdk.passivity import classify_wall
+from hapticsdk.sim.arm import OMNI_SOURCES, ArmParams, ArmSim
+from hapticsdk.sim.finger import FingerParams, Trajectory, finger, press_slide
+
+
+class OmniVirtual(HapticDevice):
+    """Simulated Omni (entry point ``omni-virtual``).
+
+    Args:
+        trajectory: finger reference path (default press 2 mm, slide at 80 mm/s, release).
+        finger: finger impedance preset name (``"soft"``, ``"medium"``, ``"stiff"``) or
+            :class:`~hapticsdk.sim.finger.FingerParams`.
+        arm: :class:`~hapticsdk.sim.arm.ArmParams` (mass, damping, force limit, encoder).
+        damping_ns_per_m, mass_kg, encoder_resolution_mm: shortcuts overriding ``arm``.
+        y0_mm: initial stylus height (mm); default the trajectory's start.
+        velocity_filter_hz: first-order low-pass on the backward-difference velocity
+            (Hz); None: raw backward difference.
+        label, safety: as for every actuator.
+    """
+
+    name: ClassVar[str] = "omni-virtual"
+    channel: ClassVar[str] = "force"
+    simulated: ClassVar[bool] = True
+    limits = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3)
+    sources: ClassVar[dict[str, str]] = OMNI_SOURCES
+
+    def __init__(self, *, trajectory: Trajectory | None = None, finger: "str | FingerParams" = "medium",
+                 arm: ArmParams | None = None, damping_ns_per_m: float | None = None,
+                 mass_kg: float | None = None, encoder_resolution_mm: float | None = None,
+                 y0_mm: float | None = None, velocity_filter_hz: float | None = None,
+                 label: str | None = None, safety: Any = None) -> None:
+        super().__init__(label=label, safety=safety)
+        if trajectory is not None and not isinstance(trajectory, Trajectory):
+            raise ValidationError("trajectory must be a hapticsdk.sim.finger.Trajectory", field="trajectory")
+        arm = arm or ArmParams()
+        over = {k: v for k, v in (("damping_ns_per_m", damping_ns_per_m), ("mass_kg", mass_kg),
+                                  ("encoder_resolution_mm", encoder_resolution_mm)) if v is not None}
+        self.arm = arm.with_(**over) if over else arm
+        self.finger = _finger(finger)
+        self.trajectory = trajectory or press_slide()
+        if velocity_filter_hz is not None and (not np.isfinite(velocity_filter_hz) or velocity_filter_hz <= 0):
+            raise ValidationError("must be > 0 Hz", field="velocity_filter_hz")
+        self.velocity_filter_hz = velocity_filter_hz
+        self._y0 = y0_mm
+        self._reset()
+
+    def _reset(self) -> None:
+        x, y, _, _ = self.trajectory.at(0.0)
+        y0 = y if self._y0 is None else float(self._y0)
+        self.sim = ArmSim(self.arm, self.finger, 0.001, y0)
+        self.t = 0.0
+        self._y_meas = self.sim.measured_mm()
+        self._v_est = 0.0
+        self._f_applied = 0.0
+        #: work done by the motor force on the stylus (J), exact under the hold
+        self.motor_work_j = 0.0
+
+    # -- actuator backend ------------------------------------------------
+    def _open(self) -> None:
+        self._reset()
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        """The command is kept by the safety layer; :meth:`step` applies it."""
+
+    def _stop(self) -> None:
+        self._f_applied = 0.0
+
+    def _read_state(self) -> DeviceState:
+        x, _, vx, _ = self.trajectory.at(self.t)
+        return DeviceState(t=self.t, position_mm=np.array([x, self._y_meas, 0.0]),
+                           velocity_mm_s=np.array([vx, self._v_est, 0.0]),
+                           force_n=np.array([0.0, self._f_applied, 0.0]))
+
+    def _step(self, dt: float) -> None:
+        cmd = self.safety.current(self.t + dt) if self.is_open else None
+        f = cmd.force_n if (cmd is not None and cmd.force_n is not None) else 0.0
+        _, r0, _, _ = self.trajectory.at(self.t)
+        _, r1, _, _ = self.trajectory.at(self.t + dt)
+        y_old = self.sim.y
+        self._f_applied = self.sim.step(dt, f, r0, (r1 - r0) / dt)
+        self.motor_work_j += self._f_applied * (self.sim.y - y_old)
+        self.t += dt
+        y_meas = self.sim.measured_mm()
+        v_raw = (y_meas - self._y_meas) / dt
+        if self.velocity_filter_hz is None:
+            self._v_est = v_raw
+        else:
+            a = 1.0 - np.exp(-2.0 * np.pi * self.velocity_filter_hz * dt)
+            self._v_est += a * (v_raw - self._v_est)
+        self._y_meas = y_meas
+
+    # -- reporting ---------------------------------------------------------
+    @property
+    def true_position_mm(self) -> float:
+        """Unquantised stylus height (mm)."""
+        return self.sim.y * 1e3
+
+    def passivity(self, stiffness_n_per_mm: float | None = None, *, period_s: float = 0.001,
+                  delay_ticks: int = 0, virtual_damping_ns_per_m: float = 0.0) -> dict[str, Any]:
+        """Colgate margin and label of a wall on this device (default K = 2.3 N/mm)."""
+        K = self.limits.max_stiffness_n_per_mm if stiffness_n_per_mm is None else stiffness_n_per_mm
+        out = classify_wall(K, self.arm.damping_ns_per_m, period_s, delay_ticks, virtual_damping_ns_per_m)
+        out["source_damping"] = OMNI_SOURCES["damping_ns_per_m"]
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        d["arm"] = {k: getattr(self.arm, k) for k in ("mass_kg", "damping_ns_per_m", "max_force_n",
+                                                       "encoder_resolution_mm", "max_stiffness_n_per_mm",
+                                                       "rated_stable_stiffness_n_per_mm")}
+        d["sources"] = dict(OMNI_SOURCES)
+        d["passivity_at_paper_stiffness"] = self.passivity(self.arm.max_stiffness_n_per_mm)
+        d["passivity_at_chai3d_stiffness"] = self.passivity(self.arm.rated_stable_stiffness_n_per_mm)
+        return d
+
+
+def _finger(spec: "str | FingerParams") -> FingerParams:
+    return finger(spec)

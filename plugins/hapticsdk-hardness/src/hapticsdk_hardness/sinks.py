@@ -1,0 +1,126 @@
+"""Where a simulated vibration actuator's drive waveform goes.
+
+A sink has ``write(samples: np.ndarray)`` (float samples, full scale 1.0) and
+``close()``. :func:`make_sink` builds one from a short spec: ``None``/``"buffer"``
+(in memory, the default), ``"wav:PATH"`` (16-bit mono WAV via the stdlib ``wave``
+module), a callable (called with each block), ``"sounddevice"`` (an audio output, needs
+the optional ``sounddevice`` package, imported only then), or any object with ``write``.
+"""
+
+from __future__ import annotations
+
+import wave
+from typing import Any, Callable
+
+import numpy as np
+
+from hapticsdk.errors import DeviceNotFoundError, ValidationError
+
+
+class BufferSink:
+    """Keeps every sample in memory; :meth:`samples` returns them as one array."""
+
+    def __init__(self) -> None:
+        self._chunks: list[np.ndarray] = []
+        self.n = 0
+
+    def write(self, samples: np.ndarray) -> None:
+        if samples.size:
+            self._chunks.append(samples)
+            self.n += samples.size
+
+    def samples(self) -> np.ndarray:
+        if len(self._chunks) > 1:
+            self._chunks = [np.concatenate(self._chunks)]
+        return self._chunks[0].copy() if self._chunks else np.zeros(0)
+
+    def clear(self) -> None:
+        self._chunks.clear()
+        self.n = 0
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+class WavSink:
+    """Writes 16-bit mono PCM at ``fs`` Hz; samples are clipped to [-1, 1]."""
+
+    def __init__(self, path: str, fs: float) -> None:
+        self.path = str(path)
+        self.fs = int(round(fs))
+        self._w: Any = wave.open(self.path, "wb")
+        self._w.setnchannels(1)
+        self._w.setsampwidth(2)
+        self._w.setframerate(self.fs)
+        self.n = 0
+
+    def write(self, samples: np.ndarray) -> None:
+        if self._w is None or not samples.size:
+            return
+        pcm = np.round(np.clip(samples, -1.0, 1.0) * 32767.0).astype("<i2")
+        self._w.writeframes(pcm.tobytes())
+        self.n += samples.size
+
+    def close(self) -> None:
+        if self._w is not None:
+            self._w.close()
+            self._w = None
+
+
+class CallbackSink:
+    """Calls ``fn(samples)`` with every block."""
+
+    def __init__(self, fn: Callable[[np.ndarray], Any]) -> None:
+        self.fn = fn
+        self.n = 0
+
+    def write(self, samples: np.ndarray) -> None:
+        if samples.size:
+            self.fn(samples)
+            self.n += samples.size
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+class SoundDeviceSink:
+    """Streams to an audio output through the optional ``sounddevice`` package."""
+
+    def __init__(self, fs: float, device: Any = None) -> None:
+        try:
+            import sounddevice  # noqa: PLC0415  (optional, imported lazily)
+        except Exception as exc:  # ImportError or a missing PortAudio library (OSError)
+            raise DeviceNotFoundError(
+                f"audio output needs the optional 'sounddevice' package and PortAudio "
+                f"(pip install hapticsdk-hardness[audio]); import failed: {exc}",
+                device="voicecoil-virtual") from exc
+        self._stream = sounddevice.OutputStream(samplerate=fs, channels=1, dtype="float32", device=device)
+        self._stream.start()
+        self.n = 0
+
+    def write(self, samples: np.ndarray) -> None:
+        if samples.size:
+            self._stream.write(np.asarray(samples, np.float32).reshape(-1, 1))
+            self.n += samples.size
+
+    def close(self) -> None:
+        self._stream.stop()
+        self._stream.close()
+
+
+def make_sink(spec: Any, fs: float) -> Any:
+    """Build a sink from ``spec`` (see the module doc)."""
+    if spec is None or spec == "buffer":
+        return BufferSink()
+    if isinstance(spec, str):
+        if spec.startswith("wav:"):
+            return WavSink(spec[4:], fs)
+        if spec == "sounddevice":
+            return SoundDeviceSink(fs)
+        raise ValidationError(f"unknown sink {spec!r}; use 'buffer', 'wav:PATH', 'sounddevice', "
+                              "a callable or an object with write()", field="sink")
+    if hasattr(spec, "write"):
+        return spec
+    if callable(spec):
+        return CallbackSink(spec)
+    raise ValidationError(f"cannot use {spec!r} as a sink", field="sink")

@@ -1,0 +1,146 @@
+"""``piezo-virtual``: a simulated DRV2667 + piezo (the default vibration actuator).
+
+Each command synthesises the drive voltage waveform of one servo period with
+:class:`hapticsdk.synthesis.Oscillator` (phase accumulator, so the frequency can change
+every tick without phase jumps; amplitude ramps of ``ramp_s`` >= 5 ms, so the 20 mm/s gate
+never clicks) and keeps it for inspection (:meth:`PiezoVirtual.waveform`). Limits follow
+the DRV2667: frequency within the synthesiser's 7.8125..1992 Hz (or a narrower piezo band
+given as ``frequency_range_hz``), amplitude up to the full scale of ``gain``
+(25/50/75/100 V peak). Optionally ``quantize=True`` rounds frequency and amplitude to the
+DRV2667 synthesis codes, like the real backends do.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.errors import ValidationError
+from hapticsdk.synthesis import Oscillator
+
+from .drv2667 import FREQ_STEP_HZ, GAIN_FULL_SCALE_V, SYNTH_FREQ_RANGE_HZ, amplitude_code, frequency_code
+
+
+def piezo_limits(gain: int, frequency_range_hz: tuple[float, float] | None) -> ActuatorLimits:
+    """Declared limits of a DRV2667-driven piezo at ``gain`` (0..3)."""
+    if gain not in (0, 1, 2, 3):
+        raise ValidationError(f"gain {gain!r} not in 0..3 (25/50/75/100 V peak)", field="options.gain")
+    lo, hi = SYNTH_FREQ_RANGE_HZ if frequency_range_hz is None else (float(frequency_range_hz[0]),
+                                                                      float(frequency_range_hz[1]))
+    if not SYNTH_FREQ_RANGE_HZ[0] - 1e-9 <= lo < hi <= SYNTH_FREQ_RANGE_HZ[1] + 1e-9:
+        raise ValidationError(f"frequency_range_hz {(lo, hi)} must lie within the DRV2667 synthesiser range "
+                              f"{SYNTH_FREQ_RANGE_HZ} Hz", field="options.frequency_range_hz")
+    return ActuatorLimits(frequency_range_hz=(lo, hi), max_amplitude=GAIN_FULL_SCALE_V[gain], amplitude_unit="V")
+
+
+class PiezoVirtual(Actuator):
+    """Simulated DRV2667 + piezo.
+
+    Options:
+        gain: DRV2667 GAIN 0..3 -> full scale 25/50/75/100 V peak (default 1, 50 V:
+            enough for the generated table's usual requests; a real board should start at 0).
+        fs: output sample rate of the synthesised waveform (Hz, default 8000 = DRV2667 FIFO rate).
+        period_s: servo period one command covers (s, default 0.001).
+        ramp_s: amplitude ramp time from 0 to full scale (s, >= 0.005).
+        frequency_range_hz: piezo band (default the synthesiser's range).
+        quantize: round to the DRV2667 synthesis codes (7.8125 Hz, amplitude/255 steps).
+        keep_s: seconds of waveform kept (default 60; older samples are dropped).
+    """
+
+    name: ClassVar[str] = "piezo-virtual"
+    channel: ClassVar[str] = "vibration"
+    simulated: ClassVar[bool] = True
+    limits = piezo_limits(1, None)
+
+    def __init__(self, *, gain: int = 1, fs: float = 8000.0, period_s: float = 0.001, ramp_s: float = 0.005,
+                 frequency_range_hz: tuple[float, float] | None = None, quantize: bool = False,
+                 keep_s: float = 60.0, **options: Any) -> None:
+        self.limits = piezo_limits(gain, frequency_range_hz)
+        if not (fs > 0 and period_s > 0 and keep_s > 0):
+            raise ValidationError("fs, period_s and keep_s must be positive", field="options")
+        if ramp_s < 0.005:
+            raise ValidationError(f"ramp_s {ramp_s} s < 5 ms would click", field="options.ramp_s")
+        if fs < 2 * self.limits.frequency_range_hz[1]:
+            raise ValidationError(f"fs {fs:g} Hz below twice the top frequency {self.limits.frequency_range_hz[1]:g} Hz",
+                                  field="options.fs")
+        super().__init__(**options)
+        self.gain = int(gain)
+        self.fs = float(fs)
+        self.period_s = float(period_s)
+        self.ramp_s = float(ramp_s)
+        self.quantize = bool(quantize)
+        self.keep_samples = int(keep_s * fs)
+        self.osc = Oscillator(self.fs, ramp_s=self.ramp_s, max_amplitude=self.limits.max_amplitude)
+        self._blocks: list[np.ndarray] = []
+        self._kept = 0
+        self._frac = 0.0
+        self._target_amp = 0.0
+        self._freq = 0.0
+        self.samples_total = 0
+        self.commands = 0
+
+    # -- backend ----------------------------------------------------------------
+    def _open(self) -> None:
+        self.osc.reset()
+        self._target_amp = 0.0
+
+    def _n_samples(self, seconds: float) -> int:
+        exact = seconds * self.fs + self._frac
+        n = int(exact)
+        self._frac = exact - n
+        return n
+
+    def _emit(self, block: np.ndarray) -> None:
+        if block.size == 0:
+            return
+        self._blocks.append(block)
+        self._kept += block.size
+        self.samples_total += block.size
+        while self._kept - self._blocks[0].size >= self.keep_samples and len(self._blocks) > 1:
+            self._kept -= self._blocks.pop(0).size
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        f = self._freq if cmd.frequency_hz is None else float(cmd.frequency_hz)
+        a = self._target_amp if cmd.amplitude is None else float(cmd.amplitude)
+        if self.quantize:
+            f = frequency_code(f) * FREQ_STEP_HZ
+            a = amplitude_code(a, self.gain) / 255.0 * GAIN_FULL_SCALE_V[self.gain]
+        self._freq, self._target_amp = f, a
+        self.commands += 1
+        self._emit(self.osc.render(f, a, self._n_samples(self.period_s)))
+
+    def _stop(self) -> None:
+        """Vibration off: the amplitude ramps to 0 (``ramp_s``) so the record ends silent."""
+        self._target_amp = 0.0
+        if self.osc.amplitude > 0:
+            n = int(np.ceil(self.osc.amplitude / self.osc.max_step)) + 1
+            self._emit(self.osc.render(self._freq, 0.0, n))
+
+    # -- inspection --------------------------------------------------------------
+    @property
+    def driving(self) -> bool:
+        """True while the output amplitude or its target is above zero."""
+        return self.osc.amplitude > 0 or self._target_amp > 0
+
+    @property
+    def output_amplitude_v(self) -> float:
+        return float(self.osc.amplitude)
+
+    def waveform(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t in s, drive voltage in V) of the kept samples."""
+        v = np.concatenate(self._blocks) if self._blocks else np.zeros(0)
+        start = self.samples_total - v.size
+        return (start + np.arange(v.size)) / self.fs, v
+
+    def clear_waveform(self) -> None:
+        self._blocks.clear()
+        self._kept = 0
+
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        d.update({"gain": self.gain, "full_scale_v": GAIN_FULL_SCALE_V[self.gain], "fs_hz": self.fs,
+                  "ramp_s": self.ramp_s, "quantize": self.quantize, "samples": self.samples_total})
+        return d

@@ -1,0 +1,215 @@
+"""Scene -> plan compilation: solving, leaving things out, serialisation, bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from hapticsdk.errors import ValidationError
+from hapticsdk.importance import PaperRegressionImportance, decide_drops, load_importance
+from hapticsdk.plan import RenderPlan, api_compatible, check_plugin_api, validate_plan_dict
+from hapticsdk.plugins import registry
+from hapticsdk.scene import Scene, compile_scene
+
+needs_hardness = pytest.mark.skipif("hardness" not in registry("dimension"),
+                                    reason="hapticsdk-hardness not installed")
+
+
+def _model():
+    from hapticsdk.problems import load_model
+    return load_model("default")
+
+
+def _predict(plan_mat):
+    """Run the perception model on the plan's solved + pinned features."""
+    m = _model()
+    allf = {**plan_mat.features, **plan_mat.pinned_features}
+    G = np.array([[allf[n] for n in m.feature_names]])
+    return dict(zip(m.dimension_names, m.predict(G)[0]))
+
+
+def test_roughness_only_scene_solves_and_pins_unread_features():
+    plan = compile_scene(Scene.for_material({"roughness": 0.45}))
+    mp = plan.material()
+    assert mp.dimensions == ["roughness"]
+    assert set(mp.features) == {"Fpeak", "AFpeak", "P"}
+    # (c) features no remaining dimension reads are not solved, they are pinned at defaults
+    defaults = _model().metadata["feature_defaults"]
+    assert set(mp.pinned_features) == {"GS", "W"}
+    for k, v in mp.pinned_features.items():
+        assert v == pytest.approx(defaults[k])
+    # closed loop: the model at the planned features meets the target
+    pred = _predict(mp)
+    assert abs(pred["roughness"] - 0.45) <= plan.settings["solver"]["tolerance"] + 1e-9
+    assert mp.solve["success"] is True
+    assert mp.actuators == {"vibration": "piezo-virtual"}
+
+
+def test_plan_round_trips_through_json_and_schema(tmp_path):
+    plan = compile_scene(Scene.for_material({"roughness": 0.3}, seed=3))
+    d = json.loads(plan.to_json())
+    validate_plan_dict(d)
+    path = plan.save(tmp_path / "plan.json")
+    again = RenderPlan.load(path)
+    assert again.to_dict() == plan.to_dict()
+    assert again.settings["solver"]["seed"] == 3
+
+
+def test_plan_schema_rejects_a_broken_plan():
+    plan = compile_scene(Scene.for_material({"roughness": 0.3}))
+    d = plan.to_dict()
+    d["materials"]["material"]["targets"]["roughness"] = 1.7
+    with pytest.raises(ValidationError) as ei:
+        RenderPlan.from_dict(d)
+    assert "targets" in str(ei.value.field)
+    d = plan.to_dict()
+    d["plugin_api_version"] = "2.0"
+    with pytest.raises(ValidationError, match="plugin API"):
+        RenderPlan.from_dict(d)
+
+
+def test_compile_is_deterministic_for_a_seed():
+    a = compile_scene(Scene.for_material({"roughness": 0.6}, seed=7)).material().features
+    b = compile_scene(Scene.for_material({"roughness": 0.6}, seed=7)).material().features
+    assert a == b
+
+
+@pytest.mark.parametrize("scene, field", [
+    ({"objects": []}, "scene.objects"),
+    ({"objects": [{"material": {"intensities": {"roughness": 1.5}}}]}, "scene.objects"),
+    ({"objects": [{"material": "NO-SUCH-MATERIAL"}]}, "scene.objects[0].material"),
+    ({"objects": [{"material": {"intensities": {"warmthiness": 0.5}}}]}, "materials"),
+    ({"objects": [{"material": {"intensities": {"roughness": 0.5}}}],
+      "devices": {"vibration": "no-such-actuator"}}, "scene.devices.vibration"),
+    ({"objects": [{"name": "a", "material": {"intensities": {"roughness": 0.5}}},
+                  {"name": "a", "material": {"intensities": {"roughness": 0.2}}}]}, "scene.objects"),
+    ({"objects": [{"material": {"intensities": {"roughness": 0.5}}}],
+      "settings": {"servo": {"period_s": 0}}}, "scene.settings.servo"),
+])
+def test_bad_scenes_raise_validation_errors_naming_the_field(scene, field):
+    with pytest.raises(ValidationError) as ei:
+        compile_scene(scene)
+    assert str(ei.value.field).startswith(field), ei.value.field
+
+
+def test_scene_file_round_trip(tmp_path):
+    sc = Scene.for_material({"roughness": 0.5}, devices={"vibration": {"actuator": "piezo-virtual"}})
+    p = tmp_path / "s.json"
+    p.write_text(json.dumps(sc.to_dict()))
+    again = Scene.load(p)
+    assert again.to_dict() == sc.to_dict()
+    assert again.devices["vibration"].actuator == "piezo-virtual"
+
+
+# -- importance ------------------------------------------------------------------
+
+def test_paper_regressions_match_tables_5_and_6():
+    m = load_importance("paper")
+    assert isinstance(m, PaperRegressionImportance)
+    f = {"GS": np.array([0.1, 2.0, 4.5]), "Fpeak": np.array([200.0, 50.0, 120.0]),
+         "AFpeak": np.array([0.5, 3.0, 2.0])}
+    both = ["hardness", "roughness"]
+    r = m.predict_loss("roughness", f, both)
+    h = m.predict_loss("hardness", f, both)
+    np.testing.assert_allclose(r, 35.009 - 0.075 * f["GS"] - 0.232 * f["Fpeak"] + 15.966 * f["AFpeak"])
+    np.testing.assert_allclose(h, 3.804 + 8.168 * f["GS"] + 0.060 * f["Fpeak"] - 9.138 * f["AFpeak"])
+    # a smooth sample (high Fpeak, low AFpeak) needs roughness less than a rough one
+    assert r[0] < r[1]
+    # the regressions refer to hardness+roughness renderings only
+    assert not m.judges("roughness", ["roughness"])
+    assert m.replacement("hardness")["force_n"] == 1.0
+    assert m.replacement("roughness") is None
+
+
+def test_importance_rejects_bad_input():
+    m = load_importance("paper")
+    with pytest.raises(ValidationError, match="GS"):
+        m.predict_loss("roughness", {"Fpeak": 1.0, "AFpeak": 1.0}, ["hardness", "roughness"])
+    with pytest.raises(ValidationError):
+        m.predict_loss("roughness", {"GS": np.nan, "Fpeak": 1.0, "AFpeak": 1.0}, ["hardness", "roughness"])
+    with pytest.raises(ValidationError):
+        m.predict_loss("roughness", {"GS": 1, "Fpeak": 1.0, "AFpeak": 1.0}, ["roughness"])
+
+
+def test_decide_drops_is_the_threshold_rule():
+    m = load_importance("paper")
+    rng = np.random.default_rng(0)
+    n = 200
+    f = {"GS": rng.uniform(0.1, 4.5, n), "Fpeak": rng.uniform(20, 240, n), "AFpeak": rng.uniform(0, 4, n)}
+    dims = ["hardness", "roughness"]
+    thr = 15.0
+    decided = decide_drops(m, dims, f, {}, thr)
+    r = m.predict_loss("roughness", f, dims)
+    h = m.predict_loss("hardness", f, dims)
+    for i, drops in enumerate(decided):
+        names = {d for d, _, _ in drops}
+        assert ("roughness" in names) == (r[i] < thr)
+        assert ("hardness" in names) == (h[i] < thr)
+    # per-dimension thresholds override the default
+    decided = decide_drops(m, dims, f, {"roughness": -1e9}, thr)
+    assert not any(d == "roughness" for drops in decided for d, _, _ in drops)
+
+
+def test_plugin_api_versions():
+    assert api_compatible(">=1.0,<2")
+    assert not api_compatible(">=1.1", "1.0")
+    assert api_compatible("==1.0", "1.0.0")
+    assert not api_compatible("<1", "1.0")
+
+    class Old:
+        name = "old"
+        hapticsdk_api = "<1"
+    from hapticsdk.errors import PluginError
+    with pytest.raises(PluginError, match="old"):
+        check_plugin_api(Old)
+    with pytest.raises(ValidationError):
+        api_compatible("~1.0")
+
+
+# -- library materials (hardness + roughness) --------------------------------------
+
+@needs_hardness
+def test_library_plan_drops_exactly_below_threshold():
+    from hapticsdk.materials import load_library
+    names = load_library().names()
+    thr = 15.0
+    scene = {"name": "library", "objects": [{"name": n, "material": n} for n in names],
+             "settings": {"importance": {"threshold_percent": thr}}}
+    plan = compile_scene(scene)
+    imp = load_importance("paper")
+    n_r = n_h = 0
+    for n in names:
+        mp = plan.materials[n]
+        f = mp.importance_features
+        both = ["hardness", "roughness"]
+        r = float(imp.predict_loss("roughness", f, both)[0])
+        h = float(imp.predict_loss("hardness", f, both)[0])
+        dropped = {d.dimension: d for d in mp.dropped}
+        assert ("roughness" in dropped) == (r < thr), (n, r)
+        assert ("hardness" in dropped) == (h < thr), (n, h)
+        if "roughness" in dropped:
+            n_r += 1
+            d = dropped["roughness"]
+            assert d.predicted_loss_percent == pytest.approx(r, abs=1e-5)
+            assert "threshold" in d.reason and d.replacement is None
+            assert "roughness" not in mp.dimensions and "vibration" not in mp.actuators
+            assert not {"Fpeak", "AFpeak", "P"} & set(mp.features)
+        if "hardness" in dropped:
+            n_h += 1
+            assert dropped["hardness"].replacement["force_n"] == 1.0
+            assert mp.actuators.get("force")
+            assert not {"GS", "W"} & set(mp.features)
+        # the importance features are those of the full solve: the model meets both targets there
+        assert set(f) == {"GS", "Fpeak", "AFpeak"}
+        # what is kept is solved: the model meets the kept targets
+        pred = _predict(mp)
+        for d in mp.dimensions:
+            assert abs(pred[d] - mp.targets[d]) <= 0.05, (n, d, pred[d], mp.targets[d])
+    # the library spans both cases for this threshold (else the test proves little)
+    assert 0 < n_h < len(names)
+    summary = plan.summary()
+    for n in names:
+        for d in summary["materials"][n]["dropped"]:
+            assert set(d) >= {"dimension", "reason", "predicted_loss_percent"}
