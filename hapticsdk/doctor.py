@@ -97,12 +97,10 @@ def check_libraries() -> dict[str, dict[str, Any]]:
             spec = importlib.util.find_spec(mod)
         except (ImportError, ValueError):
             spec = None
+        pip_name = {"serial": "pyserial", "usb": "pyusb"}.get(mod, mod)
         out[mod] = {"kind": "python", "found": spec is not None,
-                    "detail": spec.origin if spec is not None else f"not installed (pip install {mod if mod != 'serial' else 'pyserial'})"
-                    if mod != "usb" else (spec.origin if spec else "not installed (pip install pyusb)"),
+                    "detail": spec.origin if spec is not None else f"not installed (pip install {pip_name})",
                     "needed_by": needed}
-        if mod == "usb" and spec is None:
-            out[mod]["detail"] = "not installed (pip install pyusb)"
     for lib, needed in OPTIONAL_LIBRARIES.items():
         path = ctypes.util.find_library(lib)
         extra = os.environ.get("HAPTICSDK_LIBHD") if lib == "HD" else None

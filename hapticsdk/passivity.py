@@ -144,11 +144,25 @@ class ControllerSettings:
             largest linear damping CHAI3D declares for the PHANTOM Omni. Bounding alpha
             removes the force spikes of the unbounded controller.
         velocity_deadband_mm_s: below this |v| the damper is not used (mm/s).
+        velocity_filter_hz: first-order low-pass of the backward-difference velocity
+            used to *predict* the next interval's motion (Hz); the observer itself
+            always uses the exact displacement.
+        energy_tolerance_j: energy deficit the damper tolerates before it acts (J).
+        bound_tolerance_j: energy deficit at which the energy bound starts capping the
+            outward force (J). A quantised encoder makes the *observed* energy jump by
+            F*Delta per count (3.3 N x 0.055 mm = 1.8e-4 J on the Omni) and drift
+            negative while the reading dithers between two counts, far more than the
+            true energy; capping the force inside that noise would distort the spring
+            (goal 7), so the hard bound waits for a deficit of 1 mJ, which a saturated
+            stiff wall reaches within a few cycles, while the gentle damper acts at once.
         energy_bound: also bound the outward force by the observed energy (on by default).
     """
 
     max_damping_ns_per_m: float = 5.0
     velocity_deadband_mm_s: float = 1.0
+    velocity_filter_hz: float = 30.0
+    energy_tolerance_j: float = 0.0
+    bound_tolerance_j: float = 1.0e-3
     energy_bound: bool = True
 
 
@@ -159,7 +173,11 @@ class PassivityController:
     Per tick call :meth:`step` with the measured position (mm), the measured period
     ``dt`` (s) and the wall's force (N); send the returned force; then call
     :meth:`commit` with the force the device actually applied (after the safety
-    clamp). The observer books ``-F_applied(n-1) * dx(n)``.
+    clamp). The observer books ``E -= F_applied(n-1) * dx(n)``; the controller keeps
+    ``E >= -energy_tolerance_j`` by (1) capping an outward push so its predicted work
+    ``F v dt`` does not exceed the energy available and (2) a damper
+    ``alpha = -E_avail / (v^2 dt)``, ``alpha <= max_damping_ns_per_m``, when the budget
+    is already overdrawn.
     """
 
     __slots__ = ("settings", "energy_j", "dissipated_j", "bounded_j", "active_ticks",
@@ -182,28 +200,29 @@ class PassivityController:
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Observe, then return the force (N) to command this tick."""
         s = self.settings
-        if self._x_prev is None:
+        if self._x_prev is None or not dt > 0:
             self._x_prev = x_mm
-            return f_wall if f_wall <= 0.0 or not s.energy_bound else 0.0
+            return f_wall
         dx = (x_mm - self._x_prev) * 1e-3
         self._x_prev = x_mm
         self.energy_j -= self._f_prev * dx
         self.dissipated_j -= self._f_pc_prev * dx
-        v = dx / dt if dt > 0 else 0.0
+        a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
+        v = self._v + a * (dx / dt - self._v)
         self._v = v
+        avail = self.energy_j + s.energy_tolerance_j
+        budget = self.energy_j + s.bound_tolerance_j
         f = f_wall
-        e = self.energy_j
         active = False
         if s.energy_bound and f > 0.0 and v > 0.0:
-            # outward push over the next interval gives ~ f v dt; allow at most E (>= 0)
-            cap = max(e, 0.0) / (v * dt)
+            cap = (budget if budget > 0.0 else 0.0) / (v * dt)
             if f > cap:
                 self.bounded_j += (f - cap) * v * dt
                 f = cap
                 active = True
         f_pc = 0.0
-        if e < 0.0 and abs(v) * 1e3 > s.velocity_deadband_mm_s:
-            alpha = -e / (dt * v * v)
+        if avail < 0.0 and abs(v) * 1e3 > s.velocity_deadband_mm_s:
+            alpha = -avail / (dt * v * v)
             if alpha > s.max_damping_ns_per_m:
                 alpha = s.max_damping_ns_per_m
             f_pc = -alpha * v
@@ -221,48 +240,51 @@ class PassivityController:
 
     def report(self) -> dict[str, float]:
         return {"observed_energy_j": self.energy_j, "dissipated_j": self.dissipated_j,
-                "withheld_j": self.bounded_j, "active_ticks": self.active_ticks}
+                "withheld_j": self.bounded_j, "active_ticks": self.active_ticks,
+                "energy_tolerance_j": self.settings.energy_tolerance_j,
+                "bound_tolerance_j": self.settings.bound_tolerance_j}
+
+
+def controller_state_batch(n: int) -> dict[str, np.ndarray]:
+    """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
+    z = np.zeros(n)
+    return {"energy": z.copy(), "dissipated": z.copy(), "x_prev": z.copy(), "f_prev": z.copy(),
+            "f_pc_prev": z.copy(), "v": z.copy(), "started": np.zeros(n, bool)}
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: float,
                           f_wall: np.ndarray, on: np.ndarray,
                           settings: ControllerSettings | None = None) -> np.ndarray:
-    """Vectorised :class:`PassivityController` over many independent cells.
-
-    ``state`` holds arrays ``energy, dissipated, x_prev, f_prev, f_pc_prev, started``
-    (create with :func:`controller_state_batch`); cells where ``on`` is False pass the
-    wall force through. Call :func:`controller_commit_batch` with the applied force.
-    """
+    """Vectorised :class:`PassivityController` over many independent cells (same law,
+    same order of operations). Cells where ``on`` is False pass the wall force through
+    (their observer still runs). Call :func:`controller_commit_batch` after applying."""
     s = settings or ControllerSettings()
     started = state["started"]
     dx = np.where(started, (x_mm - state["x_prev"]) * 1e-3, 0.0)
-    state["x_prev"] = x_mm.copy()
+    state["x_prev"] = np.array(x_mm, float)
     state["energy"] -= state["f_prev"] * dx
     state["dissipated"] -= state["f_pc_prev"] * dx
-    v = dx / dt
-    e = state["energy"]
-    f = f_wall.copy()
+    a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
+    v = np.where(started, state["v"] + a * (dx / dt - state["v"]), 0.0)
+    state["v"] = v
+    avail = state["energy"] + s.energy_tolerance_j
+    budget = state["energy"] + s.bound_tolerance_j
+    f = np.array(f_wall, float)
     if s.energy_bound:
         with np.errstate(divide="ignore", invalid="ignore"):
-            cap = np.where(v > 0, np.maximum(e, 0.0) / (v * dt), np.inf)
-        cap = np.where(started, cap, np.where(f_wall > 0, 0.0, np.inf))
-        f = np.where((f > 0) & (f > cap), cap, f)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        alpha = np.where((e < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s),
-                         np.minimum(-e / (dt * v * v), s.max_damping_ns_per_m), 0.0)
+            cap = np.where(v > 0, np.maximum(budget, 0.0) / (v * dt), np.inf)
+        f = np.where(started & (f > 0) & (f > cap), cap, f)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        alpha = np.where((avail < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s),
+                         np.minimum(-avail / (dt * v * v), s.max_damping_ns_per_m), 0.0)
     f_pc = np.where(started, -alpha * v, 0.0)
     state["f_pc_prev"] = np.where(on, f_pc, 0.0)
     state["started"] = np.ones_like(started)
     return np.where(on, f + f_pc, f_wall)
 
 
-def controller_state_batch(n: int) -> dict[str, np.ndarray]:
-    z = np.zeros(n)
-    return {"energy": z.copy(), "dissipated": z.copy(), "x_prev": z.copy(), "f_prev": z.copy(),
-            "f_pc_prev": z.copy(), "started": np.zeros(n, bool)}
-
-
 def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray) -> None:
+    """Record the forces actually applied over the coming interval (N)."""
     state["f_prev"] = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
 
 

@@ -220,7 +220,11 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
                 if (trajectory is not None and isinstance(cls, type) and issubclass(cls, HapticDevice)
                         and getattr(cls, "simulated", False) and _accepts(cls, "trajectory")):
                     opts.setdefault("trajectory", trajectory)
-                act = cls(**opts)
+                try:
+                    act = cls(**opts)
+                except TypeError as exc:  # a backend with a fixed signature and a bad option
+                    raise ValidationError(f"actuator {name!r} rejected options {sorted(opts)}: {exc}",
+                                          field=f"plan.materials.{mp.name}.actuator_options.{role}") from None
                 if not isinstance(act, Actuator):
                     raise PluginError(f"actuator plugin {name!r} did not create an Actuator",
                                       plugin=name, kind="actuator")

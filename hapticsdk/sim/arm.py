@@ -89,18 +89,44 @@ def transition_matrices(period_s: float, arms: Sequence[ArmParams],
     for i, (a, f) in enumerate(zip(arms, fingers)):
         key = (a.mass_kg, a.damping_ns_per_m, f.mass_kg, f.stiffness_n_per_m, f.damping_ns_per_m)
         if key not in cache:
-            M = a.mass_kg + f.mass_kg
-            A = np.zeros((5, 5))
-            A[0, 1] = 1.0
-            A[1, 0] = -f.stiffness_n_per_m / M
-            A[1, 1] = -(a.damping_ns_per_m + f.damping_ns_per_m) / M
-            A[1, 2] = f.stiffness_n_per_m / M
-            A[1, 3] = f.damping_ns_per_m / M
-            A[1, 4] = 1.0 / M
-            A[2, 3] = 1.0
-            cache[key] = expm(A * period_s)[:2]
+            cache[key] = expm(_augmented(a, f) * period_s)[:2]
         out[i] = cache[key]
     return out
+
+
+def dissipation_gramians(period_s: float, arms: Sequence[ArmParams],
+                         fingers: Sequence[FingerParams]) -> np.ndarray:
+    """``G`` (n, 5, 5) with ``integral_0^T v(s)^2 ds = z^T G z`` for the augmented state z
+    at the start of a period (Van Loan's block-exponential formula), so the energy the
+    arm's damper dissipates, ``b * z^T G z``, is exact too."""
+    out = np.empty((len(arms), 5, 5))
+    cache: dict[tuple, np.ndarray] = {}
+    for i, (a, f) in enumerate(zip(arms, fingers)):
+        key = (a.mass_kg, a.damping_ns_per_m, f.mass_kg, f.stiffness_n_per_m, f.damping_ns_per_m)
+        if key not in cache:
+            A = _augmented(a, f)
+            C = np.zeros((10, 10))
+            C[:5, :5] = -A.T
+            C[1, 6] = 1.0  # Q = e_v e_v^T
+            C[5:, 5:] = A
+            E = expm(C * period_s)
+            G = E[5:, 5:].T @ E[:5, 5:]
+            cache[key] = 0.5 * (G + G.T)
+        out[i] = cache[key]
+    return out
+
+
+def _augmented(a: ArmParams, f: FingerParams) -> np.ndarray:
+    M = a.mass_kg + f.mass_kg
+    A = np.zeros((5, 5))
+    A[0, 1] = 1.0
+    A[1, 0] = -f.stiffness_n_per_m / M
+    A[1, 1] = -(a.damping_ns_per_m + f.damping_ns_per_m) / M
+    A[1, 2] = f.stiffness_n_per_m / M
+    A[1, 3] = f.damping_ns_per_m / M
+    A[1, 4] = 1.0 / M
+    A[2, 3] = 1.0
+    return A
 
 
 def derivative(z: np.ndarray, arm: ArmParams, fing: FingerParams) -> np.ndarray:

@@ -82,6 +82,15 @@ class PiezoVirtual(Actuator):
         self.samples_total = 0
         self.commands = 0
 
+    @classmethod
+    def calibration_info(cls) -> list[dict[str, Any]]:
+        """The roughness ``Tab`` used by default (for ``hapticsdk doctor``)."""
+        from .table import resolve_table
+        t = resolve_table(None)
+        return [{"kind": "piezo", "scope": "roughness Tab (default)", "generated": t.generated, "source": t.source,
+                 "frequency_range_hz": list(t.frequency_range_hz),
+                 "voltage_range_v": [float(t.voltages_v[0]), float(t.voltages_v[-1])]}]
+
     # -- backend ----------------------------------------------------------------
     def _open(self) -> None:
         self.osc.reset()
