@@ -153,17 +153,34 @@ class ControllerSettings:
             F*Delta per count (3.3 N x 0.055 mm = 1.8e-4 J on the Omni) and drift
             negative while the reading dithers between two counts, far more than the
             true energy; capping the force inside that noise would distort the spring
-            (goal 7), so the hard bound waits for a deficit of 1 mJ, which a saturated
+            (goal 7), so the hard bound waits for a deficit of 0.5 mJ, which a saturated
             stiff wall reaches within a few cycles, while the gentle damper acts at once.
         energy_bound: also bound the outward force by the observed energy (on by default).
+        device_mass_kg: apparent mass of the device (kg) used to bound how far the held
+            force itself can push the stylus within one period (``F T^2 / 2m``). Without
+            it (None) a force that catapults a light stylus out of a very stiff wall
+            within a single long period is only seen afterwards.
     """
 
     max_damping_ns_per_m: float = 5.0
     velocity_deadband_mm_s: float = 1.0
     velocity_filter_hz: float = 30.0
     energy_tolerance_j: float = 0.0
-    bound_tolerance_j: float = 1.0e-3
+    bound_tolerance_j: float = 5.0e-4
     energy_bound: bool = True
+    device_mass_kg: float | None = 0.045
+
+
+def _cap(budget: float, v: float, dt: float, mass: float | None) -> float:
+    """Largest outward force whose predicted work over one period stays within budget:
+    ``F (v+ dt + F dt^2 / (2 m)) <= budget``."""
+    if budget <= 0.0:
+        return 0.0
+    vt = v * dt if v > 0.0 else 0.0
+    if mass is None or mass <= 0:
+        return budget / vt if vt > 0.0 else math.inf
+    a = dt * dt / (2.0 * mass)
+    return (-vt + math.sqrt(vt * vt + 4.0 * a * budget)) / (2.0 * a)
 
 
 class PassivityController:
@@ -190,7 +207,7 @@ class PassivityController:
     def reset(self) -> None:
         self.energy_j = 0.0        # energy absorbed by the wall (J), PO
         self.dissipated_j = 0.0    # energy removed by the damper (J)
-        self.bounded_j = 0.0       # outward work withheld by the energy bound (J, predicted)
+        self.bounded_j = 0.0       # sum over ticks of the force withheld by the energy bound (N)
         self.active_ticks = 0
         self._x_prev: float | None = None
         self._f_prev = 0.0
@@ -208,16 +225,17 @@ class PassivityController:
         self.energy_j -= self._f_prev * dx
         self.dissipated_j -= self._f_pc_prev * dx
         a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
-        v = self._v + a * (dx / dt - self._v)
+        v_raw = dx / dt
+        v = self._v + a * (v_raw - self._v)
         self._v = v
         avail = self.energy_j + s.energy_tolerance_j
         budget = self.energy_j + s.bound_tolerance_j
         f = f_wall
         active = False
-        if s.energy_bound and f > 0.0 and v > 0.0:
-            cap = (budget if budget > 0.0 else 0.0) / (v * dt)
+        if s.energy_bound and f > 0.0:
+            cap = _cap(budget, v if v > v_raw else v_raw, dt, s.device_mass_kg)
             if f > cap:
-                self.bounded_j += (f - cap) * v * dt
+                self.bounded_j += f - cap
                 f = cap
                 active = True
         f_pc = 0.0
@@ -240,7 +258,7 @@ class PassivityController:
 
     def report(self) -> dict[str, float]:
         return {"observed_energy_j": self.energy_j, "dissipated_j": self.dissipated_j,
-                "withheld_j": self.bounded_j, "active_ticks": self.active_ticks,
+                "withheld_n_ticks": self.bounded_j, "active_ticks": self.active_ticks,
                 "energy_tolerance_j": self.settings.energy_tolerance_j,
                 "bound_tolerance_j": self.settings.bound_tolerance_j}
 
@@ -265,14 +283,21 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     state["energy"] -= state["f_prev"] * dx
     state["dissipated"] -= state["f_pc_prev"] * dx
     a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
-    v = np.where(started, state["v"] + a * (dx / dt - state["v"]), 0.0)
+    v_raw = dx / dt
+    v = np.where(started, state["v"] + a * (v_raw - state["v"]), 0.0)
     state["v"] = v
     avail = state["energy"] + s.energy_tolerance_j
     budget = state["energy"] + s.bound_tolerance_j
     f = np.array(f_wall, float)
     if s.energy_bound:
+        vt = np.maximum(np.maximum(v, v_raw), 0.0) * dt
+        bpos = np.maximum(budget, 0.0)
         with np.errstate(divide="ignore", invalid="ignore"):
-            cap = np.where(v > 0, np.maximum(budget, 0.0) / (v * dt), np.inf)
+            if s.device_mass_kg is None or s.device_mass_kg <= 0:
+                cap = np.where(vt > 0, bpos / vt, np.inf)
+            else:
+                qa = dt * dt / (2.0 * s.device_mass_kg)
+                cap = (-vt + np.sqrt(vt * vt + 4.0 * qa * bpos)) / (2.0 * qa)
         f = np.where(started & (f > 0) & (f > cap), cap, f)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         alpha = np.where((avail < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s),

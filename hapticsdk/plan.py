@@ -221,12 +221,16 @@ class RenderPlan:
 
     # -- access ------------------------------------------------------------
     def material(self, name: str | None = None) -> MaterialPlan:
-        """The plan of material ``name`` (default: the first)."""
+        """The plan of material ``name`` or of the material of scene object ``name``
+        (default: the first)."""
         if not self.materials:
             raise ValidationError("the plan has no materials", field="plan.materials")
         if name is None:
             return next(iter(self.materials.values()))
         if name not in self.materials:
+            for mp in self.materials.values():
+                if name in mp.objects:
+                    return mp
             raise ValidationError(f"no material {name!r} in the plan; it has {list(self.materials)}",
                                   field="material")
         return self.materials[name]

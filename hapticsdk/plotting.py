@@ -25,6 +25,18 @@ def _pyplot() -> Any:
     return plt
 
 
+def _role_series(a: Any, t: np.ndarray, log: dict, suffix: str, ylabel: str, title: str) -> None:
+    """Plot every ``<role><suffix>`` series of the log on axis ``a``."""
+    keys = sorted(k for k in log if k.endswith(suffix))
+    for key in keys:
+        a.plot(t, log[key], label=key[: -len(suffix)])
+    a.set_xlabel("time (s)")
+    a.set_ylabel(ylabel)
+    a.set_title(title)
+    if keys:
+        a.legend(fontsize=8)
+
+
 def plot_render(report: Any, path: str | Path) -> Path:
     """Save a 2x2 figure of ``report`` (a render report with a servo ``loop`` log) to ``path``."""
     plt = _pyplot()
@@ -51,30 +63,10 @@ def plot_render(report: Any, path: str | Path) -> Path:
     a.set_title("hardness: force against penetration")
     a.legend(fontsize=8)
 
-    a = ax[0, 1]
-    plotted = False
-    for key in sorted(log):
-        if key.endswith(".amplitude"):
-            role = key.split(".")[0]
-            a.plot(t, log[key], label=f"{role} amplitude")
-            plotted = True
-    a.set_xlabel("time (s)")
-    a.set_ylabel("drive amplitude (V for the piezo, 0..1 for the coil)")
-    a.set_title("vibration drive envelopes")
-    if plotted:
-        a.legend(fontsize=8)
-
-    a = ax[1, 0]
-    plotted = False
-    for key in sorted(log):
-        if key.endswith(".frequency_hz"):
-            a.plot(t, log[key], label=key.split(".")[0])
-            plotted = True
-    a.set_xlabel("time (s)")
-    a.set_ylabel("drive frequency (Hz)")
-    a.set_title("vibration frequencies (piezo follows sliding speed)")
-    if plotted:
-        a.legend(fontsize=8)
+    _role_series(ax[0, 1], t, log, ".amplitude", "drive amplitude (V for the piezo, 0..1 for the coil)",
+                 "vibration drive envelopes")
+    _role_series(ax[1, 0], t, log, ".frequency_hz", "drive frequency (Hz)",
+                 "vibration frequencies (piezo follows sliding speed)")
 
     a = ax[1, 1]
     a.plot(t, np.abs(vel[:, 0]), label="|v_x| sliding speed")

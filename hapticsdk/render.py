@@ -77,6 +77,7 @@ class RenderReport:
         overruns: ticks that took longer than the period; ``fault``: the fault, if any.
         renderers: each renderer's ``describe()`` after the run.
         safety: actuator label -> safety report (limit hits).
+        devices: actuator label -> its ``describe()`` at the end of the run (before closing).
         hooks: distributions whose hook modules were registered.
         loop: the :class:`~hapticsdk.runtime.LoopReport` (``to_dict`` in JSON).
     """
@@ -98,6 +99,7 @@ class RenderReport:
     hooks: list[str] = field(default_factory=list)
     loop: Any = None
     ticks: int | None = None
+    devices: dict[str, Any] = field(default_factory=dict)
     features: dict[str, float] = field(default_factory=dict)
     dropped: list[dict[str, Any]] = field(default_factory=list)
     solve: dict[str, Any] = field(default_factory=dict)
@@ -113,7 +115,7 @@ class RenderReport:
             "tick": {"ticks": self.ticks, "median_us": self.tick_median_us,
                      "p99_us": self.tick_p99_us, "overruns": self.overruns},
             "features": dict(self.features), "dropped": list(self.dropped), "solve": dict(self.solve),
-            "safety": self.safety, "hooks": list(self.hooks), "loop": loop}, default=_jsonable))
+            "safety": self.safety, "devices": self.devices, "hooks": list(self.hooks), "loop": loop}, default=_jsonable))
 
 
 def _jsonable(o: Any) -> Any:
@@ -247,7 +249,9 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         t0 = time.perf_counter()
         lr = loop.run(secs)
         wall = time.perf_counter() - t0
-        safety = {a.label: a.safety.report() for a in list(instances.values()) + [device]}
+        everyone = list(instances.values()) + ([device] if device not in instances.values() else [])
+        safety = {a.label: a.safety.report() for a in everyone}
+        devices = {a.label: a.describe() for a in everyone}
     fault = getattr(lr, "fault", None)
     report = RenderReport(
         material=mp.name, scene=plan.scene, dimensions=list(mp.dimensions),
@@ -260,7 +264,7 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         fault=None if fault is None else (dict(fault) if isinstance(fault, Mapping) else {"message": str(fault)}),
         renderers={(getattr(r, "replaces", None) and f"replacement:{r.replaces}") or d: r.describe()
                    for d, r in zip(list(mp.dimensions) + [x.dimension for x in mp.replacements], renderers)},
-        safety=safety, hooks=used_dists if hooks else [], loop=lr, ticks=_ticks(lr),
+        safety=safety, devices=devices, hooks=used_dists if hooks else [], loop=lr, ticks=_ticks(lr),
         features=dict(mp.features), dropped=[d.to_dict() for d in mp.dropped], solve=dict(mp.solve))
     if pm is not None:
         pm.call_safely("hapticsdk_render_finished", plan=one, report=report)

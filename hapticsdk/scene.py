@@ -321,12 +321,12 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
 
 
 def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed: Any) -> dict[str, Any]:
-    return {"success": bool(r.success), "error": float(r.error),
-            "error_per_dimension": {k: float(v) for k, v in r.error_per_dimension.items()},
-            "intensities": {k: float(r.intensities[k]) for k in dims if k in r.intensities},
-            "constraint_violation": float(r.constraint_violation),
-            "message": str(r.message), "method": str(r.method), "seed": seed,
-            "nfev": int(r.nfev), "time_s": float(r.time_s), "models": list(model_names)}
+    """The final solve's result (``SolveResult.to_json()``) plus the models and seed."""
+    out = json.loads(json.dumps(r.to_json(), default=float))
+    out["models"] = list(model_names)
+    out["seed"] = seed
+    out["dimensions"] = list(dims)
+    return out
 
 
 def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:

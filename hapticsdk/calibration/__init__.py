@@ -1,7 +1,16 @@
 """Calibration of actuators: the perceptual mapping of the voice coil (formula (7))
-and the piezo's voltage table ``Tab`` (formula (9))."""
+and the piezo's voltage table ``Tab`` (formula (9)), their fits from experiment data,
+and calibration files per device serial number (``docs/calibration.md``)."""
 
-from .piezo import PiezoTable
-from .voicecoil import VoiceCoilCalibration
+from .discrimination import (TABLE4_SPRINGS_N_PER_MM, DiscriminationAnswers, PsychometricFit,
+                             fit_psychometric, generate_answers)
+from .piezo import PiezoTable, read_measurements_csv, table_from_measurements
+from .store import (LoadedCalibration, calibration_dir, calibrations_in_use, list_calibrations,
+                    load_calibration, read_calibration, save_calibration)
+from .voicecoil import VoiceCoilCalibration, VoiceCoilFit, fit_voicecoil
 
-__all__ = ["PiezoTable", "VoiceCoilCalibration"]
+__all__ = ["PiezoTable", "VoiceCoilCalibration", "VoiceCoilFit", "fit_voicecoil", "DiscriminationAnswers",
+           "PsychometricFit", "fit_psychometric", "generate_answers", "TABLE4_SPRINGS_N_PER_MM",
+           "table_from_measurements", "read_measurements_csv", "LoadedCalibration", "calibration_dir",
+           "calibrations_in_use", "list_calibrations", "load_calibration", "read_calibration",
+           "save_calibration"]

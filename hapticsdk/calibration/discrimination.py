@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
-from scipy import optimize, special, stats
 
 from ..errors import CalibrationError
 
@@ -205,6 +204,7 @@ class PsychometricFit:
 
     def proportion(self, k: Any) -> np.ndarray:
         """Fitted P(spring stiffer) at spring stiffness ``k`` (N/mm)."""
+        from scipy import special
         return special.ndtr((np.asarray(k, float) - self.pse_n_per_mm) / self.sigma_n_per_mm)
 
     def to_dict(self) -> dict[str, Any]:
@@ -216,11 +216,12 @@ class PsychometricFit:
 
 
 _SIGMA_GRID = np.geomspace(0.01, 5.0, 36)
-_CHI2_95_HALF = 0.5 * stats.chi2.ppf(0.95, 1)  # 1.92
+_CHI2_95_HALF = 1.9207294103470618  # 0.5 * chi2.ppf(0.95, df=1)
 
 
 def _loglik(mu: np.ndarray, sigma: np.ndarray, k: np.ndarray, n: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Binomial log-likelihood summed over springs; broadcasts ``mu``/``sigma`` grids."""
+    from scipy import special
     z = (k - mu[..., None]) / sigma[..., None]
     lp = special.log_ndtr(z)
     lq = special.log_ndtr(-z)
@@ -240,6 +241,8 @@ def fit_psychometric(springs_n_per_mm: Any, stiffer: Any, *, frequency_hz: float
     optimiser; the PSE interval is the profile-likelihood 95 % interval
     (log-likelihood within 1.92 of the maximum).
     """
+    from scipy import optimize
+
     k_all = np.asarray(springs_n_per_mm, float)
     a_all = np.asarray(stiffer, float)
     k, inv = np.unique(k_all, return_inverse=True)

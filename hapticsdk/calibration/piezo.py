@@ -8,7 +8,9 @@ frequency ``f``. Between measured points the table is interpolated with PCHIP
 (on log-log axes where the accelerations are positive; falling back to linear interpolation at a frequency where PCHIP would break the
 monotonicity in voltage), then over voltage; since the curve over voltage is strictly
 increasing, ``voltage_for`` inverts exactly that curve (root of the monotone cubic), so
-``acceleration_at(f, voltage_for(f, A)) == A`` inside the range. Requests outside the
+``acceleration_at(f, voltage_for(f, A)) == A`` inside the range. Over voltage a cubic
+spline is used when it is strictly increasing (checked exactly), else PCHIP: both are
+monotone there, and the spline follows a smooth curved response more closely. Requests outside the
 measured frequencies or accelerations are clamped to the table and flagged.
 
 :func:`table_from_measurements` builds a table from scattered measurements (one row
@@ -92,8 +94,17 @@ class PiezoTable:
         return (1 - w) * self.acceleration[i] + w * self.acceleration[i + 1]
 
     def _curve(self, f_hz: float):
-        from scipy.interpolate import PchipInterpolator
-        return PchipInterpolator(self.voltages_v, self._row(f_hz), extrapolate=False)
+        """Acceleration over voltage at ``f_hz``: a cubic spline when it is strictly
+        increasing between every pair of measured voltages (checked exactly on the
+        derivative), else PCHIP (monotone by construction)."""
+        from scipy.interpolate import CubicSpline, PchipInterpolator
+
+        row = self._row(f_hz)
+        if self.voltages_v.size >= 4:
+            cs = CubicSpline(self.voltages_v, row, extrapolate=False)
+            if _spline_increasing(cs.c, np.diff(self.voltages_v)):
+                return cs
+        return PchipInterpolator(self.voltages_v, row, extrapolate=False)
 
     def acceleration_at(self, f_hz: float, volts: float) -> float:
         """Acceleration amplitude (m/s^2) at frequency ``f_hz`` (Hz) and drive ``volts``
@@ -161,6 +172,19 @@ class PiezoTable:
         except KeyError as exc:
             raise CalibrationError(f"piezo table misses key {exc.args[0]!r} "
                                    "(needs frequencies_hz, voltages_v, acceleration_m_s2)") from None
+
+
+def _spline_increasing(c: np.ndarray, h: np.ndarray) -> bool:
+    """Whether a piecewise cubic with coefficients ``c`` (4, m) (scipy ``PPoly`` order,
+    local variable ``x`` in ``[0, h]``) has a strictly positive derivative everywhere."""
+    a3, a2, a1 = 3 * c[0], 2 * c[1], c[2]  # derivative a3 x^2 + a2 x + a1
+    d0 = a1
+    d1 = a3 * h ** 2 + a2 * h + a1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        xv = np.where(a3 != 0, -a2 / (2 * a3), -1.0)
+    inner = (xv > 0) & (xv < h)
+    dv = np.where(inner, a3 * xv ** 2 + a2 * xv + a1, np.inf)
+    return bool(np.all(d0 > 0) and np.all(d1 > 0) and np.all(dv > 0))
 
 
 def table_from_measurements(frequency_hz: Any, voltage_v: Any, acceleration_m_s2: Any, *,

@@ -157,7 +157,12 @@ def cmd_render(args: argparse.Namespace) -> int:
 def format_render(out: dict[str, Any]) -> str:
     lines = []
     for mat in out.get("materials", [out]):
-        lines.append(f"material {mat['material']}: actuators {', '.join(mat['actuators'])}")
+        acts = mat["actuators"]
+        acts = ", ".join(f"{r}={a}" for r, a in acts.items()) if isinstance(acts, dict) else ", ".join(acts)
+        lines.append(f"material {mat['material']}: rendered {', '.join(mat.get('dimensions', []))}; "
+                     f"actuators {acts}")
+        for d in mat.get("dropped", []):
+            lines.append(f"  left out {d['dimension']}: {d['reason']}")
         if mat.get("solve"):
             lines.append("  " + format_solve(mat["solve"]).replace("\n", "\n  "))
     t = out["tick"]

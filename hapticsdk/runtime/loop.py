@@ -170,7 +170,10 @@ class ServoLoop:
         self.max_speed_mm_s = float(max_speed_mm_s)
         self.max_accel_mm_s2 = float(max_accel_mm_s2)
         self.max_catchup_ticks = int(max_catchup_ticks)
-        self.passivity_settings = passivity_settings or ControllerSettings()
+        if passivity_settings is None:
+            # the device's apparent mass (if it declares one) bounds the in-period push
+            passivity_settings = ControllerSettings(device_mass_kg=getattr(device, "apparent_mass_kg", None))
+        self.passivity_settings = passivity_settings
 
     # ------------------------------------------------------------------
     def _stop_all(self) -> None:
@@ -187,9 +190,11 @@ class ServoLoop:
         T = self.period_s
         n_max = int(math.floor(seconds / T + 1e-9)) + 1
         device = self.device
-        # open everything (idempotent)
+        # open everything (idempotent); commands older than one period become stale
         for act in [device, *self.actuators.values()]:
             act.open()
+            if hasattr(act.safety, "set_period"):
+                act.safety.set_period(T)
         slots: list[_Slot] = []
         for role, act in self.actuators.items():
             is_force = act.channel == "force"

@@ -152,10 +152,19 @@ class ArmBatch:
     """
 
     def __init__(self, period_s: float, arms: Sequence[ArmParams], fingers: Sequence[FingerParams],
-                 y0_mm: "float | np.ndarray" = 0.0) -> None:
+                 y0_mm: "float | np.ndarray" = 0.0, *, track_energy: bool = False) -> None:
         self.period_s = float(period_s)
         self.arms = list(arms)
         self.P = transition_matrices(self.period_s, self.arms, list(fingers))
+        self.track_energy = bool(track_energy)
+        if track_energy:
+            self.G = dissipation_gramians(self.period_s, self.arms, list(fingers))
+            self.b = np.array([a.damping_ns_per_m for a in self.arms])
+            self.m = np.array([a.mass_kg for a in self.arms])
+            #: work of the motor force on the stylus (J), exact
+            self.motor_work_j = np.zeros(len(self.arms))
+            #: energy dissipated by the arm's own damping (J), exact
+            self.damper_j = np.zeros(len(self.arms))
         n = len(self.arms)
         self.y = np.broadcast_to(np.asarray(y0_mm, float) * 1e-3, (n,)).copy()
         self.v = np.zeros(n)
@@ -179,9 +188,18 @@ class ArmBatch:
         z[:, 3] = np.asarray(rd_mm_s, float) * 1e-3
         z[:, 4] = f
         yv = np.einsum("nij,nj->ni", self.P, z)
+        if self.track_energy:
+            self.damper_j += self.b * np.einsum("ni,nij,nj->n", z, self.G, z)
+            self.motor_work_j += f * (yv[:, 0] - self.y)
         self.y = yv[:, 0]
         self.v = yv[:, 1]
         return f
+
+    def energy_to_user_j(self) -> np.ndarray:
+        """Energy the arm + wall have given to the finger so far (J): motor work minus the
+        arm's kinetic energy minus what its damping dissipated (the negative of the
+        display-port energy W_d; <= 0 for a passive display)."""
+        return self.motor_work_j - 0.5 * self.m * self.v ** 2 - self.damper_j
 
 
 class ArmSim:
@@ -216,4 +234,6 @@ class ArmSim:
         return f
 
     def measured_mm(self) -> float:
-        return float(quantise(self.y * 1e3, self.arm.encoder_resolution_mm))
+        res = self.arm.encoder_resolution_mm
+        y = self.y * 1e3
+        return round(y / res) * res if res > 0 else y

@@ -168,3 +168,24 @@ def test_broken_run_files_are_named(tmp_path):
     np.savez(bad, t=np.zeros(3))
     with pytest.raises(RecordingError, match="header_json"):
         load_run(bad)
+
+
+# -- with the SDK's servo loop ------------------------------------------------------
+def test_servo_loop_record_and_playback_same_forces(tmp_path):
+    from hapticsdk.runtime import ServoLoop
+
+    dev = PushedProbe()
+    rec = RunRecorder(tmp_path / "loop.npz", device=dev)
+    report = ServoLoop(dev, [SpringRenderer(2.0)], period_s=PERIOD, recorder=rec).run(0.8)
+    rec.close()
+    dev.close()
+    run = load_run(rec.path)
+    assert len(run) == report.ticks == 801
+    np.testing.assert_array_equal(run.commands["force"]["force_n"], report.log["force_n"])
+    assert report.log["force_n"].max() > 0.5  # the spring was felt
+
+    play = PlaybackDevice(run=rec.path)
+    replay = ServoLoop(play, [SpringRenderer(2.0)], period_s=PERIOD).run(0.8)
+    np.testing.assert_array_equal(replay.log["force_n"], report.log["force_n"])
+    np.testing.assert_array_equal(replay.log["position_mm"], run.position_mm)
+    play.close()

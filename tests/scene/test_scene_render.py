@@ -133,9 +133,9 @@ import json, sys
 from hapticsdk.scene import Scene, compile_scene
 from hapticsdk.render import render_plan
 plan = compile_scene(Scene.for_material({TARGETS}))
-after_compile = sorted(m for m in sys.modules if m.split('.')[0] in ('hapticsdk_roughness', 'hapticsdk_hardness', 'serial', 'usb'))
+after_compile = sorted(m for m in sys.modules if m.split('.')[0] in ('hapticsdk_roughness', 'hapticsdk_hardness', 'hapticsdk_warmth', 'serial', 'usb'))
 rep = render_plan(plan, seconds=0.3)
-after_render = sorted(m for m in sys.modules if m.split('.')[0] in ('hapticsdk_roughness', 'hapticsdk_hardness', 'serial', 'usb'))
+after_render = sorted(m for m in sys.modules if m.split('.')[0] in ('hapticsdk_roughness', 'hapticsdk_hardness', 'hapticsdk_warmth', 'serial', 'usb'))
 print(json.dumps({{"compile": after_compile, "render": after_render, "actuators": rep.actuators,
                    "plugins": [p["distribution"] for p in plan.to_dict()["plugins_loaded"]]}}))
 """
@@ -153,7 +153,7 @@ def test_hardness_only_scene_imports_no_roughness_serial_or_usb():
     res = _run("{'hardness': 0.6}")
     for stage in ("compile", "render"):
         mods = res[stage]
-        assert not [m for m in mods if m.split(".")[0] in ("hapticsdk_roughness", "serial", "usb")], (stage, mods)
+        assert not [m for m in mods if m.split(".")[0] in ("hapticsdk_roughness", "hapticsdk_warmth", "serial", "usb")], (stage, mods)
     assert any(m.startswith("hapticsdk_hardness") for m in res["render"])
     assert "hapticsdk-roughness" not in res["plugins"]
 
@@ -161,5 +161,5 @@ def test_hardness_only_scene_imports_no_roughness_serial_or_usb():
 def test_roughness_only_scene_imports_no_hardness_serial_or_usb():
     res = _run("{'roughness': 0.6}")
     for stage in ("compile", "render"):
-        assert not [m for m in res[stage] if m.split(".")[0] in ("hapticsdk_hardness", "serial", "usb")], res
+        assert not [m for m in res[stage] if m.split(".")[0] in ("hapticsdk_hardness", "hapticsdk_warmth", "serial", "usb")], res
     assert res["actuators"] == {"vibration": "piezo-virtual"}

@@ -71,6 +71,9 @@ def test_out_of_table_is_clamped_and_reported():
     assert d["table_clamped"] and not d["table_in_range"]
     assert r.v_out == pytest.approx(100.0)
     assert d["achieved_AFpeak_m_s2"] < 40.0
+    r.tick(tick(50.0))
+    r.tick(tick(5.0))
+    assert r.describe()["table_clamps"] == 1
     r2 = dim.renderer({"Fpeak": 240.0, "AFpeak": 1.0}, frequency_range_hz=(10.0, 300.0))
     r2.tick(tick(200.0))                                   # f_p = 600 Hz > 300
     (c,) = r2.tick(tick(80.0))

@@ -35,6 +35,13 @@ class Evaluator:
         self.upper = problem.space.upper
         self.span = self.upper - self.lower
         self.nfev = 0
+        model_in = list(problem.model.feature_names)
+        self._identity = (tuple(problem.space.names) == tuple(model_in))
+        # constraints whose penalty/violation are the base class's formulas: one
+        # _bound_and_value call gives both forms
+        from hapticsdk.dimensions import Constraint
+        self._fast_c = all(type(c).penalty is Constraint.penalty and type(c).violation is Constraint.violation
+                           for c in problem.constraints)
 
     def __call__(self, X: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(fitness, error, violation)`` for ``X`` ``(r, p, d)`` (or ``(r, d)``),
@@ -42,7 +49,8 @@ class Evaluator:
         p = self.problem
         T = p.targets if rows is None else p.targets[rows]
         lead = X.shape[:-1]
-        G = p.full_inputs(X.reshape(-1, X.shape[-1]))
+        X2 = X.reshape(-1, X.shape[-1])
+        G = X2 if self._identity else p.full_inputs(X2)
         I = p.model.predict(G)
         self.nfev += G.shape[0]
         I = I[:, self.out_idx].reshape(lead + (len(self.out_idx),))
@@ -53,8 +61,18 @@ class Evaluator:
             pen = np.zeros(G.shape[0])
             viol = np.zeros(G.shape[0])
             for c in p.constraints:
-                pen += c.penalty(cols, self.penalty)
-                viol = np.maximum(viol, c.violation(cols))
+                if self._fast_c:
+                    # same formulas as Constraint.penalty (paper: b^2 - v^2; normalised:
+                    # (b - v)/|b|, where v < b), computed from one _bound_and_value call
+                    b, v = c._bound_and_value(cols)
+                    short = v < b
+                    scale = np.where(np.abs(b) > 0, np.abs(b), 1.0)
+                    nv = np.where(short, (b - v) / scale, 0.0)
+                    pen += nv if self.penalty == "normalised" else np.where(short, b * b - v * v, 0.0)
+                    viol = np.maximum(viol, nv)
+                else:
+                    pen += c.penalty(cols, self.penalty)
+                    viol = np.maximum(viol, c.violation(cols))
             fit = err + p.penalty_weight * pen.reshape(lead)
             return fit, err, viol.reshape(lead)
         return err, err, np.zeros(lead)

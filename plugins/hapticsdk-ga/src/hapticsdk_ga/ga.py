@@ -38,13 +38,19 @@ from ._common import Clock, Evaluator, check_budget, check_fraction, check_int, 
 
 
 def _tournament(fit: np.ndarray, n: int, size: int, rng: np.random.Generator) -> np.ndarray:
-    """Indices ``(r, n)`` of tournament winners (lowest fitness) for each of ``r`` rows."""
+    """Flat indices (into ``fit.ravel()``) ``(r, n)`` of tournament winners (lowest fitness)."""
     r, p = fit.shape
-    cand = rng.integers(0, p, size=(r, n, size))
-    if size == 1:
-        return cand[..., 0]
-    f = fit[np.arange(r)[:, None, None], cand]
-    return np.take_along_axis(cand, f.argmin(axis=2)[..., None], axis=2)[..., 0]
+    flat = fit.ravel()
+    cand = rng.integers(0, p, size=(size, r, n)) + (np.arange(r) * p)[None, :, None]
+    win = cand[0]
+    fw = np.take(flat, win)
+    for j in range(1, size):
+        c = cand[j]
+        fc = np.take(flat, c)
+        better = fc < fw
+        win = np.where(better, c, win)
+        fw = np.where(better, fc, fw)
+    return win
 
 
 def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.ndarray, *,
@@ -52,28 +58,26 @@ def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.
                   rng: np.random.Generator) -> np.ndarray:
     """Next population ``(r, p, d)`` from ``pop`` and its fitness ``(r, p)``."""
     r, p, d = pop.shape
-    rows = np.arange(r)[:, None]
-    parts = []
+    out = np.empty_like(pop)
+    flat_pop = pop.reshape(r * p, d)
     if elite:
         order = np.argpartition(fit, elite - 1, axis=1)[:, :elite] if elite < p else np.argsort(fit, axis=1)
-        parts.append(pop[rows, order[:, :elite]])
+        out[:, :elite] = np.take(flat_pop, order[:, :elite] + (np.arange(r) * p)[:, None], axis=0)
     n_mut = p - elite - n_cross
     winners = _tournament(fit, 2 * n_cross + n_mut, tournament, rng)
-    par = pop[rows, winners]                                   # (r, 2nx + nm, d)
+    par = np.take(flat_pop, winners, axis=0)   # (r, 2nx + nm, d); np.take: faster than fancy indexing
     if n_cross:
         a, b = par[:, :n_cross], par[:, n_cross:2 * n_cross]
         if d > 1:
             cut = rng.integers(1, d, size=(r, n_cross, 1))
-            child = np.where(np.arange(d)[None, None, :] < cut, a, b)
+            np.copyto(out[:, elite:elite + n_cross], np.where(np.arange(d) < cut, a, b))
         else:
-            child = a.copy()
-        parts.append(child)
+            out[:, elite:elite + n_cross] = a
     if n_mut:
         base = par[:, 2 * n_cross:]
-        mask = rng.random((r, n_mut, d)) < mutation_rate
-        fresh = lower + rng.random((r, n_mut, d)) * span
-        parts.append(np.where(mask, fresh, base))
-    return np.concatenate(parts, axis=1)
+        u = rng.random((2, r, n_mut, d))
+        np.copyto(out[:, elite + n_cross:], np.where(u[0] < mutation_rate, lower + u[1] * span, base))
+    return out
 
 
 class GASolver(Solver):

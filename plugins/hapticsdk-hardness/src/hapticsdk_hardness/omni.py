@@ -15,6 +15,7 @@ wall at 1 kHz is ``"stable-by-assumption (not passive)"``.
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -95,25 +96,49 @@ class OmniVirtual(HapticDevice):
                            velocity_mm_s=np.array([vx, self._v_est, 0.0]),
                            force_n=np.array([0.0, self._f_applied, 0.0]))
 
-    def _step(self, dt: float) -> None:
-        cmd = self.safety.current(self.t + dt) if self.is_open else None
-        f = cmd.force_n if (cmd is not None and cmd.force_n is not None) else 0.0
+    def _force_at(self, now: float) -> float:
+        cmd = self.safety.current(now) if self.is_open else None
+        return cmd.force_n if (cmd is not None and cmd.force_n is not None) else 0.0
+
+    def _advance(self, dt: float, f: float) -> None:
         _, r0, _, _ = self.trajectory.at(self.t)
         _, r1, _, _ = self.trajectory.at(self.t + dt)
         y_old = self.sim.y
         self._f_applied = self.sim.step(dt, f, r0, (r1 - r0) / dt)
         self.motor_work_j += self._f_applied * (self.sim.y - y_old)
         self.t += dt
+
+    def _step(self, dt: float) -> None:
+        """Hold the current command (sent at the start of the interval) while the safety
+        layer considers it fresh, then zero: a late tick leaves the arm unpowered for the
+        overdue part of the interval, as a device servo thread with staleness would."""
+        t0 = self.t
+        f = self._force_at(t0)
+        if f != 0.0 and dt > 0 and self._force_at(t0 + dt) == 0.0:
+            fresh = getattr(getattr(self.safety, "settings", None), "stale_after_s", dt)
+            fresh = min(max(fresh, 0.0), dt)
+            if fresh > 0:
+                self._advance(fresh, f)
+            if dt - fresh > 1e-12:
+                self._advance(dt - fresh, 0.0)
+            self.t = t0 + dt
+        else:
+            self._advance(dt, f)
         y_meas = self.sim.measured_mm()
         v_raw = (y_meas - self._y_meas) / dt
         if self.velocity_filter_hz is None:
             self._v_est = v_raw
         else:
-            a = 1.0 - np.exp(-2.0 * np.pi * self.velocity_filter_hz * dt)
+            a = 1.0 - math.exp(-2.0 * math.pi * self.velocity_filter_hz * dt)
             self._v_est += a * (v_raw - self._v_est)
         self._y_meas = y_meas
 
     # -- reporting ---------------------------------------------------------
+    @property
+    def apparent_mass_kg(self) -> float:
+        """Apparent mass of the stylus (kg), used by the passivity controller."""
+        return self.arm.mass_kg
+
     @property
     def true_position_mm(self) -> float:
         """Unquantised stylus height (mm)."""

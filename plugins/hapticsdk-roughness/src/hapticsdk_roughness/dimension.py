@@ -68,7 +68,8 @@ class RoughnessRenderer(DimensionRenderer):
 
     Out-of-table requests are clamped and reported: ``V_out`` outside the table
     (``table_clamped``), and per tick ``f_p`` outside ``frequency_range_hz``
-    (counter ``frequency_clamps``), both in :meth:`describe`.
+    (counter ``frequency_clamps``), both in :meth:`describe`; ``table_clamps`` counts the
+    active ticks played with a clamped ``V_out``.
     """
 
     roles = ("vibration",)
@@ -98,6 +99,8 @@ class RoughnessRenderer(DimensionRenderer):
         #: acceleration the table predicts at Fpeak for the clamped V_out (m/s^2)
         self.achieved_m_s2 = self.table.acceleration_at(self.fpeak_hz, self.v_out)
         self.frequency_clamps = 0
+        #: active ticks played with a clamped V_out (the table could not reach AFpeak at Fpeak)
+        self.table_clamps = 0
         self.ticks = 0
         self.active_ticks = 0
         self._last_f = min(max(self.fpeak_hz, self.f_lo), self.f_hi)
@@ -118,6 +121,8 @@ class RoughnessRenderer(DimensionRenderer):
             f = self.f_lo if f < self.f_lo else self.f_hi
         self._last_f = f
         self.active_ticks += 1
+        if not self.in_table:
+            self.table_clamps += 1
         return [ChannelCommand(role="vibration", frequency_hz=f, amplitude=self.v_out)]
 
     def describe(self) -> dict:
@@ -127,7 +132,7 @@ class RoughnessRenderer(DimensionRenderer):
                 "table_generated": self.table.generated, "table_source": self.table.source,
                 "v_ref_mm_s": self.v_ref_mm_s, "v_gate_mm_s": self.v_gate_mm_s,
                 "frequency_range_hz": [self.f_lo, self.f_hi],
-                "frequency_clamps": self.frequency_clamps, "ticks": self.ticks,
+                "frequency_clamps": self.frequency_clamps, "table_clamps": self.table_clamps, "ticks": self.ticks,
                 "active_ticks": self.active_ticks}
 
 

@@ -1,0 +1,639 @@
+"""Solver benchmark: work-precision, runtime-to-target, peers, penalty forms, speed goals.
+
+Run with ``hapticsdk bench solvers [--json] [--plot FILE] [--quick]`` (or
+``python bench/bench_solvers.py``), on one core: set ``OMP_NUM_THREADS=1`` before the
+process starts (the ONNX model already runs onnxruntime with one intra-op thread).
+
+Targets (:func:`bench_targets`):
+
+* the material library (``hapticsdk/data/materials.json``, its intensities),
+* reachable extremes: the feasible model outputs (20000 uniform feature samples, seed 0,
+  constraints met) that are extreme along h, r, h+r and h-r,
+* candidate unreachable targets: the corners and edge midpoints of the intensity square.
+
+Every target gets a *reference* answer: the best of a 16-start, 100-iteration LM polish
+and a 200-generation GA. A target is *reachable* when the reference error is <= 1e-6
+(the model output can be met exactly), *boundary* when it is above that but within the
+tolerance, *unreachable* beyond the tolerance (those must end ``success=False`` for every
+solver; checked and reported).
+
+Work-precision: for each solver, a list of settings (generations, LM iterations, ...);
+each setting solves the whole reachable batch once per seed with ``target_error=0`` (no
+early stop); per run, ``time_s`` = wall time of the batched call / number of targets and
+``error`` = the 90th percentile over the targets of the sum of absolute intensity errors;
+a point is the median over seeds of both, with the 10th and 90th percentiles over seeds
+of the error as spread. Runtime-to-target (COCO style, fixed targets 1e-1, 1e-2, 1e-3):
+from the per-iteration traces of the largest setting, the first wall time (per target)
+at which the 90th percentile of the best errors over the targets reaches the threshold;
+median over seeds, ``null`` when fewer than half of the seeds reach it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..errors import ValidationError
+from ..solvers import SolveProblem
+
+THRESHOLDS = (1e-1, 1e-2, 1e-3)
+DIMS = ("hardness", "roughness")
+
+
+# ---------------------------------------------------------------------------
+# problem and targets
+
+def load_material_targets(path: str | Path | None = None) -> tuple[list[str], np.ndarray]:
+    """Names and ``(m, 2)`` (hardness, roughness) intensities of the material library."""
+    try:
+        from ..materials import load_library  # type: ignore[attr-defined]
+        lib = load_library(path) if path else load_library()
+        mats = list(getattr(lib, "materials", lib))
+        names = [m.name for m in mats]
+        T = np.array([[m.intensities[d] for d in DIMS] for m in mats], float)
+        return names, T
+    except Exception:
+        p = Path(path) if path else Path(__file__).resolve().parents[1] / "data" / "materials.json"
+        data = json.loads(p.read_text())
+        names = [m["name"] for m in data["materials"]]
+        T = np.array([[m["intensities"][d] for d in DIMS] for m in data["materials"]], float)
+        return names, T
+
+
+def make_problem_factory() -> tuple[Callable[..., SolveProblem], str]:
+    """``factory(targets, penalty=...) -> SolveProblem`` on the default model, and its
+    description. Raises when the default model or the dimensions are not installed."""
+    from ..problems import build_problem
+
+    probe = build_problem(np.array([[0.5, 0.5]]), dimensions=DIMS)
+    desc = f"{type(probe.model).__name__} {probe.model.name!r} (default model), space {list(probe.space.names)}, " \
+           f"constraints {[c.name for c in probe.constraints]}"
+
+    def factory(T: np.ndarray, penalty: str = "paper", **kw: Any) -> SolveProblem:
+        return build_problem(np.asarray(T, float), dimensions=DIMS, penalty=penalty, **kw)
+
+    return factory, desc
+
+
+def feasible_samples(problem: SolveProblem, n: int = 20000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    X = problem.space.random(n, np.random.default_rng(seed))
+    G = problem.full_inputs(X)
+    names = problem.model.dimension_names
+    Y = problem.model.predict(G)[:, [names.index(d) for d in problem.dimensions]]
+    ok = np.ones(n, bool)
+    cols = problem.columns(G)
+    for c in problem.constraints:
+        ok &= c.violation(cols) <= 1e-9
+    return X[ok], Y[ok]
+
+
+def bench_targets(factory: Callable[..., SolveProblem], material_path: str | None = None
+                  ) -> dict[str, Any]:
+    names, TM = load_material_targets(material_path)
+    probe = factory(np.array([[0.5, 0.5]]))
+    _, Y = feasible_samples(probe)
+    ext_idx, ext_names = [], []
+    for lab, v in (("min h", Y[:, 0]), ("max h", -Y[:, 0]), ("min r", Y[:, 1]), ("max r", -Y[:, 1]),
+                   ("min h+r", Y.sum(1)), ("max h+r", -Y.sum(1)), ("min h-r", Y[:, 0] - Y[:, 1]),
+                   ("max h-r", Y[:, 1] - Y[:, 0])):
+        k = int(np.argmin(v))
+        if k not in ext_idx:
+            ext_idx.append(k)
+            ext_names.append(f"extreme {lab}")
+    TE = Y[ext_idx]
+    TU = np.array([[0, 0], [1, 1], [0, 1], [1, 0], [0.5, 0], [0.5, 1], [0, 0.5], [1, 0.5]], float)
+    T = np.concatenate([TM, TE, TU])
+    labels = names + ext_names + [f"square ({a:g}, {b:g})" for a, b in TU]
+    kinds = ["material"] * len(TM) + ["extreme"] * len(TE) + ["candidate-unreachable"] * len(TU)
+    return {"targets": T, "labels": labels, "kinds": kinds}
+
+
+def reference_errors(factory: Callable[..., SolveProblem], T: np.ndarray) -> np.ndarray:
+    from hapticsdk_ga.ga import GASolver
+    from hapticsdk_ga.polish import PolishSolver
+
+    p = factory(T)
+    a = PolishSolver(starts=16, max_iter=100, target_error=1e-10).solve(p, seed=12345)
+    b = GASolver(generations=200, target_error=0).solve(p, seed=12345)
+    ea = np.where([r.constraint_violation <= 1e-9 for r in a], a.error, np.inf)
+    eb = np.where([r.constraint_violation <= 1e-9 for r in b], b.error, np.inf)
+    return np.minimum(ea, eb)
+
+
+# ---------------------------------------------------------------------------
+# runs
+
+def _solver(name: str, **opts: Any):
+    from ..plugins import registry
+    return registry("solver").load(name)(**opts)
+
+
+def _p(v: np.ndarray, q: float) -> float:
+    return float(np.percentile(np.asarray(v, float), q))
+
+
+def _trace_p90(res: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(time_s per iteration, p90 over targets of best error per iteration)."""
+    n = min(len(r.trace) for r in res)
+    times = np.array([res[0].trace[i]["time_s"] for i in range(n)])
+    E = np.array([[r.trace[i]["best_error"] for r in res] for i in range(n)])
+    return times, np.percentile(E, 90, axis=1)
+
+
+def work_precision(factory: Callable[..., SolveProblem], T: np.ndarray, name: str,
+                   settings: list[dict[str, Any]], seeds: list[int], *, penalty: str = "paper",
+                   prepare: Callable[[SolveProblem, Any], None] | None = None) -> dict[str, Any]:
+    p = factory(T, penalty=penalty)
+    m = len(T)
+    points = []
+    ttt: dict[str, list[float | None]] = {f"{t:g}": [] for t in THRESHOLDS}
+    for k, opts in enumerate(settings):
+        S = _solver(name, **opts)
+        if prepare:
+            prepare(p, S)
+        else:
+            S.solve(factory(T[:1], penalty=penalty), seed=0)  # warm-up
+        times, errs, succ = [], [], []
+        for s in seeds:
+            t0 = time.perf_counter()
+            res = S.solve(p, seed=s)
+            dt = time.perf_counter() - t0
+            times.append(dt / m)
+            errs.append(_p(res.error, 90))
+            succ.append(float(np.mean(res.success)))
+            if k == len(settings) - 1:
+                tt, e90 = _trace_p90(res)
+                for thr in THRESHOLDS:
+                    hit = np.flatnonzero(e90 <= thr)
+                    ttt[f"{thr:g}"].append(float(tt[hit[0]]) / m if hit.size else None)
+        points.append({"setting": opts, "time_s": statistics.median(times), "error": statistics.median(errs),
+                       "error_p10": _p(errs, 10), "error_p90": _p(errs, 90),
+                       "success_rate": statistics.median(succ), "runs": len(seeds)})
+    out_ttt = {}
+    for key, vals in ttt.items():
+        got = [v for v in vals if v is not None]
+        out_ttt[key] = statistics.median(got) if len(got) * 2 >= max(len(vals), 1) else None
+    return {"points": points, "time_to_error": out_ttt}
+
+
+# ---------------------------------------------------------------------------
+# peers: same fitness (one target row of formula (6)), population 100, 50 generations
+
+def _peer_fitness(p: SolveProblem, i: int):
+    from hapticsdk_ga._common import Evaluator
+    ev = Evaluator(p)
+    rows = np.array([i])
+
+    def f(X: np.ndarray) -> np.ndarray:
+        return ev(np.asarray(X, float)[None], rows)[0][0]
+    return f, ev
+
+
+def peer_pygad(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
+    import pygad
+    f, _ = _peer_fitness(p, i)
+    lo, hi = p.space.lower, p.space.upper
+
+    def fit(ga: Any, sols: Any, idx: Any) -> Any:
+        return -f(np.atleast_2d(sols))
+
+    ga = pygad.GA(num_generations=gens, sol_per_pop=pop, num_parents_mating=pop // 2, num_genes=len(lo),
+                  fitness_func=fit, fitness_batch_size=pop, gene_space=[{"low": a, "high": b} for a, b in zip(lo, hi)],
+                  init_range_low=0, init_range_high=1, parent_selection_type="tournament", K_tournament=2,
+                  crossover_type="single_point", crossover_probability=0.6, mutation_type="random",
+                  mutation_probability=0.2, keep_elitism=5, random_seed=seed, suppress_warnings=True,
+                  save_solutions=False)
+    ga.run()
+    return np.asarray(ga.best_solution(pop_fitness=ga.last_generation_fitness)[0], float)
+
+
+def peer_deap(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
+    import random
+    from deap import algorithms, base, creator, tools
+    f, _ = _peer_fitness(p, i)
+    lo, hi = p.space.lower, p.space.upper
+    if not hasattr(creator, "HsdkFitMin"):
+        creator.create("HsdkFitMin", base.Fitness, weights=(-1.0,))
+        creator.create("HsdkInd", list, fitness=creator.HsdkFitMin)
+    rnd = random.Random(seed)
+    tb = base.Toolbox()
+    tb.register("individual", lambda: creator.HsdkInd([rnd.uniform(a, b) for a, b in zip(lo, hi)]))
+    tb.register("population", tools.initRepeat, list, tb.individual)
+
+    def batched_map(func: Any, inds: Any) -> list:
+        inds = list(inds)
+        if not inds:
+            return []
+        vals = f(np.array(inds, float))
+        return [(float(v),) for v in vals]
+
+    def mutate(ind: Any) -> tuple:
+        for j, (a, b) in enumerate(zip(lo, hi)):
+            if rnd.random() < 0.2:
+                ind[j] = rnd.uniform(a, b)
+        return (ind,)
+
+    def mate(a: Any, b: Any) -> tuple:
+        if len(a) > 1:
+            c = rnd.randint(1, len(a) - 1)
+            a[c:], b[c:] = b[c:], a[c:]
+        return a, b
+
+    tb.register("evaluate", lambda ind: (0.0,))
+    tb.register("map", batched_map)
+    tb.register("mate", mate)
+    tb.register("mutate", mutate)
+    tb.register("select", tools.selTournament, tournsize=2)
+    random.seed(seed)
+    population = tb.population(n=pop)
+    hof = tools.HallOfFame(1)
+    algorithms.eaSimple(population, tb, cxpb=0.6, mutpb=0.2, ngen=gens, halloffame=hof, verbose=False)
+    return np.asarray(hof[0], float)
+
+
+def peer_pymoo(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
+    from pymoo.algorithms.soo.nonconvex.ga import GA
+    from pymoo.core.problem import Problem
+    from pymoo.optimize import minimize
+    f, _ = _peer_fitness(p, i)
+    lo, hi = p.space.lower, p.space.upper
+    free = hi > lo
+
+    class P(Problem):
+        def __init__(self) -> None:
+            super().__init__(n_var=int(free.sum()), n_obj=1, xl=lo[free], xu=hi[free])
+
+        def _evaluate(self, Z: Any, out: Any, *a: Any, **k: Any) -> None:
+            X = np.tile(lo, (len(Z), 1))
+            X[:, free] = Z
+            out["F"] = f(X)
+
+    res = minimize(P(), GA(pop_size=pop, eliminate_duplicates=False), ("n_gen", gens), seed=seed, verbose=False)
+    x = lo.copy()
+    x[free] = np.asarray(res.X, float).reshape(-1)
+    return x
+
+
+PEERS = {"pygad": peer_pygad, "deap": peer_deap, "pymoo": peer_pymoo}
+
+
+def run_peers(factory: Callable[..., SolveProblem], T: np.ndarray, seeds: list[int]) -> dict[str, Any]:
+    """Each peer, and our GA, solve each target one by one (population 100, 50 generations)."""
+    from hapticsdk_ga.ga import GASolver
+    p = factory(T)
+    out: dict[str, Any] = {}
+    ours_single = []
+    ours_err = []
+    for s in seeds:
+        for i in range(len(T)):
+            pi = factory(T[i:i + 1])
+            t0 = time.perf_counter()
+            r = GASolver(target_error=0).solve(pi, seed=s)
+            ours_single.append(time.perf_counter() - t0)
+            ours_err.append(float(r.error[0]))
+    t_ours = statistics.median(ours_single)
+    out["ga (ours, one target per call)"] = {"points": [{"time_s": t_ours, "error": _p(ours_err, 50),
+                                                        "error_p10": _p(ours_err, 10), "error_p90": _p(ours_err, 90)}],
+                                            "time_to_error": None, "time_ratio_vs_ours": 1.0}
+    for name, fn in PEERS.items():
+        try:
+            fn(p, 0, 0, pop=10, gens=2)  # import + warm-up
+        except Exception as exc:  # peer not installed or API changed: report, don't fail
+            out[name] = {"error": f"{type(exc).__name__}: {exc}"}
+            continue
+        times, errs = [], []
+        for s in seeds:
+            for i in range(len(T)):
+                t0 = time.perf_counter()
+                x = fn(p, i, s)
+                times.append(time.perf_counter() - t0)
+                X = np.tile(p.space.clip(x), (len(T), 1))
+                errs.append(float(p.evaluate(X, details=True)["error"][i]))
+        t = statistics.median(times)
+        out[name] = {"points": [{"time_s": t, "error": _p(errs, 50), "error_p10": _p(errs, 10),
+                                 "error_p90": _p(errs, 90)}],
+                     "time_to_error": None, "time_ratio_vs_ours": t / t_ours}
+    return out
+
+
+# ---------------------------------------------------------------------------
+# goals and profile
+
+def profile_ga(factory: Callable[..., SolveProblem], T: np.ndarray) -> dict[str, Any]:
+    """Share of the GA's wall time spent inside ``model.predict`` (paper settings, no early stop)."""
+    from hapticsdk_ga.ga import GASolver
+    p = factory(T)
+    model = p.model
+    orig = model.predict
+    spent = [0.0, 0]
+
+    def timed(G: Any) -> Any:
+        t0 = time.perf_counter()
+        y = orig(G)
+        spent[0] += time.perf_counter() - t0
+        spent[1] += len(G)
+        return y
+
+    model.predict = timed  # type: ignore[method-assign]
+    try:
+        t0 = time.perf_counter()
+        GASolver(target_error=0).solve(p, seed=0)
+        total = time.perf_counter() - t0
+    finally:
+        del model.predict
+    return {"targets": len(T), "total_ms": total * 1e3, "model_predict_ms": spent[0] * 1e3,
+            "model_share": spent[0] / total, "rows": spent[1], "ns_per_row_in_model": spent[0] / spent[1] * 1e9}
+
+
+def amortised_stats(factory: Callable[..., SolveProblem], T: np.ndarray, ref_ga_error: np.ndarray,
+                    n_lookup: int = 20000) -> dict[str, Any]:
+    from hapticsdk_ga.amortised import AmortisedSolver
+    p = factory(T)
+    S = AmortisedSolver()
+    t0 = time.perf_counter()
+    tab = S.table(p)
+    t_table = time.perf_counter() - t0
+    rng = np.random.default_rng(0)
+    Q = rng.random((n_lookup, 2))
+    lk = tab.lookup
+    per = []
+    for q in Q:
+        t0 = time.perf_counter()
+        lk(q)
+        per.append(time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    lk(Q)
+    batch_us = (time.perf_counter() - t0) / n_lookup * 1e6
+    out: dict[str, Any] = {"median_us": statistics.median(per) * 1e6, "p90_us": _p(per, 90) * 1e6,
+                           "batch_us_per_target": batch_us, "table_shape": list(tab.X.shape),
+                           "table_time_s (build or cache load, once per model)": t_table,
+                           "reachable_node_fraction": tab.reachable_fraction(p.tolerance)}
+    errs = {}
+    for steps in (0, 1, 2):
+        r = AmortisedSolver(polish_steps=steps).solve(p, seed=0)
+        errs[f"polish_steps={steps}"] = {"error_p50": _p(r.error, 50), "error_p90": _p(r.error, 90),
+                                         "error_max": float(np.max(r.error)),
+                                         "success_rate": float(np.mean(r.success)),
+                                         "ms_per_target": r.time_s / len(T) * 1e3}
+    out["error_vs_full_solve"] = {"full_ga_error_p50": _p(ref_ga_error, 50), "full_ga_error_p90": _p(ref_ga_error, 90),
+                                  **errs}
+    return out
+
+
+def batch_call_times(factory: Callable[..., SolveProblem], T: np.ndarray, seeds: list[int]) -> dict[str, Any]:
+    """Wall time of ONE batched call on the material targets, per method (median over seeds)."""
+    p = factory(T)
+    out = {}
+    for name, opts in (("ga", {}), ("ga-polish", {}), ("polish", {}), ("amortised", {})):
+        S = _solver(name, **opts)
+        S.solve(p, seed=0)
+        ts, errs, succ = [], [], []
+        for s in seeds:
+            r = S.solve(p, seed=s)
+            ts.append(r.time_s)
+            errs.append(_p(r.error, 90))
+            succ.append(float(np.mean(r.success)))
+        out[name] = {"ms": statistics.median(ts) * 1e3, "error_p90": statistics.median(errs),
+                     "success_rate": statistics.median(succ)}
+    return out
+
+
+def machine_info() -> dict[str, Any]:
+    import scipy
+    info = {"machine": platform.machine(), "processor": platform.processor() or _cpu_name(),
+            "cpus": os.cpu_count(), "python": sys.version.split()[0], "numpy": np.__version__,
+            "scipy": scipy.__version__, "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS"),
+            "platform": platform.platform()}
+    try:
+        import onnxruntime
+        info["onnxruntime"] = onnxruntime.__version__
+    except ImportError:
+        pass
+    return info
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return ""
+
+
+# ---------------------------------------------------------------------------
+# the whole benchmark
+
+def run(*, quick: bool = False, seeds: int | None = None, log: Callable[[str], None] | None = None
+        ) -> dict[str, Any]:
+    """Run the benchmark; returns the JSON-ready report (see module doc)."""
+    say = log or (lambda s: None)
+    n_seeds = seeds or (3 if quick else 15)
+    if n_seeds < 1:
+        raise ValidationError("need at least one seed", field="seeds")
+    seed_list = list(range(n_seeds))
+    factory, model_desc = make_problem_factory()
+    say(f"model: {model_desc}")
+    tg = bench_targets(factory)
+    T, labels, kinds = tg["targets"], tg["labels"], np.array(tg["kinds"])
+    say(f"{len(T)} targets; computing reference answers")
+    ref = reference_errors(factory, T)
+    tol = factory(T[:1]).tolerance
+    cls = np.where(ref <= 1e-6, "reachable", np.where(ref <= tol, "boundary", "unreachable"))
+    reach = cls == "reachable"
+    TR = T[reach]
+    report: dict[str, Any] = {
+        "meta": {**machine_info(), "model": model_desc, "quick": quick, "seeds": n_seeds,
+                 "error": "sum over dimensions of |predicted - target| intensity; per run the 90th percentile over reachable targets",
+                 "time": "wall seconds of one batched call / number of targets"},
+        "targets": [{"label": l, "kind": k, "target": [float(a), float(b)], "class": str(c), "reference_error": float(r)}
+                    for l, k, (a, b), c, r in zip(labels, kinds, T, cls, ref)],
+    }
+    report["targets_summary"] = {c: int((cls == c).sum()) for c in ("reachable", "boundary", "unreachable")}
+
+    if quick:
+        cfg = {
+            "ga": [{"generations": g, "target_error": 0} for g in (5, 20, 50)],
+            "de": [{"generations": g, "target_error": 0} for g in (10, 50)],
+            "polish": [{"max_iter": k, "target_error": 0} for k in (4, 30)],
+            "ga-polish": [{"max_iter": k, "target_error": 0} for k in (2, 8)],
+            "amortised": [{"polish_steps": k} for k in (0, 1, 3)],
+        }
+    else:
+        cfg = {
+            "ga": [{"generations": g, "target_error": 0} for g in (5, 10, 20, 50, 100, 200)],
+            "de": [{"generations": g, "target_error": 0} for g in (10, 25, 50, 100, 200)],
+            "de-scipy": [{"maxiter": k, "target_error": 0} for k in (10, 30, 100)],
+            "polish": [{"max_iter": k, "target_error": 0} for k in (2, 4, 8, 16, 30)],
+            "ga-polish": [{"max_iter": k, "target_error": 0} for k in (1, 2, 4, 8, 16)],
+            "amortised": [{"polish_steps": k} for k in (0, 1, 2, 3, 5)],
+        }
+
+    def prep_amortised(p: SolveProblem, S: Any) -> None:
+        S.table(p)           # build or load once; not timed
+        S.solve(p, seed=0)   # warm-up
+
+    report["solvers"] = {}
+    for name, settings in cfg.items():
+        say(f"work-precision: {name} ({len(settings)} settings x {n_seeds} seeds)")
+        sd = seed_list if name != "de-scipy" else seed_list[:max(3, n_seeds // 5)]
+        report["solvers"][name] = work_precision(factory, TR, name, settings, sd,
+                                                 prepare=prep_amortised if name == "amortised" else None)
+
+    # unreachable targets must fail with every solver (default settings)
+    unre = T[cls == "unreachable"]
+    checks = {}
+    if len(unre):
+        pu = factory(unre)
+        for name in cfg:
+            r = _solver(name).solve(pu, seed=0)
+            checks[name] = {"all_success_false": bool(not np.any(r.success)), "min_error": float(np.min(r.error))}
+    report["unreachable_check"] = checks
+
+    say("peers (pygad, DEAP, pymoo) at population 100 x 50 generations")
+    peer_T = TR[:3] if quick else TR[:8]
+    peer_seeds = seed_list[:1] if quick else seed_list[:3]
+    report["peers"] = run_peers(factory, peer_T, peer_seeds)
+    report["peers_note"] = ("each peer and our GA solve one target per call (population 100, 50 generations, "
+                            f"{len(peer_T)} reachable targets x {len(peer_seeds)} seeds); time_s per target; "
+                            "time_ratio_vs_ours = peer time / our GA time, same fitness function (formula (6)).")
+
+    say("penalty forms")
+    pen = {}
+    for form in ("paper", "normalised"):
+        wp = work_precision(factory, TR, "ga", [{"target_error": 0}], seed_list, penalty=form)
+        pen[form] = wp["points"][0]
+    better = min(pen, key=lambda k: pen[k]["error"])
+    report["penalty_forms"] = {**pen, "lower_error": better,
+                               "note": "GA at the paper's settings (same generations, so about equal time)"}
+
+    say("goals")
+    mats = T[kinds == "material"]
+    ga_full = _solver("ga", target_error=0).solve(factory(TR), seed=0)
+    report["amortised"] = amortised_stats(factory, TR, ga_full.error)
+    report["batch_23_materials"] = batch_call_times(factory, mats, seed_list[: max(3, min(n_seeds, 7))])
+    report["profile_ga"] = profile_ga(factory, TR)
+    report["goals"] = _goals(report)
+    return report
+
+
+def _goals(rep: dict[str, Any]) -> dict[str, Any]:
+    ga_pts = rep["solvers"]["ga"]["points"]
+    paper = [pt for pt in ga_pts if pt["setting"].get("generations") == 50]
+    best = None
+    for name, s in rep["solvers"].items():
+        for pt in s["points"]:
+            if pt["error"] <= 1e-3 and (best is None or pt["time_s"] < best[1]["time_s"]):
+                best = (name, pt)
+    g: dict[str, Any] = {}
+    if paper:
+        ms = paper[0]["time_s"] * 1e3
+        g["ga_paper_settings_ms_per_target"] = {"measured": ms, "goal": 2.0, "met": ms <= 2.0}
+    if best:
+        ms = best[1]["time_s"] * 1e3
+        g["error_1e-3_p90_ms_per_target"] = {"solver": best[0], "setting": best[1]["setting"], "measured": ms,
+                                             "goal": 5.0, "met": ms <= 5.0}
+    b = rep["batch_23_materials"]
+    g["materials_one_batched_call_ms"] = {k: {"measured": v["ms"], "goal": 10.0, "met": v["ms"] <= 10.0}
+                                          for k, v in b.items()}
+    us = rep["amortised"]["median_us"]
+    g["amortised_lookup_median_us"] = {"measured": us, "goal": 50.0, "stretch_goal": 10.0, "met": us < 50.0}
+    return g
+
+
+# ---------------------------------------------------------------------------
+# plot
+
+def plot(report: dict[str, Any], path: str | Path) -> None:
+    """Work-precision (error vs time per target, log-log) and runtime-to-target bars."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [3, 2]})
+    floor = 1e-12
+    for name, s in report["solvers"].items():
+        pts = s["points"]
+        t = np.array([p["time_s"] for p in pts]) * 1e3
+        e = np.maximum([p["error"] for p in pts], floor)
+        lo = np.maximum([p["error_p10"] for p in pts], floor)
+        hi = np.maximum([p["error_p90"] for p in pts], floor)
+        ax.errorbar(t, e, yerr=[e - lo, hi - e], marker="o", capsize=3, label=name)
+    for name, s in report.get("peers", {}).items():
+        if "points" not in s:
+            continue
+        pt = s["points"][0]
+        ax.errorbar([pt["time_s"] * 1e3], [max(pt["error"], floor)],
+                    yerr=[[max(pt["error"], floor) - max(pt["error_p10"], floor)],
+                          [max(pt["error_p90"], floor) - max(pt["error"], floor)]],
+                    marker="s", linestyle="none", capsize=3, label=f"peer: {name} (1 target/call)")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("run time per target (ms), batched call")
+    ax.set_ylabel("error: p90 over targets of sum |I - T| (median over seeds, bars p10-p90)")
+    ax.axhline(1e-3, color="gray", lw=0.8, ls=":")
+    ax.axvline(5.0, color="gray", lw=0.8, ls=":")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    m = report["meta"]
+    ax.set_title(f"work-precision ({report['targets_summary']['reachable']} reachable targets, {m['seeds']} seeds)",
+                 fontsize=9)
+    names = list(report["solvers"])
+    width = 0.25
+    for j, thr in enumerate(("0.1", "0.01", "0.001")):
+        vals = [report["solvers"][n]["time_to_error"].get(thr) for n in names]
+        xs = np.arange(len(names)) + (j - 1) * width
+        ax2.bar(xs, [v * 1e3 if v is not None else 0 for v in vals], width, label=f"error {thr}")
+        for x, v in zip(xs, vals):
+            if v is None:
+                ax2.text(x, 1e-3, "n/r", ha="center", va="bottom", fontsize=6, rotation=90)
+    ax2.set_yscale("log")
+    ax2.set_ylim(bottom=1e-3)
+    ax2.set_xticks(np.arange(len(names)))
+    ax2.set_xticklabels(names, rotation=30, fontsize=8)
+    ax2.set_ylabel("time to p90 error (ms per target)")
+    ax2.set_title("runtime to target (n/r: not reached)", fontsize=9)
+    ax2.legend(fontsize=7)
+    fig.suptitle(f"hapticsdk solvers - {m['model'][:60]} - {m.get('processor', '')}, Python {m['python']}, "
+                 f"numpy {m['numpy']}, OMP_NUM_THREADS={m.get('OMP_NUM_THREADS')}", fontsize=8)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def summary_text(rep: dict[str, Any]) -> str:
+    """A human-readable table of the report."""
+    lines = [f"model: {rep['meta']['model']}", f"targets: {rep['targets_summary']}", "",
+             f"{'solver':<12}{'setting':<34}{'ms/target':>10}{'p90 err':>11}{'succ':>6}"]
+    for name, s in rep["solvers"].items():
+        for pt in s["points"]:
+            st = ",".join(f"{k}={v}" for k, v in pt["setting"].items() if k != "target_error")
+            lines.append(f"{name:<12}{st:<34}{pt['time_s'] * 1e3:>10.3f}{pt['error']:>11.2e}{pt['success_rate']:>6.2f}")
+        tt = s["time_to_error"]
+        lines.append(f"{'':<12}time to error (ms/target): " + ", ".join(
+            f"{k}: {'null' if v is None else f'{v * 1e3:.3f}'}" for k, v in tt.items()))
+    lines.append("")
+    for name, s in rep["peers"].items():
+        if "points" in s:
+            pt = s["points"][0]
+            lines.append(f"peer {name:<30} {pt['time_s'] * 1e3:9.2f} ms/target  median err {pt['error']:.2e}  "
+                         f"time ratio vs our GA {s['time_ratio_vs_ours']:.2f}")
+        else:
+            lines.append(f"peer {name}: {s['error']}")
+    pf = rep["penalty_forms"]
+    lines.append(f"penalty paper: p90 err {pf['paper']['error']:.2e}; normalised: {pf['normalised']['error']:.2e} "
+                 f"-> lower error: {pf['lower_error']}")
+    a = rep["amortised"]
+    lines.append(f"amortised lookup: median {a['median_us']:.2f} us (batch {a['batch_us_per_target']:.3f} us/target)")
+    lines.append("goals: " + json.dumps(rep["goals"], indent=1))
+    return "\n".join(lines)

@@ -1,0 +1,215 @@
+"""Calibration and run-file commands: ``calibrate voicecoil|piezo|answers|list``, ``replay``."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from . import emit
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    cal = sub.add_parser("calibrate", help="fit actuator calibrations (voice coil formula (7), piezo Tab)")
+    csub = cal.add_subparsers(dest="calibrate_command", metavar="KIND")
+    cal.set_defaults(func=lambda args: (cal.print_help(), 2)[1])
+
+    p = csub.add_parser("voicecoil", help="fit formula (7) to stiffness-discrimination answers (CSV)")
+    p.add_argument("answers", help="CSV with columns person, frequency_hz, spring_n_per_mm, spring_stiffer")
+    p.add_argument("--confidence", type=float, default=0.95, help="level of the coefficient intervals")
+    p.add_argument("--serial", help="device serial number the calibration belongs to")
+    p.add_argument("--amplifier-gain", type=float, help="amplifier gain used in the experiment")
+    p.add_argument("--mounting", default="", help="how the tactor was mounted")
+    _save_args(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_voicecoil)
+
+    p = csub.add_parser("piezo", help="build the piezo table Tab from acceleration measurements")
+    p.add_argument("measurements", help="CSV with columns frequency_hz, voltage_v, acceleration_m_s2, "
+                                        "or a piezo table JSON")
+    p.add_argument("--serial", help="device serial number the calibration belongs to")
+    _save_args(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_piezo)
+
+    p = csub.add_parser("answers", help="write GENERATED discrimination answers from formula (7) (for trying "
+                                        "the voice-coil fit; not measured data)")
+    p.add_argument("out", help="CSV to write")
+    p.add_argument("--people", type=int, default=10)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_answers)
+
+    p = csub.add_parser("list", help="calibration files and the calibration each kind uses")
+    p.add_argument("--dir", help="calibration directory (default $HAPTICSDK_CALIBRATION_DIR or "
+                                 "~/.config/hapticsdk/calibration)")
+    p.add_argument("--serial", action="append", default=[], metavar="KIND=SERIAL",
+                   help="serial number per kind (repeatable)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_list)
+
+    p = sub.add_parser("replay", help="summarise a recorded run file (.npz) and check it plays back")
+    p.add_argument("runfile")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_replay)
+
+
+def _save_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--save", nargs="?", const="", metavar="DIR",
+                   help="write the calibration file (to DIR, default the calibration directory)")
+    p.add_argument("--out", metavar="FILE", help="write the calibration file to FILE")
+
+
+def _save(args: argparse.Namespace, cal: Any) -> str | None:
+    from ..calibration import save_calibration
+
+    if args.out:
+        return str(save_calibration(cal, path=args.out))
+    if args.save is not None:
+        return str(save_calibration(cal, args.save or None))
+    return None
+
+
+def cmd_voicecoil(args: argparse.Namespace) -> int:
+    from ..calibration import fit_voicecoil
+    from ..calibration.voicecoil import PAPER_COEFFICIENTS
+
+    res = fit_voicecoil(args.answers, confidence=args.confidence, serial=args.serial,
+                        amplifier_gain=args.amplifier_gain, mounting=args.mounting)
+    saved = _save(args, res.calibration) if res.success else None
+    out = res.to_dict()
+    out["paper_coefficients"] = list(PAPER_COEFFICIENTS)
+    out["paper_inside_intervals"] = [lo <= c <= hi for c, (lo, hi) in zip(PAPER_COEFFICIENTS, res.confidence_intervals)]
+    out["saved"] = saved
+    if args.json:
+        emit(out, True)
+    else:
+        lines = [f"voice-coil calibration from {sum(lv.n_answers for lv in res.levels)} answers"
+                 f"{' (GENERATED)' if res.generated else ''}: {res.message}",
+                 f"  {'f (Hz)':>7} {'PSE (N/mm)':>11} {'95% interval':>18} {'sigma':>7}"]
+        for lv in res.levels:
+            flag = " censored" if lv.censored else ""
+            lines.append(f"  {lv.frequency_hz:7.1f} {lv.pse_n_per_mm:11.4f} "
+                         f"[{lv.pse_ci[0]:7.4f}, {lv.pse_ci[1]:7.4f}] {lv.sigma_n_per_mm:7.4f}{flag}")
+        names = ("a (N/mm/Hz^2)", "b (N/mm/Hz)", "c (N/mm)")
+        lines.append(f"  GS_coil(f) = a f^2 + b f + c, {100 * res.confidence:g} % intervals "
+                     f"(reduced chi2 {res.chi2_reduced:.2f}):")
+        for n, c, (lo, hi), pc in zip(names, res.coefficients, res.confidence_intervals, PAPER_COEFFICIENTS):
+            lines.append(f"    {n:14} {c: .6g}  [{lo: .6g}, {hi: .6g}]   paper {pc:g}")
+        if saved:
+            lines.append(f"  saved to {saved}")
+        print("\n".join(lines))
+    return 0 if res.success else 1
+
+
+def cmd_piezo(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..calibration import PiezoTable, read_measurements_csv
+
+    path = Path(args.measurements)
+    if path.suffix.lower() == ".json":
+        from ..errors import CalibrationError
+        try:
+            table = PiezoTable.from_dict(json.loads(path.read_text()))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise CalibrationError(f"{path}: {exc}") from None
+    else:
+        table = read_measurements_csv(path)
+    if args.serial:
+        table.serial = args.serial
+    # round trip at the midpoints between measured frequencies and voltages
+    fm = 0.5 * (table.frequencies_hz[1:] + table.frequencies_hz[:-1])
+    errs = []
+    for f in fm:
+        row = table._row(f)
+        for a in 0.5 * (row[1:] + row[:-1]):
+            v, ok = table.voltage_for(f, a)
+            if ok and a > 0:
+                errs.append(abs(table.acceleration_at(f, v) - a) / a)
+    saved = _save(args, table)
+    out = {"kind": "piezo", "serial": table.serial, "generated": table.generated, "source": table.source,
+           "frequency_range_hz": list(table.frequency_range_hz),
+           "voltage_range_v": [float(table.voltages_v[0]), float(table.voltages_v[-1])],
+           "acceleration_range_m_s2": [float(table.acceleration.min()), float(table.acceleration.max())],
+           "grid": [int(table.frequencies_hz.size), int(table.voltages_v.size)],
+           "round_trip_max_rel_error": float(np.max(errs)) if errs else None, "saved": saved}
+    if args.json:
+        emit(out, True)
+    else:
+        print(f"piezo table{' (GENERATED)' if table.generated else ''}: {out['grid'][0]} frequencies "
+              f"{out['frequency_range_hz'][0]:g}..{out['frequency_range_hz'][1]:g} Hz x {out['grid'][1]} voltages "
+              f"{out['voltage_range_v'][0]:g}..{out['voltage_range_v'][1]:g} V; acceleration "
+              f"{out['acceleration_range_m_s2'][0]:.4g}..{out['acceleration_range_m_s2'][1]:.4g} m/s^2; "
+              f"Tab round trip max error {out['round_trip_max_rel_error']:.2e}"
+              + (f"; saved to {saved}" if saved else ""))
+    return 0
+
+
+def cmd_answers(args: argparse.Namespace) -> int:
+    from ..calibration import generate_answers
+
+    ans = generate_answers(people=args.people, seed=args.seed)
+    p = ans.to_csv(args.out)
+    out = {"path": str(p), "answers": len(ans), "generated": True, "source": ans.source}
+    emit(out, args.json, f"wrote {len(ans)} GENERATED answers to {p}")
+    return 0
+
+
+def cmd_list(args: argparse.Namespace) -> int:
+    from ..calibration import calibration_dir, calibrations_in_use, list_calibrations
+    from ..errors import ValidationError
+
+    serials: dict[str, str] = {}
+    for item in args.serial:
+        kind, sep, serial = item.partition("=")
+        if not sep or not serial:
+            raise ValidationError(f"expected KIND=SERIAL, got {item!r}", field="--serial")
+        serials[kind] = serial
+    directory = args.dir or calibration_dir()
+    out = {"directory": str(directory),
+           "files": [e.to_dict() for e in list_calibrations(directory)],
+           "in_use": calibrations_in_use(serials, directory=directory)}
+    if args.json:
+        emit(out, True)
+    else:
+        lines = [f"calibration directory: {directory}"]
+        lines += [f"  {e['path']}: {e['kind']} serial={e['serial']}"
+                  + (f" ERROR {e['error']}" if e["error"] else "") for e in out["files"]] or ["  (no files)"]
+        lines.append("in use:")
+        lines += [f"  {u['kind']:9} serial={u['serial']} {u['origin']}: {u['source']}" for u in out["in_use"]]
+        print("\n".join(lines))
+    return 0
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from ..runlog import PlaybackDevice, load_run
+
+    run = load_run(args.runfile)
+    dev = PlaybackDevice(run=run)
+    # play every recorded state back through the device and check it returns them
+    mismatches = 0
+    with dev:
+        for i in range(len(run)):
+            st = dev.read_state()
+            if not np.array_equal(st.position_mm, run.position_mm[i]):
+                mismatches += 1
+            dev.step(run.period_s or 1e-3)
+    out = run.summary()
+    out["playback_ticks"] = len(run)
+    out["playback_mismatches"] = mismatches
+    if args.json:
+        emit(out, True)
+    else:
+        roles = ", ".join(f"{r} ({', '.join(sorted(v))})" for r, v in out["roles"].items()) or "none"
+        print(f"{args.runfile}: {out['n_ticks']} ticks over {out['duration_s']:.3f} s "
+              f"(period {out['period_s'] or float('nan'):.6f} s); roles: {roles}; "
+              f"playback {'ok' if mismatches == 0 else f'{mismatches} mismatching ticks'}")
+        for role, fields in out["roles"].items():
+            for f, r in fields.items():
+                print(f"  {role}.{f}: {r['min']:.4g} .. {r['max']:.4g} over {r['ticks']} ticks")
+    return 0 if mismatches == 0 else 1
