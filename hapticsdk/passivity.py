@@ -160,6 +160,14 @@ class ControllerSettings:
             force itself can push the stylus within one period (``F T^2 / 2m``). Without
             it (None) a force that catapults a light stylus out of a very stiff wall
             within a single long period is only seen afterwards.
+        device_damping_ns_per_m: physical viscous damping b of the device (N*s/m), if
+            known (identified). The observer then credits ``b dx^2 / dt`` per period, a
+            lower bound of what that damping dissipates (``int v^2 >= dx^2/dt``), so the
+            controller keeps the *device + wall* passive (the Colgate view, W_d >= 0)
+            instead of the wall alone; 0 (default) is the conservative wall-only view.
+        position_resolution_mm: encoder resolution (mm). The damping credit uses
+            ``max(|dx| - resolution, 0)``, a lower bound of the true displacement, so
+            a reading dithering between two counts earns no credit.
     """
 
     max_damping_ns_per_m: float = 5.0
@@ -169,6 +177,8 @@ class ControllerSettings:
     bound_tolerance_j: float = 5.0e-4
     energy_bound: bool = True
     device_mass_kg: float | None = 0.045
+    device_damping_ns_per_m: float = 0.0
+    position_resolution_mm: float = 0.0
 
 
 def _cap(budget: float, v: float, dt: float, mass: float | None) -> float:
@@ -223,6 +233,10 @@ class PassivityController:
         dx = (x_mm - self._x_prev) * 1e-3
         self._x_prev = x_mm
         self.energy_j -= self._f_prev * dx
+        if s.device_damping_ns_per_m > 0.0:
+            ddx = abs(dx) - s.position_resolution_mm * 1e-3
+            if ddx > 0.0:
+                self.energy_j += s.device_damping_ns_per_m * ddx * ddx / dt
         self.dissipated_j -= self._f_pc_prev * dx
         a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
         v_raw = dx / dt
@@ -272,15 +286,22 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: float,
                           f_wall: np.ndarray, on: np.ndarray,
-                          settings: ControllerSettings | None = None) -> np.ndarray:
+                          settings: ControllerSettings | None = None,
+                          damping_ns_per_m: "np.ndarray | float | None" = None,
+                          resolution_mm: "np.ndarray | float | None" = None) -> np.ndarray:
     """Vectorised :class:`PassivityController` over many independent cells (same law,
     same order of operations). Cells where ``on`` is False pass the wall force through
-    (their observer still runs). Call :func:`controller_commit_batch` after applying."""
+    (their observer still runs). ``damping_ns_per_m`` (per cell) overrides
+    ``settings.device_damping_ns_per_m`` and ``resolution_mm`` the encoder resolution. Call :func:`controller_commit_batch` after."""
     s = settings or ControllerSettings()
     started = state["started"]
     dx = np.where(started, (x_mm - state["x_prev"]) * 1e-3, 0.0)
     state["x_prev"] = np.array(x_mm, float)
     state["energy"] -= state["f_prev"] * dx
+    b = s.device_damping_ns_per_m if damping_ns_per_m is None else damping_ns_per_m
+    res = s.position_resolution_mm if resolution_mm is None else resolution_mm
+    ddx = np.maximum(np.abs(dx) - np.asarray(res, float) * 1e-3, 0.0)
+    state["energy"] += np.asarray(b, float) * ddx * ddx / dt
     state["dissipated"] -= state["f_pc_prev"] * dx
     a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
     v_raw = dx / dt

@@ -575,7 +575,7 @@ def plot(report: dict[str, Any], path: str | Path) -> None:
         ax.errorbar([pt["time_s"] * 1e3], [max(pt["error"], floor)],
                     yerr=[[max(pt["error"], floor) - max(pt["error_p10"], floor)],
                           [max(pt["error_p90"], floor) - max(pt["error"], floor)]],
-                    marker="s", linestyle="none", capsize=3, label=f"peer: {name} (1 target/call)")
+                    marker="s", linestyle="none", capsize=3, label=f"peer: {name}" + ("" if "one target" in name else " (1 target/call)"))
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("run time per target (ms), batched call")

@@ -118,7 +118,8 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
         y_meas = batch.measured_mm()
         pen = -y_meas
         f_wall = np.where(pen > 0, K * pen, 0.0)
-        f_cmd = controller_step_batch(st, y_meas, period_s, f_wall, on, settings)
+        f_cmd = controller_step_batch(st, y_meas, period_s, f_wall, on, settings, damping_ns_per_m=b,
+                                      resolution_mm=batch.res_mm)
         f_cmd = np.nan_to_num(f_cmd, nan=0.0)
         f = batch.step(f_cmd, np.full(len(arms), r[k]), np.full(len(arms), (r[k + 1] - r[k]) / period_s))
         controller_commit_batch(st, f)

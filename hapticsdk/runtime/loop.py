@@ -172,7 +172,11 @@ class ServoLoop:
         self.max_catchup_ticks = int(max_catchup_ticks)
         if passivity_settings is None:
             # the device's apparent mass (if it declares one) bounds the in-period push
-            passivity_settings = ControllerSettings(device_mass_kg=getattr(device, "apparent_mass_kg", None))
+            # and its declared physical damping is credited (device + wall passivity)
+            passivity_settings = ControllerSettings(
+                device_mass_kg=getattr(device, "apparent_mass_kg", None),
+                device_damping_ns_per_m=float(getattr(device, "damping_ns_per_m", 0.0) or 0.0),
+                position_resolution_mm=float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0))
         self.passivity_settings = passivity_settings
 
     # ------------------------------------------------------------------

@@ -140,6 +140,16 @@ class OmniVirtual(HapticDevice):
         return self.arm.mass_kg
 
     @property
+    def damping_ns_per_m(self) -> float:
+        """Physical viscous damping of the arm (N*s/m), credited by the passivity observer."""
+        return self.arm.damping_ns_per_m
+
+    @property
+    def encoder_resolution_mm(self) -> float:
+        """Position quantum of the encoder (mm)."""
+        return self.arm.encoder_resolution_mm
+
+    @property
     def true_position_mm(self) -> float:
         """Unquantised stylus height (mm)."""
         return self.sim.y * 1e3
