@@ -111,30 +111,18 @@ def check_libraries() -> dict[str, dict[str, Any]]:
     return out
 
 
-def calibration_dir() -> Path:
-    return Path(os.environ.get("HAPTICSDK_CALIBRATION_DIR", Path.home() / ".config" / "hapticsdk" / "calibration"))
-
-
 def list_calibrations(classes: dict[str, type] | None = None) -> list[dict[str, Any]]:
+    """Calibrations in use: what :func:`hapticsdk.calibration.load_calibration` picks for
+    each kind, every file of the calibration directory (schema-checked, errors kept), and
+    what backends report through an optional ``calibration_info()`` classmethod."""
+    from .calibration.store import calibrations_in_use, list_calibrations as files
+
     cals: list[dict[str, Any]] = []
     try:
-        from .calibration import VoiceCoilCalibration
-        vc = VoiceCoilCalibration()
-        cals.append({"kind": "voicecoil", "scope": "default", "source": vc.source, "generated": False,
-                     "coefficients": list(vc.coefficients), "frequency_range_hz": list(vc.frequency_range_hz)})
+        cals.extend(dict(c, scope="in use") for c in calibrations_in_use())
     except Exception as exc:
-        cals.append({"kind": "voicecoil", "error": _error_text(exc)})
-    d = calibration_dir()
-    if d.is_dir():
-        for p in sorted(d.glob("*.json")):
-            item: dict[str, Any] = {"kind": "file", "path": str(p)}
-            try:
-                import json
-                data = json.loads(p.read_text())
-                item.update(kind=data.get("kind", "?"), generated=data.get("generated"), source=data.get("source"))
-            except Exception as exc:
-                item["error"] = _error_text(exc)
-            cals.append(item)
+        cals.append({"scope": "in use", "error": _error_text(exc)})
+    cals.extend(dict(e.to_dict(), scope="file") for e in files())
     for name, cls in (classes or {}).items():
         info = getattr(cls, "calibration_info", None)
         if info is None:

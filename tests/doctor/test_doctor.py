@@ -77,7 +77,11 @@ def test_cli_doctor_json_and_text(broken_plugins, capsys, tmp_path, monkeypatch)
     from hapticsdk.cli.doctor import handle_doctor, register
 
     cal = tmp_path / "piezo-SN1.json"
-    cal.write_text(json.dumps({"kind": "piezo", "generated": False, "source": "bench"}))
+    from hapticsdk.calibration import PiezoTable
+    table = PiezoTable([50.0, 100.0], [0.0, 50.0, 100.0], [[0.0, 1.0, 2.0], [0.0, 2.0, 4.0]],
+                       generated=False, source="bench")
+    from hapticsdk.calibration.store import save_calibration
+    save_calibration(table, path=cal)
     (tmp_path / "broken.json").write_text("{not json")
     monkeypatch.setenv("HAPTICSDK_CALIBRATION_DIR", str(tmp_path))
     assert handle_doctor(argparse.Namespace(json=True)) == 0

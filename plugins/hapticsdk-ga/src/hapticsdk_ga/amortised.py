@@ -33,7 +33,6 @@ import dataclasses
 import hashlib
 import json
 import logging
-import math
 import os
 from pathlib import Path
 from typing import Any, ClassVar
