@@ -168,6 +168,10 @@ class ControllerSettings:
         position_resolution_mm: encoder resolution (mm). The damping credit uses
             ``max(|dx| - resolution, 0)``, a lower bound of the true displacement, so
             a reading dithering between two counts earns no credit.
+        max_force_step_n: on ticks where the controller acts, its output may differ from
+            the previous tick's output by at most this much (N): no force spikes (an
+            Omni trips ``HD_EXCEEDED_MAX_FORCE_IMPULSE`` on them). The slower cut is
+            paid from the bound tolerance. None: no limit.
     """
 
     max_damping_ns_per_m: float = 5.0
@@ -179,6 +183,7 @@ class ControllerSettings:
     device_mass_kg: float | None = 0.045
     device_damping_ns_per_m: float = 0.0
     position_resolution_mm: float = 0.0
+    max_force_step_n: float | None = 1.0
 
 
 def _cap(budget: float, v: float, dt: float, mass: float | None) -> float:
@@ -208,7 +213,7 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "dissipated_j", "bounded_j", "active_ticks",
-                 "_x_prev", "_f_prev", "_f_pc_prev", "_v")
+                 "_x_prev", "_f_prev", "_f_pc_prev", "_v", "_out_prev")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: float) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -223,12 +228,14 @@ class PassivityController:
         self._f_prev = 0.0
         self._f_pc_prev = 0.0
         self._v = 0.0
+        self._out_prev = 0.0
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Observe, then return the force (N) to command this tick."""
         s = self.settings
         if self._x_prev is None or not dt > 0:
             self._x_prev = x_mm
+            self._out_prev = f_wall
             return f_wall
         dx = (x_mm - self._x_prev) * 1e-3
         self._x_prev = x_mm
@@ -259,10 +266,16 @@ class PassivityController:
                 alpha = s.max_damping_ns_per_m
             f_pc = -alpha * v
             active = True
+        out = f + f_pc
         if active:
             self.active_ticks += 1
-        self._f_pc_prev = f_pc
-        return f + f_pc
+            step = s.max_force_step_n
+            if step is not None:
+                lo, hi = self._out_prev - step, self._out_prev + step
+                out = lo if out < lo else (hi if out > hi else out)
+        self._f_pc_prev = out - f_wall if active else 0.0
+        self._out_prev = out
+        return out
 
     def commit(self, f_applied: float) -> None:
         """Record the force the device actually held over the coming interval (N)."""
@@ -281,7 +294,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
     z = np.zeros(n)
     return {"energy": z.copy(), "dissipated": z.copy(), "x_prev": z.copy(), "f_prev": z.copy(),
-            "f_pc_prev": z.copy(), "v": z.copy(), "started": np.zeros(n, bool)}
+            "f_pc_prev": z.copy(), "v": z.copy(), "out_prev": z.copy(), "started": np.zeros(n, bool)}
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: float,
@@ -319,14 +332,23 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
             else:
                 qa = dt * dt / (2.0 * s.device_mass_kg)
                 cap = (-vt + np.sqrt(vt * vt + 4.0 * qa * bpos)) / (2.0 * qa)
-        f = np.where(started & (f > 0) & (f > cap), cap, f)
+        capped = started & (f > 0) & (f > cap)
+        f = np.where(capped, cap, f)
+    else:
+        capped = np.zeros(f.shape, bool)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        alpha = np.where((avail < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s),
-                         np.minimum(-avail / (dt * v * v), s.max_damping_ns_per_m), 0.0)
-    f_pc = np.where(started, -alpha * v, 0.0)
-    state["f_pc_prev"] = np.where(on, f_pc, 0.0)
+        damp = (avail < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s)
+        alpha = np.where(damp, np.minimum(-avail / (dt * v * v), s.max_damping_ns_per_m), 0.0)
+    active = started & (capped | damp)
+    out = f + np.where(started, -alpha * v, 0.0)
+    if s.max_force_step_n is not None:
+        prev = state["out_prev"]
+        out = np.where(active, np.clip(out, prev - s.max_force_step_n, prev + s.max_force_step_n), out)
+    out = np.where(started, out, f_wall)
+    state["f_pc_prev"] = np.where(on & active, out - f_wall, 0.0)
+    state["out_prev"] = out
     state["started"] = np.ones_like(started)
-    return np.where(on, f + f_pc, f_wall)
+    return np.where(on, out, f_wall)
 
 
 def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray) -> None:

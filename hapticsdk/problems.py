@@ -21,7 +21,8 @@ from .models import CompositeModel, PerceptionModel
 from .plugins import registry
 from .solvers import BatchSolveResult, SolveProblem, SolveResult, Solver
 
-DEFAULT_METHOD = "ga"
+#: the default solver: the paper's GA (short) followed by a Levenberg-Marquardt polish
+DEFAULT_METHOD = "ga-polish"
 _model_cache: dict[str, PerceptionModel] = {}
 
 

@@ -51,7 +51,7 @@ DEFAULT_SETTINGS: dict[str, Any] = {
         "threshold_percent": 10.0,
         "thresholds": {},
     },
-    "solver": {"method": "ga", "seed": 0, "options": {}, "tolerance": 0.01, "penalty": "paper"},
+    "solver": {"method": "ga-polish", "seed": 0, "options": {}, "tolerance": 0.01, "penalty": "paper"},
     "model": None,
     "servo": {"period_s": 0.001, "realtime": False, "passivity": True},
     "dimensions": None,

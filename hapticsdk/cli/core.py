@@ -26,7 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--roughness", type=intensity, help="target roughness 0..1")
     p.add_argument("--target", action="append", default=[], metavar="DIM=VALUE",
                    help="target of any other dimension (repeatable)")
-    p.add_argument("--method", default="ga", help="solver name (see `hapticsdk plugins --kind solver`)")
+    p.add_argument("--method", default="ga-polish",
+                   help="solver name (see `hapticsdk plugins --kind solver`; `ga` is the paper's GA alone)")
     p.add_argument("--model", default=None, help="model name or .onnx path (default: the dimensions' model)")
     p.add_argument("--penalty", default="paper", choices=["paper", "normalised"])
     p.add_argument("--tolerance", type=positive_float, default=0.01)

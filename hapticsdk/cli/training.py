@@ -50,7 +50,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     from ..training import lm
     from ..training.pipeline import train_dataset
 
-    cfg = lm.with_overrides(lm.TrainConfig(), seed=args.seed, folds=args.folds, restarts=args.restarts)
+    cfg = lm.with_overrides(lm.TrainConfig(), seed=args.seed, folds=args.folds, restarts=args.restarts,
+                          target_scale=args.target_scale)
     try:
         report, _ = train_dataset(args.dataset, args.out, cfg)
     except HapticSDKError as exc:
@@ -127,6 +128,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="split/initialisation seed (default 0)")
     p.add_argument("--folds", type=int, default=None, help="k of grouped k-fold CV (default 5, 0 = off)")
     p.add_argument("--restarts", type=int, default=None, help="initialisations tried (default 5)")
+    p.add_argument("--target-scale", choices=["intensity", "data"], default=None,
+                   help="scale targets over the 0..1 intensity scale (default) or the data range (MATLAB)")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("dataset", help="generated data sets", description="Generated (simulated) data sets.")

