@@ -603,8 +603,10 @@ def plot(report: dict[str, Any], path: str | Path) -> None:
     ax2.set_ylabel("time to p90 error (ms per target)")
     ax2.set_title("runtime to target (n/r: not reached)", fontsize=9)
     ax2.legend(fontsize=7)
-    fig.suptitle(f"hapticsdk solvers - {m['model'][:60]} - {m.get('processor', '')}, Python {m['python']}, "
-                 f"numpy {m['numpy']}, OMP_NUM_THREADS={m.get('OMP_NUM_THREADS')}", fontsize=8)
+    model_short = m["model"].split(", space")[0]   # e.g. "OnnxModel 'default' (default model)"
+    fig.suptitle(f"hapticsdk solvers - {model_short} - {m.get('processor', '')}, Python {m['python']}, "
+                 f"numpy {m['numpy']}, onnxruntime {m.get('onnxruntime', '-')}, "
+                 f"OMP_NUM_THREADS={m.get('OMP_NUM_THREADS')}", fontsize=8)
     fig.tight_layout()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)

@@ -28,6 +28,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..errors import ValidationError
 from ..passivity import (ControllerSettings, controller_commit_batch, controller_state_batch,
                          controller_step_batch, passivity_margin)
 from ..sim.arm import ArmBatch, ArmParams
@@ -136,6 +137,9 @@ def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = No
     """Run the stability matrix over ``grid`` (keys as :data:`DEFAULT_GRID`)."""
     g = dict(DEFAULT_GRID)
     g.update(grid or {})
+    if not float(g["duration_s"]) >= 3.0:
+        raise ValidationError("a stability cell needs >= 3 s (one press/slide/tap cycle, then 1 s of release)",
+                              field="duration_s")
     t0 = time.perf_counter()
     cells: list[dict[str, Any]] = []
     for T in g["period_s"]:

@@ -34,8 +34,8 @@ class VirtualProbe(HapticDevice):
     limits = ActuatorLimits()
 
     def __init__(self, *, trajectory: Trajectory | None = None, loop: bool = False,
-                 label: str | None = None, safety: Any = None) -> None:
-        super().__init__(label=label, safety=safety)
+                 label: str | None = None, safety: Any = None, **options: Any) -> None:
+        super().__init__(label=label, safety=safety, **options)
         if trajectory is not None and not isinstance(trajectory, Trajectory):
             raise ValidationError("trajectory must be a hapticsdk.sim.finger.Trajectory", field="trajectory")
         self.trajectory = trajectory or press_slide()

@@ -156,3 +156,63 @@ def test_searching_a_subset_with_fixed_features(fx, model):
     r = GASolver(generations=100).solve(p, seed=1)
     assert r.x.shape == (5, 4) and all(ri.x_dict["Fpeak"] == 100.0 for ri in r)
     assert np.median(r.error) <= p.tolerance
+
+
+@pytest.mark.parametrize("size", [1, 2, 3])
+def test_rank_selection_has_the_tournament_law(size):
+    """Winners drawn through the ranks follow the law of a literal tournament of ``size``
+    (drawn with replacement, lowest fitness wins): P(rank k) = ((p-k)^s - (p-k-1)^s) / p^s."""
+    from hapticsdk_ga.ga import _rank_select
+    rng = np.random.default_rng(5)
+    r, p, n = 4, 20, 20000
+    fit = rng.random((r, p))
+    order = np.argsort(fit, axis=1)
+    order_flat = order + (np.arange(r) * p)[:, None]
+    win = _rank_select(order_flat, rng.random((r, n)), size)
+    assert np.all(win // p == np.arange(r)[:, None])                 # each row picks its own
+    rank = np.argsort(order, axis=1)                                  # rank of each individual
+    got = np.bincount(rank.ravel()[win.ravel()], minlength=p) / win.size
+    k = np.arange(p)
+    law = ((p - k) ** size - (p - k - 1) ** size) / p ** size
+    assert np.abs(got - law).max() < 4 * np.sqrt(law.max() / win.size)
+    # the literal tournament, simulated, agrees with the law too (guards the formula)
+    cand = rng.integers(0, p, size=(size, 200000))
+    lit = np.bincount(cand.min(axis=0), minlength=p) / cand.shape[1]
+    assert np.abs(lit - law).max() < 4 * np.sqrt(law.max() / cand.shape[1])
+
+
+def test_generation_keeps_elites_and_bounds(fx):
+    from hapticsdk_ga.ga import ga_generation
+    rng = np.random.default_rng(2)
+    r, p, d = 3, 30, 5
+    lower, span = fx.LOWER, fx.UPPER - fx.LOWER
+    pop = lower + rng.random((r, p, d)) * span
+    fit = rng.random((r, p))
+    new, esrc = ga_generation(pop, fit, lower, span, elite=4, n_cross=15, tournament=2,
+                              mutation_rate=0.2, rng=rng)
+    assert new.shape == pop.shape
+    best4 = np.argsort(fit, axis=1)[:, :4]
+    assert np.array_equal(esrc, best4 + (np.arange(r) * p)[:, None])
+    assert np.array_equal(new[:, :4], np.take_along_axis(pop, best4[..., None], axis=1))
+    assert np.array_equal(np.take(fit, esrc), np.sort(fit, axis=1)[:, :4])
+    assert np.all((new >= lower) & (new <= lower + span))
+    # crossover children: every gene comes from some parent of the same row, genes [:c]
+    # from one parent and [c:] from another
+    for i in range(r):
+        for child in new[i, 4:19]:
+            assert any(np.any(np.all(pop[i][:, :c] == child[:c], axis=1))
+                       and np.any(np.all(pop[i][:, c:] == child[c:], axis=1)) for c in range(1, d))
+    # mutation children: each gene is its parent's or a redraw within bounds; some differ
+    mut = new[:, 19:]
+    assert mut.shape[1] == p - 19
+    same_as_some = [np.any(np.all(pop[i] == c, axis=1)) for i in range(r) for c in mut[i]]
+    assert 0 < sum(same_as_some) < len(same_as_some)
+
+
+def test_elites_not_reevaluated(problem):
+    """The elites' fitness is reused: each generation evaluates population - elite rows."""
+    res = GASolver(target_error=0, generations=6).solve(problem, seed=0)
+    nfev = [row["nfev"] for row in res.trace]
+    m = problem.n_targets
+    assert nfev[0] == m * 100
+    assert np.all(np.diff(nfev) == m * 95)

@@ -42,6 +42,8 @@ class Evaluator:
         from hapticsdk.dimensions import Constraint
         self._fast_c = all(type(c).penalty is Constraint.penalty and type(c).violation is Constraint.violation
                            for c in problem.constraints)
+        self.penalty_weight_is_one = float(problem.penalty_weight) == 1.0
+        self._all_out = np.array_equal(self.out_idx, np.arange(len(names)))
 
     def __call__(self, X: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(fitness, error, violation)`` for ``X`` ``(r, p, d)`` (or ``(r, d)``),
@@ -52,55 +54,115 @@ class Evaluator:
         X2 = X.reshape(-1, X.shape[-1])
         G = X2 if self._identity else p.full_inputs(X2)
         I = p.model.predict(G)
-        self.nfev += G.shape[0]
-        I = I[:, self.out_idx].reshape(lead + (len(self.out_idx),))
-        Tb = T.reshape((T.shape[0],) + (1,) * (len(lead) - 1) + (T.shape[1],))
-        err = np.abs(I - Tb).sum(axis=-1)
-        if p.constraints:
-            cols = p.columns(G)
-            pen = np.zeros(G.shape[0])
-            viol = np.zeros(G.shape[0])
+        n = G.shape[0]
+        self.nfev += n
+        # sum_j |I_j - T_j|: one subtraction, |.| in place, then the columns added (a
+        # reduction over a length-2 axis costs more than the additions)
+        I3 = I.reshape(T.shape[0], -1, I.shape[-1])
+        if not self._all_out:
+            I3 = I3[:, :, self.out_idx]
+        D = np.subtract(I3, T[:, None, :])
+        np.abs(D, out=D)
+        if D.shape[-1] == 2:
+            err = np.add(D[..., 0], D[..., 1])
+        else:
+            err = D.sum(axis=-1)
+        err = err.reshape(lead)
+        if not p.constraints:
+            return err, err, np.zeros(lead)
+        cols = p.columns(G)
+        if self._fast_c:
+            # same values as Constraint.penalty (paper: b^2 - v^2; normalised:
+            # (b - v)/|b|, where v < b), one _bound_and_value call per constraint, all
+            # constraints stacked so that each operation runs once
+            nc = len(p.constraints)
+            B = np.empty((nc, n))
+            V = np.empty((nc, n))
+            for j, c in enumerate(p.constraints):
+                B[j], V[j] = c._bound_and_value(cols)
+            short = V < B
+            scale = np.abs(B)
+            scale[scale == 0] = 1.0
+            nvs = np.subtract(B, V)
+            nvs /= scale
+            nvs[~short] = 0.0
+            viol = nvs.max(axis=0) if nc > 1 else nvs[0]
+            if self.penalty == "normalised":
+                pen = nvs.sum(axis=0) if nc > 1 else nvs[0].copy()
+            else:
+                B *= B
+                V *= V
+                B -= V
+                B[~short] = 0.0
+                pen = B.sum(axis=0) if nc > 1 else B[0]
+        else:
+            pen = np.zeros(n)
+            viol = np.zeros(n)
             for c in p.constraints:
-                if self._fast_c:
-                    # same formulas as Constraint.penalty (paper: b^2 - v^2; normalised:
-                    # (b - v)/|b|, where v < b), computed from one _bound_and_value call
-                    b, v = c._bound_and_value(cols)
-                    short = v < b
-                    scale = np.where(np.abs(b) > 0, np.abs(b), 1.0)
-                    nv = np.where(short, (b - v) / scale, 0.0)
-                    pen += nv if self.penalty == "normalised" else np.where(short, b * b - v * v, 0.0)
-                    viol = np.maximum(viol, nv)
-                else:
-                    pen += c.penalty(cols, self.penalty)
-                    viol = np.maximum(viol, c.violation(cols))
+                pen += c.penalty(cols, self.penalty)
+                np.maximum(viol, c.violation(cols), out=viol)
+        if self.penalty_weight_is_one:
+            pen += err.reshape(-1)
+            fit = pen.reshape(lead)
+        else:
             fit = err + p.penalty_weight * pen.reshape(lead)
-            return fit, err, viol.reshape(lead)
-        return err, err, np.zeros(lead)
+        return fit, err, viol.reshape(lead)
+
+
+def constraint_shortfalls(problem: SolveProblem, G: np.ndarray) -> np.ndarray:
+    """Relative constraint shortfalls ``(n, c)``: ``(bound - value) / |bound|`` (``|bound|``
+    replaced by 1 where it is 0); positive = violated. ``max(0, .)`` of a column is the
+    constraint's ``violation`` (the base :class:`~hapticsdk.dimensions.Constraint` formula);
+    one ``_bound_and_value`` call per constraint."""
+    cons = problem.constraints
+    n = G.shape[0]
+    out = np.empty((n, len(cons)))
+    if not cons:
+        return out
+    cols = problem.columns(G)
+    for j, c in enumerate(cons):
+        bound, value = c._bound_and_value(cols)
+        bound = np.asarray(bound, float)
+        col = out[:, j]
+        np.subtract(bound, value, out=col)
+        scale = np.abs(bound)
+        if scale.ndim:
+            scale[scale == 0] = 1.0
+        elif scale == 0:
+            scale = 1.0
+        col /= scale
+    return out
+
+
+def violation_from(problem: SolveProblem, S: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Max relative violation per row from :func:`constraint_shortfalls` ``S`` (exactly
+    ``Constraint.violation`` when no constraint overrides it; otherwise that method)."""
+    n = S.shape[0]
+    if not problem.constraints:
+        return np.zeros(n)
+    from hapticsdk.dimensions import Constraint
+    if all(type(c).violation is Constraint.violation and type(c).penalty is Constraint.penalty
+           for c in problem.constraints):
+        v = np.where(S <= 0, 0.0, S)   # NaN (infinite bound) stays NaN = not feasible
+        return v.max(axis=1)
+    cols = problem.columns(G)
+    v = np.zeros(n)
+    for c in problem.constraints:
+        np.maximum(v, c.violation(cols), out=v)
+    return v
 
 
 def constraint_terms(problem: SolveProblem, G: np.ndarray, margin: float) -> np.ndarray:
-    """Signed constraint shortfalls ``(n, c)``: ``(bound + margin|bound| - value)/|bound|``
-    (positive = violated, or within the margin of the bound).
+    """Signed constraint shortfalls ``(n, c)`` shifted by a margin: ``(bound - value)/|bound|
+    + margin`` (positive = violated, or within the margin of the bound).
 
     The margin makes a Gauss-Newton iterate that converges onto the constraint land on the
     feasible side (the base class counts a violation above ``CONSTRAINT_TOL`` as failure).
     """
-    cons = problem.constraints
-    if not cons:
-        return np.zeros((G.shape[0], 0))
-    cols = problem.columns(G)
-    out = np.empty((G.shape[0], len(cons)))
-    for j, c in enumerate(cons):
-        bv = getattr(c, "_bound_and_value", None)
-        if bv is None:  # pragma: no cover - every Constraint has it (abstract method)
-            out[:, j] = c.violation(cols)
-            continue
-        bound, value = bv(cols)
-        bound = np.broadcast_to(np.asarray(bound, float), (G.shape[0],))
-        value = np.broadcast_to(np.asarray(value, float), (G.shape[0],))
-        scale = np.where(np.abs(bound) > 0, np.abs(bound), 1.0)
-        out[:, j] = (bound + margin * scale - value) / scale
-    return out
+    S = constraint_shortfalls(problem, G)
+    if margin:
+        S += margin
+    return S
 
 
 def check_int(opts: dict, key: str, lo: int, hi: int | None = None, *, allow_none: bool = False) -> int | None:

@@ -17,7 +17,11 @@ defaults, which give these semantics:
   ``mutation_rate``, replaced by a uniform draw within its bounds);
 * fitness is formula (6) (``problem.penalty`` chooses the paper's or the normalised form).
 
-Every generation evaluates the children of all still-active targets in ONE model call.
+Every generation evaluates the children of all still-active targets in ONE model call
+(the elites are copied unchanged, so their fitness is reused, not recomputed). Tournament
+selection is sampled through the fitness ranks (see :func:`_rank_select`: the same
+selection law as drawing ``tournament`` individuals and keeping the best, with one random
+number per selected parent instead of ``tournament``).
 A target whose best individual meets ``target_error`` (default: the problem's tolerance)
 with constraints met leaves the active set; the run stops when none is active, after
 ``generations``, or when ``time_budget_s`` is spent. The run is deterministic for a seed.
@@ -37,47 +41,135 @@ from hapticsdk.solvers import SolveProblem, Solver, SolverOutput, Trace
 from ._common import Clock, Evaluator, check_budget, check_fraction, check_int, rank_key, solved_mask, target_error
 
 
-def _tournament(fit: np.ndarray, n: int, size: int, rng: np.random.Generator) -> np.ndarray:
-    """Flat indices (into ``fit.ravel()``) ``(r, n)`` of tournament winners (lowest fitness)."""
-    r, p = fit.shape
-    flat = fit.ravel()
-    cand = rng.integers(0, p, size=(size, r, n)) + (np.arange(r) * p)[None, :, None]
-    win = cand[0]
-    fw = np.take(flat, win)
-    for j in range(1, size):
-        c = cand[j]
-        fc = np.take(flat, c)
-        better = fc < fw
-        win = np.where(better, c, win)
-        fw = np.where(better, fc, fw)
-    return win
+def _rank_select(order_flat: np.ndarray, u: np.ndarray, size: int) -> np.ndarray:
+    """Flat indices ``(r, n)`` of tournament winners from uniforms ``u`` ``(r, n)`` (overwritten).
+
+    A tournament of ``size`` individuals drawn uniformly with replacement, won by the lowest
+    fitness, selects the individual of rank ``K = min`` of ``size`` i.i.d. uniform ranks in
+    ``0..p-1``. Since ``floor(p * min(U_i)) = min(floor(p * U_i))`` and ``min`` of ``size``
+    i.i.d. U(0, 1) has the law of ``1 - V ** (1 / size)`` (V uniform), ``K = floor(p * (1 -
+    V ** (1 / size)))`` has exactly the tournament's distribution (ties in fitness aside,
+    which pick among equal-fitness individuals either way). ``order_flat`` ``(r, p)`` holds
+    the flat indices (into ``pop.reshape(r * p, d)``) of each row's individuals sorted best
+    first. One random number per winner instead of ``size``, and no fitness gathers.
+    """
+    r, p = order_flat.shape
+    if size == 2:
+        np.sqrt(u, out=u)
+    elif size != 1:
+        np.power(u, 1.0 / size, out=u)
+    u *= -p
+    u += p                                    # p * (1 - V^(1/size)) in [0, p]
+    k = u.astype(np.intp)
+    np.minimum(k, p - 1, out=k)
+    k += _offsets(r, p)
+    return np.take(order_flat, k)
+
+
+_CACHE: dict[tuple, np.ndarray] = {}
+
+
+def _offsets(r: int, p: int) -> np.ndarray:
+    """``(r, 1)`` row offsets ``i * p`` into a flattened ``(r, p)`` array (cached)."""
+    key = ("off", r, p)
+    o = _CACHE.get(key)
+    if o is None:
+        if len(_CACHE) > 256:
+            _CACHE.clear()
+        o = _CACHE[key] = (np.arange(r) * p)[:, None]
+    return o
+
+
+def _cut_masks(d: int) -> np.ndarray:
+    """``(d - 1, d)`` bool table, row ``j`` = genes ``[:j + 1]`` (single-point crossover
+    with cut ``c = j + 1`` in ``1..d-1`` takes them from the first parent)."""
+    key = ("cut", d)
+    t = _CACHE.get(key)
+    if t is None:
+        t = _CACHE[key] = np.arange(d)[None, :] < np.arange(1, d)[:, None]
+    return t
+
+
+class GAWorkspace:
+    """Preallocated buffers for :func:`ga_generation` (population double buffer, uniforms,
+    crossover parents, mutation children), sized for ``m`` rows: a generation then writes
+    into memory that is already mapped and cached instead of allocating ~1 MB of fresh
+    temporaries (which the allocator returns to the system and faults in again every
+    generation). A batch of ``r <= m`` active rows uses the leading ``r`` rows."""
+
+    def __init__(self, m: int, p: int, d: int, elite: int, n_cross: int) -> None:
+        n_mut = p - elite - n_cross
+        self.n_u = 2 * n_cross + n_mut + (n_cross if d > 1 else 0) + n_mut * d
+        self.pops = [np.empty((m, p, d)), np.empty((m, p, d))]
+        self.turn = 0
+        self.u = np.empty((m, self.n_u))
+        self.a = np.empty((m, n_cross, d))
+        self.b = np.empty((m, n_cross, d))
+        self.child = np.empty((m, n_mut, d))
+
+    def next_pop(self, r: int, current: np.ndarray) -> np.ndarray:
+        """The buffer not holding ``current``, first ``r`` rows."""
+        for buf in self.pops:
+            if not np.may_share_memory(buf, current):
+                return buf[:r]
+        return np.empty((r,) + self.pops[0].shape[1:])  # pragma: no cover - defensive
 
 
 def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.ndarray, *,
                   elite: int, n_cross: int, tournament: int, mutation_rate: float,
-                  rng: np.random.Generator) -> np.ndarray:
-    """Next population ``(r, p, d)`` from ``pop`` and its fitness ``(r, p)``."""
+                  rng: np.random.Generator, order: np.ndarray | None = None,
+                  work: GAWorkspace | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Next population ``(r, p, d)`` from ``pop`` and its fitness ``(r, p)``.
+
+    Returns ``(new_pop, elite_src)``: ``new_pop[:, :elite]`` are the ``elite`` best of
+    ``pop`` (best first), copied unchanged, and ``elite_src`` ``(r, elite)`` their flat
+    indices into ``fit.ravel()`` (so the caller reuses their fitness instead of evaluating
+    them again). ``order`` (optional) = ``np.argsort(fit, axis=1)``. With ``work`` (a
+    :class:`GAWorkspace` of at least ``r`` rows) no large array is allocated and
+    ``new_pop`` is a view of one of its buffers (valid until the next-but-one call).
+
+    Random numbers per row, from ONE ``rng.random`` call: one per selected parent, one per
+    crossover cut (``c = 1 + floor((d - 1) u)``, uniform in ``1..d-1``), one per gene of
+    the mutation children (mutated when ``< mutation_rate``); a second call draws the new
+    values of the mutated genes only (uniform within the gene's bounds).
+    """
     r, p, d = pop.shape
-    out = np.empty_like(pop)
+    if order is None:
+        order = np.argsort(fit, axis=1)
+    order_flat = order + _offsets(r, p)
     flat_pop = pop.reshape(r * p, d)
-    if elite:
-        order = np.argpartition(fit, elite - 1, axis=1)[:, :elite] if elite < p else np.argsort(fit, axis=1)
-        out[:, :elite] = np.take(flat_pop, order[:, :elite] + (np.arange(r) * p)[:, None], axis=0)
     n_mut = p - elite - n_cross
-    winners = _tournament(fit, 2 * n_cross + n_mut, tournament, rng)
-    par = np.take(flat_pop, winners, axis=0)   # (r, 2nx + nm, d); np.take: faster than fancy indexing
+    n_sel = 2 * n_cross + n_mut
+    n_cut = n_cross if d > 1 else 0
+    n_u = n_sel + n_cut + n_mut * d
+    if work is not None:
+        out = work.next_pop(r, pop)
+        u = rng.random((r, n_u), out=work.u[:r])
+        bufs = (work.a[:r], work.b[:r], work.child[:r])
+    else:
+        out = np.empty_like(pop)
+        u = rng.random((r, n_u))
+        bufs = (None, None, None)
+    if elite:
+        np.take(flat_pop, order_flat[:, :elite], axis=0, out=out[:, :elite], mode="clip")
+    winners = _rank_select(order_flat, u[:, :n_sel], tournament)
     if n_cross:
-        a, b = par[:, :n_cross], par[:, n_cross:2 * n_cross]
+        a = np.take(flat_pop, winners[:, :n_cross], axis=0, out=bufs[0], mode="clip")       # (r, n_cross, d)
         if d > 1:
-            cut = rng.integers(1, d, size=(r, n_cross, 1))
-            np.copyto(out[:, elite:elite + n_cross], np.where(np.arange(d) < cut, a, b))
-        else:
-            out[:, elite:elite + n_cross] = a
+            b = np.take(flat_pop, winners[:, n_cross:2 * n_cross], axis=0, out=bufs[1], mode="clip")
+            uc = u[:, n_sel:n_sel + n_cut]
+            uc *= d - 1
+            np.copyto(b, a, where=np.take(_cut_masks(d), uc.astype(np.intp), axis=0))  # genes [:cut] from a
+            a = b
+        out[:, elite:elite + n_cross] = a
     if n_mut:
-        base = par[:, 2 * n_cross:]
-        u = rng.random((2, r, n_mut, d))
-        np.copyto(out[:, elite + n_cross:], np.where(u[0] < mutation_rate, lower + u[1] * span, base))
-    return out
+        child = np.take(flat_pop, winners[:, 2 * n_cross:], axis=0, out=bufs[2], mode="clip")  # (r, n_mut, d)
+        hit = np.flatnonzero(u[:, n_sel + n_cut:] < mutation_rate)    # row-major = child's order
+        if hit.size:
+            g = hit % d
+            child.reshape(-1)[hit] = lower[g] + rng.random(hit.size) * span[g]
+        out[:, elite + n_cross:] = child
+    return out, order_flat[:, :elite]
 
 
 class GASolver(Solver):
@@ -125,7 +217,11 @@ class GASolver(Solver):
         n_cross = int(round(s["crossover_fraction"] * (p - elite)))
         lower, span = ev.lower, ev.span
 
-        pop = lower + rng.random((m, p, d)) * span
+        work = GAWorkspace(m, p, d, elite, n_cross)
+        pop = work.pops[0]
+        rng.random((m, p, d), out=pop)
+        pop *= span
+        pop += lower
         if problem.x0 is not None:
             pop[:, 0] = problem.x0
         fit, err, viol = ev(pop)
@@ -135,36 +231,54 @@ class GASolver(Solver):
         best_f, best_e, best_v = fit[ar, best_i], err[ar, best_i], viol[ar, best_i]
         trace.record(ev.nfev, best_e, best_v)
         active = ~solved_mask(best_e, best_v, goal)
-        pop, fit = pop[active], fit[active]
+        if not active.all():
+            k = int(active.sum())
+            pop[:k] = pop[active]
+            pop, fit = pop[:k], fit[active]
         gen = 0
         reason = "generations exhausted"
+        kw = dict(elite=elite, n_cross=n_cross, tournament=s["tournament"], mutation_rate=s["mutation_rate"])
+        rows = np.flatnonzero(active)
         while gen < s["generations"]:
-            if not active.any():
+            if not rows.size:
                 reason = f"all targets within target_error {goal:g}"
                 break
             if clock.expired():
                 reason = f"time budget {s['time_budget_s']:g} s spent"
                 break
-            rows = np.flatnonzero(active)
-            pop = ga_generation(pop, fit, lower, span, elite=elite, n_cross=n_cross,
-                                tournament=s["tournament"], mutation_rate=s["mutation_rate"], rng=rng)
-            fit, err, viol = ev(pop, rows)
+            r = rows.size
+            pop, esrc = ga_generation(pop, fit, lower, span, rng=rng, work=work, **kw)
+            # the elites are copied unchanged: their fitness is reused, only the children are
+            # evaluated. An elite never beats best_f (elite 0 is the previous best), so the
+            # best-so-far update only looks at the children.
+            fc, ec, vc = ev(pop[:, elite:], rows)
+            nf = np.empty((r, p))
+            if elite:
+                nf[:, :elite] = np.take(fit, esrc)
+            nf[:, elite:] = fc
+            fit = nf
             gen += 1
-            k = fit.argmin(axis=1)
-            ra = np.arange(len(rows))
-            better = fit[ra, k] < best_f[rows]
-            upd = rows[better]
-            best_x[upd] = pop[ra[better], k[better]]
-            best_f[upd] = fit[ra[better], k[better]]
-            best_e[upd] = err[ra[better], k[better]]
-            best_v[upd] = viol[ra[better], k[better]]
-            trace.record(ev.nfev, best_e, best_v)
-            still = ~solved_mask(best_e[rows], best_v[rows], goal)
-            if not still.all():
-                active[rows[~still]] = False
-                pop, fit = pop[still], fit[still]
+            k = fc.argmin(axis=1)
+            ra = np.arange(r)
+            fk = fc[ra, k]
+            better = fk < best_f[rows]
+            if better.any():
+                upd, kb, rb = rows[better], k[better], ra[better]
+                best_x[upd] = pop[rb, kb + elite]
+                best_f[upd] = fk[better]
+                best_e[upd] = ec[rb, kb]
+                best_v[upd] = vc[rb, kb]
+                trace.record(ev.nfev, best_e, best_v)
+                still = ~solved_mask(best_e[rows], best_v[rows], goal)
+                if not still.all():
+                    rows = rows[still]
+                    k = rows.size
+                    pop[:k] = pop[still]          # compact in place (leading rows of the buffer)
+                    pop, fit = pop[:k], fit[still]
+            else:
+                trace.record(ev.nfev, best_e, best_v)
         else:
-            if not active.any():
+            if not rows.size:
                 reason = f"all targets within target_error {goal:g}"
         return SolverOutput(x=best_x, nfev=ev.nfev, nit=gen,
                             message=f"{gen} generations, {reason}")

@@ -53,8 +53,8 @@ class OmniVirtual(HapticDevice):
                  arm: ArmParams | None = None, damping_ns_per_m: float | None = None,
                  mass_kg: float | None = None, encoder_resolution_mm: float | None = None,
                  y0_mm: float | None = None, velocity_filter_hz: float | None = None,
-                 label: str | None = None, safety: Any = None) -> None:
-        super().__init__(label=label, safety=safety)
+                 label: str | None = None, safety: Any = None, **options: Any) -> None:
+        super().__init__(label=label, safety=safety, **options)
         if trajectory is not None and not isinstance(trajectory, Trajectory):
             raise ValidationError("trajectory must be a hapticsdk.sim.finger.Trajectory", field="trajectory")
         arm = arm or ArmParams()

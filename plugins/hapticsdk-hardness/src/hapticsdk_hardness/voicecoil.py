@@ -40,8 +40,8 @@ class VoiceCoilVirtual(Actuator):
     limits = ActuatorLimits(frequency_range_hz=(1.0, 1000.0), max_amplitude=1.0, amplitude_unit="1")
 
     def __init__(self, *, sample_rate_hz: float = 5000.0, sink: Any = None, ramp_s: float = 0.005,
-                 label: str | None = None, safety: Any = None) -> None:
-        super().__init__(label=label, safety=safety)
+                 label: str | None = None, safety: Any = None, **options: Any) -> None:
+        super().__init__(label=label, safety=safety, **options)
         if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0):
             raise ValidationError("must be > 0 Hz", field="sample_rate_hz")
         self.fs = float(sample_rate_hz)

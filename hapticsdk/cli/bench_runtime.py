@@ -1,0 +1,79 @@
+"""``hapticsdk bench stability | fidelity | timing``: servo-runtime benchmarks.
+
+Heavy imports (the simulators, the plugins) happen inside the handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+
+def register_bench(bench_sub: Any) -> None:
+    from . import positive_float
+
+    p = bench_sub.add_parser("stability", help="stability matrix of a virtual wall on the simulated Omni "
+                                               "(stiffness x period x damping x finger, controller on/off)")
+    p.add_argument("--quick", action="store_true", help="small grid, 3 s runs (for tests)")
+    p.add_argument("--duration", type=positive_float, default=None, help="seconds per cell (default 10)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_stability)
+
+    p = bench_sub.add_parser("fidelity", help="force and frequency error against servo period (0.25..4 ms)")
+    p.add_argument("--periods", type=positive_float, nargs="+", default=None, metavar="S",
+                   help="servo periods in s (default 0.00025 0.0005 0.001 0.002 0.004)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_fidelity)
+
+    p = bench_sub.add_parser("timing", help="per-tick compute time and period jitter of the servo loop")
+    p.add_argument("--seconds", type=positive_float, default=60.0, help="run length (default 60 s)")
+    p.add_argument("--realtime", action="store_true", help="pace on the machine clock (jitter figures)")
+    p.add_argument("--load", action="store_true", help="run a second CPU-bound process meanwhile")
+    p.add_argument("--period", type=positive_float, default=0.001, help="servo period in s (default 0.001)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=_timing)
+
+
+def _stability(args: argparse.Namespace) -> int:
+    from ..benchmarks.stability import DEFAULT_GRID, QUICK_GRID, run_matrix
+    from . import emit
+    grid = dict(QUICK_GRID if args.quick else DEFAULT_GRID)
+    if args.duration:
+        grid["duration_s"] = args.duration
+    res = run_matrix(grid).to_dict()
+    s = res["summary"]
+    text = (f"{s['cells']} cells, {grid['duration_s']:g} s each, {res['runtime_s']:.1f} s\n"
+            f"controller on : {s['controller_on_unstable']} unstable, max energy to user "
+            f"{s['controller_on_max_energy_j'] * 1e3:.3f} mJ (tolerance {res['energy_tolerance_j'] * 1e3:.2f} mJ), "
+            f"max peak force {s['controller_on_max_peak_force_n']:.2f} N\n"
+            f"controller off: {s['controller_off_unstable']} unstable "
+            f"({s['controller_off_predicted_active']} predicted active by b < K T / 2)")
+    emit(res, args.json, text)
+    return 0 if s["controller_on_unstable"] == 0 else 1
+
+
+def _fidelity(args: argparse.Namespace) -> int:
+    from ..benchmarks.fidelity import PERIODS_S, run_fidelity
+    from . import emit
+    rows = run_fidelity(tuple(args.periods) if args.periods else PERIODS_S)
+    text = "\n".join(["period_ms  force_err_rms_N  freq_err_Hz  tick_median_us"] +
+                     [f"{r['period_s'] * 1e3:9.2f}  {r['force_error_rms_n']:15.4f}  {r['frequency_error_hz']:11.3f}  "
+                      f"{r['tick_median_us']:14.1f}" for r in rows])
+    emit(rows, args.json, text)
+    return 0
+
+
+def _timing(args: argparse.Namespace) -> int:
+    from ..benchmarks.timing import run_timing
+    from . import emit
+    d = run_timing(args.seconds, realtime=args.realtime, load=args.load, period_s=args.period)
+    text = (f"{d['ticks']} ticks ({', '.join(d['dimensions'])}), load={d['load']}: tick compute median "
+            f"{d['tick_median_us']:.1f} us, p99 {d['tick_p99_us']:.1f} us, p99.9 {d['tick_p999_us']:.1f} us, "
+            f"max {d['tick_max_us']:.1f} us, overruns {d['overruns']}; goal 13 "
+            f"{'pass' if d['goal13_pass'] else 'FAIL'}")
+    if d["jitter"]:
+        j = d["jitter"]
+        text += (f"\njitter |period - T|: p50 {j['p50_us']:.1f} us, p99 {j['p99_us']:.1f} us, p99.9 "
+                 f"{j['p999_us']:.1f} us, max {j['max_us']:.1f} us, missed-tick rate {j['missed_tick_rate']:.4%}")
+    emit(d, args.json, text)
+    return 0

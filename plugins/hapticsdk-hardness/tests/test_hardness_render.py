@@ -1,0 +1,149 @@
+"""Hardness plugin: formula (8) measured on the simulated Omni (goal 7), formula (7)
+reproduced by the voice coil's actual waveform (goal 8), constraint (4), plugins."""
+
+import wave
+
+import numpy as np
+import pytest
+
+from hapticsdk.calibration import VoiceCoilCalibration
+from hapticsdk.errors import DeviceNotFoundError, ValidationError
+from hapticsdk.plugins import registry
+from hapticsdk.runtime import ServoLoop
+from hapticsdk.sim.finger import Trajectory, press_slide
+from hapticsdk_hardness.dimension import GS_MAX_N_PER_MM, HardnessDimension, HardnessRenderer, WorkConstraint
+from hapticsdk_hardness.omni import OmniVirtual
+from hapticsdk_hardness.voicecoil import VoiceCoilVirtual
+
+
+def _slow_press(depth_mm=3.0, speed=5.0):
+    """Rest 2 mm above (the safety ramp finishes), press at `speed` mm/s (< 10: quasi-static), release."""
+    s = (2.0 + depth_mm) / speed
+    return Trajectory([(0, 0, 2.0), (0.3, 0, 2.0), (0.3 + s, 0, -depth_mm), (0.4 + s, 0, -depth_mm),
+                       (0.4 + 2 * s, 0, 2.0)])
+
+
+@pytest.mark.parametrize("gs", [0.08, 0.3, 0.8, 1.5, 2.3, 4.5])
+def test_rendered_force_follows_the_spring_law(gs):
+    """Goal 7: press the simulated Omni through the servo loop (passivity on), regress the
+    force the arm applied on the measured penetration: slope within 7 % of min(GS, 2.3)."""
+    tr = _slow_press()
+    dev = OmniVirtual(trajectory=tr, finger="stiff")
+    coil = VoiceCoilVirtual()
+    r = HardnessDimension().renderer({"GS": gs})
+    rep = ServoLoop(dev, [r], {"force": dev, "coil": coil}).run(tr.duration_s)
+    L = rep.log
+    m = (L["penetration_mm"] > 0.1) & (L["force_n"] < 0.95 * 3.3) & (np.abs(L["velocity_mm_s"][:, 1]) < 60)
+    assert m.sum() > 200
+    slope = np.polyfit(L["penetration_mm"][m], L["force_n"][m], 1)[0]
+    assert slope == pytest.approx(min(gs, GS_MAX_N_PER_MM), rel=0.07)
+    assert L["force_n"].max() <= 3.3
+
+
+def test_stiffness_above_the_limit_goes_to_the_coil_never_to_the_arm():
+    r = HardnessRenderer(4.0)
+    assert r.omni_stiffness_n_per_mm == 2.3 and r.coil_stiffness_n_per_mm == pytest.approx(1.7)
+    assert r.rendered_stiffness_n_per_mm() == pytest.approx(4.0)
+    from hapticsdk.dimensions import TickInput
+    out = {c.role: c for c in r.tick(TickInput(0, 1e-3, 1.0, np.zeros(3), True))}
+    assert out["force"].force_n == pytest.approx(2.3)
+    assert out["coil"].amplitude > 0
+    off = {c.role: c for c in r.tick(TickInput(0, 1e-3, -1.0, np.zeros(3), False))}
+    assert off["force"].force_n == 0 and off["coil"].amplitude == 0
+    r2 = HardnessRenderer(2.0)
+    assert r2.coil_frequency_hz is None and r2.rendered_stiffness_n_per_mm() == 2.0
+
+
+def _measured_frequency(y, fs):
+    """Frequency (Hz) from the spacing of upward zero crossings (linear interpolation)."""
+    s = np.signbit(y)
+    idx = np.nonzero(s[:-1] & ~s[1:])[0]
+    tc = idx + y[idx] / (y[idx] - y[idx + 1])
+    return (len(tc) - 1) / ((tc[-1] - tc[0]) / fs)
+
+
+@pytest.mark.parametrize("f_target", [30.0, 75.0, 120.0])
+def test_voice_coil_reproduces_formula_7(f_target):
+    """GS = 2.3 + GS_coil(f): the renderer picks f (1e-9 relative) and the coil's
+    synthesised 5 kHz waveform, rendered through the loop while pressing, has that frequency."""
+    cal = VoiceCoilCalibration.paper()
+    gs_coil = 0.00012 * f_target ** 2 + 0.01 * f_target - 0.3045
+    r = HardnessDimension().renderer({"GS": GS_MAX_N_PER_MM + gs_coil}, calibration=cal)
+    assert r.coil_frequency_hz == pytest.approx(f_target, rel=1e-9)
+    assert abs(r.coil_residual_n_per_mm) < 1e-9
+    tr = Trajectory([(0, 0, 1.0), (0.2, 0, -2.0), (1.4, 0, -2.0), (1.6, 0, 1.0)])
+    dev = OmniVirtual(trajectory=tr, finger="stiff")
+    coil = VoiceCoilVirtual()
+    ServoLoop(dev, [r], {"force": dev, "coil": coil}).run(tr.duration_s)
+    y = coil.sink.samples()
+    assert y.size == pytest.approx(tr.duration_s * 5000, abs=10)
+    steady = y[int(0.4 * 5000):int(1.3 * 5000)]
+    assert _measured_frequency(steady, 5000.0) == pytest.approx(f_target, rel=0.005)
+    assert np.abs(steady).max() == pytest.approx(0.5, rel=0.02)  # constant amplitude in contact
+    assert np.abs(y[-200:]).max() < 1e-12  # silent after release
+
+
+def test_coil_clamps_and_reports_residual():
+    lo = HardnessRenderer(2.3 + 0.05)
+    assert lo.coil_frequency_hz == 30.0 and lo.coil_residual_n_per_mm == pytest.approx(0.05 - 0.1035)
+    hi = HardnessRenderer(2.3 + 3.0)
+    assert hi.coil_frequency_hz == 120.0 and hi.coil_residual_n_per_mm == pytest.approx(3.0 - 2.6235)
+
+
+def test_work_constraint_formula_4():
+    c = WorkConstraint()
+    gs = np.array([0.5, 1.0, 2.0, 0.0])
+    wv = 3.3 ** 2 / (2 * gs[:3])
+    w = np.r_[wv[0] + 0.1, wv[1] - 0.5, wv[2], 1.0]
+    pen = c.penalty({"GS": gs, "W": w})
+    assert pen[0] == 0 and pen[2] == 0
+    assert pen[1] == pytest.approx(wv[1] ** 2 - (wv[1] - 0.5) ** 2)
+    assert np.isinf(pen[3]) or pen[3] > 1e6
+    dim = HardnessDimension()
+    assert [f.name for f in dim.features] == ["GS", "W"]
+    assert isinstance(dim.constraints()[0], WorkConstraint)
+    with pytest.raises(ValidationError):
+        dim.renderer({"W": 1.0})
+
+
+def test_entry_points():
+    assert registry("dimension").load("hardness") is HardnessDimension
+    assert registry("actuator").load("omni-virtual") is OmniVirtual
+    assert registry("actuator").load("voicecoil-virtual") is VoiceCoilVirtual
+    assert HardnessDimension.default_actuators == {"force": "omni-virtual", "coil": "voicecoil-virtual"}
+
+
+def test_voicecoil_sinks(tmp_path):
+    from hapticsdk.dimensions import ChannelCommand
+    path = tmp_path / "coil.wav"
+    got = []
+    for sink in (f"wav:{path}", got.append):
+        c = VoiceCoilVirtual(sink=sink, sample_rate_hz=8000.0)
+        c.open()
+        for k in range(100):
+            c.command(ChannelCommand("coil", frequency_hz=100.0, amplitude=0.8), now=k * 1e-3)
+            c.step(1e-3)
+        c.close()
+    with wave.open(str(path), "rb") as w:
+        assert w.getframerate() == 8000 and w.getnframes() == 800 and w.getsampwidth() == 2
+    assert sum(len(a) for a in got) == 800
+    with pytest.raises(ValidationError):
+        VoiceCoilVirtual(sink="nonsense")
+
+
+def test_sounddevice_sink_is_optional():
+    try:
+        import sounddevice  # noqa: F401
+    except Exception:
+        with pytest.raises(DeviceNotFoundError, match="sounddevice"):
+            VoiceCoilVirtual(sink="sounddevice")
+    else:
+        pytest.skip("sounddevice installed; the missing-library path is not reachable here")
+
+
+def test_omni_stale_command_becomes_zero():
+    """step() applies only what the safety layer says is current: no command -> no force."""
+    dev = OmniVirtual(trajectory=Trajectory([(0, 0, -1.0), (1, 0, -1.0)]), encoder_resolution_mm=0.0)
+    dev.open()
+    dev.step(1e-3)
+    assert dev.read_state().force_n[1] == 0.0

@@ -1,0 +1,61 @@
+"""The runtime benchmarks and their CLI handlers (quick settings)."""
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from hapticsdk.benchmarks.stability import ENERGY_TOLERANCE_J, QUICK_GRID, run_matrix
+
+
+@pytest.fixture(scope="module")
+def quick_matrix():
+    return run_matrix(QUICK_GRID).to_dict()
+
+
+def test_stability_controller_on_never_gives_energy(quick_matrix):
+    on = [c for c in quick_matrix["cells"] if c["controller"]]
+    assert on and all(c["stable"] for c in on)
+    assert max(c["energy_to_user_j"] for c in on) <= ENERGY_TOLERANCE_J
+    assert max(c["peak_force_n"] for c in on) <= 3.3 + 1e-12
+
+
+def test_stability_predicted_active_cells_do_go_unstable_without_controller(quick_matrix):
+    """Cells far on the active side of b > K T / 2 (margin < -1 N*s/m, K >= 1 N/mm) are
+    unstable with the controller off; passive-predicted cells stay stable."""
+    off = [c for c in quick_matrix["cells"] if not c["controller"]]
+    active = [c for c in off if c["margin_ns_per_m"] < -1.0 and c["stiffness_n_per_mm"] >= 1.0]
+    assert active and not any(c["stable"] for c in active)
+    assert all(c["stable"] for c in off if c["margin_ns_per_m"] > 0)
+    keys = {"stiffness_n_per_mm", "period_s", "damping_ns_per_m", "finger", "controller", "energy_to_user_j",
+            "peak_force_n", "stable"}
+    assert keys <= set(off[0])
+    json.dumps(quick_matrix)
+
+
+def test_cli_handlers(capsys):
+    from hapticsdk.cli import bench_runtime
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    bench_runtime.register_bench(sub)
+    args = parser.parse_args(["stability", "--quick", "--duration", "3", "--json"])
+    assert args.func(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"cells", "summary", "energy_tolerance_j"} <= set(out)
+    args = parser.parse_args(["fidelity", "--periods", "0.001", "0.004", "--json"])
+    assert args.func(args) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["period_s"] for r in rows] == [0.001, 0.004]
+    assert {"period_s", "force_error_rms_n", "frequency_error_hz", "tick_median_us"} <= set(rows[0])
+    assert rows[1]["frequency_error_hz"] > rows[0]["frequency_error_hz"]  # coarser servo, larger error
+    args = parser.parse_args(["timing", "--seconds", "0.5", "--json"])
+    assert args.func(args) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["ticks"] == 501 and d["tick_median_us"] > 0 and "goal13_pass" in d
+
+
+def test_stability_rejects_too_short_cells():
+    from hapticsdk.errors import ValidationError
+    with pytest.raises(ValidationError):
+        run_matrix(dict(QUICK_GRID, duration_s=1.0))
