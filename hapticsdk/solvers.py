@@ -110,16 +110,22 @@ class Trace:
 
     def rows(self, i: int | None = None) -> list[dict[str, Any]]:
         """Rows for target ``i`` (scalars), or for the batch (max over targets)."""
-        out = []
-        for t, n, e, v in zip(self.times, self.nfev, self.best_error, self.violation):
-            if i is None:
-                out.append({"time_s": t, "nfev": n, "best_error": float(e.max()),
-                            "best_error_median": float(np.median(e)),
-                            "constraint_violation": float(v.max())})
-            else:
-                out.append({"time_s": t, "nfev": n, "best_error": float(e[i]),
-                            "constraint_violation": float(v[i])})
-        return out
+        return self.per_target()[i] if i is not None else self._batch_rows()
+
+    def _batch_rows(self) -> list[dict[str, Any]]:
+        return [{"time_s": t, "nfev": n, "best_error": float(e.max()),
+                 "best_error_median": float(np.median(e)), "constraint_violation": float(v.max())}
+                for t, n, e, v in zip(self.times, self.nfev, self.best_error, self.violation)]
+
+    def per_target(self) -> list[list[dict[str, Any]]]:
+        """Rows of every target, built in one pass (``per_target()[i] == rows(i)``)."""
+        if not self.times:
+            return [[] for _ in range(self.n_targets)]
+        E = np.array(self.best_error).T.tolist()     # (m, iterations)
+        V = np.array(self.violation).T.tolist()
+        tn = list(zip(self.times, self.nfev))
+        return [[{"time_s": t, "nfev": n, "best_error": e, "constraint_violation": v}
+                 for (t, n), e, v in zip(tn, Ei, Vi)] for Ei, Vi in zip(E, V)]
 
 
 @dataclass
@@ -329,6 +335,7 @@ def assemble_results(problem: SolveProblem, x: np.ndarray, out: SolverOutput, el
     per_c = {c.name: c.violation(cols) for c in problem.constraints}
     results = []
     m = problem.n_targets
+    traces = trace.per_target()
     for i in range(m):
         I = ev["intensities"][i]
         err_dims = {d: float(abs(I[problem._out_idx[j]] - problem.targets[i, j]))
@@ -359,5 +366,5 @@ def assemble_results(problem: SolveProblem, x: np.ndarray, out: SolverOutput, el
             targets={d: float(problem.targets[i, j]) for j, d in enumerate(problem.dimensions)},
             constraint_violation=viol,
             constraint_violations={k: float(v[i]) for k, v in per_c.items()},
-            time_s=float(elapsed), trace=trace.rows(i), method=method))
+            time_s=float(elapsed), trace=traces[i], method=method))
     return results
