@@ -37,6 +37,20 @@ def two_product(a: float, b: float) -> tuple[float, float]:
     return p, e
 
 
+_K_CACHE: dict[int, np.ndarray] = {}
+
+
+def _ramp_index(n: int) -> np.ndarray:
+    """``[1, 2, ..., n]`` as floats (cached; callers must not modify it)."""
+    k = _K_CACHE.get(n)
+    if k is None:
+        k = np.arange(1, n + 1, dtype=float)
+        k.flags.writeable = False
+        if len(_K_CACHE) < 256:
+            _K_CACHE[n] = k
+    return k
+
+
 class PhaseAccumulator:
     """Phase in cycles, wrapped to [0, 1), kept as a double-double (``phase`` + tail).
 
@@ -88,8 +102,9 @@ class PhaseAccumulator:
         constant frequency; the accumulator ends after the last sample (advanced by
         exactly ``n`` sample increments)."""
         inc = frequency_hz / fs
-        k = np.arange(1, n + 1, dtype=float)
-        ph = np.mod(self.phase + (self._lo + inc * k), 1.0)
+        ph = inc * _ramp_index(n)
+        ph += self.phase + self._lo
+        np.mod(ph, 1.0, out=ph)
         dt = 1.0 / fs
         if n == 1:
             self.advance(frequency_hz, dt)
@@ -137,16 +152,18 @@ class Oscillator:
         ph = self.acc.block(frequency_hz, n, self.fs)
         self.frequency_hz = float(frequency_hz)
         a0 = self.amplitude
+        ph *= 2.0 * np.pi
+        np.sin(ph, out=ph)
         if amplitude == a0:
             if a0 == 0.0:
                 return np.zeros(n)
-            return a0 * np.sin(2.0 * np.pi * ph)
+            ph *= a0
+            return ph
         step = self.max_step
         delta = amplitude - a0
-        k = np.arange(1, n + 1, dtype=float)
-        amps = a0 + math.copysign(1.0, delta) * np.minimum(abs(delta), step * k)
+        amps = a0 + math.copysign(1.0, delta) * np.minimum(abs(delta), step * _ramp_index(n))
         self.amplitude = float(amps[-1])
-        return amps * np.sin(2.0 * np.pi * ph)
+        return amps * ph
 
     def reset(self) -> None:
         self.acc = PhaseAccumulator()

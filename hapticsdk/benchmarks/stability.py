@@ -34,11 +34,12 @@ from ..passivity import (ControllerSettings, controller_commit_batch, controller
 from ..sim.arm import ArmBatch, ArmParams
 from ..sim.finger import FINGERS, Trajectory, press_slide, taps
 
-#: Energy the wall may give to the user with the controller on (J): twice the
-#: controller's bound tolerance (ControllerSettings.bound_tolerance_j; the second half
-#: covers what a one-period prediction cannot see: the finger's own push during the
-#: period and the encoder's quantisation, 3.3 N x 0.055 mm = 0.18 mJ per count).
-ENERGY_TOLERANCE_J = 2 * ControllerSettings().bound_tolerance_j
+#: Energy the wall may give to the user with the controller on (J): 2.5 mJ, i.e. the
+#: controller's bound tolerance (1 mJ, ControllerSettings.bound_tolerance_j: lower values
+#: make the controller chatter on encoder-quantisation noise, see docs/runtime.md) plus
+#: 1.5 mJ for what a one-period prediction cannot see: the finger's own push during the
+#: period and the encoder's quantisation (3.3 N x 0.055 mm = 0.18 mJ per count).
+ENERGY_TOLERANCE_J = 2.5e-3
 #: Wall force after release counted as continuing oscillation (N).
 OSCILLATION_TOLERANCE_N = 1e-6
 
