@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import atexit
 import logging
+import math
 import time
 import weakref
 from abc import ABC, abstractmethod
@@ -177,9 +178,9 @@ class Actuator(ABC):
         if self.fault is not None:
             raise DeviceError(f"actuator is faulted ({self.fault}); stop() and open() again",
                               device=self.label)
-        for attr in ("force_n", "frequency_hz", "amplitude"):
-            v = getattr(cmd, attr)
-            if v is not None and not np.isfinite(v):
+        for attr, v in (("force_n", cmd.force_n), ("frequency_hz", cmd.frequency_hz),
+                        ("amplitude", cmd.amplitude)):
+            if v is not None and not math.isfinite(v):
                 raise ValidationError(f"{attr} is NaN or infinite", field=f"{self.label}.{attr}")
         safe = self.safety.filter(cmd, time.monotonic() if now is None else now)
         try:

@@ -23,7 +23,7 @@ from typing import Any, Mapping
 
 from .actuators import Actuator, HapticDevice
 from .dimensions import ChannelCommand, DimensionRenderer, TickInput
-from .errors import PluginError, ValidationError
+from .errors import DeviceError, PluginError, ValidationError
 from .plan import MaterialPlan, RenderPlan, check_plugin_api
 
 #: the sensing device used when no actuator of the plan senses
@@ -247,8 +247,16 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         loop = ServoLoop(device, renderers, by_role, period_s=period, realtime=rt, recorder=recorder,
                          passivity=passivity, raise_on_fault=raise_on_fault)
         t0 = time.perf_counter()
-        lr = loop.run(secs)
+        try:
+            lr = loop.run(secs)
+        except DeviceError as exc:  # every actuator is already stopped by the loop
+            if pm is not None:
+                pm.call_safely("hapticsdk_device_fault", device=exc.device or "", error=exc)
+            raise
         wall = time.perf_counter() - t0
+        if pm is not None and getattr(lr, "fault", None):
+            pm.call_safely("hapticsdk_device_fault", device=str(lr.fault.get("device", "")),
+                           error=DeviceError(str(lr.fault.get("message", "")), device=lr.fault.get("device")))
         everyone = list(instances.values()) + ([device] if device not in instances.values() else [])
         safety = {a.label: a.safety.report() for a in everyone}
         devices = {a.label: a.describe() for a in everyone}

@@ -210,8 +210,6 @@ class SafetyLayer:
             self._restart()
         if self._t_last is not None and now - self._t_last > s.restart_after_s + _TIME_EPS:
             self.fault(f"command gap of {now - self._t_last:.4f} s (> restart_after_s)")
-        out = cmd
-
         force = cmd.force_n
         if force is not None:
             force = self._limit_force(float(force))
@@ -224,11 +222,12 @@ class SafetyLayer:
             if lim.max_amplitude is not None and amp > lim.max_amplitude:
                 self._hit("max_amplitude")
                 amp = float(lim.max_amplitude)
-        if cmd.frequency_hz is not None and lim.frequency_range_hz is not None:
+        freq = cmd.frequency_hz
+        if freq is not None and lim.frequency_range_hz is not None:
             lo, hi = lim.frequency_range_hz
-            if not lo <= cmd.frequency_hz <= hi:
+            if not lo <= freq <= hi:
                 self._hit("frequency_range_hz")
-                out = replace(out, frequency_hz=float(np.clip(cmd.frequency_hz, lo, hi)))
+                freq = float(min(max(freq, lo), hi))
 
         gain = self._envelope(force, now)
         if force is not None:
@@ -238,11 +237,11 @@ class SafetyLayer:
                 self._hit("max_force_rate_n_per_tick")
                 force = self._prev_force + math.copysign(rate, force - self._prev_force)
             self._prev_force = force
-            out = replace(out, force_n=float(force))
-        if amp is not None:
-            if s.ramp_amplitude:
-                amp = gain * amp
-            out = replace(out, amplitude=float(amp))
+            force = float(force)
+        if amp is not None and s.ramp_amplitude:
+            amp = gain * amp
+        # one new command per tick (dataclasses.replace costs several us on the servo path)
+        out = ChannelCommand(cmd.role, force, freq, amp)
         self._last = out
         self._t_last = now
         self._stale_counted = False

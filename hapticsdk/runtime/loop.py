@@ -32,12 +32,15 @@ actuators, ends the run cleanly with ``report.fault`` set, and is re-raised from
 
 from __future__ import annotations
 
+import logging
 import gc
 import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
+
+_log = logging.getLogger(__name__)
 
 import numpy as np
 
@@ -192,7 +195,8 @@ class ServoLoop:
         if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
             raise ValidationError(f"seconds must be > 0, got {seconds!r}", field="seconds")
         T = self.period_s
-        n_max = int(math.floor(seconds / T + 1e-9)) + 1
+        # ticks at t = 0, T, ..., seconds - T: a run of `seconds` at period T has seconds/T ticks
+        n_max = max(1, int(math.floor(seconds / T + 1e-9)))
         device = self.device
         # open everything (idempotent); commands older than one period become stale
         for act in [device, *self.actuators.values()]:
@@ -432,6 +436,12 @@ class ServoLoop:
         finally:
             if gc_was_enabled:
                 gc.enable()
+            close = getattr(recorder, "close", None)
+            if callable(close):
+                try:
+                    close()
+                except Exception as exc:  # the run's outcome matters more than the log
+                    _log.warning("recorder.close() failed: %s", exc)
             if hasattr(gc, "unfreeze"):
                 gc.unfreeze()
             if fault is not None:

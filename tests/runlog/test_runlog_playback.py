@@ -180,7 +180,7 @@ def test_servo_loop_record_and_playback_same_forces(tmp_path):
     rec.close()
     dev.close()
     run = load_run(rec.path)
-    assert len(run) == report.ticks == 801
+    assert len(run) == report.ticks == 800
     np.testing.assert_array_equal(run.commands["force"]["force_n"], report.log["force_n"])
     assert report.log["force_n"].max() > 0.5  # the spring was felt
 

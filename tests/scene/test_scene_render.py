@@ -27,7 +27,7 @@ def test_roughness_render_follows_formula_9():
     rep = render_plan(plan, seconds=1.2)
     assert rep.sensor == "probe-virtual"
     assert rep.actuators == {"vibration": "piezo-virtual"}
-    assert rep.fault is None and rep.ticks == 1201
+    assert rep.fault is None and rep.ticks == 1200
     log = rep.loop.log
     vx = np.abs(log["velocity_mm_s"][:, 0])
     amp = log["vibration.amplitude"]
@@ -40,7 +40,7 @@ def test_roughness_render_follows_formula_9():
     assert np.all(amp[active] > 0) and np.all(amp[~active] == 0)
     d = rep.to_dict()
     json.dumps(d)
-    assert d["tick"]["ticks"] == 1201 and d["material"] == "material"
+    assert d["tick"]["ticks"] == 1200 and d["material"] == "material"
 
 
 def test_render_from_saved_plan_needs_no_solver(tmp_path, monkeypatch):
@@ -107,11 +107,25 @@ def test_every_actuator_is_stopped_and_closed_on_a_fault():
             opened.append(self)
             return orig(self)
         VirtualProbe.__enter__ = spy
+        from hapticsdk.hookspecs import hookimpl
+        from hapticsdk.plugins import manager
+
+        faults = []
+
+        class Listener:
+            @hookimpl
+            def hapticsdk_device_fault(self, device, error):
+                faults.append((device, str(error)))
+
+        manager().register(Listener(), name="test-fault-listener")
         try:
             with pytest.raises(DeviceError, match="failing-test"):
                 render_plan(plan, seconds=0.5)
         finally:
             VirtualProbe.__enter__ = orig
+            manager().pm.unregister(name="test-fault-listener")
+        assert len(faults) == 1 and "failing-test" in faults[0][0] + faults[0][1]
+        assert "link lost" in faults[0][1]
         (act,) = _Failing.instances
         assert not act.is_open and act.stopped >= 1
         assert opened and not opened[0].is_open
