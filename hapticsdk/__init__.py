@@ -44,7 +44,7 @@ _LAZY = {
     "Scene": "hapticsdk.scene",
     "load_scene": "hapticsdk.scene",
     "compile_scene": "hapticsdk.plan",
-    "render_plan": "hapticsdk.render",
+    "render_plan": "hapticsdk.rendering",
     "HapticSDKError": "hapticsdk.errors",
 }
 
@@ -61,7 +61,7 @@ def render(material: Any, *, seconds: float = 3.0, seed: int | None = 0, devices
     """Solve and render one material (a library name or ``{dimension: intensity}``) on the
     scene's devices (simulated by default); returns the render report."""
     from .plan import compile_scene
-    from .render import render_plan
+    from .rendering import render_plan
     from .scene import Scene
 
     scene = Scene.for_material(material, devices=devices, seed=seed)

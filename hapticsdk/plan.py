@@ -5,7 +5,7 @@ material it records the perception dimensions kept, those left out and why (with
 importance model's predicted realism loss), the solved features (physical units), the
 features pinned out of the solve, the actuator chosen for every channel role, and the
 solve's outcome. It is plain data: :meth:`RenderPlan.to_dict` gives JSON that
-``schemas/plan.schema.json`` validates, and :func:`hapticsdk.render.render_plan`
+``schemas/plan.schema.json`` validates, and :func:`hapticsdk.rendering.render_plan`
 renders it without solving again.
 
 The plan also carries :data:`PLUGIN_API_VERSION`, the version of the plugin interface

@@ -20,7 +20,7 @@ settings (importance threshold, solver, servo period).
 4. each kept dimension's renderer is built once to learn the channel roles it commands;
    each role is mapped to an actuator (the scene's ``devices`` or the dimension's
    ``default_actuators``). Actuators are only looked up in the entry-point table here:
-   they are imported and opened by :func:`hapticsdk.render.render_plan`.
+   they are imported and opened by :func:`hapticsdk.rendering.render_plan`.
 
 Only the plugins a material of the scene names are imported.
 """
@@ -464,7 +464,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         plugins.append(_plugin_entry("importance", imp_model.name, "compile"))
     plugins += [_plugin_entry("actuator", a, "render") for a in sorted(used_actuators)]
     from .plugins import registry
-    from .render import FALLBACK_SENSOR
+    from .rendering import FALLBACK_SENSOR
     if FALLBACK_SENSOR not in used_actuators:
         e = _plugin_entry("actuator", FALLBACK_SENSOR, "render")
         e["reason"] = "sensing device when no actuator of the rendered material senses"

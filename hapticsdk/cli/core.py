@@ -129,7 +129,7 @@ def format_solve(out: dict[str, Any]) -> str:
 def cmd_render(args: argparse.Namespace) -> int:
     from ..errors import ValidationError
     from ..plan import compile_scene
-    from ..render import render_plan
+    from ..rendering import render_plan
     from ..scene import Scene, load_scene
 
     targets = _targets(args)

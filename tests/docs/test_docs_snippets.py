@@ -28,3 +28,13 @@ def test_page_snippets_run(page, capsys):
             exec(compile(code, f"{page}[snippet {i}]", "exec"), ns)
         except Exception as exc:  # name the snippet
             raise AssertionError(f"{page} snippet {i} failed: {type(exc).__name__}: {exc}\n{code}") from exc
+
+
+def test_readme_api_example_runs(capsys):
+    """The README's ten-line example of the public API."""
+    readme = (DOCS.parent / "README.md").read_text(encoding="utf-8")
+    (code,) = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+    assert len([ln for ln in code.splitlines() if ln.strip()]) <= 10
+    exec(compile(code, "README.md", "exec"), {"__name__": "readme"})
+    out = capsys.readouterr().out
+    assert "True" in out and "'ticks'" in out
