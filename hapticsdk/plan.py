@@ -284,14 +284,8 @@ class RenderPlan:
 
     @classmethod
     def load(cls, path: str | Path) -> "RenderPlan":
-        p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ValidationError(f"no such plan file: {p}", field="plan") from None
-        except json.JSONDecodeError as exc:
-            raise ValidationError(f"{p} is not JSON: {exc}", field="plan") from None
-        return cls.from_dict(data)
+        from .schemas_io import read_json
+        return cls.from_dict(read_json(path, field="plan"))
 
     def summary(self) -> dict[str, Any]:
         """The short form printed by ``hapticsdk plan --json``."""

@@ -161,13 +161,9 @@ class Scene:
 
     @classmethod
     def load(cls, path: str | Path) -> "Scene":
+        from .schemas_io import read_json
         p = Path(path)
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ValidationError(f"no such scene file: {p}", field="scene") from None
-        except json.JSONDecodeError as exc:
-            raise ValidationError(f"{p} is not JSON: {exc}", field="scene") from None
+        data = read_json(p, field="scene")
         if isinstance(data, dict) and "name" not in data:
             data["name"] = p.stem
         return cls.from_dict(data)

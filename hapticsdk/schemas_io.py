@@ -53,14 +53,19 @@ def validate(instance: Any, name: str, *, source: str = "") -> None:
         raise ValidationError(f"{where}{err.message}", field=field)
 
 
-def load_json(path: str | Path, schema: str) -> Any:
-    """Read a JSON file and validate it; errors name the file and the field."""
+def read_json(path: str | Path, *, field: str, error: type[ValidationError] = ValidationError) -> Any:
+    """Parse a JSON file; a missing file or bad JSON raises ``error`` naming the file and ``field``."""
     p = Path(path)
     try:
-        data = json.loads(p.read_text())
-    except FileNotFoundError:
-        raise ValidationError(f"file not found: {p}", field=schema) from None
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (FileNotFoundError, IsADirectoryError):
+        raise error(f"file not found: {p}", field=field) from None
     except json.JSONDecodeError as exc:
-        raise ValidationError(f"{p}: not valid JSON: {exc}", field=schema) from None
-    validate(data, schema, source=str(p))
+        raise error(f"{p}: not valid JSON: {exc}", field=field) from None
+
+
+def load_json(path: str | Path, schema: str) -> Any:
+    """Read a JSON file and validate it; errors name the file and the field."""
+    data = read_json(path, field=schema)
+    validate(data, schema, source=str(path))
     return data

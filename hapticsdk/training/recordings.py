@@ -38,6 +38,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import RecordingError, ValidationError
+from ..schemas_io import read_json
 
 #: Columns of one trial file, in file order.
 COLUMNS: tuple[str, ...] = ("time_s", "force_n", "displacement_mm", "acc_x", "acc_y",
@@ -307,12 +308,7 @@ def load_manifest(path: Path | str) -> RecordingSet:
     p = Path(path)
     if p.is_dir():
         p = p / MANIFEST_NAME
-    if not p.is_file():
-        raise RecordingError(f"{p}: recording manifest not found", field="file")
-    try:
-        doc = json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{p}: invalid JSON ({exc})", field="file") from None
+    doc = read_json(p, field="file", error=RecordingError)
     validate_json(doc, "recording.schema.json", source=str(p))
     seen = set()
     for i, e in enumerate(doc["trials"]):
@@ -366,12 +362,7 @@ def load_ratings(path: Path | str) -> Ratings:
     p = Path(path)
     if p.is_dir():
         p = p / RATINGS_NAME
-    if not p.is_file():
-        raise RecordingError(f"{p}: ratings file not found", field="file")
-    try:
-        doc = json.loads(p.read_text())
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"{p}: invalid JSON ({exc})", field="file") from None
+    doc = read_json(p, field="file", error=RecordingError)
     validate_json(doc, "ratings.schema.json", source=str(p))
     dims = tuple(doc["dimensions"])
     raters = tuple(doc["raters"])
