@@ -185,19 +185,34 @@ class ControllerSettings:
     device_mass_kg: float | None = 0.045
     device_damping_ns_per_m: float = 0.0
     position_resolution_mm: float = 0.0
-    max_force_step_n: float | None = None
+    max_force_step_n: float | None = 0.8
+    ramp_reserve_j: float = 2.5e-4
 
 
-def _cap(budget: float, v: float, dt: float, mass: float | None) -> float:
-    """Largest outward force whose predicted work over one period stays within budget:
-    ``F (v+ dt + F dt^2 / (2 m)) <= budget``."""
+def _cap(budget: float, v: float, dt: float, mass: float | None, quantum_m: float = 0.0) -> float:
+    """Largest outward force whose predicted booked work over one period stays within
+    budget: ``F (v+ dt + q + F dt^2 / (2 m)) <= budget``, where ``q`` (m) is one encoder
+    count, the most the reading can jump beyond the true motion."""
     if budget <= 0.0:
         return 0.0
-    vt = v * dt if v > 0.0 else 0.0
+    vt = (v * dt if v > 0.0 else 0.0) + quantum_m
     if mass is None or mass <= 0:
         return budget / vt if vt > 0.0 else math.inf
     a = dt * dt / (2.0 * mass)
     return (-vt + math.sqrt(vt * vt + 4.0 * a * budget)) / (2.0 * a)
+
+
+def _ramp_force(impulse: float, step: float | None) -> float:
+    """Largest starting force F (N) whose ramp-down ``F, F - step, F - 2 step, ... , 0``
+    (one value per tick) sums to at most ``impulse`` (N, the sum of the held forces).
+
+    The sum is ``S(F) = sum_j max(F - j step, 0)``: ``S = F`` for ``F <= step`` and
+    ``S <= F^2 / (2 step) + F / 2 + step / 8`` above (the chord of the parabola through the
+    multiples of ``step``), whose inverse ``sqrt(2 step S) - step / 2`` is therefore safe."""
+    if step is None or not impulse > step:
+        return impulse
+    r = math.sqrt(2.0 * step * impulse) - 0.5 * step
+    return r if r > step else step
 
 
 class PassivityController:
@@ -255,8 +270,15 @@ class PassivityController:
         budget = self.energy_j + s.bound_tolerance_j
         f = f_wall
         active = False
+        step = s.max_force_step_n
+        hard = math.inf
         if s.energy_bound and f > 0.0:
-            cap = _cap(budget, v if v > v_raw else v_raw, dt, s.device_mass_kg)
+            # impulse budget of the rest of the push (N): one tick at most, or the whole
+            # ramp-down at `step` per tick (same bound, see _cap / _ramp_force)
+            vp = v if v > v_raw else v_raw
+            q = s.position_resolution_mm * 1e-3
+            cap = _ramp_force(_cap(budget, vp, dt, s.device_mass_kg, q), step)
+            hard = _cap(budget + s.ramp_reserve_j, vp, dt, s.device_mass_kg, q) if step is not None else cap
             if f > cap:
                 self.bounded_j += f - cap
                 f = cap
@@ -271,11 +293,14 @@ class PassivityController:
         out = f + f_pc
         if active:
             self.active_ticks += 1
-            step = s.max_force_step_n
-            if step is not None and budget > 0.0:  # an exhausted budget cuts at once
-                lo, hi = self._out_prev - step, self._out_prev + step
-                out = lo if out < lo else (hi if out > hi else out)
-        self._f_pc_prev = out - f_wall if active else 0.0
+        if step is not None and (active or self._f_pc_prev != 0.0):
+            # slew limit while the controller acts and until the output has caught up
+            # with the wall again; a cut below the one-tick cap is never delayed
+            lo, hi = self._out_prev - step, self._out_prev + step
+            if lo > hard:
+                lo = hard
+            out = lo if out < lo else (hi if out > hi else out)
+        self._f_pc_prev = out - f_wall
         self._out_prev = out
         return out
 
@@ -325,17 +350,26 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     avail = state["energy"] + s.energy_tolerance_j
     budget = state["energy"] + s.bound_tolerance_j
     f = np.array(f_wall, float)
+    step = s.max_force_step_n
+    hard = np.full(f.shape, np.inf)
     if s.energy_bound:
-        vt = np.maximum(np.maximum(v, v_raw), 0.0) * dt
-        bpos = np.maximum(budget, 0.0)
+        vt = np.maximum(np.maximum(v, v_raw), 0.0) * dt + np.asarray(res, float) * 1e-3
         with np.errstate(divide="ignore", invalid="ignore"):
-            if s.device_mass_kg is None or s.device_mass_kg <= 0:
-                cap = np.where(vt > 0, bpos / vt, np.inf)
-            else:
+            def one_tick(bud: np.ndarray) -> np.ndarray:
+                bpos = np.maximum(bud, 0.0)
+                if s.device_mass_kg is None or s.device_mass_kg <= 0:
+                    return np.where(vt > 0, bpos / vt, np.inf)
                 qa = dt * dt / (2.0 * s.device_mass_kg)
-                cap = (-vt + np.sqrt(vt * vt + 4.0 * qa * bpos)) / (2.0 * qa)
+                return (-vt + np.sqrt(vt * vt + 4.0 * qa * bpos)) / (2.0 * qa)
+            imp = one_tick(budget)
+            if step is None:
+                cap = hard = imp
+            else:
+                cap = np.where(imp > step, np.maximum(np.sqrt(2.0 * step * imp) - 0.5 * step, step), imp)
+                hard = one_tick(budget + s.ramp_reserve_j)
         capped = started & (f > 0) & (f > cap)
         f = np.where(capped, cap, f)
+        hard = np.where(f_wall > 0, hard, np.inf)
     else:
         capped = np.zeros(f.shape, bool)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -343,12 +377,13 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         alpha = np.where(damp, np.minimum(-avail / (dt * v * v), s.max_damping_ns_per_m), 0.0)
     active = started & (capped | damp)
     out = f + np.where(started, -alpha * v, 0.0)
-    if s.max_force_step_n is not None:
+    if step is not None:
         prev = state["out_prev"]
-        limit = active & (budget > 0)  # an exhausted budget cuts at once
-        out = np.where(limit, np.clip(out, prev - s.max_force_step_n, prev + s.max_force_step_n), out)
+        limit = started & (active | (state["f_pc_prev"] != 0.0))
+        lo = np.minimum(prev - step, hard)  # a cut below the one-tick cap is never delayed
+        out = np.where(limit, np.clip(out, lo, prev + step), out)
     out = np.where(started, out, f_wall)
-    state["f_pc_prev"] = np.where(on & active, out - f_wall, 0.0)
+    state["f_pc_prev"] = np.where(on, out - f_wall, 0.0)
     state["out_prev"] = out
     state["started"] = np.ones_like(started)
     return np.where(on, out, f_wall)
