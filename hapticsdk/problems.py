@@ -76,7 +76,7 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
                   model: str | PerceptionModel | None = None,
                   penalty: str = "paper", tolerance: float = 0.01,
                   fixed: Mapping[str, float] | None = None,
-                  penalty_weight: float = 1.0) -> SolveProblem:
+                  penalty_weight: float = 1.0, data_support: bool = False) -> SolveProblem:
     """Assemble a :class:`~hapticsdk.solvers.SolveProblem`.
 
     Args:
@@ -88,6 +88,11 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
         penalty: ``"paper"`` (formula (6)) or ``"normalised"``.
         tolerance: success threshold on the sum of absolute intensity errors.
         fixed: model inputs to pin (physical units) instead of searching them.
+        data_support: also keep the solution where the model's training data were, using
+            the facts the model file carries (``constraint_context``, e.g. the recorded
+            press-force range for hardness). Off by default, as in the paper: the inverse is
+            not unique, and without it the solver may return feature combinations no
+            recording had (see docs/solvers.md, "Data support").
     """
     T, dims = _targets_array(targets, dimensions)
     if len(set(dims)) != len(dims):
@@ -130,7 +135,9 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
             pinned[n] = 0.5 * (f.lower + f.upper)
         else:
             raise ModelError(f"model {mdl.name!r} input {n!r} is not searched and has no default value")
-    context = {}
+    # facts of the model's training data that constraints use (df of formula (5), ...)
+    context = ({k: float(v) for k, v in (mdl.metadata.get("constraint_context") or {}).items()}
+               if data_support else {})
     if mdl.metadata.get("df_hz") is not None:
         context["df_hz"] = float(mdl.metadata["df_hz"])
     constraints = []

@@ -51,7 +51,8 @@ DEFAULT_SETTINGS: dict[str, Any] = {
         "threshold_percent": 10.0,
         "thresholds": {},
     },
-    "solver": {"method": "ga-polish", "seed": 0, "options": {}, "tolerance": 0.01, "penalty": "paper"},
+    "solver": {"method": "ga-polish", "seed": 0, "options": {}, "tolerance": 0.01, "penalty": "paper",
+               "data_support": False},
     "model": None,
     "servo": {"period_s": 0.001, "realtime": False, "passivity": True},
     "dimensions": None,
@@ -309,7 +310,8 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
         T = np.array([[m.targets[d] for d in dims] for m in mats], dtype=float)
         res = solve(T, dimensions=list(dims), model=settings.get("model"), method=s["method"],
                     seed=s["seed"], options=dict(s.get("options") or {}),
-                    penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01))
+                    penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01),
+                    data_support=bool(s.get("data_support", False)))
         results = list(res) if isinstance(res, list) else [res]
         for m, r in zip(mats, results):
             out[m.name] = r

@@ -10,7 +10,9 @@ arrays (one vectorised step per tick for the whole grid).
 
 Per cell: ``energy_to_user_j`` = max over time of the energy the arm + wall gave to the
 finger (the negative of the display-port energy ``W_d = 1/2 m v^2 + int b v^2 - int F v``;
-exact under the hold), ``peak_force_n``, ``oscillation_after_release_n`` (largest wall
+exact under the hold), ``peak_force_n``, ``max_force_step_n`` (largest
+change of the applied force between two ticks, N; includes the wall's own jump at
+contact), ``oscillation_after_release_n`` (largest wall
 force over the last 0.5 s, when the finger rests 2 mm above the surface: any force
 means the stylus still bounces on the wall), and ``stable`` = energy within
 :data:`ENERGY_TOLERANCE_J`, no force after release (below
@@ -93,6 +95,8 @@ def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "controller_on_unstable": sum(not c["stable"] for c in on),
             "controller_on_max_energy_j": max((c["energy_to_user_j"] for c in on), default=float("nan")),
             "controller_on_max_peak_force_n": max((c["peak_force_n"] for c in on), default=float("nan")),
+            "controller_on_max_force_step_n": max((c.get("max_force_step_n", float("nan")) for c in on),
+                                                  default=float("nan")),
             "controller_off_unstable": sum(not c["stable"] for c in off),
             "controller_off_predicted_active": sum(c["margin_ns_per_m"] < 0 for c in off)}
 
@@ -115,6 +119,8 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
     peak = np.zeros(len(arms))
     e_max = np.zeros(len(arms))
     resid = np.zeros(len(arms))
+    dmax = np.zeros(len(arms))
+    f_last = np.zeros(len(arms))
     t_rel = duration_s - 0.5
     for k in range(n_ticks):
         y_meas = batch.measured_mm()
@@ -126,10 +132,13 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
         f = batch.step(f_cmd, np.full(len(arms), r[k]), np.full(len(arms), (r[k + 1] - r[k]) / period_s))
         controller_commit_batch(st, f)
         np.maximum(peak, np.abs(f), out=peak)
+        np.maximum(dmax, np.abs(f - f_last), out=dmax)
+        f_last = f
         np.maximum(e_max, batch.energy_to_user_j(), out=e_max)
         if tt[k] >= t_rel:
             np.maximum(resid, np.abs(f), out=resid)
     return {"energy_to_user_j": e_max, "peak_force_n": peak, "oscillation_after_release_n": resid,
+            "max_force_step_n": dmax,
             "limit_n": limit, "observed_energy_j": st["energy"], "dissipated_j": st["dissipated"]}
 
 
@@ -159,6 +168,7 @@ def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = No
             cells.append({"stiffness_n_per_mm": float(Ki), "period_s": float(T), "damping_ns_per_m": float(bi),
                           "finger": fi, "controller": bool(oi), "energy_to_user_j": e, "peak_force_n": pk,
                           "oscillation_after_release_n": osc, "stable": stable,
+                          "max_force_step_n": float(res["max_force_step_n"][i]),
                           "margin_ns_per_m": float(passivity_margin(Ki, 0.0, bi, T, 0))})
     return StabilityResult(cells=cells, tolerance_j=ENERGY_TOLERANCE_J, duration_s=float(g["duration_s"]),
                            runtime_s=time.perf_counter() - t0)

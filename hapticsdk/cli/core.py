@@ -31,6 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", default=None, help="model name or .onnx path (default: the dimensions' model)")
     p.add_argument("--penalty", default="paper", choices=["paper", "normalised"])
     p.add_argument("--tolerance", type=positive_float, default=0.01)
+    p.add_argument("--data-support", action="store_true",
+                   help="keep the answer where the model's recordings were (e.g. recorded press-force range)")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_solve)
@@ -106,7 +108,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         raise ValidationError("give at least one target: --hardness, --roughness or --target DIM=V",
                               field="targets")
     res = solve(targets, method=args.method, seed=args.seed, model=args.model,
-                penalty=args.penalty, tolerance=args.tolerance)
+                penalty=args.penalty, tolerance=args.tolerance, data_support=args.data_support)
     out = res.to_json()
     if args.json:
         emit(out, True)

@@ -43,9 +43,16 @@ def _dumps(v: Any) -> str:
 
 def build_metadata(space: FeatureSpace, dimensions: Sequence[str], *, feature_defaults: Mapping[str, float],
                    df_hz: float, metrics: Mapping[str, Any], training_data_sha256: str,
-                   data_generated: bool, architecture: str = "mlp-tanh") -> dict[str, str]:
-    """The ``metadata_props`` of the model file (keys prefixed ``hapticsdk.``, JSON values)."""
-    return {
+                   data_generated: bool, architecture: str = "mlp-tanh",
+                   constraint_context: Mapping[str, float] | None = None) -> dict[str, str]:
+    """The ``metadata_props`` of the model file (keys prefixed ``hapticsdk.``, JSON values).
+
+    ``constraint_context``: facts of the training data that dimensions' constraints use
+    (e.g. ``press_force_max_n``), passed to ``PerceptionDimension.constraints(**context)``.
+    """
+    extra = {META_PREFIX + "constraint_context": _dumps({k: float(v) for k, v in constraint_context.items()})
+             } if constraint_context else {}
+    return {**extra,
         META_PREFIX + "features": _dumps([{"name": f.name, "unit": f.unit, "lower": f.lower,
                                            "upper": f.upper} for f in space]),
         META_PREFIX + "dimensions": _dumps(list(dimensions)),

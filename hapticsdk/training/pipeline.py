@@ -195,6 +195,20 @@ def generate_feature_dataset(out: Path | str, n_samples: int = 23, *, seed: int 
 
 
 # --------------------------------------------------------------------------- train
+def constraint_context(X: np.ndarray) -> dict[str, float]:
+    """Facts of the training rows that the dimensions' constraints use.
+
+    ``press_force_min_n`` / ``press_force_max_n``: the range of the pressing force implied
+    by each row's stiffness and work, ``sqrt(2 GS W)`` (N; exact for a linear spring). The
+    hardness dimension keeps solutions inside the recorded maximum, where the model was
+    trained, instead of letting GS and W drift to combinations no recording had.
+    """
+    gs = X[:, FEATURE_NAMES.index("GS")]
+    w = X[:, FEATURE_NAMES.index("W")]
+    f = np.sqrt(2.0 * np.clip(gs, 0.0, None) * np.clip(w, 0.0, None))
+    return {"press_force_min_n": float(f.min()), "press_force_max_n": float(f.max())}
+
+
 def train_dataset(path: Path | str, out: Path | str | None, cfg=None) -> tuple[dict, Any]:
     """Train on a data set, export ONNX to ``out`` and return (report, TrainResult).
 
@@ -213,7 +227,8 @@ def train_dataset(path: Path | str, out: Path | str | None, cfg=None) -> tuple[d
     defaults = dict(zip(FEATURE_NAMES, (float(v) for v in np.median(X, axis=0))))
     meta = onnx_export.build_metadata(space, table.dimensions, feature_defaults=defaults, df_hz=table.df_hz,
                                       metrics=res.metrics, training_data_sha256=sha,
-                                      data_generated=table.generated)
+                                      data_generated=table.generated,
+                                      constraint_context=constraint_context(X))
     data = onnx_export.model_bytes(res.model, meta)
     rng = np.random.default_rng(0)
     probe = np.concatenate([X, space.random(256, rng)])

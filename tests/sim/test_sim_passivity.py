@@ -115,18 +115,39 @@ def test_controller_keeps_wall_passive_without_spikes(K):
     assert np.abs(np.diff(f)).max() <= 1.0
     assert x[-500:].std() < 0.05
     assert x_off[-500:].std() > x[-500:].std()
+    # transparency: the wall is rendered, not withheld (mean force = spring law at the mean depth)
+    assert f[-500:].mean() == pytest.approx(K * -x[-500:].mean(), rel=0.05)
 
 
-def test_controller_at_four_times_critical_stiffness():
-    """Goal 4 at K = 4 x 2b/T: energy within the bound tolerance, |F| <= 3.3 N, settled.
-    Known limitation (reported, not hidden): here the damper alone is not enough, the
-    energy bound fires and cuts the force in one tick (|dF| up to 3.3 N > the 1 N goal)."""
-    e_off, _, _ = _press(4.0, on=False, res=0.055)
-    e_on, x, f = _press(4.0, on=True, res=0.055)
+@pytest.mark.parametrize("K", [3.0, 3.5, 4.0])
+def test_controller_has_no_force_spikes_up_to_four_times_critical_stiffness(K):
+    """Goal 4 spike criterion at K = 3 ... 4 x 2b/T (quantised encoder): |dF| <= 1 N per
+    tick and |F| <= 3.3 N on every tick, energy to the hand within the bound tolerance.
+    The controller before the predictive ramp cut the force in one tick here (|dF| up
+    to 3.2-3.25 N), so this test fails on that behaviour."""
+    e_off, _, _ = _press(K, on=False, res=0.055)
+    e_on, x, f = _press(K, on=True, res=0.055)
     assert e_off > 1e-3
     assert e_on <= ControllerSettings().bound_tolerance_j
     assert np.abs(f).max() <= 3.3 + 1e-12
-    assert x[-500:].std() < 0.05
+    assert np.abs(np.diff(f)).max() <= 1.0
+    assert np.abs(np.diff(f)).max() <= ControllerSettings().max_force_step_n + 1e-9
+
+
+def test_spike_criterion_fails_without_the_slew_limit():
+    """The same K = 4 x 2b/T press with the ramp/slew limit off cuts the force in one tick
+    (the old behaviour), so the spike assertion above can fail."""
+    _, _, f = _press(4.0, on=True, res=0.055, settings=ControllerSettings(max_force_step_n=None))
+    assert np.abs(np.diff(f)).max() > 1.0
+
+
+@pytest.mark.xfail(strict=True, reason="known gap (docs/runtime.md): at K = 3-4 x 2b/T the 30 Hz damper "
+                   "lags the oscillation; K = 3: std 0.68 mm, K = 3.5 / 4: W_d down to -2.6e-6 / -9.6e-5 J")
+@pytest.mark.parametrize("K", [3.0, 3.5, 4.0])
+def test_goal4_energy_and_settling_up_to_four_times_critical_stiffness(K):
+    """Goal 4 in full at K = 3 ... 4 x 2b/T: min W_d >= -1e-6 J and std < 0.05 mm."""
+    e_on, x, _ = _press(K, on=True, res=0.055)
+    assert e_on <= 1e-6 and x[-500:].std() < 0.05
 
 
 def test_scalar_controller_equals_batch():

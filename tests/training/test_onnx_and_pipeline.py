@@ -62,7 +62,9 @@ def test_onnx_metadata_and_initializers(shipped_report):
     _, res, out = shipped_report
     proto = onnx.load(str(out))
     meta = {p.key: json.loads(p.value) for p in proto.metadata_props}
-    assert set(meta) == {"hapticsdk." + k for k in onnx_export.REQUIRED_KEYS}
+    assert set(meta) == {"hapticsdk." + k for k in onnx_export.REQUIRED_KEYS} | {"hapticsdk.constraint_context"}
+    ctx = meta["hapticsdk.constraint_context"]
+    assert 3.3 < ctx["press_force_min_n"] < ctx["press_force_max_n"] < 10.0  # generated presses: 4-6 N
     assert [f["name"] for f in meta["hapticsdk.features"]] == list(FEATURE_NAMES)
     assert meta["hapticsdk.dimensions"] == ["hardness", "roughness"]
     assert meta["hapticsdk.df_hz"] == 0.4 and meta["hapticsdk.architecture"] == "mlp-tanh"

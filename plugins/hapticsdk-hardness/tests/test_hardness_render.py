@@ -147,3 +147,18 @@ def test_omni_stale_command_becomes_zero():
     dev.open()
     dev.step(1e-3)
     assert dev.read_state().force_n[1] == 0.0
+
+
+def test_press_force_constraint_bounds_the_implied_press():
+    from hapticsdk_hardness.dimension import HardnessDimension, PressForceConstraint
+
+    c = PressForceConstraint(6.0)
+    gs = np.array([1.0, 1.0, 2.0])
+    w = np.array([17.0, 19.0, 9.0])        # implied force sqrt(2 GS W): 5.83, 6.16, 6.0 N
+    pen = c.penalty({"GS": gs, "W": w}, "normalised")
+    assert pen[0] == 0.0 and pen[2] == 0.0 and pen[1] > 0.0
+    assert pen[1] == pytest.approx((19.0 - 18.0) / 19.0)
+    names = [k.name for k in HardnessDimension().constraints()]
+    assert names == ["hardness.work"]
+    names = [k.name for k in HardnessDimension().constraints(press_force_max_n=6.0)]
+    assert names == ["hardness.work", "hardness.press_force"]

@@ -47,6 +47,30 @@ class WorkConstraint(Constraint):
         return wv, w
 
 
+class PressForceConstraint(Constraint):
+    """W <= F_max^2 / (2 GS): the pressing force implied by stiffness and work,
+    ``sqrt(2 GS W)``, stays within what the recordings reached (``press_force_max_n`` of the
+    model's data). Not in the paper: without it the inverse solve may pair a stiffness with
+    a work that no recording had (e.g. GS 2.5 N/mm with W 120 mJ, a 24 N press), where the
+    perception model extrapolates. Written as ``F_max^2/(2 GS) >= W``.
+    """
+
+    name: ClassVar[str] = "hardness.press_force"
+    features: ClassVar[tuple[str, ...]] = ("GS", "W")
+
+    def __init__(self, f_max_n: float) -> None:
+        if not np.isfinite(f_max_n) or f_max_n <= 0:
+            raise ValidationError(f"press_force_max_n must be > 0 N, got {f_max_n!r}",
+                                  field="press_force_max_n")
+        self.f_max_n = float(f_max_n)
+
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        gs = np.asarray(cols["GS"], float)
+        w = np.asarray(cols["W"], float)
+        w_max = self.f_max_n ** 2 / (2.0 * np.maximum(gs, 1e-12))
+        return w, w_max
+
+
 class HardnessRenderer(DimensionRenderer):
     """Per-tick commands of formula (8) for one material.
 
@@ -125,7 +149,12 @@ class HardnessDimension(PerceptionDimension):
     render_features: ClassVar[tuple[str, ...]] = ("GS",)
 
     def constraints(self, **context: float) -> list[Constraint]:
-        return [WorkConstraint(float(context.get("mf_n", MF_N)))]
+        """Formula (4) always; the recorded press-force range when the model's data give it
+        (``press_force_max_n``, see :class:`PressForceConstraint`)."""
+        out: list[Constraint] = [WorkConstraint(float(context.get("mf_n", MF_N)))]
+        if context.get("press_force_max_n") is not None:
+            out.append(PressForceConstraint(float(context["press_force_max_n"])))
+        return out
 
     def renderer(self, features: Mapping[str, float], **options: Any) -> HardnessRenderer:
         if "GS" not in features:

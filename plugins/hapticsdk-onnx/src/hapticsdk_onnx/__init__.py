@@ -71,6 +71,11 @@ class OnnxModel(PerceptionModel):
         dims = _meta(raw, "dimensions", where)
         defaults = _meta(raw, "feature_defaults", where)
         meta = {k: _meta(raw, k, where) for k in REQUIRED_METADATA}
+        if "hapticsdk.constraint_context" in raw:  # optional: data facts for constraints
+            ctx = _meta(raw, "constraint_context", where)
+            if not isinstance(ctx, dict) or not all(isinstance(v, (int, float)) for v in ctx.values()):
+                raise ModelError(f"{where}: metadata 'hapticsdk.constraint_context' must map names to numbers")
+            meta["constraint_context"] = ctx
         if not isinstance(feats, list) or not feats or not all(
                 isinstance(f, dict) and {"name", "unit", "lower", "upper"} <= set(f) for f in feats):
             raise ModelError(f"{where}: metadata 'hapticsdk.features' must be a non-empty list of "
