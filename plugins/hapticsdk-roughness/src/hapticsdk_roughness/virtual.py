@@ -75,6 +75,11 @@ class PiezoVirtual(Actuator):
         self.keep_samples = int(keep_s * fs)
         self.osc = Oscillator(self.fs, ramp_s=self.ramp_s, max_amplitude=self.limits.max_amplitude)
         self._blocks: list[np.ndarray] = []
+        #: (frequency Hz, amplitude V, samples) per command not yet synthesised: the servo
+        #: tick only records the command (as a real DRV2667 host only writes registers);
+        #: the waveform the chip would play is synthesised in :meth:`step` (the loop's
+        #: simulation phase) or when it is read.
+        self._pending: list[tuple[float, float, int]] = []
         self._kept = 0
         self._frac = 0.0
         self._target_amp = 0.0
@@ -94,6 +99,7 @@ class PiezoVirtual(Actuator):
     # -- backend ----------------------------------------------------------------
     def _open(self) -> None:
         self.osc.reset()
+        self._pending.clear()
         self._target_amp = 0.0
 
     def _n_samples(self, seconds: float) -> int:
@@ -119,10 +125,22 @@ class PiezoVirtual(Actuator):
             a = amplitude_code(a, self.gain) / 255.0 * GAIN_FULL_SCALE_V[self.gain]
         self._freq, self._target_amp = f, a
         self.commands += 1
-        self._emit(self.osc.render(f, a, self._n_samples(self.period_s)))
+        self._pending.append((f, a, self._n_samples(self.period_s)))
+
+    def _flush(self) -> None:
+        """Synthesise the commands recorded since the last flush, in order."""
+        if self._pending:
+            for f, a, n in self._pending:
+                self._emit(self.osc.render(f, a, n))
+            self._pending.clear()
+
+    def step(self, dt: float) -> None:
+        """Simulation phase of a servo tick: synthesise the waveform commanded so far."""
+        self._flush()
 
     def _stop(self) -> None:
         """Vibration off: the amplitude ramps to 0 (``ramp_s``) so the record ends silent."""
+        self._flush()
         self._target_amp = 0.0
         if self.osc.amplitude > 0:
             n = int(np.ceil(self.osc.amplitude / self.osc.max_step)) + 1
@@ -132,19 +150,23 @@ class PiezoVirtual(Actuator):
     @property
     def driving(self) -> bool:
         """True while the output amplitude or its target is above zero."""
+        self._flush()
         return self.osc.amplitude > 0 or self._target_amp > 0
 
     @property
     def output_amplitude_v(self) -> float:
+        self._flush()
         return float(self.osc.amplitude)
 
     def waveform(self) -> tuple[np.ndarray, np.ndarray]:
         """(t in s, drive voltage in V) of the kept samples."""
+        self._flush()
         v = np.concatenate(self._blocks) if self._blocks else np.zeros(0)
         start = self.samples_total - v.size
         return (start + np.arange(v.size)) / self.fs, v
 
     def clear_waveform(self) -> None:
+        self._flush()
         self._blocks.clear()
         self._kept = 0
 
