@@ -19,7 +19,7 @@ import importlib
 import logging
 from dataclasses import dataclass
 from importlib import metadata
-from typing import Any, Callable, Iterable
+from typing import Any, Iterable
 
 import pluggy
 
@@ -271,10 +271,3 @@ _manager = PluginManager()
 def manager() -> PluginManager:
     """The process-wide hook manager."""
     return _manager
-
-
-def make_factory(kind: str) -> Callable[..., Any]:
-    """``make_factory("actuator")("omni-virtual", **opts)`` -> instance."""
-    def create(name: str, **options: Any) -> Any:
-        return registry(kind).load(name)(**options)
-    return create

@@ -235,8 +235,16 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
             try:
                 m = library.get(obj.material)
             except (KeyError, LookupError, ValidationError) as exc:
-                raise ValidationError(f"unknown material {obj.material!r}: {exc}",
-                                      field=f"{where}.material") from None
+                # not in the shipped library: only now ask the plugins (this imports
+                # every plugin's hook module, so library materials never pay for it)
+                if library.source != "with-plugins":
+                    library = load_library(with_plugins=True)
+                    library.source = "with-plugins"
+                try:
+                    m = library.get(obj.material)
+                except (KeyError, LookupError, ValidationError) as exc2:
+                    raise ValidationError(f"unknown material {obj.material!r}: {exc2}",
+                                          field=f"{where}.material") from None
             name, source = m.name, "library"
             targets = {k: float(v) for k, v in m.intensities.items()}
         elif isinstance(obj.material, Mapping):

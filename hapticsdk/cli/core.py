@@ -18,6 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("materials", help="list the named material library")
     p.add_argument("--library", help="a materials JSON file instead of the shipped library")
+    p.add_argument("--with-plugins", action="store_true",
+                   help="add the materials installed plugins contribute (hapticsdk_materials hook)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_materials)
 
@@ -69,7 +71,7 @@ def cmd_plugins(args: argparse.Namespace) -> int:
 def cmd_materials(args: argparse.Namespace) -> int:
     from ..materials import load_library
 
-    lib = load_library(args.library)
+    lib = load_library(args.library, with_plugins=args.with_plugins)
     rows = [m.to_dict() for m in lib]
     if args.json:
         emit({"generated": lib.generated, "source": lib.source, "materials": rows}, True)
@@ -78,7 +80,8 @@ def cmd_materials(args: argparse.Namespace) -> int:
     print(f"{len(rows)} materials{note}")
     for m in lib:
         its = ", ".join(f"{k} {v:.3f}" for k, v in m.intensities.items())
-        print(f"{m.name:<5} {m.label:<22} {its}")
+        src = f"  [{m.source}]" if m.source.startswith("plugin") else ""
+        print(f"{m.name:<5} {m.label:<22} {its}{src}")
     return 0
 
 

@@ -84,3 +84,14 @@ def test_render_malformed_scene_names_the_field(tmp_path, capsys):
     code = main(["render", "--scene", str(p), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert code == 2 and out["field"] and "scene" in out["field"]
+
+
+def test_plugin_materials_are_listed_and_rendered_by_name(capsys):
+    pytest.importorskip("hapticsdk_warmth", reason="the example plugin is part of requirements.txt")
+    code, out = run_json(capsys, "materials", "--with-plugins", "--json")
+    names = {m["name"]: m for m in out["materials"]}
+    assert "S7" in names and names["warm-felt"]["source"].startswith("plugin")
+    code, out = run_json(capsys, "materials", "--json")
+    assert "warm-felt" not in {m["name"] for m in out["materials"]}
+    code, out = run_json(capsys, "render", "warm-felt", "--seconds", "0.2", "--json")
+    assert code == 0 and out["material"] == "warm-felt" and "warmth" in out["dimensions"]
