@@ -10,7 +10,7 @@ plugins (entry-point group ``hapticsdk.dimensions``); the core knows none of the
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import ClassVar, Mapping
 
 import numpy as np

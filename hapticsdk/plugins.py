@@ -15,7 +15,6 @@ others (:func:`list_plugins`, :meth:`PluginManager.load_all`).
 
 from __future__ import annotations
 
-import importlib
 import logging
 from dataclasses import dataclass
 from importlib import metadata

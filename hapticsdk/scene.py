@@ -234,7 +234,7 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
                 library = load_library()
             try:
                 m = library.get(obj.material)
-            except (KeyError, LookupError, ValidationError) as exc:
+            except (KeyError, LookupError, ValidationError):
                 # not in the shipped library: only now ask the plugins (this imports
                 # every plugin's hook module, so library materials never pay for it)
                 if library.source != "with-plugins":

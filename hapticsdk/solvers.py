@@ -16,11 +16,11 @@ from __future__ import annotations
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Mapping, Sequence
+from typing import Any, ClassVar, Sequence
 
 import numpy as np
 
-from .dimensions import PENALTY_FORMS, Constraint, check_intensity
+from .dimensions import PENALTY_FORMS, Constraint
 from .errors import SolverError, ValidationError
 from .features import FeatureSpace
 from .models import PerceptionModel

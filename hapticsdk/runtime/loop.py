@@ -48,7 +48,7 @@ from ..actuators import Actuator, DeviceState, HapticDevice
 from ..dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
-from .clock import MonotonicClock, SimulatedClock
+from .clock import MonotonicClock
 from .stats import jitter_stats, tick_stats
 
 #: event counters every report carries (0 when nothing happened)
@@ -241,7 +241,6 @@ class ServoLoop:
         max_pos, max_spd = self.max_position_mm, self.max_speed_mm_s
         clock = self.clock
         realtime = self.realtime
-        pc_active0 = 0
         fault: dict[str, str] | None = None
         fault_exc: BaseException | None = None
 

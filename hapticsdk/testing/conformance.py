@@ -31,7 +31,7 @@ import numpy as np
 
 from ..actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevice
 from ..dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
-from ..errors import DeviceError, HapticSDKError, PluginError, ValidationError
+from ..errors import DeviceError, PluginError, ValidationError
 from ..features import Feature, FeatureSpace
 from ..models import PerceptionModel
 from ..solvers import SolveProblem, Solver

@@ -303,13 +303,19 @@ class RecordingSet:
             yield self.load_trial(e)
 
 
-def load_manifest(path: Path | str) -> RecordingSet:
-    """Load and schema-validate ``recordings.json`` (``path`` is the file or its directory)."""
+def _read_checked(path: Path | str, default_name: str, schema: str) -> tuple[Path, Any]:
+    """Read a JSON file (or ``default_name`` inside a directory) and validate it."""
     p = Path(path)
     if p.is_dir():
-        p = p / MANIFEST_NAME
+        p = p / default_name
     doc = read_json(p, field="file", error=RecordingError)
-    validate_json(doc, "recording.schema.json", source=str(p))
+    validate_json(doc, schema, source=str(p))
+    return p, doc
+
+
+def load_manifest(path: Path | str) -> RecordingSet:
+    """Load and schema-validate ``recordings.json`` (``path`` is the file or its directory)."""
+    p, doc = _read_checked(path, MANIFEST_NAME, "recording.schema.json")
     seen = set()
     for i, e in enumerate(doc["trials"]):
         key = (e["sample"], e["trial"])
@@ -359,11 +365,7 @@ class Ratings:
 
 def load_ratings(path: Path | str) -> Ratings:
     """Load and validate a ratings file (``path`` is the file or its directory)."""
-    p = Path(path)
-    if p.is_dir():
-        p = p / RATINGS_NAME
-    doc = read_json(p, field="file", error=RecordingError)
-    validate_json(doc, "ratings.schema.json", source=str(p))
+    p, doc = _read_checked(path, RATINGS_NAME, "ratings.schema.json")
     dims = tuple(doc["dimensions"])
     raters = tuple(doc["raters"])
     for s, per in doc["ratings"].items():

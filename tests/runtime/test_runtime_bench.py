@@ -3,7 +3,6 @@
 import argparse
 import json
 
-import numpy as np
 import pytest
 
 from hapticsdk.benchmarks.stability import ENERGY_TOLERANCE_J, QUICK_GRID, run_matrix

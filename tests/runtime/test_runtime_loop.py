@@ -8,7 +8,6 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import ActuatorLimits
 from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime import EVENT_KEYS, ServoLoop, SimulatedClock

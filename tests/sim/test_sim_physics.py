@@ -95,7 +95,6 @@ def test_dissipation_gramian_is_the_integral_of_v_squared():
     arm, fg = ARM, FingerParams()
     T = 2e-3
     G = dissipation_gramians(T, [arm], [fg])[0]
-    A = np.zeros((5, 5))
     P = transition_matrices(T / 2000, [arm], [fg])[0]
     z0 = np.array([-1e-3, 0.05, -3e-3, 0.02, 1.5])
     # fine quadrature of v(s)^2 with the exact sub-step transition (Simpson)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.errors import ValidationError
-from hapticsdk.solvers import SolveProblem, Solver, SolverOutput
+from hapticsdk.solvers import Solver, SolverOutput
 from hapticsdk_ga.amortised import AmortisedSolver
 from hapticsdk_ga.de import DESolver
 from hapticsdk_ga.ga import GASolver

@@ -10,7 +10,7 @@ from hapticsdk.calibration import VoiceCoilCalibration
 from hapticsdk.errors import DeviceNotFoundError, ValidationError
 from hapticsdk.plugins import registry
 from hapticsdk.runtime import ServoLoop
-from hapticsdk.sim.finger import Trajectory, press_slide
+from hapticsdk.sim.finger import Trajectory
 from hapticsdk_hardness.dimension import GS_MAX_N_PER_MM, HardnessDimension, HardnessRenderer, WorkConstraint
 from hapticsdk_hardness.omni import OmniVirtual
 from hapticsdk_hardness.voicecoil import VoiceCoilVirtual

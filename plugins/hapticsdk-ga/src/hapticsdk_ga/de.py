@@ -155,7 +155,7 @@ class ScipyDESolver(Solver):
         goal = target_error(o, problem)
         clock = Clock(check_budget(o))
         ev = Evaluator(problem)
-        m, d = problem.n_targets, problem.n_features
+        m = problem.n_targets
         lower, upper = ev.lower, ev.upper
         free = np.flatnonzero(upper > lower)
         # current best per target, starting from the box centre (or x0) so the trace is defined

@@ -288,7 +288,6 @@ def _repair(R: _Residuals, U: np.ndarray, G: np.ndarray, err: np.ndarray, S: np.
     Jacobians by central differences, no model call), then one model call for the moved
     rows. Needed where the least-squares compromise between a large intensity residual
     (unreachable target) and a constraint leaves a small violation."""
-    p = R.p
     touched = np.zeros(U.shape[0], bool)
     for _ in range(iters):
         viol_rows = (S > 0).any(axis=1)
