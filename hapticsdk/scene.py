@@ -52,7 +52,7 @@ DEFAULT_SETTINGS: dict[str, Any] = {
         "thresholds": {},
     },
     "solver": {"method": "ga-polish", "seed": 0, "options": {}, "tolerance": 0.01, "penalty": "paper",
-               "data_support": False},
+               "data_support": True},
     "model": None,
     "servo": {"period_s": 0.001, "realtime": False, "passivity": True},
     "dimensions": None,
@@ -319,7 +319,7 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
         res = solve(T, dimensions=list(dims), model=settings.get("model"), method=s["method"],
                     seed=s["seed"], options=dict(s.get("options") or {}),
                     penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01),
-                    data_support=bool(s.get("data_support", False)))
+                    data_support=bool(s.get("data_support", True)))
         results = list(res) if isinstance(res, list) else [res]
         for m, r in zip(mats, results):
             out[m.name] = r
