@@ -88,7 +88,7 @@ class PaperRegressionImportance(ImportanceModel):
     """The multiple regressions of Tables 5 and 6 of the reference paper.
 
     Loss of realism (% of the realism with hardness and roughness rendered) when one is
-    removed, from the GA features GS (N/mm), Fpeak (Hz) and AFpeak (m/s^2):
+    removed, from the GA features GS (N/mm), Fpeak (Hz) and AFpeak (in g, see below):
 
     * removing roughness: ``35.009 - 0.075 GS - 0.232 Fpeak + 15.966 AFpeak`` (R^2 0.842)
     * removing hardness:  ``3.804 + 8.168 GS + 0.060 Fpeak - 9.138 AFpeak``  (R^2 0.952)
@@ -97,6 +97,14 @@ class PaperRegressionImportance(ImportanceModel):
     roughness, so this model judges a dimension only while both are rendered (once one
     is dropped, the other is kept). A dropped hardness is replaced by a constant normal
     force of 1 N while in contact (the paper's "No Hardness" condition).
+
+    Units of AFpeak: the paper gives none. Its accelerometer (ADXL345) reports in g, and
+    only g makes the regressions agree with the paper's own averages: with Fpeak about
+    100 Hz and GS about 2 N/mm, the mean losses it reports (hardness 29 %, roughness 18 %:
+    realism 70.86 -> 50.23 and 57.81) need AFpeak about 0.2-0.4, i.e. 2-4 m/s^2 expressed
+    in g; read as m/s^2 the hardness regression would call nearly every material "soft".
+    The SDK's AFpeak is in m/s^2, so it is divided by ``G0`` before the regression
+    (``AFPEAK_PER_UNIT``; set it to 1.0 in a subclass to apply the coefficients to m/s^2).
     """
 
     name: ClassVar[str] = "paper"
@@ -106,6 +114,8 @@ class PaperRegressionImportance(ImportanceModel):
         "roughness": (35.009, -0.075, -0.232, 15.966),
         "hardness": (3.804, 8.168, 0.060, -9.138),
     }
+    #: factor turning the SDK's AFpeak (m/s^2) into the regression's unit (g)
+    AFPEAK_PER_UNIT: ClassVar[float] = 1.0 / 9.80665
     #: normal force (N) rendered in place of a dropped hardness
     NO_HARDNESS_FORCE_N: ClassVar[float] = 1.0
 
@@ -118,7 +128,7 @@ class PaperRegressionImportance(ImportanceModel):
     def _predict_loss(self, dimension: str, cols: Mapping[str, np.ndarray],
                       present: Sequence[str]) -> np.ndarray:
         b0, bgs, bf, ba = self.COEFFICIENTS[dimension]
-        return b0 + bgs * cols["GS"] + bf * cols["Fpeak"] + ba * cols["AFpeak"]
+        return b0 + bgs * cols["GS"] + bf * cols["Fpeak"] + ba * self.AFPEAK_PER_UNIT * cols["AFpeak"]
 
     def replacement(self, dimension: str) -> dict[str, Any] | None:
         if dimension == "hardness":
