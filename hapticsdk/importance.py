@@ -31,6 +31,10 @@ class ImportanceModel(ABC):
     name: ClassVar[str] = ""
     #: ``hapticsdk_api`` range of the plugin API this model was written for.
     hapticsdk_api: ClassVar[str] = ">=1.0,<2"
+    #: True when the predictions refer to removing ONE dimension with all the others
+    #: rendered: then at most one judged dimension is dropped per material (the one
+    #: with the lowest predicted loss).
+    single_removal: ClassVar[bool] = False
 
     def features_needed(self, dimension: str, present: Sequence[str]) -> tuple[str, ...]:
         """Feature names the prediction for ``dimension`` reads (default: none)."""
@@ -108,6 +112,7 @@ class PaperRegressionImportance(ImportanceModel):
     """
 
     name: ClassVar[str] = "paper"
+    single_removal: ClassVar[bool] = True
     PAIR: ClassVar[tuple[str, str]] = ("hardness", "roughness")
     #: intercept, GS, Fpeak, AFpeak coefficients per removed dimension
     COEFFICIENTS: ClassVar[dict[str, tuple[float, float, float, float]]] = {
@@ -169,7 +174,9 @@ def decide_drops(model: ImportanceModel, dimensions: Sequence[str],
     Rule: every dimension the model judges (with all of ``dimensions`` rendered, the
     condition its predictions refer to) is dropped when its predicted loss is below its
     threshold (``thresholds[dim]``, else ``default_threshold``); decisions are independent,
-    one vectorised prediction per dimension for all materials. If that would leave a
+    one vectorised prediction per dimension for all materials. A model whose predictions
+    refer to single removals (``single_removal``) drops at most one dimension per
+    material: the one with the lowest predicted loss. If the rule would leave a
     material with nothing rendered at all (no kept dimension and no replacement), the
     dropped dimension with the highest predicted loss is kept.
     """
@@ -190,6 +197,8 @@ def decide_drops(model: ImportanceModel, dimensions: Sequence[str],
                 thr = float(thresholds.get(d, default_threshold))
                 if losses[d][i] < thr:
                     drops.append((d, float(losses[d][i]), thr))
+        if model.single_removal and len(drops) > 1:
+            drops = [min(drops, key=lambda t: t[1])]
         if drops and len(drops) == len(dims) and not any(model.replacement(d) for d, _, _ in drops):
             keep = max(drops, key=lambda t: t[1])
             drops.remove(keep)
