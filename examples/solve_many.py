@@ -10,8 +10,8 @@ targets = np.array([[m.intensities["hardness"], m.intensities["roughness"]] for 
 batch = hs.solve(targets, dimensions=["hardness", "roughness"], seed=0)
 print(f"{len(batch)} targets in {batch.time_s * 1e3:.1f} ms, {int(batch.success.sum())} reached")
 model = hs.load_model("default")
-for m, res in zip(lib, batch):
+for m, target, res in zip(lib, targets, batch):
     G = [[res.x_dict[n] for n in model.feature_names]]
     pred = model.predict(G)[0]
-    print(f"{m.name:<4} target {targets[lib.names().index(m.name)].round(3)} predicted {pred.round(3)} "
+    print(f"{m.name:<4} target {target.round(3)} predicted {pred.round(3)} "
           f"error {res.error:.4f} {'ok' if res.success else 'NOT REACHED'}")

@@ -30,7 +30,8 @@ class Constraint(ABC):
     Subclasses set ``name`` and ``features`` (the feature names they read) and
     implement :meth:`_bound_and_value`, returning the lower bound the constrained
     quantity must reach and the quantity itself, both ``(n,)`` arrays. The base turns
-    them into both penalty forms.
+    them into both penalty forms; solvers that need the raw pair call the public
+    :meth:`bound_and_value`.
     """
 
     name: ClassVar[str] = "constraint"
@@ -39,6 +40,17 @@ class Constraint(ABC):
     @abstractmethod
     def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(bound, value)``; the constraint is ``value >= bound``."""
+
+    def bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """``(bound, value)`` per row (the constraint is ``value >= bound``), from the
+        feature columns ``cols``; subclasses implement :meth:`_bound_and_value`."""
+        return self._bound_and_value(cols)
+
+    @classmethod
+    def uses_base_formulas(cls) -> bool:
+        """True when ``penalty`` and ``violation`` are this base class's formulas (so both
+        follow from one :meth:`bound_and_value` call)."""
+        return cls.penalty is Constraint.penalty and cls.violation is Constraint.violation
 
     def penalty(self, cols: Mapping[str, np.ndarray], form: str = "paper") -> np.ndarray:
         """Penalty per row, 0 where the constraint holds.
@@ -49,7 +61,7 @@ class Constraint(ABC):
         if form not in PENALTY_FORMS:
             raise ValidationError(f"unknown penalty form {form!r}; valid: {list(PENALTY_FORMS)}",
                                   field="penalty")
-        bound, value = self._bound_and_value(cols)
+        bound, value = self.bound_and_value(cols)
         short = value < bound
         if form == "paper":
             return np.where(short, bound ** 2 - value ** 2, 0.0)

@@ -158,7 +158,7 @@ def load_importance(name: str | ImportanceModel = "paper") -> ImportanceModel:
         obj: Any = BUILTIN[name]
     else:
         obj = reg.load(name)
-    model = obj() if isinstance(obj, type) or callable(obj) else obj
+    model = obj() if callable(obj) else obj
     if not isinstance(model, ImportanceModel):
         raise ValidationError(f"importance plugin {name!r} did not give an ImportanceModel "
                               f"(got {type(model).__name__})", field="settings.importance.model")

@@ -305,18 +305,7 @@ class RenderPlan:
                 "plugin_api_version": self.plugin_api_version}
 
 
-def compile_scene(scene: Any) -> RenderPlan:
-    """Compile a scene into a plan (see :func:`hapticsdk.scene.compile_scene`)."""
-    from .scene import compile_scene as _compile
-    return _compile(scene)
-
-
-def _validate_with_schema(data: Any, name: str, what: str) -> None:
-    """Validate against ``schemas/<name>`` (errors name the JSON path)."""
-    from .schemas_io import validate
-    validate(data, name.split(".")[0])
-
-
 def validate_plan_dict(data: Any) -> None:
-    """Validate a plan dict against ``schemas/plan.schema.json``."""
-    _validate_with_schema(data, "plan.schema.json", "plan")
+    """Validate a plan dict against ``schemas/plan.schema.json`` (errors name the JSON path)."""
+    from .schemas_io import validate
+    validate(data, "plan")

@@ -133,6 +133,7 @@ class SafetyLayer:
         self._ramp_t0: float | None = None
         self._prev_force = 0.0
         self._overspeed = False
+        self._speed_now: float | None = None  # |v| of the observed state (mm/s), when checked
 
     # -- configuration -----------------------------------------------------
     def configure(self, **changes: Any) -> None:
@@ -177,8 +178,10 @@ class SafetyLayer:
         (:class:`~hapticsdk.actuators.DeviceState`), before the tick's commands."""
         self._state = state
         vmax = getattr(self.limits, "max_velocity_mm_s", None)
+        self._speed_now = None
         if vmax is not None:
-            over = self._speed() > vmax
+            self._speed_now = self._speed()
+            over = self._speed_now > vmax
             if over:
                 self._hit("max_velocity_mm_s")
                 if not self._overspeed:
@@ -256,7 +259,8 @@ class SafetyLayer:
             f = math.copysign(fmax, f)
         vmax = getattr(lim, "max_velocity_mm_s", None)
         if vmax is not None and self._state is not None:
-            speed = self._speed()
+            # observe() already measured this state's speed
+            speed = self._speed_now if self._speed_now is not None else self._speed()
             if speed > vmax:
                 f = 0.0  # counted in observe() (once per tick)
             elif fmax is not None:

@@ -37,8 +37,7 @@ import numpy as np
 
 from .dimensions import check_intensity
 from .errors import PluginError, ValidationError
-from .plan import (DroppedDimension, MaterialPlan, RenderPlan, _validate_with_schema,
-                   check_plugin_api)
+from .plan import DroppedDimension, MaterialPlan, RenderPlan, check_plugin_api
 
 #: Default settings of a scene; a scene's ``settings`` are merged into these.
 DEFAULT_SETTINGS: dict[str, Any] = {
@@ -151,7 +150,8 @@ class Scene:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Scene":
         """Build from the JSON form; validated against ``schemas/scene.schema.json``."""
-        _validate_with_schema(data, "scene.schema.json", "scene")
+        from .schemas_io import validate
+        validate(data, "scene")
         objs = []
         for i, o in enumerate(data["objects"]):
             objs.append(SceneObject(name=o.get("name", f"object{i}"), material=copy.deepcopy(o["material"]),
@@ -224,6 +224,7 @@ class _Mat:
 def _resolve_materials(scene: Scene) -> list[_Mat]:
     """Material name -> targets, in scene order; the library is read only if named."""
     library = None
+    with_plugins = False
     mats: dict[str, _Mat] = {}
     restrict = scene.settings.get("dimensions")
     for i, obj in enumerate(scene.objects):
@@ -237,9 +238,9 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
             except (KeyError, LookupError, ValidationError):
                 # not in the shipped library: only now ask the plugins (this imports
                 # every plugin's hook module, so library materials never pay for it)
-                if library.source != "with-plugins":
+                if not with_plugins:
                     library = load_library(with_plugins=True)
-                    library.source = "with-plugins"
+                    with_plugins = True
                 try:
                     m = library.get(obj.material)
                 except (KeyError, LookupError, ValidationError) as exc2:
@@ -337,6 +338,7 @@ def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed
 
 def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     """Compile a scene (object, dict, or path of a JSON file) into a render plan."""
+    from .plugins import registry
     if isinstance(scene, (str, Path)):
         scene = Scene.load(scene)
     elif isinstance(scene, Mapping):
@@ -369,6 +371,10 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         for dims, gm in groups.items():
             if len(dims) < 2:
                 continue
+            needed: set[str] = set()
+            for d in dims:
+                if imp_model.judges(d, list(dims)):
+                    needed |= set(imp_model.features_needed(d, list(dims)))
             keys = sorted(set().union(*(first[m.name].x_dict for m in gm)))
             cols = {k: np.array([first[m.name].x_dict.get(k, np.nan) for m in gm]) for k in keys}
             cols = {k: v for k, v in cols.items() if np.isfinite(v).all()}
@@ -376,10 +382,6 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                                    float(imp_cfg["threshold_percent"]))
             for m, dl in zip(gm, decided):
                 drops[m.name] = dl
-                needed = set()
-                for d in dims:
-                    if imp_model.judges(d, list(dims)):
-                        needed |= set(imp_model.features_needed(d, list(dims)))
                 imp_features[m.name] = {k: float(first[m.name].x_dict[k]) for k in sorted(needed)
                                         if k in first[m.name].x_dict}
 
@@ -442,7 +444,6 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                     raise ValidationError(f"no actuator for role {role!r} of dimension {dname!r}: "
                                           f"the scene's devices name none and the dimension has no "
                                           f"default", field=f"scene.devices.{role}")
-                from .plugins import registry
                 if spec.actuator not in registry("actuator"):
                     raise ValidationError(f"no actuator plugin named {spec.actuator!r}; installed: "
                                           f"{registry('actuator').names()}", field=f"scene.devices.{role}")
@@ -450,7 +451,6 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                 options[role] = dict(spec.options)
         used_dims |= set(kept) | set(gone)
         used_actuators |= set(actuators.values())
-        from .plugins import registry
         dists = {d: registry("dimension").distribution_of(d) for d in list(kept) + gone}
         models = model_names or sorted({dim_objs[d].default_model for d in (kept or m.targets)})
         plans[m.name] = MaterialPlan(
@@ -469,7 +469,6 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     if imp_model is not None:
         plugins.append(_plugin_entry("importance", imp_model.name, "compile"))
     plugins += [_plugin_entry("actuator", a, "render") for a in sorted(used_actuators)]
-    from .plugins import registry
     from .rendering import FALLBACK_SENSOR
     if FALLBACK_SENSOR not in used_actuators:
         e = _plugin_entry("actuator", FALLBACK_SENSOR, "render")

@@ -110,9 +110,8 @@ class Trace:
 
     def rows(self, i: int | None = None) -> list[dict[str, Any]]:
         """Rows for target ``i`` (scalars), or for the batch (max over targets)."""
-        return self.per_target()[i] if i is not None else self._batch_rows()
-
-    def _batch_rows(self) -> list[dict[str, Any]]:
+        if i is not None:
+            return self.per_target()[i]
         return [{"time_s": t, "nfev": n, "best_error": float(e.max()),
                  "best_error_median": float(np.median(e)), "constraint_violation": float(v.max())}
                 for t, n, e, v in zip(self.times, self.nfev, self.best_error, self.violation)]
@@ -200,7 +199,10 @@ class SolveProblem:
             if absent:
                 raise ValidationError(f"constraint {c.name!r} reads features {absent} that the model "
                                       f"does not take", field="constraints")
-        self._out_idx = np.array([self.model.dimension_names.index(d) for d in self.dimensions])
+        self._out_idx = np.array([self.model.dimension_names.index(d) for d in self.dimensions], dtype=int)
+        self._all_out = np.array_equal(self._out_idx, np.arange(self.model.n_outputs))
+        self._identity = tuple(self.space.names) == tuple(model_in)   # X rows are model inputs
+        self._base_formulas = all(type(c).uses_base_formulas() for c in self.constraints)
         self._space_cols = np.array([model_in.index(n) for n in self.space.names], dtype=int)
         self._fixed_row = np.zeros(len(model_in))
         for n, v in self.fixed.items():
@@ -238,33 +240,81 @@ class SolveProblem:
         return {n: G[..., i] for i, n in enumerate(self.model.feature_names)}
 
     # -- evaluation --------------------------------------------------------
-    def evaluate(self, X: np.ndarray, *, penalty: str | None = None,
-                 details: bool = False) -> Any:
+    def evaluate(self, X: np.ndarray, *, penalty: str | None = None, details: bool = False,
+                 rows: np.ndarray | None = None) -> Any:
         """Fitness of formula (6) for ``X`` of shape ``(m, p, d)`` (p candidates per target)
-        or ``(m, d)``; ONE model call for all rows. Returns fitness with the leading shape of
-        ``X``; with ``details``, a dict with ``fitness``, ``error``, ``violation``, ``intensities``."""
+        or ``(m, d)``; ONE model call for all rows. ``rows`` (optional index array) scores
+        ``X`` against ``targets[rows]`` instead of all ``m`` targets (solvers that drop solved
+        targets). Returns fitness with the leading shape of ``X``; with ``details``, a dict
+        with ``fitness``, ``error``, ``violation``, ``intensities``."""
         X = np.asarray(X, float)
         lead = X.shape[:-1]
-        if X.shape[-1] != self.n_features or lead[0] != self.n_targets:
-            raise ValidationError(f"candidates must have shape (m={self.n_targets}, [p,] "
+        T = self.targets if rows is None else self.targets[rows]
+        if X.shape[-1] != self.n_features or not lead or lead[0] != T.shape[0]:
+            raise ValidationError(f"candidates must have shape (m={T.shape[0]}, [p,] "
                                   f"{self.n_features}), got {X.shape}", field="X")
-        G = self.full_inputs(X.reshape(-1, self.n_features))
-        I = self.model.predict(G).reshape(lead + (self.model.n_outputs,))
-        T = self.targets.reshape((self.n_targets,) + (1,) * (len(lead) - 1) + (len(self.dimensions),))
-        err = np.abs(I[..., self._out_idx] - T).sum(axis=-1)
         form = penalty or self.penalty
-        cols = self.columns(G)
-        pen = np.zeros(G.shape[0])
-        viol = np.zeros(G.shape[0])
-        for c in self.constraints:
-            pen += c.penalty(cols, form)
-            viol = np.maximum(viol, c.violation(cols))
-        pen = pen.reshape(lead)
-        fitness = err + self.penalty_weight * pen
+        X2 = X.reshape(-1, self.n_features)
+        G = X2 if self._identity else self.full_inputs(X2)
+        I = self.model.predict(G)
+        n = G.shape[0]
+        # sum_j |I_j - T_j|: one subtraction, |.| in place, then the columns added (a
+        # reduction over a length-2 axis costs more than the additions)
+        I3 = I.reshape(T.shape[0], -1, I.shape[-1])
+        if not self._all_out:
+            I3 = I3[:, :, self._out_idx]
+        D = np.subtract(I3, T[:, None, :])
+        np.abs(D, out=D)
+        err = (np.add(D[..., 0], D[..., 1]) if D.shape[-1] == 2 else D.sum(axis=-1)).reshape(lead)
+        if not self.constraints:
+            fitness, viol = err, np.zeros(lead)
+        else:
+            pen, viol = self._penalty_violation(self.columns(G), form, n)
+            if self.penalty_weight == 1.0:
+                pen += err.reshape(-1)
+                fitness = pen.reshape(lead)
+            else:
+                fitness = err + self.penalty_weight * pen.reshape(lead)
+            viol = viol.reshape(lead)
         if not details:
             return fitness
-        return {"fitness": fitness, "error": err, "violation": viol.reshape(lead),
-                "intensities": I}
+        return {"fitness": fitness, "error": err, "violation": viol,
+                "intensities": I.reshape(lead + (I.shape[-1],))}
+
+    def _penalty_violation(self, cols: dict[str, np.ndarray], form: str, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """Summed penalty (``form``) and max violation of all constraints, ``(n,)`` each."""
+        if form not in PENALTY_FORMS:   # the message of Constraint.penalty
+            raise ValidationError(f"unknown penalty form {form!r}; valid: {list(PENALTY_FORMS)}",
+                                  field="penalty")
+        if not self._base_formulas:
+            pen = np.zeros(n)
+            viol = np.zeros(n)
+            for c in self.constraints:
+                pen += c.penalty(cols, form)
+                np.maximum(viol, c.violation(cols), out=viol)
+            return pen, viol
+        # the values of Constraint.penalty (paper: b^2 - v^2; normalised: (b - v)/|b|,
+        # where v < b) from one bound_and_value call per constraint, all constraints
+        # stacked so that each operation runs once
+        nc = len(self.constraints)
+        B = np.empty((nc, n))
+        V = np.empty((nc, n))
+        for j, c in enumerate(self.constraints):
+            B[j], V[j] = c.bound_and_value(cols)
+        short = V < B
+        scale = np.abs(B)
+        scale[scale == 0] = 1.0
+        nvs = np.subtract(B, V)
+        nvs /= scale
+        nvs[~short] = 0.0
+        viol = nvs.max(axis=0) if nc > 1 else nvs[0]
+        if form == "normalised":
+            return (nvs.sum(axis=0) if nc > 1 else nvs[0].copy()), viol
+        B *= B
+        V *= V
+        B -= V
+        B[~short] = 0.0
+        return (B.sum(axis=0) if nc > 1 else B[0]), viol
 
 
 @dataclass

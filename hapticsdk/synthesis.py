@@ -152,11 +152,11 @@ class Oscillator:
         ph = self.acc.block(frequency_hz, n, self.fs)
         self.frequency_hz = float(frequency_hz)
         a0 = self.amplitude
+        if amplitude == a0 == 0.0:  # silent: the phase still advances, no sine needed
+            return np.zeros(n)
         ph *= 2.0 * np.pi
         np.sin(ph, out=ph)
         if amplitude == a0:
-            if a0 == 0.0:
-                return np.zeros(n)
             ph *= a0
             return ph
         step = self.max_step

@@ -42,7 +42,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import ValidationError
-from ..solvers import SolveProblem
+from ..problems import get_solver as _solver
+from ..solvers import CONSTRAINT_TOL, SolveProblem
 
 THRESHOLDS = (1e-1, 1e-2, 1e-3)
 DIMS = ("hardness", "roughness")
@@ -53,19 +54,9 @@ DIMS = ("hardness", "roughness")
 
 def load_material_targets(path: str | Path | None = None) -> tuple[list[str], np.ndarray]:
     """Names and ``(m, 2)`` (hardness, roughness) intensities of the material library."""
-    try:
-        from ..materials import load_library  # type: ignore[attr-defined]
-        lib = load_library(path) if path else load_library()
-        mats = list(getattr(lib, "materials", lib))
-        names = [m.name for m in mats]
-        T = np.array([[m.intensities[d] for d in DIMS] for m in mats], float)
-        return names, T
-    except Exception:
-        p = Path(path) if path else Path(__file__).resolve().parents[1] / "data" / "materials.json"
-        data = json.loads(p.read_text())
-        names = [m["name"] for m in data["materials"]]
-        T = np.array([[m["intensities"][d] for d in DIMS] for m in data["materials"]], float)
-        return names, T
+    from ..materials import load_library
+    mats = list(load_library(path))
+    return [m.name for m in mats], np.array([[m.intensities[d] for d in DIMS] for m in mats], float)
 
 
 def make_problem_factory() -> tuple[Callable[..., SolveProblem], str]:
@@ -91,7 +82,7 @@ def feasible_samples(problem: SolveProblem, n: int = 20000, seed: int = 0) -> tu
     ok = np.ones(n, bool)
     cols = problem.columns(G)
     for c in problem.constraints:
-        ok &= c.violation(cols) <= 1e-9
+        ok &= c.violation(cols) <= CONSTRAINT_TOL
     return X[ok], Y[ok]
 
 
@@ -123,18 +114,13 @@ def reference_errors(factory: Callable[..., SolveProblem], T: np.ndarray) -> np.
     p = factory(T)
     a = PolishSolver(starts=16, max_iter=100, target_error=1e-10).solve(p, seed=12345)
     b = GASolver(generations=200, target_error=0).solve(p, seed=12345)
-    ea = np.where([r.constraint_violation <= 1e-9 for r in a], a.error, np.inf)
-    eb = np.where([r.constraint_violation <= 1e-9 for r in b], b.error, np.inf)
+    ea = np.where([r.constraint_violation <= CONSTRAINT_TOL for r in a], a.error, np.inf)
+    eb = np.where([r.constraint_violation <= CONSTRAINT_TOL for r in b], b.error, np.inf)
     return np.minimum(ea, eb)
 
 
 # ---------------------------------------------------------------------------
 # runs
-
-def _solver(name: str, **opts: Any):
-    from ..plugins import registry
-    return registry("solver").load(name)(**opts)
-
 
 def _p(v: np.ndarray, q: float) -> float:
     return float(np.percentile(np.asarray(v, float), q))
@@ -187,19 +173,18 @@ def work_precision(factory: Callable[..., SolveProblem], T: np.ndarray, name: st
 # ---------------------------------------------------------------------------
 # peers: same fitness (one target row of formula (6)), population 100, 50 generations
 
-def _peer_fitness(p: SolveProblem, i: int):
-    from hapticsdk_ga._common import Evaluator
-    ev = Evaluator(p)
+def _peer_fitness(p: SolveProblem, i: int) -> Callable[[np.ndarray], np.ndarray]:
+    """Formula (6) of target ``i`` for candidate rows ``(n, d)``."""
     rows = np.array([i])
 
     def f(X: np.ndarray) -> np.ndarray:
-        return ev(np.asarray(X, float)[None], rows)[0][0]
-    return f, ev
+        return p.evaluate(np.asarray(X, float)[None], rows=rows)[0]
+    return f
 
 
 def peer_pygad(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
     import pygad
-    f, _ = _peer_fitness(p, i)
+    f = _peer_fitness(p, i)
     lo, hi = p.space.lower, p.space.upper
 
     def fit(ga: Any, sols: Any, idx: Any) -> Any:
@@ -218,7 +203,7 @@ def peer_pygad(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 5
 def peer_deap(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
     import random
     from deap import algorithms, base, creator, tools
-    f, _ = _peer_fitness(p, i)
+    f = _peer_fitness(p, i)
     lo, hi = p.space.lower, p.space.upper
     if not hasattr(creator, "HsdkFitMin"):
         creator.create("HsdkFitMin", base.Fitness, weights=(-1.0,))
@@ -263,7 +248,7 @@ def peer_pymoo(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 5
     from pymoo.algorithms.soo.nonconvex.ga import GA
     from pymoo.core.problem import Problem
     from pymoo.optimize import minimize
-    f, _ = _peer_fitness(p, i)
+    f = _peer_fitness(p, i)
     lo, hi = p.space.lower, p.space.upper
     free = hi > lo
 
@@ -315,8 +300,8 @@ def run_peers(factory: Callable[..., SolveProblem], T: np.ndarray, seeds: list[i
                 t0 = time.perf_counter()
                 x = fn(p, i, s)
                 times.append(time.perf_counter() - t0)
-                X = np.tile(p.space.clip(x), (len(T), 1))
-                errs.append(float(p.evaluate(X, details=True)["error"][i]))
+                ev = p.evaluate(p.space.clip(x)[None], details=True, rows=np.array([i]))
+                errs.append(float(ev["error"][0]))
         t = statistics.median(times)
         out[name] = {"points": [{"time_s": t, "error": _p(errs, 50), "error_p10": _p(errs, 10),
                                  "error_p90": _p(errs, 90)}],

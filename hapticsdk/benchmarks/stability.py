@@ -129,7 +129,7 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
         f_cmd = controller_step_batch(st, y_meas, period_s, f_wall, on, settings, damping_ns_per_m=b,
                                       resolution_mm=batch.res_mm)
         f_cmd = np.nan_to_num(f_cmd, nan=0.0)
-        f = batch.step(f_cmd, np.full(len(arms), r[k]), np.full(len(arms), (r[k + 1] - r[k]) / period_s))
+        f = batch.step(f_cmd, r[k], (r[k + 1] - r[k]) / period_s)  # one reference for all cells (broadcast)
         controller_commit_batch(st, f)
         np.maximum(peak, np.abs(f), out=peak)
         np.maximum(dmax, np.abs(f - f_last), out=dmax)

@@ -34,6 +34,20 @@ PAPER_LEVELS_HZ = tuple(float(f) for f in range(30, 121, 10))
 CSV_COLUMNS = ("person", "frequency_hz", "spring_n_per_mm", "spring_stiffer")
 
 
+def read_commented_csv(path: str | Path, what: str) -> tuple[Path, list[str], list[list[str]]]:
+    """``(path, comments, rows)`` of a CSV file whose ``#`` lines are comments (their text
+    without ``#``; blank lines skipped, ``rows[0]`` is the header). A missing file raises
+    :class:`CalibrationError` "<what> file not found"."""
+    p = Path(path)
+    try:
+        lines = p.read_text().splitlines()
+    except FileNotFoundError:
+        raise CalibrationError(f"{what} file not found: {p}") from None
+    comments = [ln[1:].strip() for ln in lines if ln.startswith("#")]
+    rows = list(csv.reader(ln for ln in lines if ln.strip() and not ln.startswith("#")))
+    return p, comments, rows
+
+
 @dataclass
 class DiscriminationAnswers:
     """One row per answer.
@@ -96,13 +110,7 @@ class DiscriminationAnswers:
     def from_csv(cls, path: str | Path) -> "DiscriminationAnswers":
         """Read answers from CSV (columns :data:`CSV_COLUMNS`; ``#`` lines are comments;
         a comment containing ``GENERATED`` marks the answers as generated)."""
-        p = Path(path)
-        try:
-            lines = p.read_text().splitlines()
-        except FileNotFoundError:
-            raise CalibrationError(f"answers file not found: {p}") from None
-        comments = [ln[1:].strip() for ln in lines if ln.startswith("#")]
-        rows = list(csv.reader(ln for ln in lines if ln.strip() and not ln.startswith("#")))
+        p, comments, rows = read_commented_csv(path, "answers")
         if not rows:
             raise CalibrationError(f"{p}: empty answers file")
         header = [h.strip() for h in rows[0]]

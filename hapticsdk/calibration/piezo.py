@@ -93,13 +93,14 @@ class PiezoTable:
         w = (f - f0) / (f1 - f0)
         return (1 - w) * self.acceleration[i] + w * self.acceleration[i + 1]
 
-    def _curve(self, f_hz: float):
-        """Acceleration over voltage at ``f_hz``: a cubic spline when it is strictly
-        increasing between every pair of measured voltages (checked exactly on the
-        derivative), else PCHIP (monotone by construction)."""
+    def _curve(self, f_hz: float, row: np.ndarray | None = None):
+        """Acceleration over voltage at ``f_hz`` (``row``: its :meth:`_row`, if known): a
+        cubic spline when it is strictly increasing between every pair of measured
+        voltages (checked exactly on the derivative), else PCHIP (monotone by construction)."""
         from scipy.interpolate import CubicSpline, PchipInterpolator
 
-        row = self._row(f_hz)
+        if row is None:
+            row = self._row(f_hz)
         if self.voltages_v.size >= 4:
             cs = CubicSpline(self.voltages_v, row, extrapolate=False)
             if _spline_increasing(cs.c, np.diff(self.voltages_v)):
@@ -114,10 +115,14 @@ class PiezoTable:
 
     def in_range(self, f_hz: float, accel_m_s2: float) -> bool:
         """Whether ``(f_hz, accel_m_s2)`` lies inside the measured table."""
+        return self._in_range(f_hz, accel_m_s2)
+
+    def _in_range(self, f_hz: float, accel_m_s2: float, row: np.ndarray | None = None) -> bool:
         lo_f, hi_f = self.frequency_range_hz
         if not lo_f * (1 - _RANGE_RTOL) <= f_hz <= hi_f * (1 + _RANGE_RTOL):
             return False
-        row = self._row(f_hz)
+        if row is None:
+            row = self._row(f_hz)
         tol = _RANGE_RTOL * max(abs(row[-1]), 1.0)
         return bool(row[0] - tol <= accel_m_s2 <= row[-1] + tol)
 
@@ -131,7 +136,7 @@ class PiezoTable:
         from scipy.optimize import brentq
 
         row = self._row(f_hz)
-        ok = self.in_range(f_hz, accel_m_s2)
+        ok = self._in_range(f_hz, accel_m_s2, row)
         if accel_m_s2 <= row[0]:
             return float(self.voltages_v[0]), ok
         if accel_m_s2 >= row[-1]:
@@ -140,7 +145,7 @@ class PiezoTable:
         v0, v1 = float(self.voltages_v[j - 1]), float(self.voltages_v[j])
         if accel_m_s2 == row[j]:
             return v1, ok
-        curve = self._curve(f_hz)
+        curve = self._curve(f_hz, row)
         v = brentq(lambda x: float(curve(x)) - accel_m_s2, v0, v1, xtol=1e-12, rtol=1e-12)
         return float(v), ok
 
@@ -225,16 +230,9 @@ def read_measurements_csv(path: Any) -> PiezoTable:
     """A :class:`PiezoTable` from a CSV with columns ``frequency_hz, voltage_v,
     acceleration_m_s2`` (``#`` lines are comments; one containing ``GENERATED`` marks
     the table generated)."""
-    import csv
-    from pathlib import Path
+    from .discrimination import read_commented_csv
 
-    p = Path(path)
-    try:
-        lines = p.read_text().splitlines()
-    except FileNotFoundError:
-        raise CalibrationError(f"measurements file not found: {p}") from None
-    comments = [ln[1:].strip() for ln in lines if ln.startswith("#")]
-    rows = list(csv.reader(ln for ln in lines if ln.strip() and not ln.startswith("#")))
+    p, comments, rows = read_commented_csv(path, "measurements")
     cols = ("frequency_hz", "voltage_v", "acceleration_m_s2")
     if not rows or any(c not in [h.strip() for h in rows[0]] for c in cols):
         raise CalibrationError(f"{p}: needs a header with columns {list(cols)}")

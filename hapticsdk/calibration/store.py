@@ -110,21 +110,27 @@ class CalibrationEntry:
                 "generated": self.generated, "source": self.source, "error": self.error}
 
 
-def list_calibrations(directory: str | Path | None = None) -> list[CalibrationEntry]:
-    """Every ``*.json`` file of the calibration directory, loaded or with its error."""
+def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, VoiceCoilCalibration | PiezoTable | None]]:
+    """Every ``*.json`` file of the calibration directory: its entry and the loaded
+    calibration (``None`` when it does not load)."""
     d = Path(directory) if directory is not None else calibration_dir()
-    out: list[CalibrationEntry] = []
+    out: list[tuple[CalibrationEntry, VoiceCoilCalibration | PiezoTable | None]] = []
     if not d.is_dir():
         return out
     for p in sorted(d.glob("*.json")):
         try:
             cal = read_calibration(p)
         except (ValidationError, CalibrationError) as exc:
-            out.append(CalibrationEntry(p, None, None, None, "", error=str(exc)))
+            out.append((CalibrationEntry(p, None, None, None, "", error=str(exc)), None))
             continue
         kind = "voicecoil" if isinstance(cal, VoiceCoilCalibration) else "piezo"
-        out.append(CalibrationEntry(p, kind, cal.serial, bool(cal.generated), cal.source))
+        out.append((CalibrationEntry(p, kind, cal.serial, bool(cal.generated), cal.source), cal))
     return out
+
+
+def list_calibrations(directory: str | Path | None = None) -> list[CalibrationEntry]:
+    """Every ``*.json`` file of the calibration directory, loaded or with its error."""
+    return [e for e, _ in _scan(directory)]
 
 
 @dataclass
@@ -181,10 +187,9 @@ def load_calibration(kind: str, serial: str | None = None, *, directory: str | P
     Files that fail validation are skipped (listed in ``skipped``), never used.
     """
     _check_kind(kind)
-    exact: CalibrationEntry | None = None
-    anyone: CalibrationEntry | None = None
+    exact = anyone = None
     skipped: dict[str, str] = {}
-    for e in list_calibrations(directory):
+    for e, cal in _scan(directory):
         if e.error is not None:
             if f'"{kind}"' in _peek_kind(e.path):
                 skipped[str(e.path)] = e.error
@@ -192,12 +197,13 @@ def load_calibration(kind: str, serial: str | None = None, *, directory: str | P
         if e.kind != kind:
             continue
         if serial is not None and e.serial == serial and exact is None:
-            exact = e
+            exact = (e, cal)
         elif e.serial is None and anyone is None:
-            anyone = e
-    for entry, origin in ((exact, "file"), (anyone, "file-any")):
-        if entry is not None:
-            return LoadedCalibration(kind, serial, read_calibration(entry.path), origin, entry.path, skipped)
+            anyone = (e, cal)
+    for found, origin in ((exact, "file"), (anyone, "file-any")):
+        if found is not None:
+            entry, cal = found
+            return LoadedCalibration(kind, serial, cal, origin, entry.path, skipped)
     if default is not None:
         cal = default() if callable(default) else default
         return LoadedCalibration(kind, serial, cal, "default", None, skipped)
@@ -207,8 +213,10 @@ def load_calibration(kind: str, serial: str | None = None, *, directory: str | P
 
 
 def _peek_kind(path: Path) -> str:
+    from ..schemas_io import read_json
+
     try:
-        return json.dumps(json.loads(path.read_text()).get("kind"))
+        return json.dumps(read_json(path, field="calibration").get("kind"))
     except Exception:
         return ""
 

@@ -102,7 +102,6 @@ def cmd_voicecoil(args: argparse.Namespace) -> int:
 
 
 def cmd_piezo(args: argparse.Namespace) -> int:
-    import json
     from pathlib import Path
 
     import numpy as np
@@ -111,11 +110,13 @@ def cmd_piezo(args: argparse.Namespace) -> int:
 
     path = Path(args.measurements)
     if path.suffix.lower() == ".json":
-        from ..errors import CalibrationError
+        from ..errors import CalibrationError, ValidationError
+        from ..schemas_io import read_json
         try:
-            table = PiezoTable.from_dict(json.loads(path.read_text()))
-        except (OSError, json.JSONDecodeError) as exc:
-            raise CalibrationError(f"{path}: {exc}") from None
+            data = read_json(path, field="measurements")
+        except ValidationError as exc:
+            raise CalibrationError(str(exc)) from None
+        table = PiezoTable.from_dict(data)
     else:
         table = read_measurements_csv(path)
     if args.serial:

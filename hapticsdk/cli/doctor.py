@@ -14,13 +14,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def handle_doctor(args: argparse.Namespace) -> int:
     """Print the report; exit 0 (a missing optional device is not an error)."""
-    import json
-
     from ..doctor import collect, format_report
+    from . import emit
 
     rep = collect()
-    if getattr(args, "json", False):
-        print(json.dumps(rep, indent=2, default=str))
-    else:
-        print(format_report(rep))
+    as_json = getattr(args, "json", False)
+    emit(rep, as_json, None if as_json else format_report(rep))
     return 0

@@ -7,11 +7,11 @@ exit code (0 ok, 2 for a data/validation error, printed to stderr).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 from ..errors import HapticSDKError
+from . import emit
 
 
 def _fail(exc: Exception) -> int:
@@ -31,10 +31,10 @@ def cmd_features(args: argparse.Namespace) -> int:
         return _fail(exc)
     summ = ft.summary()
     if args.json:
-        print(json.dumps({"df_hz": ft.dataset_df_hz, "generated": bool(rs.manifest.get("generated", False)),
-                          "units": FEATURE_UNITS,
-                          "samples": {s: {f: {"mean": m, "std": d} for f, (m, d) in v.items()}
-                                      for s, v in summ.items()}}, indent=1))
+        emit({"df_hz": ft.dataset_df_hz, "generated": bool(rs.manifest.get("generated", False)),
+              "units": FEATURE_UNITS,
+              "samples": {s: {f: {"mean": m, "std": d} for f, (m, d) in v.items()}
+                          for s, v in summ.items()}}, True)
         return 0
     if rs.manifest.get("generated"):
         print("# GENERATED data (simulated, not measured)")
@@ -57,7 +57,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     except HapticSDKError as exc:
         return _fail(exc)
     if args.json:
-        print(json.dumps(report, indent=1))
+        emit(report, True)
         return 0
     if report["data_generated"]:
         print("# trained on GENERATED data (simulated, not measured)")
@@ -99,7 +99,7 @@ def cmd_growth(args: argparse.Namespace) -> int:
     except HapticSDKError as exc:
         return _fail(exc)
     if args.json:
-        print(json.dumps(rows, indent=1))
+        emit(rows, True)
         return 0
     print(f"{'samples':>8} {'split':<6}{'MSE hard':>10}{'R hard':>9}{'MSE rough':>11}{'R rough':>9}{'time s':>8}")
     for r in rows:

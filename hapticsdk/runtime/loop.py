@@ -102,6 +102,11 @@ class LoopReport:
         return d
 
 
+def _distinct(acts: Any) -> list:
+    """The actuators of ``acts`` once each (by identity), in order."""
+    return list({id(a): a for a in acts}.values())
+
+
 class _Slot:
     """Per-role bookkeeping."""
 
@@ -184,11 +189,8 @@ class ServoLoop:
 
     # ------------------------------------------------------------------
     def _stop_all(self) -> None:
-        seen = set()
-        for act in [self.device, *self.actuators.values()]:
-            if id(act) not in seen:
-                seen.add(id(act))
-                act.stop()
+        for act in _distinct([self.device, *self.actuators.values()]):
+            act.stop()
 
     def run(self, seconds: float) -> LoopReport:
         """Run for ``seconds`` of (simulated or real) time; return a :class:`LoopReport`."""
@@ -199,7 +201,7 @@ class ServoLoop:
         n_max = max(1, int(math.floor(seconds / T + 1e-9)))
         device = self.device
         # open everything (idempotent); commands older than one period become stale
-        for act in [device, *self.actuators.values()]:
+        for act in _distinct([device, *self.actuators.values()]):
             act.open()
             if hasattr(act.safety, "set_period"):
                 act.safety.set_period(T)
@@ -213,11 +215,11 @@ class ServoLoop:
                 s.pending = deque([0.0] * self.delay_ticks)
             slots.append(s)
         by_role = {s.role: s for s in slots}
-        stepped = [a for a in {id(a): a for a in self.actuators.values()}.values()
+        stepped = [a for a in _distinct(self.actuators.values())
                    if a is not device and getattr(a, "simulated", False) and callable(getattr(a, "step", None))]
         sim_device = bool(getattr(device, "simulated", False))
         hits0 = {id(a): sum(a.safety.hits.values()) if hasattr(a.safety, "hits") else 0
-                 for a in {id(a): a for a in [device, *self.actuators.values()]}.values()}
+                 for a in _distinct([device, *self.actuators.values()])}
 
         # logs
         L_t = np.zeros(n_max)
@@ -235,10 +237,11 @@ class ServoLoop:
                 s.log_a = np.zeros(n_max)
         events = dict.fromkeys(EVENT_KEYS, 0)
 
-        observers = [a.safety for a in {id(a): a for a in self.actuators.values()}.values()]
+        observers = [a.safety for a in _distinct(self.actuators.values())]
         renderers = self.renderers
         recorder = self.recorder
         max_pos, max_spd = self.max_position_mm, self.max_speed_mm_s
+        max_acc, max_catchup = self.max_accel_mm_s2, self.max_catchup_ticks
         clock = self.clock
         realtime = self.realtime
         fault: dict[str, str] | None = None
@@ -301,7 +304,7 @@ class ServoLoop:
                     events["huge_state"] += 1
                     bad = True
                 elif have_good:
-                    lim = self.max_accel_mm_s2 * dt
+                    lim = max_acc * dt
                     if (abs(v0 - last_vel[0]) > lim or abs(v1 - last_vel[1]) > lim or abs(v2 - last_vel[2]) > lim):
                         events["velocity_spike"] += 1
                         v0, v1, v2 = float(last_vel[0]), float(last_vel[1]), float(last_vel[2])
@@ -414,7 +417,7 @@ class ServoLoop:
                     deadline += T
                     now = clock.now()
                     behind = (now - deadline) / T
-                    if behind > self.max_catchup_ticks:
+                    if behind > max_catchup:
                         skipped = int(behind)
                         events["skipped_ticks"] += skipped
                         deadline += skipped * T
@@ -447,7 +450,7 @@ class ServoLoop:
                 self._stop_all()
 
         n = k
-        for a in {id(a): a for a in [device, *self.actuators.values()]}.values():
+        for a in _distinct([device, *self.actuators.values()]):
             if hasattr(a.safety, "hits"):
                 events["clamp"] += sum(a.safety.hits.values()) - hits0.get(id(a), 0)
         pas: dict[str, Any] = {}

@@ -81,10 +81,7 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None) -> tuple
             obj = _load(kind, target)
         except PluginError as exc:
             return target, None, None, str(exc)
-        if kind in ("actuator", "device", "dimension", "solver"):
-            return target, (lambda: obj(**opts)), obj, None
-        if kind == "model":
-            return target, (lambda: obj(**opts) if opts else obj()), obj, None
+        return target, (lambda: obj(**opts)), obj, None
     if callable(target) and not isinstance(target, type):
         name = getattr(target, "__name__", kind)
         try:
@@ -104,6 +101,18 @@ def _guard(ctx: _Ctx, rule: str, fn: Callable[[], None]) -> None:
         ctx.fail(rule, str(exc))
     except Exception as exc:
         ctx.fail(rule, f"raised {type(exc).__name__}: {exc}")
+
+
+def _run_rules(ctx: _Ctx, rules: Sequence[tuple[str, Callable[[], None]]], *,
+               always: tuple[str, ...] = (), stop_after: tuple[str, ...] = ()) -> None:
+    """Run ``rules`` in order (only those of ``ctx.only`` when set, plus ``always``);
+    stop after a rule of ``stop_after`` when anything failed so far."""
+    for rule, fn in rules:
+        if ctx.only and rule not in ctx.only and rule not in always:
+            continue
+        _guard(ctx, rule, fn)
+        if rule in stop_after and ctx.violations:
+            break
 
 
 def _finite(x: Any) -> bool:
@@ -359,12 +368,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         ("safe-stop", r_safe_stop), ("determinism", r_determinism)]
     if device:
         rules.append(("state", r_state))
-    for rule, fn in rules:
-        if ctx.only and rule not in ctx.only:
-            continue
-        _guard(ctx, rule, fn)
-        if rule == "class" and ctx.violations:
-            break
+    _run_rules(ctx, rules, stop_after=("class",))
 
 
 def _commands_force(cls: type) -> bool:
@@ -482,14 +486,9 @@ def _dimension_rules(ctx: _Ctx) -> None:
                          for i in _tick_inputs()])
         assert outs[0] == outs[1], "two renderers of the same features gave different commands"
 
-    for rule, fn in [("class", r_class), ("features", r_features), ("constraints-vectorised", r_constraints),
+    _run_rules(ctx, [("class", r_class), ("features", r_features), ("constraints-vectorised", r_constraints),
                      ("renderer", r_renderer), ("renderer-bad-input", r_renderer_bad),
-                     ("determinism", r_determinism)]:
-        if ctx.only and rule not in ctx.only and rule != "class":
-            continue
-        _guard(ctx, rule, fn)
-        if rule in ("class", "features") and ctx.violations:
-            break
+                     ("determinism", r_determinism)], always=("class",), stop_after=("class", "features"))
 
 
 # ---------------------------------------------------------------------------
@@ -573,13 +572,9 @@ def _model_rules(ctx: _Ctx) -> None:
                 f = m.feature_space[k]
                 assert f.lower - 1e-9 <= float(v) <= f.upper + 1e-9, f"default {k}={v} outside [{f.lower}, {f.upper}]"
 
-    for rule, fn in [("shapes", r_shapes), ("vectorised", r_vectorised), ("determinism", r_determinism),
-                     ("bad-input", r_bad_input), ("jacobian", r_jacobian), ("metadata", r_metadata)]:
-        if ctx.only and rule not in ctx.only and rule != "shapes":
-            continue
-        _guard(ctx, rule, fn)
-        if rule == "shapes" and ctx.violations:
-            break
+    _run_rules(ctx, [("shapes", r_shapes), ("vectorised", r_vectorised), ("determinism", r_determinism),
+                     ("bad-input", r_bad_input), ("jacobian", r_jacobian), ("metadata", r_metadata)],
+               always=("shapes",), stop_after=("shapes",))
 
 
 # ---------------------------------------------------------------------------
@@ -671,13 +666,9 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
             return
         raise AssertionError("solve() accepted something that is not a SolveProblem")
 
-    for rule, fn in [("class", r_class), ("options", r_options), ("solves", r_solves),
-                     ("determinism", r_determinism), ("batch", r_batch), ("bad-input", r_bad_input)]:
-        if ctx.only and rule not in ctx.only and rule != "class":
-            continue
-        _guard(ctx, rule, fn)
-        if rule == "class" and ctx.violations:
-            break
+    _run_rules(ctx, [("class", r_class), ("options", r_options), ("solves", r_solves),
+                     ("determinism", r_determinism), ("batch", r_batch), ("bad-input", r_bad_input)],
+               always=("class",), stop_after=("class",))
 
 
 # ---------------------------------------------------------------------------

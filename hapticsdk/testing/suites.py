@@ -23,6 +23,11 @@ import pytest
 from .conformance import RULES, assert_conforms, check
 
 
+def _rules(kind: str) -> list[str]:
+    """The rules of ``kind`` a class parametrises over (``import`` runs inside each)."""
+    return [r for r in RULES[kind] if r != "import"]
+
+
 class _Conformance:
     kind: ClassVar[str] = ""
     #: entry-point name of the plugin under test
@@ -35,6 +40,10 @@ class _Conformance:
             pytest.fail(f"{type(self).__name__}: set plugin_name or override the factory fixture")
         return factory if factory is not None else self.plugin_name
 
+    def _assert_rule(self, rule: str, factory: Callable[[], Any] | None,
+                     options: dict[str, Any] | None = None) -> None:
+        assert_conforms(check(self.kind, self._target(factory), options=options, rules=[rule]))
+
 
 class ActuatorConformance(_Conformance):
     """Contract of an output actuator (entry-point group ``hapticsdk.actuators``)."""
@@ -46,10 +55,9 @@ class ActuatorConformance(_Conformance):
         """Zero-argument callable returning a new, unopened actuator (default: by name)."""
         return None
 
-    @pytest.mark.parametrize("rule", [r for r in RULES["actuator"] if r != "import"])
+    @pytest.mark.parametrize("rule", _rules("actuator"))
     def test_rule(self, rule: str, actuator_factory: Any) -> None:
-        assert_conforms(check(self.kind, self._target(actuator_factory), options=self.plugin_options,
-                              rules=[rule]))
+        self._assert_rule(rule, actuator_factory, self.plugin_options)
 
 
 class DeviceConformance(ActuatorConformance):
@@ -61,10 +69,9 @@ class DeviceConformance(ActuatorConformance):
     def device_factory(self) -> Callable[[], Any] | None:
         return None
 
-    @pytest.mark.parametrize("rule", [r for r in RULES["device"] if r != "import"])
+    @pytest.mark.parametrize("rule", _rules("device"))
     def test_rule(self, rule: str, device_factory: Any) -> None:  # type: ignore[override]
-        assert_conforms(check(self.kind, self._target(device_factory), options=self.plugin_options,
-                              rules=[rule]))
+        self._assert_rule(rule, device_factory, self.plugin_options)
 
 
 class DimensionConformance(_Conformance):
@@ -76,9 +83,9 @@ class DimensionConformance(_Conformance):
     def dimension_factory(self) -> Callable[[], Any] | None:
         return None
 
-    @pytest.mark.parametrize("rule", [r for r in RULES["dimension"] if r != "import"])
+    @pytest.mark.parametrize("rule", _rules("dimension"))
     def test_rule(self, rule: str, dimension_factory: Any) -> None:
-        assert_conforms(check(self.kind, self._target(dimension_factory), rules=[rule]))
+        self._assert_rule(rule, dimension_factory)
 
 
 class ModelConformance(_Conformance):
@@ -90,9 +97,9 @@ class ModelConformance(_Conformance):
     def model_factory(self) -> Callable[[], Any] | None:
         return None
 
-    @pytest.mark.parametrize("rule", [r for r in RULES["model"] if r != "import"])
+    @pytest.mark.parametrize("rule", _rules("model"))
     def test_rule(self, rule: str, model_factory: Any) -> None:
-        assert_conforms(check(self.kind, self._target(model_factory), rules=[rule]))
+        self._assert_rule(rule, model_factory)
 
 
 class SolverConformance(_Conformance):
@@ -102,9 +109,9 @@ class SolverConformance(_Conformance):
     #: options for the solver under test (e.g. fewer generations to keep tests fast)
     solver_options: ClassVar[dict[str, Any]] = {}
 
-    @pytest.mark.parametrize("rule", [r for r in RULES["solver"] if r != "import"])
+    @pytest.mark.parametrize("rule", _rules("solver"))
     def test_rule(self, rule: str) -> None:
-        assert_conforms(check(self.kind, self._target(None), options=self.solver_options, rules=[rule]))
+        self._assert_rule(rule, None, self.solver_options)
 
 
 class ImportConformance:

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import RecordingError, ValidationError
 from ..features import Feature, FeatureSpace
+from ..schemas_io import read_json
 from .extraction import FEATURE_DESCRIPTIONS, FEATURE_NAMES, FEATURE_UNITS, FeatureTable, extract_set, extract_trials
 from .recordings import MANIFEST_NAME, Ratings, load_manifest, load_ratings, validate_json, write_ratings
 
@@ -162,7 +163,7 @@ def load_table(path: Path | str) -> TrainingTable:
                              bool(rs.manifest.get("generated", False)), str(rs.manifest.get("source", "")),
                              {"fs_hz": rs.fs_hz, "kind": "recordings", "settings": rs.manifest.get("generator")})
     if (p / DATASET_NAME).is_file():
-        doc = json.loads((p / DATASET_NAME).read_text())
+        doc = read_json(p / DATASET_NAME, field="file", error=RecordingError)
         ft = _read_trial_features(p / doc.get("files", {}).get("trial_features", TRIAL_FEATURES))
         ratings = load_ratings(p / doc.get("files", {}).get("ratings", "ratings.json"))
         return TrainingTable(ft, ratings, doc.get("samples", []), bool(doc.get("generated", False)),

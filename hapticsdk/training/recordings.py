@@ -37,8 +37,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import RecordingError, ValidationError
-from ..schemas_io import read_json
+from ..errors import RecordingError
+from ..schemas_io import load_schema, read_json
 
 #: Columns of one trial file, in file order.
 COLUMNS: tuple[str, ...] = ("time_s", "force_n", "displacement_mm", "acc_x", "acc_y",
@@ -54,21 +54,11 @@ MIN_PRESS_S = 0.3
 MIN_SLIDE_S = 2.2
 
 
-def schema_dir() -> Path:
-    """Directory of the JSON schemas (``hapticsdk/schemas`` when installed, else the repo's ``schemas``)."""
-    here = Path(__file__).resolve().parent.parent
-    for cand in (here / "schemas", here.parent / "schemas"):
-        if (cand / "recording.schema.json").is_file():
-            return cand
-    raise ValidationError("JSON schemas not found (looked in hapticsdk/schemas and ./schemas)",
-                          field="schemas")
-
-
 def validate_json(doc: Any, schema_name: str, *, source: str) -> None:
     """Validate ``doc`` against ``schemas/<schema_name>``; raise RecordingError naming the path."""
     import jsonschema
 
-    schema = json.loads((schema_dir() / schema_name).read_text())
+    schema = load_schema(schema_name.removesuffix(".schema.json"))
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(doc), key=lambda e: list(e.absolute_path))
     if errors:

@@ -16,6 +16,7 @@ from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.plugins import registry
 from hapticsdk.rendering import ConstantForceRenderer, render_plan
 from hapticsdk.scene import Scene, compile_scene
+from hapticsdk.schemas_io import read_json
 from hapticsdk.dimensions import TickInput
 
 needs_hardness = pytest.mark.skipif("hardness" not in registry("dimension"),
@@ -52,7 +53,7 @@ def test_render_from_saved_plan_needs_no_solver(tmp_path, monkeypatch):
         raise AssertionError("render must not solve")
     monkeypatch.setattr(problems, "solve", boom)
     monkeypatch.setattr(problems, "build_problem", boom)
-    rep = render_plan(json.loads(path.read_text()), seconds=0.2)
+    rep = render_plan(read_json(path, field="plan"), seconds=0.2)
     assert rep.features == plan.material().features
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from hapticsdk.testing import ActuatorConformance, DimensionConformance
 
 
@@ -11,9 +13,6 @@ class TestRoughnessDimension(DimensionConformance):
 
 class TestPiezoVirtual(ActuatorConformance):
     plugin_name = "piezo-virtual"
-
-
-import pytest  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -67,6 +67,17 @@ def cmd(f=100.0, a=10.0):
     return ChannelCommand("vibration", frequency_hz=f, amplitude=a)
 
 
+def _piezo(emus, kind, board, **opts):
+    """(actuator, its emulated DRV2667): a PiezoSerial on a new emulated bridge (``kind ==
+    "serial"``) or a PiezoMCP2221 on one emulated board with USB serial ``board``."""
+    bridge, boards = emus
+    if kind == "serial":
+        emu = bridge()
+        return PiezoSerial(port=emu.port, **opts, **FAST), emu.drv
+    be = boards(board)
+    return PiezoMCP2221(backend=be, **opts), be.boards[0].drv
+
+
 # -- bytes on the wire -------------------------------------------------------------------
 WAVE = [SynthChunk(amplitude=0x80, frequency=32, cycles=5, envelope=0x12),
         SynthChunk(amplitude=0xFF, frequency=25, cycles=10, envelope=0x00)]
@@ -148,13 +159,7 @@ def test_fifo_streaming_handles_full_fifo_nak(emus):
 # -- end-to-end render through the hardware backends ---------------------------------------
 @pytest.mark.parametrize("kind", ["serial", "usb"])
 def test_render_speed_following_on_hardware_backend(emus, kind):
-    bridge, boards = emus
-    if kind == "serial":
-        emu = bridge()
-        act, drv_emu = PiezoSerial(port=emu.port, gain=1, **FAST), emu.drv
-    else:
-        be = boards("S1")
-        act, drv_emu = PiezoMCP2221(backend=be, gain=1), be.boards[0].drv
+    act, drv_emu = _piezo(emus, kind, "S1", gain=1)
     r = RoughnessDimension().renderer({"Fpeak": 100.0, "AFpeak": 2.0})
     with act:
         for vx in (40.0, 120.0, 10.0):
@@ -291,13 +296,7 @@ def test_serial_nak_storm_and_recovered_corruption(emus):
 
 @pytest.mark.parametrize("kind", ["serial", "usb"])
 def test_overcurrent_flag_stops_and_names_device(emus, kind):
-    bridge, boards = emus
-    if kind == "serial":
-        emu = bridge()
-        act, drv_emu = PiezoSerial(port=emu.port, status_interval_s=0.001, **FAST), emu.drv
-    else:
-        be = boards("OC")
-        act, drv_emu = PiezoMCP2221(backend=be, status_interval_s=0.001), be.boards[0].drv
+    act, drv_emu = _piezo(emus, kind, "OC", status_interval_s=0.001)
     act.open()
     for _ in range(5):
         act.command(cmd())

@@ -7,7 +7,7 @@ name says ``u`` (unit coordinates, ``u = (x - lower) / span``, 0 for a degenerat
 from __future__ import annotations
 
 import time
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -18,102 +18,30 @@ __all__ = ["Evaluator", "check_int", "check_fraction", "check_budget", "Clock", 
 
 
 class Evaluator:
-    """Formula (6) for any subset of the problem's targets, one model call per call.
+    """Formula (6) for any subset of the problem's targets, counting model rows.
 
-    :meth:`SolveProblem.evaluate` needs all ``m`` targets; solvers that drop targets once
-    they are solved (``ga``, ``de``) or solve targets one by one (``de-scipy``) need the same
-    fitness on a subset of rows. The arithmetic is the one of ``SolveProblem.evaluate``
-    (checked against it by the tests).
+    A thin adapter over :meth:`SolveProblem.evaluate` (its ``rows`` argument scores a subset
+    of targets: solvers that drop solved targets, ``ga`` and ``de``, or solve them one by
+    one, ``de-scipy``) that returns ``(fitness, error, violation)`` and counts ``nfev``.
     """
 
-    def __init__(self, problem: SolveProblem, penalty: str | None = None) -> None:
+    def __init__(self, problem: SolveProblem) -> None:
         self.problem = problem
-        self.penalty = penalty or problem.penalty
-        names = problem.model.dimension_names
-        self.out_idx = np.array([names.index(d) for d in problem.dimensions], dtype=int)
-        self.lower = problem.space.lower
-        self.upper = problem.space.upper
-        self.span = self.upper - self.lower
         self.nfev = 0
-        model_in = list(problem.model.feature_names)
-        self._identity = (tuple(problem.space.names) == tuple(model_in))
-        # constraints whose penalty/violation are the base class's formulas: one
-        # _bound_and_value call gives both forms
-        from hapticsdk.dimensions import Constraint
-        self._fast_c = all(type(c).penalty is Constraint.penalty and type(c).violation is Constraint.violation
-                           for c in problem.constraints)
-        self.penalty_weight_is_one = float(problem.penalty_weight) == 1.0
-        self._all_out = np.array_equal(self.out_idx, np.arange(len(names)))
 
     def __call__(self, X: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(fitness, error, violation)`` for ``X`` ``(r, p, d)`` (or ``(r, d)``),
         where ``r`` targets are ``problem.targets[rows]`` (all targets when ``rows`` is None)."""
-        p = self.problem
-        T = p.targets if rows is None else p.targets[rows]
-        lead = X.shape[:-1]
-        X2 = X.reshape(-1, X.shape[-1])
-        G = X2 if self._identity else p.full_inputs(X2)
-        I = p.model.predict(G)
-        n = G.shape[0]
-        self.nfev += n
-        # sum_j |I_j - T_j|: one subtraction, |.| in place, then the columns added (a
-        # reduction over a length-2 axis costs more than the additions)
-        I3 = I.reshape(T.shape[0], -1, I.shape[-1])
-        if not self._all_out:
-            I3 = I3[:, :, self.out_idx]
-        D = np.subtract(I3, T[:, None, :])
-        np.abs(D, out=D)
-        if D.shape[-1] == 2:
-            err = np.add(D[..., 0], D[..., 1])
-        else:
-            err = D.sum(axis=-1)
-        err = err.reshape(lead)
-        if not p.constraints:
-            return err, err, np.zeros(lead)
-        cols = p.columns(G)
-        if self._fast_c:
-            # same values as Constraint.penalty (paper: b^2 - v^2; normalised:
-            # (b - v)/|b|, where v < b), one _bound_and_value call per constraint, all
-            # constraints stacked so that each operation runs once
-            nc = len(p.constraints)
-            B = np.empty((nc, n))
-            V = np.empty((nc, n))
-            for j, c in enumerate(p.constraints):
-                B[j], V[j] = c._bound_and_value(cols)
-            short = V < B
-            scale = np.abs(B)
-            scale[scale == 0] = 1.0
-            nvs = np.subtract(B, V)
-            nvs /= scale
-            nvs[~short] = 0.0
-            viol = nvs.max(axis=0) if nc > 1 else nvs[0]
-            if self.penalty == "normalised":
-                pen = nvs.sum(axis=0) if nc > 1 else nvs[0].copy()
-            else:
-                B *= B
-                V *= V
-                B -= V
-                B[~short] = 0.0
-                pen = B.sum(axis=0) if nc > 1 else B[0]
-        else:
-            pen = np.zeros(n)
-            viol = np.zeros(n)
-            for c in p.constraints:
-                pen += c.penalty(cols, self.penalty)
-                np.maximum(viol, c.violation(cols), out=viol)
-        if self.penalty_weight_is_one:
-            pen += err.reshape(-1)
-            fit = pen.reshape(lead)
-        else:
-            fit = err + p.penalty_weight * pen.reshape(lead)
-        return fit, err, viol.reshape(lead)
+        d = self.problem.evaluate(X, details=True, rows=rows)
+        self.nfev += d["fitness"].size
+        return d["fitness"], d["error"], d["violation"]
 
 
 def constraint_shortfalls(problem: SolveProblem, G: np.ndarray) -> np.ndarray:
     """Relative constraint shortfalls ``(n, c)``: ``(bound - value) / |bound|`` (``|bound|``
     replaced by 1 where it is 0); positive = violated. ``max(0, .)`` of a column is the
     constraint's ``violation`` (the base :class:`~hapticsdk.dimensions.Constraint` formula);
-    one ``_bound_and_value`` call per constraint."""
+    one ``bound_and_value`` call per constraint."""
     cons = problem.constraints
     n = G.shape[0]
     out = np.empty((n, len(cons)))
@@ -121,7 +49,7 @@ def constraint_shortfalls(problem: SolveProblem, G: np.ndarray) -> np.ndarray:
         return out
     cols = problem.columns(G)
     for j, c in enumerate(cons):
-        bound, value = c._bound_and_value(cols)
+        bound, value = c.bound_and_value(cols)
         bound = np.asarray(bound, float)
         col = out[:, j]
         np.subtract(bound, value, out=col)
@@ -140,9 +68,7 @@ def violation_from(problem: SolveProblem, S: np.ndarray, G: np.ndarray) -> np.nd
     n = S.shape[0]
     if not problem.constraints:
         return np.zeros(n)
-    from hapticsdk.dimensions import Constraint
-    if all(type(c).violation is Constraint.violation and type(c).penalty is Constraint.penalty
-           for c in problem.constraints):
+    if all(type(c).uses_base_formulas() for c in problem.constraints):
         v = np.where(S <= 0, 0.0, S)   # NaN (infinite bound) stays NaN = not feasible
         return v.max(axis=1)
     cols = problem.columns(G)
@@ -150,19 +76,6 @@ def violation_from(problem: SolveProblem, S: np.ndarray, G: np.ndarray) -> np.nd
     for c in problem.constraints:
         np.maximum(v, c.violation(cols), out=v)
     return v
-
-
-def constraint_terms(problem: SolveProblem, G: np.ndarray, margin: float) -> np.ndarray:
-    """Signed constraint shortfalls ``(n, c)`` shifted by a margin: ``(bound - value)/|bound|
-    + margin`` (positive = violated, or within the margin of the bound).
-
-    The margin makes a Gauss-Newton iterate that converges onto the constraint land on the
-    feasible side (the base class counts a violation above ``CONSTRAINT_TOL`` as failure).
-    """
-    S = constraint_shortfalls(problem, G)
-    if margin:
-        S += margin
-    return S
 
 
 def check_int(opts: dict, key: str, lo: int, hi: int | None = None, *, allow_none: bool = False) -> int | None:
@@ -242,6 +155,3 @@ def rank_key(err: np.ndarray, viol: np.ndarray) -> np.ndarray:
     """Ordering for 'best answer': feasible first, then smaller error."""
     return np.where(viol <= CONSTRAINT_TOL, err, 1e6 + viol + err)
 
-
-def as_rows(seq: Sequence[int] | np.ndarray) -> np.ndarray:
-    return np.asarray(seq, dtype=int)

@@ -67,7 +67,8 @@ class DESolver(Solver):
         clock = Clock(check_budget(o))
         ev = Evaluator(problem)
         m, d = problem.n_targets, problem.n_features
-        lower, span = ev.lower, ev.span
+        lower = problem.space.lower
+        span = problem.space.upper - lower
         pop = lower + rng.random((m, p, d)) * span
         if problem.x0 is not None:
             pop[:, 0] = problem.x0
@@ -156,7 +157,7 @@ class ScipyDESolver(Solver):
         clock = Clock(check_budget(o))
         ev = Evaluator(problem)
         m = problem.n_targets
-        lower, upper = ev.lower, ev.upper
+        lower, upper = problem.space.lower, problem.space.upper
         free = np.flatnonzero(upper > lower)
         # current best per target, starting from the box centre (or x0) so the trace is defined
         best_x = problem.x0.copy() if problem.x0 is not None else np.tile((lower + upper) / 2, (m, 1))

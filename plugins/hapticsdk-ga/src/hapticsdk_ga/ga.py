@@ -38,7 +38,7 @@ import numpy as np
 
 from hapticsdk.solvers import SolveProblem, Solver, SolverOutput, Trace
 
-from ._common import Clock, Evaluator, check_budget, check_fraction, check_int, rank_key, solved_mask, target_error
+from ._common import Clock, Evaluator, check_budget, check_fraction, check_int, solved_mask, target_error
 
 
 def _rank_select(order_flat: np.ndarray, u: np.ndarray, size: int) -> np.ndarray:
@@ -215,7 +215,8 @@ class GASolver(Solver):
         m, d, p = problem.n_targets, problem.n_features, s["population"]
         elite = s["elite_count"]
         n_cross = int(round(s["crossover_fraction"] * (p - elite)))
-        lower, span = ev.lower, ev.span
+        lower = problem.space.lower
+        span = problem.space.upper - lower
 
         work = GAWorkspace(m, p, d, elite, n_cross)
         pop = work.pops[0]
@@ -283,7 +284,3 @@ class GASolver(Solver):
         return SolverOutput(x=best_x, nfev=ev.nfev, nit=gen,
                             message=f"{gen} generations, {reason}")
 
-
-def best_of(err: np.ndarray, viol: np.ndarray) -> np.ndarray:
-    """Index of the best candidate per row (feasible first, then lowest error)."""
-    return rank_key(err, viol).argmin(axis=-1)

@@ -62,9 +62,6 @@ class _Residuals:
         d = len(self.span)
         self.h = 1e-6
         self._E = np.concatenate([np.eye(d) * self.h, np.eye(d) * -self.h])   # (2d, d): +h then -h
-        from hapticsdk.dimensions import Constraint
-        self._base_viol = all(type(c).violation is Constraint.violation and type(c).penalty is Constraint.penalty
-                              for c in problem.constraints)
 
     def x(self, U: np.ndarray) -> np.ndarray:
         X = U * self.span
@@ -128,10 +125,6 @@ class _Residuals:
         return out
 
     def violation(self, S: np.ndarray, G: np.ndarray) -> np.ndarray:
-        if not self.nc:
-            return np.zeros(S.shape[0])
-        if self._base_viol:
-            return np.where(S <= 0, 0.0, S).max(axis=1)   # NaN (infinite bound) stays NaN
         return violation_from(self.p, S, G)
 
 
@@ -298,11 +291,9 @@ def _repair(R: _Residuals, U: np.ndarray, G: np.ndarray, err: np.ndarray, S: np.
             break
         Ub, sb = U[bad], S[bad] + R.margin
         n, d = Ub.shape
-        h = 1e-6
-        E = np.concatenate([np.eye(d) * h, np.eye(d) * -h])
-        spm = (R.shortfalls(R.inputs((Ub[:, None, :] + E).reshape(-1, d))) + R.margin
+        spm = (R.shortfalls(R.inputs((Ub[:, None, :] + R._E).reshape(-1, d))) + R.margin
                ).reshape(n, 2, d, -1)
-        J = np.transpose((spm[:, 0] - spm[:, 1]) / (2 * h), (0, 2, 1))  # (n, c, d)
+        J = np.transpose((spm[:, 0] - spm[:, 1]) / (2 * R.h), (0, 2, 1))  # (n, c, d)
         act = sb > 0
         J = J * act[:, :, None]
         r = np.where(act, sb, 0.0)

@@ -42,8 +42,8 @@ class WorkConstraint(Constraint):
     def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         gs = np.asarray(cols["GS"], float)
         w = np.asarray(cols["W"], float)
-        with np.errstate(divide="ignore"):
-            wv = np.where(gs > 0, self.mf_n ** 2 / (2.0 * np.where(gs > 0, gs, 1.0)), np.inf)
+        # MF^2 / (2 GS) where GS > 0, +inf elsewhere (NaN included): one division, no masking
+        wv = np.divide(self.mf_n ** 2, 2.0 * gs, out=np.full(gs.shape, np.inf), where=gs > 0)
         return wv, w
 
 

@@ -77,6 +77,7 @@ class OmniVirtual(HapticDevice):
         self._y_meas = self.sim.measured_mm()
         self._v_est = 0.0
         self._f_applied = 0.0
+        self._ref: tuple = (None, None, None)  # (trajectory, t, trajectory.at(t)) of the last lookup
         #: work done by the motor force on the stylus (J), exact under the hold
         self.motor_work_j = 0.0
 
@@ -90,8 +91,18 @@ class OmniVirtual(HapticDevice):
     def _stop(self) -> None:
         self._f_applied = 0.0
 
+    def _at(self, t: float) -> tuple[float, float, float, float]:
+        """``trajectory.at(t)``, reusing the last lookup: a tick reads, then steps from,
+        the time the previous step ended at."""
+        traj, t_ref, ref = self._ref
+        if t_ref == t and traj is self.trajectory:
+            return ref
+        ref = self.trajectory.at(t)
+        self._ref = (self.trajectory, t, ref)
+        return ref
+
     def _read_state(self) -> DeviceState:
-        x, _, vx, _ = self.trajectory.at(self.t)
+        x, _, vx, _ = self._at(self.t)
         return DeviceState(t=self.t, position_mm=np.array([x, self._y_meas, 0.0]),
                            velocity_mm_s=np.array([vx, self._v_est, 0.0]),
                            force_n=np.array([0.0, self._f_applied, 0.0]))
@@ -101,8 +112,8 @@ class OmniVirtual(HapticDevice):
         return cmd.force_n if (cmd is not None and cmd.force_n is not None) else 0.0
 
     def _advance(self, dt: float, f: float) -> None:
-        _, r0, _, _ = self.trajectory.at(self.t)
-        _, r1, _, _ = self.trajectory.at(self.t + dt)
+        _, r0, _, _ = self._at(self.t)
+        _, r1, _, _ = self._at(self.t + dt)
         y_old = self.sim.y
         self._f_applied = self.sim.step(dt, f, r0, (r1 - r0) / dt)
         self.motor_work_j += self._f_applied * (self.sim.y - y_old)

@@ -202,6 +202,9 @@ class OmniOpenHaptics(HapticDevice):
         self.handle: int | None = None
         self._sched: int | None = None
         self._cb = HDSchedulerCallback(self._servo)          # kept alive while scheduled
+        #: servo-tick buffers, allocated once (the values are copied out / in every tick)
+        self._get_buf = (ctypes.c_double * 3)()
+        self._force_buf = (ctypes.c_double * 3)()
         self._lock = threading.Lock()
         self._force = (0.0, 0.0, 0.0)
         self._pos = (0.0, 0.0, 0.0)
@@ -227,7 +230,7 @@ class OmniOpenHaptics(HapticDevice):
         return f"{HD_ERROR_NAMES.get(code, 'HD error')} 0x{code:04x} (internal {internal}){': ' + text if text else ''}"
 
     def _get3(self, what: int) -> tuple[float, float, float]:
-        buf = (ctypes.c_double * 3)()
+        buf = self._get_buf
         self.lib.hdGetDoublev(what, buf)
         return (buf[0], buf[1], buf[2])
 
@@ -244,7 +247,9 @@ class OmniOpenHaptics(HapticDevice):
             elif f[1] != 0.0 and time.monotonic() - self._force_t > self.command_timeout_s:
                 f = (0.0, 0.0, 0.0)                # stale command: device-side watchdog
                 self.watchdog_zeroed += 1
-            lib.hdSetDoublev(HD_CURRENT_FORCE, (ctypes.c_double * 3)(*f))
+            fb = self._force_buf
+            fb[0], fb[1], fb[2] = f
+            lib.hdSetDoublev(HD_CURRENT_FORCE, fb)
             lib.hdEndFrame(h)
             err = self._error()
             with self._lock:

@@ -67,10 +67,8 @@ class OnnxModel(PerceptionModel):
         except Exception as exc:  # malformed protobuf
             raise ModelError(f"{where}: not a readable ONNX model ({exc})") from None
         raw = {e.key: e.value for e in proto.metadata_props}
-        feats = _meta(raw, "features", where)
-        dims = _meta(raw, "dimensions", where)
-        defaults = _meta(raw, "feature_defaults", where)
         meta = {k: _meta(raw, k, where) for k in REQUIRED_METADATA}
+        feats, dims, defaults = meta["features"], meta["dimensions"], meta["feature_defaults"]
         if "hapticsdk.constraint_context" in raw:  # optional: data facts for constraints
             ctx = _meta(raw, "constraint_context", where)
             if not isinstance(ctx, dict) or not all(isinstance(v, (int, float)) for v in ctx.values()):

@@ -109,10 +109,7 @@ class MCP2221Bus(I2CBus):
         devs = find_devices(self.backend)
         found = [(_serial_of(d), d) for d in devs]
         want = self.serial_number
-        if want is not None:
-            match = [d for sn, d in found if sn == want]
-        else:
-            match = [d for _, d in found]
+        match = [(sn, d) for sn, d in found if want is None or sn == want]
         if not match or (want is None and len(match) > 1):
             listing = [sn or "?" for sn, _ in found]
             why = (f"no MCP2221A with serial number {want!r}" if want is not None and found else
@@ -121,8 +118,7 @@ class MCP2221Bus(I2CBus):
             raise DeviceNotFoundError(
                 f"{why} (searched USB VID:PID 04D8:00DD; found serial numbers: {listing or 'none'}); "
                 f"check the cable, the serial number, and USB permissions ({INSTALL_HINT})", device=self.device)
-        self.dev = match[0]
-        sn = _serial_of(self.dev)
+        sn, self.dev = match[0]
         self.name = f"MCP2221A {sn or '?'} (USB 04D8:00DD)"
         try:
             try:
