@@ -30,6 +30,12 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--realtime", action="store_true", help="pace on the machine clock (jitter figures)")
     p.add_argument("--load", action="store_true", help="run a second CPU-bound process meanwhile")
     p.add_argument("--period", type=positive_float, default=0.001, help="servo period in s (default 0.001)")
+    p.add_argument("--pin-cpu", type=int, default=None, metavar="N",
+                   help="pin the servo thread to CPU N (reported if refused)")
+    p.add_argument("--fifo-priority", type=int, default=None, metavar="P",
+                   help="request SCHED_FIFO priority P, 1..99 (reported if refused; prefer with --realtime)")
+    p.add_argument("--mlockall", action="store_true", help="lock the process's memory (Linux; reported if refused)")
+    p.add_argument("--declared-rt-machine", action="store_true", help="judge goal 14 jitter (pass/fail)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_timing)
 
@@ -64,16 +70,11 @@ def _fidelity(args: argparse.Namespace) -> int:
 
 
 def _timing(args: argparse.Namespace) -> int:
-    from ..benchmarks.timing import run_timing
+    from ..benchmarks.timing import format_table, run_timing
     from . import emit
-    d = run_timing(args.seconds, realtime=args.realtime, load=args.load, period_s=args.period)
-    text = (f"{d['ticks']} ticks ({', '.join(d['dimensions'])}), load={d['load']}: tick compute median "
-            f"{d['tick_median_us']:.1f} us, p99 {d['tick_p99_us']:.1f} us, p99.9 {d['tick_p999_us']:.1f} us, "
-            f"max {d['tick_max_us']:.1f} us, overruns {d['overruns']}; goal 13 "
-            f"{'pass' if d['goal13_pass'] else 'FAIL'}")
-    if d["jitter"]:
-        j = d["jitter"]
-        text += (f"\njitter |period - T|: p50 {j['p50_us']:.1f} us, p99 {j['p99_us']:.1f} us, p99.9 "
-                 f"{j['p999_us']:.1f} us, max {j['max_us']:.1f} us, missed-tick rate {j['missed_tick_rate']:.4%}")
+    rt = {"cpu": args.pin_cpu, "fifo_priority": args.fifo_priority, "mlockall": args.mlockall}
+    d = run_timing(args.seconds, realtime=args.realtime, load=args.load, period_s=args.period, rt=rt,
+                   declared_rt_machine=args.declared_rt_machine)
+    text = (f"{d['ticks']} ticks ({', '.join(d['dimensions'])}), overruns {d['overruns']}\n" + format_table([d]))
     emit(d, args.json, text)
     return 0

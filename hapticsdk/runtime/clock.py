@@ -5,12 +5,27 @@ A clock has ``now() -> float`` (s), ``wait_until(deadline)`` and ``work(tick, se
 ``work`` is where a simulated clock charges the compute time of a tick (and any stall
 injected by a test). On the real clock the compute has already taken real time, so
 ``work`` does nothing.
+
+Also here: :func:`thread_cpu_clock_cost_s` (cost of reading the servo thread's CPU-time
+clock) and :class:`RealtimeSettings` / :func:`apply_realtime`, the optional OS options
+of the servo thread (CPU pinning, ``SCHED_FIFO``, GC freeze, ``mlockall``) that report
+their outcome instead of raising.
 """
 
 from __future__ import annotations
 
+import errno
+import logging
+import os
+import platform
+import sys
 import time
-from typing import Mapping
+from dataclasses import dataclass, fields
+from typing import Any, Callable, Mapping
+
+from ..errors import ValidationError
+
+_log = logging.getLogger(__name__)
 
 
 class MonotonicClock:
@@ -68,3 +83,196 @@ class SimulatedClock:
 
     def work(self, tick: int, seconds: float) -> None:
         self.t += self.compute_s + self.stalls.get(tick, 0.0)
+
+
+# ----------------------------------------------------------------------
+# CPU time of the servo thread
+# ----------------------------------------------------------------------
+
+def thread_cpu_clock_cost_s(samples: int = 256) -> float:
+    """Wall time (s) of one ``time.thread_time_ns()`` call on this machine (median of
+    ``samples`` batched readings; on Linux it is a system call, not a vDSO read). The
+    loop reads it twice per tick, so the per-tick cost of CPU-time measurement is about
+    twice this."""
+    tt = time.thread_time_ns
+    pc = time.perf_counter
+    per: list[float] = []
+    batch = 16
+    for _ in range(max(1, samples // batch)):
+        t0 = pc()
+        for _ in range(batch):
+            tt()
+        per.append((pc() - t0) / batch)
+    per.sort()
+    return per[len(per) // 2]
+
+
+# ----------------------------------------------------------------------
+# Real-time options of the servo thread (goal 14)
+# ----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class RealtimeSettings:
+    """Operating-system options applied to the thread that runs
+    :meth:`~hapticsdk.runtime.ServoLoop.run`, for the duration of the run.
+
+    Every option is opt-in except the GC freeze (the loop always collects and disables
+    the garbage collector). None of them raises when the OS refuses: the outcome is a
+    string in ``LoopReport.rt`` (``"applied: ..."``, ``"refused: <reason>"``,
+    ``"unavailable: <reason>"`` or ``"off"``), and whatever was applied is undone after
+    the run.
+
+    Attributes:
+        cpu: pin the servo thread to this CPU index (``os.sched_setaffinity``); None = off.
+        fifo_priority: request ``SCHED_FIFO`` at this priority (1..99,
+            ``os.sched_setscheduler``); None = off. Needs ``CAP_SYS_NICE`` or an
+            ``RLIMIT_RTPRIO`` at least this high. A FIFO thread that never sleeps holds
+            its CPU (the kernel leaves others 5 % by default): use it with paced
+            (``realtime=True``) loops.
+        gc_freeze: ``gc.freeze()`` the surviving objects before the loop (default on;
+            GC is disabled in the loop regardless).
+        mlockall: lock the process's current and future pages in RAM (``mlockall``
+            through ctypes, Linux only); undone with ``munlockall`` after the run.
+    """
+
+    cpu: int | None = None
+    fifo_priority: int | None = None
+    gc_freeze: bool = True
+    mlockall: bool = False
+
+    def __post_init__(self) -> None:
+        if self.cpu is not None and not (isinstance(self.cpu, int) and not isinstance(self.cpu, bool)
+                                         and self.cpu >= 0):
+            raise ValidationError(f"cpu must be a CPU index >= 0 or None, got {self.cpu!r}", field="cpu")
+        if self.fifo_priority is not None and not (
+                isinstance(self.fifo_priority, int) and not isinstance(self.fifo_priority, bool)
+                and 1 <= self.fifo_priority <= 99):
+            raise ValidationError(f"fifo_priority must be in 1..99 or None, got {self.fifo_priority!r}",
+                                  field="fifo_priority")
+
+    @classmethod
+    def coerce(cls, value: RealtimeSettings | Mapping[str, Any] | None) -> RealtimeSettings:
+        """Settings from an instance, a mapping of the same field names, or None (defaults)."""
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, Mapping):
+            unknown = sorted(set(value) - {f.name for f in fields(cls)})
+            if unknown:
+                raise ValidationError(f"unknown realtime option(s) {unknown}; known: cpu, fifo_priority, "
+                                      f"gc_freeze, mlockall", field="rt")
+            return cls(**dict(value))
+        raise ValidationError(f"rt must be RealtimeSettings, a mapping or None, got {type(value).__name__}",
+                              field="rt")
+
+    @property
+    def requested(self) -> bool:
+        """True when any OS option beyond the default GC handling is asked for."""
+        return self.cpu is not None or self.fifo_priority is not None or self.mlockall
+
+
+def _os_error(exc: BaseException) -> str:
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return f"{errno.errorcode.get(exc.errno, exc.errno)} ({os.strerror(exc.errno)})"
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _libc() -> Any:
+    import ctypes
+    import ctypes.util
+    return ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+
+
+def _is_linux() -> bool:
+    return sys.platform.startswith("linux")
+
+
+def _mcl_flags() -> tuple[int, int]:
+    """``MCL_CURRENT``, ``MCL_FUTURE`` of this Linux architecture."""
+    m = platform.machine().lower()
+    if m.startswith(("ppc", "powerpc", "sparc")):
+        return 0x2000, 0x4000
+    return 1, 2
+
+
+def apply_realtime(settings: RealtimeSettings) -> tuple[dict[str, str], Callable[[], None]]:
+    """Apply the OS options of ``settings`` to the calling thread (and, for mlockall,
+    the process); never raises.
+
+    Returns ``(status, restore)``: ``status`` maps ``cpu_affinity``, ``rt_priority`` and
+    ``mlockall`` to ``"off"``, ``"applied: ..."``, ``"refused: <reason>"`` or
+    ``"unavailable: <reason>"``; ``restore()`` undoes what was applied (also never
+    raises). GC handling is the loop's (key ``gc``).
+    """
+    status: dict[str, str] = {"cpu_affinity": "off", "rt_priority": "off", "mlockall": "off"}
+    undo: list[Callable[[], None]] = []
+
+    # (a) pin the thread to one CPU
+    if settings.cpu is not None:
+        if not (hasattr(os, "sched_setaffinity") and hasattr(os, "sched_getaffinity")):
+            status["cpu_affinity"] = "unavailable: os.sched_setaffinity is not on this platform"
+        else:
+            try:
+                before = os.sched_getaffinity(0)
+                if settings.cpu not in before:
+                    status["cpu_affinity"] = (f"refused: cpu {settings.cpu} is not in this thread's allowed "
+                                              f"set {sorted(before)}")
+                else:
+                    os.sched_setaffinity(0, {settings.cpu})
+                    undo.append(lambda b=before: os.sched_setaffinity(0, b))
+                    status["cpu_affinity"] = f"applied: cpu {settings.cpu} (was {sorted(before)})"
+            except Exception as exc:  # never raise for an OS refusal
+                status["cpu_affinity"] = f"refused: {_os_error(exc)}"
+
+    # (b) SCHED_FIFO priority
+    if settings.fifo_priority is not None:
+        if not (hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_FIFO")):
+            status["rt_priority"] = "unavailable: os.sched_setscheduler / SCHED_FIFO is not on this platform"
+        else:
+            try:
+                pol0 = os.sched_getscheduler(0)
+                par0 = os.sched_getparam(0)
+                lo = os.sched_get_priority_min(os.SCHED_FIFO)
+                hi = os.sched_get_priority_max(os.SCHED_FIFO)
+                if not lo <= settings.fifo_priority <= hi:
+                    status["rt_priority"] = (f"refused: priority {settings.fifo_priority} outside this "
+                                             f"system's SCHED_FIFO range {lo}..{hi}")
+                else:
+                    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(settings.fifo_priority))
+                    undo.append(lambda p=pol0, q=par0: os.sched_setscheduler(0, p, q))
+                    status["rt_priority"] = f"applied: SCHED_FIFO {settings.fifo_priority}"
+            except Exception as exc:
+                hint = (" (needs CAP_SYS_NICE or RLIMIT_RTPRIO >= the priority)"
+                        if isinstance(exc, PermissionError) else "")
+                status["rt_priority"] = f"refused: {_os_error(exc)}{hint}"
+
+    # (d) lock memory
+    if settings.mlockall:
+        if not _is_linux():
+            status["mlockall"] = f"unavailable: mlockall is used on Linux only (platform {sys.platform})"
+        else:
+            try:
+                import ctypes
+                libc = _libc()
+                cur, fut = _mcl_flags()
+                if libc.mlockall(cur | fut) != 0:
+                    e = ctypes.get_errno()
+                    hint = (" (needs CAP_IPC_LOCK or RLIMIT_MEMLOCK >= the process size)"
+                            if e in (errno.EPERM, errno.ENOMEM) else "")
+                    status["mlockall"] = f"refused: {errno.errorcode.get(e, e)} ({os.strerror(e)}){hint}"
+                else:
+                    undo.append(lambda: libc.munlockall())
+                    status["mlockall"] = "applied: MCL_CURRENT | MCL_FUTURE"
+            except Exception as exc:
+                status["mlockall"] = f"refused: {_os_error(exc)}"
+
+    def restore() -> None:
+        for fn in reversed(undo):
+            try:
+                fn()
+            except Exception as exc:  # restoring is best effort
+                _log.warning("could not undo a realtime option: %s", exc)
+        undo.clear()
+
+    return status, restore

@@ -21,13 +21,17 @@ Delay accounting: the force computed from the state of tick ``n`` is held from t
 ``delay_ticks`` adds ``d`` more ticks for tests of the delay law.
 
 Time: by default simulated time (``t = n T``, as fast as possible, each tick's compute
-time measured with ``perf_counter``); with ``realtime=True`` the loop paces itself on a
+time measured with ``perf_counter`` and, as on-CPU time of the servo thread, with
+``thread_time_ns``; a tick whose wall time exceeds its CPU time by more than 100 us was
+preempted); with ``realtime=True`` the loop paces itself on a
 clock (hybrid sleep-then-spin) against a fixed deadline grid, hands renderers the
 *measured* ``dt``, catches up after a late tick without skipping a deadline, and
 re-anchors the grid (counting the skipped ticks) only when more than
 ``max_catchup_ticks`` behind. A :class:`DeviceError` from any actuator stops *all*
 actuators, ends the run cleanly with ``report.fault`` set, and is re-raised from
-:meth:`ServoLoop.run` when ``raise_on_fault``.
+:meth:`ServoLoop.run` when ``raise_on_fault``. Optional OS options for the servo
+thread (CPU pinning, ``SCHED_FIFO``, ``mlockall``; ``rt=``) report their outcome in
+``report.rt`` and never raise.
 """
 
 from __future__ import annotations
@@ -48,8 +52,8 @@ from ..actuators import Actuator, DeviceState, HapticDevice
 from ..dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
-from .clock import MonotonicClock
-from .stats import jitter_stats, tick_stats
+from .clock import MonotonicClock, RealtimeSettings, apply_realtime, thread_cpu_clock_cost_s
+from .stats import PREEMPT_THRESHOLD_S, jitter_stats, preemption_stats, tick_stats
 
 #: event counters every report carries (0 when nothing happened)
 EVENT_KEYS = ("nonfinite_state", "huge_state", "velocity_spike", "renderer_error", "nonfinite_command",
@@ -66,7 +70,19 @@ class LoopReport:
         realtime: paced on a clock (True) or simulated time.
         tick_median_us, tick_p99_us, tick_max_us: per-tick compute time of the control
             path (read, renderers, passivity, commands, logging), excluding simulated
-            physics (us).
+            physics (us), wall clock (``perf_counter``): includes time the thread was
+            off the CPU (preempted by another process).
+        tick_p999_us: p99.9 of the same (us).
+        tick_cpu_median_us, tick_cpu_p99_us, tick_cpu_p999_us, tick_cpu_max_us: the same
+            ticks' on-CPU time of the servo thread (``thread_time_ns``), what the tick
+            code costs (us); NaN when ``cpu_time=False``.
+        preempted_ticks: ticks whose wall compute exceeded their CPU compute by more
+            than ``preempt_threshold_us`` (100 us); None when ``cpu_time=False``.
+        off_cpu_max_us: largest wall - CPU compute of a tick (us).
+        cpu_clock_cost_us: measured cost of the two CPU-clock reads a tick makes (us).
+        rt: outcome of the OS options: ``cpu_affinity``, ``rt_priority``, ``mlockall``,
+            ``gc`` (``"off"``, ``"applied: ..."``, ``"refused: <reason>"``,
+            ``"unavailable: <reason>"``) and ``applied`` (names applied).
         sim_step_median_us: median time spent stepping simulated devices (us).
         overruns: ticks whose compute time exceeded the period.
         jitter: |period - T| statistics and missed-tick rate (realtime mode), else None.
@@ -91,6 +107,15 @@ class LoopReport:
     fault: dict[str, str] | None
     sim_step_median_us: float = float("nan")
     tick_p999_us: float = float("nan")
+    tick_cpu_median_us: float = float("nan")
+    tick_cpu_p99_us: float = float("nan")
+    tick_cpu_p999_us: float = float("nan")
+    tick_cpu_max_us: float = float("nan")
+    preempted_ticks: int | None = None
+    preempt_threshold_us: float = PREEMPT_THRESHOLD_S * 1e6
+    off_cpu_max_us: float = float("nan")
+    cpu_clock_cost_us: float = float("nan")
+    rt: dict[str, Any] = field(default_factory=dict)
     log: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
@@ -98,6 +123,13 @@ class LoopReport:
         d = {k: getattr(self, k) for k in ("ticks", "period_s", "realtime", "tick_median_us", "tick_p99_us",
                                             "tick_p999_us", "tick_max_us", "sim_step_median_us", "overruns",
                                             "jitter", "events", "passivity", "fault")}
+        d["compute_us"] = {"median_us": self.tick_median_us, "p99_us": self.tick_p99_us,
+                           "p999_us": self.tick_p999_us, "max_us": self.tick_max_us, "clock": "wall"}
+        d["compute_cpu_us"] = {"median_us": self.tick_cpu_median_us, "p99_us": self.tick_cpu_p99_us,
+                               "p999_us": self.tick_cpu_p999_us, "max_us": self.tick_cpu_max_us,
+                               "clock": "thread_cpu"}
+        for k in ("preempted_ticks", "preempt_threshold_us", "off_cpu_max_us", "cpu_clock_cost_us", "rt"):
+            d[k] = getattr(self, k)
         d["log_keys"] = sorted(self.log)
         return d
 
@@ -141,6 +173,13 @@ class ServoLoop:
         passivity_settings: :class:`~hapticsdk.passivity.ControllerSettings`.
         drop_unmapped_roles: ignore commands for roles with no actuator (counted as
             ``role_conflict``) instead of refusing to build the loop.
+        cpu_time: also measure each tick's on-CPU time of the servo thread (default on;
+            two ``thread_time_ns`` reads per tick, ~1-2 us on Linux).
+        rt: :class:`~hapticsdk.runtime.clock.RealtimeSettings` or a mapping of its
+            fields (``cpu``, ``fifo_priority``, ``gc_freeze``, ``mlockall``): OS options
+            applied to the thread calling :meth:`run` for the run and undone after;
+            refusals are reported in ``report.rt``, never raised. Default: none (GC is
+            collected, frozen and disabled as always).
     """
 
     def __init__(self, device: HapticDevice, renderers: Sequence[DimensionRenderer],
@@ -150,7 +189,8 @@ class ServoLoop:
                  max_position_mm: float = 1000.0, max_speed_mm_s: float = 5000.0,
                  max_accel_mm_s2: float = 2.0e6, max_catchup_ticks: int = 5,
                  passivity_settings: ControllerSettings | None = None,
-                 drop_unmapped_roles: bool = False) -> None:
+                 drop_unmapped_roles: bool = False, cpu_time: bool = True,
+                 rt: RealtimeSettings | Mapping[str, Any] | None = None) -> None:
         if not isinstance(device, HapticDevice):
             raise ValidationError("device must be a HapticDevice", field="device")
         if not (isinstance(period_s, (int, float)) and math.isfinite(period_s) and 0 < period_s <= 1.0):
@@ -186,6 +226,8 @@ class ServoLoop:
                 device_damping_ns_per_m=float(getattr(device, "damping_ns_per_m", 0.0) or 0.0),
                 position_resolution_mm=float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0))
         self.passivity_settings = passivity_settings
+        self.cpu_time = bool(cpu_time)
+        self.rt = RealtimeSettings.coerce(rt)
 
     # ------------------------------------------------------------------
     def _stop_all(self) -> None:
@@ -229,6 +271,7 @@ class ServoLoop:
         L_vel = np.zeros((n_max, 3))
         L_f = np.zeros(n_max)
         L_compute = np.zeros(n_max)
+        L_cpu = np.zeros(n_max)
         L_sim = np.zeros(n_max)
         L_start = np.zeros(n_max)
         for s in slots:
@@ -252,12 +295,22 @@ class ServoLoop:
         have_good = False
         good_state: DeviceState | None = None
         perf = time.perf_counter
+        cpu_time = self.cpu_time
+        tcpu = time.thread_time_ns
+        cpu_cost_us = 2e6 * thread_cpu_clock_cost_s() if cpu_time else float("nan")
 
         gc_was_enabled = gc.isenabled()
         gc.collect()
-        if hasattr(gc, "freeze"):
+        froze = False
+        if self.rt.gc_freeze and hasattr(gc, "freeze"):
             gc.freeze()
+            froze = True
         gc.disable()
+        rt_status, rt_restore = apply_realtime(self.rt)
+        rt_status["gc"] = ("applied: collected, frozen and disabled" if froze else
+                           "applied: collected and disabled (freeze off)" if not self.rt.gc_freeze else
+                           "applied: collected and disabled (gc.freeze unavailable)")
+        rt_status["applied"] = sorted(k for k, v in rt_status.items() if v.startswith("applied"))
         k = 0
         t_prev = 0.0
         try:
@@ -281,6 +334,8 @@ class ServoLoop:
                     t = k * T
                     dt = T
                 c0 = perf()
+                if cpu_time:
+                    q0 = tcpu()
                 L_start[k] = t
                 # ---- 1. sense -------------------------------------------------
                 try:
@@ -406,6 +461,8 @@ class ServoLoop:
                 L_pen[k] = pen
                 L_pos[k] = st.position_mm
                 L_vel[k] = st.velocity_mm_s
+                if cpu_time:
+                    L_cpu[k] = (tcpu() - q0) * 1e-9
                 c1 = perf()
                 L_compute[k] = c1 - c0
                 if c1 - c0 > T:
@@ -436,6 +493,7 @@ class ServoLoop:
                     L_sim[k] = perf() - s0
                 k += 1
         finally:
+            rt_restore()
             if gc_was_enabled:
                 gc.enable()
             close = getattr(recorder, "close", None)
@@ -444,7 +502,7 @@ class ServoLoop:
                     close()
                 except Exception as exc:  # the run's outcome matters more than the log
                     _log.warning("recorder.close() failed: %s", exc)
-            if hasattr(gc, "unfreeze"):
+            if froze and hasattr(gc, "unfreeze"):
                 gc.unfreeze()
             if fault is not None:
                 self._stop_all()
@@ -460,12 +518,20 @@ class ServoLoop:
                 events["passivity_active"] += rep["active_ticks"]
                 pas[s.role] = rep
         comp = tick_stats(L_compute[:n])
+        if cpu_time:
+            cpu = tick_stats(L_cpu[:n])
+            pre = preemption_stats(L_compute[:n], L_cpu[:n])
+        else:
+            cpu = tick_stats(np.zeros(0))
+            pre = {"preempted_ticks": None, "off_cpu_max_us": float("nan")}
         jit = None
         if realtime and n > 1:
             jit = jitter_stats(np.diff(L_start[:n]), T)
         log = {"t": L_t[:n].copy(), "dt": L_dt[:n].copy(), "penetration_mm": L_pen[:n].copy(),
                "position_mm": L_pos[:n].copy(), "velocity_mm_s": L_vel[:n].copy(), "force_n": L_f[:n].copy(),
                "compute_s": L_compute[:n].copy()}
+        if cpu_time:
+            log["compute_cpu_s"] = L_cpu[:n].copy()
         for s in slots:
             if not s.is_force:
                 log[f"{s.role}.frequency_hz"] = s.log_f[:n].copy()
@@ -474,7 +540,11 @@ class ServoLoop:
         report = LoopReport(ticks=n, period_s=T, realtime=realtime, tick_median_us=comp["median_us"],
                             tick_p99_us=comp["p99_us"], tick_max_us=comp["max_us"], tick_p999_us=comp["p999_us"],
                             overruns=events["overrun"], jitter=jit, events=events, passivity=pas,
-                            fault=fault, sim_step_median_us=sim_us, log=log)
+                            fault=fault, sim_step_median_us=sim_us, log=log,
+                            tick_cpu_median_us=cpu["median_us"], tick_cpu_p99_us=cpu["p99_us"],
+                            tick_cpu_p999_us=cpu["p999_us"], tick_cpu_max_us=cpu["max_us"],
+                            preempted_ticks=pre["preempted_ticks"], off_cpu_max_us=pre["off_cpu_max_us"],
+                            cpu_clock_cost_us=cpu_cost_us, rt=rt_status)
         self.report = report
         if fault_exc is not None and self.raise_on_fault:
             if isinstance(fault_exc, DeviceError):

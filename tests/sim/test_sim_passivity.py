@@ -12,7 +12,7 @@ from hapticsdk.passivity import (PASSIVE, STABLE_BY_ASSUMPTION, ControllerSettin
                                  controller_step_batch, critical_stiffness, critical_stiffness_eig,
                                  naive_observer_energy, passivity_margin, spectral_radius,
                                  zoh_observer_energy)
-from hapticsdk.sim.arm import ArmBatch, ArmParams
+from hapticsdk.sim.arm import ArmBatch, ArmParams, quantise
 from hapticsdk.sim.finger import FingerParams, Trajectory
 
 
@@ -28,20 +28,21 @@ def test_margin_formula():
 @pytest.mark.parametrize("m, b, T, d", list(itertools.product((0.045, 0.2), (0.2, 0.5, 1.15, 2.0),
                                                               (0.5e-3, 1e-3, 2e-3), (0, 1, 2))))
 def test_margin_predicts_eigenvalue_stability_limit(m, b, T, d):
-    """Goal 1: K_crit from the margin within 2 % of the ZOH eigenvalue limit.
+    """Goal 1: K_crit within 2 % of the ZOH eigenvalue limit in all 72 cells with the
+    device's apparent mass given (measured worst 0.004 %).
 
-    Measured exception (goal 1 is met in 69 of 72 cells, not 72): the margin is the
-    first-order term in delta = b*T/m of the exact limit (its error is about
-    -0.17, -0.26, -0.40 x delta for d = 0, 1, 2); for the light arm (m = 0.045 kg) at
-    T = 2 ms with b >= 1.15 N*s/m and d >= 1 (delta >= 0.05) it underestimates the
-    eigenvalue limit by 2.1-3.5 % (conservative side). Those three cells are held to 4 %
-    and listed in docs/runtime.md; the eigenvalue model itself is checked in the time
-    domain below."""
-    k_pred = critical_stiffness(b, T, d)
+    The plain formula (no mass: b - K T (1/2 + d) - |B|, the goal's expression) is the
+    first-order term in delta = b*T/m of the exact limit: 69 of the 72 cells within 2 %;
+    for the light arm (m = 0.045 kg) at T = 2 ms with b >= 1.15 N*s/m and d >= 1
+    (delta >= 0.05) it is 2.1-3.5 % low (conservative side). Those three cells are held to
+    4 % and listed in docs/runtime.md."""
     k_eig = critical_stiffness_eig(m, b, T, d)
+    k_mass = critical_stiffness(b, T, d, mass_kg=m)
+    assert k_mass == pytest.approx(k_eig, rel=0.02)
+    k_pred = critical_stiffness(b, T, d)
     heavy_damping = b * T / m >= 0.05 and d >= 1
     assert k_pred == pytest.approx(k_eig, rel=0.04 if heavy_damping else 0.02)
-    assert k_pred <= k_eig * 1.02  # never optimistic
+    assert k_pred <= k_mass * (1 + 1e-12) and k_pred <= k_eig * 1.02  # never optimistic
     # and the eigenvalue check really separates the two sides
     assert spectral_radius(0.9 * k_eig, m, b, T, d) < 1.0 < spectral_radius(1.1 * k_eig, m, b, T, d)
 
@@ -92,26 +93,34 @@ def test_no_hidden_passivity_claim_at_gs_max():
     assert classify_wall(0.99, 0.5, 1e-3)["label"] == PASSIVE
 
 
-def _press(K, *, on, b=0.5, T=1e-3, res=0.0, dur=3.0, settings=None):
+def _press_cells(K, on, *, b=0.5, T=1e-3, res=0.0, dur=3.0, settings=None):
     """Device m=0.05 kg pulled 3 mm into a wall by a 200 N/m, 0.2 N*s/m hand (the reference's
-    V-sim setting). Returns (energy-to-user max, x at each tick (mm), applied forces)."""
+    V-sim setting), one cell per entry of ``on`` (run together). Returns per cell
+    (energy-to-user max, x at each tick (mm), applied forces)."""
+    on = np.asarray(on, bool)
+    c = on.size
     arm = ArmParams(mass_kg=0.05, damping_ns_per_m=b, encoder_resolution_mm=res)
     tr = Trajectory([(0, 0, 1.0), (0.5, 0, -3.0), (dur, 0, -3.0)])
     n = int(round(dur / T))
     _, r = tr.position(np.arange(n + 1) * T)
-    bt = ArmBatch(T, [arm], [FingerParams(0.0, 200.0, 0.2)], y0_mm=1.0, track_energy=True)
-    st = controller_state_batch(1)
-    xs, fs, e = [], [], []
+    bt = ArmBatch(T, [arm] * c, [FingerParams(0.0, 200.0, 0.2)] * c, y0_mm=1.0, track_energy=True)
+    st = controller_state_batch(c)
+    xs, fs = np.empty((n, c)), np.empty((n, c))
+    e = np.full(c, -np.inf)
     for k in range(n):
         y = bt.measured_mm()
         fw = np.where(-y > 0, K * -y, 0.0)
-        f = controller_step_batch(st, y, T, fw, np.array([on]), settings, damping_ns_per_m=b, resolution_mm=res)
-        xs.append(bt.y[0] * 1e3)
-        f = bt.step(f, r[k:k + 1], [(r[k + 1] - r[k]) / T])
+        f = controller_step_batch(st, y, T, fw, on, settings, damping_ns_per_m=b, resolution_mm=res)
+        xs[k] = bt.y * 1e3
+        f = bt.step(f, np.full(c, r[k]), np.full(c, (r[k + 1] - r[k]) / T))
         controller_commit_batch(st, f)
-        fs.append(f[0])
-        e.append(bt.energy_to_user_j()[0])
-    return max(e), np.array(xs), np.array(fs)
+        fs[k] = f
+        np.maximum(e, bt.energy_to_user_j(), out=e)
+    return [(e[i], xs[:, i], fs[:, i]) for i in range(c)]
+
+
+def _press(K, *, on, **kw):
+    return _press_cells(K, [on], **kw)[0]
 
 
 def test_harness_detects_an_active_wall():
@@ -161,19 +170,95 @@ def test_controller_has_no_force_spikes_up_to_four_times_critical_stiffness(K):
 
 
 def test_spike_criterion_fails_without_the_slew_limit():
-    """The same K = 4 x 2b/T press with the ramp/slew limit off cuts the force in one tick
-    (the old behaviour), so the spike assertion above can fail."""
-    _, _, f = _press(4.0, on=True, res=0.055, settings=ControllerSettings(max_force_step_n=None))
+    """The K = 4 x 2b/T press with the old controller (energy observer only, no slew
+    limit) cuts the force in one tick, so the spike assertion above can fail."""
+    old = ControllerSettings(max_force_step_n=None, generation_observer=False)
+    _, _, f = _press(4.0, on=True, res=0.055, settings=old)
     assert np.abs(np.diff(f)).max() > 1.0
 
 
-@pytest.mark.xfail(strict=True, reason="known gap (docs/runtime.md): at K = 3-4 x 2b/T the 30 Hz damper "
-                   "lags the oscillation; K = 3: std 0.68 mm, K = 3.5 / 4: W_d down to -2.6e-6 / -9.6e-5 J")
-@pytest.mark.parametrize("K", [3.0, 3.5, 4.0])
-def test_goal4_energy_and_settling_up_to_four_times_critical_stiffness(K):
-    """Goal 4 in full at K = 3 ... 4 x 2b/T: min W_d >= -1e-6 J and std < 0.05 mm."""
-    e_on, x, _ = _press(K, on=True, res=0.055)
-    assert e_on <= 1e-6 and x[-500:].std() < 0.05
+GOAL4 = [(b, T, res, mult) for b, T in ((0.5, 1e-3), (0.2, 1e-3), (1.15, 1e-3), (0.5, 0.5e-3), (0.5, 2e-3))
+         for res in (0.0, 0.055) for mult in (1.5, 3.0, 4.0)
+         if res * mult * 2.0 * b / T / 1000.0 <= 0.35]  # quantised: one count worth <= 0.35 N
+
+
+@pytest.mark.parametrize("b, T, res, mult", GOAL4)
+def test_goal4_passive_settled_and_transparent_up_to_four_times_critical_stiffness(b, T, res, mult):
+    """Goal 4 in full, K = 1.5 ... 4 x 2b/T, exact and quantised (0.055 mm) encoder:
+    min W_d >= -1e-6 J, std of the position over the last 0.5 s < 0.05 mm, |F| <= 3.3 N,
+    |dF| <= 1 N per tick; and the wall is still rendered (mean force = spring law at the
+    mean depth within 12 %: a controller that withholds the wall would pass the other
+    criteria). Not claimed: quantised encoder with b = 1.15 at 3-4x (K = 6.9-9.2 N/mm,
+    one count = 0.38-0.51 N) nor at 0.5 ms, 4x (8 N/mm, 0.44 N per count): the cells
+    whose count is worth more than 0.35 N (docs/runtime.md). Transparency is judged
+    against the spring of the *reading* the wall is computed from."""
+    K = mult * 2.0 * b / T / 1000.0
+    (e_off, _, _), (e_on, x, f) = _press_cells(K, [False, True], res=res, b=b, T=T)
+    n = int(round(0.5 / T))
+    if mult >= 3.0:
+        assert e_off > 1e-6  # the wall is active without the controller
+    assert e_on <= 1e-6
+    assert x[-n:].std() < 0.05
+    assert np.abs(f).max() <= 3.3 + 1e-12
+    assert np.abs(np.diff(f)).max() <= 1.0
+    assert f[-n:].mean() == pytest.approx(K * -quantise(x[-n:], res).mean(), rel=0.12)
+
+
+@pytest.mark.parametrize("K", [3.0, 4.0])
+def test_goal4_fails_without_the_generation_observer(K):
+    """The energy observer alone (the controller before the generation observer) lets
+    the 45-50 Hz oscillation at K = 3-4 x 2b/T grow until the wall's stored energy is
+    spent: settling or energy fails, so the goal-4 test above can fail."""
+    old = ControllerSettings(generation_observer=False)
+    e_on, x, _ = _press(K, on=True, res=0.0, settings=old)
+    assert e_on > 1e-6 or x[-500:].std() >= 0.05
+
+
+@pytest.mark.parametrize("K", [1.5, 4.0])
+def test_wall_is_not_withheld_in_a_long_quantised_hold(K):
+    """8 s press and hold on the 0.055 mm encoder: the count-level dither of the reading
+    must not drain the energy observer until the energy bound withholds the wall (the
+    controller before the half-count play did so after about 4 s at 1.5 x 2b/T)."""
+    e_on, x, f = _press(K, on=True, res=0.055, dur=8.0)
+    assert e_on <= 1e-6
+    assert f[-500:].mean() == pytest.approx(K * -x[-500:].mean(), rel=0.12)
+    old = ControllerSettings(generation_observer=False)
+    _, x0, f0 = _press(1.5, on=True, res=0.055, dur=8.0, settings=old)
+    assert abs(f0[-500:].mean()) < 0.1 * 1.5 * abs(x0[-500:].mean())  # the old one withheld it
+
+
+def test_generation_observer_books_the_hold_at_once():
+    """One tick of motion dx into a spring K with exact positions: the generation
+    observer falls by K dx^2 / 2 - b dx^2 / dt (the hold's excess over the credited
+    damping) in that very tick, while the energy observer still holds the spring's
+    stored energy (positive)."""
+    K, b, dt = 2000.0, 0.5, 1e-3  # N/m
+    pc = PassivityController(ControllerSettings(device_damping_ns_per_m=b, generation_budget_j=1.0))
+    x0, x1, x2 = -0.5, -0.6, -0.65  # mm, moving into the wall
+    pc.step(x0, dt, K * 1e-3 * -x0)
+    pc.commit(K * 1e-3 * -x0)
+    pc.step(x1, dt, K * 1e-3 * -x1)
+    g1 = pc.generation_j
+    dx = (x1 - x0) * 1e-3
+    assert g1 == pytest.approx(-(0.5 * K * dx * dx - b * dx * dx / dt), rel=1e-9)
+    assert pc.energy_j > 0
+    # the next command carries the damper (opposes the inward motion: pushes outward more)
+    out = pc.step(x2, dt, K * 1e-3 * -x2)
+    assert out > K * 1e-3 * -x2
+
+
+def test_no_damper_out_of_contact():
+    """In free space (wall force 0) the generation observer is reset and adds no force."""
+    pc = PassivityController(ControllerSettings(device_damping_ns_per_m=0.0))
+    xs = [-0.5, -0.8, -1.1, -0.7, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5]
+    outs = []
+    for x in xs:
+        fw = 0.5 * -x if x < 0 else 0.0
+        o = pc.step(x, 1e-3, fw)
+        pc.commit(o)
+        outs.append(o)
+    assert outs[-3:] == [0.0, 0.0, 0.0]
+    assert pc.generation_j == 0.0
 
 
 def test_scalar_controller_equals_batch():

@@ -23,7 +23,7 @@ import numpy as np
 from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
-from hapticsdk.passivity import classify_wall
+from hapticsdk.passivity import classify_wall, critical_stiffness
 from hapticsdk.sim.arm import OMNI_SOURCES, ArmParams, ArmSim
 from hapticsdk.sim.finger import FingerParams, Trajectory, finger, press_slide
 
@@ -167,9 +167,17 @@ class OmniVirtual(HapticDevice):
 
     def passivity(self, stiffness_n_per_mm: float | None = None, *, period_s: float = 0.001,
                   delay_ticks: int = 0, virtual_damping_ns_per_m: float = 0.0) -> dict[str, Any]:
-        """Colgate margin and label of a wall on this device (default K = 2.3 N/mm)."""
+        """Colgate margin and label of a wall on this device (default K = 2.3 N/mm).
+
+        ``critical_stiffness_mass_corrected_n_per_mm`` (N/mm) is the ZOH eigenvalue
+        stability limit of the free arm with its apparent mass (``critical_stiffness(...,
+        mass_kg=arm.mass_kg)``); it is a stability figure, not a passivity one, and does
+        not change the label.
+        """
         K = self.limits.max_stiffness_n_per_mm if stiffness_n_per_mm is None else stiffness_n_per_mm
         out = classify_wall(K, self.arm.damping_ns_per_m, period_s, delay_ticks, virtual_damping_ns_per_m)
+        out["critical_stiffness_mass_corrected_n_per_mm"] = critical_stiffness(
+            self.arm.damping_ns_per_m, period_s, delay_ticks, virtual_damping_ns_per_m, mass_kg=self.arm.mass_kg)
         out["source_damping"] = OMNI_SOURCES["damping_ns_per_m"]
         return out
 
