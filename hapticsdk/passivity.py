@@ -29,6 +29,12 @@ Two tools:
   ``S (v+ T + Delta) + S^2 T^2 / 2m`` for the sum S of the ramp's forces, Delta one
   encoder count), in the spirit of energy bounding / reference energy following
   (Kim & Ryu; Ryu, Preusche, Hannaford & Hirzinger 2005) rather than a one-tick dump.
+  A second observer ``G`` books, every tick, what the hold generates *relative to the
+  wall's own continuous law* (held-force work minus the trapezoid of the wall's force,
+  plus the credited device damping) and drives a damper on the raw velocity the moment
+  it goes negative: the Colgate deficit ``K T / 2 - b`` is paid as it arises instead of
+  after the wall's stored energy is spent, which is what keeps walls up to 4 x 2b/T
+  passive, settled and at their full spring law (goal 4 of the reference).
 
 Sign conventions: ``x`` is the probe position along the surface normal (mm, y axis,
 inside the material at x < 0); ``F`` is the force on the probe along +x (N, "pushing the
@@ -310,6 +316,26 @@ class ControllerSettings:
         generation_budget_j: upper bound of ``G`` (J). Dissipation booked during fast
             motion is not saved up to let a later oscillation grow: ``G`` is capped
             here (a cap can only make the controller act sooner, never later).
+        generation_floor_j: lower bound of ``G`` (J) with an exact position reading: the
+            debt the damper works off is at most this; a longer-standing deficit keeps
+            the damper at its bound rather than growing without limit. Passivity itself
+            is the energy observer's job (``E``).
+        dither_damping_ns_per_m: with a quantised reading the floor is
+            ``max(generation_floor_j, dither_damping * Delta^2 / dt)``, so the damper's
+            pulse at a one-count change of the reading (velocity ``Delta / dt``) is at most
+            this damping (N*s/m; 3 N*s/m: 0.17 N at 0.055 mm and 1 kHz). These pulses are
+            what damps the count-level limit cycle a quantised stiff wall has without
+            Coulomb friction (Abbott & Okamura); larger values buzz more (the fidelity
+            bench's force error), smaller ones (1.7 N*s/m at 0.5 ms) let a 3 x 2b/T wall
+            give energy back.
+        count_play_ratio: the energy observer books a quantised reading through half a
+            count of play, so a dither between two counts books nothing, only while the
+            wall's force step across one count stays within this fraction of what the
+            device damping plus the damper absorb over one count,
+            ``|dF| <= ratio (b + max_damping) Delta / dt`` (N); a steeper (relay-like)
+            wall and a device of unknown damping (b = 0) are booked count by count in
+            full. Without the play the observer's count-level drift (about -K Delta^2 per
+            dither cycle) withheld a 1.5 x 2b/T wall after about 4 s of holding.
     """
 
     max_damping_ns_per_m: float = 5.0
@@ -325,7 +351,9 @@ class ControllerSettings:
     ramp_reserve_j: float = 2.5e-4
     generation_observer: bool = True
     generation_budget_j: float = 1.0e-5
-    generation_floor_j: float = 1.0e-4
+    generation_floor_j: float = 1.0e-5
+    dither_damping_ns_per_m: float = 3.0
+    count_play_ratio: float = 0.75
 
 
 def _cap(budget: float, v: float, dt: float, mass: float | None, quantum_m: float = 0.0) -> float:
@@ -355,8 +383,9 @@ def _ramp_force(impulse: float, step: float | None) -> float:
 
 
 class PassivityController:
-    """ZOH-paired passivity observer + bounded variable damper + energy bound (scalar,
-    one axis, pure-Python floats for the servo tick).
+    """ZOH-paired passivity observer + generation observer with its damper + bounded
+    variable damper + energy bound (scalar, one axis, pure-Python floats for the servo
+    tick).
 
     Per tick call :meth:`step` with the measured position (mm), the measured period
     ``dt`` (s) and the wall's force (N); send the returned force; then call
@@ -366,7 +395,10 @@ class PassivityController:
     ``F v dt`` does not exceed the energy available and (2) a damper
     ``alpha = -E_avail / (v^2 dt)``, ``alpha <= max_damping_ns_per_m``, when the budget
     is already overdrawn; (3) limiting the output's change to ``max_force_step_n`` per
-    tick, with the cap in (1) computed for the whole ramp-down at that rate.
+    tick, with the cap in (1) computed for the whole ramp-down at that rate. Before
+    those, the generation observer ``G`` (see :class:`ControllerSettings`) adds a damper
+    on the raw velocity as soon as the hold makes more energy than the device damping
+    dissipates, so a wall above 2b/T is damped while it still renders its full spring.
     """
 
     __slots__ = ("settings", "energy_j", "generation_j", "dissipated_j", "bounded_j", "active_ticks",
@@ -414,7 +446,7 @@ class PassivityController:
             elif x_mm < xp - h:
                 xp = x_mm + h
             b = s.device_damping_ns_per_m
-            if b > 0.0 and abs(f_wall - self._fw_prev) * dt <= (b + s.max_damping_ns_per_m) * h * 2e-3:
+            if b > 0.0 and abs(f_wall - self._fw_prev) * dt <= s.count_play_ratio * (b + s.max_damping_ns_per_m) * h * 2e-3:
                 self.energy_j -= self._f_prev * (xp - self._x_play) * 1e-3
             else:
                 self.energy_j -= work
@@ -446,8 +478,13 @@ class PassivityController:
                 g = 0.0  # out of contact: the empty wall holds and generates nothing
             if g > s.generation_budget_j:
                 g = s.generation_budget_j
-            elif g < -s.generation_floor_j:
-                g = -s.generation_floor_j
+            else:
+                q = s.position_resolution_mm * 1e-3
+                floor = s.dither_damping_ns_per_m * q * q / dt
+                if floor < s.generation_floor_j:
+                    floor = s.generation_floor_j
+                if g < -floor:
+                    g = -floor
             self.generation_j = g
             self._fw_prev = f_wall
             if g < 0.0 and f_wall != 0.0 and abs(v_raw) * 1e3 > s.velocity_deadband_mm_s:
@@ -497,6 +534,10 @@ class PassivityController:
         self._f_prev = f_applied
 
     def report(self) -> dict[str, float]:
+        """Observer state: ``observed_energy_j`` (E, J), ``generation_j`` (G, J),
+        ``dissipated_j`` (work of the corrections booked on the reading, J: with a
+        quantised encoder the count-level pulses make it noisy and it can be negative
+        while the true energy is not), ``withheld_n_ticks`` (N), ``active_ticks``."""
         return {"observed_energy_j": self.energy_j, "generation_j": self.generation_j,
                 "dissipated_j": self.dissipated_j,
                 "withheld_n_ticks": self.bounded_j, "active_ticks": self.active_ticks,
@@ -532,7 +573,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     xp0 = np.where(started, state["x_play"], x_mm)
     xp = np.where(x_mm > xp0 + h, x_mm - h, np.where(x_mm < xp0 - h, x_mm + h, xp0))
     small = (np.asarray(b, float) > 0.0) & (np.abs(np.asarray(f_wall, float) - state["fw_prev"]) * dt
-                                             <= (np.asarray(b, float) + s.max_damping_ns_per_m) * h * 2e-3)
+                                             <= s.count_play_ratio * (np.asarray(b, float) + s.max_damping_ns_per_m) * h * 2e-3)
     state["energy"] -= np.where((h > 0) & small, state["f_prev"] * (xp - xp0) * 1e-3, work)
     state["x_play"] = xp
     ddx = np.maximum(np.abs(dx) - np.asarray(res, float) * 1e-3, 0.0)
@@ -550,7 +591,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     if s.generation_observer:
         g = state["generation"] - work + 0.5 * (state["fw_prev"] + f) * dx + credit
         g = np.clip(np.where((f == 0.0) & (state["fw_prev"] == 0.0), 0.0, g),
-                    -s.generation_floor_j, s.generation_budget_j)
+                    -np.maximum(s.dither_damping_ns_per_m * (np.asarray(res, float) * 1e-3) ** 2 / dt,
+                                s.generation_floor_j), s.generation_budget_j)
         state["generation"] = g
         state["fw_prev"] = f.copy()
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

@@ -1,0 +1,59 @@
+"""Goal 4 end to end: the hardness renderer at GS_max = 2.3 N/mm (2.3 x 2b/T on the
+simulated Omni's default b = 0.5 N*s/m at 1 kHz, 0.055 mm encoder) pressed and held
+through the servo loop with its default passivity controller: no energy to the finger,
+the stylus settles, the wall is rendered; with the controller off the same press is
+active (so the test can fail)."""
+
+import numpy as np
+import pytest
+
+from hapticsdk.runtime import ServoLoop
+from hapticsdk.sim.finger import Trajectory
+from hapticsdk_hardness.dimension import HardnessDimension
+from hapticsdk_hardness.omni import OmniVirtual
+from hapticsdk_hardness.voicecoil import VoiceCoilVirtual
+
+
+class _RecordingOmni(OmniVirtual):
+    """The simulated Omni, recording the exact state after every interval of the hold."""
+
+    def _reset(self) -> None:
+        super()._reset()
+        self.hist: list[tuple[float, float, float, float]] = []
+
+    def _advance(self, dt: float, f: float) -> None:
+        super()._advance(dt, f)
+        self.hist.append((self.t, self.sim.y, self.sim.v, self.motor_work_j))
+
+
+def _press_and_hold(passivity: bool, finger: str, gs: float = 2.3, dur: float = 4.0):
+    """Returns (upper bound of the energy given to the finger (J), position std over the
+    last 0.5 s (mm), mean wall force over the last 0.5 s (N), mean penetration (mm))."""
+    tr = Trajectory([(0, 0, 2.0), (0.3, 0, 2.0), (0.8, 0, -3.0), (dur, 0, -3.0)])
+    dev = _RecordingOmni(trajectory=tr, finger=finger)
+    r = HardnessDimension().renderer({"GS": gs})
+    rep = ServoLoop(dev, [r], {"force": dev, "coil": VoiceCoilVirtual()}, passivity=passivity).run(dur)
+    t, y, v, w = np.array(dev.hist).T
+    # energy to the finger = motor work - kinetic energy - arm damping's dissipation; the
+    # dissipation is at least b dy^2 / dt per interval, so this is an upper bound
+    diss = np.concatenate([[0.0], np.cumsum(dev.damping_ns_per_m * np.diff(y) ** 2 / np.diff(t))])
+    e_user = w - 0.5 * dev.apparent_mass_kg * v ** 2 - diss
+    tail = t > dur - 0.5
+    L = rep.log
+    ltail = L["t"] > dur - 0.5
+    return (float(e_user.max()), float((y[tail] * 1e3).std()), float(L["force_n"][ltail].mean()),
+            float(L["penetration_mm"][ltail].mean()))
+
+
+@pytest.mark.parametrize("finger", ["soft", "medium", "stiff"])
+def test_wall_at_gs_max_is_passive_and_settles_through_the_loop(finger):
+    e, sd, f, pen = _press_and_hold(True, finger)
+    assert e <= 1e-6
+    assert sd < 0.05
+    assert f == pytest.approx(2.3 * pen, rel=0.1)
+
+
+@pytest.mark.parametrize("finger", ["soft", "medium"])
+def test_same_wall_without_the_controller_is_active(finger):
+    e, sd, _, _ = _press_and_hold(False, finger)
+    assert e > 1e-4 and sd > 0.1
