@@ -316,18 +316,17 @@ class ControllerSettings:
         generation_budget_j: upper bound of ``G`` (J). Dissipation booked during fast
             motion is not saved up to let a later oscillation grow: ``G`` is capped
             here (a cap can only make the controller act sooner, never later).
-        generation_floor_j: lower bound of ``G`` (J) with an exact position reading: the
-            debt the damper works off is at most this; a longer-standing deficit keeps
-            the damper at its bound rather than growing without limit. Passivity itself
-            is the energy observer's job (``E``).
-        dither_damping_ns_per_m: with a quantised reading the floor is
-            ``max(generation_floor_j, dither_damping * Delta^2 / dt)``, so the damper's
-            pulse at a one-count change of the reading (velocity ``Delta / dt``) is at most
-            this damping (N*s/m; 3 N*s/m: 0.17 N at 0.055 mm and 1 kHz). These pulses are
-            what damps the count-level limit cycle a quantised stiff wall has without
-            Coulomb friction (Abbott & Okamura); larger values buzz more (the fidelity
-            bench's force error), smaller ones (1.7 N*s/m at 0.5 ms) let a 3 x 2b/T wall
-            give energy back.
+        generation_floor_j: lower bound of ``G`` (J): the debt the damper works off is at
+            most this (1 mJ; at long periods one tick's deficit is tens of microjoules and
+            must be paid in full). Passivity itself is the energy observer's job (``E``).
+        dither_damping_ns_per_m: at a tick whose reading moved by at most one count the
+            floor is ``min(generation_floor_j, dither_damping * Delta^2 / dt)``, so the
+            damper's pulse at a one-count change of the reading (velocity ``Delta / dt``)
+            is at most this damping (N*s/m; 3 N*s/m: 0.17 N at 0.055 mm and 1 kHz).
+            These pulses are what damps the count-level limit cycle a quantised stiff
+            wall has without Coulomb friction (Abbott & Okamura); larger values buzz
+            more (the fidelity bench's force error), smaller ones (1.7 N*s/m at 0.5 ms)
+            let a 3 x 2b/T wall give energy back.
         count_play_ratio: the energy observer books a quantised reading through half a
             count of play, so a dither between two counts books nothing, only while the
             wall's force step across one count stays within this fraction of what the
@@ -351,7 +350,7 @@ class ControllerSettings:
     ramp_reserve_j: float = 2.5e-4
     generation_observer: bool = True
     generation_budget_j: float = 1.0e-5
-    generation_floor_j: float = 1.0e-5
+    generation_floor_j: float = 1.0e-3
     dither_damping_ns_per_m: float = 3.0
     count_play_ratio: float = 0.75
 
@@ -469,20 +468,22 @@ class PassivityController:
         f = f_wall
         active = False
         if s.generation_observer:
-            # the hold's generation relative to the wall's own law, plus the credit, plus
-            # what the previous correction dissipates at the velocity it was computed for
-            # (Hannaford & Ryu's alpha v^2 T booking: a count-level dither of the reading
-            # must not turn the damper's own pulses into phantom debt)
+            # the hold's generation relative to the wall's own law (held-force work minus
+            # the trapezoid of the wall's force), plus the credited device damping
             g = self.generation_j - work + 0.5 * (self._fw_prev + f_wall) * dx + credit
             if f_wall == 0.0 and self._fw_prev == 0.0:
                 g = 0.0  # out of contact: the empty wall holds and generates nothing
             if g > s.generation_budget_j:
                 g = s.generation_budget_j
             else:
+                floor = s.generation_floor_j
                 q = s.position_resolution_mm * 1e-3
-                floor = s.dither_damping_ns_per_m * q * q / dt
-                if floor < s.generation_floor_j:
-                    floor = s.generation_floor_j
+                if q > 0.0 and abs(dx) <= 1.000001 * q:
+                    # a count-level change of the reading: the damper's pulse is bounded
+                    # by the dither damping (its velocity is one count per tick)
+                    fq = s.dither_damping_ns_per_m * q * q / dt
+                    if fq < floor:
+                        floor = fq
                 if g < -floor:
                     g = -floor
             self.generation_j = g
@@ -590,9 +591,11 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     gen_damp = np.zeros(f.shape, bool)
     if s.generation_observer:
         g = state["generation"] - work + 0.5 * (state["fw_prev"] + f) * dx + credit
-        g = np.clip(np.where((f == 0.0) & (state["fw_prev"] == 0.0), 0.0, g),
-                    -np.maximum(s.dither_damping_ns_per_m * (np.asarray(res, float) * 1e-3) ** 2 / dt,
-                                s.generation_floor_j), s.generation_budget_j)
+        qm = np.asarray(res, float) * 1e-3
+        floor = np.where((qm > 0) & (np.abs(dx) <= 1.000001 * qm),
+                         np.minimum(s.dither_damping_ns_per_m * qm * qm / dt, s.generation_floor_j),
+                         s.generation_floor_j)
+        g = np.clip(np.where((f == 0.0) & (state["fw_prev"] == 0.0), 0.0, g), -floor, s.generation_budget_j)
         state["generation"] = g
         state["fw_prev"] = f.copy()
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):

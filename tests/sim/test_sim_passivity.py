@@ -277,3 +277,26 @@ def test_scalar_controller_equals_batch():
         controller_commit_batch(st, np.array([fa]))
     assert pc.energy_j == pytest.approx(st["energy"][0], rel=1e-9, abs=1e-15)
     assert pc.active_ticks > 0
+
+
+@pytest.mark.parametrize("T", [1e-3, 4e-3])
+def test_goal4_in_the_stability_matrix_cycles(T):
+    """Goal 4 on the stability matrix's press / slide / tap cycles (10 s, quantised
+    encoder, soft / medium / stiff finger): every cell with b > 0 and K <= 4 x 2b/T gives
+    the finger no energy (<= 1e-6 J) with the controller on, and its largest force step
+    is the wall's own (the same cells without the controller give the finger energy)."""
+    from hapticsdk.benchmarks.stability import run_period
+    cells = [(K, b, fg) for K in (0.1, 0.7, 2.3) for b in (0.25, 0.5) for fg in ("soft", "medium", "stiff")
+             if K * 1000.0 <= 4 * 2 * b / T]
+    K = np.array([c[0] for c in cells] * 2)
+    b = np.array([c[1] for c in cells] * 2)
+    fg = [c[2] for c in cells] * 2
+    on = np.array([True] * len(cells) + [False] * len(cells))
+    r = run_period(T, K, b, fg, on, 10.0)
+    n = len(cells)
+    assert np.all(r["energy_to_user_j"][:n] <= 1e-6)
+    assert np.all(r["max_force_step_n"][:n] <= np.maximum(r["max_force_step_n"][n:], 0.8) + 1e-9)
+    assert np.all(r["peak_force_n"][:n] <= 3.3 + 1e-12)
+    active = K[:n] * 1000.0 > 2 * b[:n] / T
+    if active.any():
+        assert r["energy_to_user_j"][n:][active].max() > 1e-4
