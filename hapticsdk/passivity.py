@@ -304,7 +304,10 @@ class ControllerSettings:
             every tick as the work of the held force minus the trapezoid of the wall's
             requested force over the same displacement, plus the credited device
             damping: ``G += -F_held(n-1) dx + (F_wall(n-1) + F_wall(n)) dx / 2 +
-            b max(|dx| - Delta, 0)^2 / dt``. For a spring the trapezoid is its exact
+            b max(|dx| - Delta, 0)^2 / dt`` (a one-count change of the reading is credited
+            whole, ``b dx^2 / dt``, when the wall's step across it is within Colgate's
+            bound ``|dF| <= 2 b |dx| / dt``: a wall below 2b/T is then left alone). For a
+            spring the trapezoid is its exact
             storage change, so ``G`` sees the hold's ``K dx^2 / 2`` per tick at once,
             not after the wall's stored energy is spent (which is when the first
             observer ``E`` goes negative). When ``G < 0`` a damper on the *raw*
@@ -470,7 +473,16 @@ class PassivityController:
         if s.generation_observer:
             # the hold's generation relative to the wall's own law (held-force work minus
             # the trapezoid of the wall's force), plus the credited device damping
-            g = self.generation_j - work + 0.5 * (self._fw_prev + f_wall) * dx + credit
+            cg = credit
+            q = s.position_resolution_mm * 1e-3
+            if q > 0.0 and dx != 0.0 and abs(dx) <= 1.000001 * q:
+                # a one-count change: if the wall's step across it is within Colgate's
+                # bound (|dF| <= 2 b |dx| / dt) the device damping covers the hold's
+                # K dx^2 / 2, so the count is credited whole instead of not at all
+                bd = s.device_damping_ns_per_m
+                if abs(f_wall - self._fw_prev) * dt <= 2.0 * bd * abs(dx):
+                    cg = bd * dx * dx / dt
+            g = self.generation_j - work + 0.5 * (self._fw_prev + f_wall) * dx + cg
             if f_wall == 0.0 and self._fw_prev == 0.0:
                 g = 0.0  # out of contact: the empty wall holds and generates nothing
             if g > s.generation_budget_j:
@@ -590,7 +602,12 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     f = np.array(f_wall, float)
     gen_damp = np.zeros(f.shape, bool)
     if s.generation_observer:
-        g = state["generation"] - work + 0.5 * (state["fw_prev"] + f) * dx + credit
+        qm0 = np.asarray(res, float) * 1e-3
+        bb = np.asarray(b, float)
+        whole = ((qm0 > 0) & (dx != 0) & (np.abs(dx) <= 1.000001 * qm0)
+                 & (np.abs(f - state["fw_prev"]) * dt <= 2.0 * bb * np.abs(dx)))
+        cg = np.where(whole, bb * dx * dx / dt, credit)
+        g = state["generation"] - work + 0.5 * (state["fw_prev"] + f) * dx + cg
         qm = np.asarray(res, float) * 1e-3
         floor = np.where((qm > 0) & (np.abs(dx) <= 1.000001 * qm),
                          np.minimum(s.dither_damping_ns_per_m * qm * qm / dt, s.generation_floor_j),

@@ -300,3 +300,14 @@ def test_goal4_in_the_stability_matrix_cycles(T):
     active = K[:n] * 1000.0 > 2 * b[:n] / T
     if active.any():
         assert r["energy_to_user_j"][n:][active].max() > 1e-4
+
+
+@pytest.mark.parametrize("K", [0.5, 0.95])
+def test_controller_leaves_a_passive_quantised_wall_alone(K):
+    """Below 2b/T (quantised encoder) the device damping covers the hold: a one-count
+    change is credited whole when the wall's step across it is within Colgate's bound,
+    so the controller commands exactly the wall's force on every tick of the press (no
+    dither pulses). With the count credited only by its strict lower bound (zero; the
+    controller of the previous commit) the same presses got 0.19 / 0.27 N pulses."""
+    (_, _, f_off), (_, _, f_on) = _press_cells(K, [False, True], res=0.055)
+    assert np.array_equal(f_on, f_off)
