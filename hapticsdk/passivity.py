@@ -435,20 +435,24 @@ class PassivityController:
             return f_wall
         dx = (x_mm - self._x_prev) * 1e-3
         self._x_prev = x_mm
+        q = s.position_resolution_mm * 1e-3  # one encoder count (m)
+        bd = s.device_damping_ns_per_m
+        adx = abs(dx)
+        count_level = q > 0.0 and adx <= 1.000001 * q  # the reading moved by at most one count
+        dfw = abs(f_wall - self._fw_prev) * dt  # the wall's force step, times dt
         work = self._f_prev * dx
-        h = s.position_resolution_mm * 0.5
-        if h > 0.0 and dx != 0.0:
-            # E is booked on the reading through half a count of play: a dither between
-            # two counts books nothing, as long as the wall's force step across the count
-            # is one the device damping plus the damper can absorb (2 (b + alpha) Delta /
-            # dt); a relay-like wall (a count worth newtons) is booked in full
+        if q > 0.0 and dx != 0.0:
+            # both observers book the reading through half a count of play: a dither
+            # between two counts books nothing, as long as the wall's force step across
+            # the count is one the device damping plus the damper can absorb; a
+            # relay-like wall (a count worth newtons) is booked count by count
+            h = 0.5 * s.position_resolution_mm
             xp = self._x_play
             if x_mm > xp + h:
                 xp = x_mm - h
             elif x_mm < xp - h:
                 xp = x_mm + h
-            b = s.device_damping_ns_per_m
-            if b > 0.0 and abs(f_wall - self._fw_prev) * dt <= s.count_play_ratio * (b + s.max_damping_ns_per_m) * h * 2e-3:
+            if bd > 0.0 and dfw <= s.count_play_ratio * (bd + s.max_damping_ns_per_m) * q:
                 self.energy_j -= self._f_prev * (xp - self._x_play) * 1e-3
             else:
                 self.energy_j -= work
@@ -456,11 +460,9 @@ class PassivityController:
         else:
             self.energy_j -= work
         credit = 0.0
-        if s.device_damping_ns_per_m > 0.0:
-            ddx = abs(dx) - s.position_resolution_mm * 1e-3
-            if ddx > 0.0:
-                credit = s.device_damping_ns_per_m * ddx * ddx / dt
-                self.energy_j += credit
+        if bd > 0.0 and adx > q:
+            credit = bd * (adx - q) * (adx - q) / dt
+            self.energy_j += credit
         self.dissipated_j -= self._f_pc_prev * dx
         a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
         v_raw = dx / dt
@@ -474,14 +476,11 @@ class PassivityController:
             # the hold's generation relative to the wall's own law (held-force work minus
             # the trapezoid of the wall's force), plus the credited device damping
             cg = credit
-            q = s.position_resolution_mm * 1e-3
-            if q > 0.0 and dx != 0.0 and abs(dx) <= 1.000001 * q:
-                # a one-count change: if the wall's step across it is within Colgate's
-                # bound (|dF| <= 2 b |dx| / dt) the device damping covers the hold's
+            if count_level and dx != 0.0 and dfw <= 2.0 * bd * adx:
+                # a one-count change whose wall step is within Colgate's bound
+                # (|dF| <= 2 b |dx| / dt): the device damping covers the hold's
                 # K dx^2 / 2, so the count is credited whole instead of not at all
-                bd = s.device_damping_ns_per_m
-                if abs(f_wall - self._fw_prev) * dt <= 2.0 * bd * abs(dx):
-                    cg = bd * dx * dx / dt
+                cg = bd * dx * dx / dt
             g = self.generation_j - work + 0.5 * (self._fw_prev + f_wall) * dx + cg
             if f_wall == 0.0 and self._fw_prev == 0.0:
                 g = 0.0  # out of contact: the empty wall holds and generates nothing
@@ -489,17 +488,15 @@ class PassivityController:
                 g = s.generation_budget_j
             else:
                 floor = s.generation_floor_j
-                q = s.position_resolution_mm * 1e-3
-                if q > 0.0 and abs(dx) <= 1.000001 * q:
-                    # a count-level change of the reading: the damper's pulse is bounded
-                    # by the dither damping (its velocity is one count per tick)
+                if count_level:
+                    # the damper's pulse at a count-level change is bounded by the dither
+                    # damping (its velocity is one count per tick)
                     fq = s.dither_damping_ns_per_m * q * q / dt
                     if fq < floor:
                         floor = fq
                 if g < -floor:
                     g = -floor
             self.generation_j = g
-            self._fw_prev = f_wall
             if g < 0.0 and f_wall != 0.0 and abs(v_raw) * 1e3 > s.velocity_deadband_mm_s:
                 alpha = -g / (dt * v_raw * v_raw)
                 if alpha > s.max_damping_ns_per_m:
@@ -512,7 +509,6 @@ class PassivityController:
             # impulse budget of the rest of the push (N): one tick at most, or the whole
             # ramp-down at `step` per tick (same bound, see _cap / _ramp_force)
             vp = v if v > v_raw else v_raw
-            q = s.position_resolution_mm * 1e-3
             cap = _ramp_force(_cap(budget, vp, dt, s.device_mass_kg, q), step)
             hard = _cap(budget + s.ramp_reserve_j, vp, dt, s.device_mass_kg, q) if step is not None else cap
             if f > cap:
@@ -538,6 +534,7 @@ class PassivityController:
             out = lo if out < lo else (hi if out > hi else out)
         self._f_pc_prev = out - f_wall
         self._out_prev = out
+        self._fw_prev = f_wall
         return out
 
     def commit(self, f_applied: float) -> None:
@@ -580,17 +577,21 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     dx = np.where(started, (x_mm - state["x_prev"]) * 1e-3, 0.0)
     state["x_prev"] = np.array(x_mm, float)
     work = state["f_prev"] * dx
-    b = s.device_damping_ns_per_m if damping_ns_per_m is None else damping_ns_per_m
-    res = s.position_resolution_mm if resolution_mm is None else resolution_mm
-    h = np.asarray(res, float) * 0.5
+    bb = np.asarray(s.device_damping_ns_per_m if damping_ns_per_m is None else damping_ns_per_m, float)
+    res = np.asarray(s.position_resolution_mm if resolution_mm is None else resolution_mm, float)
+    qm = res * 1e-3  # one encoder count (m)
+    adx = np.abs(dx)
+    count_level = (qm > 0) & (adx <= 1.000001 * qm)
+    f = np.array(f_wall, float)
+    dfw = np.abs(f - state["fw_prev"]) * dt
+    h = res * 0.5
     xp0 = np.where(started, state["x_play"], x_mm)
     xp = np.where(x_mm > xp0 + h, x_mm - h, np.where(x_mm < xp0 - h, x_mm + h, xp0))
-    small = (np.asarray(b, float) > 0.0) & (np.abs(np.asarray(f_wall, float) - state["fw_prev"]) * dt
-                                             <= s.count_play_ratio * (np.asarray(b, float) + s.max_damping_ns_per_m) * h * 2e-3)
+    small = (bb > 0.0) & (dfw <= s.count_play_ratio * (bb + s.max_damping_ns_per_m) * qm)
     state["energy"] -= np.where((h > 0) & small, state["f_prev"] * (xp - xp0) * 1e-3, work)
     state["x_play"] = xp
-    ddx = np.maximum(np.abs(dx) - np.asarray(res, float) * 1e-3, 0.0)
-    credit = np.asarray(b, float) * ddx * ddx / dt
+    ddx = np.maximum(adx - qm, 0.0)
+    credit = bb * ddx * ddx / dt
     state["energy"] += credit
     state["dissipated"] -= state["f_pc_prev"] * dx
     a = 1.0 - math.exp(-2.0 * math.pi * s.velocity_filter_hz * dt) if s.velocity_filter_hz > 0 else 1.0
@@ -599,22 +600,15 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     state["v"] = v
     avail = state["energy"] + s.energy_tolerance_j
     budget = state["energy"] + s.bound_tolerance_j
-    f = np.array(f_wall, float)
     gen_damp = np.zeros(f.shape, bool)
     if s.generation_observer:
-        qm0 = np.asarray(res, float) * 1e-3
-        bb = np.asarray(b, float)
-        whole = ((qm0 > 0) & (dx != 0) & (np.abs(dx) <= 1.000001 * qm0)
-                 & (np.abs(f - state["fw_prev"]) * dt <= 2.0 * bb * np.abs(dx)))
+        whole = count_level & (dx != 0) & (dfw <= 2.0 * bb * adx)
         cg = np.where(whole, bb * dx * dx / dt, credit)
         g = state["generation"] - work + 0.5 * (state["fw_prev"] + f) * dx + cg
-        qm = np.asarray(res, float) * 1e-3
-        floor = np.where((qm > 0) & (np.abs(dx) <= 1.000001 * qm),
-                         np.minimum(s.dither_damping_ns_per_m * qm * qm / dt, s.generation_floor_j),
+        floor = np.where(count_level, np.minimum(s.dither_damping_ns_per_m * qm * qm / dt, s.generation_floor_j),
                          s.generation_floor_j)
         g = np.clip(np.where((f == 0.0) & (state["fw_prev"] == 0.0), 0.0, g), -floor, s.generation_budget_j)
         state["generation"] = g
-        state["fw_prev"] = f.copy()
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             gen_damp = started & (g < 0.0) & (f != 0.0) & (np.abs(v_raw) * 1e3 > s.velocity_deadband_mm_s)
             alpha_g = np.where(gen_damp, np.minimum(-g / (dt * v_raw * v_raw), s.max_damping_ns_per_m), 0.0)
@@ -622,7 +616,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     step = s.max_force_step_n
     hard = np.full(f.shape, np.inf)
     if s.energy_bound:
-        vt = np.maximum(np.maximum(v, v_raw), 0.0) * dt + np.asarray(res, float) * 1e-3
+        vt = np.maximum(np.maximum(v, v_raw), 0.0) * dt + qm
         with np.errstate(divide="ignore", invalid="ignore"):
             def one_tick(bud: np.ndarray) -> np.ndarray:
                 bpos = np.maximum(bud, 0.0)
@@ -655,6 +649,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     out = np.where(started, out, f_wall)
     state["f_pc_prev"] = np.where(on, out - f_wall, 0.0)
     state["out_prev"] = out
+    state["fw_prev"] = np.array(f_wall, float)
     state["started"] = np.ones_like(started)
     return np.where(on, out, f_wall)
 
