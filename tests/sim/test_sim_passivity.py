@@ -169,10 +169,15 @@ def test_controller_has_no_force_spikes_up_to_four_times_critical_stiffness(K):
     assert np.abs(np.diff(f)).max() <= ControllerSettings().max_force_step_n + 1e-9
 
 
+#: the controller before the generation observer and the half-count play (energy
+#: observer, bounded damper and energy bound only)
+OLD = {"generation_observer": False, "count_play_ratio": 0.0}
+
+
 def test_spike_criterion_fails_without_the_slew_limit():
     """The K = 4 x 2b/T press with the old controller (energy observer only, no slew
     limit) cuts the force in one tick, so the spike assertion above can fail."""
-    old = ControllerSettings(max_force_step_n=None, generation_observer=False)
+    old = ControllerSettings(max_force_step_n=None, **OLD)
     _, _, f = _press(4.0, on=True, res=0.055, settings=old)
     assert np.abs(np.diff(f)).max() > 1.0
 
@@ -209,7 +214,7 @@ def test_goal4_fails_without_the_generation_observer(K):
     """The energy observer alone (the controller before the generation observer) lets
     the 45-50 Hz oscillation at K = 3-4 x 2b/T grow until the wall's stored energy is
     spent: settling or energy fails, so the goal-4 test above can fail."""
-    old = ControllerSettings(generation_observer=False)
+    old = ControllerSettings(**OLD)
     e_on, x, _ = _press(K, on=True, res=0.0, settings=old)
     assert e_on > 1e-6 or x[-500:].std() >= 0.05
 
@@ -222,7 +227,7 @@ def test_wall_is_not_withheld_in_a_long_quantised_hold(K):
     e_on, x, f = _press(K, on=True, res=0.055, dur=8.0)
     assert e_on <= 1e-6
     assert f[-500:].mean() == pytest.approx(K * -x[-500:].mean(), rel=0.12)
-    old = ControllerSettings(generation_observer=False)
+    old = ControllerSettings(**OLD)
     _, x0, f0 = _press(1.5, on=True, res=0.055, dur=8.0, settings=old)
     assert abs(f0[-500:].mean()) < 0.1 * 1.5 * abs(x0[-500:].mean())  # the old one withheld it
 
