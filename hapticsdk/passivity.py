@@ -160,12 +160,12 @@ def passivity_margin(K: Any, B: Any, b: Any, T: Any, d: Any = 0, *, mass_kg: Any
         ``K_crit = (b - |B|) / (T (1/2 + d))``.
     """
     K = np.asarray(K, float) * 1000.0
-    if mass_kg is None:
-        out = np.asarray(b, float) - (K * np.asarray(T, float) * (0.5 + np.asarray(d, float)) + np.abs(np.asarray(B, float)))
-        return out if out.ndim else float(out)
     aB = np.abs(np.asarray(B, float))
-    b_eff = aB + (np.asarray(b, float) - aB) * mass_correction(b, T, d, mass_kg)
-    out = np.asarray(b_eff - (K * np.asarray(T, float) * (0.5 + np.asarray(d, float)) + aB))
+    load = K * np.asarray(T, float) * (0.5 + np.asarray(d, float)) + aB
+    b_eff = np.asarray(b, float)
+    if mass_kg is not None:
+        b_eff = aB + (b_eff - aB) * mass_correction(b, T, d, mass_kg)
+    out = np.asarray(b_eff - load)
     return out if out.ndim else float(out)
 
 
@@ -179,7 +179,7 @@ def critical_stiffness(b: float, T: float, d: int = 0, B: float = 0.0, *, mass_k
     k = max(float(b) - abs(float(B)), 0.0) / (float(T) * (0.5 + float(d))) / 1000.0
     if mass_kg is None:
         return k
-    return k * float(mass_correction(b, T, d, float(_check_mass(mass_kg))))
+    return k * float(mass_correction(b, T, d, mass_kg))
 
 
 def classify_wall(K: float, b: float, T: float, d: int = 0, B: float = 0.0, *,
@@ -268,12 +268,12 @@ class ControllerSettings:
             always uses the exact displacement.
         energy_tolerance_j: energy deficit the damper tolerates before it acts (J).
         bound_tolerance_j: energy deficit at which the energy bound starts capping the
-            outward force (J). A quantised encoder makes the *observed* energy jump by
-            F*Delta per count (3.3 N x 0.055 mm = 1.8e-4 J on the Omni) and drift
-            negative while the reading dithers between two counts, far more than the
-            true energy; capping the force inside that noise would distort the spring
-            (goal 7), so the hard bound waits for a deficit of 1 mJ, which a saturated
-            stiff wall reaches within a few cycles, while the gentle damper acts at once.
+            outward force (J). With a quantised encoder the cap's predicted work includes
+            one count (``F Delta``), which an empty budget never covers: with 0 a wall
+            met from outside would never be rendered at all. 1 mJ (a saturated stiff
+            wall reaches it within a few cycles) lets the wall start and absorb energy;
+            the observed energy's count-level drift is removed by the half-count play
+            (``count_play_ratio``), and the gentle dampers act at once.
         energy_bound: also bound the outward force by the observed energy (on by default).
         device_mass_kg: apparent mass of the device (kg) used to bound how far the held
             force itself can push the stylus within one period (``F T^2 / 2m``). Without

@@ -6,13 +6,17 @@ from __future__ import annotations
 import numpy as np
 
 
+def _summary(us: np.ndarray) -> tuple[float, float, float, float]:
+    """p50, p99, p99.9 and max of ``us`` (NaN when empty)."""
+    if us.size == 0:
+        return (float("nan"),) * 4
+    p50, p99, p999 = np.percentile(us, [50, 99, 99.9])
+    return float(p50), float(p99), float(p999), float(us.max())
+
+
 def tick_stats(seconds: np.ndarray) -> dict[str, float]:
     """Median, p99, p99.9 and max of per-tick compute times given in seconds (us out)."""
-    us = np.asarray(seconds, float) * 1e6
-    if us.size == 0:
-        return {"median_us": float("nan"), "p99_us": float("nan"), "p999_us": float("nan"), "max_us": float("nan")}
-    p50, p99, p999 = np.percentile(us, [50, 99, 99.9])
-    return {"median_us": float(p50), "p99_us": float(p99), "p999_us": float(p999), "max_us": float(us.max())}
+    return dict(zip(("median_us", "p99_us", "p999_us", "max_us"), _summary(np.asarray(seconds, float) * 1e6)))
 
 
 def jitter_stats(periods_s: np.ndarray, period_s: float) -> dict[str, float]:
@@ -22,9 +26,8 @@ def jitter_stats(periods_s: np.ndarray, period_s: float) -> dict[str, float]:
     if p.size == 0:
         return {"p50_us": float("nan"), "p99_us": float("nan"), "p999_us": float("nan"),
                 "max_us": float("nan"), "missed_tick_rate": float("nan"), "periods": 0}
-    dev = np.abs(p - period_s) * 1e6
-    p50, p99, p999 = np.percentile(dev, [50, 99, 99.9])
-    return {"p50_us": float(p50), "p99_us": float(p99), "p999_us": float(p999), "max_us": float(dev.max()),
+    p50, p99, p999, mx = _summary(np.abs(p - period_s) * 1e6)
+    return {"p50_us": p50, "p99_us": p99, "p999_us": p999, "max_us": mx,
             "missed_tick_rate": float(np.mean(p > 1.5 * period_s)), "periods": int(p.size),
             "mean_period_us": float(p.mean() * 1e6)}
 
