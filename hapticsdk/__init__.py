@@ -43,8 +43,8 @@ _LAZY = {
     "list_plugins": "hapticsdk.plugins",
     "Scene": "hapticsdk.scene",
     "load_scene": "hapticsdk.scene",
-    "compile_scene": "hapticsdk.scene",
-    "render_plan": "hapticsdk.rendering",
+    "compile_scene": "hapticsdk.compiler",
+    "render_plan": "hapticsdk.runtime.render",
     "HapticSDKError": "hapticsdk.errors",
 }
 
@@ -60,8 +60,9 @@ def __getattr__(name: str) -> Any:
 def render(material: Any, *, seconds: float = 3.0, seed: int | None = 0, devices: Any = None) -> Any:
     """Solve and render one material (a library name or ``{dimension: intensity}``) on the
     scene's devices (simulated by default); returns the render report."""
-    from .rendering import render_plan
-    from .scene import Scene, compile_scene
+    from .compiler import compile_scene
+    from .runtime.render import render_plan
+    from .scene import Scene
 
     scene = Scene.for_material(material, devices=devices, seed=seed)
     return render_plan(compile_scene(scene), seconds=seconds)

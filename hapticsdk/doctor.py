@@ -12,6 +12,8 @@
 * ``calibrations``: calibrations in use: the core defaults, files in the calibration
   directory (``$HAPTICSDK_CALIBRATION_DIR``), and what backends report through an
   optional ``calibration_info()`` classmethod.
+* ``missing_plugins``: first-party plugins whose distribution is not installed,
+  ``[{"kind", "name", "distribution"}]`` (empty with everything installed).
 * ``libraries``: optional Python modules and shared libraries, ``name -> {"found", "detail",
   "needed_by"}``.
 
@@ -138,8 +140,10 @@ def list_calibrations(classes: dict[str, type] | None = None) -> list[dict[str, 
 def collect() -> dict[str, Any]:
     """The full doctor report (see module docstring)."""
     backends, classes = check_backends()
+    from .plugins import missing_first_party
     return {"backends": backends, "devices": discover_devices(classes, backends),
-            "calibrations": list_calibrations(classes), "libraries": check_libraries()}
+            "calibrations": list_calibrations(classes), "libraries": check_libraries(),
+            "missing_plugins": missing_first_party()}
 
 
 def format_report(rep: dict[str, Any]) -> str:
@@ -153,6 +157,12 @@ def format_report(rep: dict[str, Any]) -> str:
     for dev in rep["devices"]:
         rest = ", ".join(f"{k}={v}" for k, v in dev.items() if k != "backend")
         lines.append(f"  {dev['backend']}: {rest}")
+    missing: dict[str, list[str]] = {}
+    for m in rep.get("missing_plugins", []):
+        missing.setdefault(m["distribution"], []).append(f"{m['kind']} {m['name']}")
+    lines.append("first-party plugins:" + ("" if missing else " all installed"))
+    for dist, what in sorted(missing.items()):
+        lines.append(f"  -- {dist} not installed (pip install {dist}): provides {', '.join(what)}")
     lines.append("libraries:")
     for name, lib in rep["libraries"].items():
         lines.append(f"  {'ok ' if lib['found'] else '-- '}{name}: {lib['detail']}  [{lib['needed_by']}]")

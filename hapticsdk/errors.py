@@ -74,3 +74,8 @@ class CalibrationError(HapticSDKError, ValueError):
 
 class RecordingError(ValidationError):
     """A recording (trial data) is broken; the message names file/trial and field."""
+
+
+class FileWriteError(ValidationError):
+    """A file could not be written (missing directory, disk full, permission); the old
+    file, if any, is unchanged. ``field`` names the path or the option that gave it."""

@@ -37,6 +37,35 @@ GROUPS: dict[str, str] = {
     "hooks": "hapticsdk.hooks",
 }
 
+#: first-party plugin names -> the distribution that provides them, so that a core-only
+#: install can say what to ``pip install`` (kept equal to the plugins' entry points by a test)
+FIRST_PARTY: dict[str, dict[str, str]] = {
+    "dimension": {"hardness": "hapticsdk-hardness", "roughness": "hapticsdk-roughness"},
+    "actuator": {
+        "omni-virtual": "hapticsdk-hardness", "voicecoil-virtual": "hapticsdk-hardness",
+        "omni-openhaptics": "hapticsdk-hardness", "piezo-virtual": "hapticsdk-roughness",
+        "piezo-serial": "hapticsdk-roughness", "piezo-mcp2221": "hapticsdk-roughness",
+    },
+    "solver": {n: "hapticsdk-ga" for n in ("ga", "de", "de-scipy", "polish", "ga-polish", "amortised")},
+    "model": {"default": "hapticsdk-onnx", "onnx": "hapticsdk-onnx"},
+}
+
+
+def install_hint(kind: str, name: str) -> str:
+    """``"; install the distribution hapticsdk-X (pip install hapticsdk-X)"`` when ``name``
+    is a first-party plugin of ``kind`` that is not installed, else ``""``."""
+    dist = FIRST_PARTY.get(kind, {}).get(name)
+    if dist is None or name in registry(kind):
+        return ""
+    return f"; it is provided by the distribution {dist} (pip install {dist})"
+
+
+def missing_first_party() -> list[dict[str, str]]:
+    """First-party plugins whose distribution is not installed (kind, name, distribution)."""
+    return [{"kind": kind, "name": name, "distribution": dist}
+            for kind, table in FIRST_PARTY.items() for name, dist in table.items()
+            if name not in registry(kind)]
+
 
 @dataclass(frozen=True)
 class PluginInfo:
@@ -119,7 +148,8 @@ class Registry:
         if name not in table:
             valid = self.names()
             raise UnknownPluginError(
-                f"no {self.kind} named {name!r}; installed: {', '.join(valid) if valid else '(none)'}",
+                f"no {self.kind} named {name!r}; installed: {', '.join(valid) if valid else '(none)'}"
+                f"{install_hint(self.kind, name)}",
                 plugin=name, kind=self.kind)
         return table[name]
 

@@ -7,7 +7,8 @@ from .discrimination import (TABLE4_SPRINGS_N_PER_MM, DiscriminationAnswers, Psy
 from .piezo import PiezoTable, read_measurements_csv, table_from_measurements
 from .store import (LoadedCalibration, calibration_dir, calibrations_in_use, list_calibrations,
                     load_calibration, read_calibration, save_calibration)
-from .voicecoil import VoiceCoilCalibration, VoiceCoilFit, fit_voicecoil
+from .voicecoil import VoiceCoilCalibration
+from .voicecoil_fit import VoiceCoilFit, fit_voicecoil
 
 __all__ = ["PiezoTable", "VoiceCoilCalibration", "VoiceCoilFit", "fit_voicecoil", "DiscriminationAnswers",
            "PsychometricFit", "fit_psychometric", "generate_answers", "TABLE4_SPRINGS_N_PER_MM",

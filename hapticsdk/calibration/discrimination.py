@@ -25,6 +25,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 
 from ..errors import CalibrationError
+from .voicecoil import VoiceCoilCalibration
 
 #: Table 4 of the paper: reference springs (N/mm)
 TABLE4_SPRINGS_N_PER_MM = (0.08, 0.3, 0.5, 0.8, 1.5, 2.1, 4.5)
@@ -155,7 +156,6 @@ def generate_answers(pse_n_per_mm: Callable[[np.ndarray], np.ndarray] | None = N
         seed: random seed (``None``: fresh entropy).
     """
     if pse_n_per_mm is None:
-        from .voicecoil import VoiceCoilCalibration
         pse_n_per_mm = VoiceCoilCalibration.paper().gs_coil
     if people < 1 or repeats < 1:
         raise CalibrationError("people and repeats must be >= 1")

@@ -133,8 +133,9 @@ def format_solve(out: dict[str, Any]) -> str:
 
 def cmd_render(args: argparse.Namespace) -> int:
     from ..errors import ValidationError
-    from ..rendering import render_plan
-    from ..scene import Scene, compile_scene, load_scene
+    from ..compiler import compile_scene
+    from ..runtime.render import render_plan
+    from ..scene import Scene, load_scene
 
     targets = _targets(args)
     given = [bool(args.material), bool(args.scene), bool(targets)]

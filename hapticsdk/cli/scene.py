@@ -41,7 +41,8 @@ def _scene_from_arg(text: str) -> Any:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
-    from ..scene import Scene, compile_scene
+    from ..compiler import compile_scene
+    from ..scene import Scene
 
     scene = _scene_from_arg(args.scene)
     over: dict[str, Any] = {}
@@ -52,7 +53,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.no_importance:
         over.setdefault("importance", {})["enabled"] = False
     if over:
-        from ..scene import _merge
+        from ..scene.model import _merge
         scene = Scene(objects=scene.objects, devices=scene.devices,
                       settings=_merge(scene.settings, over), name=scene.name)
     plan = compile_scene(scene)

@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from hapticsdk.errors import ValidationError
-from hapticsdk.importance import PaperRegressionImportance, decide_drops, load_importance
-from hapticsdk.plan import RenderPlan, api_compatible, check_plugin_api, validate_plan_dict
+from hapticsdk.compiler.importance import PaperRegressionImportance, decide_drops, load_importance
+from hapticsdk.plan import RenderPlan, validate_plan_dict
+from hapticsdk.plugin_api import api_compatible, check_plugin_api
 from hapticsdk.plugins import registry
-from hapticsdk.scene import Scene, compile_scene
+from hapticsdk.compiler import compile_scene
+from hapticsdk.scene import Scene
 
 needs_hardness = pytest.mark.skipif("hardness" not in registry("dimension"),
                                     reason="hapticsdk-hardness not installed")

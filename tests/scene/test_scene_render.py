@@ -14,8 +14,10 @@ import pytest
 from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.plugins import registry
-from hapticsdk.rendering import ConstantForceRenderer, render_plan
-from hapticsdk.scene import Scene, compile_scene
+from hapticsdk.runtime.render import render_plan
+from hapticsdk.runtime.replacements import ConstantForceRenderer
+from hapticsdk.compiler import compile_scene
+from hapticsdk.scene import Scene
 from hapticsdk.schemas_io import read_json
 from hapticsdk.dimensions import TickInput
 
@@ -145,8 +147,9 @@ def test_render_rejects_bad_arguments():
 
 SNIPPET = """
 import json, sys
-from hapticsdk.scene import Scene, compile_scene
-from hapticsdk.rendering import render_plan
+from hapticsdk.compiler import compile_scene
+from hapticsdk.scene import Scene
+from hapticsdk.runtime.render import render_plan
 plan = compile_scene(Scene.for_material({TARGETS}))
 after_compile = sorted(m for m in sys.modules if m.split('.')[0] in ('hapticsdk_roughness', 'hapticsdk_hardness', 'hapticsdk_warmth', 'serial', 'usb'))
 rep = render_plan(plan, seconds=0.3)

@@ -13,8 +13,8 @@ import pytest
 from hapticsdk.models import CompositeModel
 from hapticsdk.plugins import list_plugins
 from hapticsdk.problems import build_problem, load_model
-from hapticsdk.rendering import render_plan
-from hapticsdk.scene import compile_scene
+from hapticsdk.runtime.render import render_plan
+from hapticsdk.compiler import compile_scene
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "warm-and-rough.json"
 
@@ -69,8 +69,8 @@ def test_render_holds_the_contact_temperature_and_calls_hooks(plan):
 
 
 def test_a_scene_without_warmth_never_imports_the_plugin():
-    code = ("import sys, json\nfrom hapticsdk.scene import Scene, compile_scene\n"
-            "from hapticsdk.rendering import render_plan\n"
+    code = ("import sys, json\nfrom hapticsdk.scene import Scene\nfrom hapticsdk.compiler import compile_scene\n"
+            "from hapticsdk.runtime.render import render_plan\n"
             "render_plan(compile_scene(Scene.for_material('S7')), seconds=0.2)\n"
             "print(json.dumps(sorted(m for m in sys.modules if m.startswith('hapticsdk_warmth'))))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)

@@ -29,6 +29,7 @@ dropping candidates whose CRC fails.
 
 from __future__ import annotations
 
+import binascii
 from dataclasses import dataclass
 
 START = 0xA5
@@ -55,12 +56,12 @@ ERROR_NAMES = {ERR_CRC: "frame CRC error", ERR_LENGTH: "bad length", ERR_COMMAND
 
 
 def crc16(data: bytes, crc: int = 0xFFFF) -> int:
-    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor)."""
-    for b in data:
-        crc ^= b << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-    return crc
+    """CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final xor).
+
+    :func:`binascii.crc_hqx` computes exactly this CRC (MSB first, poly 0x1021, the
+    initial value given) in C: ~0.3 us for a 104-byte frame instead of ~70-300 us for a
+    bit loop in Python."""
+    return binascii.crc_hqx(data, crc)
 
 
 @dataclass(frozen=True)

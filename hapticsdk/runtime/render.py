@@ -21,46 +21,12 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from .actuators import Actuator, HapticDevice
-from .dimensions import ChannelCommand, DimensionRenderer, TickInput
-from .errors import DeviceError, PluginError, ValidationError
-from .plan import MaterialPlan, RenderPlan, check_plugin_api
-
-#: the sensing device used when no actuator of the plan senses
-FALLBACK_SENSOR = "probe-virtual"
-
-
-class ConstantForceRenderer(DimensionRenderer):
-    """A constant normal force while the probe is in contact, 0 outside (role ``force``).
-
-    Renders a dropped hardness the way the paper's "No Hardness" condition did (1 N).
-    """
-
-    def __init__(self, force_n: float = 1.0, *, role: str = "force", replaces: str | None = None) -> None:
-        f = float(force_n)
-        if not (f >= 0 and f < 1e3):
-            raise ValidationError(f"force must be a finite number >= 0 N, got {force_n!r}",
-                                  field="replacement.force_n")
-        self.force_n = f
-        self.roles = (role,)
-        self.role = role
-        self.replaces = replaces
-
-    def tick(self, inp: TickInput) -> list[ChannelCommand]:
-        return [ChannelCommand(role=self.role, force_n=self.force_n if inp.in_contact else 0.0)]
-
-    def describe(self) -> dict:
-        return {"renderer": "constant-force", "force_n": self.force_n, "role": self.role,
-                "replaces": self.replaces}
-
-
-def _make_replacement(rep: Mapping[str, Any], dimension: str) -> DimensionRenderer:
-    kind = rep.get("renderer")
-    if kind == "constant-force":
-        return ConstantForceRenderer(rep.get("force_n", 1.0), role=rep.get("role", "force"),
-                                     replaces=dimension)
-    raise ValidationError(f"unknown replacement renderer {kind!r} (known: constant-force)",
-                          field=f"plan.dropped.{dimension}.replacement")
+from ..actuators import Actuator, HapticDevice
+from ..dimensions import DimensionRenderer
+from ..errors import DeviceError, PluginError, ValidationError
+from ..plan import FALLBACK_SENSOR, MaterialPlan, RenderPlan
+from ..plugin_api import check_plugin_api
+from .replacements import make_replacement
 
 
 @dataclass
@@ -141,7 +107,7 @@ def _accepts(cls: type, kw: str) -> bool:
 def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None) -> list[DimensionRenderer]:
     """Renderers of one material plan: kept dimensions from the plan's features, then the
     replacements of dropped ones (no solving)."""
-    from .plugins import registry
+    from ..plugins import registry
     ropts = dict((settings or {}).get("renderer_options") or {})
     out: list[DimensionRenderer] = []
     for d in mp.dimensions:
@@ -156,7 +122,7 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None)
                                   field=f"plan.materials.{mp.name}.actuators")
         out.append(r)
     for dd in mp.replacements:
-        out.append(_make_replacement(dd.replacement or {}, dd.dimension))
+        out.append(make_replacement(dd.replacement or {}, dd.dimension))
     return out
 
 
@@ -197,17 +163,14 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     renderers = build_renderers(mp, plan.settings)
     roles_used = {role for r in renderers for role in r.roles}
 
-    from .plugins import manager, registry
+    from ..plugins import manager, registry
     used_dists = plan.distributions(mp.name)
     pm = manager().load_for(used_dists) if hooks else None
     one = RenderPlan(scene=plan.scene, materials={mp.name: mp}, settings=plan.settings,
                      plugins=plan.plugins, unused_plugins=plan.unused_plugins,
                      plugin_api_version=plan.plugin_api_version)
 
-    try:
-        from .runtime import ServoLoop
-    except ImportError:  # runtime package without re-exports
-        from .runtime.loop import ServoLoop
+    from .loop import ServoLoop
 
     with ExitStack() as stack:
         instances: dict[tuple[str, str], Actuator] = {}

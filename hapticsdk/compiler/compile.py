@@ -1,26 +1,23 @@
-"""Scenes: objects made of materials, rendered on devices, compiled into render plans.
+"""Compile a scene into a render plan: solve every material, leave out what matters
+little, map channel roles to actuators.
 
-A scene (JSON, ``schemas/scene.schema.json``) lists objects and their materials --
-by library name (``"S7"``), or by target intensities (``{"hardness": 0.3}``), or a
-library material with extra or overridden intensities (a warmth added to ``S7``) --
-the devices to render on (channel role -> actuator plugin name and options), and
-settings (importance threshold, solver, servo period).
-
-:func:`compile_scene` turns it into a :class:`~hapticsdk.plan.RenderPlan`:
+:func:`compile_scene` turns a :class:`~hapticsdk.scene.Scene` into a
+:class:`~hapticsdk.plan.RenderPlan`:
 
 1. every material's target intensities are solved for features with every dimension it
    names (:func:`hapticsdk.problems.solve`, materials with the same dimensions in one
    batch);
-2. the importance model (``settings.importance.model``, default ``paper``) predicts the
-   realism loss of leaving each dimension out, from those features; a dimension below
-   the threshold is dropped (and, if the model says so, replaced by something simpler,
-   e.g. a constant 1 N force for hardness);
+2. the importance model (``settings.importance.model``, default ``paper``;
+   :mod:`hapticsdk.compiler.importance`) predicts the realism loss of leaving each
+   dimension out, from those features; a dimension below the threshold is dropped
+   (and, if the model says so, replaced by something simpler, e.g. a constant 1 N force
+   for hardness);
 3. materials that lost a dimension are solved again with only the kept ones, so that
    features no kept dimension reads are pinned at the model's defaults and left out;
 4. each kept dimension's renderer is built once to learn the channel roles it commands;
    each role is mapped to an actuator (the scene's ``devices`` or the dimension's
    ``default_actuators``). Actuators are only looked up in the entry-point table here:
-   they are imported and opened by :func:`hapticsdk.rendering.render_plan`.
+   they are imported and opened by :func:`hapticsdk.runtime.render.render_plan`.
 
 Only the plugins a material of the scene names are imported.
 """
@@ -29,189 +26,17 @@ from __future__ import annotations
 
 import copy
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .dimensions import check_intensity
-from .errors import PluginError, ValidationError
-from .plan import DroppedDimension, MaterialPlan, RenderPlan, check_plugin_api
-
-#: Default settings of a scene; a scene's ``settings`` are merged into these.
-DEFAULT_SETTINGS: dict[str, Any] = {
-    "importance": {
-        "enabled": True,
-        "model": "paper",
-        # Project choice (not from the paper): leave a dimension out when leaving it out
-        # is predicted to cost less than 10 % of the realism. The paper's mean losses
-        # were 18.4 % (roughness) and 29.1 % (hardness).
-        "threshold_percent": 10.0,
-        "thresholds": {},
-    },
-    "solver": {"method": "ga-polish", "seed": 0, "options": {}, "tolerance": 0.01, "penalty": "paper",
-               "data_support": True},
-    "model": None,
-    "servo": {"period_s": 0.001, "realtime": False, "passivity": True},
-    "dimensions": None,
-    "renderer_options": {},
-}
-
-
-def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
-    out = copy.deepcopy(dict(base))
-    for k, v in over.items():
-        if isinstance(v, Mapping) and isinstance(out.get(k), Mapping) and k not in ("thresholds", "options"):
-            out[k] = _merge(out[k], v)
-        else:
-            out[k] = copy.deepcopy(v)
-    return out
-
-
-@dataclass
-class DeviceSpec:
-    """The actuator serving one channel role: plugin name and keyword options."""
-
-    actuator: str
-    options: dict[str, Any] = field(default_factory=dict)
-
-    @classmethod
-    def parse(cls, value: Any, role: str) -> "DeviceSpec":
-        if isinstance(value, DeviceSpec):
-            return value
-        if isinstance(value, str) and value:
-            return cls(actuator=value)
-        if isinstance(value, Mapping) and isinstance(value.get("actuator"), str):
-            opts = value.get("options", {})
-            if not isinstance(opts, Mapping):
-                raise ValidationError("options must be an object", field=f"scene.devices.{role}.options")
-            return cls(actuator=value["actuator"], options=dict(opts))
-        raise ValidationError(f"expected an actuator name or {{'actuator': name, 'options': {{}}}}, "
-                              f"got {value!r}", field=f"scene.devices.{role}")
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"actuator": self.actuator, "options": dict(self.options)}
-
-
-@dataclass
-class SceneObject:
-    """One object of a scene.
-
-    Attributes:
-        name: object name.
-        material: a library material name, or ``{"name": ..., "intensities": {...}}``.
-        intensities: intensities added to / overriding the material's (0..1).
-        dimensions: if given, only these dimensions of the material are rendered.
-    """
-
-    name: str
-    material: str | dict[str, Any]
-    intensities: dict[str, float] = field(default_factory=dict)
-    dimensions: list[str] | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        d: dict[str, Any] = {"name": self.name, "material": copy.deepcopy(self.material)}
-        if self.intensities:
-            d["intensities"] = dict(self.intensities)
-        if self.dimensions is not None:
-            d["dimensions"] = list(self.dimensions)
-        return d
-
-
-@dataclass
-class Scene:
-    """A scene: objects, devices (role -> :class:`DeviceSpec`) and settings."""
-
-    objects: list[SceneObject]
-    devices: dict[str, DeviceSpec] = field(default_factory=dict)
-    settings: dict[str, Any] = field(default_factory=dict)
-    name: str = "scene"
-
-    def __post_init__(self) -> None:
-        if not self.objects:
-            raise ValidationError("a scene needs at least one object", field="scene.objects")
-        self.devices = {r: DeviceSpec.parse(v, r) for r, v in dict(self.devices).items()}
-        self.settings = _merge(DEFAULT_SETTINGS, self.settings or {})
-        thr = self.settings["importance"]["threshold_percent"]
-        if not isinstance(thr, (int, float)) or not np.isfinite(thr):
-            raise ValidationError(f"threshold must be a finite number (%), got {thr!r}",
-                                  field="scene.settings.importance.threshold_percent")
-        period = self.settings["servo"]["period_s"]
-        if not isinstance(period, (int, float)) or not 0 < period <= 0.1:
-            raise ValidationError(f"servo period must be in (0, 0.1] s, got {period!r}",
-                                  field="scene.settings.servo.period_s")
-        names = [o.name for o in self.objects]
-        dup = sorted({n for n in names if names.count(n) > 1})
-        if dup:
-            raise ValidationError(f"duplicate object names {dup}", field="scene.objects")
-
-    # -- construction ------------------------------------------------------
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> "Scene":
-        """Build from the JSON form; validated against ``schemas/scene.schema.json``."""
-        from .schemas_io import validate
-        validate(data, "scene")
-        objs = []
-        for i, o in enumerate(data["objects"]):
-            objs.append(SceneObject(name=o.get("name", f"object{i}"), material=copy.deepcopy(o["material"]),
-                                    intensities=dict(o.get("intensities", {})),
-                                    dimensions=list(o["dimensions"]) if "dimensions" in o else None))
-        return cls(objects=objs, devices=dict(data.get("devices", {})),
-                   settings=dict(data.get("settings", {})), name=data.get("name", "scene"))
-
-    @classmethod
-    def load(cls, path: str | Path) -> "Scene":
-        from .schemas_io import read_json
-        p = Path(path)
-        data = read_json(p, field="scene")
-        if isinstance(data, dict) and "name" not in data:
-            data["name"] = p.stem
-        return cls.from_dict(data)
-
-    @classmethod
-    def for_material(cls, material: str | Mapping[str, float], devices: Mapping[str, Any] | None = None,
-                     *, dimensions: Sequence[str] | None = None, seed: int | None = None,
-                     **settings: Any) -> "Scene":
-        """A one-object scene: ``material`` is a library name (``"S7"``) or target
-        intensities (``{"hardness": 0.4, "roughness": 0.8}``). ``seed`` seeds the solver;
-        ``settings`` override :data:`DEFAULT_SETTINGS` keys (``importance=``, ``solver=``,
-        ``servo=`` ...)."""
-        if seed is not None:
-            settings = _merge({"solver": {}}, settings)
-            settings["solver"]["seed"] = int(seed)
-        if isinstance(material, str):
-            mat: str | dict[str, Any] = material
-            name = material
-        elif isinstance(material, Mapping):
-            mat = {"name": "material", "intensities": {k: float(v) for k, v in material.items()}}
-            name = "material"
-        else:
-            raise ValidationError(f"expected a material name or intensities, got {material!r}",
-                                  field="material")
-        return cls(objects=[SceneObject(name="object", material=mat,
-                                        dimensions=list(dimensions) if dimensions else None)],
-                   devices=dict(devices or {}), settings=settings, name=name)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"schema_version": 1, "name": self.name,
-                "objects": [o.to_dict() for o in self.objects],
-                "devices": {r: d.to_dict() for r, d in self.devices.items()},
-                "settings": copy.deepcopy(self.settings)}
-
-    def compile(self) -> RenderPlan:
-        """Shortcut for :func:`compile_scene`."""
-        return compile_scene(self)
-
-
-def load_scene(path: str | Path) -> Scene:
-    """Read and validate a scene JSON file (``schemas/scene.schema.json``)."""
-    return Scene.load(path)
-
-
-# ---------------------------------------------------------------------------
-# compilation
-# ---------------------------------------------------------------------------
+from ..dimensions import check_intensity
+from ..errors import PluginError, ValidationError
+from ..plan import FALLBACK_SENSOR, DroppedDimension, MaterialPlan, RenderPlan
+from ..plugin_api import check_plugin_api
+from ..scene import DeviceSpec, Scene
 
 @dataclass
 class _Mat:
@@ -231,7 +56,7 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
         where = f"scene.objects[{i}]"
         if isinstance(obj.material, str):
             if library is None:
-                from .materials import load_library
+                from ..materials import load_library
                 library = load_library()
             try:
                 m = library.get(obj.material)
@@ -283,11 +108,11 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
 
 
 def _plugin_entry(kind: str, name: str, stage: str) -> dict[str, Any]:
-    from .plugins import registry
+    from ..plugins import registry
     try:
         info = registry(kind).info(name).to_dict()
     except PluginError:
-        from . import __version__
+        from .. import __version__
         from .importance import BUILTIN
         core = kind == "importance" and name in BUILTIN
         info = {"kind": kind, "name": name, "distribution": "hapticsdk" if core else None,
@@ -298,10 +123,12 @@ def _plugin_entry(kind: str, name: str, stage: str) -> dict[str, Any]:
 
 
 def _load_dimension(name: str, field: str) -> Any:
-    from .plugins import registry
+    from ..plugins import registry
     reg = registry("dimension")
     if name not in reg:
-        raise ValidationError(f"no dimension plugin named {name!r}; installed: {reg.names()}", field=field)
+        from ..plugins import install_hint
+        raise ValidationError(f"no dimension plugin named {name!r}; installed: {reg.names()}"
+                              f"{install_hint('dimension', name)}", field=field)
     cls = reg.load(name)
     check_plugin_api(cls, name=name)
     return cls() if isinstance(cls, type) else cls
@@ -310,7 +137,7 @@ def _load_dimension(name: str, field: str) -> Any:
 def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[str, Any]
                   ) -> dict[str, Any]:
     """Solve each group of materials sharing a dimension tuple in one batch."""
-    from .problems import solve
+    from ..problems import solve
     s = settings["solver"]
     out: dict[str, Any] = {}
     for dims, mats in groups.items():
@@ -338,7 +165,7 @@ def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed
 
 def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     """Compile a scene (object, dict, or path of a JSON file) into a render plan."""
-    from .plugins import registry
+    from ..plugins import registry
     if isinstance(scene, (str, Path)):
         scene = Scene.load(scene)
     elif isinstance(scene, Mapping):
@@ -445,8 +272,11 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                                           f"the scene's devices name none and the dimension has no "
                                           f"default", field=f"scene.devices.{role}")
                 if spec.actuator not in registry("actuator"):
+                    from ..plugins import install_hint
                     raise ValidationError(f"no actuator plugin named {spec.actuator!r}; installed: "
-                                          f"{registry('actuator').names()}", field=f"scene.devices.{role}")
+                                          f"{registry('actuator').names()}"
+                                          f"{install_hint('actuator', spec.actuator)}",
+                                          field=f"scene.devices.{role}")
                 actuators[role] = spec.actuator
                 options[role] = dict(spec.options)
         used_dims |= set(kept) | set(gone)
@@ -469,7 +299,6 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     if imp_model is not None:
         plugins.append(_plugin_entry("importance", imp_model.name, "compile"))
     plugins += [_plugin_entry("actuator", a, "render") for a in sorted(used_actuators)]
-    from .rendering import FALLBACK_SENSOR
     if FALLBACK_SENSOR not in used_actuators:
         e = _plugin_entry("actuator", FALLBACK_SENSOR, "render")
         e["reason"] = "sensing device when no actuator of the rendered material senses"

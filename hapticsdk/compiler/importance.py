@@ -18,7 +18,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
 
-from .errors import ValidationError
+from ..errors import ValidationError
 
 
 class ImportanceModel(ABC):
@@ -151,7 +151,7 @@ def load_importance(name: str | ImportanceModel = "paper") -> ImportanceModel:
     """An importance model by entry-point name (group ``hapticsdk.importance``) or as given."""
     if isinstance(name, ImportanceModel):
         return name
-    from .plugins import registry
+    from ..plugins import registry
     reg = registry("importance")
     if name not in reg and name in BUILTIN:
         # the core's own model, when the core's entry points are not installed (source tree)

@@ -1,0 +1,208 @@
+"""Atomic file writes: every file the SDK writes goes through here.
+
+A write goes to a temporary file in the target's directory, is flushed and
+``fsync``-ed, and is then renamed over the target (``os.replace``, atomic on POSIX
+and Windows). So:
+
+- a reader sees the old file or the new one, never a partial one;
+- a write that fails (disk full, ``ulimit -f``, SIGKILL, an exception while
+  producing the content) leaves the old file intact and no temporary file behind
+  (except after SIGKILL, where a ``.<name>.<random>.tmp`` may remain; it is never
+  read as the target);
+- writers into the same directory, in this process and in other processes, are
+  serialised by an advisory lock on the directory (POSIX ``fcntl.flock``; on other
+  systems the rename alone keeps readers safe);
+- a symbolic link at the target is replaced by the new regular file; its old target
+  is not written through (a link planted in a calibration folder cannot redirect a
+  write elsewhere).
+
+Failures raise :class:`~hapticsdk.errors.FileWriteError` (a ``ValidationError`` whose
+``field`` is the path), so the CLI reports them as ``hapticsdk: error: <path>: ...``
+with exit status 2.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import IO, Any, Iterator
+
+from .errors import FileWriteError
+
+__all__ = ["atomic_writer", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_savez",
+           "check_output_path", "FileWriteError"]
+
+
+def check_output_path(path: str | os.PathLike[str], *, field: str = "output", overwrite: bool = True) -> Path:
+    """Check, before any work is done, that ``path`` can be written.
+
+    The parent directory must exist and be a directory, the path must not be a
+    directory, and with ``overwrite=False`` it must not exist yet.
+
+    Returns:
+        the path as a :class:`~pathlib.Path`.
+
+    Raises:
+        FileWriteError: naming ``field`` and the reason.
+    """
+    p = Path(os.fspath(path))
+    if str(p) == "":
+        raise FileWriteError("empty output path", field=field)
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.exists():
+        raise FileWriteError(f"directory {str(parent)!r} does not exist", field=field)
+    if not parent.is_dir():
+        raise FileWriteError(f"{str(parent)!r} is not a directory", field=field)
+    if p.is_dir():
+        raise FileWriteError(f"{str(p)!r} is a directory", field=field)
+    if not overwrite and (p.exists() or p.is_symlink()):
+        raise FileWriteError(f"{str(p)!r} exists already (refusing to overwrite)", field=field)
+    if not os.access(parent, os.W_OK):
+        raise FileWriteError(f"directory {str(parent)!r} is not writable", field=field)
+    return p
+
+
+@contextlib.contextmanager
+def _lock(target: Path) -> Iterator[None]:
+    """Serialise writers of one directory (an advisory ``flock`` on the directory
+    itself, so no lock file is left behind)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - non-POSIX: the rename alone keeps readers safe
+        yield
+        return
+    parent = target.parent if str(target.parent) else Path(".")
+    try:
+        fd = os.open(parent, os.O_RDONLY)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:
+            pass
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: str | None = "utf-8",
+                  newline: str | None = None, field: str | None = None) -> Iterator[IO[Any]]:
+    """Context manager yielding a file object whose content replaces ``path`` on success.
+
+    Args:
+        path: the file to (re)place.
+        mode: ``"wb"`` (bytes) or ``"w"`` (text).
+        encoding, newline: for text mode.
+        field: names the path in errors (default: the path itself).
+
+    On an exception inside the block, or a failure to write, flush or rename, the
+    temporary file is removed and the old content of ``path`` is untouched; OS errors
+    are raised as :class:`FileWriteError`, other exceptions propagate unchanged.
+    """
+    if mode not in ("wb", "w"):
+        raise ValueError(f"atomic_writer mode must be 'wb' or 'w', got {mode!r}")
+    target = Path(os.fspath(path))
+    name = field or str(target)
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise FileWriteError(f"directory {str(parent)!r} does not exist", field=name)
+    if target.is_dir() and not target.is_symlink():
+        raise FileWriteError(f"{str(target)!r} is a directory", field=name)
+    with _lock(target):
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent)
+        except OSError as exc:
+            raise FileWriteError(f"cannot create a file in {str(parent)!r}: {exc.strerror or exc}",
+                                 field=name) from exc
+        ok = False
+        try:
+            try:
+                # keep the permissions of the file being replaced (mkstemp makes 0600)
+                os.chmod(tmp, (os.stat(target).st_mode & 0o777) if target.exists() and not target.is_symlink()
+                         else 0o644 & ~_umask())
+            except OSError:
+                pass
+            raw = os.fdopen(fd, "wb")
+            fh: IO[Any] = raw if mode == "wb" else io.TextIOWrapper(raw, encoding=encoding or "utf-8",
+                                                                     newline=newline)
+            with fh:
+                yield fh
+                fh.flush()
+                os.fsync(raw.fileno())
+            os.replace(tmp, target)
+            ok = True
+            _fsync_dir(parent)
+        except OSError as exc:
+            raise FileWriteError(f"write failed, the old file is unchanged: {exc.strerror or exc}",
+                                 field=name) from exc
+        finally:
+            if not ok:
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
+
+
+def _fsync_dir(d: Path) -> None:
+    if os.name != "posix":  # pragma: no cover
+        return
+    try:
+        dfd = os.open(d, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(dfd)
+    except OSError:
+        pass
+    finally:
+        os.close(dfd)
+
+
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, field: str | None = None) -> Path:
+    """Replace ``path`` with ``data`` atomically; returns the path."""
+    with atomic_writer(path, "wb", field=field) as fh:
+        fh.write(data)
+    return Path(os.fspath(path))
+
+
+def atomic_write_text(path: str | os.PathLike[str], text: str, *, encoding: str = "utf-8",
+                      field: str | None = None) -> Path:
+    """Replace ``path`` with ``text`` atomically; returns the path."""
+    return atomic_write_bytes(path, text.encode(encoding), field=field)
+
+
+def atomic_write_json(path: str | os.PathLike[str], obj: Any, *, indent: int | None = 1,
+                      field: str | None = None, **dumps_kw: Any) -> Path:
+    """Serialise ``obj`` to JSON (``allow_nan=False``: NaN is refused, not written) and
+    replace ``path`` atomically. The whole document is serialised before the file is
+    touched, so a serialisation error leaves the old file as it was."""
+    dumps_kw.setdefault("allow_nan", False)
+    try:
+        text = json.dumps(obj, indent=indent, **dumps_kw) + "\n"
+    except ValueError as exc:
+        raise FileWriteError(f"not written: {exc}", field=field or str(path)) from exc
+    return atomic_write_text(path, text, field=field)
+
+
+def atomic_savez(path: str | os.PathLike[str], *, compressed: bool = True, field: str | None = None,
+                 **arrays: Any) -> Path:
+    """``numpy.savez[_compressed]`` to ``path`` atomically (the name is kept as given:
+    no ``.npz`` suffix is appended)."""
+    import numpy as np
+
+    with atomic_writer(path, "wb", field=field) as fh:
+        (np.savez_compressed if compressed else np.savez)(fh, **arrays)
+    return Path(os.fspath(path))
