@@ -6,8 +6,10 @@ import numpy as np
 import hapticsdk as hs
 
 lib = hs.load_library()
-targets = np.array([[m.intensities["hardness"], m.intensities["roughness"]] for m in lib])
-batch = hs.solve(targets, dimensions=["hardness", "roughness"], seed=0)
+# one row per target (a list of rows, or a 2-D array); a list of rows is typed as a batch
+rows = [[m.intensities["hardness"], m.intensities["roughness"]] for m in lib]
+targets = np.array(rows)
+batch = hs.solve(rows, dimensions=["hardness", "roughness"], seed=0)
 print(f"{len(batch)} targets in {batch.time_s * 1e3:.1f} ms, {int(batch.success.sum())} reached")
 model = hs.load_model("default")
 for m, target, res in zip(lib, targets, batch):

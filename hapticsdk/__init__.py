@@ -18,9 +18,23 @@ Names are imported lazily, so ``import hapticsdk`` loads no plugin and no device
 from __future__ import annotations
 
 from importlib import import_module
-from typing import Any
+from typing import TYPE_CHECKING, Any, Mapping
 
 __version__ = "0.1.0"
+
+if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load lazily
+    from .actuators import Actuator, HapticDevice, create_actuator
+    from .compiler import compile_scene
+    from .dimensions import PerceptionDimension
+    from .errors import HapticSDKError
+    from .features import Feature, FeatureSpace
+    from .materials import Material, load_library
+    from .models import PerceptionModel
+    from .plugins import list_plugins
+    from .problems import build_problem, get_solver, load_dimension, load_model, solve
+    from .runtime.render import RenderReport, render_plan
+    from .scene import Scene, load_scene
+    from .solvers import BatchSolveResult, SolveProblem, SolveResult, Solver
 
 _LAZY = {
     "solve": "hapticsdk.problems",
@@ -37,6 +51,8 @@ _LAZY = {
     "Solver": "hapticsdk.solvers",
     "SolveProblem": "hapticsdk.solvers",
     "SolveResult": "hapticsdk.solvers",
+    "BatchSolveResult": "hapticsdk.solvers",
+    "RenderReport": "hapticsdk.runtime.render",
     "Actuator": "hapticsdk.actuators",
     "HapticDevice": "hapticsdk.actuators",
     "create_actuator": "hapticsdk.actuators",
@@ -57,12 +73,25 @@ def __getattr__(name: str) -> Any:
     raise AttributeError(f"module 'hapticsdk' has no attribute {name!r}")
 
 
-def render(material: Any, *, seconds: float = 3.0, seed: int | None = 0, devices: Any = None) -> Any:
-    """Solve and render one material (a library name or ``{dimension: intensity}``) on the
-    scene's devices (simulated by default); returns the render report."""
+def render(material: str | Mapping[str, float], *, seconds: float = 3.0, seed: int | None = 0,
+           devices: Mapping[str, Any] | None = None, realtime: bool | None = None) -> RenderReport:
+    """Solve and render one material on the scene's devices (simulated by default).
+
+    Args:
+        material: a library name (``"S7"``) or target intensities in 0..1
+            (``{"hardness": 0.8, "roughness": 0.3}``).
+        seconds: servo time to render [s].
+        seed: solver seed (``None``: fresh entropy).
+        devices: role -> actuator name or spec, overriding the dimensions' defaults.
+        realtime: pace the servo loop on the machine clock (``None``: the plan's setting).
+
+    Returns:
+        the :class:`~hapticsdk.runtime.render.RenderReport` (what was solved, kept and
+        dropped, the actuators used, servo tick statistics).
+    """
     from .compiler import compile_scene
     from .runtime.render import render_plan
     from .scene import Scene
 
     scene = Scene.for_material(material, devices=devices, seed=seed)
-    return render_plan(compile_scene(scene), seconds=seconds)
+    return render_plan(compile_scene(scene), seconds=seconds, realtime=realtime)

@@ -18,6 +18,7 @@ import logging
 import math
 import time
 import weakref
+from collections import deque
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
 from typing import Any, ClassVar
@@ -33,6 +34,10 @@ log = logging.getLogger(__name__)
 _OPEN_ACTUATORS: "weakref.WeakSet[Actuator]" = weakref.WeakSet()
 
 
+#: the last stops of this process: (label, time.monotonic(), success); see stops_since
+_STOPS: "deque[tuple[str, float, bool]]" = deque(maxlen=256)
+
+
 def stop_all() -> list[str]:
     """Put every open actuator of this process in its safe state; return their labels."""
     labels = []
@@ -40,6 +45,13 @@ def stop_all() -> list[str]:
         act.stop()
         labels.append(act.label)
     return labels
+
+
+def stops_since(t0: float) -> list[tuple[str, float, bool]]:
+    """Stops done at or after ``t0`` (``time.monotonic()`` seconds), oldest first, as
+    ``(label, t, success)``: what a stop path (signal, exception) really stopped, also
+    for actuators that were closed since (and so are no longer open for :func:`stop_all`)."""
+    return [s for s in list(_STOPS) if s[1] >= t0]
 
 
 atexit.register(stop_all)
@@ -103,7 +115,8 @@ class Actuator(ABC):
     """Base class of every actuator plugin.
 
     Class attributes a backend sets: ``name`` (its entry-point name), ``channel`` (one of
-    :data:`CHANNELS`), ``limits`` (:class:`ActuatorLimits`), ``simulated``.
+    :data:`CHANNELS`), ``limits`` (:class:`ActuatorLimits`), ``simulated``,
+    ``privileged_options``.
 
     Public API (do not override): :meth:`open`, :meth:`close`, :meth:`command`,
     :meth:`stop`, context manager. Backend API: ``_open``, ``_command``, ``_stop``,
@@ -114,6 +127,11 @@ class Actuator(ABC):
     channel: ClassVar[str] = "other"
     limits: ActuatorLimits = ActuatorLimits()
     simulated: ClassVar[bool] = False
+    #: options that name native code to load or files to write (option -> what it names,
+    #: e.g. ``{"library": "native library", "sink": "output file"}``): never taken from
+    #: scene or plan files, only from code, CLI flags, the environment or the user's device
+    #: configuration (:mod:`hapticsdk.device_options`). Merged over base classes.
+    privileged_options: ClassVar[dict[str, str]] = {}
 
     def __init__(self, *, label: str | None = None, safety: Any = None, **options: Any) -> None:
         if options:
@@ -195,17 +213,25 @@ class Actuator(ABC):
         return safe
 
     def stop(self) -> bool:
-        """Put the hardware in its safe state (zero force, vibration off). Never raises;
-        returns False when the backend's stop failed (the failure is logged and kept in
-        :attr:`fault`)."""
-        self.safety.on_stop()
+        """Put the hardware in its safe state (zero force, vibration off). Never raises
+        an :class:`Exception` (the stop paths of the servo loop and the CLI rely on it):
+        the backend's ``_stop`` runs even when the safety layer's ``on_stop`` fails.
+        Returns False when either failed (logged, kept in :attr:`fault`). Each call is
+        noted in :func:`stops_since` (label, ``time.monotonic()``, success)."""
+        ok = True
+        try:
+            self.safety.on_stop()
+        except Exception as exc:
+            log.error("%s: safety.on_stop failed: %s", self.label, exc)
+            ok = False
         try:
             self._stop()
-            return True
         except Exception as exc:
             log.error("%s: stop failed: %s", self.label, exc)
             self.fault = self.fault or exc
-            return False
+            ok = False
+        _STOPS.append((self.label, time.monotonic(), ok))
+        return ok
 
     # -- discovery (used by `hapticsdk doctor`) -----------------------------
     @classmethod

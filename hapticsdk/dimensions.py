@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import ClassVar, Mapping
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
@@ -157,7 +157,7 @@ class PerceptionDimension(ABC):
         return []
 
     @abstractmethod
-    def renderer(self, features: Mapping[str, float], **options) -> DimensionRenderer:
+    def renderer(self, features: Mapping[str, float], **options: Any) -> DimensionRenderer:
         """A renderer for a material with these solved features (physical units)."""
 
     def describe(self) -> dict:
@@ -167,7 +167,12 @@ class PerceptionDimension(ABC):
 
 
 def check_intensity(value: object, field: str) -> float:
-    """Return ``value`` as a float in [0, 1] or raise :class:`ValidationError` naming ``field``."""
+    """Return ``value`` as a float in [0, 1] or raise :class:`ValidationError` naming ``field``.
+
+    ``value`` is a number or the text of one (command-line arguments); ``True`` and
+    ``False`` are refused (a bool is not an intensity)."""
+    if isinstance(value, (bool, np.bool_)):
+        raise ValidationError(f"intensity must be a number, got {value!r}", field=field)
     try:
         v = float(value)  # type: ignore[arg-type]
     except (TypeError, ValueError):

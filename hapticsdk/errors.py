@@ -76,6 +76,13 @@ class RecordingError(ValidationError):
     """A recording (trial data) is broken; the message names file/trial and field."""
 
 
+class FormatError(ValidationError):
+    """An interchange file (e.g. MPEG-I haptics ``.hjif``) is malformed: bad JSON, wrong
+    type, missing or unknown field, unresolved reference, too large or too deep.
+    ``field`` is the JSON path (``perceptions[0].channels[1].bands[0].effects[3]``) or,
+    for file-level problems (size, encoding, JSON syntax), the file name."""
+
+
 class FileWriteError(ValidationError):
     """A file could not be written (missing directory, disk full, permission); the old
     file, if any, is unchanged. ``field`` names the path or the option that gave it."""

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import ValidationError
 
@@ -130,7 +131,7 @@ class FeatureSpace:
             f.with_bounds(*bounds[f.name]) if f.name in bounds else f for f in self.features))
 
     # -- arrays ------------------------------------------------------------
-    def validate(self, X: object, *, field: str = "features", check_bounds: bool = False,
+    def validate(self, X: npt.ArrayLike, *, field: str = "features", check_bounds: bool = False,
                  rtol: float = 1e-9) -> np.ndarray:
         """Return ``X`` as a float ``(n, d)`` array; raise on wrong shape, NaN or Inf.
 
@@ -142,7 +143,7 @@ class FeatureSpace:
             arr = arr[None, :]
         if arr.ndim != 2 or arr.shape[1] != len(self):
             raise ValidationError(
-                f"expected shape (n, {len(self)}) for features {list(self.names)}, got {np.shape(X)}",
+                f"expected shape (n, {len(self)}) for features {list(self.names)}, got {arr.shape}",
                 field=field)
         bad = ~np.isfinite(arr)
         if bad.any():

@@ -121,7 +121,8 @@ def load_library(path: str | Path | None = None, *, with_plugins: bool = False) 
         pm = manager().load_all()
         for impl in pm.pm.hook.hapticsdk_materials.get_hookimpls():
             try:
-                entries = impl.function() or []
+                answer: Any = impl.function()   # pluggy types a hook's answer as object
+                entries: list[dict[str, Any]] = list(answer or [])
                 for e in entries:
                     validate({"schema_version": 1, "generated": bool(e.get("generated", False)),
                               "source": impl.plugin_name, "materials": [e]}, "materials",

@@ -16,6 +16,7 @@ from abc import ABC, abstractmethod
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+import numpy.typing as npt
 
 from .errors import ModelError, ValidationError
 from .features import FeatureSpace
@@ -57,7 +58,7 @@ class PerceptionModel(ABC):
     def n_outputs(self) -> int:
         return len(self.dimension_names)
 
-    def predict(self, G: np.ndarray) -> np.ndarray:
+    def predict(self, G: npt.ArrayLike) -> np.ndarray:
         """Intensities for each row of ``G`` (``(n, d)`` or ``(d,)``), shape ``(n, k)``."""
         X = np.asarray(G, dtype=float)
         if X.ndim == 1:

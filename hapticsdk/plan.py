@@ -44,6 +44,12 @@ class DroppedDimension:
         importance_model: name of the importance model that decided.
         replacement: what renders in its place (``{"renderer": "constant-force",
             "role": "force", "force_n": 1.0}``), or ``None``.
+        loss_interval_percent: 10-90 % interval of the predicted loss over the feature
+            vectors reaching the target (%); ``None`` when not estimated that way.
+        confidence: share of those feature vectors whose predicted loss is below the
+            threshold (0..1).
+        n_solutions: how many feature vectors the estimate is taken over.
+        extrapolated_fraction: share of them with a negative raw prediction (counted as 0).
     """
 
     dimension: str
@@ -52,21 +58,33 @@ class DroppedDimension:
     threshold_percent: float | None = None
     importance_model: str | None = None
     replacement: dict[str, Any] | None = None
+    loss_interval_percent: list[float] | None = None
+    confidence: float | None = None
+    n_solutions: int | None = None
+    extrapolated_fraction: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"dimension": self.dimension, "reason": self.reason,
                 "predicted_loss_percent": self.predicted_loss_percent,
                 "threshold_percent": self.threshold_percent,
                 "importance_model": self.importance_model,
-                "replacement": dict(self.replacement) if self.replacement else None}
+                "replacement": dict(self.replacement) if self.replacement else None,
+                "loss_interval_percent": list(self.loss_interval_percent)
+                if self.loss_interval_percent is not None else None,
+                "confidence": self.confidence, "n_solutions": self.n_solutions,
+                "extrapolated_fraction": self.extrapolated_fraction}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "DroppedDimension":
+        iv = d.get("loss_interval_percent")
         return cls(dimension=d["dimension"], reason=d["reason"],
                    predicted_loss_percent=d.get("predicted_loss_percent"),
                    threshold_percent=d.get("threshold_percent"),
                    importance_model=d.get("importance_model"),
-                   replacement=dict(d["replacement"]) if d.get("replacement") else None)
+                   replacement=dict(d["replacement"]) if d.get("replacement") else None,
+                   loss_interval_percent=[float(v) for v in iv] if iv is not None else None,
+                   confidence=d.get("confidence"), n_solutions=d.get("n_solutions"),
+                   extrapolated_fraction=d.get("extrapolated_fraction"))
 
 
 @dataclass
@@ -82,8 +100,12 @@ class MaterialPlan:
             GS N/mm, W mJ, Fpeak Hz, AFpeak m/s^2, P (m/s^2)^2, ...).
         pinned_features: model inputs no kept dimension reads, pinned at the model's
             defaults during the solve and not rendered.
-        importance_features: the features the importance model was evaluated on (the
-            solve with every dimension, as the paper's regressions use GA features).
+        importance_features: the solver's features (the solve with every dimension) for
+            the features the importance model reads, for reference.
+        importance: dimension -> the importance model's loss estimate over the feature
+            vectors reaching the target (median, 80 % interval, confidence, decision;
+            :meth:`hapticsdk.compiler.importance.LossEstimate.to_dict`), for every
+            dimension the model judged, kept or dropped.
         actuators: channel role -> actuator plugin name.
         actuator_options: role -> keyword options for that actuator.
         roles: dimension (or ``"replacement:<dim>"``) -> roles its renderer commands.
@@ -100,6 +122,7 @@ class MaterialPlan:
     features: dict[str, float] = field(default_factory=dict)
     pinned_features: dict[str, float] = field(default_factory=dict)
     importance_features: dict[str, float] = field(default_factory=dict)
+    importance: dict[str, dict[str, Any]] = field(default_factory=dict)
     actuators: dict[str, str] = field(default_factory=dict)
     actuator_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     roles: dict[str, list[str]] = field(default_factory=dict)
@@ -118,6 +141,7 @@ class MaterialPlan:
                 "dropped": [d.to_dict() for d in self.dropped],
                 "features": dict(self.features), "pinned_features": dict(self.pinned_features),
                 "importance_features": dict(self.importance_features),
+                "importance": json.loads(json.dumps(self.importance)),
                 "actuators": dict(self.actuators),
                 "actuator_options": {k: dict(v) for k, v in self.actuator_options.items()},
                 "roles": {k: list(v) for k, v in self.roles.items()},
@@ -132,6 +156,7 @@ class MaterialPlan:
                    features={k: float(v) for k, v in d.get("features", {}).items()},
                    pinned_features={k: float(v) for k, v in d.get("pinned_features", {}).items()},
                    importance_features={k: float(v) for k, v in d.get("importance_features", {}).items()},
+                   importance={k: dict(v) for k, v in d.get("importance", {}).items()},
                    actuators=dict(d.get("actuators", {})),
                    actuator_options={k: dict(v) for k, v in d.get("actuator_options", {}).items()},
                    roles={k: list(v) for k, v in d.get("roles", {}).items()},
@@ -236,7 +261,10 @@ class RenderPlan:
                 "materials": {k: {"dimensions": list(m.dimensions),
                                   "dropped": [{"dimension": x.dimension, "reason": x.reason,
                                                "predicted_loss_percent": x.predicted_loss_percent,
+                                               "loss_interval_percent": x.loss_interval_percent,
+                                               "confidence": x.confidence,
                                                "replacement": x.replacement} for x in m.dropped],
+                                  "importance": json.loads(json.dumps(m.importance)),
                                   "features": dict(m.features),
                                   "pinned_features": dict(m.pinned_features),
                                   "actuators": dict(m.actuators),

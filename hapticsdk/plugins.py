@@ -216,7 +216,7 @@ def list_plugins(kinds: Iterable[str] | None = None, *, check: bool = False) -> 
     for kind in kinds or [k for k in GROUPS if k != "hooks"]:
         reg = registry(kind)
         for name in reg.names():
-            info = reg.info(name).to_dict()
+            info: dict[str, Any] = dict(reg.info(name).to_dict())
             if check:
                 try:
                     reg.load(name)

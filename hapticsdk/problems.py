@@ -10,7 +10,7 @@ constraints. ``solve(...)`` then resolves ``method=`` through the solver table, 
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Sequence, overload
 
 import numpy as np
 
@@ -154,13 +154,47 @@ def get_solver(method: str = DEFAULT_METHOD, **options: Any) -> Solver:
     return cls(**options)
 
 
+@overload
+def solve(targets: Mapping[str, float], *, method: str = ..., seed: int | None = ...,
+          options: Mapping[str, Any] | None = ..., **build_kw: Any) -> SolveResult: ...
+@overload
+def solve(targets: Sequence[Sequence[float]], *, method: str = ..., seed: int | None = ...,
+          options: Mapping[str, Any] | None = ..., **build_kw: Any) -> BatchSolveResult: ...
+@overload
+def solve(targets: Sequence[float], *, method: str = ..., seed: int | None = ...,
+          options: Mapping[str, Any] | None = ..., **build_kw: Any) -> SolveResult: ...
+@overload
+def solve(targets: np.ndarray, *, method: str = ..., seed: int | None = ...,
+          options: Mapping[str, Any] | None = ..., **build_kw: Any) -> SolveResult | BatchSolveResult: ...
 def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: str = DEFAULT_METHOD,
           seed: int | None = None, options: Mapping[str, Any] | None = None,
           **build_kw: Any) -> SolveResult | BatchSolveResult:
     """Find features whose predicted intensities meet ``targets``.
 
+    One target (``{dimension: intensity}``, or a 1-D row with ``dimensions=[...]``) gives
+    a :class:`~hapticsdk.solvers.SolveResult`; a batch (2-D rows, one target each, with
+    ``dimensions=[...]``) gives a :class:`~hapticsdk.solvers.BatchSolveResult`, solved in
+    one call. (A numpy array is typed as either: narrow it with ``isinstance``.)
+
+    Args:
+        targets: intensities in 0..1 per dimension.
+        method: solver plugin name (``hapticsdk plugins`` lists them; ``"ga"``,
+            ``"de"``, ``"de-scipy"``, ``"polish"``, ``"ga-polish"``, ``"amortised"``
+            with ``hapticsdk-ga``).
+        seed: random seed (``None``: fresh entropy).
+        options: solver options (see each solver's ``default_options``).
+        **build_kw: passed to :func:`build_problem` (``dimensions``, ``model``,
+            ``penalty``, ``tolerance`` [intensity units], ``fixed``, ...).
+
+    Returns:
+        scipy-style result(s): ``x`` (features, physical units), ``x_dict``, ``fun``,
+        ``success``, ``message``, ``nfev``, ``nit``, ``error`` (sum of absolute intensity
+        errors), ``intensities``, ``constraint_violation``, ``time_s``, ``trace``.
+
     >>> res = solve({"hardness": 0.8, "roughness": 0.3}, seed=1)   # doctest: +SKIP
     >>> res.success, res.error, res.x_dict["GS"]                      # doctest: +SKIP
     """
+    from .checks import check_seed
+    check_seed(seed)  # before any work: seed='abc' or -1 is bad input, not a solver failure
     problem = build_problem(targets, **build_kw)
     return get_solver(method, **dict(options or {})).solve(problem, seed=seed)

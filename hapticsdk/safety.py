@@ -195,7 +195,7 @@ class SafetyLayer:
         a zero command (same role, force 0 / amplitude 0) once it is stale, ``None``
         before the first command."""
         last = self._last
-        if last is None:
+        if last is None or self._t_last is None:
             return None
         if now - self._t_last > self.settings.stale_after_s + _TIME_EPS:
             if not self._stale_counted:
@@ -297,7 +297,7 @@ class SafetyLayer:
             if s.ramp_time_s <= 0:
                 self.phase = "running"
                 return 1.0
-            if now < self._ramp_t0:  # clock went backwards: restart the ramp from here
+            if self._ramp_t0 is None or now < self._ramp_t0:  # clock went backwards: restart the ramp from here
                 self._ramp_t0 = now
             g = (now - self._ramp_t0) / s.ramp_time_s
             if g >= 1.0 - _TIME_EPS:

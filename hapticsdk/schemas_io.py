@@ -53,14 +53,128 @@ def validate(instance: Any, name: str, *, source: str = "") -> None:
         raise ValidationError(f"{where}{err.message}", field=field)
 
 
-def read_json(path: str | Path, *, field: str, error: type[ValidationError] = ValidationError) -> Any:
-    """Parse a JSON file; a missing file or bad JSON raises ``error`` naming the file and ``field``."""
+#: largest JSON file the SDK reads (bytes); scenes, plans and calibrations are far smaller
+MAX_JSON_BYTES = 64 * 1024 * 1024
+#: deepest nesting of arrays/objects accepted in a JSON file (the SDK's formats need < 15)
+MAX_JSON_DEPTH = 100
+#: largest CSV / text table the SDK reads (bytes)
+MAX_TEXT_BYTES = 256 * 1024 * 1024
+
+
+def read_bytes(path: str | Path, *, field: str, error: type[ValidationError] = ValidationError,
+               max_bytes: int = MAX_JSON_BYTES) -> bytes:
+    """The bytes of a regular file of at most ``max_bytes``.
+
+    A missing path, a directory, a FIFO or device (which could block for ever), an
+    unreadable or too large file raise ``error`` naming the file, with ``field``.
+    """
+    import os
+    import stat
+
     p = Path(path)
     try:
-        return json.loads(p.read_text(encoding="utf-8"))
-    except (FileNotFoundError, IsADirectoryError):
+        st = os.stat(p)
+    except FileNotFoundError:
         raise error(f"file not found: {p}", field=field) from None
+    except OSError as exc:
+        raise error(f"{p}: cannot read: {exc.strerror or exc}", field=field) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise error(f"{p} is a directory, expected a file", field=field)
+    if not stat.S_ISREG(st.st_mode):
+        raise error(f"{p} is not a regular file (FIFO, socket or device)", field=field)
+    if st.st_size > max_bytes:
+        raise error(f"{p}: {st.st_size} bytes, more than the {max_bytes} bytes accepted", field=field)
+    try:
+        with open(p, "rb") as fh:
+            data = fh.read(max_bytes + 1)
+    except OSError as exc:
+        raise error(f"{p}: cannot read: {exc.strerror or exc}", field=field) from None
+    if len(data) > max_bytes:  # grew while being read
+        raise error(f"{p}: more than the {max_bytes} bytes accepted", field=field)
+    return data
+
+
+def read_text(path: str | Path, *, field: str, error: type[ValidationError] = ValidationError,
+              max_bytes: int = MAX_TEXT_BYTES) -> str:
+    """A UTF-8 text file (see :func:`read_bytes`); other encodings raise ``error`` saying
+    where the first bad byte is. A UTF-8 byte-order mark is dropped."""
+    data = read_bytes(path, field=field, error=error, max_bytes=max_bytes)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise error(f"{Path(path)}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start})",
+                    field=field) from None
+
+
+def read_csv_rows(path: str | Path, *, field: str, error: type[ValidationError] = ValidationError,
+                  max_bytes: int = MAX_TEXT_BYTES, comments: bool = False) -> tuple[list[str], list[list[str]]]:
+    """``(comment_lines, rows)`` of a UTF-8 CSV file read with :func:`read_text`.
+
+    Blank lines are skipped; with ``comments`` lines starting with ``#`` are returned
+    (without the ``#``) instead of parsed. A malformed CSV (e.g. an unclosed quote, a
+    NUL byte) raises ``error``."""
+    import csv
+
+    text = read_text(path, field=field, error=error, max_bytes=max_bytes)
+    lines = text.splitlines()
+    notes = [ln[1:].strip() for ln in lines if comments and ln.startswith("#")]
+    body = [ln for ln in lines if ln.strip() and not (comments and ln.startswith("#"))]
+    try:
+        rows = list(csv.reader(body, strict=True))
+    except csv.Error as exc:
+        raise error(f"{Path(path)}: malformed CSV ({exc})", field=field) from None
+    return notes, rows
+
+
+def json_depth(text: str) -> int:
+    """Deepest nesting of ``[`` / ``{`` in JSON ``text`` (brackets inside strings ignored);
+    linear time, no recursion."""
+    import re
+
+    import numpy as np
+
+    if '"' in text:
+        text = re.sub(r'"(?:[^"\\]|\\.)*"', '""', text)
+    b = np.frombuffer(text.encode("utf-8", "surrogatepass"), dtype=np.uint8)
+    if not b.size:
+        return 0
+    step = _depth_table()[b]
+    return int(np.cumsum(step, dtype=np.int64).max())
+
+
+@lru_cache(maxsize=1)
+def _depth_table() -> Any:
+    import numpy as np
+
+    t = np.zeros(256, np.int8)
+    t[[ord("["), ord("{")]] = 1
+    t[[ord("]"), ord("}")]] = -1
+    return t
+
+
+
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def read_json(path: str | Path, *, field: str, error: type[ValidationError] = ValidationError,
+              max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_DEPTH) -> Any:
+    """Parse a JSON file, the one reader of every JSON file the SDK opens.
+
+    Refused with ``error`` naming the file and ``field``: a missing or non-regular file,
+    more than ``max_bytes``, text that is not UTF-8, nesting deeper than ``max_depth``
+    (checked before parsing, so 5000 nested brackets cannot exhaust the stack), invalid
+    JSON, and ``NaN`` / ``Infinity`` (not JSON numbers)."""
+    p = Path(path)
+    text = read_text(p, field=field, error=error, max_bytes=max_bytes)
+    depth = json_depth(text)
+    if depth > max_depth:
+        raise error(f"{p}: JSON nested {depth} levels deep, more than the {max_depth} accepted", field=field)
+    try:
+        return json.loads(text, parse_constant=_refuse_constant)
     except json.JSONDecodeError as exc:
+        raise error(f"{p}: not valid JSON: {exc}", field=field) from None
+    except (ValueError, RecursionError) as exc:
         raise error(f"{p}: not valid JSON: {exc}", field=field) from None
 
 

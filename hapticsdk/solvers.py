@@ -13,10 +13,12 @@ returned ``x``: a solver cannot report an error it did not reach.
 
 from __future__ import annotations
 
+import copy
+import operator
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Sequence
+from typing import Any, ClassVar, Iterator, Sequence, overload
 
 import numpy as np
 
@@ -27,6 +29,13 @@ from .models import PerceptionModel
 
 #: Violation (relative, normalised form) below which a constraint counts as met.
 CONSTRAINT_TOL = 1e-9
+#: Targets solved per chunk by :meth:`Solver.solve` (bounds the working memory of a batch:
+#: a solver holds at most one chunk's populations/starts at a time).
+DEFAULT_CHUNK_SIZE = 4096
+MAX_CHUNK_SIZE = 1_000_000
+#: Batches larger than this keep no per-target trace (``result.trace == []``; the
+#: batch-level ``trace`` stays): per-target traces cost ~1 kB per target.
+PER_TARGET_TRACE_MAX = 20000
 
 
 class SolveResult(dict):
@@ -67,27 +76,96 @@ class SolveResult(dict):
                 f"time_s={self.time_s:.4g}, method={self.method!r})")
 
 
-class BatchSolveResult(list):
+class BatchSolveResult(list):  # type: ignore[type-arg]
     """Results of a batch of targets solved in one call: a list of :class:`SolveResult`
-    with batch-level ``x`` ``(m, d)``, ``error`` ``(m,)``, ``success`` ``(m,)``,
-    ``time_s`` (wall time of the whole batch), ``nfev`` (model rows evaluated),
-    ``trace`` (per iteration: ``time_s``, ``nfev``, ``best_error`` ``(m,)``) and ``method``."""
+    (a ``list`` subclass whose items are built on access: the batch itself holds arrays, so
+    a million targets take ~150 MB, not one dict per target; ``len``, indexing, slicing and
+    iteration work as on a list) with batch-level ``x`` ``(m, d)``, ``error`` ``(m,)``,
+    ``success`` ``(m,)``, ``fun`` ``(m,)``, ``constraint_violation`` ``(m,)``,
+    ``time_s`` (wall time of the whole batch, s), ``nfev`` (model rows evaluated),
+    ``nit``, ``trace`` (per iteration: ``time_s``, ``nfev``, ``best_error`` = max over
+    targets, ``best_error_median``) and ``method``."""
 
-    def __init__(self, results: Sequence[SolveResult], **attrs: Any) -> None:
-        super().__init__(results)
+    time_s: float
+    nfev: int
+    nit: int
+    trace: list[dict[str, Any]]
+    method: str
+
+    def __init__(self, results: Sequence[SolveResult] | None = None, *, data: "_BatchData | None" = None,
+                 **attrs: Any) -> None:
+        super().__init__()
+        self._list = None if results is None else list(results)
+        self._data = data
         self.__dict__.update(attrs)
+
+    def __bool__(self) -> bool:
+        return len(self) > 0
+
+    def __contains__(self, item: object) -> bool:
+        return any(r is item or r == item for r in self)
+
+    def __reversed__(self) -> Iterator[SolveResult]:
+        for k in range(len(self) - 1, -1, -1):
+            yield self[k]
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, (list, tuple)):
+            return len(self) == len(other) and all(a == b for a, b in zip(self, other))
+        return NotImplemented
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __len__(self) -> int:
+        return len(self._list) if self._list is not None else self._data.m  # type: ignore[union-attr]
+
+    def __getitem__(self, i: Any) -> Any:
+        if self._list is not None:
+            return self._list[i]
+        if isinstance(i, slice):
+            return [self._data.result(k) for k in range(*i.indices(len(self)))]  # type: ignore[union-attr]
+        k = operator.index(i)
+        m = len(self)
+        if k < 0:
+            k += m
+        if not 0 <= k < m:
+            raise IndexError("BatchSolveResult index out of range")
+        return self._data.result(k)  # type: ignore[union-attr]
+
+    def __iter__(self) -> Iterator[SolveResult]:
+        for k in range(len(self)):
+            yield self[k]
+
+    def _column(self, name: str) -> np.ndarray:
+        if self._list is not None:
+            return np.array([r[name] for r in self._list])
+        return getattr(self._data, name).copy()
 
     @property
     def x(self) -> np.ndarray:
-        return np.array([r.x for r in self])
+        return self._column("x")
 
     @property
     def error(self) -> np.ndarray:
-        return np.array([r.error for r in self])
+        return self._column("error")
 
     @property
     def success(self) -> np.ndarray:
-        return np.array([r.success for r in self])
+        return self._column("success")
+
+    @property
+    def fun(self) -> np.ndarray:
+        return self._column("fun")
+
+    @property
+    def constraint_violation(self) -> np.ndarray:
+        return self._column("constraint_violation")
+
+    def __repr__(self) -> str:
+        e = self.error
+        return (f"BatchSolveResult(targets={len(self)}, success={int(self.success.sum())}/{len(self)}, "
+                f"max_error={float(e.max()) if e.size else float('nan'):.3g}, "
+                f"time_s={self.__dict__.get('time_s', float('nan')):.4g}, method={self.__dict__.get('method')!r})")
 
 
 class Trace:
@@ -127,6 +205,22 @@ class Trace:
                  for (t, n), e, v in zip(tn, Ei, Vi)] for Ei, Vi in zip(E, V)]
 
 
+def _check_targets(T: np.ndarray, dimensions: tuple[str, ...], given_shape: tuple[int, ...]) -> None:
+    """Raise unless ``T`` is ``(m >= 1, k)`` with every value finite in 0..1."""
+    if T.ndim != 2 or T.shape[1] != len(dimensions) or T.shape[0] == 0:
+        raise ValidationError(f"targets must have shape (m, {len(dimensions)}) for "
+                              f"{list(dimensions)}, got {given_shape}", field="targets")
+    if np.isfinite(T).all() and (T >= 0).all() and (T <= 1).all():
+        return
+    for j, dname in enumerate(dimensions):
+        col = T[:, j]
+        if not np.isfinite(col).all():
+            raise ValidationError("NaN or infinite target", field=f"targets.{dname}")
+        if (col < 0).any() or (col > 1).any():
+            bad = col[(col < 0) | (col > 1)][0]
+            raise ValidationError(f"target {bad:g} outside 0..1", field=f"targets.{dname}")
+
+
 @dataclass
 class SolveProblem:
     """Targets + model + feature space + constraints.
@@ -162,16 +256,7 @@ class SolveProblem:
         self.single = T.ndim == 1
         if T.ndim == 1:
             T = T[None, :]
-        if T.ndim != 2 or T.shape[1] != len(self.dimensions) or T.shape[0] == 0:
-            raise ValidationError(f"targets must have shape (m, {len(self.dimensions)}) for "
-                                  f"{list(self.dimensions)}, got {np.shape(self.targets)}", field="targets")
-        for j, dname in enumerate(self.dimensions):
-            col = T[:, j]
-            if not np.isfinite(col).all():
-                raise ValidationError("NaN or infinite target", field=f"targets.{dname}")
-            if (col < 0).any() or (col > 1).any():
-                bad = col[(col < 0) | (col > 1)][0]
-                raise ValidationError(f"target {bad:g} outside 0..1", field=f"targets.{dname}")
+        _check_targets(T, self.dimensions, np.shape(self.targets))
         self.targets = T
         missing = [d for d in self.dimensions if d not in self.model.dimension_names]
         if missing:
@@ -215,6 +300,30 @@ class SolveProblem:
             self.x0 = self.space.clip(self.space.validate(x0, field="x0"))
             if self.x0.shape[0] != self.n_targets:
                 raise ValidationError("x0 must have one row per target", field="x0")
+
+    def with_targets(self, targets: Any, x0: np.ndarray | None = None, *, validate: bool = True) -> "SolveProblem":
+        """The same problem (model, space, constraints, settings) for other targets: a
+        shallow copy, so nothing but the targets is validated or derived again (a one-target
+        public call and the chunks of a batch use this). ``targets`` as in the constructor;
+        ``x0`` optional ``(m, d)`` starts (already in bounds)."""
+        T = np.asarray(targets, dtype=float)
+        single = T.ndim == 1
+        if single:
+            T = T[None, :]
+        if validate:
+            _check_targets(T, self.dimensions, np.shape(targets))
+        new = copy.copy(self)
+        new.targets = T
+        new.single = single
+        new.x0 = x0
+        return new
+
+    def target_chunk(self, start: int, stop: int) -> "SolveProblem":
+        """Targets ``start:stop`` as a batch problem (``x0`` rows sliced with them)."""
+        new = self.with_targets(self.targets[start:stop],
+                                None if self.x0 is None else self.x0[start:stop], validate=False)
+        new.single = False
+        return new
 
     # -- sizes -------------------------------------------------------------
     @property
@@ -345,76 +454,153 @@ class Solver(ABC):
                                   f"valid: {sorted(self.default_options)}", field="options")
         self.options: dict[str, Any] = {**self.default_options, **options}
 
-    def solve(self, problem: SolveProblem, *, seed: int | None = None) -> SolveResult | BatchSolveResult:
+    def solve(self, problem: SolveProblem, *, seed: int | None = None,
+              chunk_size: int | None = None) -> SolveResult | BatchSolveResult:
         """Solve; a 1-target problem returns a :class:`SolveResult`, a batch a
-        :class:`BatchSolveResult`. The error is recomputed from the model at ``x``."""
+        :class:`BatchSolveResult`. The error is recomputed from the model at ``x``.
+
+        The targets are solved ``chunk_size`` at a time (default :data:`DEFAULT_CHUNK_SIZE`)
+        with one random stream running through the chunks, so the working memory is that of
+        one chunk whatever the batch. Solvers whose random draws per target are fixed in
+        number and order (``polish``, ``amortised``) give the same answers for any chunk
+        size; population solvers (``ga``, ``de``) give equally good ones that depend on the
+        chunk size, as they depend on a target's position in the batch."""
         if not isinstance(problem, SolveProblem):
             raise ValidationError("problem must be a SolveProblem", field="problem")
-        rng = np.random.default_rng(seed)
-        trace = Trace(problem.n_targets)
+        from .checks import check_seed
+        rng = np.random.default_rng(check_seed(seed))
+        chunk = DEFAULT_CHUNK_SIZE if chunk_size is None else chunk_size
+        if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or not 1 <= chunk <= MAX_CHUNK_SIZE:
+            raise ValidationError(f"must be an integer in 1..{MAX_CHUNK_SIZE}, got {chunk_size!r}",
+                                  field="chunk_size")
+        m = problem.n_targets
+        keep_traces = m <= PER_TARGET_TRACE_MAX
+        data = _BatchData(problem, self.name, keep_traces)
         t0 = time.perf_counter()
-        try:
-            out = self._solve(problem, rng, trace)
-        except (ValidationError, SolverError):
-            raise
-        except Exception as exc:
-            raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
-        elapsed = time.perf_counter() - t0
-        x = np.asarray(out.x, float)
-        if x.shape != (problem.n_targets, problem.n_features) or not np.isfinite(x).all():
-            raise SolverError(f"solver {self.name!r} returned x of shape {x.shape} "
-                              f"(expected {(problem.n_targets, problem.n_features)}) or non-finite values")
-        x = problem.space.clip(x)
-        results = assemble_results(problem, x, out, elapsed, trace, self.name)
+        for a in range(0, m, int(chunk)):
+            sub = problem if m <= chunk else problem.target_chunk(a, min(m, a + int(chunk)))
+            trace = Trace(sub.n_targets)
+            try:
+                out = self._solve(sub, rng, trace)
+            except (ValidationError, SolverError):
+                raise
+            except Exception as exc:
+                raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
+            x = np.asarray(out.x, float)
+            if x.shape != (sub.n_targets, sub.n_features) or not np.isfinite(x).all():
+                raise SolverError(f"solver {self.name!r} returned x of shape {x.shape} "
+                                  f"(expected {(sub.n_targets, sub.n_features)}) or non-finite values")
+            data.add(sub, sub.space.clip(x), out, trace, trace.t0 - t0)
+        data.finish(time.perf_counter() - t0)
         if problem.single:
-            return results[0]
-        return BatchSolveResult(results, time_s=elapsed, nfev=out.nfev, nit=out.nit,
-                                trace=trace.rows(), method=self.name)
+            return data.result(0)
+        return BatchSolveResult(data=data, time_s=data.elapsed, nfev=data.nfev, nit=data.nit,
+                                trace=data.batch_trace, method=self.name)
 
     @abstractmethod
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
         """Search; call ``trace.record`` once per iteration."""
 
 
-def assemble_results(problem: SolveProblem, x: np.ndarray, out: SolverOutput, elapsed: float,
-                     trace: Trace, method: str) -> list[SolveResult]:
-    """Evaluate ``x`` honestly and build one :class:`SolveResult` per target."""
-    ev = problem.evaluate(x, details=True)
-    G = problem.full_inputs(x)
-    cols = problem.columns(G)
-    per_c = {c.name: c.violation(cols) for c in problem.constraints}
-    results = []
-    m = problem.n_targets
-    traces = trace.per_target()
-    for i in range(m):
-        I = ev["intensities"][i]
-        err_dims = {d: float(abs(I[problem._out_idx[j]] - problem.targets[i, j]))
-                    for j, d in enumerate(problem.dimensions)}
-        error = float(ev["error"][i])
-        viol = float(ev["violation"][i])
-        ok = error <= problem.tolerance and viol <= CONSTRAINT_TOL
-        preds = {d: float(v) for d, v in zip(problem.model.dimension_names, I)}
+class _BatchData:
+    """The arrays of a solved batch, filled chunk by chunk (:meth:`add`), from which
+    :class:`SolveResult` objects are built on access (:meth:`result`). Everything a result
+    reports is recomputed here from the model at the returned ``x``."""
+
+    def __init__(self, problem: SolveProblem, method: str, keep_traces: bool) -> None:
+        self.problem, self.method, self.keep_traces = problem, method, keep_traces
+        self.m = problem.n_targets
+        self._parts: list[dict[str, Any]] = []
+        self.nfev = 0
+        self.nit = 0
+        self.batch_trace: list[dict[str, Any]] = []
+        self.elapsed = 0.0
+
+    def add(self, sub: SolveProblem, x: np.ndarray, out: SolverOutput, trace: Trace, t_offset: float) -> None:
+        ev = sub.evaluate(x, details=True)
+        if sub.constraints:
+            cols = sub.columns(sub.full_inputs(x))
+            per_c = np.stack([c.violation(cols) for c in sub.constraints], axis=1)
+        else:
+            per_c = np.zeros((len(x), 0))
+        part = {"x": x, "fun": ev["fitness"], "error": ev["error"], "violation": ev["violation"],
+                "intensities": ev["intensities"], "per_c": per_c, "message": out.message,
+                "n": len(x), "traces": None}
+        if self.keep_traces and trace.times:
+            part["traces"] = (np.array(trace.times), np.array(trace.nfev), np.array(trace.best_error).T,
+                              np.array(trace.violation).T)
+        self._parts.append(part)
+        nfev0 = self.nfev
+        for row in trace.rows():
+            row["time_s"] += t_offset
+            row["nfev"] += nfev0
+            self.batch_trace.append(row)
+        self.nfev += int(out.nfev)
+        self.nit = max(self.nit, int(out.nit))
+
+    def finish(self, elapsed: float) -> None:
+        self.elapsed = float(elapsed)
+        parts = self._parts
+        one = len(parts) == 1
+        cat = (lambda k: parts[0][k]) if one else (lambda k: np.concatenate([q[k] for q in parts]))
+        self.x, self.fun, self.error = cat("x"), cat("fun"), cat("error")
+        self.constraint_violation, self.intensities, self.per_c = cat("violation"), cat("intensities"), cat("per_c")
+        self.success = (self.error <= self.problem.tolerance) & (self.constraint_violation <= CONSTRAINT_TOL)
+        self._part_of = None if one else np.repeat(np.arange(len(parts)), [q["n"] for q in parts])
+        self._start = np.cumsum([0] + [q["n"] for q in parts])
+
+    def result(self, i: int) -> SolveResult:
+        problem = self.problem
+        k = 0 if self._part_of is None else int(self._part_of[i])
+        part = self._parts[k]
+        I = self.intensities[i]
+        dims = problem.dimensions
+        out_idx = problem._out_idx
+        Ti = problem.targets[i]
+        err_dims = {d: float(abs(I[out_idx[j]] - Ti[j])) for j, d in enumerate(dims)}
+        error = float(self.error[i])
+        viol = float(self.constraint_violation[i])
+        ok = bool(self.success[i])
+        names = problem.model.dimension_names
+        preds = {d: float(v) for d, v in zip(names, I.tolist())}
+        cnames = [c.name for c in problem.constraints]
+        pc = self.per_c[i].tolist()
         if ok:
             msg = f"target reached: error {error:.3g} <= tolerance {problem.tolerance:g}, constraints met"
         else:
             parts = []
             if error > problem.tolerance:
                 parts.append(f"error {error:.3g} > tolerance {problem.tolerance:g}; residual per "
-                             f"dimension {{{', '.join(f'{k}: {v:.3g}' for k, v in err_dims.items())}}}; "
-                             f"nearest intensities found {{{', '.join(f'{k}: {preds[k]:.3g}' for k in problem.dimensions)}}}")
+                             f"dimension {{{', '.join(f'{a}: {v:.3g}' for a, v in err_dims.items())}}}; "
+                             f"nearest intensities found {{{', '.join(f'{a}: {preds[a]:.3g}' for a in dims)}}}")
             if viol > CONSTRAINT_TOL:
-                bad = [k for k, v in per_c.items() if v[i] > CONSTRAINT_TOL]
+                bad = [n for n, v in zip(cnames, pc) if v > CONSTRAINT_TOL]
                 parts.append(f"constraints violated: {bad} (max relative violation {viol:.3g})")
             msg = "target not reached: " + "; ".join(parts)
-        if out.message:
-            msg += f" [{method}: {out.message}]"
-        results.append(SolveResult(
-            x=x[i].copy(), x_dict={n: float(v) for n, v in zip(problem.model.feature_names, G[i])},
-            feature_names=problem.feature_names, fun=float(ev["fitness"][i]), success=bool(ok),
-            message=msg, nfev=int(out.nfev), nit=int(out.nit), error=error,
+        if part["message"]:
+            msg += f" [{self.method}: {part['message']}]"
+        x = self.x[i].copy()
+        G = x if problem._identity else problem.full_inputs(x[None])[0]
+        trace: list[dict[str, Any]] = []
+        if part["traces"] is not None:
+            times, nfev, E, V = part["traces"]
+            j = i - int(self._start[k])
+            trace = [{"time_s": t, "nfev": n, "best_error": e, "constraint_violation": v}
+                     for t, n, e, v in zip(times.tolist(), nfev.tolist(), E[j].tolist(), V[j].tolist())]
+        return SolveResult(
+            x=x, x_dict=dict(zip(problem.model.feature_names, G.tolist())),
+            feature_names=problem.feature_names, fun=float(self.fun[i]), success=ok,
+            message=msg, nfev=self.nfev, nit=self.nit, error=error,
             error_per_dimension=err_dims, intensities=preds,
-            targets={d: float(problem.targets[i, j]) for j, d in enumerate(problem.dimensions)},
-            constraint_violation=viol,
-            constraint_violations={k: float(v[i]) for k, v in per_c.items()},
-            time_s=float(elapsed), trace=traces[i], method=method))
-    return results
+            targets={d: float(v) for d, v in zip(dims, Ti.tolist())},
+            constraint_violation=viol, constraint_violations=dict(zip(cnames, pc)),
+            time_s=self.elapsed, trace=trace, method=self.method)
+
+
+def assemble_results(problem: SolveProblem, x: np.ndarray, out: SolverOutput, elapsed: float,
+                     trace: Trace, method: str) -> list[SolveResult]:
+    """Evaluate ``x`` honestly and build one :class:`SolveResult` per target."""
+    data = _BatchData(problem, method, True)
+    data.add(problem, problem.space.clip(np.asarray(x, float)), out, trace, 0.0)
+    data.finish(elapsed)
+    return [data.result(i) for i in range(problem.n_targets)]

@@ -39,13 +39,16 @@ def read_commented_csv(path: str | Path, what: str) -> tuple[Path, list[str], li
     """``(path, comments, rows)`` of a CSV file whose ``#`` lines are comments (their text
     without ``#``; blank lines skipped, ``rows[0]`` is the header). A missing file raises
     :class:`CalibrationError` "<what> file not found"."""
+    from ..errors import ValidationError
+    from ..schemas_io import read_csv_rows
+
     p = Path(path)
-    try:
-        lines = p.read_text().splitlines()
-    except FileNotFoundError:
-        raise CalibrationError(f"{what} file not found: {p}") from None
-    comments = [ln[1:].strip() for ln in lines if ln.startswith("#")]
-    rows = list(csv.reader(ln for ln in lines if ln.strip() and not ln.startswith("#")))
+    if not p.exists():
+        raise CalibrationError(f"{what} file not found: {p}")
+    try:  # the shared reader: regular UTF-8 file of bounded size, well-formed CSV
+        comments, rows = read_csv_rows(p, field=what, comments=True)
+    except ValidationError as exc:
+        raise CalibrationError(str(exc)) from None
     return p, comments, rows
 
 

@@ -1,8 +1,11 @@
 """Calibration files: one JSON file per calibration, found by kind and device serial.
 
 Files (format ``schemas/calibration.schema.json``) live in the calibration directory:
-``$HAPTICSDK_CALIBRATION_DIR`` if set, else ``$XDG_CONFIG_HOME/hapticsdk/calibration``
-(``~/.config/hapticsdk/calibration``). :func:`save_calibration` names them
+``$HAPTICSDK_CALIBRATION_DIR`` if set, else the per-user configuration directory of
+``platformdirs`` plus ``calibration``: ``$XDG_CONFIG_HOME/hapticsdk/calibration``
+(``~/.config/hapticsdk/calibration``) on Linux, ``~/Library/Application
+Support/hapticsdk/calibration`` on macOS, ``%LOCALAPPDATA%\\hapticsdk\\calibration`` on
+Windows. :func:`save_calibration` names them
 ``<kind>-<serial>.json`` (``<kind>-any.json`` without a serial), but any ``*.json``
 file in the directory is considered; its ``kind`` and ``serial`` fields decide.
 
@@ -17,6 +20,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import logging
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +29,8 @@ from typing import Any
 from ..errors import CalibrationError, ValidationError
 from .piezo import PiezoTable
 from .voicecoil import VoiceCoilCalibration
+
+log = logging.getLogger(__name__)
 
 KINDS = ("voicecoil", "piezo")
 ENV_DIR = "HAPTICSDK_CALIBRATION_DIR"
@@ -35,8 +41,11 @@ def calibration_dir() -> Path:
     env = os.environ.get(ENV_DIR)
     if env:
         return Path(env).expanduser()
-    base = os.environ.get("XDG_CONFIG_HOME") or str(Path.home() / ".config")
-    return Path(base) / "hapticsdk" / "calibration"
+    from platformdirs import user_config_path
+
+    # Linux: $XDG_CONFIG_HOME/hapticsdk (~/.config/hapticsdk); macOS: ~/Library/Application
+    # Support/hapticsdk; Windows: %LOCALAPPDATA%\hapticsdk (no author folder)
+    return user_config_path("hapticsdk", appauthor=False) / "calibration"
 
 
 def _check_kind(kind: str) -> None:
@@ -65,16 +74,88 @@ def calibration_from_dict(data: dict[str, Any], *, source: str = "") -> VoiceCoi
     return PiezoTable.from_dict(data)
 
 
-def read_calibration(path: str | Path) -> VoiceCoilCalibration | PiezoTable:
-    """Read one calibration file (errors name the file and the field)."""
-    from ..schemas_io import load_json
+#: largest calibration file read (bytes); a measured piezo table is a few kB
+MAX_CALIBRATION_BYTES = 4 * 1024 * 1024
 
-    p = Path(path)
-    data = load_json(p, "calibration")
+
+def _read_file(p: Path) -> tuple[Any, str]:
+    """``(parsed JSON, sha256 of the bytes parsed)`` of one calibration file.
+
+    Only a regular file is opened (a FIFO, a device -- also through a symbolic link --
+    or a directory named ``*.json`` is refused before it could block), the read is
+    capped at :data:`MAX_CALIBRATION_BYTES`, the text must be UTF-8 and the nesting
+    shallow. Raises :class:`ValidationError` naming the file."""
+    import hashlib
+
+    from ..schemas_io import MAX_JSON_DEPTH, json_depth
+
+    data = _read_regular(p, MAX_CALIBRATION_BYTES)
+    digest = hashlib.sha256(data).hexdigest()
     try:
-        return calibration_from_dict(data, source=str(p))
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValidationError(f"{p}: not UTF-8 text (offset {exc.start})", field="calibration") from None
+    if json_depth(text) > MAX_JSON_DEPTH:
+        raise ValidationError(f"{p}: JSON nested deeper than {MAX_JSON_DEPTH} levels", field="calibration")
+    try:
+        return json.loads(text), digest
+    except (ValueError, RecursionError) as exc:
+        raise ValidationError(f"{p}: not valid JSON: {exc}", field="calibration") from None
+
+
+def _read_regular(p: Path, max_bytes: int) -> bytes:
+    """The bytes of ``p`` if it is a regular file of at most ``max_bytes``. The file is
+    opened non-blocking (a FIFO swapped in after the check cannot block the open) and
+    checked again on the open descriptor."""
+    import stat
+
+    def refuse(why: str) -> ValidationError:
+        return ValidationError(f"{p}: {why}", field="calibration")
+
+    try:
+        st = os.stat(p)
+    except OSError as exc:
+        raise refuse(f"cannot read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file (FIFO, socket or device)"
+        raise refuse(f"{kind}; skipped")
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(p, flags)
+    except OSError as exc:
+        raise refuse(f"cannot open: {exc.strerror or exc}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise refuse("not a regular file (FIFO, socket or device); skipped")
+        chunks, total = [], 0
+        while total <= max_bytes:
+            b = os.read(fd, min(1 << 16, max_bytes + 1 - total))
+            if not b:
+                break
+            chunks.append(b)
+            total += len(b)
+    except OSError as exc:
+        raise refuse(f"cannot read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if total > max_bytes:
+        raise refuse(f"larger than {max_bytes} bytes; skipped")
+    return b"".join(chunks)
+
+
+def _from_file(p: Path) -> tuple[VoiceCoilCalibration | PiezoTable, str]:
+    data, digest = _read_file(p)
+    try:
+        return calibration_from_dict(data, source=str(p)), digest
     except CalibrationError as exc:
         raise CalibrationError(f"{p}: {exc}") from None
+    except (TypeError, ValueError, KeyError, IndexError, OverflowError) as exc:  # e.g. ragged table rows
+        raise CalibrationError(f"{p}: not a usable calibration: {type(exc).__name__}: {exc}") from None
+
+
+def read_calibration(path: str | Path) -> VoiceCoilCalibration | PiezoTable:
+    """Read one calibration file (errors name the file and the field)."""
+    return _from_file(Path(path))[0]
 
 
 def save_calibration(cal: VoiceCoilCalibration | PiezoTable, directory: str | Path | None = None, *,
@@ -89,8 +170,16 @@ def save_calibration(cal: VoiceCoilCalibration | PiezoTable, directory: str | Pa
         safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(serial))
         path = d / f"{data['kind']}-{safe}.json"
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(data, indent=1))
+    from ..fileio import atomic_write_json
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        from ..errors import FileWriteError
+        raise FileWriteError(f"cannot create the directory {str(p.parent)!r}: {exc.strerror or exc}",
+                             field=str(p)) from None
+    # temporary file + fsync + rename: a reader sees the old calibration or the new one,
+    # a failed write leaves the old one, a symbolic link at ``p`` is replaced, not followed
+    atomic_write_json(p, data, indent=1)
     return p
 
 
@@ -104,10 +193,14 @@ class CalibrationEntry:
     generated: bool | None
     source: str
     error: str | None = None
+    sha256: str | None = None
+    #: the ``kind`` field of a file that failed to load, when it could be read
+    claimed_kind: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"path": str(self.path), "kind": self.kind, "serial": self.serial,
-                "generated": self.generated, "source": self.source, "error": self.error}
+                "generated": self.generated, "source": self.source, "error": self.error,
+                "sha256": self.sha256}
 
 
 def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, VoiceCoilCalibration | PiezoTable | None]]:
@@ -117,14 +210,22 @@ def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, VoiceCoi
     out: list[tuple[CalibrationEntry, VoiceCoilCalibration | PiezoTable | None]] = []
     if not d.is_dir():
         return out
-    for p in sorted(d.glob("*.json")):
+    try:
+        paths = sorted(d.glob("*.json"))
+    except OSError as exc:
+        log.warning("calibration directory %s not readable: %s", d, exc)
+        return out
+    for p in paths:
         try:
-            cal = read_calibration(p)
-        except (ValidationError, CalibrationError) as exc:
-            out.append((CalibrationEntry(p, None, None, None, "", error=str(exc)), None))
+            cal, digest = _from_file(p)
+        except Exception as exc:  # one bad file never stops the others: skipped, named
+            msg = str(exc) if isinstance(exc, (ValidationError, CalibrationError)) else \
+                f"{p}: {type(exc).__name__}: {exc}"
+            log.warning("skipped calibration file %s: %s", p, msg)
+            out.append((CalibrationEntry(p, None, None, None, "", error=msg, claimed_kind=_peek_kind(p)), None))
             continue
         kind = "voicecoil" if isinstance(cal, VoiceCoilCalibration) else "piezo"
-        out.append((CalibrationEntry(p, kind, cal.serial, bool(cal.generated), cal.source), cal))
+        out.append((CalibrationEntry(p, kind, cal.serial, bool(cal.generated), cal.source, sha256=digest), cal))
     return out
 
 
@@ -145,6 +246,7 @@ class LoadedCalibration:
             ``"default"`` or ``"none"``.
         path: the file used, if any.
         skipped: files of this kind that failed to load (path: error).
+        sha256: SHA-256 of the bytes of ``path`` that were parsed (``None`` for a default).
     """
 
     kind: str
@@ -153,6 +255,7 @@ class LoadedCalibration:
     origin: str
     path: Path | None
     skipped: dict[str, str]
+    sha256: str | None = None
 
     @property
     def generated(self) -> bool | None:
@@ -163,12 +266,14 @@ class LoadedCalibration:
         """Human-readable provenance (file path or default, and the calibration's source)."""
         if self.calibration is None:
             return "none (no calibration file and no default)"
-        where = str(self.path) if self.path is not None else "built-in default"
-        return f"{where}: {self.calibration.source}"
+        if self.path is None:
+            return f"default, no calibration file saved: {self.calibration.source}"
+        return f"{self.path}: {self.calibration.source}"
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": self.kind, "serial": self.serial, "origin": self.origin,
-                "path": str(self.path) if self.path else None, "generated": self.generated,
+                "path": str(self.path) if self.path else None, "file": str(self.path) if self.path else None,
+                "sha256": self.sha256, "generated": self.generated,
                 "source": self.source, "skipped": dict(self.skipped)}
 
 
@@ -191,7 +296,7 @@ def load_calibration(kind: str, serial: str | None = None, *, directory: str | P
     skipped: dict[str, str] = {}
     for e, cal in _scan(directory):
         if e.error is not None:
-            if f'"{kind}"' in _peek_kind(e.path):
+            if e.claimed_kind == kind:
                 skipped[str(e.path)] = e.error
             continue
         if e.kind != kind:
@@ -203,7 +308,7 @@ def load_calibration(kind: str, serial: str | None = None, *, directory: str | P
     for found, origin in ((exact, "file"), (anyone, "file-any")):
         if found is not None:
             entry, cal = found
-            return LoadedCalibration(kind, serial, cal, origin, entry.path, skipped)
+            return LoadedCalibration(kind, serial, cal, origin, entry.path, skipped, entry.sha256)
     if default is not None:
         cal = default() if callable(default) else default
         return LoadedCalibration(kind, serial, cal, "default", None, skipped)
@@ -212,13 +317,14 @@ def load_calibration(kind: str, serial: str | None = None, *, directory: str | P
     return LoadedCalibration(kind, serial, None, "none", None, skipped)
 
 
-def _peek_kind(path: Path) -> str:
-    from ..schemas_io import read_json
-
+def _peek_kind(path: Path) -> str | None:
+    """The ``kind`` field of a file that failed validation (``None`` if unreadable)."""
     try:
-        return json.dumps(read_json(path, field="calibration").get("kind"))
+        data, _ = _read_file(path)
     except Exception:
-        return ""
+        return None
+    kind = data.get("kind") if isinstance(data, dict) else None
+    return kind if isinstance(kind, str) else None
 
 
 def calibrations_in_use(serials: dict[str, str | None] | None = None, *, directory: str | Path | None = None,

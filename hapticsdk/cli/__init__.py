@@ -13,7 +13,7 @@ import importlib
 import json
 import logging
 import sys
-from typing import Sequence
+from typing import NoReturn, Sequence
 
 from ..errors import HapticSDKError, ValidationError
 
@@ -24,10 +24,13 @@ COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_
 def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="hapticsdk",
         description="Multi-modal haptic rendering: solve stimulus features for perceptual "
-                    "targets and render them on (simulated) devices.")
+                    "targets and render them on (simulated) devices.",
+        epilog="Exit status: 0 success; 1 a target was not reached (solve, render, plan) or a check "
+               "failed; 2 bad input (the message reads 'hapticsdk: error: <field>: <reason>'); "
+               "128+n after signal n (141: output pipe closed, e.g. piped into head).")
     parser.add_argument("--version", action="version", version=f"hapticsdk {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -68,44 +71,130 @@ def _json_default(o: object) -> object:
     return str(o)
 
 
+class Parser(argparse.ArgumentParser):
+    """``argparse`` parser whose usage errors read ``hapticsdk: error: <field>: <reason>``
+    (exit status 2), like every other input error of the command."""
+
+    def error(self, message: str) -> "NoReturn":  # type: ignore[override]
+        self.print_usage(sys.stderr)
+        if message.startswith("argument "):
+            message = message[len("argument "):]  # "--seed: must be >= 0, got -1"
+        else:  # no option to name: name the (sub)command
+            message = f"{self.prog.split(' ', 1)[-1] if ' ' in self.prog else self.prog}: {message}"
+        self.exit(2, f"hapticsdk: error: {message}\n")
+
+
+def error_line(exc: BaseException, args: argparse.Namespace | None = None) -> str:
+    """``<field>: <reason>`` for an SDK error: its ``field`` when it has one, else the
+    device or plugin it names, else the command that failed."""
+    if getattr(exc, "field", None):
+        return str(exc)  # ValidationError puts "field: " in front already
+    where = getattr(exc, "device", None) or getattr(exc, "plugin", None)
+    if where:
+        text = str(exc)
+        return text if text.startswith(f"[{where}]") else f"{where}: {text}"
+    command = " ".join(str(getattr(args, k)) for k in ("command", "bench_command", "calibrate_command",
+                                                         "dataset_command")
+                       if args is not None and getattr(args, k, None)) or "hapticsdk"
+    return f"{command}: {exc}"
+
+
+def report_error(exc: BaseException, args: argparse.Namespace | None = None) -> int:
+    """Print an SDK error the command's way and return exit status 2: the line
+    ``hapticsdk: error: <field>: <reason>`` on stderr, and with ``--json`` also
+    ``{"error", "type", "field"}`` on stdout."""
+    if args is not None and getattr(args, "json", False):
+        print(json.dumps({"error": str(exc), "type": type(exc).__name__, "field": getattr(exc, "field", None)}))
+    print(f"hapticsdk: error: {error_line(exc, args)}", file=sys.stderr)
+    return 2
+
+
+def _quiet_stdout() -> None:
+    """After EPIPE: point stdout at devnull so the interpreter's final flush does not fail
+    again (the recipe of the Python docs, "Note on SIGPIPE")."""
+    import os
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout without a file descriptor (tests)
+        pass
+
+
+def interrupt_message(signame: str, t_signal: float) -> str:
+    """Stop every actuator still open (the last resort), then say which actuators the
+    stop path put in their safe state since ``t_signal`` (``time.monotonic()``, s) --
+    including those already stopped and closed on the way out -- and how soon."""
+    from ..actuators import stop_all, stops_since
+
+    stop_all()
+    stops = stops_since(t_signal)
+    if not stops:
+        return f"stopped by {signame}; no actuator was open"
+    ok = list(dict.fromkeys(label for label, _, good in stops if good))
+    failed = [lb for lb in dict.fromkeys(label for label, _, good in stops if not good) if lb not in ok]
+    msg = (f"stopped by {signame}; actuators in safe state: {', '.join(ok) or 'none'} "
+           f"(first stop {1e3 * max(0.0, stops[0][1] - t_signal):.1f} ms after the signal)")
+    if failed:
+        msg += f"; stop FAILED on {', '.join(failed)} (see the log above)"
+    return msg
+
+
+#: exit status after the output pipe closed early (128 + SIGPIPE, as a shell reports it)
+EXIT_BROKEN_PIPE = 141
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    """Run the ``hapticsdk`` command; returns the exit status (never raises for bad input).
+
+    0 success; 1 a target not reached or a check failed; 2 bad input (including usage
+    errors); 128+n after stop signal n (SIGINT 130, SIGTERM 143, SIGHUP 129: every
+    actuator is put in its safe state first); 141 stdout closed early (``| head``); 1 with
+    ``hapticsdk: internal error: ...`` for a bug (``-v`` shows the traceback)."""
+    import time
+
+    from ..runtime.signals import SafeStop, safe_stop_on_signals
+
+    t_start = time.monotonic()
     try:
-        return int(args.func(args) or 0)
-    except HapticSDKError as exc:
-        field = getattr(exc, "field", None)
-        if getattr(args, "json", False):
-            print(json.dumps({"error": str(exc), "type": type(exc).__name__, "field": field}))
-        else:
-            print(f"hapticsdk: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        from ..actuators import stop_all
-        stopped = stop_all()
-        print(f"hapticsdk: interrupted; stopped {stopped or 'no actuators'}", file=sys.stderr)
-        return 130
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # usage error (2) or --help/--version (0)
+            return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 2)
+        logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                            format="%(levelname)s %(name)s: %(message)s")
+        try:
+            # SIGINT, SIGTERM, SIGHUP -> SafeStop (a KeyboardInterrupt): one safe stop path
+            with safe_stop_on_signals():
+                code = int(args.func(args) or 0)
+            sys.stdout.flush()  # a closed pipe shows up here, not at interpreter exit
+            return code
+        except HapticSDKError as exc:
+            return report_error(exc, args)
+        except KeyboardInterrupt as exc:
+            if isinstance(exc, SafeStop):
+                name, code, t_sig = exc.signame, exc.exit_code, exc.received_at
+            else:  # Python's own SIGINT handler, outside the handled block
+                name, code, t_sig = "SIGINT", 130, t_start
+            print(f"hapticsdk: {interrupt_message(name, t_sig)}", file=sys.stderr)
+            return code
+        except BrokenPipeError:
+            raise
+        except Exception as exc:  # last resort: a bug, not bad input
+            from ..actuators import stop_all
+            stop_all()
+            if args.verbose:
+                import traceback
+                traceback.print_exc()
+            print(f"hapticsdk: internal error: {type(exc).__name__}: {exc} (run 'hapticsdk -v ...' for the "
+                  "traceback; please report it)", file=sys.stderr)
+            return 1
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
 
 
-def positive_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0: {text!r}")
-    return v
-
-
-def intensity(text: str) -> float:
-    """argparse type for a 0..1 intensity: NaN and out-of-range values are rejected."""
-    from ..dimensions import check_intensity
-    try:
-        return check_intensity(text, "intensity")
-    except ValidationError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+from .argtypes import intensity, positive_float  # noqa: E402  (kept importable from here)
 
 
 if __name__ == "__main__":  # pragma: no cover

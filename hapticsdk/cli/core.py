@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from . import emit, intensity, positive_float
+from . import emit
+from .argtypes import intensity, nonneg_int, positive_float
+
+
+#: the exit-status rule shared by ``solve``, ``render`` and ``plan`` (also in docs/app-developers.md)
+UNREACHED_RULE = ("Exit status: 0 when every target was reached; 1 when a target was not reached "
+                  "(the nearest reachable answer is still printed, and rendered); 2 for bad input.")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_materials)
 
-    p = sub.add_parser("solve", help="solve stimulus features for perceptual targets")
+    p = sub.add_parser("solve", help="solve stimulus features for perceptual targets",
+                       epilog=UNREACHED_RULE)
     p.add_argument("--hardness", type=intensity, help="target hardness 0..1")
     p.add_argument("--roughness", type=intensity, help="target roughness 0..1")
     p.add_argument("--target", action="append", default=[], metavar="DIM=VALUE",
@@ -35,18 +42,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tolerance", type=positive_float, default=0.01)
     p.add_argument("--data-support", action="store_true",
                    help="keep the answer where the model's recordings were (e.g. recorded press-force range)")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=nonneg_int, default=None, help="random seed, a whole number >= 0")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_solve)
 
-    p = sub.add_parser("render", help="render a named material or a scene on (simulated) devices")
+    p = sub.add_parser("render", help="render a named material or a scene on (simulated) devices",
+                       epilog=UNREACHED_RULE)
     p.add_argument("material", nargs="?", help="material name (see `hapticsdk materials`)")
     p.add_argument("--scene", help="scene JSON file instead of a material")
     p.add_argument("--hardness", type=intensity, help="render targets instead of a named material")
     p.add_argument("--roughness", type=intensity)
     p.add_argument("--seconds", type=positive_float, default=3.0, help="render duration (s)")
-    p.add_argument("--seed", type=int, default=0, help="solver seed")
+    p.add_argument("--seed", type=nonneg_int, default=0, help="solver seed, a whole number >= 0")
     p.add_argument("--plot", metavar="PNG", help="save a figure of the render (needs matplotlib)")
+    p.add_argument("--device-option", action="append", default=[], metavar="ROLE.KEY=VALUE",
+                   help="actuator option for a channel role (repeatable), e.g. force.library=/opt/libHD.so or "
+                        "coil.sink=wav:out.wav; the only place, with $HAPTICSDK_DEVICE_OPTIONS and the user "
+                        "device configuration, for options naming libraries, files or ports")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_render)
 
@@ -142,12 +154,20 @@ def cmd_render(args: argparse.Namespace) -> int:
     if sum(given) != 1:
         raise ValidationError("give exactly one of MATERIAL, --scene FILE, or --hardness/--roughness",
                               field="render")
+    if args.plot:  # before the work: a figure that cannot be written fails now, not after the render
+        from ..fileio import check_output_path
+        check_output_path(args.plot, field="--plot")
     if args.scene:
         scene = load_scene(args.scene)
     else:
         scene = Scene.for_material(args.material if args.material else targets, seed=args.seed)
+    from ..device_options import parse_device_option
+    dev_opts: dict[str, dict[str, Any]] = {}
+    for item in args.device_option:
+        role, key, value = parse_device_option(item)
+        dev_opts.setdefault(role, {})[key] = value
     plan = compile_scene(scene)
-    report = render_plan(plan, seconds=args.seconds)
+    report = render_plan(plan, seconds=args.seconds, actuator_options=dev_opts)
     out = report.to_dict()
     if args.plot:
         from ..plotting import plot_render
@@ -157,7 +177,15 @@ def cmd_render(args: argparse.Namespace) -> int:
         emit(out, True)
     else:
         print(format_render(out))
-    return 0
+    return 0 if all_reached(out) else 1
+
+
+def all_reached(out: dict[str, Any]) -> bool:
+    """Whether every solve in a render or plan report reached its targets (the
+    :data:`UNREACHED_RULE`); a material rendered without a solve counts as reached."""
+    mats = out.get("materials", [out])
+    mats = list(mats.values()) if isinstance(mats, dict) else list(mats)
+    return all((m.get("solve") or {}).get("success") is not False for m in mats)
 
 
 def format_render(out: dict[str, Any]) -> str:

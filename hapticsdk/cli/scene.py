@@ -14,12 +14,16 @@ from typing import Any
 
 
 def register(sub: Any) -> None:
-    p = sub.add_parser("plan", help="compile a scene into a render plan (what is rendered, what is left out)")
+    from .argtypes import nonneg_float, nonneg_int
+    from .core import UNREACHED_RULE
+
+    p = sub.add_parser("plan", help="compile a scene into a render plan (what is rendered, what is left out)",
+                       epilog=UNREACHED_RULE)
     p.add_argument("scene", metavar="SCENE", help="scene JSON file, or a library material name (S7)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("-o", "--output", metavar="PLAN", help="save the full plan (JSON) to this file")
-    p.add_argument("--seed", type=int, help="solver seed (overrides the scene's)")
-    p.add_argument("--threshold", type=float, metavar="PERCENT",
+    p.add_argument("--seed", type=nonneg_int, help="solver seed (overrides the scene's), a whole number >= 0")
+    p.add_argument("--threshold", type=nonneg_float, metavar="PERCENT",
                    help="importance threshold: drop a dimension whose predicted realism loss is below it (%%)")
     p.add_argument("--no-importance", action="store_true", help="keep every dimension")
     p.set_defaults(func=cmd_plan)
@@ -44,6 +48,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     from ..compiler import compile_scene
     from ..scene import Scene
 
+    if args.output:  # before the work: an output that cannot be written fails now
+        from ..fileio import check_output_path
+        check_output_path(args.output, field="--output")
     scene = _scene_from_arg(args.scene)
     over: dict[str, Any] = {}
     if args.seed is not None:
@@ -67,7 +74,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         emit(out, True)
     else:
         print(format_plan(out))
-    return 0
+    from .core import all_reached
+    return 0 if all_reached(out) else 1
 
 
 def format_plan(out: dict[str, Any]) -> str:
@@ -82,6 +90,12 @@ def format_plan(out: dict[str, Any]) -> str:
                          + ", ".join(sorted(m["pinned_features"])))
         for d in m["dropped"]:
             lines.append(f"  dropped {d['dimension']}: {d['reason']}")
+        for dim, e in (m.get("importance") or {}).items():
+            if e.get("decision") == "keep":
+                lo, hi = e["interval_percent"]
+                lines.append(f"  kept {dim}: predicted realism loss if left out {e['median_percent']:.2f} % "
+                             f"(80 % interval {lo:.1f}-{hi:.1f} % over {e['n_solutions']} feature vectors) "
+                             f">= threshold {e['threshold_percent']:g} %")
         s = m["solve"]
         if s.get("success") is not None:
             lines.append(f"  solve: {'success' if s['success'] else 'NOT REACHED'}, error {s['error']:.3g}")

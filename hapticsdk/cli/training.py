@@ -7,16 +7,26 @@ exit code (0 ok, 2 for a data/validation error, printed to stderr).
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from ..errors import HapticSDKError
 from . import emit
+from .argtypes import bounded_int, int_list, nonneg_int
+
+#: largest generated set the command makes (samples, trials per sample, raters)
+MAX_SAMPLES, MAX_TRIALS, MAX_RATERS = 10_000, 1_000, 1_000
 
 
-def _fail(exc: Exception) -> int:
-    print(f"error: {exc}", file=sys.stderr)
-    return 2
+def _fail(exc: Exception, args: argparse.Namespace | None = None) -> int:
+    from . import report_error
+    return report_error(exc, args)
+
+
+def _check_out(path: Path | None, field: str, **kw: bool) -> None:
+    """An output path is checked before the work starts (missing directory, a directory)."""
+    if path is not None:
+        from ..fileio import check_output_path
+        check_output_path(path, field=field, **kw)
 
 
 def cmd_features(args: argparse.Namespace) -> int:
@@ -28,7 +38,7 @@ def cmd_features(args: argparse.Namespace) -> int:
         rs = load_manifest(args.recordings)
         ft = extract_set(rs)
     except HapticSDKError as exc:
-        return _fail(exc)
+        return _fail(exc, args)
     summ = ft.summary()
     if args.json:
         emit({"df_hz": ft.dataset_df_hz, "generated": bool(rs.manifest.get("generated", False)),
@@ -53,9 +63,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg = lm.with_overrides(lm.TrainConfig(), seed=args.seed, folds=args.folds, restarts=args.restarts,
                           target_scale=args.target_scale)
     try:
+        _check_out(args.out, "--out")
         report, _ = train_dataset(args.dataset, args.out, cfg)
     except HapticSDKError as exc:
-        return _fail(exc)
+        return _fail(exc, args)
     if args.json:
         emit(report, True)
         return 0
@@ -77,27 +88,45 @@ def cmd_generate(args: argparse.Namespace) -> int:
     from ..training.pipeline import generate_feature_dataset, write_materials
 
     try:
+        _check_generate_out(args.out)
+        _check_out(args.materials, "--materials")
         table = generate_feature_dataset(args.out, args.samples, seed=args.seed, n_trials=args.trials,
                                          n_raters=args.raters,
                                          raw_format=None if args.summary_only else args.format)
         if args.materials:
             write_materials(table, args.materials)
     except HapticSDKError as exc:
-        return _fail(exc)
+        return _fail(exc, args)
     print(f"wrote GENERATED data set ({len(table.features.sample_names)} samples, "
           f"{len(table.X)} trials) to {args.out}" + (f"; materials to {args.materials}" if args.materials else ""))
     return 0
+
+
+def _check_generate_out(out: Path) -> None:
+    """The output of ``dataset generate`` is a directory: refuse an existing file (it
+    would be replaced by a directory's worth of files) and a missing parent directory."""
+    from ..errors import FileWriteError
+    from ..fileio import check_output_path
+
+    if out.exists() and not out.is_dir():
+        raise FileWriteError(f"{str(out)!r} exists and is not a directory (refusing to overwrite it)",
+                             field="out")
+    if not out.exists():
+        check_output_path(out, field="out")
 
 
 def cmd_growth(args: argparse.Namespace) -> int:
     """Train on generated sets of growing size; print test and CV metrics."""
     from ..training.pipeline import data_growth
 
-    sizes = [int(s) for s in args.sizes.split(",") if s.strip()]
+    sizes = list(args.sizes)
     try:
+        if max(sizes) > MAX_SAMPLES:
+            from ..errors import ValidationError
+            raise ValidationError(f"sample counts must be <= {MAX_SAMPLES}, got {max(sizes)}", field="--sizes")
         rows = data_growth(sizes, seed=args.seed)
     except HapticSDKError as exc:
-        return _fail(exc)
+        return _fail(exc, args)
     if args.json:
         emit(rows, True)
         return 0
@@ -125,9 +154,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("dataset", type=Path, help="data set directory")
     p.add_argument("--out", type=Path, required=True, help="ONNX file to write")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.add_argument("--seed", type=int, default=None, help="split/initialisation seed (default 0)")
-    p.add_argument("--folds", type=int, default=None, help="k of grouped k-fold CV (default 5, 0 = off)")
-    p.add_argument("--restarts", type=int, default=None, help="initialisations tried (default 5)")
+    p.add_argument("--seed", type=nonneg_int, default=None, help="split/initialisation seed (default 0)")
+    p.add_argument("--folds", type=bounded_int(0, 100), default=None,
+                   help="k of grouped k-fold CV (default 5, 0 = off)")
+    p.add_argument("--restarts", type=bounded_int(1, 1000), default=None, help="initialisations tried (default 5)")
     p.add_argument("--target-scale", choices=["intensity", "data"], default=None,
                    help="scale targets over the 0..1 intensity scale (default) or the data range (MATLAB)")
     p.set_defaults(func=cmd_train)
@@ -136,17 +166,21 @@ def register(sub: argparse._SubParsersAction) -> None:
     dsub = p.add_subparsers(dest="dataset_command", required=True)
     g = dsub.add_parser("generate", help="generate a data set (simulated recordings + ratings)")
     g.add_argument("out", type=Path, help="output directory")
-    g.add_argument("--samples", type=int, default=23, help="number of samples (default 23)")
-    g.add_argument("--seed", type=int, default=None, help="generator seed (default 20221122)")
-    g.add_argument("--trials", type=int, default=None, help="trials per sample (default 10)")
-    g.add_argument("--raters", type=int, default=None, help="raters (default 10)")
+    g.add_argument("--samples", type=bounded_int(1, MAX_SAMPLES), default=23,
+                   help=f"number of samples, 1..{MAX_SAMPLES} (default 23)")
+    g.add_argument("--seed", type=nonneg_int, default=None, help="generator seed (default 20221122)")
+    g.add_argument("--trials", type=bounded_int(1, MAX_TRIALS), default=None,
+                   help=f"trials per sample, 1..{MAX_TRIALS} (default 10)")
+    g.add_argument("--raters", type=bounded_int(1, MAX_RATERS), default=None,
+                   help=f"raters, 1..{MAX_RATERS} (default 10)")
     g.add_argument("--format", choices=("npz", "csv"), default="npz", help="raw trial file format")
     g.add_argument("--summary-only", action="store_true",
                    help="write only the feature tables and ratings (no raw trials)")
     g.add_argument("--materials", type=Path, default=None, help="also write a materials.json here")
     g.set_defaults(func=cmd_generate)
     gr = dsub.add_parser("growth", help="accuracy vs number of generated samples")
-    gr.add_argument("--sizes", default="23,46,92", help="comma-separated sample counts")
-    gr.add_argument("--seed", type=int, default=None)
+    gr.add_argument("--sizes", type=int_list, default=[23, 46, 92],
+                    help="comma-separated sample counts, each >= 1 (default 23,46,92)")
+    gr.add_argument("--seed", type=nonneg_int, default=None)
     gr.add_argument("--json", action="store_true")
     gr.set_defaults(func=cmd_growth)

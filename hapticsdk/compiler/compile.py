@@ -148,7 +148,7 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
                     seed=s["seed"], options=dict(s.get("options") or {}),
                     penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01),
                     data_support=bool(s.get("data_support", True)))
-        results = list(res) if isinstance(res, list) else [res]
+        results = [res] if isinstance(res, dict) else list(res)  # SolveResult is a dict
         for m, r in zip(mats, results):
             out[m.name] = r
     return out
@@ -186,29 +186,36 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         groups.setdefault(tuple(m.targets), []).append(m)
     first = _solve_groups(groups, settings)
 
-    # 2. importance
+    # 2. importance: the predicted loss over every feature vector reaching the target
+    #    (seed-independent; hapticsdk.compiler.solution_set), not over the solver's one
     imp_cfg = settings["importance"]
     imp_model = None
-    drops: dict[str, list[tuple[str, float, float]]] = {m.name: [] for m in mats}
+    drops: dict[str, list[Any]] = {m.name: [] for m in mats}
+    estimates: dict[str, dict[str, Any]] = {m.name: {} for m in mats}
     imp_features: dict[str, dict[str, float]] = {m.name: {} for m in mats}
     if imp_cfg.get("enabled", True):
-        from .importance import decide_drops, load_importance
+        from ..problems import build_problem
+        from .importance import decide_from_estimates, estimate_losses, load_importance
+        from .solution_set import solution_sets
         imp_model = load_importance(imp_cfg.get("model", "paper"))
         check_plugin_api(imp_model, name=imp_model.name)
+        s_cfg = settings["solver"]
         for dims, gm in groups.items():
-            if len(dims) < 2:
+            if len(dims) < 2 or not any(imp_model.judges(d, list(dims)) for d in dims):
                 continue
             needed: set[str] = set()
             for d in dims:
                 if imp_model.judges(d, list(dims)):
                     needed |= set(imp_model.features_needed(d, list(dims)))
-            keys = sorted(set().union(*(first[m.name].x_dict for m in gm)))
-            cols = {k: np.array([first[m.name].x_dict.get(k, np.nan) for m in gm]) for k in keys}
-            cols = {k: v for k, v in cols.items() if np.isfinite(v).all()}
-            decided = decide_drops(imp_model, dims, cols, imp_cfg.get("thresholds") or {},
-                                   float(imp_cfg["threshold_percent"]))
-            for m, dl in zip(gm, decided):
+            problem = build_problem(np.array([[m.targets[d] for d in dims] for m in gm]), dimensions=list(dims),
+                                    model=settings.get("model"), penalty=s_cfg.get("penalty", "paper"),
+                                    tolerance=s_cfg.get("tolerance", 0.01),
+                                    data_support=bool(s_cfg.get("data_support", True)))
+            ests = estimate_losses(imp_model, dims, solution_sets(problem), imp_cfg.get("thresholds") or {},
+                                   float(imp_cfg["threshold_percent"]), fixed=problem.fixed)
+            for m, est, dl in zip(gm, ests, decide_from_estimates(imp_model, dims, ests)):
                 drops[m.name] = dl
+                estimates[m.name] = {d: e.to_dict() for d, e in est.items()}
                 imp_features[m.name] = {k: float(first[m.name].x_dict[k]) for k in sorted(needed)
                                         if k in first[m.name].x_dict}
 
@@ -216,7 +223,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     regroup: dict[tuple[str, ...], list[_Mat]] = {}
     for m in mats:
         if drops[m.name]:
-            gone = {d for d, _, _ in drops[m.name]}
+            gone = {e.dimension for e in drops[m.name]}
             regroup.setdefault(tuple(d for d in m.targets if d not in gone), []).append(m)
     second = _solve_groups(regroup, settings)
     final = {**first, **second}
@@ -228,7 +235,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     used_actuators: set[str] = set()
     plans: dict[str, MaterialPlan] = {}
     for m in mats:
-        gone = [d for d, _, _ in drops[m.name]]
+        gone = [e.dimension for e in drops[m.name]]
         kept = [d for d in m.targets if d not in gone]
         r = final[m.name]
         read = {f.name for d in kept for f in dim_objs[d].features}
@@ -246,14 +253,25 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                                   kind="dimension") from exc
             roles[d] = list(rend.roles)
         dropped: list[DroppedDimension] = []
-        for d, loss, thr in drops[m.name]:
+        for e in drops[m.name]:
+            d = e.dimension
             rep = imp_model.replacement(d) if imp_model is not None else None
             what = "replaced by " + rep["renderer"] if rep else "not rendered"
+            flags = ""
+            if e.extrapolated_fraction > 0:
+                flags += (f"; {100 * e.extrapolated_fraction:.0f} % of the solutions give a negative loss "
+                          f"(regression extrapolating; counted as 0 %)")
+            if not e.reached:
+                flags += "; the target is not reached, estimate over the nearest feasible features"
             dropped.append(DroppedDimension(
-                dimension=d, predicted_loss_percent=round(loss, 6), threshold_percent=thr,
+                dimension=d, predicted_loss_percent=e.median_percent, threshold_percent=e.threshold_percent,
                 importance_model=imp_model.name if imp_model else None, replacement=rep,
-                reason=(f"predicted realism loss {loss:.2f} % < threshold {thr:g} % "
-                        f"(importance model {imp_model.name!r}); {what}")))
+                loss_interval_percent=[e.low_percent, e.high_percent], confidence=round(e.confidence, 6),
+                n_solutions=e.n_solutions, extrapolated_fraction=e.extrapolated_fraction,
+                reason=(f"predicted realism loss {e.median_percent:.2f} % (median over {e.n_solutions} "
+                        f"feature vectors reaching the target; 80 % interval {e.low_percent:.1f}-"
+                        f"{e.high_percent:.1f} %) < threshold {e.threshold_percent:g} % (importance model "
+                        f"{imp_model.name!r}, confidence {100 * e.confidence:.0f} %){flags}; {what}")))
             if rep:
                 roles[f"replacement:{d}"] = [rep["role"]]
         actuators: dict[str, str] = {}
@@ -277,6 +295,10 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                                           f"{registry('actuator').names()}"
                                           f"{install_hint('actuator', spec.actuator)}",
                                           field=f"scene.devices.{role}")
+                if spec.options:  # refuse privileged options now, not at render time
+                    from ..device_options import check_data_options
+                    check_data_options(registry("actuator").load(spec.actuator), spec.actuator, role,
+                                       spec.options, field=f"scene.devices.{role}.options")
                 actuators[role] = spec.actuator
                 options[role] = dict(spec.options)
         used_dims |= set(kept) | set(gone)
@@ -286,6 +308,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         plans[m.name] = MaterialPlan(
             name=m.name, targets=dict(m.targets), dimensions=kept, dropped=dropped,
             features=feats, pinned_features=pinned, importance_features=imp_features[m.name],
+            importance=estimates[m.name],
             actuators=actuators, actuator_options=options, roles=roles,
             dimension_distributions=dists,
             solve=_solve_summary(r, kept, models, settings["solver"]["seed"]),

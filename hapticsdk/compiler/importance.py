@@ -9,11 +9,21 @@ entry-point group ``hapticsdk.importance``; the core registers ``paper``
 
 Predictions are vectorised: :meth:`ImportanceModel.predict_loss` takes feature columns
 (arrays, one entry per material) and returns one loss per material.
+
+Scenes decide on the distribution of the predicted loss over every feature vector
+that reaches the material's target (:func:`estimate_losses` over the target's
+:class:`~hapticsdk.compiler.solution_set.SolutionSet`), not on the one vector a
+randomised solver returned, so the decision does not change with the solver's seed:
+a dimension is dropped when the median predicted loss is below the threshold, and the
+plan reports the 10-90 % interval and the share of solutions on the decided side
+(the decision's confidence). A negative predicted loss (the regression extrapolating
+outside the materials it was fitted on) counts as 0 % and is flagged.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
@@ -202,5 +212,98 @@ def decide_drops(model: ImportanceModel, dimensions: Sequence[str],
         if drops and len(drops) == len(dims) and not any(model.replacement(d) for d, _, _ in drops):
             keep = max(drops, key=lambda t: t[1])
             drops.remove(keep)
+        out.append(drops)
+    return out
+
+
+@dataclass
+class LossEstimate:
+    """Predicted realism loss of leaving one dimension out, over a material's solutions.
+
+    Attributes:
+        dimension: the dimension left out.
+        median_percent: median predicted loss (%), negative predictions counted as 0.
+        low_percent, high_percent: 10th and 90th percentile (%), likewise.
+        threshold_percent: the threshold it is compared with (%).
+        p_below: share of the solutions whose predicted loss is below the threshold.
+        n_solutions: number of feature vectors the estimate is taken over.
+        extrapolated_fraction: share of the solutions whose raw prediction was negative
+            (the regression outside the range it was fitted on).
+        reached: False when no feature vector reaches the target (the estimate is then
+            taken over the nearest feasible ones).
+        drop: the decision: ``median_percent < threshold_percent``.
+    """
+
+    dimension: str
+    median_percent: float
+    low_percent: float
+    high_percent: float
+    threshold_percent: float
+    p_below: float
+    n_solutions: int
+    extrapolated_fraction: float
+    reached: bool
+    drop: bool
+
+    @property
+    def confidence(self) -> float:
+        """Share of the solutions on the side of the threshold the decision took."""
+        return self.p_below if self.drop else 1.0 - self.p_below
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"dimension": self.dimension, "median_percent": self.median_percent,
+                "interval_percent": [self.low_percent, self.high_percent], "interval_level": 0.8,
+                "threshold_percent": self.threshold_percent, "p_below": self.p_below,
+                "confidence": self.confidence, "n_solutions": self.n_solutions,
+                "extrapolated_fraction": self.extrapolated_fraction, "reached": self.reached,
+                "decision": "drop" if self.drop else "keep"}
+
+
+def estimate_losses(model: ImportanceModel, dimensions: Sequence[str], sets: Sequence[Any],
+                    thresholds: Mapping[str, float], default_threshold: float,
+                    fixed: Mapping[str, float] | None = None) -> list[dict[str, LossEstimate]]:
+    """For each material (one :class:`~hapticsdk.compiler.solution_set.SolutionSet` per
+    material) the :class:`LossEstimate` of every dimension the model judges.
+
+    ``fixed``: features pinned in the solve (not in the sets' columns)."""
+    dims = list(dimensions)
+    out: list[dict[str, LossEstimate]] = []
+    for sset in sets:
+        est: dict[str, LossEstimate] = {}
+        if len(sset) == 0:
+            out.append(est)
+            continue
+        cols = sset.columns(dict(fixed or {}))
+        for d in dims:
+            if not model.judges(d, dims) or any(f not in cols for f in model.features_needed(d, dims)):
+                continue
+            raw = model.predict_loss(d, cols, dims)
+            loss = np.maximum(raw, 0.0)
+            thr = float(thresholds.get(d, default_threshold))
+            med = float(np.median(loss))
+            lo, hi = (float(v) for v in np.percentile(loss, [10.0, 90.0]))
+            est[d] = LossEstimate(dimension=d, median_percent=round(med, 6), low_percent=round(lo, 6),
+                                  high_percent=round(hi, 6), threshold_percent=thr,
+                                  p_below=round(float(np.mean(loss < thr)), 6), n_solutions=len(sset),
+                                  extrapolated_fraction=round(float(np.mean(raw < 0.0)), 6),
+                                  reached=bool(sset.reached), drop=med < thr)
+        out.append(est)
+    return out
+
+
+def decide_from_estimates(model: ImportanceModel, dimensions: Sequence[str],
+                          estimates: Sequence[Mapping[str, LossEstimate]]) -> list[list[LossEstimate]]:
+    """The dimensions to drop per material, from :func:`estimate_losses`: every estimate
+    whose decision is ``drop``; with a ``single_removal`` model at most one (the lowest
+    median); never every dimension when none has a replacement (then the one with the
+    highest median is kept)."""
+    dims = list(dimensions)
+    out: list[list[LossEstimate]] = []
+    for est in estimates:
+        drops = [est[d] for d in dims if d in est and est[d].drop]
+        if model.single_removal and len(drops) > 1:
+            drops = [min(drops, key=lambda e: e.median_percent)]
+        if drops and len(drops) == len(dims) and not any(model.replacement(e.dimension) for e in drops):
+            drops.remove(max(drops, key=lambda e: e.median_percent))
         out.append(drops)
     return out

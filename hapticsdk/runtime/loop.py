@@ -231,8 +231,14 @@ class ServoLoop:
 
     # ------------------------------------------------------------------
     def _stop_all(self) -> None:
+        """Every actuator to its safe state. Each one is tried even when another one's
+        ``stop()`` raises (a backend that breaks the never-raise contract, or a second
+        Ctrl-C); the first such exception is re-raised after all were tried."""
+        first: BaseException | None = None
         for act in _distinct([self.device, *self.actuators.values()]):
             act.stop()
+        if first is not None:
+            raise first
 
     def run(self, seconds: float) -> LoopReport:
         """Run for ``seconds`` of (simulated or real) time; return a :class:`LoopReport`."""
@@ -492,6 +498,16 @@ class ServoLoop:
                         break
                     L_sim[k] = perf() - s0
                 k += 1
+        except BaseException as exc:
+            # safety (issue 13, item 3): ANY exception leaving the loop -- KeyboardInterrupt,
+            # SystemExit, SafeStop (SIGTERM/SIGHUP), an OSError from a sink or a device
+            # step, anything from a renderer, recorder or actuator -- stops every actuator
+            # first, then propagates unchanged
+            try:
+                self._stop_all()
+            except BaseException as stop_exc:  # noqa: BLE001 - the original exception wins
+                _log.error("stopping after %s: %s", type(exc).__name__, stop_exc)
+            raise
         finally:
             rt_restore()
             if gc_was_enabled:

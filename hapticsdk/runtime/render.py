@@ -129,7 +129,8 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None)
 def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, material: str | None = None,
                 trajectory: Any = None, recorder: Any = None, realtime: bool | None = None,
                 period_s: float | None = None, hooks: bool = True,
-                raise_on_fault: bool = True) -> RenderReport:
+                raise_on_fault: bool = True,
+                actuator_options: Mapping[str, Mapping[str, Any]] | None = None) -> RenderReport:
     """Render one material of ``plan`` for ``seconds`` (s) of servo time.
 
     Args:
@@ -143,6 +144,11 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
             settings).
         hooks: call the render hooks of the plan's distributions.
         raise_on_fault: re-raise a device fault after the safe stop.
+        actuator_options: role -> options from the application (code or command line),
+            merged over the plan's options, the user's device configuration file and
+            ``$HAPTICSDK_DEVICE_OPTIONS``. The only way, with those two, to give an actuator's
+            privileged options (a native library, an output file, a port): a plan may not
+            (:mod:`hapticsdk.device_options`).
     """
     if isinstance(plan, Mapping):
         plan = RenderPlan.from_dict(plan)
@@ -155,6 +161,11 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     if not (secs > 0 and secs < 1e6):
         raise ValidationError(f"seconds must be > 0, got {seconds!r}", field="seconds")
     mp = plan.material(material)
+    app_options = _check_app_options(actuator_options)
+    unknown = sorted(set(app_options) - set(mp.actuators))
+    if unknown:
+        raise ValidationError(f"roles {unknown} are not roles of material {mp.name!r} "
+                              f"(it has {sorted(mp.actuators)})", field="actuator_options")
     servo = dict(plan.settings.get("servo") or {})
     period = float(period_s if period_s is not None else servo.get("period_s", 0.001))
     rt = bool(servo.get("realtime", False) if realtime is None else realtime)
@@ -172,16 +183,21 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
 
     from .loop import ServoLoop
 
+    # every role's options are checked before any actuator is created
+    chosen: dict[str, tuple[Any, dict[str, Any]]] = {}
+    for role in sorted(roles_used):
+        cls = registry("actuator").load(mp.actuators[role])
+        check_plugin_api(cls, name=mp.actuators[role])
+        chosen[role] = (cls, _actuator_options(cls, mp.actuators[role], role, mp, app_options))
+
     with ExitStack() as stack:
         instances: dict[tuple[str, str], Actuator] = {}
         by_role: dict[str, Actuator] = {}
         for role in sorted(roles_used):
             name = mp.actuators[role]
-            opts = dict(mp.actuator_options.get(role, {}))
-            key = (name, json.dumps(opts, sort_keys=True, default=str))
+            cls, opts = chosen[role]
+            key = (name, json.dumps(opts, sort_keys=True, default=repr))
             if key not in instances:
-                cls = registry("actuator").load(name)
-                check_plugin_api(cls, name=name)
                 if (trajectory is not None and isinstance(cls, type) and issubclass(cls, HapticDevice)
                         and getattr(cls, "simulated", False) and _accepts(cls, "trajectory")):
                     opts.setdefault("trajectory", trajectory)
@@ -240,6 +256,24 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     if pm is not None:
         pm.call_safely("hapticsdk_render_finished", plan=one, report=report)
     return report
+
+
+def _check_app_options(options: Mapping[str, Mapping[str, Any]] | None) -> dict[str, dict[str, Any]]:
+    if options is None:
+        return {}
+    if not isinstance(options, Mapping) or not all(isinstance(v, Mapping) for v in options.values()):
+        raise ValidationError("expected role -> {option: value}", field="actuator_options")
+    return {str(r): dict(v) for r, v in options.items()}
+
+
+def _actuator_options(cls: Any, name: str, role: str, mp: MaterialPlan,
+                      app_options: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
+    """The options actuator ``name`` gets for ``role``: the plan's (never a privileged
+    one), then the user's configuration and environment, then the application's."""
+    from ..device_options import check_data_options, trusted_options
+    from_plan = dict(mp.actuator_options.get(role, {}))
+    check_data_options(cls, name, role, from_plan, field=f"plan.materials.{mp.name}.actuator_options.{role}")
+    return {**from_plan, **trusted_options(name), **dict(app_options.get(role, {}))}
 
 
 def _ticks(lr: Any) -> int | None:

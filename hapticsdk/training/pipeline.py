@@ -28,7 +28,8 @@ from ..errors import RecordingError, ValidationError
 from ..features import Feature, FeatureSpace
 from ..schemas_io import read_json
 from .extraction import FEATURE_DESCRIPTIONS, FEATURE_NAMES, FEATURE_UNITS, FeatureTable, extract_set, extract_trials
-from .recordings import MANIFEST_NAME, Ratings, load_manifest, load_ratings, validate_json, write_ratings
+from .recordings import (MANIFEST_NAME, Ratings, load_manifest, load_ratings, path_inside, validate_json,
+                         write_ratings)
 
 DATASET_NAME = "dataset.json"
 TRIAL_FEATURES = "trial_features.csv"
@@ -124,8 +125,8 @@ def write_feature_dataset(out: Path | str, ft: FeatureTable, ratings: Ratings, *
 def _read_trial_features(path: Path) -> FeatureTable:
     if not path.is_file():
         raise RecordingError(f"{path}: trial feature table not found", field="file")
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
+    from ..schemas_io import read_csv_rows
+    _, rows = read_csv_rows(path, field="file", error=RecordingError)  # UTF-8, bounded, well-formed
     if not rows:
         raise RecordingError(f"{path}: empty file", field="rows")
     head = rows[0]
@@ -158,14 +159,23 @@ def load_table(path: Path | str) -> TrainingTable:
     if (p / MANIFEST_NAME).is_file():
         rs = load_manifest(p)
         ft = extract_set(rs)
-        ratings = load_ratings(rs.root / rs.manifest.get("ratings", "ratings.json"))
+        ratings = load_ratings(path_inside(rs.root, rs.manifest.get("ratings", "ratings.json"), field="ratings",
+                                           where=str(rs.root / MANIFEST_NAME)))
         return TrainingTable(ft, ratings, rs.samples or [{"name": n} for n in ft.sample_names],
                              bool(rs.manifest.get("generated", False)), str(rs.manifest.get("source", "")),
                              {"fs_hz": rs.fs_hz, "kind": "recordings", "settings": rs.manifest.get("generator")})
     if (p / DATASET_NAME).is_file():
         doc = read_json(p / DATASET_NAME, field="file", error=RecordingError)
-        ft = _read_trial_features(p / doc.get("files", {}).get("trial_features", TRIAL_FEATURES))
-        ratings = load_ratings(p / doc.get("files", {}).get("ratings", "ratings.json"))
+        if not isinstance(doc, dict):
+            raise RecordingError(f"{p / DATASET_NAME}: expected a JSON object", field="file")
+        files = doc.get("files") or {}
+        if not isinstance(files, dict):
+            raise RecordingError(f"{p / DATASET_NAME}: 'files' must be an object", field="files")
+        where = str(p / DATASET_NAME)
+        ft = _read_trial_features(path_inside(p, files.get("trial_features", TRIAL_FEATURES),
+                                              field="files.trial_features", where=where))
+        ratings = load_ratings(path_inside(p, files.get("ratings", "ratings.json"), field="files.ratings",
+                                           where=where))
         return TrainingTable(ft, ratings, doc.get("samples", []), bool(doc.get("generated", False)),
                              str(doc.get("source", "")),
                              {"fs_hz": doc.get("fs_hz"), "kind": "features", "settings": doc.get("generator")})

@@ -29,7 +29,6 @@ and trial and whose ``field`` names the offending column or manifest key.
 
 from __future__ import annotations
 
-import csv
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -126,14 +125,17 @@ def read_trial_file(path: Path) -> dict[str, np.ndarray]:
     if not path.is_file():
         raise RecordingError(f"{path}: trial file not found", field="file")
     if path.suffix == ".npz":
+        import zipfile
+        import zlib
         try:
             with np.load(path, allow_pickle=False) as z:
                 cols = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as exc:
-            raise RecordingError(f"{path}: unreadable npz ({exc})", field="file") from None
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+            # truncated or corrupted archive, a pickled member, not a zip at all
+            raise RecordingError(f"{path}: unreadable npz ({type(exc).__name__}: {exc})", field="file") from None
     elif path.suffix == ".csv":
-        with open(path, newline="") as fh:
-            rows = list(csv.reader(fh))
+        from ..schemas_io import read_csv_rows
+        _, rows = read_csv_rows(path, field="file", error=RecordingError)  # UTF-8, bounded, well-formed
         if not rows:
             raise RecordingError(f"{path}: empty file (no header)", field="rows")
         header = [h.strip() for h in rows[0]]
@@ -280,7 +282,7 @@ class RecordingSet:
     def load_trial(self, entry: Mapping[str, Any]) -> Trial:
         """Load (not yet validate) the trial of one manifest entry."""
         m = self.manifest
-        path = self.root / entry["file"]
+        path = path_inside(self.root, entry["file"], field="file", where=str(self.root / MANIFEST_NAME))
         cols = read_trial_file(path)
         return trial_from_columns(cols, sample=entry["sample"], trial=entry["trial"],
                                   fs_hz=entry.get("fs_hz", m["fs_hz"]),
@@ -291,6 +293,24 @@ class RecordingSet:
     def iter_trials(self):
         for e in self.entries:
             yield self.load_trial(e)
+
+
+def path_inside(root: Path | str, name: Any, *, field: str, where: str = "") -> Path:
+    """``root / name`` for a file named by a manifest, refused with RecordingError when
+    ``name`` is absolute, empty or climbs out of ``root`` with ``..`` (a manifest is data:
+    it may only name files inside its own folder)."""
+    import posixpath
+
+    text = str(name)
+    w = f"{where}: " if where else ""
+    if not text or "\x00" in text:
+        raise RecordingError(f"{w}empty or invalid file name {text!r}", field=field)
+    norm = posixpath.normpath(text.replace("\\", "/"))
+    if (text.startswith(("/", "\\")) or Path(text).is_absolute() or (len(text) > 1 and text[1] == ":")
+            or norm == ".." or norm.startswith("../")):
+        raise RecordingError(f"{w}file {text!r} is outside the recording folder (absolute or '..'); "
+                             "name files relative to the manifest's folder", field=field)
+    return Path(root) / norm
 
 
 def _read_checked(path: Path | str, default_name: str, schema: str) -> tuple[Path, Any]:
@@ -312,6 +332,9 @@ def load_manifest(path: Path | str) -> RecordingSet:
         if key in seen:
             raise RecordingError(f"{p}: duplicate trial {key}", field=f"trials.{i}")
         seen.add(key)
+        path_inside(p.parent, e["file"], field=f"trials.{i}.file", where=str(p))
+    if "ratings" in doc:
+        path_inside(p.parent, doc["ratings"], field="ratings", where=str(p))
     return RecordingSet(root=p.parent, manifest=doc)
 
 

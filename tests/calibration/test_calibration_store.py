@@ -63,3 +63,30 @@ def test_env_directory(tmp_path, monkeypatch):
     assert p.parent == tmp_path / "cal"
     got = load_calibration("voicecoil", "Z")
     assert got.origin == "file" and got.generated is True
+
+
+def test_calibration_dir_is_per_user_with_the_environment_override(monkeypatch, tmp_path):
+    import platformdirs
+
+    from hapticsdk.calibration import store
+
+    monkeypatch.setenv(store.ENV_DIR, str(tmp_path / "mine"))
+    assert store.calibration_dir() == tmp_path / "mine"
+    monkeypatch.delenv(store.ENV_DIR)
+    # the per-user directory comes from platformdirs (right on Windows and macOS too) ...
+    seen = []
+
+    def fake(appname, appauthor=None, **kw):
+        seen.append((appname, appauthor))
+        return tmp_path / "platform-config" / appname
+
+    monkeypatch.setattr(platformdirs, "user_config_path", fake)
+    assert store.calibration_dir() == tmp_path / "platform-config" / "hapticsdk" / "calibration"
+    assert seen == [("hapticsdk", False)]
+    monkeypatch.undo()
+    # ... which on Linux follows XDG_CONFIG_HOME
+    import sys
+    if sys.platform.startswith("linux"):
+        monkeypatch.delenv(store.ENV_DIR, raising=False)
+        monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+        assert store.calibration_dir() == tmp_path / "xdg" / "hapticsdk" / "calibration"

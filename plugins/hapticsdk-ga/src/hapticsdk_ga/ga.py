@@ -38,7 +38,15 @@ import numpy as np
 
 from hapticsdk.solvers import SolveProblem, Solver, SolverOutput, Trace
 
-from ._common import Clock, Evaluator, check_budget, check_fraction, check_int, solved_mask, target_error
+from ._common import (Clock, Evaluator, check_budget, check_fraction, check_int, sample_cloud, solved_mask,
+                      target_error)
+
+#: upper limits of the size options (a run of the paper's size is 100 x 50; these bound a
+#: mistyped value, e.g. ``generations: 1e9``, instead of running for days)
+MAX_POPULATION = 100_000
+MAX_GENERATIONS = 1_000_000
+#: individuals of ``init="nearest"`` taken from the sample cloud
+NEAREST_INIT = 8
 
 
 def _rank_select(order_flat: np.ndarray, u: np.ndarray, size: int) -> np.ndarray:
@@ -182,29 +190,36 @@ class GASolver(Solver):
     ``elite_count`` (5 = MATLAB ``ga`` default 5 % of 100; 0 disables elitism),
     ``target_error`` (None = the problem's tolerance; 0 never stops early),
     ``time_budget_s`` (None = unlimited; wall seconds for the whole batch),
-    ``init`` (``"uniform"``: uniform in bounds; ``problem.x0`` rows, when given, replace
-    individual 0 of each target).
+    ``init`` (``"uniform"``: uniform in bounds; ``"nearest"``: the first ``min(8,
+    population)`` individuals of each target are the feasible samples of a fixed cached
+    cloud whose intensities are nearest the target (:func:`~hapticsdk_ga._common.sample_cloud`),
+    the rest uniform; with either, ``problem.x0`` rows, when given, replace individual 0),
+    ``stall_generations`` (None = never: a target whose best fitness has not fallen by more
+    than 0.1 % in that many generations leaves the batch, like MATLAB's
+    ``MaxStallGenerations``).
     """
 
     name: ClassVar[str] = "ga"
     default_options: ClassVar[dict[str, Any]] = {
         "population": 100, "generations": 50, "tournament": 2, "crossover_fraction": 0.6,
         "mutation_rate": 0.2, "elite_count": 5, "target_error": None, "time_budget_s": None,
-        "init": "uniform",
+        "init": "uniform", "stall_generations": None,
     }
 
     def _settings(self) -> dict[str, Any]:
         o = self.options
-        pop = check_int(o, "population", 2)
-        s = {"population": pop, "generations": check_int(o, "generations", 0),
+        pop = check_int(o, "population", 2, MAX_POPULATION)
+        s = {"population": pop, "generations": check_int(o, "generations", 0, MAX_GENERATIONS),
              "tournament": check_int(o, "tournament", 1, pop),
              "crossover_fraction": check_fraction(o, "crossover_fraction"),
              "mutation_rate": check_fraction(o, "mutation_rate"),
              "elite_count": check_int(o, "elite_count", 0, pop - 1),
-             "time_budget_s": check_budget(o)}
-        if o["init"] != "uniform":
+             "time_budget_s": check_budget(o),
+             "stall_generations": check_int(o, "stall_generations", 1, MAX_GENERATIONS, allow_none=True)}
+        if o["init"] not in ("uniform", "nearest"):
             from hapticsdk.errors import ValidationError
-            raise ValidationError(f"unknown init {o['init']!r}; valid: ['uniform']", field="options.init")
+            raise ValidationError(f"unknown init {o['init']!r}; valid: ['uniform', 'nearest']",
+                                  field="options.init")
         return s
 
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
@@ -223,6 +238,9 @@ class GASolver(Solver):
         rng.random((m, p, d), out=pop)
         pop *= span
         pop += lower
+        if self.options["init"] == "nearest":
+            k = min(NEAREST_INIT, p)
+            pop[:, :k] = sample_cloud(problem).nearest(problem.targets, k)
         if problem.x0 is not None:
             pop[:, 0] = problem.x0
         fit, err, viol = ev(pop)
@@ -240,6 +258,11 @@ class GASolver(Solver):
         reason = "generations exhausted"
         kw = dict(elite=elite, n_cross=n_cross, tournament=s["tournament"], mutation_rate=s["mutation_rate"])
         rows = np.flatnonzero(active)
+        stall_n = s["stall_generations"]
+        if stall_n is not None:
+            ref_f = best_f.copy()           # best fitness when it last fell by > 0.1 %
+            since = np.zeros(m, int)        # generations since then
+        n_stalled = 0
         while gen < s["generations"]:
             if not rows.size:
                 reason = f"all targets within target_error {goal:g}"
@@ -278,9 +301,22 @@ class GASolver(Solver):
                     pop, fit = pop[:k], fit[still]
             else:
                 trace.record(ev.nfev, best_e, best_v)
+            if stall_n is not None and rows.size:
+                fell = best_f[rows] < ref_f[rows] - 1e-3 * np.abs(ref_f[rows])
+                ref_f[rows[fell]] = best_f[rows[fell]]
+                since[rows] = np.where(fell, 0, since[rows] + 1)
+                still = since[rows] < stall_n
+                if not still.all():
+                    n_stalled += int((~still).sum())
+                    rows = rows[still]
+                    k = rows.size
+                    pop[:k] = pop[still]
+                    pop, fit = pop[:k], fit[still]
         else:
             if not rows.size:
                 reason = f"all targets within target_error {goal:g}"
+        if n_stalled:
+            reason += f"; {n_stalled} target(s) stalled for {stall_n} generations"
         return SolverOutput(x=best_x, nfev=ev.nfev, nit=gen,
                             message=f"{gen} generations, {reason}")
 

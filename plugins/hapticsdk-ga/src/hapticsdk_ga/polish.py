@@ -33,7 +33,14 @@ from hapticsdk.errors import ValidationError
 from hapticsdk.solvers import CONSTRAINT_TOL, SolveProblem, Solver, SolverOutput, Trace
 
 from ._common import (Clock, check_budget, check_fraction, check_int, constraint_shortfalls, merge_options,
-                      rank_key, violation_from)
+                      rank_key, sample_cloud, solved_mask, violation_from)
+
+#: upper limits of the size options (they bound a mistyped value, not a sensible one)
+MAX_ITER = 100_000
+_SCALED = False
+_DIAG_FLOOR = 1e-6
+_SETTLE_FTOL = 0.0
+MAX_STARTS = 10_000
 
 
 class _Residuals:
@@ -203,7 +210,11 @@ def levenberg_marquardt(problem: SolveProblem, X0: np.ndarray, rows: np.ndarray,
             g[held] = 0.0
         JT = np.transpose(Ja, (0, 2, 1))
         A = JT @ Ja
-        A += la[:, None, None] * eye
+        if _SCALED:
+            dg = np.einsum("nii->ni", A)
+            A += (la[:, None] * np.maximum(dg, _DIAG_FLOOR))[:, :, None] * eye
+        else:
+            A += la[:, None, None] * eye
         step = np.linalg.solve(A, -g[..., None])[..., 0]
         step += Ua
         Un = np.clip(step, 0.0, 1.0, out=step)
@@ -216,7 +227,11 @@ def levenberg_marquardt(problem: SolveProblem, X0: np.ndarray, rows: np.ndarray,
             # an accepted step lowering f by <= ftol*f starts (or extends) a stall; once
             # stalled, rejected steps extend it too (before that they are the normal damping
             # search of LM); an accepted step with real progress ends it
-            tiny = acc & (fa - fn <= ftol * fa)
+            if _SETTLE_FTOL and settle is not None:
+                ft = np.where(ea <= settle, max(ftol, _SETTLE_FTOL), ftol)
+                tiny = acc & (fa - fn <= ft * fa)
+            else:
+                tiny = acc & (fa - fn <= ftol * fa)
             stall = np.where(tiny | (~acc & (stall > 0)), stall + 1, np.where(acc, 0, stall))
             conv = stall >= patience
         if acc.any():
@@ -352,18 +367,26 @@ class PolishSolver(Solver):
     default_options: ClassVar[dict[str, Any]] = {
         "max_iter": 30, "starts": 4, "start": "auto", "ga_options": None, "target_error": 1e-6,
         "ftol": 1e-4, "damping": 1e-2, "constraint_margin": 1e-6, "constraint_weight": 1.0, "time_budget_s": None,
+        "rescue_starts": 8, "patience": 5,
     }
     _ga_defaults: ClassVar[dict[str, Any]] = {"population": 30, "generations": 10}
 
     def _starts(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace, n_starts: int,
                 start: str) -> tuple[np.ndarray, int]:
+        """``(m * n_starts, d)`` start rows (target-major) and the model rows spent on them.
+
+        Row 0 of a target: ``problem.x0`` (``"auto"``/``"x0"``, when given) or the GA's best
+        (``"ga"``); then, except for ``"random"``, the feasible samples of the cached cloud
+        nearest the target (about half of the starts); the rest uniform in bounds."""
         m, d = problem.n_targets, problem.n_features
         lower, span = problem.space.lower, problem.space.upper - problem.space.lower
         X = lower + rng.random((m, n_starts, d)) * span
         nfev = 0
+        first = 0
         if start in ("auto", "x0"):
             if problem.x0 is not None:
                 X[:, 0] = problem.x0
+                first = 1
             elif start == "x0":
                 raise ValidationError("start='x0' needs problem.x0", field="options.start")
         elif start == "ga":
@@ -374,15 +397,19 @@ class PolishSolver(Solver):
             out = GASolver(**ga_opts)._solve(problem, rng, trace)
             X[:, 0] = out.x
             nfev = out.nfev
+            first = 1
         elif start != "random":
             raise ValidationError(f"unknown start {start!r}; valid: ['auto', 'x0', 'random', 'ga']",
                                   field="options.start")
+        if start != "random" and n_starts > first:
+            k = max(1, (n_starts - first + 1) // 2)
+            X[:, first:first + k] = sample_cloud(problem).nearest(problem.targets, k)
         return X.reshape(m * n_starts, d), nfev
 
     def _run(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace, *, start: str,
              n_starts: int) -> SolverOutput:
         o = self.options
-        max_iter = check_int(o, "max_iter", 0)
+        max_iter = check_int(o, "max_iter", 0, MAX_ITER)
         goal = float(o["target_error"])
         if not (np.isfinite(goal) and goal >= 0):
             raise ValidationError("must be >= 0", field="options.target_error")
@@ -390,24 +417,46 @@ class PolishSolver(Solver):
         ftol = check_fraction(o, "ftol", 0.0, 1.0)
         margin = check_fraction(o, "constraint_margin", 0.0, 1.0)
         weight = check_fraction(o, "constraint_weight", 1e-12, 1e12)
+        rescue = check_int(o, "rescue_starts", 0, MAX_STARTS)
         clock = Clock(check_budget(o))
         m = problem.n_targets
         if start == "x0" and problem.x0 is not None:
             n_starts = 1
         X0, nfev0 = self._starts(problem, rng, trace, n_starts, start)
         rows = np.repeat(np.arange(m), n_starts)
+        lm = dict(max_iter=max_iter, goal=goal, damping=damping, margin=margin, weight=weight, clock=clock,
+                  ftol=ftol, patience=check_int(o, "patience", 1, MAX_ITER), per_target=True,
+                  settle=float(problem.tolerance))
         X, err, viol, it, nfev = levenberg_marquardt(
-            problem, X0, rows, max_iter=max_iter, goal=goal, damping=damping, margin=margin,
-            weight=weight, clock=clock, on_iter=_BestTrace(trace, m, n_starts, nfev0), ftol=ftol,
-            per_target=True, settle=float(problem.tolerance))
+            problem, X0, rows, on_iter=_BestTrace(trace, m, n_starts, nfev0), **lm)
         xb, eb, vb = pick_best(X, err, viol, m, n_starts)
+        note = ""
+        # rescue: a target none of whose starts got within the tolerance (a local minimum or
+        # a stall) gets ``rescue_starts`` fresh starts: its next-nearest cloud samples and
+        # random points, solved the same way; kept only where better
+        miss = np.flatnonzero(~solved_mask(eb, vb, float(problem.tolerance)))
+        if rescue and miss.size and not clock.expired():
+            k_near = (rescue + 1) // 2
+            near = sample_cloud(problem).nearest(problem.targets[miss], n_starts + k_near)[:, -k_near:]
+            lower, span = problem.space.lower, problem.space.upper - problem.space.lower
+            XR = lower + rng.random((miss.size, rescue, problem.n_features)) * span
+            XR[:, :k_near] = near
+            Xr, er, vr, it2, nfev2 = levenberg_marquardt(
+                problem, XR.reshape(-1, problem.n_features), np.repeat(miss, rescue), **lm)
+            nfev += nfev2
+            it += it2
+            xr, err_r, viol_r = pick_best(Xr, er, vr, miss.size, rescue)
+            better = rank_key(err_r, viol_r) < rank_key(eb[miss], vb[miss])
+            xb[miss[better]], eb[miss[better]], vb[miss[better]] = xr[better], err_r[better], viol_r[better]
+            trace.record(nfev0 + nfev, eb, vb)
+            note = f"; {miss.size} target(s) not within tolerance retried from {rescue} new starts"
         ok = int(((eb <= goal) & (vb <= CONSTRAINT_TOL)).sum())
         return SolverOutput(x=xb, nfev=nfev0 + nfev, nit=it,
-                            message=f"LM {it} iterations x {n_starts} starts; {ok}/{m} at error <= {goal:g}")
+                            message=f"LM {it} iterations x {n_starts} starts{note}; {ok}/{m} at error <= {goal:g}")
 
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
         return self._run(problem, rng, trace, start=self.options["start"],
-                         n_starts=check_int(self.options, "starts", 1))
+                         n_starts=check_int(self.options, "starts", 1, MAX_STARTS))
 
 
 class GAPolishSolver(PolishSolver):

@@ -14,6 +14,12 @@ device and the HD error; the core then stops it (zero force, force output disabl
 Constants are the OpenHaptics 3.30 ``hdDefines.h`` values (kept in this one module).
 Library lookup order: ``library=`` option, ``$HAPTICSDK_LIBHD``, ``ctypes.util.find_library("HD")``,
 then the platform names below; a failure names every file tried and how to install.
+
+Only trusted code is loaded: ``library`` is a privileged option (never from a scene or plan
+file, see :mod:`hapticsdk.device_options`); a bare name is looked up by the system loader
+and must be an HD library name (``libHD.so[.N]``, ``libHD.dylib``, ``HD.dll``); an
+explicit path must be absolute and a regular file (a relative path would resolve against
+the current directory, e.g. a downloaded scene's folder).
 """
 
 from __future__ import annotations
@@ -21,6 +27,8 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import os
+import re
+import stat
 import sys
 import threading
 import time
@@ -134,6 +142,24 @@ def library_candidates(explicit: str | None = None) -> list[str]:
     return names + [e for e in extra if e not in names]
 
 
+_HD_NAME = re.compile(r"^(lib)?HD(\.so(\.[0-9]+)*|\.dylib|\.dll)?$")
+
+
+def check_candidate(cand: str) -> str | None:
+    """Why ``cand`` may not be loaded (``None``: it may). See the module docstring."""
+    if os.path.sep not in cand and (os.path.altsep or "/") not in cand:
+        return None if _HD_NAME.match(cand) else "not an HD library name (libHD.so, libHD.dylib, HD.dll)"
+    if not os.path.isabs(cand):
+        return "a relative path; give an absolute path"
+    try:
+        st = os.stat(cand)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    if not stat.S_ISREG(st.st_mode):
+        return "not a regular file"
+    return None
+
+
 def bind(lib: Any) -> Any:
     """Set ``restype``/``argtypes`` of every HD function used (once per library)."""
     for fname, (res, args) in PROTOTYPES.items():
@@ -148,6 +174,10 @@ def load_library(explicit: str | None = None, *, device: str = "omni-openhaptics
     naming every file tried and what to install."""
     tried: list[str] = []
     for cand in library_candidates(explicit):
+        why = check_candidate(cand)
+        if why is not None:
+            tried.append(f"{cand} (refused: {why})")
+            continue
         try:
             lib = ctypes.CDLL(cand)
         except OSError as exc:
@@ -181,6 +211,8 @@ class OmniOpenHaptics(HapticDevice):
     channel: ClassVar[str] = "force"
     simulated: ClassVar[bool] = False
     limits = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3)
+    #: ``library`` is loaded into the process: never from a scene/plan file
+    privileged_options: ClassVar[dict[str, str]] = {"library": "native library"}
 
     def __init__(self, *, config: str | None = None, library: str | None = None, rate_hz: int = 1000,
                  surface_y_mm: float = 0.0, command_timeout_s: float = 0.05, **options: Any) -> None:

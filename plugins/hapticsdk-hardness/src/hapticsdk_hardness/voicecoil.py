@@ -37,6 +37,8 @@ class VoiceCoilVirtual(Actuator):
     name: ClassVar[str] = "voicecoil-virtual"
     channel: ClassVar[str] = "vibration"
     simulated: ClassVar[bool] = True
+    #: ``sink`` can name a file to write (``"wav:PATH"``) or an audio device: never from a scene/plan file
+    privileged_options: ClassVar[dict[str, str]] = {"sink": "output file or audio device"}
     limits = ActuatorLimits(frequency_range_hz=(1.0, 1000.0), max_amplitude=1.0, amplitude_unit="1")
 
     def __init__(self, *, sample_rate_hz: float = 5000.0, sink: Any = None, ramp_s: float = 0.005,

@@ -138,6 +138,12 @@ class PiezoSerial(DRV2667Actuator):
     """
 
     name: ClassVar[str] = "piezo-serial"
+    #: ``port`` is a machine address, not material data: a scene shared between machines
+    #: would send bridge frames to whatever device sits there, and pyserial URLs
+    #: (``spy://...?logfile=``, ``socket://``, ``rfc2217://``) write files or open network
+    #: connections. It comes from code, ``--device-option``, the environment or the user's
+    #: device configuration; a scene may give ``serial_number`` (checked on open).
+    privileged_options: ClassVar[dict[str, str]] = {"port": "serial port or pyserial URL (device address)"}
 
     def __init__(self, *, port: str | None = None, baudrate: int = 115200, timeout: float = 0.05,
                  retries: int = 3, serial_number: str | None = None, **options: Any) -> None:
@@ -177,6 +183,8 @@ class PiezoMCP2221(DRV2667Actuator):
     """
 
     name: ClassVar[str] = "piezo-mcp2221"
+    #: ``backend`` is a Python object (a pyusb backend): code only
+    privileged_options: ClassVar[dict[str, str]] = {"backend": "USB backend object"}
 
     def __init__(self, *, serial_number: str | None = None, speed_hz: int = 400_000, timeout_ms: int = 100,
                  backend: Any = None, **options: Any) -> None:
