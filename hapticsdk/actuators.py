@@ -141,9 +141,15 @@ class Actuator(ABC):
         self._is_open = False
         self.fault: BaseException | None = None
         self.last_command: ChannelCommand | None = None
+        from .safety import SafetyLayer
         if safety is None:
-            from .safety import SafetyLayer
             safety = SafetyLayer(self.limits)
+        elif not isinstance(safety, SafetyLayer):
+            # e.g. a scene file's device options {"safety": "off"}: the safety layer is not
+            # an option a file can set or switch off
+            raise ValidationError(f"safety must be a hapticsdk.safety.SafetyLayer built in code, got "
+                                  f"{type(safety).__name__} {safety!r}; the safety layer cannot be set or "
+                                  "turned off from a scene or plan file", field="options.safety")
         self.safety = safety
 
     # -- lifecycle ---------------------------------------------------------

@@ -85,9 +85,15 @@ class TickInput:
         dt: measured time since the previous tick (s).
         penetration_mm: depth of the probe into the material along the normal (mm), >= 0
             in contact, <= 0 outside.
-        velocity_mm_s: probe velocity, shape (3,), (mm/s); index 0 is the lateral
-            sliding direction x, index 1 the normal y.
+        velocity_mm_s: probe velocity in the contact frame, shape (3,), (mm/s): index 1
+            is the component along the object's outward normal, index 0 the sliding
+            speed along the surface (on a surface with normal +y, as in a version-1 scene,
+            the signed lateral velocity x, and index 2 is z; on any other normal the
+            tangential speed, >= 0, and index 2 is 0).
         in_contact: penetration > 0.
+        normal: the object's outward unit normal at the contact, ``(nx, ny, nz)`` in device
+            coordinates; ``(0, 1, 0)`` for the version-1 plane y = 0.
+        object: name of the object under the probe (None when no scene object is named).
     """
 
     t: float
@@ -95,6 +101,8 @@ class TickInput:
     penetration_mm: float
     velocity_mm_s: np.ndarray
     in_contact: bool
+    normal: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    object: str | None = None
 
 
 @dataclass
@@ -103,13 +111,17 @@ class ChannelCommand:
 
     ``force_n`` for force channels (normal force, N, pushing the probe out);
     ``frequency_hz`` and ``amplitude`` for vibration channels (amplitude in the
-    actuator's own unit: V for a piezo, 0..1 for a voice coil).
+    actuator's own unit: V for a piezo, 0..1 for a voice coil). ``direction``: the unit
+    vector (device coordinates) the force pushes along, the contact normal; None means
+    +y (the version-1 surface). A device that renders along one axis only applies the
+    projection of the force on its axis (the simulated Omni: ``force_n * direction[1]``).
     """
 
     role: str
     force_n: float | None = None
     frequency_hz: float | None = None
     amplitude: float | None = None
+    direction: tuple[float, float, float] | None = None
 
 
 class DimensionRenderer(ABC):
@@ -145,6 +157,10 @@ class PerceptionDimension(ABC):
     default_actuators: ClassVar[dict[str, str]] = {}
     #: Features a material of this dimension needs to be rendered (subset of ``features``).
     render_features: ClassVar[tuple[str, ...]] = ()
+    #: Saved actuator calibrations the renderer takes: renderer option -> (calibration
+    #: kind, channel role), e.g. ``{"calibration": ("voicecoil", "coil")}``; the core loads
+    #: them from the calibration store (:mod:`hapticsdk.calibration.selection`).
+    calibrations: ClassVar[dict[str, tuple[str, str]]] = {}
     #: Name (group ``hapticsdk.models``) of the perception model that covers this dimension
     #: when a scene names none; dimensions sharing a model are solved with it together.
     default_model: ClassVar[str] = "default"

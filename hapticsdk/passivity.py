@@ -182,12 +182,41 @@ def critical_stiffness(b: float, T: float, d: int = 0, B: float = 0.0, *, mass_k
     return k * float(mass_correction(b, T, d, mass_kg))
 
 
+def _check_wall(K: Any, b: Any, T: Any, d: Any, B: Any) -> tuple[float, float, float, int, float]:
+    """Validated scalar wall parameters (see :func:`classify_wall`)."""
+    def num(v: Any, name: str) -> float:
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)):
+            raise ValidationError(f"must be a number, got {v!r}", field=name)
+        x = float(v)
+        if not math.isfinite(x):
+            raise ValidationError(f"must be finite, got {v!r}", field=name)
+        return x
+    K_, b_, T_, B_ = num(K, "K"), num(b, "b"), num(T, "T"), num(B, "B")
+    if K_ < 0:
+        raise ValidationError(f"stiffness must be >= 0 N/mm, got {K!r}", field="K")
+    if b_ < 0:
+        raise ValidationError(f"device damping must be >= 0 N*s/m, got {b!r}", field="b")
+    if T_ <= 0:
+        raise ValidationError(f"period must be > 0 s, got {T!r}", field="T")
+    if isinstance(d, bool) or not isinstance(d, (int, np.integer)) and not (
+            isinstance(d, (float, np.floating)) and float(d).is_integer()):
+        raise ValidationError(f"delay must be a whole number of ticks, got {d!r}", field="d")
+    if int(d) < 0:
+        raise ValidationError(f"delay must be >= 0 ticks, got {d!r}", field="d")
+    return K_, b_, T_, int(d), B_
+
+
 def classify_wall(K: float, b: float, T: float, d: int = 0, B: float = 0.0, *,
                   mass_kg: float | None = None) -> dict[str, Any]:
     """Margin (N*s/m), critical stiffness (N/mm) and the label of a wall.
 
     The label is ``"passive"`` only when the margin is positive; a wall that needs the
     user's hand to be stable is ``"stable-by-assumption (not passive)"``.
+
+    Raises :class:`~hapticsdk.errors.ValidationError` (naming the argument) for a
+    stiffness, device damping or period that is negative, zero (period) or not finite, a
+    delay that is not a whole number >= 0, or a virtual damping that is not finite: a
+    nonsensical wall gets no verdict, least of all "passive".
 
     With ``mass_kg`` (kg) the same fields (and the label, which stays the Colgate
     *passivity* verdict) are returned plus ``mass_kg``, ``delta_bT_over_m`` (-),
@@ -196,6 +225,7 @@ def classify_wall(K: float, b: float, T: float, d: int = 0, B: float = 0.0, *,
     device, N/mm). Between the two critical stiffnesses the free device is stable but
     the wall is not passive, so no passivity is claimed there.
     """
+    K, b, T, d, B = _check_wall(K, b, T, d, B)
     m = float(passivity_margin(K, B, b, T, d))
     out = {"stiffness_n_per_mm": float(K), "virtual_damping_ns_per_m": float(B),
            "device_damping_ns_per_m": float(b), "period_s": float(T), "delay_ticks": int(d),

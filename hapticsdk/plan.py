@@ -113,6 +113,11 @@ class MaterialPlan:
         solve: outcome of the final solve (success, error, intensities, message, ...).
         source: ``"library"`` or ``"intensities"``.
         objects: scene objects made of this material.
+        calibrations: dimension -> the actuator calibration its renderer uses: ``kind``,
+            ``role``, ``serial``, ``origin`` (``file``, ``file-any``, ``default``,
+            ``renderer_options``), ``file`` and ``sha256`` (of the calibration file read at
+            compile time; ``None`` for a default), ``source`` (words). Rendering loads the
+            calibration again and reports it (:mod:`hapticsdk.calibration.selection`).
     """
 
     name: str
@@ -130,6 +135,7 @@ class MaterialPlan:
     solve: dict[str, Any] = field(default_factory=dict)
     source: str = "intensities"
     objects: list[str] = field(default_factory=list)
+    calibrations: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     @property
     def replacements(self) -> list[DroppedDimension]:
@@ -146,7 +152,8 @@ class MaterialPlan:
                 "actuator_options": {k: dict(v) for k, v in self.actuator_options.items()},
                 "roles": {k: list(v) for k, v in self.roles.items()},
                 "dimension_distributions": dict(self.dimension_distributions),
-                "solve": dict(self.solve)}
+                "solve": dict(self.solve),
+                "calibrations": {k: dict(v) for k, v in self.calibrations.items()}}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "MaterialPlan":
@@ -162,7 +169,8 @@ class MaterialPlan:
                    roles={k: list(v) for k, v in d.get("roles", {}).items()},
                    dimension_distributions=dict(d.get("dimension_distributions", {})),
                    solve=dict(d.get("solve", {})), source=d.get("source", "intensities"),
-                   objects=list(d.get("objects", [])))
+                   objects=list(d.get("objects", [])),
+                   calibrations={k: dict(v) for k, v in d.get("calibrations", {}).items()})
 
 
 @dataclass
@@ -252,8 +260,14 @@ class RenderPlan:
 
     @classmethod
     def load(cls, path: str | Path) -> "RenderPlan":
+        """Read a plan file. A plan file is data: besides the schema, every feature
+        value is checked against the range its dimension declares (widened to the
+        solving model's data bounds), so a hand-edited ``GS: 1e6`` is refused here
+        with the field named, not clamped by the safety layer later."""
         from .schemas_io import read_json
-        return cls.from_dict(read_json(path, field="plan"))
+        plan = cls.from_dict(read_json(path, field="plan"))
+        check_plan_features(plan)
+        return plan
 
     def summary(self) -> dict[str, Any]:
         """The short form printed by ``hapticsdk plan --json``."""
@@ -274,6 +288,59 @@ class RenderPlan:
                 "plugins_loaded": [dict(p) for p in self.plugins],
                 "unused_plugins": [dict(p) for p in self.unused_plugins],
                 "plugin_api_version": self.plugin_api_version}
+
+
+def feature_ranges(mp: "MaterialPlan") -> dict[str, tuple[float, float]]:
+    """Accepted range per feature of one material: the bounds the kept (and dropped)
+    dimensions declare for their features, widened to the bounds of the registered
+    perception model(s) the solve names (a model named by a file path is not loaded)."""
+    from .errors import HapticSDKError
+    from .plugins import registry
+
+    ranges: dict[str, tuple[float, float]] = {}
+
+    def widen(name: str, lo: float, hi: float) -> None:
+        a, b = ranges.get(name, (lo, hi))
+        ranges[name] = (min(a, lo), max(b, hi))
+
+    reg = registry("dimension")
+    for dim in list(mp.dimensions) + [d.dimension for d in mp.dropped]:
+        if dim not in reg.names():
+            continue  # rendering reports the missing plugin
+        for f in getattr(reg.load(dim), "features", ()):
+            widen(f.name, float(f.lower), float(f.upper))
+    models = (mp.solve or {}).get("models") or []
+    if isinstance(models, list):
+        mreg = registry("model")
+        for name in models:
+            if not isinstance(name, str) or name.endswith(".onnx") or name not in mreg.names():
+                continue
+            try:
+                from .problems import load_model
+                for f in load_model(name).feature_space:
+                    widen(f.name, float(f.lower), float(f.upper))
+            except HapticSDKError:
+                continue
+    return ranges
+
+
+def check_plan_features(plan: "RenderPlan") -> None:
+    """Refuse a plan whose feature values are not numbers (``true`` included), not finite,
+    or outside :func:`feature_ranges` (relative slack 1e-6); raises
+    :class:`ValidationError` naming ``plan.materials.<m>.features.<f>``."""
+    from .checks import check_number
+
+    for mname, mp in plan.materials.items():
+        ranges = feature_ranges(mp)
+        for group in ("features", "pinned_features", "importance_features"):
+            for fname, value in getattr(mp, group).items():
+                field_ = f"plan.materials.{mname}.{group}.{fname}"
+                v = check_number(value, field_)
+                if fname in ranges:
+                    lo, hi = ranges[fname]
+                    slack = 1e-6 * max(abs(lo), abs(hi), 1.0)
+                    if not lo - slack <= v <= hi + slack:
+                        raise ValidationError(f"{v:g} is outside the feature's range {lo:g}..{hi:g}", field=field_)
 
 
 def validate_plan_dict(data: Any) -> None:

@@ -196,5 +196,65 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
     """
     from .checks import check_seed
     check_seed(seed)  # before any work: seed='abc' or -1 is bad input, not a solver failure
-    problem = build_problem(targets, **build_kw)
-    return get_solver(method, **dict(options or {})).solve(problem, seed=seed)
+    problem = _problem_for(targets, build_kw)
+    return _solver_for(method, options).solve(problem, seed=seed)
+
+
+#: problems built by :func:`solve`, per setup (dimensions, model, penalty, tolerance, fixed
+#: values, ...): a later call with the same setup reuses the model, the feature space, the
+#: constraints and the solvers' per-setup caches, and validates only its targets
+_PROBLEMS: dict[tuple, SolveProblem] = {}
+_SOLVERS: dict[tuple, Solver] = {}
+_MAX_CACHED = 64
+
+
+def _hashable(v: Any) -> Any:
+    if isinstance(v, PerceptionModel):
+        return ("model", id(v))        # the cached problem holds the model: the id stays unique
+    if isinstance(v, Mapping):
+        return tuple(sorted((k, _hashable(x)) for k, x in v.items()))
+    if isinstance(v, (list, tuple)):
+        return tuple(_hashable(x) for x in v)
+    hash(v)
+    return v
+
+
+def _problem_for(targets: Any, build_kw: dict[str, Any]) -> SolveProblem:
+    """``build_problem(targets, **build_kw)``, from a cached problem of the same setup when
+    there is one (then only the targets are validated)."""
+    mapping = isinstance(targets, Mapping)
+    try:
+        if not build_kw:
+            key = ("mapping", tuple(targets)) if mapping else ("array",)
+        else:
+            key = (tuple(targets) if mapping and build_kw.get("dimensions") is None else (), _hashable(build_kw))
+    except TypeError:   # an unhashable option value: no caching
+        return build_problem(targets, **build_kw)
+    template = _PROBLEMS.get(key)
+    if template is None:
+        problem = build_problem(targets, **build_kw)
+        if len(_PROBLEMS) >= _MAX_CACHED:
+            _PROBLEMS.clear()
+        _PROBLEMS[key] = problem
+        return problem
+    T, dims = _targets_array(targets, build_kw.get("dimensions"))
+    if dims != template.dimensions:   # pragma: no cover - the key holds the dimensions
+        return build_problem(targets, **build_kw)
+    return template.with_targets(T)
+
+
+def _solver_for(method: str, options: Mapping[str, Any] | None) -> Solver:
+    """``get_solver(method, **options)``, reusing an instance for the same settings
+    (solvers keep no state between calls besides their options)."""
+    opts = dict(options or {})
+    try:
+        key = (method, _hashable(opts))
+    except TypeError:
+        return get_solver(method, **opts)
+    s = _SOLVERS.get(key)
+    if s is None:
+        s = get_solver(method, **opts)
+        if len(_SOLVERS) >= _MAX_CACHED:
+            _SOLVERS.clear()
+        _SOLVERS[key] = s
+    return s

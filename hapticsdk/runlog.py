@@ -259,14 +259,28 @@ def load_run(path: str | Path) -> RunLog:
         raise RecordingError(f"{p}: not a readable .npz run file ({exc})", field="runlog") from None
     if "header_json" not in data:
         raise RecordingError(f"{p}: no header_json (not a hapticsdk run file)", field="runlog.header_json")
-    header = json.loads(str(data["header_json"]))
+    from .schemas_io import MAX_JSON_DEPTH, json_depth
+    text = str(data["header_json"])
+    if json_depth(text) > MAX_JSON_DEPTH:
+        raise RecordingError(f"{p}: header_json nested deeper than {MAX_JSON_DEPTH} levels", field="runlog.header_json")
+    try:
+        header = json.loads(text)
+    except (ValueError, RecursionError) as exc:
+        raise RecordingError(f"{p}: header_json is not valid JSON ({exc})", field="runlog.header_json") from None
+    if not isinstance(header, dict):
+        raise RecordingError(f"{p}: header_json must be a JSON object", field="runlog.header_json")
     if header.get("format") != FORMAT or header.get("version") != VERSION:
         raise RecordingError(f"{p}: format {header.get('format')!r} v{header.get('version')!r}, "
                              f"expected {FORMAT!r} v{VERSION}", field="runlog.header_json")
     for key in ("t", "state_t", "position_mm", "velocity_mm_s", "device_force_n", "buttons"):
         if key not in data:
             raise RecordingError(f"{p}: array {key!r} missing", field=f"runlog.{key}")
+    if data["t"].ndim != 1:
+        raise RecordingError(f"{p}: t has shape {data['t'].shape}, expected (n,)", field="runlog.t")
     n = data["t"].shape[0]
+    for key, v in data.items():
+        if key != "header_json" and v.dtype.kind not in "biuf":
+            raise RecordingError(f"{p}: {key} holds {v.dtype} values, expected numbers", field=f"runlog.{key}")
     for key in ("state_t", "buttons"):
         if data[key].shape != (n,):
             raise RecordingError(f"{p}: {key} has shape {data[key].shape}, expected ({n},)", field=f"runlog.{key}")
@@ -276,7 +290,11 @@ def load_run(path: str | Path) -> RunLog:
     cmds: dict[str, dict[str, np.ndarray]] = {}
     for key, v in data.items():
         if key.startswith("cmd/"):
-            _, role, f = key.split("/", 2)
+            parts = key.split("/", 2)
+            if len(parts) != 3 or parts[2] not in _CMD_FIELDS or not parts[1]:
+                raise RecordingError(f"{p}: array {key!r} is not cmd/<role>/<{'|'.join(_CMD_FIELDS)}>",
+                                     field=f"runlog.{key}")
+            _, role, f = parts
             if v.shape != (n,):
                 raise RecordingError(f"{p}: {key} has shape {v.shape}, expected ({n},)", field=f"runlog.{key}")
             cmds.setdefault(role, {})[f] = v.astype(float)
@@ -286,6 +304,109 @@ def load_run(path: str | Path) -> RunLog:
                   commands=cmds)
 
 
+#: limits of playback when the recorded device is not an installed actuator: the
+#: reference force device's (Phantom Omni: 3.3 N, 2.3 N/mm) and its 0..1 drive
+PLAYBACK_DEFAULT_LIMITS = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3)
+
+
+def device_class_limits(name: Any) -> ActuatorLimits:
+    """Declared limits of the installed actuator class ``name`` (entry-point group
+    ``hapticsdk.actuators``), or :data:`PLAYBACK_DEFAULT_LIMITS` when there is none."""
+    from .errors import HapticSDKError
+    from .plugins import registry
+
+    if isinstance(name, str) and name and name != PlaybackDevice.name:
+        try:
+            reg = registry("actuator")
+            if name in reg.names():
+                lim = getattr(reg.load(name), "limits", None)
+                if isinstance(lim, ActuatorLimits):
+                    return lim
+        except (HapticSDKError, ImportError):
+            pass
+    return PLAYBACK_DEFAULT_LIMITS
+
+
+def narrowed_limits(base: ActuatorLimits, header: Any) -> ActuatorLimits:
+    """``base`` narrowed by the limits of a run-file header.
+
+    Every header value must be a finite number > 0 (``frequency_range_hz`` a pair
+    ``0 <= lo < hi``) and inside ``base``: a header granting more than the device
+    class declares (say 1e9 N on a 3.3 N device) raises :class:`RecordingError`
+    naming the field. ``amplitude_unit`` comes from ``base`` when it has one."""
+    from .checks import check_number
+
+    if header is None:
+        return base
+    if not isinstance(header, dict):
+        raise RecordingError("device limits must be an object", field="runlog.header_json.device.limits")
+    out = dict(base.__dict__)
+    for key, value in header.items():
+        field_ = f"runlog.header_json.device.limits.{key}"
+        if key not in ActuatorLimits.__dataclass_fields__ or value is None:
+            continue
+        if key == "amplitude_unit":
+            if base.amplitude_unit and value != base.amplitude_unit:
+                raise RecordingError(f"unit {value!r} differs from the device's {base.amplitude_unit!r}", field=field_)
+            out[key] = base.amplitude_unit or str(value)
+            continue
+        cap = getattr(base, key)
+        if key == "frequency_range_hz":
+            if not isinstance(value, (list, tuple)) or len(value) != 2:
+                raise RecordingError(f"must be a pair [lo, hi], got {value!r}", field=field_)
+            lo = check_number(value[0], field_ + "[0]", minimum=0.0, error=RecordingError)
+            hi = check_number(value[1], field_ + "[1]", exclusive_minimum=lo, error=RecordingError)
+            if cap is not None and (lo < cap[0] or hi > cap[1]):
+                raise RecordingError(f"{lo:g}..{hi:g} Hz is wider than the device's {cap[0]:g}..{cap[1]:g} Hz "
+                                     "(a run file may only narrow the declared limits)", field=field_)
+            out[key] = (lo, hi)
+            continue
+        v = check_number(value, field_, exclusive_minimum=0.0, error=RecordingError)
+        if cap is not None and v > cap:
+            raise RecordingError(f"{v:g} is above the device's declared {cap:g} "
+                                 "(a run file may only narrow the declared limits)", field=field_)
+        out[key] = v
+    return ActuatorLimits(**out)
+
+
+def stricter_settings(header: Any) -> Any:
+    """The SDK's default :class:`~hapticsdk.safety.SafetySettings`, made stricter (never
+    looser) by a run-file header: per field the stricter of the default and the header
+    (a longer ramp, an earlier stale cut-off, a smaller start gate ...). Bad values raise
+    :class:`RecordingError` naming the field."""
+    from .checks import is_number
+    from .safety import SafetySettings
+
+    if not isinstance(header, dict):
+        raise RecordingError("safety_settings must be an object", field="runlog.header_json.device.safety_settings")
+    d = SafetySettings()
+    larger_is_stricter = {"ramp_time_s"}
+    smaller_is_stricter = {"stale_after_s", "restart_after_s", "start_max_penetration_mm", "start_max_force_n",
+                           "velocity_knee", "stiffness_offset_n"}
+    out = d.to_dict()
+    for key, value in header.items():
+        field_ = f"runlog.header_json.device.safety_settings.{key}"
+        if key == "ramp_amplitude":
+            if not isinstance(value, bool):
+                raise RecordingError(f"must be true or false, got {value!r}", field=field_)
+            out[key] = out[key] or value
+            continue
+        if key not in larger_is_stricter | smaller_is_stricter or value is None:
+            continue
+        if not is_number(value) or not np.isfinite(float(value)) or float(value) < 0:
+            raise RecordingError(f"must be a finite number >= 0, got {value!r}", field=field_)
+        cur = out[key]
+        v = float(value)
+        if key in larger_is_stricter:
+            out[key] = max(cur, v)
+        else:
+            out[key] = v if cur is None else min(cur, v)
+    try:
+        return SafetySettings(**out)
+    except ValidationError as exc:
+        raise RecordingError(str(exc), field="runlog.header_json.device.safety_settings") from None
+
+
 class PlaybackDevice(HapticDevice):
     """A simulated device that replays the states of a recorded run, tick by tick.
 
@@ -293,9 +414,13 @@ class PlaybackDevice(HapticDevice):
     :meth:`read_state` returns the state of the current tick, and the first read after
     :meth:`open` returns tick 0 whether or not the loop stepped before reading. At the
     end of the run the last state is held (``at_end="hold"``, :attr:`finished` turns
-    True) or reading raises :class:`DeviceError` (``at_end="error"``). The limits and
-    safety settings recorded in the header are applied again, unless ``limits`` or
-    ``safety`` are given. Commands received are kept in :attr:`received`.
+    True) or reading raises :class:`DeviceError` (``at_end="error"``). A run file is
+    data: the limits are those the recorded device's class declares (installed
+    actuator ``header.device.name``, else :data:`PLAYBACK_DEFAULT_LIMITS`), narrowed
+    by the header's limits, which may never widen them (:func:`narrowed_limits`); the
+    header's safety settings only make the defaults stricter (:func:`stricter_settings`).
+    ``limits`` / ``safety`` given in code replace both. Commands received are kept in
+    :attr:`received`.
 
     Args:
         run: a :class:`RunLog` or the path of a run file.
@@ -315,18 +440,16 @@ class PlaybackDevice(HapticDevice):
         if len(self.run) == 0:
             raise RecordingError("the run has no ticks", field="runlog.t")
         dev = self.run.header.get("device") or {}
-        if limits is None and dev.get("limits"):
-            lim = dict(dev["limits"])
-            if lim.get("frequency_range_hz") is not None:
-                lim["frequency_range_hz"] = tuple(lim["frequency_range_hz"])
-            limits = ActuatorLimits(**{k: v for k, v in lim.items() if k in ActuatorLimits.__dataclass_fields__})
-        if limits is not None:
-            self.limits = limits
+        if not isinstance(dev, dict):
+            raise RecordingError("header 'device' must be an object", field="runlog.header_json.device")
+        if limits is None:
+            # a run file is data: the limits come from the recorded device's class, and
+            # the header may only narrow them (never widen)
+            limits = narrowed_limits(device_class_limits(dev.get("name")), dev.get("limits"))
+        self.limits = limits
         if safety is None and dev.get("safety_settings"):
-            from .safety import SafetyLayer, SafetySettings
-            known = SafetySettings.__dataclass_fields__
-            safety = SafetyLayer(self.limits, SafetySettings(**{k: v for k, v in dev["safety_settings"].items()
-                                                                 if k in known}))
+            from .safety import SafetyLayer
+            safety = SafetyLayer(self.limits, stricter_settings(dev["safety_settings"]))
         super().__init__(label=label or f"playback:{dev.get('label') or dev.get('name') or 'run'}", safety=safety)
         self.at_end = at_end
         self.index = 0

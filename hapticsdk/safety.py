@@ -244,7 +244,7 @@ class SafetyLayer:
         if amp is not None and s.ramp_amplitude:
             amp = gain * amp
         # one new command per tick (dataclasses.replace costs several us on the servo path)
-        out = ChannelCommand(cmd.role, force, freq, amp)
+        out = ChannelCommand(cmd.role, force, freq, amp, cmd.direction)
         self._last = out
         self._t_last = now
         self._stale_counted = False

@@ -84,11 +84,22 @@ def read_bytes(path: str | Path, *, field: str, error: type[ValidationError] = V
         raise error(f"{p} is not a regular file (FIFO, socket or device)", field=field)
     if st.st_size > max_bytes:
         raise error(f"{p}: {st.st_size} bytes, more than the {max_bytes} bytes accepted", field=field)
+    # non-blocking open and a second check on the descriptor: a FIFO swapped in after
+    # the stat above can neither block the open nor be read
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_BINARY", 0)
     try:
-        with open(p, "rb") as fh:
+        fd = os.open(p, flags)
+    except OSError as exc:
+        raise error(f"{p}: cannot open: {exc.strerror or exc}", field=field) from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise error(f"{p} is not a regular file (FIFO, socket or device)", field=field)
+        with os.fdopen(fd, "rb", closefd=False) as fh:
             data = fh.read(max_bytes + 1)
     except OSError as exc:
         raise error(f"{p}: cannot read: {exc.strerror or exc}", field=field) from None
+    finally:
+        os.close(fd)
     if len(data) > max_bytes:  # grew while being read
         raise error(f"{p}: more than the {max_bytes} bytes accepted", field=field)
     return data

@@ -210,7 +210,10 @@ def _check_targets(T: np.ndarray, dimensions: tuple[str, ...], given_shape: tupl
     if T.ndim != 2 or T.shape[1] != len(dimensions) or T.shape[0] == 0:
         raise ValidationError(f"targets must have shape (m, {len(dimensions)}) for "
                               f"{list(dimensions)}, got {given_shape}", field="targets")
-    if np.isfinite(T).all() and (T >= 0).all() and (T <= 1).all():
+    if T.size <= 16:   # plain floats: NaN fails both comparisons
+        if all(0.0 <= v <= 1.0 for v in T.ravel().tolist()):
+            return
+    elif np.isfinite(T).all() and (T >= 0).all() and (T <= 1).all():
         return
     for j, dname in enumerate(dimensions):
         col = T[:, j]
@@ -289,6 +292,10 @@ class SolveProblem:
         self._identity = tuple(self.space.names) == tuple(model_in)   # X rows are model inputs
         self._base_formulas = all(type(c).uses_base_formulas() for c in self.constraints)
         self._space_cols = np.array([model_in.index(n) for n in self.space.names], dtype=int)
+        #: per-setup memo (search caches: sample clouds, lookup tables, keys) shared by the
+        #: problems :meth:`with_targets` derives, which differ only in their targets
+        self._setup_cache: dict[Any, Any] = {}
+        self._lo, self._hi = self.space.lower, self.space.upper
         self._fixed_row = np.zeros(len(model_in))
         for n, v in self.fixed.items():
             if n in model_in:
@@ -300,6 +307,10 @@ class SolveProblem:
             self.x0 = self.space.clip(self.space.validate(x0, field="x0"))
             if self.x0.shape[0] != self.n_targets:
                 raise ValidationError("x0 must have one row per target", field="x0")
+
+    def clip(self, X: np.ndarray) -> np.ndarray:
+        """``X`` clipped to the searched features' bounds (a new array)."""
+        return np.minimum(np.maximum(X, self._lo), self._hi)
 
     def with_targets(self, targets: Any, x0: np.ndarray | None = None, *, validate: bool = True) -> "SolveProblem":
         """The same problem (model, space, constraints, settings) for other targets: a
@@ -375,10 +386,11 @@ class SolveProblem:
         D = np.subtract(I3, T[:, None, :])
         np.abs(D, out=D)
         err = (np.add(D[..., 0], D[..., 1]) if D.shape[-1] == 2 else D.sum(axis=-1)).reshape(lead)
+        per_c = None
         if not self.constraints:
             fitness, viol = err, np.zeros(lead)
         else:
-            pen, viol = self._penalty_violation(self.columns(G), form, n)
+            pen, viol, per_c = self._penalty_violation(self.columns(G), form, n, per=details)
             if self.penalty_weight == 1.0:
                 pen += err.reshape(-1)
                 fitness = pen.reshape(lead)
@@ -388,20 +400,26 @@ class SolveProblem:
         if not details:
             return fitness
         return {"fitness": fitness, "error": err, "violation": viol,
-                "intensities": I.reshape(lead + (I.shape[-1],))}
+                "intensities": I.reshape(lead + (I.shape[-1],)),
+                "violations": (np.zeros(lead + (0,)) if per_c is None
+                               else np.moveaxis(per_c, 0, -1).reshape(lead + (len(self.constraints),)))}
 
-    def _penalty_violation(self, cols: dict[str, np.ndarray], form: str, n: int) -> tuple[np.ndarray, np.ndarray]:
-        """Summed penalty (``form``) and max violation of all constraints, ``(n,)`` each."""
+    def _penalty_violation(self, cols: dict[str, np.ndarray], form: str, n: int, per: bool = False
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Summed penalty (``form``) and max violation of all constraints, ``(n,)`` each,
+        and (with ``per``) each constraint's violation ``(c, n)``."""
         if form not in PENALTY_FORMS:   # the message of Constraint.penalty
             raise ValidationError(f"unknown penalty form {form!r}; valid: {list(PENALTY_FORMS)}",
                                   field="penalty")
         if not self._base_formulas:
             pen = np.zeros(n)
             viol = np.zeros(n)
-            for c in self.constraints:
+            P = np.empty((len(self.constraints), n))
+            for j, c in enumerate(self.constraints):
                 pen += c.penalty(cols, form)
-                np.maximum(viol, c.violation(cols), out=viol)
-            return pen, viol
+                P[j] = c.violation(cols)
+                np.maximum(viol, P[j], out=viol)
+            return pen, viol, (P if per else None)
         # the values of Constraint.penalty (paper: b^2 - v^2; normalised: (b - v)/|b|,
         # where v < b) from one bound_and_value call per constraint, all constraints
         # stacked so that each operation runs once
@@ -416,14 +434,14 @@ class SolveProblem:
         nvs = np.subtract(B, V)
         nvs /= scale
         nvs[~short] = 0.0
-        viol = nvs.max(axis=0) if nc > 1 else nvs[0]
+        viol = nvs.max(axis=0) if nc > 1 else nvs[0].copy()
         if form == "normalised":
-            return (nvs.sum(axis=0) if nc > 1 else nvs[0].copy()), viol
+            return (nvs.sum(axis=0) if nc > 1 else nvs[0].copy()), viol, (nvs if per else None)
         B *= B
         V *= V
         B -= V
         B[~short] = 0.0
-        return (B.sum(axis=0) if nc > 1 else B[0]), viol
+        return (B.sum(axis=0) if nc > 1 else B[0]), viol, (nvs if per else None)
 
 
 @dataclass
@@ -490,7 +508,7 @@ class Solver(ABC):
             if x.shape != (sub.n_targets, sub.n_features) or not np.isfinite(x).all():
                 raise SolverError(f"solver {self.name!r} returned x of shape {x.shape} "
                                   f"(expected {(sub.n_targets, sub.n_features)}) or non-finite values")
-            data.add(sub, sub.space.clip(x), out, trace, trace.t0 - t0)
+            data.add(sub, sub.clip(x), out, trace, trace.t0 - t0)
         data.finish(time.perf_counter() - t0)
         if problem.single:
             return data.result(0)
@@ -518,11 +536,7 @@ class _BatchData:
 
     def add(self, sub: SolveProblem, x: np.ndarray, out: SolverOutput, trace: Trace, t_offset: float) -> None:
         ev = sub.evaluate(x, details=True)
-        if sub.constraints:
-            cols = sub.columns(sub.full_inputs(x))
-            per_c = np.stack([c.violation(cols) for c in sub.constraints], axis=1)
-        else:
-            per_c = np.zeros((len(x), 0))
+        per_c = ev["violations"]
         part = {"x": x, "fun": ev["fitness"], "error": ev["error"], "violation": ev["violation"],
                 "intensities": ev["intensities"], "per_c": per_c, "message": out.message,
                 "n": len(x), "traces": None}
@@ -547,7 +561,7 @@ class _BatchData:
         self.constraint_violation, self.intensities, self.per_c = cat("violation"), cat("intensities"), cat("per_c")
         self.success = (self.error <= self.problem.tolerance) & (self.constraint_violation <= CONSTRAINT_TOL)
         self._part_of = None if one else np.repeat(np.arange(len(parts)), [q["n"] for q in parts])
-        self._start = np.cumsum([0] + [q["n"] for q in parts])
+        self._start = [0] if one else np.cumsum([0] + [q["n"] for q in parts]).tolist()
 
     def result(self, i: int) -> SolveResult:
         problem = self.problem

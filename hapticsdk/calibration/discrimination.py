@@ -88,6 +88,10 @@ class DiscriminationAnswers:
             raise CalibrationError("answers: frequency_hz and spring_n_per_mm must be finite")
         if np.any(self.frequency_hz <= 0) or np.any(self.spring_n_per_mm <= 0):
             raise CalibrationError("answers: frequency_hz and spring_n_per_mm must be > 0")
+        from .voicecoil import MAX_FREQUENCY_HZ
+        if np.any(self.frequency_hz > MAX_FREQUENCY_HZ):
+            raise CalibrationError(f"answers: frequency_hz {self.frequency_hz.max():g} Hz is above "
+                                   f"{MAX_FREQUENCY_HZ:g} Hz (not a vibrotactile drive frequency)")
         if not np.isin(self.spring_stiffer, (0, 1)).all():
             raise CalibrationError("answers: spring_stiffer must be 0 or 1")
 

@@ -29,6 +29,16 @@ from ..errors import CalibrationError
 #: relative slack when deciding whether a request lies inside the measured range
 _RANGE_RTOL = 1e-9
 
+#: Plausibility limits of a piezo table (a table outside them is refused, not clamped
+#: later). Drive voltage: the DRV2667's largest full scale, 100 V peak (200 Vpp at gain
+#: setting 3); a table column above it was not measured on a DRV2667-class driver.
+MAX_DRIVE_VOLTAGE_V = 100.0
+#: Drive frequency: above the DRV2667's synthesis range (7.8125..1992 Hz) and far above
+#: what the skin feels as vibration (sensitivity ends near 1 kHz).
+MAX_DRIVE_FREQUENCY_HZ = 2000.0
+#: Acceleration amplitude: about 1000 g; a tactile piezo on a fingertip reaches tens of g.
+MAX_ACCELERATION_M_S2 = 1.0e4
+
 
 @dataclass
 class PiezoTable:
@@ -62,6 +72,7 @@ class PiezoTable:
         if not np.isfinite(a).all() or np.any(np.diff(a, axis=1) <= 0):
             raise CalibrationError("piezo acceleration must be finite and strictly increase with voltage "
                                    "at every frequency")
+        _check_plausible(f, v, a)
         self.frequencies_hz, self.voltages_v, self.acceleration = f, v, a
         from scipy.interpolate import PchipInterpolator
         # over frequency: PCHIP of log(acceleration) over log(frequency) for columns that
@@ -177,6 +188,44 @@ class PiezoTable:
         except KeyError as exc:
             raise CalibrationError(f"piezo table misses key {exc.args[0]!r} "
                                    "(needs frequencies_hz, voltages_v, acceleration_m_s2)") from None
+
+
+def _check_plausible(f: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
+    """Refuse a table outside physical plausibility (:data:`MAX_DRIVE_VOLTAGE_V`,
+    :data:`MAX_DRIVE_FREQUENCY_HZ`, :data:`MAX_ACCELERATION_M_S2`), naming the field."""
+    if not np.isfinite(f).all() or not np.isfinite(v).all():
+        raise CalibrationError("piezo table: frequencies_hz and voltages_v must be finite")
+    if f[0] <= 0 or f[-1] > MAX_DRIVE_FREQUENCY_HZ:
+        bad = f[0] if f[0] <= 0 else f[-1]
+        raise CalibrationError(f"piezo table: frequencies_hz contains {bad:g} Hz; drive frequencies must lie in "
+                               f"(0, {MAX_DRIVE_FREQUENCY_HZ:g}] Hz")
+    if v[0] < 0 or v[-1] > MAX_DRIVE_VOLTAGE_V:
+        bad = v[0] if v[0] < 0 else v[-1]
+        raise CalibrationError(f"piezo table: voltages_v contains {bad:g} V; drive voltages must lie in "
+                               f"0..{MAX_DRIVE_VOLTAGE_V:g} V peak (the DRV2667's largest full scale, 200 Vpp)")
+    if a.min() < 0 or a.max() > MAX_ACCELERATION_M_S2:
+        bad = a.min() if a.min() < 0 else a.max()
+        raise CalibrationError(f"piezo table: acceleration_m_s2 contains {bad:g} m/s^2; amplitudes must lie "
+                               f"in 0..{MAX_ACCELERATION_M_S2:g} m/s^2")
+
+
+def check_table_limits(table: "PiezoTable", limits: Any, *, device: str = "piezo") -> None:
+    """Refuse ``table`` for a device whose declared :class:`~hapticsdk.actuators.ActuatorLimits`
+    it exceeds: voltages above ``max_amplitude`` (when the unit is V) or frequencies
+    outside ``frequency_range_hz``. Raises :class:`CalibrationError` naming the field."""
+    if limits is None:
+        return
+    vmax = getattr(limits, "max_amplitude", None)
+    if vmax is not None and getattr(limits, "amplitude_unit", "") == "V" and table.voltages_v[-1] > vmax * (1 + 1e-9):
+        raise CalibrationError(f"piezo table: voltages_v reaches {table.voltages_v[-1]:g} V, above {device}'s "
+                               f"declared maximum {vmax:g} V")
+    rng = getattr(limits, "frequency_range_hz", None)
+    if rng is not None:
+        lo, hi = rng
+        flo, fhi = table.frequency_range_hz
+        if flo < lo * (1 - 1e-9) or fhi > hi * (1 + 1e-9):
+            raise CalibrationError(f"piezo table: frequencies_hz {flo:g}..{fhi:g} Hz leave {device}'s declared "
+                                   f"range {lo:g}..{hi:g} Hz")
 
 
 def _spline_increasing(c: np.ndarray, h: np.ndarray) -> bool:

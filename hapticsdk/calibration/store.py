@@ -31,6 +31,7 @@ from .piezo import PiezoTable
 from .voicecoil import VoiceCoilCalibration
 
 log = logging.getLogger(__name__)
+_WARNED: set[tuple[str, str]] = set()
 
 KINDS = ("voicecoil", "piezo")
 ENV_DIR = "HAPTICSDK_CALIBRATION_DIR"
@@ -149,6 +150,8 @@ def _from_file(p: Path) -> tuple[VoiceCoilCalibration | PiezoTable, str]:
         return calibration_from_dict(data, source=str(p)), digest
     except CalibrationError as exc:
         raise CalibrationError(f"{p}: {exc}") from None
+    except ValidationError:
+        raise
     except (TypeError, ValueError, KeyError, IndexError, OverflowError) as exc:  # e.g. ragged table rows
         raise CalibrationError(f"{p}: not a usable calibration: {type(exc).__name__}: {exc}") from None
 
@@ -221,7 +224,9 @@ def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, VoiceCoi
         except Exception as exc:  # one bad file never stops the others: skipped, named
             msg = str(exc) if isinstance(exc, (ValidationError, CalibrationError)) else \
                 f"{p}: {type(exc).__name__}: {exc}"
-            log.warning("skipped calibration file %s: %s", p, msg)
+            if (str(p), msg) not in _WARNED:  # once per file and reason in a process
+                _WARNED.add((str(p), msg))
+                log.warning("skipped calibration file %s: %s", p, msg)
             out.append((CalibrationEntry(p, None, None, None, "", error=msg, claimed_kind=_peek_kind(p)), None))
             continue
         kind = "voicecoil" if isinstance(cal, VoiceCoilCalibration) else "piezo"

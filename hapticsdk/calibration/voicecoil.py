@@ -21,6 +21,26 @@ from ..errors import CalibrationError
 
 PAPER_COEFFICIENTS = (0.00012, 0.01, -0.3045)
 PAPER_RANGE_HZ = (30.0, 120.0)
+#: Plausibility limit of a calibration's frequency range (Hz): vibrotactile sensitivity
+#: ends near 1 kHz, and voice-coil tactors are driven at tens to hundreds of Hz; a curve
+#: fitted over 1e5..1e6 Hz is refused, not clamped at render time.
+MAX_FREQUENCY_HZ = 2000.0
+#: Plausibility limit of ``amplifier_gain`` (dimensionless voltage gain of an audio/
+#: tactor amplifier; 1e4 is 80 dB).
+MAX_AMPLIFIER_GAIN = 1.0e4
+
+
+def check_amplifier_gain(gain: Any) -> float | None:
+    """``None`` or a finite number in ``(0, MAX_AMPLIFIER_GAIN]``; bool, NaN, negative
+    and zero gains raise :class:`CalibrationError` naming ``amplifier_gain``."""
+    from ..checks import is_number
+
+    if gain is None:
+        return None
+    if not is_number(gain) or not np.isfinite(float(gain)) or not 0 < float(gain) <= MAX_AMPLIFIER_GAIN:
+        raise CalibrationError(f"voice-coil calibration: amplifier_gain must be a finite number in "
+                               f"(0, {MAX_AMPLIFIER_GAIN:g}] or null, got {gain!r}")
+    return float(gain)
 
 
 @dataclass(frozen=True)
@@ -52,14 +72,36 @@ class VoiceCoilCalibration:
     mounting: str = ""
 
     def __post_init__(self) -> None:
+        from ..checks import is_number
+
+        if len(tuple(self.coefficients)) != 3 or len(tuple(self.frequency_range_hz)) != 2 or not all(
+                is_number(v) for v in (*self.coefficients, *self.frequency_range_hz)):
+            raise CalibrationError(f"voice-coil calibration: coefficients (a, b, c) and frequency_range_hz "
+                                   f"(lo, hi) must be numbers, got {self.coefficients!r}, {self.frequency_range_hz!r}")
         a, b, c = (float(v) for v in self.coefficients)
         lo, hi = (float(v) for v in self.frequency_range_hz)
         if not all(np.isfinite([a, b, c, lo, hi])) or not 0 < lo < hi:
             raise CalibrationError(f"invalid voice-coil calibration {self.coefficients} on {self.frequency_range_hz}")
+        if hi > MAX_FREQUENCY_HZ:
+            raise CalibrationError(f"voice-coil calibration: frequency_range_hz {lo:g}..{hi:g} Hz goes above "
+                                   f"{MAX_FREQUENCY_HZ:g} Hz (not a vibrotactile drive frequency)")
+        check_amplifier_gain(self.amplifier_gain)
         f = np.linspace(lo, hi, 256)
         if np.any(np.diff(self.gs_coil(f)) <= 0):
             raise CalibrationError("voice-coil calibration must increase over its frequency range "
                                    f"(coefficients {self.coefficients}, range {self.frequency_range_hz} Hz)")
+
+    def check_limits(self, limits: Any, *, device: str = "voice coil") -> None:
+        """Refuse this calibration for a device whose declared ``frequency_range_hz``
+        (:class:`~hapticsdk.actuators.ActuatorLimits`) does not hold its frequency range;
+        raises :class:`CalibrationError` naming the field."""
+        rng = getattr(limits, "frequency_range_hz", None) if limits is not None else None
+        if rng is None:
+            return
+        lo, hi = self.frequency_range_hz
+        if lo < rng[0] * (1 - 1e-9) or hi > rng[1] * (1 + 1e-9):
+            raise CalibrationError(f"voice-coil calibration: frequency_range_hz {lo:g}..{hi:g} Hz leaves "
+                                   f"{device}'s declared range {rng[0]:g}..{rng[1]:g} Hz")
 
     @classmethod
     def paper(cls) -> "VoiceCoilCalibration":

@@ -78,6 +78,9 @@ def fit_voicecoil(answers: Any, *, confidence: float = 0.95, frequency_range_hz:
     """
     from scipy import stats
 
+    from .voicecoil import check_amplifier_gain
+
+    check_amplifier_gain(amplifier_gain)  # before the fit: a NaN gain is bad input, not a failed fit
     if not isinstance(answers, DiscriminationAnswers):
         answers = DiscriminationAnswers.from_csv(answers)
     if not 0 < confidence < 1:

@@ -18,7 +18,8 @@ from typing import NoReturn, Sequence
 from ..errors import HapticSDKError, ValidationError
 
 #: command modules, in help order
-COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_solvers", "bench_runtime")
+COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_solvers", "bench_runtime",
+                   "interop")
 
 
 def build_parser() -> argparse.ArgumentParser:

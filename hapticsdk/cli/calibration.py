@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from . import emit
+from .argtypes import bounded_int, nonneg_int, open_unit_interval, positive_float
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,9 +16,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     p = csub.add_parser("voicecoil", help="fit formula (7) to stiffness-discrimination answers (CSV)")
     p.add_argument("answers", help="CSV with columns person, frequency_hz, spring_n_per_mm, spring_stiffer")
-    p.add_argument("--confidence", type=float, default=0.95, help="level of the coefficient intervals")
+    p.add_argument("--confidence", type=open_unit_interval, default=0.95,
+                   help="level of the coefficient intervals, strictly between 0 and 1")
     p.add_argument("--serial", help="device serial number the calibration belongs to")
-    p.add_argument("--amplifier-gain", type=float, help="amplifier gain used in the experiment")
+    p.add_argument("--amplifier-gain", type=positive_float,
+                   help="amplifier gain used in the experiment (a finite number > 0)")
     p.add_argument("--mounting", default="", help="how the tactor was mounted")
     _save_args(p)
     p.add_argument("--json", action="store_true")
@@ -34,8 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = csub.add_parser("answers", help="write GENERATED discrimination answers from formula (7) (for trying "
                                         "the voice-coil fit; not measured data)")
     p.add_argument("out", help="CSV to write")
-    p.add_argument("--people", type=int, default=10)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--people", type=bounded_int(1, 1000), default=10, help="simulated people, 1..1000")
+    p.add_argument("--seed", type=nonneg_int, default=0)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_answers)
 
@@ -59,6 +62,20 @@ def _save_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", metavar="FILE", help="write the calibration file to FILE")
 
 
+def _check_save(args: argparse.Namespace) -> None:
+    """Check ``--out FILE`` / ``--save DIR`` before the fit runs."""
+    from ..errors import FileWriteError
+    from ..fileio import check_output_path
+
+    if args.out:
+        check_output_path(args.out, field="--out")
+    if args.save:
+        from pathlib import Path
+        d = Path(args.save)
+        if d.exists() and not d.is_dir():
+            raise FileWriteError(f"{str(d)!r} is not a directory", field="--save")
+
+
 def _save(args: argparse.Namespace, cal: Any) -> str | None:
     from ..calibration import save_calibration
 
@@ -73,6 +90,7 @@ def cmd_voicecoil(args: argparse.Namespace) -> int:
     from ..calibration import fit_voicecoil
     from ..calibration.voicecoil import PAPER_COEFFICIENTS
 
+    _check_save(args)
     res = fit_voicecoil(args.answers, confidence=args.confidence, serial=args.serial,
                         amplifier_gain=args.amplifier_gain, mounting=args.mounting)
     saved = _save(args, res.calibration) if res.success else None
@@ -108,6 +126,7 @@ def cmd_piezo(args: argparse.Namespace) -> int:
 
     from ..calibration import PiezoTable, read_measurements_csv
 
+    _check_save(args)
     path = Path(args.measurements)
     if path.suffix.lower() == ".json":
         from ..errors import CalibrationError, ValidationError
@@ -152,6 +171,8 @@ def cmd_piezo(args: argparse.Namespace) -> int:
 def cmd_answers(args: argparse.Namespace) -> int:
     from ..calibration import generate_answers
 
+    from ..fileio import check_output_path
+    check_output_path(args.out, field="out")
     ans = generate_answers(people=args.people, seed=args.seed)
     p = ans.to_csv(args.out)
     out = {"path": str(p), "answers": len(ans), "generated": True, "source": ans.source}

@@ -32,6 +32,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..calibration.selection import select_calibrations
 from ..dimensions import check_intensity
 from ..errors import PluginError, ValidationError
 from ..plan import FALLBACK_SENSOR, DroppedDimension, MaterialPlan, RenderPlan
@@ -120,6 +121,20 @@ def _plugin_entry(kind: str, name: str, stage: str) -> dict[str, Any]:
     info.pop("value", None)
     info["stage"] = stage
     return info
+
+
+def _role_options(scene: Scene, dim: Any) -> dict[str, dict[str, Any]]:
+    """Options of the actuators on the roles whose calibration ``dim`` declares (for their
+    serial numbers): the scene's, over the user's device configuration."""
+    from ..calibration.selection import declared_calibrations
+    from ..device_options import trusted_options
+    out: dict[str, dict[str, Any]] = {}
+    for _, role in declared_calibrations(dim).values():
+        spec = scene.devices.get(role)
+        name = spec.actuator if spec is not None else dim.default_actuators.get(role)
+        if name:
+            out[role] = {**trusted_options(name), **(dict(spec.options) if spec is not None else {})}
+    return out
 
 
 def _load_dimension(name: str, field: str) -> Any:
@@ -242,9 +257,13 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         feats = {k: float(v) for k, v in r.x_dict.items() if k in read}
         pinned = {k: float(v) for k, v in r.x_dict.items() if k not in read}
         roles: dict[str, list[str]] = {}
+        cal_records: dict[str, dict[str, Any]] = {}
         for d in kept:
+            cal_opts, recs = select_calibrations(d, dim_objs[d], renderer_options=ropts.get(d, {}),
+                                                 role_options=_role_options(scene, dim_objs[d]))
+            cal_records.update(recs)
             try:
-                rend = dim_objs[d].renderer(dict(feats), **dict(ropts.get(d, {})))
+                rend = dim_objs[d].renderer(dict(feats), **{**dict(ropts.get(d, {})), **cal_opts})
             except ValidationError:
                 raise
             except Exception as exc:
@@ -308,7 +327,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         plans[m.name] = MaterialPlan(
             name=m.name, targets=dict(m.targets), dimensions=kept, dropped=dropped,
             features=feats, pinned_features=pinned, importance_features=imp_features[m.name],
-            importance=estimates[m.name],
+            importance=estimates[m.name], calibrations=cal_records,
             actuators=actuators, actuator_options=options, roles=roles,
             dimension_distributions=dists,
             solve=_solve_summary(r, kept, models, settings["solver"]["seed"]),

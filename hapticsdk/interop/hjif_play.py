@@ -240,7 +240,7 @@ def format_report(r: PlayReport) -> str:
         fr = info["frequency_hz"]
         frs = f"{fr[0]:.4g}..{fr[1]:.4g} Hz" if fr else "silent"
         out = f", output peak {info['output_peak_frequency_hz']:g} Hz" if "output_peak_frequency_hz" in info else ""
-        hits = info["safety"].get("hits") if isinstance(info["safety"], dict) else None
+        hits = info["safety"].get("limit_hits") if isinstance(info["safety"], dict) else None
         lines.append(f"  {a}: {info['active_ticks']}/{info['ticks']} ticks active, {frs}, max amplitude "
                      f"{info['max_amplitude']:.4g} {info['amplitude_unit']}{out}"
                      + (f", safety limits hit {hits}" if hits else ""))

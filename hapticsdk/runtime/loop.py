@@ -1,24 +1,49 @@
-"""The servo loop: read the probe, run every renderer, send the commands, step the
-simulation, once per period.
+"""The servo loop: read the probe, find the object it touches, run that object's
+renderers, send the commands, step the simulation, once per period.
 
-Each tick of :class:`ServoLoop`:
+:class:`ServoLoop` is steppable: :meth:`ServoLoop.start` opens the actuators and sets up
+the run, :meth:`ServoLoop.tick` runs one period, :meth:`ServoLoop.finish` restores the
+process state and returns the :class:`LoopReport`. :meth:`ServoLoop.run` (the batch path
+of :func:`hapticsdk.render` and :func:`~hapticsdk.runtime.render.render_plan`) is
+``start`` + ``tick`` until the duration is reached + ``finish``; a live
+:class:`~hapticsdk.runtime.session.Session` drives the same ``tick`` for as long as the
+application wants.
+
+Each tick:
 
 1. ``state`` = the device's sensed state; non-finite or huge readings and velocity
    spikes are replaced by safe values and counted (never raised);
-2. every actuator's safety layer observes the state;
-3. a :class:`~hapticsdk.dimensions.TickInput` goes to every renderer; force commands
-   of the same role are summed, a renderer that raises or returns NaN is counted and
-   contributes nothing;
+2. the hit test (a :class:`hapticsdk.scene.geometry.HitTester`, or without one the
+   version-1 scene: the plane y = 0 with normal +y, penetration ``-y``) gives the
+   object under the probe, the penetration along its outward normal and the normal;
+   every actuator's safety layer observes the state (with that penetration);
+3. that object's renderers get a :class:`~hapticsdk.dimensions.TickInput` in the contact
+   frame (penetration along the normal; velocity index 0 the sliding speed, index 1 the
+   normal component; ``normal`` and ``object`` set); force commands of the same role
+   are summed, a renderer that raises or returns NaN is counted and contributes nothing.
+   While an object's material is being switched (:meth:`ServoLoop.set_renderers`) its
+   old and new renderers both run and their commands are cross-faded linearly over the
+   switch ramp (``switch_ramp_s``, default 50 ms): force ``(1 - a) F_old + a F_new``,
+   vibration amplitude likewise at the new frequency, ``a`` rising from 0 to 1;
 4. the force role goes through the passivity observer/controller
-   (:class:`~hapticsdk.passivity.PassivityController`, on by default);
-5. each role's command is sent with ``actuator.command(cmd, now=t)`` (the safety
-   layer clamps it) and optionally recorded;
+   (:class:`~hapticsdk.passivity.PassivityController`, on by default) along the contact
+   normal (its position is the signed distance ``-penetration``; the observer restarts
+   when the probe moves from one object to another, as when a wall is met from outside);
+   the force command carries the normal as ``direction``;
+5. each role's command is sent with ``actuator.command(cmd, now=t)`` (the safety layer
+   clamps it) and optionally recorded;
 6. simulated devices are stepped (``device.step(dt)``, then every other simulated
    actuator with a ``step`` method).
 
 Delay accounting: the force computed from the state of tick ``n`` is held from tick
 ``n`` to ``n+1``, so the loop's computational delay is ``d = 0`` (one zero-order hold);
 ``delay_ticks`` adds ``d`` more ticks for tests of the delay law.
+
+Memory: the per-tick log is a ring buffer holding the last ``log_seconds`` (default
+60 s, at most :data:`MAX_LOG_TICKS` ticks) of ticks, whatever the duration (``report.log`` is that window, oldest first);
+counts, the overrun total and the maximum tick time cover the whole run, the percentiles
+the window. A recorder (``recorder=``, e.g. :class:`hapticsdk.runlog.RunRecorder`)
+streams every tick to a run file.
 
 Time: by default simulated time (``t = n T``, as fast as possible, each tick's compute
 time measured with ``perf_counter`` and, as on-CPU time of the servo thread, with
@@ -27,24 +52,28 @@ preempted); with ``realtime=True`` the loop paces itself on a
 clock (hybrid sleep-then-spin) against a fixed deadline grid, hands renderers the
 *measured* ``dt``, catches up after a late tick without skipping a deadline, and
 re-anchors the grid (counting the skipped ticks) only when more than
-``max_catchup_ticks`` behind. A :class:`DeviceError` from any actuator stops *all*
-actuators, ends the run cleanly with ``report.fault`` set, and is re-raised from
-:meth:`ServoLoop.run` when ``raise_on_fault``. Optional OS options for the servo
-thread (CPU pinning, ``SCHED_FIFO``, ``mlockall``; ``rt=``) report their outcome in
-``report.rt`` and never raise.
+``max_catchup_ticks`` behind.
+
+Stops: a :class:`DeviceError` from any actuator stops *all* actuators, ends the run
+cleanly with ``report.fault`` set, and is re-raised from :meth:`ServoLoop.run` when
+``raise_on_fault``. ANY other exception leaving a tick (KeyboardInterrupt, SystemExit,
+:class:`~hapticsdk.runtime.signals.SafeStop` for SIGTERM/SIGHUP, an OSError from a sink,
+anything from a renderer's caller, recorder or actuator) stops every actuator first and
+then propagates unchanged. Optional OS options for the servo thread (CPU pinning,
+``SCHED_FIFO``, ``mlockall``; ``rt=``) report their outcome in ``report.rt`` and never
+raise.
 """
 
 from __future__ import annotations
 
-import logging
 import gc
+import logging
 import math
+import sys
 import time
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
-
-_log = logging.getLogger(__name__)
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -55,9 +84,21 @@ from ..passivity import ControllerSettings, PassivityController
 from .clock import MonotonicClock, RealtimeSettings, apply_realtime, thread_cpu_clock_cost_s
 from .stats import PREEMPT_THRESHOLD_S, jitter_stats, preemption_stats, tick_stats
 
+_log = logging.getLogger(__name__)
+
 #: event counters every report carries (0 when nothing happened)
 EVENT_KEYS = ("nonfinite_state", "huge_state", "velocity_spike", "renderer_error", "nonfinite_command",
-              "negative_force", "role_conflict", "overrun", "clamp", "skipped_ticks", "passivity_active")
+              "negative_force", "role_conflict", "overrun", "clamp", "skipped_ticks", "passivity_active",
+              "contact_changes", "material_switches")
+
+#: default length of the per-tick log window (s)
+DEFAULT_LOG_SECONDS = 60.0
+#: the log window never holds more ticks than this (2**17: 131 s at 1 kHz, ~18 MB)
+MAX_LOG_TICKS = 2 ** 17
+#: default duration of the cross-fade when an object's renderers are replaced (s)
+DEFAULT_SWITCH_RAMP_S = 0.05
+
+_UP = (0.0, 1.0, 0.0)
 
 
 @dataclass
@@ -68,30 +109,36 @@ class LoopReport:
         ticks: ticks executed.
         period_s: nominal period (s).
         realtime: paced on a clock (True) or simulated time.
-        tick_median_us, tick_p99_us, tick_max_us: per-tick compute time of the control
-            path (read, renderers, passivity, commands, logging), excluding simulated
-            physics (us), wall clock (``perf_counter``): includes time the thread was
-            off the CPU (preempted by another process).
+        tick_median_us, tick_p99_us: per-tick compute time of the control path (read,
+            hit test, renderers, passivity, commands, logging), excluding simulated
+            physics (us), wall clock (``perf_counter``): includes time the thread was off
+            the CPU (preempted by another process); percentiles over the log window.
+        tick_max_us: the largest of the whole run (us).
         tick_p999_us: p99.9 of the same (us).
         tick_cpu_median_us, tick_cpu_p99_us, tick_cpu_p999_us, tick_cpu_max_us: the same
             ticks' on-CPU time of the servo thread (``thread_time_ns``), what the tick
             code costs (us); NaN when ``cpu_time=False``.
-        preempted_ticks: ticks whose wall compute exceeded their CPU compute by more
-            than ``preempt_threshold_us`` (100 us); None when ``cpu_time=False``.
+        preempted_ticks: ticks of the window whose wall compute exceeded their CPU compute
+            by more than ``preempt_threshold_us`` (100 us); None when ``cpu_time=False``.
         off_cpu_max_us: largest wall - CPU compute of a tick (us).
         cpu_clock_cost_us: measured cost of the two CPU-clock reads a tick makes (us).
         rt: outcome of the OS options: ``cpu_affinity``, ``rt_priority``, ``mlockall``,
             ``gc`` (``"off"``, ``"applied: ..."``, ``"refused: <reason>"``,
             ``"unavailable: <reason>"``) and ``applied`` (names applied).
         sim_step_median_us: median time spent stepping simulated devices (us).
-        overruns: ticks whose compute time exceeded the period.
-        jitter: |period - T| statistics and missed-tick rate (realtime mode), else None.
-        events: counts of unsafe inputs replaced, clamps, skipped ticks ...
+        overruns: ticks of the whole run whose compute time exceeded the period.
+        jitter: |period - T| statistics and missed-tick rate over the window (realtime
+            mode), plus ``missed_ticks_total`` over the whole run; else None.
+        events: counts of unsafe inputs replaced, clamps, skipped ticks, contact changes,
+            material switches ...
         passivity: observer/controller figures per force role (J), or {} when off.
         fault: ``{"device", "message"}`` of the failure that stopped the run, or None.
-        log: numpy arrays per tick: ``t`` (s), ``dt`` (s), ``penetration_mm``,
-            ``position_mm`` (n, 3), ``velocity_mm_s`` (n, 3), ``force_n`` (sent), and per
-            vibration role ``<role>.frequency_hz`` / ``<role>.amplitude``.
+        log: numpy arrays per tick of the last ``log_window_s``: ``t`` (s), ``dt`` (s),
+            ``penetration_mm`` (along the contact normal), ``object`` (index of the object
+            under the probe, -1 none), ``position_mm`` (n, 3), ``velocity_mm_s`` (n, 3),
+            ``force_n`` (sent, along the normal), and per vibration role
+            ``<role>.frequency_hz`` / ``<role>.amplitude``.
+        log_window_s: length of the log window (s); ``objects``: object names by index.
     """
 
     ticks: int
@@ -117,6 +164,8 @@ class LoopReport:
     cpu_clock_cost_us: float = float("nan")
     rt: dict[str, Any] = field(default_factory=dict)
     log: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
+    log_window_s: float = DEFAULT_LOG_SECONDS
+    objects: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (the log is summarised by its keys and length)."""
@@ -128,7 +177,8 @@ class LoopReport:
         d["compute_cpu_us"] = {"median_us": self.tick_cpu_median_us, "p99_us": self.tick_cpu_p99_us,
                                "p999_us": self.tick_cpu_p999_us, "max_us": self.tick_cpu_max_us,
                                "clock": "thread_cpu"}
-        for k in ("preempted_ticks", "preempt_threshold_us", "off_cpu_max_us", "cpu_clock_cost_us", "rt"):
+        for k in ("preempted_ticks", "preempt_threshold_us", "off_cpu_max_us", "cpu_clock_cost_us", "rt",
+                  "log_window_s", "objects"):
             d[k] = getattr(self, k)
         d["log_keys"] = sorted(self.log)
         return d
@@ -152,17 +202,61 @@ class _Slot:
         self.pending: deque | None = None
 
 
+class _Obj:
+    """One object's renderers and its material switch in progress."""
+
+    __slots__ = ("name", "renderers", "old", "ramp_t0", "ramp_s")
+
+    def __init__(self, name: str, renderers: Sequence[DimensionRenderer]) -> None:
+        self.name = name
+        self.renderers = list(renderers)
+        self.old: list[DimensionRenderer] | None = None
+        self.ramp_t0: float | None = None
+        self.ramp_s = DEFAULT_SWITCH_RAMP_S
+
+
+class _ContactState:
+    """The device state as the safety layers see it: with the penetration along the
+    contact normal of the object under the probe (``DeviceState.penetration_mm`` is the
+    version-1 ``-y``)."""
+
+    __slots__ = ("t", "position_mm", "velocity_mm_s", "force_n", "buttons", "penetration_mm")
+
+    def __init__(self, st: DeviceState, pen: float) -> None:
+        self.t = st.t
+        self.position_mm = st.position_mm
+        self.velocity_mm_s = st.velocity_mm_s
+        self.force_n = st.force_n
+        self.buttons = st.buttons
+        self.penetration_mm = pen
+
+
+def _check_renderers(renderers: Sequence[DimensionRenderer], actuators: Mapping[str, Actuator],
+                     drop_unmapped: bool) -> list[DimensionRenderer]:
+    out = list(renderers)
+    for r in out:
+        if not isinstance(r, DimensionRenderer):
+            raise ValidationError(f"{r!r} is not a DimensionRenderer", field="renderers")
+        missing = [role for role in r.roles if role not in actuators]
+        if missing and not drop_unmapped:
+            raise ValidationError(f"renderer {type(r).__name__} commands role(s) {missing} with no "
+                                  f"actuator; mapped roles: {sorted(actuators)}", field="actuators")
+    return out
+
+
 class ServoLoop:
     """Run renderers against a device and actuators at a fixed period.
 
     Args:
         device: the sensing device (its state drives the renderers).
-        renderers: one :class:`DimensionRenderer` per rendered dimension.
+        renderers: the renderers of the version-1 scene (one material on the plane
+            y = 0). Ignored when ``objects`` is given.
         actuators: role -> actuator; the device may serve the role ``"force"``. Default
             ``{"force": device}``. Every role a renderer commands must be mapped.
         period_s: servo period T (s).
         realtime: pace on a clock instead of simulated time.
-        recorder: object with ``record(t, state, sent)`` called every tick.
+        recorder: object with ``record(t, state, sent)`` called every tick (and
+            ``close()`` at the end), e.g. a run-file writer.
         passivity: passivity observer/controller on the force roles (default on).
         raise_on_fault: re-raise the :class:`DeviceError` that stopped a run.
         clock: clock for realtime mode (default :class:`MonotonicClock`).
@@ -180,9 +274,16 @@ class ServoLoop:
             applied to the thread calling :meth:`run` for the run and undone after;
             refusals are reported in ``report.rt``, never raised. Default: none (GC is
             collected, frozen and disabled as always).
+        objects: ``[(name, renderers), ...]``: the objects of a spatial scene, in the
+            order of ``hit_tester``'s indices.
+        hit_tester: object with ``query(x_mm, y_mm, z_mm) -> (index or -1,
+            penetration_mm, nx, ny, nz)`` (:class:`hapticsdk.scene.geometry.HitTester`).
+            None: the version-1 plane y = 0 (penetration ``-y``, normal +y).
+        log_seconds: length of the per-tick log window (s), default 60.
+        switch_ramp_s: default cross-fade of :meth:`set_renderers` (s), default 0.05.
     """
 
-    def __init__(self, device: HapticDevice, renderers: Sequence[DimensionRenderer],
+    def __init__(self, device: HapticDevice, renderers: Sequence[DimensionRenderer] = (),
                  actuators: Mapping[str, Actuator] | None = None, *, period_s: float = 0.001,
                  realtime: bool = False, recorder: Any = None, passivity: bool = True,
                  raise_on_fault: bool = True, clock: Any = None, delay_ticks: int = 0,
@@ -190,23 +291,33 @@ class ServoLoop:
                  max_accel_mm_s2: float = 2.0e6, max_catchup_ticks: int = 5,
                  passivity_settings: ControllerSettings | None = None,
                  drop_unmapped_roles: bool = False, cpu_time: bool = True,
-                 rt: RealtimeSettings | Mapping[str, Any] | None = None) -> None:
+                 rt: RealtimeSettings | Mapping[str, Any] | None = None,
+                 objects: Sequence[tuple[str, Sequence[DimensionRenderer]]] | None = None,
+                 hit_tester: Any = None, log_seconds: float = DEFAULT_LOG_SECONDS,
+                 switch_ramp_s: float = DEFAULT_SWITCH_RAMP_S) -> None:
         if not isinstance(device, HapticDevice):
             raise ValidationError("device must be a HapticDevice", field="device")
-        if not (isinstance(period_s, (int, float)) and math.isfinite(period_s) and 0 < period_s <= 1.0):
-            raise ValidationError(f"period must be in (0, 1] s, got {period_s!r}", field="period_s")
+        if not (isinstance(period_s, (int, float)) and math.isfinite(period_s) and 1e-5 <= period_s <= 1.0):
+            raise ValidationError(f"period must be in [1e-5, 1] s, got {period_s!r}", field="period_s")
         if int(delay_ticks) < 0:
             raise ValidationError("delay_ticks must be >= 0", field="delay_ticks")
+        if not (isinstance(log_seconds, (int, float)) and math.isfinite(log_seconds) and 0 < log_seconds <= 3600):
+            raise ValidationError(f"log_seconds must be in (0, 3600] s, got {log_seconds!r}", field="log_seconds")
+        if not (isinstance(switch_ramp_s, (int, float)) and math.isfinite(switch_ramp_s) and switch_ramp_s >= 0):
+            raise ValidationError(f"switch_ramp_s must be >= 0 s, got {switch_ramp_s!r}", field="switch_ramp_s")
         self.device = device
-        self.renderers = list(renderers)
         self.actuators: dict[str, Actuator] = dict(actuators) if actuators is not None else {"force": device}
-        for r in self.renderers:
-            if not isinstance(r, DimensionRenderer):
-                raise ValidationError(f"{r!r} is not a DimensionRenderer", field="renderers")
-            missing = [role for role in r.roles if role not in self.actuators]
-            if missing and not drop_unmapped_roles:
-                raise ValidationError(f"renderer {type(r).__name__} commands role(s) {missing} with no "
-                                      f"actuator; mapped roles: {sorted(self.actuators)}", field="actuators")
+        self.drop_unmapped_roles = bool(drop_unmapped_roles)
+        if objects is None:
+            objs = [_Obj("surface", _check_renderers(renderers, self.actuators, self.drop_unmapped_roles))]
+        else:
+            objs = [_Obj(str(n), _check_renderers(rs, self.actuators, self.drop_unmapped_roles))
+                    for n, rs in objects]
+            if hit_tester is None and len(objs) != 1:
+                raise ValidationError("several objects need a hit_tester", field="hit_tester")
+        self._objs = objs
+        self.hit_tester = hit_tester
+        self.renderers = objs[0].renderers if objs else []
         self.period_s = float(period_s)
         self.realtime = bool(realtime)
         self.recorder = recorder
@@ -218,6 +329,8 @@ class ServoLoop:
         self.max_speed_mm_s = float(max_speed_mm_s)
         self.max_accel_mm_s2 = float(max_accel_mm_s2)
         self.max_catchup_ticks = int(max_catchup_ticks)
+        self.log_seconds = float(log_seconds)
+        self.switch_ramp_s = float(switch_ramp_s)
         if passivity_settings is None:
             # the device's apparent mass (if it declares one) bounds the in-period push
             # and its declared physical damping is credited (device + wall passivity)
@@ -228,25 +341,121 @@ class ServoLoop:
         self.passivity_settings = passivity_settings
         self.cpu_time = bool(cpu_time)
         self.rt = RealtimeSettings.coerce(rt)
+        #: operations handed in from other threads, applied at the start of a tick
+        self._ops: deque = deque()
+        #: pause: renderers are not run, force 0 and vibration amplitude 0 are sent
+        self.paused = False
+        #: index of the object in contact (penetration > 0), -1 none; updated every tick
+        self.contact = -1
+        #: last good sensed state, penetration (mm) and sent force (N) of the last tick
+        self.last_state: DeviceState | None = None
+        self.last_penetration_mm = 0.0
+        self.last_force_n = 0.0
+        self._running = False
 
     # ------------------------------------------------------------------
+    @property
+    def object_names(self) -> list[str]:
+        return [o.name for o in self._objs]
+
     def _stop_all(self) -> None:
         """Every actuator to its safe state. Each one is tried even when another one's
         ``stop()`` raises (a backend that breaks the never-raise contract, or a second
         Ctrl-C); the first such exception is re-raised after all were tried."""
         first: BaseException | None = None
         for act in _distinct([self.device, *self.actuators.values()]):
-            act.stop()
+            try:
+                act.stop()
+            except BaseException as exc:  # noqa: BLE001 - keep stopping the others
+                _log.error("%s: stop() raised %s: %s", getattr(act, "label", act), type(exc).__name__, exc)
+                first = first or exc
         if first is not None:
             raise first
 
-    def run(self, seconds: float) -> LoopReport:
-        """Run for ``seconds`` of (simulated or real) time; return a :class:`LoopReport`."""
-        if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
-            raise ValidationError(f"seconds must be > 0, got {seconds!r}", field="seconds")
+    def stop_all(self) -> None:
+        """Put every actuator of the loop in its safe state now (never raises an
+        :class:`Exception`; see :meth:`_stop_all`)."""
+        try:
+            self._stop_all()
+        except Exception as exc:  # noqa: BLE001 - logged by _stop_all
+            _log.error("stop_all: %s", exc)
+
+    # -- changes while running (thread-safe: applied at the start of the next tick) --
+    def set_renderers(self, index: int, renderers: Sequence[DimensionRenderer],
+                      ramp_s: float | None = None) -> None:
+        """Replace object ``index``'s renderers (a new material). From the next tick the
+        old and new renderers' commands are cross-faded linearly over ``ramp_s``
+        (default ``switch_ramp_s``); the passivity controller keeps running across the
+        switch. Callable from any thread."""
+        rs = _check_renderers(renderers, self.actuators, self.drop_unmapped_roles)
+        r = self.switch_ramp_s if ramp_s is None else float(ramp_s)
+        if not (math.isfinite(r) and r >= 0):
+            raise ValidationError(f"ramp_s must be >= 0 s, got {ramp_s!r}", field="ramp_s")
+        self._ops.append(("renderers", int(index), rs, r))
+
+    def add_object(self, name: str, renderers: Sequence[DimensionRenderer], shape: Any = None) -> None:
+        """Append an object (its index is the next one); ``shape`` goes to the hit
+        tester's ``add(name, shape)``. Callable from any thread."""
+        rs = _check_renderers(renderers, self.actuators, self.drop_unmapped_roles)
+        self._ops.append(("add", str(name), rs, shape))
+
+    def remove_object(self, name: str) -> None:
+        """Remove an object from the hit test (its index stays reserved, renders nothing)."""
+        self._ops.append(("remove", str(name), None, None))
+
+    def set_pose(self, index: int, pose: Any) -> None:
+        """Move object ``index`` (the hit tester's ``set_pose``). Callable from any thread."""
+        self._ops.append(("pose", int(index), pose, None))
+
+    def call_in_loop(self, fn: Callable[[], None]) -> None:
+        """Run ``fn()`` in the servo thread at the start of the next tick."""
+        self._ops.append(("call", 0, fn, None))
+
+    def _apply_ops(self, t: float) -> None:
+        ops = self._ops
+        while ops:
+            kind, a, b, c = ops.popleft()
+            if kind == "renderers":
+                if 0 <= a < len(self._objs):
+                    o = self._objs[a]
+                    if c > 0:
+                        o.old = o.renderers
+                        o.ramp_t0 = None  # set on the first tick that renders it
+                        o.ramp_s = c
+                    else:
+                        o.old = None
+                    o.renderers = b
+                    self._events["material_switches"] += 1
+            elif kind == "add":
+                if self.hit_tester is not None and c is not None:
+                    self.hit_tester.add(a, c)
+                self._objs.append(_Obj(a, b))
+            elif kind == "remove":
+                if self.hit_tester is not None:
+                    self.hit_tester.remove(a)
+                for o in self._objs:
+                    if o.name == a:
+                        o.renderers, o.old = [], None
+            elif kind == "pose":
+                if self.hit_tester is not None:
+                    self.hit_tester.set_pose(a, b)
+            elif kind == "call":
+                b()
+
+    # ------------------------------------------------------------------
+    def start(self, seconds: float | None = None) -> None:
+        """Open every actuator and set up a run of ``seconds`` (s; None: until
+        :meth:`finish`). Disables the garbage collector and applies the ``rt`` options
+        until :meth:`finish`."""
         T = self.period_s
-        # ticks at t = 0, T, ..., seconds - T: a run of `seconds` at period T has seconds/T ticks
-        n_max = max(1, int(math.floor(seconds / T + 1e-9)))
+        if seconds is None:
+            n_max = sys.maxsize
+        else:
+            if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
+                raise ValidationError(f"seconds must be > 0, got {seconds!r}", field="seconds")
+            # ticks at t = 0, T, ..., seconds - T: a run of `seconds` at period T has seconds/T ticks
+            n_max = max(1, int(math.floor(seconds / T + 1e-9)))
+        cap = max(2, min(n_max, int(math.ceil(self.log_seconds / T)), MAX_LOG_TICKS))
         device = self.device
         # open everything (idempotent); commands older than one period become stale
         for act in _distinct([device, *self.actuators.values()]):
@@ -261,243 +470,75 @@ class ServoLoop:
                 s.pc = PassivityController(self.passivity_settings)
             if is_force and self.delay_ticks:
                 s.pending = deque([0.0] * self.delay_ticks)
+            if not is_force:
+                s.log_f = np.zeros(cap)
+                s.log_a = np.zeros(cap)
             slots.append(s)
-        by_role = {s.role: s for s in slots}
-        stepped = [a for a in _distinct(self.actuators.values())
-                   if a is not device and getattr(a, "simulated", False) and callable(getattr(a, "step", None))]
-        sim_device = bool(getattr(device, "simulated", False))
-        hits0 = {id(a): sum(a.safety.hits.values()) if hasattr(a.safety, "hits") else 0
-                 for a in _distinct([device, *self.actuators.values()])}
-
-        # logs
-        L_t = np.zeros(n_max)
-        L_dt = np.zeros(n_max)
-        L_pen = np.zeros(n_max)
-        L_pos = np.zeros((n_max, 3))
-        L_vel = np.zeros((n_max, 3))
-        L_f = np.zeros(n_max)
-        L_compute = np.zeros(n_max)
-        L_cpu = np.zeros(n_max)
-        L_sim = np.zeros(n_max)
-        L_start = np.zeros(n_max)
-        for s in slots:
-            if not s.is_force:
-                s.log_f = np.zeros(n_max)
-                s.log_a = np.zeros(n_max)
-        events = dict.fromkeys(EVENT_KEYS, 0)
-
-        observers = [a.safety for a in _distinct(self.actuators.values())]
-        renderers = self.renderers
-        recorder = self.recorder
-        max_pos, max_spd = self.max_position_mm, self.max_speed_mm_s
-        max_acc, max_catchup = self.max_accel_mm_s2, self.max_catchup_ticks
-        clock = self.clock
-        realtime = self.realtime
-        fault: dict[str, str] | None = None
-        fault_exc: BaseException | None = None
-
-        last_pos = np.zeros(3)
-        last_vel = np.zeros(3)
-        have_good = False
-        good_state: DeviceState | None = None
-        perf = time.perf_counter
-        cpu_time = self.cpu_time
-        tcpu = time.thread_time_ns
-        cpu_cost_us = 2e6 * thread_cpu_clock_cost_s() if cpu_time else float("nan")
-
-        gc_was_enabled = gc.isenabled()
+        self._slots = slots
+        self._by_role = {s.role: s for s in slots}
+        self._stepped = [a for a in _distinct(self.actuators.values())
+                         if a is not device and getattr(a, "simulated", False) and callable(getattr(a, "step", None))]
+        self._sim_device = bool(getattr(device, "simulated", False))
+        self._hits0 = {id(a): sum(a.safety.hits.values()) if hasattr(a.safety, "hits") else 0
+                       for a in _distinct([device, *self.actuators.values()])}
+        self._observers = [a.safety for a in _distinct(self.actuators.values())]
+        self._n_max = n_max
+        self._cap = cap
+        self._L = {k: np.zeros(cap) for k in ("t", "dt", "pen", "obj", "f", "compute", "cpu", "sim", "start")}
+        self._L_pos = np.zeros((cap, 3))
+        self._L_vel = np.zeros((cap, 3))
+        self._events = dict.fromkeys(EVENT_KEYS, 0)
+        self._fault: dict[str, str] | None = None
+        self._fault_exc: BaseException | None = None
+        self._last_pos = [0.0, 0.0, 0.0]
+        self._last_vel = np.zeros(3)
+        self._last_x = 0.0
+        self._have_good = False
+        self._good_state: DeviceState | None = None
+        self._cpu_cost_us = 2e6 * thread_cpu_clock_cost_s() if self.cpu_time else float("nan")
+        self._max_compute = 0.0
+        self._max_cpu = 0.0
+        self._missed = 0
+        self._pc_obj = -2
+        self.contact = -1
+        self._gc_was_enabled = gc.isenabled()
         gc.collect()
-        froze = False
+        self._froze = False
         if self.rt.gc_freeze and hasattr(gc, "freeze"):
             gc.freeze()
-            froze = True
+            self._froze = True
         gc.disable()
-        rt_status, rt_restore = apply_realtime(self.rt)
-        rt_status["gc"] = ("applied: collected, frozen and disabled" if froze else
+        rt_status, self._rt_restore = apply_realtime(self.rt)
+        rt_status["gc"] = ("applied: collected, frozen and disabled" if self._froze else
                            "applied: collected and disabled (freeze off)" if not self.rt.gc_freeze else
                            "applied: collected and disabled (gc.freeze unavailable)")
         rt_status["applied"] = sorted(k for k, v in rt_status.items() if v.startswith("applied"))
-        k = 0
-        t_prev = 0.0
+        self._rt_status = rt_status
+        self._k = 0
+        self._t_prev = 0.0
+        if self.realtime:
+            self._t_origin = self.clock.now()
+            self._deadline = self._t_origin
+        self._running = True
+
+    @property
+    def ticks(self) -> int:
+        """Ticks executed so far in this run."""
+        return getattr(self, "_k", 0)
+
+    @property
+    def events(self) -> dict[str, int]:
+        """Event counters of the run so far (live; clamps are added by :meth:`finish`)."""
+        return getattr(self, "_events", {})
+
+    def tick(self) -> bool:
+        """Run one servo period. Returns False when the run is over (the duration given
+        to :meth:`start` was reached, or a device fault stopped every actuator: see
+        ``report.fault``). Any exception leaving the tick stops every actuator first."""
+        if self._k >= self._n_max or self._fault is not None:
+            return False
         try:
-            if realtime:
-                t_origin = clock.now()
-                deadline = t_origin
-            while k < n_max:
-                if realtime:
-                    clock.wait_until(deadline)
-                    now = clock.now()
-                    t = now - t_origin
-                    dt = t - t_prev if k else T
-                    if k and sim_device:
-                        # physics advances by the time that really passed
-                        s0 = perf()
-                        device.step(dt)
-                        for a in stepped:
-                            a.step(dt)
-                        L_sim[k - 1] = perf() - s0
-                else:
-                    t = k * T
-                    dt = T
-                c0 = perf()
-                if cpu_time:
-                    q0 = tcpu()
-                L_start[k] = t
-                # ---- 1. sense -------------------------------------------------
-                try:
-                    # the backend read: the loop does its own checks of the values
-                    st = device._read_state()
-                except Exception as exc:
-                    fault_exc = exc if isinstance(exc, DeviceError) else DeviceError(
-                        f"read failed: {type(exc).__name__}: {exc}", device=device.label)
-                    fault = {"device": getattr(fault_exc, "device", None) or device.label, "message": str(fault_exc)}
-                    break
-                pos = st.position_mm
-                vel = st.velocity_mm_s
-                bad = False
-                p0, p1, p2 = float(pos[0]), float(pos[1]), float(pos[2])
-                v0, v1, v2 = float(vel[0]), float(vel[1]), float(vel[2])
-                if not (math.isfinite(p0 + p1 + p2) and math.isfinite(v0 + v1 + v2)):
-                    events["nonfinite_state"] += 1
-                    bad = True
-                elif (abs(p0) > max_pos or abs(p1) > max_pos or abs(p2) > max_pos
-                      or v0 * v0 + v1 * v1 + v2 * v2 > max_spd * max_spd):
-                    events["huge_state"] += 1
-                    bad = True
-                elif have_good:
-                    lim = max_acc * dt
-                    if (abs(v0 - last_vel[0]) > lim or abs(v1 - last_vel[1]) > lim or abs(v2 - last_vel[2]) > lim):
-                        events["velocity_spike"] += 1
-                        v0, v1, v2 = float(last_vel[0]), float(last_vel[1]), float(last_vel[2])
-                        st = DeviceState(t=st.t, position_mm=pos, velocity_mm_s=last_vel.copy(),
-                                         force_n=st.force_n, buttons=st.buttons)
-                if bad:
-                    st = good_state if good_state is not None else DeviceState(
-                        t=t, position_mm=np.array([0.0, max_pos, 0.0]), velocity_mm_s=np.zeros(3))
-                else:
-                    have_good = True
-                    good_state = st
-                    last_pos[0], last_pos[1], last_pos[2] = p0, p1, p2
-                    last_vel[0], last_vel[1], last_vel[2] = v0, v1, v2
-                for obs in observers:
-                    obs.observe(st)
-                # ---- 2. render ------------------------------------------------
-                pen = -p1 if not bad else 0.0
-                forces: dict[str, float] = {}
-                vib: dict[str, ChannelCommand] = {}
-                if not bad:
-                    inp = TickInput(t=t, dt=dt, penetration_mm=pen, velocity_mm_s=st.velocity_mm_s,
-                                    in_contact=pen > 0.0)
-                    for r in renderers:
-                        try:
-                            cmds = r.tick(inp)
-                        except Exception:
-                            events["renderer_error"] += 1
-                            continue
-                        for c in cmds:
-                            slot = by_role.get(c.role)
-                            if slot is None:
-                                events["role_conflict"] += 1
-                                continue
-                            if slot.is_force:
-                                f = c.force_n
-                                if f is None:
-                                    continue
-                                if f != f or f in (math.inf, -math.inf):
-                                    events["nonfinite_command"] += 1
-                                    continue
-                                if f < 0.0:
-                                    events["negative_force"] += 1
-                                    f = 0.0
-                                forces[c.role] = forces.get(c.role, 0.0) + f
-                            else:
-                                fr, am = c.frequency_hz, c.amplitude
-                                if (fr is not None and not math.isfinite(fr)) or (am is not None and not math.isfinite(am)):
-                                    events["nonfinite_command"] += 1
-                                    c = ChannelCommand(c.role, frequency_hz=None, amplitude=0.0)
-                                if c.role in vib:
-                                    events["role_conflict"] += 1
-                                    continue
-                                vib[c.role] = c
-                # ---- 3. passivity + send ------------------------------------
-                sent: dict[str, ChannelCommand] = {}
-                for s in slots:
-                    if s.is_force:
-                        f = forces.get(s.role, 0.0)
-                        if s.pending is not None:
-                            s.pending.append(f)
-                            f = s.pending.popleft()
-                        if s.pc is not None:
-                            f = s.pc.step(p1 if not bad else float(last_pos[1]), dt, f)
-                        cmd = ChannelCommand(s.role, force_n=f)
-                    else:
-                        cmd = vib.get(s.role)
-                        if cmd is None:
-                            last = s.act.last_command
-                            cmd = ChannelCommand(s.role, frequency_hz=last.frequency_hz if last else None,
-                                                 amplitude=0.0)
-                    try:
-                        out = s.act.command(cmd, now=t)
-                    except DeviceError as exc:
-                        fault_exc = exc
-                        fault = {"device": exc.device or s.act.label, "message": str(exc)}
-                        break
-                    except Exception as exc:  # validation of a value we should have caught
-                        fault_exc = DeviceError(f"command rejected: {type(exc).__name__}: {exc}",
-                                                device=s.act.label)
-                        fault = {"device": s.act.label, "message": str(fault_exc)}
-                        break
-                    sent[s.role] = out
-                    if s.is_force:
-                        if s.pc is not None:
-                            s.pc.commit(out.force_n if out.force_n is not None else 0.0)
-                        L_f[k] = out.force_n or 0.0
-                    else:
-                        s.log_f[k] = out.frequency_hz if out.frequency_hz is not None else np.nan
-                        s.log_a[k] = out.amplitude or 0.0
-                if fault is not None:
-                    break
-                if recorder is not None:
-                    try:
-                        recorder.record(t, st, sent)
-                    except Exception:
-                        events["renderer_error"] += 1
-                L_t[k] = t
-                L_dt[k] = dt
-                L_pen[k] = pen
-                L_pos[k] = st.position_mm
-                L_vel[k] = st.velocity_mm_s
-                if cpu_time:
-                    L_cpu[k] = (tcpu() - q0) * 1e-9
-                c1 = perf()
-                L_compute[k] = c1 - c0
-                if c1 - c0 > T:
-                    events["overrun"] += 1
-                # ---- 4. pace / step ------------------------------------------
-                if realtime:
-                    clock.work(k, c1 - c0)
-                    t_prev = t
-                    deadline += T
-                    now = clock.now()
-                    behind = (now - deadline) / T
-                    if behind > max_catchup:
-                        skipped = int(behind)
-                        events["skipped_ticks"] += skipped
-                        deadline += skipped * T
-                else:
-                    s0 = perf()
-                    try:
-                        if sim_device:
-                            device.step(T)
-                        for a in stepped:
-                            a.step(T)
-                    except DeviceError as exc:
-                        fault_exc = exc
-                        fault = {"device": exc.device or device.label, "message": str(exc)}
-                        k += 1
-                        break
-                    L_sim[k] = perf() - s0
-                k += 1
+            return self._tick()
         except BaseException as exc:
             # safety (issue 13, item 3): ANY exception leaving the loop -- KeyboardInterrupt,
             # SystemExit, SafeStop (SIGTERM/SIGHUP), an OSError from a sink or a device
@@ -508,63 +549,397 @@ class ServoLoop:
             except BaseException as stop_exc:  # noqa: BLE001 - the original exception wins
                 _log.error("stopping after %s: %s", type(exc).__name__, stop_exc)
             raise
-        finally:
-            rt_restore()
-            if gc_was_enabled:
+
+    def _set_fault(self, exc: BaseException, device: str | None) -> None:
+        self._fault_exc = exc
+        self._fault = {"device": getattr(exc, "device", None) or device or self.device.label,
+                       "message": str(exc)}
+
+    def _tick(self) -> bool:
+        k = self._k
+        T = self.period_s
+        device = self.device
+        perf = time.perf_counter
+        L = self._L
+        i = k % self._cap
+        events = self._events
+        realtime = self.realtime
+        if realtime:
+            clock = self.clock
+            clock.wait_until(self._deadline)
+            now = clock.now()
+            t = now - self._t_origin
+            dt = t - self._t_prev if k else T
+            if k and self._sim_device:
+                # physics advances by the time that really passed
+                s0 = perf()
+                device.step(dt)
+                for a in self._stepped:
+                    a.step(dt)
+                L["sim"][(k - 1) % self._cap] = perf() - s0
+            if k and dt > 1.5 * T:
+                self._missed += 1
+        else:
+            t = k * T
+            dt = T
+        c0 = perf()
+        cpu_time = self.cpu_time
+        if cpu_time:
+            q0 = time.thread_time_ns()
+        L["start"][i] = t
+        if self._ops:
+            self._apply_ops(t)
+        # ---- 1. sense -------------------------------------------------
+        try:
+            # the backend read: the loop does its own checks of the values
+            st = device._read_state()
+        except Exception as exc:
+            self._set_fault(exc if isinstance(exc, DeviceError) else DeviceError(
+                f"read failed: {type(exc).__name__}: {exc}", device=device.label), device.label)
+            return False
+        pos = st.position_mm
+        vel = st.velocity_mm_s
+        bad = False
+        p0, p1, p2 = float(pos[0]), float(pos[1]), float(pos[2])
+        v0, v1, v2 = float(vel[0]), float(vel[1]), float(vel[2])
+        max_pos = self.max_position_mm
+        last_vel = self._last_vel
+        if not (math.isfinite(p0 + p1 + p2) and math.isfinite(v0 + v1 + v2)):
+            events["nonfinite_state"] += 1
+            bad = True
+        elif (abs(p0) > max_pos or abs(p1) > max_pos or abs(p2) > max_pos
+              or v0 * v0 + v1 * v1 + v2 * v2 > self.max_speed_mm_s * self.max_speed_mm_s):
+            events["huge_state"] += 1
+            bad = True
+        elif self._have_good:
+            lim = self.max_accel_mm_s2 * dt
+            if (abs(v0 - last_vel[0]) > lim or abs(v1 - last_vel[1]) > lim or abs(v2 - last_vel[2]) > lim):
+                events["velocity_spike"] += 1
+                v0, v1, v2 = float(last_vel[0]), float(last_vel[1]), float(last_vel[2])
+                st = DeviceState(t=st.t, position_mm=pos, velocity_mm_s=last_vel.copy(),
+                                 force_n=st.force_n, buttons=st.buttons)
+        if bad:
+            st = self._good_state if self._good_state is not None else DeviceState(
+                t=t, position_mm=np.array([0.0, max_pos, 0.0]), velocity_mm_s=np.zeros(3))
+        else:
+            self._have_good = True
+            self._good_state = st
+            lp = self._last_pos
+            lp[0], lp[1], lp[2] = p0, p1, p2
+            last_vel[0], last_vel[1], last_vel[2] = v0, v1, v2
+        # ---- 2. hit test ------------------------------------------------
+        ht = self.hit_tester
+        direction = None
+        if bad:
+            idx, pen = -1, 0.0
+        elif ht is None:
+            idx, pen = 0, -p1
+        else:
+            idx, pen, nx, ny, nz = ht.query(p0, p1, p2)
+            if idx >= len(self._objs):
+                idx = -1
+            if not (nx == 0.0 and nz == 0.0 and ny == 1.0):
+                direction = (nx, ny, nz)
+        in_contact = pen > 0.0
+        contact = idx if in_contact else -1
+        if contact != self.contact:
+            events["contact_changes"] += 1
+            self.contact = contact
+        obs_state = st if (direction is None and ht is None) or bad else _ContactState(st, pen)
+        for obs in self._observers:
+            obs.observe(obs_state)
+        # ---- 3. render ------------------------------------------------
+        forces: dict[str, float] = {}
+        vib: dict[str, ChannelCommand] = {}
+        if idx >= 0 and not self.paused:
+            o = self._objs[idx]
+            if direction is None:
+                vin = st.velocity_mm_s
+                normal = _UP
+            else:
+                nx, ny, nz = direction
+                vn = v0 * nx + v1 * ny + v2 * nz
+                tx, ty, tz = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
+                vin = np.array([math.sqrt(tx * tx + ty * ty + tz * tz), vn, 0.0])
+                normal = direction
+            inp = TickInput(t=t, dt=dt, penetration_mm=pen, velocity_mm_s=vin, in_contact=in_contact,
+                            normal=normal, object=o.name)
+            self._render(o.renderers, inp, forces, vib, events)
+            if o.old is not None:
+                if o.ramp_t0 is None:
+                    o.ramp_t0 = t
+                a = (t - o.ramp_t0) / o.ramp_s if o.ramp_s > 0 else 1.0
+                if a >= 1.0:
+                    o.old = None
+                else:
+                    f_old: dict[str, float] = {}
+                    v_old: dict[str, ChannelCommand] = {}
+                    self._render(o.old, inp, f_old, v_old, events)
+                    b = 1.0 - a
+                    for role in set(forces) | set(f_old):
+                        forces[role] = a * forces.get(role, 0.0) + b * f_old.get(role, 0.0)
+                    for role in set(vib) | set(v_old):
+                        cn, co = vib.get(role), v_old.get(role)
+                        fr = cn.frequency_hz if cn is not None and cn.frequency_hz is not None else (
+                            co.frequency_hz if co is not None else None)
+                        am = a * ((cn.amplitude or 0.0) if cn is not None else 0.0) + b * (
+                            (co.amplitude or 0.0) if co is not None else 0.0)
+                        vib[role] = ChannelCommand(role, frequency_hz=fr, amplitude=am)
+        # ---- 4. passivity + send --------------------------------------
+        x_n = -pen if not bad else self._last_x
+        if not bad:
+            self._last_x = x_n
+        if idx != self._pc_obj and idx >= 0:
+            if self._pc_obj != -2:
+                # another object: its observer starts afresh, as a wall met from outside
+                for s in self._slots:
+                    if s.pc is not None:
+                        s.pc.reset()
+            self._pc_obj = idx
+        sent: dict[str, ChannelCommand] = {}
+        f_sent = 0.0
+        for s in self._slots:
+            if s.is_force:
+                f = forces.get(s.role, 0.0)
+                if s.pending is not None:
+                    s.pending.append(f)
+                    f = s.pending.popleft()
+                if s.pc is not None:
+                    f = s.pc.step(x_n, dt, f)
+                cmd = ChannelCommand(s.role, force_n=f) if direction is None else ChannelCommand(
+                    s.role, force_n=f, direction=direction)
+            else:
+                cmd = vib.get(s.role)
+                if cmd is None:
+                    last = s.act.last_command
+                    cmd = ChannelCommand(s.role, frequency_hz=last.frequency_hz if last else None, amplitude=0.0)
+            try:
+                out = s.act.command(cmd, now=t)
+            except DeviceError as exc:
+                self._set_fault(exc, s.act.label)
+                return False
+            except Exception as exc:  # validation of a value we should have caught
+                self._set_fault(DeviceError(f"command rejected: {type(exc).__name__}: {exc}",
+                                            device=s.act.label), s.act.label)
+                return False
+            sent[s.role] = out
+            if s.is_force:
+                if s.pc is not None:
+                    s.pc.commit(out.force_n if out.force_n is not None else 0.0)
+                f_sent = out.force_n or 0.0
+            else:
+                s.log_f[i] = out.frequency_hz if out.frequency_hz is not None else np.nan
+                s.log_a[i] = out.amplitude or 0.0
+        L["f"][i] = f_sent
+        if self.recorder is not None:
+            try:
+                self.recorder.record(t, st, sent)
+            except Exception:
+                events["renderer_error"] += 1
+        L["t"][i] = t
+        L["dt"][i] = dt
+        L["pen"][i] = pen
+        L["obj"][i] = idx
+        self._L_pos[i] = st.position_mm
+        self._L_vel[i] = st.velocity_mm_s
+        self.last_state = st
+        self.last_penetration_mm = pen
+        self.last_force_n = f_sent
+        if cpu_time:
+            q = (time.thread_time_ns() - q0) * 1e-9
+            L["cpu"][i] = q
+            if q > self._max_cpu:
+                self._max_cpu = q
+        c1 = perf()
+        comp = c1 - c0
+        L["compute"][i] = comp
+        if comp > self._max_compute:
+            self._max_compute = comp
+        if comp > T:
+            events["overrun"] += 1
+        # ---- 5. pace / step ------------------------------------------
+        if realtime:
+            clock.work(k, comp)
+            self._t_prev = t
+            self._deadline += T
+            behind = (clock.now() - self._deadline) / T
+            if behind > self.max_catchup_ticks:
+                skipped = int(behind)
+                events["skipped_ticks"] += skipped
+                self._deadline += skipped * T
+        else:
+            s0 = perf()
+            try:
+                if self._sim_device:
+                    device.step(T)
+                for a in self._stepped:
+                    a.step(T)
+            except DeviceError as exc:
+                self._set_fault(exc, device.label)
+                self._k = k + 1
+                return False
+            L["sim"][i] = perf() - s0
+        self._k = k + 1
+        return self._k < self._n_max
+
+    def _render(self, renderers: list, inp: TickInput, forces: dict, vib: dict, events: dict) -> None:
+        by_role = self._by_role
+        for r in renderers:
+            try:
+                cmds = r.tick(inp)
+            except Exception:
+                events["renderer_error"] += 1
+                continue
+            for c in cmds:
+                slot = by_role.get(c.role)
+                if slot is None:
+                    events["role_conflict"] += 1
+                    continue
+                if slot.is_force:
+                    f = c.force_n
+                    if f is None:
+                        continue
+                    if f != f or f in (math.inf, -math.inf):
+                        events["nonfinite_command"] += 1
+                        continue
+                    if f < 0.0:
+                        events["negative_force"] += 1
+                        f = 0.0
+                    forces[c.role] = forces.get(c.role, 0.0) + f
+                else:
+                    fr, am = c.frequency_hz, c.amplitude
+                    if (fr is not None and not math.isfinite(fr)) or (am is not None and not math.isfinite(am)):
+                        events["nonfinite_command"] += 1
+                        c = ChannelCommand(c.role, frequency_hz=None, amplitude=0.0)
+                    if c.role in vib:
+                        events["role_conflict"] += 1
+                        continue
+                    vib[c.role] = c
+
+    def _window(self, a: np.ndarray, n: int) -> np.ndarray:
+        """The logged ticks of ``a``, oldest first (a copy)."""
+        cap = self._cap
+        if n <= cap:
+            return a[:n].copy()
+        j = n % cap
+        return np.concatenate([a[j:], a[:j]])
+
+    def finish(self) -> LoopReport:
+        """End the run: restore GC and the OS options, close the recorder, stop every
+        actuator after a fault, build the :class:`LoopReport` (also ``self.report``) and,
+        with ``raise_on_fault``, re-raise the fault."""
+        if not self._running:
+            raise ValidationError("finish() without start()", field="loop")
+        self._running = False
+        fault = self._fault
+        try:
+            self._rt_restore()
+            if self._gc_was_enabled:
                 gc.enable()
-            close = getattr(recorder, "close", None)
+            close = getattr(self.recorder, "close", None)
             if callable(close):
                 try:
                     close()
                 except Exception as exc:  # the run's outcome matters more than the log
                     _log.warning("recorder.close() failed: %s", exc)
-            if froze and hasattr(gc, "unfreeze"):
+            if self._froze and hasattr(gc, "unfreeze"):
                 gc.unfreeze()
+        finally:
             if fault is not None:
                 self._stop_all()
-
-        n = k
-        for a in _distinct([device, *self.actuators.values()]):
-            if hasattr(a.safety, "hits"):
-                events["clamp"] += sum(a.safety.hits.values()) - hits0.get(id(a), 0)
-        pas: dict[str, Any] = {}
-        for s in slots:
-            if s.pc is not None:
-                rep = s.pc.report()
-                events["passivity_active"] += rep["active_ticks"]
-                pas[s.role] = rep
-        comp = tick_stats(L_compute[:n])
-        if cpu_time:
-            cpu = tick_stats(L_cpu[:n])
-            pre = preemption_stats(L_compute[:n], L_cpu[:n])
-        else:
-            cpu = tick_stats(np.zeros(0))
-            pre = {"preempted_ticks": None, "off_cpu_max_us": float("nan")}
-        jit = None
-        if realtime and n > 1:
-            jit = jitter_stats(np.diff(L_start[:n]), T)
-        log = {"t": L_t[:n].copy(), "dt": L_dt[:n].copy(), "penetration_mm": L_pen[:n].copy(),
-               "position_mm": L_pos[:n].copy(), "velocity_mm_s": L_vel[:n].copy(), "force_n": L_f[:n].copy(),
-               "compute_s": L_compute[:n].copy()}
-        if cpu_time:
-            log["compute_cpu_s"] = L_cpu[:n].copy()
-        for s in slots:
-            if not s.is_force:
-                log[f"{s.role}.frequency_hz"] = s.log_f[:n].copy()
-                log[f"{s.role}.amplitude"] = s.log_a[:n].copy()
-        sim_us = float(np.median(L_sim[:n]) * 1e6) if n else float("nan")
-        report = LoopReport(ticks=n, period_s=T, realtime=realtime, tick_median_us=comp["median_us"],
-                            tick_p99_us=comp["p99_us"], tick_max_us=comp["max_us"], tick_p999_us=comp["p999_us"],
-                            overruns=events["overrun"], jitter=jit, events=events, passivity=pas,
-                            fault=fault, sim_step_median_us=sim_us, log=log,
-                            tick_cpu_median_us=cpu["median_us"], tick_cpu_p99_us=cpu["p99_us"],
-                            tick_cpu_p999_us=cpu["p999_us"], tick_cpu_max_us=cpu["max_us"],
-                            preempted_ticks=pre["preempted_ticks"], off_cpu_max_us=pre["off_cpu_max_us"],
-                            cpu_clock_cost_us=cpu_cost_us, rt=rt_status)
+        report = self._report()
         self.report = report
+        fault_exc = self._fault_exc
         if fault_exc is not None and self.raise_on_fault:
             if isinstance(fault_exc, DeviceError):
                 fault_exc.report = report  # type: ignore[attr-defined]
                 raise fault_exc
             raise DeviceError(str(fault_exc), device=fault["device"] if fault else None) from fault_exc
         return report
+
+    def _report(self) -> LoopReport:
+        n = self._k
+        T = self.period_s
+        events = dict(self._events)
+        for a in _distinct([self.device, *self.actuators.values()]):
+            if hasattr(a.safety, "hits"):
+                events["clamp"] += sum(a.safety.hits.values()) - self._hits0.get(id(a), 0)
+        pas: dict[str, Any] = {}
+        for s in self._slots:
+            if s.pc is not None:
+                rep = s.pc.report()
+                events["passivity_active"] += rep["active_ticks"]
+                pas[s.role] = rep
+        W = self._window
+        L = self._L
+        comp_w = W(L["compute"], n)
+        comp = tick_stats(comp_w)
+        if n:
+            comp["max_us"] = self._max_compute * 1e6
+        if self.cpu_time:
+            cpu_w = W(L["cpu"], n)
+            cpu = tick_stats(cpu_w)
+            if n:
+                cpu["max_us"] = self._max_cpu * 1e6
+            pre = preemption_stats(comp_w, cpu_w)
+        else:
+            cpu = tick_stats(np.zeros(0))
+            pre = {"preempted_ticks": None, "off_cpu_max_us": float("nan")}
+        jit = None
+        if self.realtime and n > 1:
+            jit = jitter_stats(np.diff(W(L["start"], n)), T)
+            jit["missed_ticks_total"] = self._missed
+        log = {"t": W(L["t"], n), "dt": W(L["dt"], n), "penetration_mm": W(L["pen"], n),
+               "object": W(L["obj"], n).astype(np.int32),
+               "position_mm": W(self._L_pos, n), "velocity_mm_s": W(self._L_vel, n), "force_n": W(L["f"], n),
+               "compute_s": comp_w}
+        if self.cpu_time:
+            log["compute_cpu_s"] = cpu_w
+        for s in self._slots:
+            if not s.is_force:
+                log[f"{s.role}.frequency_hz"] = W(s.log_f, n)
+                log[f"{s.role}.amplitude"] = W(s.log_a, n)
+        sim_w = W(L["sim"], n)
+        sim_us = float(np.median(sim_w) * 1e6) if n else float("nan")
+        return LoopReport(ticks=n, period_s=T, realtime=self.realtime, tick_median_us=comp["median_us"],
+                          tick_p99_us=comp["p99_us"], tick_max_us=comp["max_us"], tick_p999_us=comp["p999_us"],
+                          overruns=events["overrun"], jitter=jit, events=events, passivity=pas,
+                          fault=self._fault, sim_step_median_us=sim_us, log=log,
+                          tick_cpu_median_us=cpu["median_us"], tick_cpu_p99_us=cpu["p99_us"],
+                          tick_cpu_p999_us=cpu["p999_us"], tick_cpu_max_us=cpu["max_us"],
+                          preempted_ticks=pre["preempted_ticks"], off_cpu_max_us=pre["off_cpu_max_us"],
+                          cpu_clock_cost_us=self._cpu_cost_us, rt=self._rt_status,
+                          log_window_s=self._cap * T, objects=self.object_names)
+
+    def run(self, seconds: float) -> LoopReport:
+        """Run for ``seconds`` of (simulated or real) time; return a :class:`LoopReport`."""
+        if not (isinstance(seconds, (int, float)) and math.isfinite(seconds) and seconds > 0):
+            raise ValidationError(f"seconds must be > 0, got {seconds!r}", field="seconds")
+        self.start(seconds)
+        try:
+            tick = self.tick
+            while tick():
+                pass
+        except BaseException:
+            # the tick already stopped every actuator; restore GC / OS options / recorder
+            try:
+                self._running and self._finish_quietly()
+            finally:
+                raise
+        return self.finish()
+
+    def _finish_quietly(self) -> None:
+        self._running = False
+        try:
+            self._rt_restore()
+        finally:
+            if self._gc_was_enabled:
+                gc.enable()
+            if self._froze and hasattr(gc, "unfreeze"):
+                gc.unfreeze()
+            close = getattr(self.recorder, "close", None)
+            if callable(close):
+                try:
+                    close()
+                except Exception as exc:
+                    _log.warning("recorder.close() failed: %s", exc)

@@ -46,6 +46,9 @@ class RenderReport:
         devices: actuator label -> its ``describe()`` at the end of the run (before closing).
         hooks: distributions whose hook modules were registered.
         loop: the :class:`~hapticsdk.runtime.LoopReport` (``to_dict`` in JSON).
+        calibrations: dimension -> the actuator calibration its renderer used (``kind``,
+            ``origin``, ``file``, ``sha256``, ``source``; ``changed_since_plan`` when the
+            file differs from the one the plan was compiled with).
     """
 
     material: str
@@ -69,6 +72,7 @@ class RenderReport:
     features: dict[str, float] = field(default_factory=dict)
     dropped: list[dict[str, Any]] = field(default_factory=list)
     solve: dict[str, Any] = field(default_factory=dict)
+    calibrations: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         loop = self.loop.to_dict() if hasattr(self.loop, "to_dict") else self.loop
@@ -81,6 +85,7 @@ class RenderReport:
             "tick": {"ticks": self.ticks, "median_us": self.tick_median_us,
                      "p99_us": self.tick_p99_us, "overruns": self.overruns},
             "features": dict(self.features), "dropped": list(self.dropped), "solve": dict(self.solve),
+            "calibrations": dict(self.calibrations),
             "safety": self.safety, "devices": self.devices, "hooks": list(self.hooks), "loop": loop}, default=_jsonable))
 
 
@@ -104,9 +109,11 @@ def _accepts(cls: type, kw: str) -> bool:
                                if p.name != "options")
 
 
-def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None) -> list[DimensionRenderer]:
+def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None, *,
+                    calibrations: Mapping[str, Mapping[str, Any]] | None = None) -> list[DimensionRenderer]:
     """Renderers of one material plan: kept dimensions from the plan's features, then the
-    replacements of dropped ones (no solving)."""
+    replacements of dropped ones (no solving). ``calibrations``: dimension -> renderer
+    options holding saved calibrations (:func:`hapticsdk.calibration.selection.select_calibrations`)."""
     from ..plugins import registry
     ropts = dict((settings or {}).get("renderer_options") or {})
     out: list[DimensionRenderer] = []
@@ -114,7 +121,7 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None)
         cls = registry("dimension").load(d)
         check_plugin_api(cls, name=d)
         dim = cls() if isinstance(cls, type) else cls
-        r = dim.renderer(dict(mp.features), **dict(ropts.get(d, {})))
+        r = dim.renderer(dict(mp.features), **{**dict(ropts.get(d, {})), **dict((calibrations or {}).get(d, {}))})
         missing = [role for role in r.roles if role not in mp.actuators]
         if missing:
             raise ValidationError(f"renderer of {d!r} commands roles {missing} that the plan maps to "
@@ -171,10 +178,19 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     rt = bool(servo.get("realtime", False) if realtime is None else realtime)
     passivity = bool(servo.get("passivity", True))
 
-    renderers = build_renderers(mp, plan.settings)
-    roles_used = {role for r in renderers for role in r.roles}
-
     from ..plugins import manager, registry
+
+    # actuator options per role (privileged ones refused when they come from the plan),
+    # checked for every role before any actuator is created
+    chosen: dict[str, tuple[Any, dict[str, Any]]] = {}
+    for role in sorted(mp.actuators):
+        cls = registry("actuator").load(mp.actuators[role])
+        check_plugin_api(cls, name=mp.actuators[role])
+        chosen[role] = (cls, _actuator_options(cls, mp.actuators[role], role, mp, app_options))
+
+    cal_opts, cal_records = _calibrations(mp, plan.settings, {r: o for r, (_, o) in chosen.items()})
+    renderers = build_renderers(mp, plan.settings, calibrations=cal_opts)
+    roles_used = {role for r in renderers for role in r.roles}
     used_dists = plan.distributions(mp.name)
     pm = manager().load_for(used_dists) if hooks else None
     one = RenderPlan(scene=plan.scene, materials={mp.name: mp}, settings=plan.settings,
@@ -182,13 +198,6 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
                      plugin_api_version=plan.plugin_api_version)
 
     from .loop import ServoLoop
-
-    # every role's options are checked before any actuator is created
-    chosen: dict[str, tuple[Any, dict[str, Any]]] = {}
-    for role in sorted(roles_used):
-        cls = registry("actuator").load(mp.actuators[role])
-        check_plugin_api(cls, name=mp.actuators[role])
-        chosen[role] = (cls, _actuator_options(cls, mp.actuators[role], role, mp, app_options))
 
     with ExitStack() as stack:
         instances: dict[tuple[str, str], Actuator] = {}
@@ -252,10 +261,33 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         renderers={(getattr(r, "replaces", None) and f"replacement:{r.replaces}") or d: r.describe()
                    for d, r in zip(list(mp.dimensions) + [x.dimension for x in mp.replacements], renderers)},
         safety=safety, devices=devices, hooks=used_dists if hooks else [], loop=lr, ticks=_ticks(lr),
-        features=dict(mp.features), dropped=[d.to_dict() for d in mp.dropped], solve=dict(mp.solve))
+        features=dict(mp.features), dropped=[d.to_dict() for d in mp.dropped], solve=dict(mp.solve),
+        calibrations=cal_records)
     if pm is not None:
         pm.call_safely("hapticsdk_render_finished", plan=one, report=report)
     return report
+
+
+def _calibrations(mp: MaterialPlan, settings: Mapping[str, Any], role_options: Mapping[str, Mapping[str, Any]]
+                  ) -> tuple[dict[str, dict[str, Any]], dict[str, dict[str, Any]]]:
+    """Saved calibrations for the kept dimensions' renderers (loaded from the store now)
+    and their records; a record whose file differs from the plan's says so."""
+    from ..calibration.selection import select_calibrations
+    from ..plugins import registry
+    ropts = dict((settings or {}).get("renderer_options") or {})
+    opts: dict[str, dict[str, Any]] = {}
+    records: dict[str, dict[str, Any]] = {}
+    for d in mp.dimensions:
+        cls = registry("dimension").load(d)
+        dim = cls() if isinstance(cls, type) else cls
+        o, recs = select_calibrations(d, dim, renderer_options=ropts.get(d, {}), role_options=role_options)
+        opts[d] = o
+        for k, rec in recs.items():
+            planned = mp.calibrations.get(k)
+            if planned is not None and (planned.get("file"), planned.get("sha256")) != (rec["file"], rec["sha256"]):
+                rec["changed_since_plan"] = {"file": planned.get("file"), "sha256": planned.get("sha256")}
+            records[k] = rec
+    return opts, records
 
 
 def _check_app_options(options: Mapping[str, Mapping[str, Any]] | None) -> dict[str, dict[str, Any]]:

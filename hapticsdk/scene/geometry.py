@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from bisect import bisect_left
 from abc import ABC, abstractmethod
 from typing import Any, Callable, ClassVar, Mapping, Sequence
 
@@ -567,20 +568,28 @@ class HitTester:
     The tester is therefore stateful: use one per probe; :meth:`reset` forgets the held
     contact.
 
-    Cost: each object first gets a bounding-sphere check (6 float operations), and
-    only objects whose bounding sphere contains the probe, or may hold a surface nearer
-    than the nearest found so far, are tested exactly.
+    Cost: the object held in contact is tested first (one exact test while the probe
+    stays in it). Otherwise bounded objects are visited nearest-first along the
+    horizontal axis (x or z) with the larger spread of their centres (a sorted list,
+    rebuilt by :meth:`add`, :meth:`remove` and :meth:`set_pose`, searched by bisection);
+    the search stops once the remaining ones are too far along that axis to contain the
+    probe or to be nearer than the nearest surface found; each visited object gets a
+    bounding-sphere check before its exact test. Unbounded objects (infinite planes)
+    are always tested.
     """
 
-    __slots__ = ("_names", "_shapes", "_entries", "_current")
+    __slots__ = ("_names", "_shapes", "_current", "_probes", "_unbounded", "_keys", "_sorted", "_axis",
+                 "_rbmax")
 
     def __init__(self, objects: Sequence[tuple[str, Shape]] = ()) -> None:
         self._names: list[str] = []
         self._shapes: list[Shape] = []
-        self._entries: list[tuple[Callable[[float, float, float], Contact], float, float, float, float]] = []
         self._current = -1
         for name, shape in objects:
-            self.add(name, shape)
+            self._check(name, shape)
+            self._names.append(name)
+            self._shapes.append(shape)
+        self._rebuild()
 
     @classmethod
     def single_plane(cls, name: str = "plane") -> "HitTester":
@@ -612,33 +621,48 @@ class HitTester:
         except ValueError:
             raise ValidationError(f"no object {name!r}; objects: {self._names}", field="name") from None
 
-    @staticmethod
-    def _entry(shape: Shape) -> tuple[Callable[[float, float, float], Contact], float, float, float, float]:
-        rb = shape.bound_radius_mm
-        px, py, pz = shape.pose.position_mm
-        return (shape.probe, px, py, pz, rb if math.isfinite(rb) else -1.0)
-
-    def add(self, name: str, shape: Shape) -> int:
-        """Append an object; returns its index."""
+    def _check(self, name: str, shape: Shape) -> None:
         if not isinstance(name, str) or not name:
             raise ValidationError(f"object name must be a non-empty string, got {name!r}", field="name")
         if name in self._names:
             raise ValidationError(f"duplicate object name {name!r}", field="name")
         if not isinstance(shape, Shape):
             raise ValidationError(f"expected a Shape, got {shape!r}", field=f"objects.{name}")
+
+    def _rebuild(self) -> None:
+        """The per-tick tables (plain lists of floats)."""
+        self._probes = [s.probe for s in self._shapes]
+        self._unbounded = [(i, s.probe) for i, s in enumerate(self._shapes) if not math.isfinite(s.bound_radius_mm)]
+        bounded = [(i, s) for i, s in enumerate(self._shapes) if math.isfinite(s.bound_radius_mm)]
+        axis = 0
+        if bounded:
+            xs = [s.pose.position_mm[0] for _, s in bounded]
+            zs = [s.pose.position_mm[2] for _, s in bounded]
+            axis = 0 if max(xs) - min(xs) >= max(zs) - min(zs) else 2
+        rows = sorted((s.pose.position_mm[axis], i, s.probe, *s.pose.position_mm, s.bound_radius_mm)
+                      for i, s in bounded)
+        self._axis = axis
+        self._keys = [r[0] for r in rows]
+        self._sorted = [r[1:] for r in rows]
+        self._rbmax = max((r[6] for r in rows), default=0.0)
+
+    def add(self, name: str, shape: Shape) -> int:
+        """Append an object; returns its index."""
+        self._check(name, shape)
         self._names.append(name)
         self._shapes.append(shape)
-        self._entries.append(self._entry(shape))
+        self._rebuild()
         return len(self._shapes) - 1
 
     def remove(self, name: str) -> int:
         """Remove an object; later objects move down one index. Returns the removed index."""
         i = self.index(name)
-        del self._names[i], self._shapes[i], self._entries[i]
+        del self._names[i], self._shapes[i]
         if self._current == i:
             self._current = -1
         elif self._current > i:
             self._current -= 1
+        self._rebuild()
         return i
 
     def set_pose(self, index: "int | str", pose: Pose) -> None:
@@ -648,9 +672,8 @@ class HitTester:
             raise ValidationError(f"no object {index!r}", field="index")
         if not isinstance(pose, Pose):
             raise ValidationError("expected a Pose", field="pose")
-        shape = self._shapes[i].with_pose(pose)
-        self._shapes[i] = shape
-        self._entries[i] = self._entry(shape)
+        self._shapes[i] = self._shapes[i].with_pose(pose)
+        self._rebuild()
 
     def reset(self) -> None:
         """Forget the object held in contact."""
@@ -659,10 +682,9 @@ class HitTester:
     # -- per tick ----------------------------------------------------------
     def query(self, x_mm: float, y_mm: float, z_mm: float) -> Hit:
         """``(index or -1, penetration_mm, nx, ny, nz)`` of the probe at ``(x, y, z)`` (mm)."""
-        entries = self._entries
         cur = self._current
         if cur >= 0:
-            pen, nx, ny, nz = entries[cur][0](x_mm, y_mm, z_mm)
+            pen, nx, ny, nz = self._probes[cur](x_mm, y_mm, z_mm)
             if pen > 0.0:
                 return (cur, pen, nx, ny, nz)
         best = -1
@@ -670,22 +692,48 @@ class HitTester:
         bx = bz = 0.0
         by = 1.0
         out = math.inf
+        oi = -1
         ox = oz = 0.0
         oy = 1.0
-        i = -1
-        for probe, cx, cy, cz, rb in entries:
-            i += 1
-            if rb >= 0.0:
-                dx, dy, dz = x_mm - cx, y_mm - cy, z_mm - cz
-                lim = rb + (0.0 if best >= 0 else out)
-                if dx * dx + dy * dy + dz * dz > lim * lim:
-                    continue  # cannot hold the probe, cannot be nearer than the nearest so far
+        for i, probe in self._unbounded:
             pen, nx, ny, nz = probe(x_mm, y_mm, z_mm)
             if pen > 0.0:
-                if pen > best_pen:
+                if pen > best_pen or (pen == best_pen and i < best):
                     best, best_pen, bx, by, bz = i, pen, nx, ny, nz
-            elif -pen < out:
-                out, ox, oy, oz = -pen, nx, ny, nz
+            elif -pen < out or (-pen == out and i < oi):
+                out, oi, ox, oy, oz = -pen, i, nx, ny, nz
+        keys = self._keys
+        n = len(keys)
+        if n:
+            rows = self._sorted
+            rbmax = self._rbmax
+            c = x_mm if self._axis == 0 else z_mm
+            hi = bisect_left(keys, c)
+            lo = hi - 1
+            while lo >= 0 or hi < n:
+                # the next object nearest along the sort axis
+                if hi < n and (lo < 0 or keys[hi] - c <= c - keys[lo]):
+                    j = hi
+                    d1 = keys[hi] - c
+                    hi += 1
+                else:
+                    j = lo
+                    d1 = c - keys[lo]
+                    lo -= 1
+                slack = 0.0 if best >= 0 else out
+                if d1 > rbmax + slack:
+                    break  # every remaining object is farther along the axis alone
+                i, probe, cx, cy, cz, rb = rows[j]
+                dx, dy, dz = x_mm - cx, y_mm - cy, z_mm - cz
+                lim = rb + slack
+                if dx * dx + dy * dy + dz * dz > lim * lim:
+                    continue  # cannot hold the probe, cannot be nearer than the nearest so far
+                pen, nx, ny, nz = probe(x_mm, y_mm, z_mm)
+                if pen > 0.0:
+                    if pen > best_pen or (pen == best_pen and i < best):
+                        best, best_pen, bx, by, bz = i, pen, nx, ny, nz
+                elif -pen < out or (-pen == out and i < oi):
+                    out, oi, ox, oy, oz = -pen, i, nx, ny, nz
         self._current = best
         if best >= 0:
             return (best, best_pen, bx, by, bz)

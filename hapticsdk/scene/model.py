@@ -11,6 +11,16 @@ settings (importance threshold, solver, servo period).
 :class:`~hapticsdk.plan.RenderPlan` (solve, leave out, map roles to actuators).
 
 A scene is plain data: reading one imports no plugin.
+
+Spatial scenes (``schema_version`` 2): every object has a ``geometry`` (plane patch,
+box or sphere; :mod:`hapticsdk.scene.geometry`) and a ``pose`` in the device
+workspace (mm); :meth:`Scene.hit_tester` gives the servo loop's per-tick hit test.
+Version-1 files have no geometry: each of their objects is read as the infinite plane
+y = 0 (normal +y), the surface every version-1 scene rendered on. Several version-1
+objects therefore share that plane; the hit test's tie rule (lower index) gives it to
+the first object, and the others are felt only once the application gives them a pose
+or a geometry of their own (``HitTester.set_pose``, or a version-2 file).
+:meth:`Scene.to_dict` writes version 2.
 """
 
 from __future__ import annotations
@@ -23,6 +33,10 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import ValidationError
+from .geometry import HitTester, PlanePatch, Pose, Shape, shape_from_dict
+
+#: scene-file versions this module reads; :meth:`Scene.to_dict` writes the last
+SCHEMA_VERSIONS = (1, 2)
 
 if TYPE_CHECKING:
     from ..plan import RenderPlan
@@ -91,12 +105,42 @@ class SceneObject:
         material: a library material name, or ``{"name": ..., "intensities": {...}}``.
         intensities: intensities added to / overriding the material's (0..1).
         dimensions: if given, only these dimensions of the material are rendered.
+        geometry: the object's shape (:class:`~hapticsdk.scene.geometry.PlanePatch`,
+            ``Box``, ``Sphere``, or the scene-file form ``{"shape": "sphere",
+            "radius_mm": 20}``); default the infinite plane y = 0 (a version-1 object).
+        pose: where the shape is (:class:`~hapticsdk.scene.geometry.Pose` or
+            ``{"position_mm": [x, y, z], "rotation": {...}}``, mm); default the
+            geometry's own pose (the origin, unrotated, for the scene-file form).
     """
 
     name: str
     material: str | dict[str, Any]
     intensities: dict[str, float] = field(default_factory=dict)
     dimensions: list[str] | None = None
+    geometry: Any = None
+    pose: Any = None
+
+    def __post_init__(self) -> None:
+        self._coerce_geometry(f"objects.{self.name}")
+
+    def _coerce_geometry(self, where: str) -> None:
+        """Turn the scene-file forms into a :class:`Shape` and a :class:`Pose`."""
+        g, p = self.geometry, self.pose
+        if p is not None and not isinstance(p, Pose):
+            p = Pose.from_dict(p, field=f"{where}.pose")
+        if g is None:
+            g = PlanePatch()
+        elif not isinstance(g, Shape):
+            g = shape_from_dict(g, p, field=f"{where}.geometry")
+        if p is None:
+            p = g.pose
+        self.geometry: Shape = g if g.pose == p else g.with_pose(p)
+        self.pose: Pose = p
+
+    def shape(self) -> Shape:
+        """The object's geometry at its pose (world coordinates, mm)."""
+        g = self.geometry
+        return g if g.pose == self.pose else g.with_pose(self.pose)
 
     def to_dict(self) -> dict[str, Any]:
         d: dict[str, Any] = {"name": self.name, "material": copy.deepcopy(self.material)}
@@ -104,6 +148,8 @@ class SceneObject:
             d["intensities"] = dict(self.intensities)
         if self.dimensions is not None:
             d["dimensions"] = list(self.dimensions)
+        d["geometry"] = self.geometry.geometry_dict()
+        d["pose"] = self.pose.to_dict()
         return d
 
 
@@ -133,18 +179,48 @@ class Scene:
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ValidationError(f"duplicate object names {dup}", field="scene.objects")
+        for i, o in enumerate(self.objects):
+            if not isinstance(o, SceneObject):
+                raise ValidationError(f"expected a SceneObject, got {o!r}", field=f"scene.objects[{i}]")
+            if not isinstance(o.geometry, Shape) or not isinstance(o.pose, Pose):
+                o._coerce_geometry(f"scene.objects[{i}]")
 
     # -- construction ------------------------------------------------------
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> "Scene":
-        """Build from the JSON form; validated against ``schemas/scene.schema.json``."""
+        """Build from the JSON form; validated against ``schemas/scene.schema.json``.
+
+        Version 1 (no ``schema_version`` or 1): objects without geometry, each read as
+        the infinite plane y = 0. Version 2: objects may have ``geometry`` and ``pose``
+        (checked: positive sizes, unit quaternions and normals, finite numbers; errors
+        name the field, e.g. ``scene.objects[2].geometry.radius_mm``)."""
         from ..schemas_io import validate
+        shapes: dict[int, Shape] = {}
+        if isinstance(data, Mapping):
+            version = data.get("schema_version", 1)
+            objects = data.get("objects")
+            if version in SCHEMA_VERSIONS and isinstance(objects, list):
+                # geometry first: these checks name the exact field and cover what JSON
+                # Schema cannot (finite numbers, unit lengths)
+                for i, o in enumerate(objects):
+                    if not isinstance(o, Mapping) or ("geometry" not in o and "pose" not in o):
+                        continue
+                    where = f"scene.objects[{i}]"
+                    if version < 2:
+                        key = "geometry" if "geometry" in o else "pose"
+                        raise ValidationError(f"{key} needs \"schema_version\": 2 (this file is version "
+                                              f"{version})", field=f"{where}.{key}")
+                    pose = Pose.from_dict(o["pose"], field=f"{where}.pose") if "pose" in o else None
+                    shapes[i] = (shape_from_dict(o["geometry"], pose, field=f"{where}.geometry")
+                                 if "geometry" in o else PlanePatch(pose=pose))
         validate(data, "scene")
         objs = []
         for i, o in enumerate(data["objects"]):
+            shape = shapes.get(i)
             objs.append(SceneObject(name=o.get("name", f"object{i}"), material=copy.deepcopy(o["material"]),
                                     intensities=dict(o.get("intensities", {})),
-                                    dimensions=list(o["dimensions"]) if "dimensions" in o else None))
+                                    dimensions=list(o["dimensions"]) if "dimensions" in o else None,
+                                    geometry=shape, pose=shape.pose if shape is not None else None))
         return cls(objects=objs, devices=dict(data.get("devices", {})),
                    settings=dict(data.get("settings", {})), name=data.get("name", "scene"))
 
@@ -181,8 +257,15 @@ class Scene:
                                         dimensions=list(dimensions) if dimensions else None)],
                    devices=dict(devices or {}), settings=settings, name=name)
 
+    def hit_tester(self) -> HitTester:
+        """A fresh :class:`~hapticsdk.scene.geometry.HitTester` over the objects, in order
+        (object index = index in :attr:`objects`)."""
+        return HitTester([(o.name, o.shape()) for o in self.objects])
+
     def to_dict(self) -> dict[str, Any]:
-        return {"schema_version": 1, "name": self.name,
+        """The scene-file form, ``schema_version`` 2 (every object's geometry and pose
+        written out, also for objects read from a version-1 file)."""
+        return {"schema_version": SCHEMA_VERSIONS[-1], "name": self.name,
                 "objects": [o.to_dict() for o in self.objects],
                 "devices": {r: d.to_dict() for r, d in self.devices.items()},
                 "settings": copy.deepcopy(self.settings)}

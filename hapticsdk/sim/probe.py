@@ -1,6 +1,7 @@
 """A kinematic virtual probe: a stylus that follows a scripted trajectory exactly.
 
-It senses (position, velocity) but has no motors: forces commanded to it are accepted
+It senses (position, velocity; all three axes of a 3-D trajectory such as
+:func:`hapticsdk.sim.finger.walk_over`) but has no motors: forces commanded to it are accepted
 and ignored, so it exercises renderers and the servo loop without any physics
 (entry point ``probe-virtual``). For a probe pushed back by the rendered force use the
 simulated Omni of the hardness plugin (``omni-virtual``).
@@ -49,9 +50,9 @@ class VirtualProbe(HapticDevice):
         return self.t
 
     def _read_state(self) -> DeviceState:
-        x, y, vx, vy = self.trajectory.at(self._time())
-        return DeviceState(t=self.t, position_mm=np.array([x, y, 0.0]),
-                           velocity_mm_s=np.array([vx, vy, 0.0]))
+        x, y, z, vx, vy, vz = self.trajectory.at3(self._time())
+        return DeviceState(t=self.t, position_mm=np.array([x, y, z]),
+                           velocity_mm_s=np.array([vx, vy, vz]))
 
     def _step(self, dt: float) -> None:
         self.t += dt

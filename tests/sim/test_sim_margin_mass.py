@@ -155,3 +155,26 @@ def test_omni_reports_the_mass_corrected_limit():
     assert k > rep["critical_stiffness_n_per_mm"]
     assert k == pytest.approx(critical_stiffness_eig(dev.arm.mass_kg, dev.arm.damping_ns_per_m, 1e-3, 0), rel=1e-5)
     assert rep["label"] == STABLE_BY_ASSUMPTION  # unchanged (goal 6)
+
+
+@pytest.mark.parametrize("kw, field", [
+    ({"K": -1.0}, "K"), ({"K": float("nan")}, "K"), ({"K": float("inf")}, "K"),
+    ({"b": -0.5}, "b"), ({"T": -0.001}, "T"), ({"T": 0.0}, "T"), ({"T": float("nan")}, "T"),
+    ({"d": -1}, "d"), ({"d": 0.5}, "d"), ({"B": float("nan")}, "B"), ({"K": True}, "K"), ({"K": "2"}, "K"),
+])
+def test_classify_wall_refuses_nonsense_instead_of_calling_it_passive(kw, field):
+    from hapticsdk.errors import ValidationError
+    from hapticsdk.passivity import classify_wall
+    args = {"K": 0.5, "b": 0.5, "T": 0.001, "d": 0, "B": 0.0}
+    args.update(kw)
+    with pytest.raises(ValidationError) as ei:
+        classify_wall(**args)
+    assert ei.value.field == field
+
+
+def test_classify_wall_still_labels_valid_walls():
+    from hapticsdk.passivity import classify_wall
+    # 2b/T = 1 N/mm at b = 0.5 N*s/m, T = 1 ms: below it passive, above it not
+    assert classify_wall(0.9, 0.5, 0.001)["label"] == "passive"
+    assert classify_wall(1.1, 0.5, 0.001)["label"] != "passive"
+    assert classify_wall(0.0, 0.0, 0.001, 2)["margin_ns_per_m"] == 0.0

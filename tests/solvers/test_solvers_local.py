@@ -91,9 +91,12 @@ def test_amortised_table_cache_and_lookup(fx, model, tmp_path):
     assert len(files) == 1
     tab = S.table(p)
     assert tab.X.shape == (31, 31, 5) and tab.reachable_fraction(p.tolerance) > 0.2
-    # disk cache round trip gives the same table
+    assert S.table(p) is tab                           # the problem's setup memo
+    assert tab.build_time_s > 0 and tab.source == "built"
+    # disk cache round trip gives the same table (a fresh problem of the same setup)
     _MEMO.clear()
-    tab2 = S.table(p)
+    tab2 = S.table(fx.make_problem(n=15, model=model, seed=6))
+    assert tab2.source == "disk cache" and tab2.build_time_s == tab.build_time_s
     assert tab2 is not tab and np.array_equal(tab2.X, tab.X) and tab2.key == tab.key
     assert np.array_equal(AmortisedTable.load(files[0]).X, tab.X)
     # lookup: a node returns the node's features exactly; batch equals one-by-one

@@ -24,17 +24,106 @@ def shipped_report(tmp_path_factory):
     return report, res, out
 
 
-def test_default_model_rebuilds_bit_for_bit(shipped_report):
+# Rebuilding across numpy / scipy / onnx versions: the sums behind every number may be
+# taken in another order (pairwise or SIMD summation, another FFT or filter kernel), so
+# equal bytes are guaranteed only for what is copied or counted (structure, names,
+# strings, integers, min/max). Numbers are compared with tolerances derived below.
+EPS = float(np.finfo(np.float64).eps)
+#: operations behind one generated trial value: its signals have fewer than 4096 samples
+#: (500 Hz x at most 4 s per press-and-slide), and a float64 sum of N terms is exact to
+#: N * eps of the sum of its magnitudes
+N_OPS = 4096
+RTOL_SUM = N_OPS * EPS                       # ~9e-13
+#: metrics are shown to people with at most 4 significant digits (docs, CLI); agreeing
+#: to 1e-6 relative keeps every shown digit
+RTOL_SHOWN = 1e-6
+
+
+def _close_tree(a, b, rtol, path="$"):
+    """Equal structure; str/int/bool/None exactly; floats within ``rtol`` (relative)."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and list(a) == list(b), path
+        for k in a:
+            _close_tree(a[k], b[k], rtol, f"{path}.{k}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _close_tree(x, y, rtol, f"{path}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        assert not isinstance(a, bool) and not isinstance(b, bool), path
+        assert a == pytest.approx(b, rel=rtol, abs=0.0), f"{path}: {a!r} vs {b!r}"
+    else:
+        assert a == b and type(a) is type(b), f"{path}: {a!r} vs {b!r}"
+
+
+def _csv_rows(path):
+    import csv
+    with open(path, newline="") as f:
+        return list(csv.reader(f))
+
+
+def test_default_model_rebuilds_within_float32_rounding(shipped_report):
+    """The default model rebuilt from the shipped data set is the shipped one: the same
+    graph and metadata; predictions equal to within what float32 rounding of the trained
+    weights can move them."""
+    import onnxruntime as ort
+
     report, _, out = shipped_report
-    assert out.read_bytes() == DEFAULT_ONNX.read_bytes()
+    got, ref = onnx.load(str(out)), onnx.load(str(DEFAULT_ONNX))
+    w_got = {t.name: onnx.numpy_helper.to_array(t) for t in got.graph.initializer}
+    w_ref = {t.name: onnx.numpy_helper.to_array(t) for t in ref.graph.initializer}
+    assert set(w_got) == set(w_ref)
+    # normalisation constants come from min/max of the data: exact
+    for k in ("x_min", "x_max", "y_min", "y_max", "x_scale", "y_half", "one"):
+        np.testing.assert_array_equal(w_got[k], w_ref[k], err_msg=k)
+    # the graph apart from its numbers is byte-identical
+    for m in (got, ref):
+        del m.metadata_props[:]
+        for t in m.graph.initializer:
+            t.ClearField("raw_data")
+            t.ClearField("float_data")
+    assert got.SerializeToString() == ref.SerializeToString()
+    # metadata: names, hashes and counts exact, metrics to every shown digit
+    meta_got = {p.key: json.loads(p.value) for p in onnx.load(str(out)).metadata_props}
+    meta_ref = {p.key: json.loads(p.value) for p in onnx.load(str(DEFAULT_ONNX)).metadata_props}
+    _close_tree(meta_got, meta_ref, RTOL_SHOWN)
+    # predictions over the data set: two float32 roundings of each weight (u = 2^-24
+    # relative each) move an output by at most
+    #   2u * y_half * (|W2| (|W1| 1 + |b1|) + |W2| 1 + |b2|)      (|x_s| <= 1, |tanh'| <= 1)
+    u = 2.0 ** -24
+    W1, b1, W2, b2 = (np.abs(w_ref[k].astype(np.float64)) for k in ("W1", "b1", "W2", "b2"))
+    bound = 2 * u * w_ref["y_half"] * (W2 @ (W1.sum(axis=1) + b1) + W2.sum(axis=1) + b2)
+    X = pipeline.load_table(SHIPPED).X.astype(np.float32)
+    pred = [ort.InferenceSession(str(p), providers=["CPUExecutionProvider"]).run(None, {"G": X})[0]
+            for p in (out, DEFAULT_ONNX)]
+    assert np.all(np.abs(pred[0] - pred[1]) <= bound), (np.abs(pred[0] - pred[1]).max(axis=0), bound)
 
 
-def test_shipped_dataset_regenerates_identically(tmp_path):
+def test_shipped_dataset_regenerates_within_roundoff(tmp_path):
+    """Regenerating the shipped (generated) data set gives the same rows; each value to
+    within the float64 roundoff of the sums behind it."""
     table = pipeline.generate_feature_dataset(tmp_path, 23)
-    for name in ("trial_features.csv", "sample_features.csv", "ratings.json", "dataset.json", "truth.json"):
-        assert (tmp_path / name).read_bytes() == (SHIPPED / name).read_bytes(), name
+    for name in ("trial_features.csv", "sample_features.csv"):
+        got, ref = _csv_rows(tmp_path / name), _csv_rows(SHIPPED / name)
+        assert got[0] == ref[0] and len(got) == len(ref), name
+        header = ref[0]
+        for r_got, r_ref in zip(got[1:], ref[1:]):
+            row = dict(zip(header, r_ref))
+            for col, a, b in zip(header, r_got, r_ref):
+                if col in ("sample", "trial", "label", "substrate", "texture"):
+                    assert a == b, (name, col)
+                elif col.endswith("_std"):
+                    # a standard deviation cancels its mean away: its variance is exact to
+                    # ~N eps of mean^2, not of itself
+                    mean = float(row[col[:-4] + "_mean"])
+                    assert abs(float(a) ** 2 - float(b) ** 2) <= 2 * RTOL_SUM * mean ** 2, (name, col, a, b)
+                else:
+                    assert float(a) == pytest.approx(float(b), rel=RTOL_SUM, abs=0.0), (name, col, a, b)
+    for name in ("ratings.json", "dataset.json", "truth.json"):
+        _close_tree(json.loads((tmp_path / name).read_text()), json.loads((SHIPPED / name).read_text()),
+                    RTOL_SUM)
     shipped_mat = json.loads((ROOT / "hapticsdk/data/materials.json").read_text())
-    assert pipeline.build_materials(table) == shipped_mat
+    _close_tree(pipeline.build_materials(table), shipped_mat, RTOL_SUM)
 
 
 def test_materials_library_format():

@@ -26,13 +26,14 @@ class _RecordingOmni(OmniVirtual):
         self.hist.append((self.t, self.sim.y, self.sim.v, self.motor_work_j))
 
 
-def _press_and_hold(passivity: bool, finger: str, gs: float = 2.3, dur: float = 4.0):
+def _press_and_hold(passivity: bool | None, finger: str, gs: float = 2.3, dur: float = 4.0):
     """Returns (upper bound of the energy given to the finger (J), position std over the
     last 0.5 s (mm), mean wall force over the last 0.5 s (N), mean penetration (mm))."""
     tr = Trajectory([(0, 0, 2.0), (0.3, 0, 2.0), (0.8, 0, -3.0), (dur, 0, -3.0)])
     dev = _RecordingOmni(trajectory=tr, finger=finger)
     r = HardnessDimension().renderer({"GS": gs})
-    rep = ServoLoop(dev, [r], {"force": dev, "coil": VoiceCoilVirtual()}, passivity=passivity).run(dur)
+    kw = {} if passivity is None else {"passivity": passivity}   # None: the loop's default
+    rep = ServoLoop(dev, [r], {"force": dev, "coil": VoiceCoilVirtual()}, **kw).run(dur)
     t, y, v, w = np.array(dev.hist).T
     # energy to the finger = motor work - kinetic energy - arm damping's dissipation; the
     # dissipation is at least b dy^2 / dt per interval, so this is an upper bound
@@ -57,3 +58,22 @@ def test_wall_at_gs_max_is_passive_and_settles_through_the_loop(finger):
 def test_same_wall_without_the_controller_is_active(finger):
     e, sd, _, _ = _press_and_hold(False, finger)
     assert e > 1e-4 and sd > 0.1
+
+
+def test_the_servo_loops_default_is_the_passive_controller():
+    """Without a passivity argument the loop renders the same wall passively."""
+    e, sd, _, _ = _press_and_hold(None, "medium", dur=2.0)
+    assert e <= 1e-6 and sd < 0.05
+
+
+def test_scenes_render_with_the_passivity_controller_by_default():
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.runtime.render import render_plan
+    from hapticsdk.scene import Scene
+
+    plan = compile_scene(Scene.for_material({"hardness": 0.9}))
+    rep = render_plan(plan, seconds=1.0)
+    # the controller ran on the force role: it books the energy flow of every tick
+    pas = rep.loop.passivity
+    assert "force" in pas and pas["force"]["active_ticks"] >= 0
+    assert rep.loop.ticks == 1000

@@ -170,12 +170,18 @@ def setup_key(problem: SolveProblem) -> tuple:
     """What a problem's answers depend on besides its targets (model object, dimensions,
     bounds, pinned values, penalty and the constraints' classes and parameters): the key
     of in-memory caches shared by problems that differ only in their targets."""
+    memo = getattr(problem, "_setup_cache", None)
+    if memo is not None and "setup_key" in memo:
+        return memo["setup_key"]
     cons = tuple((type(c).__module__, type(c).__qualname__, c.name,
                   repr(sorted((k, v) for k, v in vars(c).items() if not k.startswith("_"))))
                  for c in problem.constraints)
-    return (id(problem.model), tuple(problem.dimensions), tuple(problem.space.names),
-            problem.space.lower.tobytes(), problem.space.upper.tobytes(),
-            tuple(sorted((k, float(v)) for k, v in problem.fixed.items())), cons)
+    key = (id(problem.model), tuple(problem.dimensions), tuple(problem.space.names),
+           problem.space.lower.tobytes(), problem.space.upper.tobytes(),
+           tuple(sorted((k, float(v)) for k, v in problem.fixed.items())), cons)
+    if memo is not None:
+        memo["setup_key"] = key
+    return key
 
 
 class SampleCloud:
@@ -212,9 +218,14 @@ def sample_cloud(problem: SolveProblem) -> SampleCloud:
     :data:`CLOUD_SAMPLES` uniform samples (seed :data:`CLOUD_SEED`), one model call, the
     ones meeting every constraint kept (all of them if fewer than 16 do)."""
     import weakref
+    memo = getattr(problem, "_setup_cache", None)
+    if memo is not None and "cloud" in memo:
+        return memo["cloud"]
     key = setup_key(problem)
     hit = _CLOUDS.get(key)
     if hit is not None and hit[0]() is problem.model:
+        if memo is not None:
+            memo["cloud"] = hit[1]
         return hit[1]
     X = problem.space.random(CLOUD_SAMPLES, np.random.default_rng(CLOUD_SEED))
     G = problem.full_inputs(X)
@@ -227,4 +238,6 @@ def sample_cloud(problem: SolveProblem) -> SampleCloud:
     if len(_CLOUDS) > 32:
         _CLOUDS.clear()
     _CLOUDS[key] = (weakref.ref(problem.model), cloud)
+    if memo is not None:
+        memo["cloud"] = cloud
     return cloud

@@ -34,6 +34,7 @@ import hashlib
 import json
 import logging
 import os
+import time
 from pathlib import Path
 from typing import Any, ClassVar
 
@@ -46,6 +47,7 @@ from ._common import check_int, rank_key
 from .polish import levenberg_marquardt
 
 log = logging.getLogger(__name__)
+_dot = np.dot
 
 TABLE_VERSION = 1
 _MEMO: dict[str, "AmortisedTable"] = {}
@@ -73,8 +75,14 @@ class AmortisedTable:
 
     def __init__(self, X: np.ndarray, node_error: np.ndarray, node_violation: np.ndarray,
                  feature_names: tuple[str, ...], dimensions: tuple[str, ...], key: str,
-                 lower: np.ndarray, upper: np.ndarray) -> None:
+                 lower: np.ndarray, upper: np.ndarray, build_time_s: float = float("nan")) -> None:
         self.X = np.ascontiguousarray(X, float)
+        #: CPU seconds the table took to build (kept in the cache file; NaN if unknown)
+        self.build_time_s = float(build_time_s)
+        #: where this instance came from: "built", "disk cache" or "memory"
+        self.source = "built"
+        #: seconds spent building it or loading it from disk in this process
+        self.obtain_time_s = float("nan")
         self.node_error = node_error
         self.node_violation = node_violation
         self.feature_names = tuple(feature_names)
@@ -86,6 +94,11 @@ class AmortisedTable:
         self._g = [n - 1 for n in self.shape]
         if self.k == 2:
             self._flat = self.X.reshape(-1, self.X.shape[-1])
+            # the four corner rows of every cell side by side, (g1-1, g2-1, 4, d): a lookup
+            # then reads one contiguous block and needs one small matrix product
+            C = np.stack([self.X[:-1, :-1], self.X[1:, :-1], self.X[:-1, 1:], self.X[1:, 1:]], axis=2)
+            self._cells = np.ascontiguousarray(C)
+            self._g1f, self._g2f = float(self._g[0]), float(self._g[1])
 
     def lookup(self, targets: Any) -> np.ndarray:
         """Interpolated features for ``targets`` (``(m, k)`` or one ``(k,)`` row) in 0..1.
@@ -100,6 +113,8 @@ class AmortisedTable:
             T = np.asarray(targets, float)
             if T.ndim == 1:
                 return self._one(float(T[0]), float(T[1]))
+            if T.shape[0] == 1:
+                return self._one(float(T[0, 0]), float(T[0, 1]))[None]
             return self._many(T)
         T = np.asarray(targets, float)
         single = T.ndim == 1
@@ -110,15 +125,22 @@ class AmortisedTable:
         return out[0] if single else out
 
     def _one(self, h: float, r: float) -> np.ndarray:
+        # bilinear weights on plain floats, then one (4,) @ (4, d) product on the cell's
+        # corner block (a fresh (d,) array)
         g1, g2 = self._g
-        fh = min(max(h, 0.0), 1.0) * g1
-        fr = min(max(r, 0.0), 1.0) * g2
-        i = min(int(fh), g1 - 1)
-        j = min(int(fr), g2 - 1)
-        a, b = fh - i, fr - j
-        X = self.X
-        return ((1 - a) * (1 - b)) * X[i, j] + (a * (1 - b)) * X[i + 1, j] + \
-            ((1 - a) * b) * X[i, j + 1] + (a * b) * X[i + 1, j + 1]
+        fh = (0.0 if h < 0.0 else 1.0 if h > 1.0 else h) * self._g1f
+        fr = (0.0 if r < 0.0 else 1.0 if r > 1.0 else r) * self._g2f
+        i = int(fh)
+        j = int(fr)
+        if i >= g1:
+            i = g1 - 1
+        if j >= g2:
+            j = g2 - 1
+        a = fh - i
+        b = fr - j
+        a1 = 1.0 - a
+        b1 = 1.0 - b
+        return _dot((a1 * b1, a * b1, a1 * b, a * b), self._cells[i, j])
 
     def _many(self, T: np.ndarray) -> np.ndarray:
         g1, g2 = self._g
@@ -138,21 +160,23 @@ class AmortisedTable:
         return float(((self.node_error <= tolerance) & (self.node_violation <= CONSTRAINT_TOL)).mean())
 
     def save(self, path: Path) -> None:
+        """Write the table (and its build time) to ``path`` atomically."""
+        from hapticsdk.fileio import atomic_savez
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-        with open(tmp, "wb") as fh:
-            np.savez(fh, X=self.X, node_error=self.node_error, node_violation=self.node_violation,
-                     lower=self.lower, upper=self.upper,
+        atomic_savez(path, compressed=False, X=self.X, node_error=self.node_error,
+                     node_violation=self.node_violation, lower=self.lower, upper=self.upper,
                      meta=np.array(json.dumps({"feature_names": self.feature_names, "dimensions": self.dimensions,
-                                               "key": self.key, "version": TABLE_VERSION})))
-        os.replace(tmp, path)
+                                               "key": self.key, "version": TABLE_VERSION,
+                                               "build_time_s": self.build_time_s})))
 
     @classmethod
     def load(cls, path: Path) -> "AmortisedTable":
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
+            bt = meta.get("build_time_s")
             return cls(z["X"], z["node_error"], z["node_violation"], tuple(meta["feature_names"]),
-                       tuple(meta["dimensions"]), meta["key"], z["lower"], z["upper"])
+                       tuple(meta["dimensions"]), meta["key"], z["lower"], z["upper"],
+                       build_time_s=float(bt) if isinstance(bt, (int, float)) else float("nan"))
 
 
 def problem_key(problem: SolveProblem, options: dict[str, Any]) -> str:
@@ -262,11 +286,19 @@ class AmortisedSolver(Solver):
     def table(self, problem: SolveProblem) -> AmortisedTable:
         """The table for ``problem`` (memory cache, then disk cache, else built and stored)."""
         o = self.options
-        opts = {"grid": check_int(o, "grid", 2, 2001), "build_samples": check_int(o, "build_samples", 16),
-                "build_iter": check_int(o, "build_iter", 1)}
+        opts = {"grid": check_int(o, "grid", 2, 2001),
+                "build_samples": check_int(o, "build_samples", 16, 10_000_000),
+                "build_iter": check_int(o, "build_iter", 1, 10_000)}
+        memo = getattr(problem, "_setup_cache", None)
+        mkey = ("amortised", tuple(sorted(opts.items())), bool(o["cache"]), o["cache_dir"])
+        if memo is not None and mkey in memo:
+            return memo[mkey]
+        t_start = time.perf_counter()
         key = problem_key(problem, opts)
         tab = _MEMO.get(key)
         if tab is not None:
+            if memo is not None:
+                memo[mkey] = tab
             return tab
         path = None
         if o["cache"]:
@@ -275,25 +307,34 @@ class AmortisedSolver(Solver):
             if path.exists():
                 try:
                     tab = AmortisedTable.load(path)
+                    tab.source = "disk cache"
                     if tab.key != key:
                         tab = None
                 except Exception as exc:  # corrupt cache file: rebuild
                     log.warning("ignoring unreadable amortised table %s: %s", path, exc)
                     tab = None
         if tab is None:
+            c0 = time.process_time()
             tab = build_table(problem, key=key, **opts)
+            tab.build_time_s = time.process_time() - c0
+            log.info("built amortised table %s in %.2f s CPU", tab.shape, tab.build_time_s)
             if path is not None:
                 try:
                     tab.save(path)
                 except OSError as exc:
                     log.warning("could not write amortised table cache %s: %s", path, exc)
+        tab.obtain_time_s = time.perf_counter() - t_start
         _MEMO[key] = tab
+        if memo is not None:
+            memo[mkey] = tab
         return tab
 
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
-        steps = check_int(self.options, "polish_steps", 0)
+        steps = check_int(self.options, "polish_steps", 0, 10_000)
         tab = self.table(problem)
-        X = problem.space.clip(tab.lookup(problem.targets))
+        X = problem.clip(tab.lookup(problem.targets))
+        if steps == 0:   # the lookup alone: the core evaluates the answer
+            return SolverOutput(x=X, nfev=0, nit=0, message=f"table {tab.shape} lookup")
         rows = np.arange(problem.n_targets)
         Xp, err, viol, it, nfev = levenberg_marquardt(
             problem, X, rows, max_iter=steps, goal=0.0, on_iter=lambda n, e, v: trace.record(n, e, v))

@@ -372,15 +372,16 @@ class PolishSolver(Solver):
     _ga_defaults: ClassVar[dict[str, Any]] = {"population": 30, "generations": 10}
 
     def _starts(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace, n_starts: int,
-                start: str) -> tuple[np.ndarray, int]:
+                start: str, uniforms: np.ndarray) -> tuple[np.ndarray, int]:
         """``(m * n_starts, d)`` start rows (target-major) and the model rows spent on them.
 
         Row 0 of a target: ``problem.x0`` (``"auto"``/``"x0"``, when given) or the GA's best
         (``"ga"``); then, except for ``"random"``, the feasible samples of the cached cloud
-        nearest the target (about half of the starts); the rest uniform in bounds."""
+        nearest the target (about half of the starts); the rest uniform in bounds, from
+        ``uniforms`` ``(m, n_starts, d)``."""
         m, d = problem.n_targets, problem.n_features
         lower, span = problem.space.lower, problem.space.upper - problem.space.lower
-        X = lower + rng.random((m, n_starts, d)) * span
+        X = lower + uniforms * span
         nfev = 0
         first = 0
         if start in ("auto", "x0"):
@@ -422,7 +423,10 @@ class PolishSolver(Solver):
         m = problem.n_targets
         if start == "x0" and problem.x0 is not None:
             n_starts = 1
-        X0, nfev0 = self._starts(problem, rng, trace, n_starts, start)
+        # every random start of a target, rescue included, is drawn here: a fixed number per
+        # target in target order, so a batch solved in chunks gets the same answers
+        uni = rng.random((m, n_starts + rescue, problem.n_features))
+        X0, nfev0 = self._starts(problem, rng, trace, n_starts, start, uni[:, :n_starts])
         rows = np.repeat(np.arange(m), n_starts)
         lm = dict(max_iter=max_iter, goal=goal, damping=damping, margin=margin, weight=weight, clock=clock,
                   ftol=ftol, patience=check_int(o, "patience", 1, MAX_ITER), per_target=True,
@@ -439,7 +443,7 @@ class PolishSolver(Solver):
             k_near = (rescue + 1) // 2
             near = sample_cloud(problem).nearest(problem.targets[miss], n_starts + k_near)[:, -k_near:]
             lower, span = problem.space.lower, problem.space.upper - problem.space.lower
-            XR = lower + rng.random((miss.size, rescue, problem.n_features)) * span
+            XR = lower + uni[miss, n_starts:] * span
             XR[:, :k_near] = near
             Xr, er, vr, it2, nfev2 = levenberg_marquardt(
                 problem, XR.reshape(-1, problem.n_features), np.repeat(miss, rescue), **lm)

@@ -146,6 +146,8 @@ class HardnessDimension(PerceptionDimension):
         Feature("W", "mJ", 0.0, 100.0, "work of pressing"),
     )
     default_actuators: ClassVar[dict[str, str]] = {"force": "omni-virtual", "coil": "voicecoil-virtual"}
+    #: formula (7) comes from the voice coil's saved calibration when there is one
+    calibrations: ClassVar[dict[str, tuple[str, str]]] = {"calibration": ("voicecoil", "coil")}
     render_features: ClassVar[tuple[str, ...]] = ("GS",)
 
     def constraints(self, **context: float) -> list[Constraint]:

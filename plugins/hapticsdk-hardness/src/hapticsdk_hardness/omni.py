@@ -2,8 +2,10 @@
 
 One normal axis (y) is simulated physically (:mod:`hapticsdk.sim.arm`: arm mass +
 viscous damping + force saturation + encoder quantisation, finger as mass-spring-damper
-driven by a scripted trajectory, exact zero-order-hold integration); the lateral axis x
-follows the trajectory kinematically (the finger slides the stylus). Each
+driven by a scripted trajectory, exact zero-order-hold integration); the lateral axes x
+and z follow the trajectory kinematically (the finger slides the stylus; z is 0 unless
+the trajectory is 3-D, e.g. :func:`hapticsdk.sim.finger.walk_over` across the objects of
+a spatial scene). The force acts along y only. Each
 :meth:`step` applies the force the safety layer says is current (so a stale command
 becomes zero once the safety layer implements staleness).
 
@@ -103,13 +105,21 @@ class OmniVirtual(HapticDevice):
 
     def _read_state(self) -> DeviceState:
         x, _, vx, _ = self._at(self.t)
-        return DeviceState(t=self.t, position_mm=np.array([x, self._y_meas, 0.0]),
-                           velocity_mm_s=np.array([vx, self._v_est, 0.0]),
+        z, vz = self.trajectory.z_at(self.t)  # (0, 0) for a 2-D trajectory
+        return DeviceState(t=self.t, position_mm=np.array([x, self._y_meas, z]),
+                           velocity_mm_s=np.array([vx, self._v_est, vz]),
                            force_n=np.array([0.0, self._f_applied, 0.0]))
 
     def _force_at(self, now: float) -> float:
+        """Force along the simulated axis y (N): the command's force projected on y when
+        it carries a ``direction`` (the contact normal of a spatial scene; this
+        simulation has one physical axis, so the lateral part of a slanted normal is not
+        rendered)."""
         cmd = self.safety.current(now) if self.is_open else None
-        return cmd.force_n if (cmd is not None and cmd.force_n is not None) else 0.0
+        if cmd is None or cmd.force_n is None:
+            return 0.0
+        d = cmd.direction
+        return cmd.force_n if d is None else cmd.force_n * d[1]
 
     def _advance(self, dt: float, f: float) -> None:
         _, r0, _, _ = self._at(self.t)

@@ -50,6 +50,16 @@ def _meta(raw: dict[str, str], key: str, where: str) -> Any:
         raise ModelError(f"{where}: metadata {full!r} is not valid JSON ({exc})") from None
 
 
+def _number(value: Any, key: str, where: str, *, positive: bool = False) -> float:
+    """A metadata value that must be a finite number (not a bool, not a string); raises
+    :class:`ModelError` naming the file and the key ``hapticsdk.<key>``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or (
+            positive and value <= 0):
+        raise ModelError(f"{where}: metadata {PREFIX + key!r} must be a finite number"
+                         f"{' > 0' if positive else ''}, got {value!r}")
+    return float(value)
+
+
 class OnnxModel(PerceptionModel):
     """A perception model stored as ONNX (input ``G`` float32 [N,d], output ``I`` float32 [N,k])."""
 
@@ -71,7 +81,8 @@ class OnnxModel(PerceptionModel):
         feats, dims, defaults = meta["features"], meta["dimensions"], meta["feature_defaults"]
         if "hapticsdk.constraint_context" in raw:  # optional: data facts for constraints
             ctx = _meta(raw, "constraint_context", where)
-            if not isinstance(ctx, dict) or not all(isinstance(v, (int, float)) for v in ctx.values()):
+            if not isinstance(ctx, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                    and np.isfinite(v) for v in ctx.values()):
                 raise ModelError(f"{where}: metadata 'hapticsdk.constraint_context' must map names to numbers")
             meta["constraint_context"] = ctx
         if not isinstance(feats, list) or not feats or not all(
@@ -108,11 +119,13 @@ class OnnxModel(PerceptionModel):
         if not isinstance(defaults, dict) or set(defaults) - set(space.names):
             raise ModelError(f"{where}: 'hapticsdk.feature_defaults' names unknown features "
                              f"{sorted(set(defaults) - set(space.names)) if isinstance(defaults, dict) else defaults}")
+        df_hz = _number(meta["df_hz"], "df_hz", where, positive=True)
+        defaults = {k: _number(v, f"feature_defaults.{k}", where) for k, v in defaults.items()}
         meta["source_path"] = where
         super().__init__(space.names, dims, feature_space=space, metadata=meta, name=name or p.stem)
         self.units = dict(zip(space.names, space.units))
-        self.feature_defaults = {k: float(v) for k, v in defaults.items()}
-        self.df_hz = float(meta["df_hz"])
+        self.feature_defaults = defaults
+        self.df_hz = df_hz
         self._mlp: MLPModel | None = None
         if meta["architecture"] == "mlp-tanh":
             missing = [n for n in MLP_INITIALIZERS if n not in inits]

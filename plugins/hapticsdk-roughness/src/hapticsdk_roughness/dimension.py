@@ -150,6 +150,8 @@ class RoughnessDimension(PerceptionDimension):
                 "lateral vibration power (mean square of the high-passed acceleration)"),
     )
     default_actuators: ClassVar[dict[str, str]] = {"vibration": "piezo-virtual"}
+    #: the piezo table Tab comes from the piezo's saved calibration when there is one
+    calibrations: ClassVar[dict[str, tuple[str, str]]] = {"table": ("piezo", "vibration")}
     render_features: ClassVar[tuple[str, ...]] = ("Fpeak", "AFpeak")
 
     def constraints(self, **context: float) -> list[Constraint]:

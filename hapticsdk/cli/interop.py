@@ -1,0 +1,141 @@
+"""Interchange commands (MPEG-I haptics ``.hjif``):
+
+- ``hapticsdk export PLAN_OR_SCENE --format hjif -o FILE``: solved materials to ``.hjif``;
+- ``hapticsdk import FILE.hjif [--json]``: what a file holds and what the SDK plays of it;
+- ``hapticsdk play FILE.hjif [--seconds S] [--json]``: play its vibrotactile content on the
+  simulated (or real) vibration actuators.
+
+Heavy imports stay inside the handlers. See ``docs/interop.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+from typing import Any
+
+from . import positive_float
+
+
+def register(sub: Any) -> None:
+    p = sub.add_parser("export", help="export solved materials (plan or scene) as MPEG-I haptics (.hjif)")
+    p.add_argument("source", metavar="PLAN_OR_SCENE",
+                   help="plan JSON (hapticsdk plan -o), scene JSON, or a library material name (S7)")
+    p.add_argument("--format", default="hjif", choices=["hjif"], help="output format (default hjif)")
+    p.add_argument("-o", "--output", required=True, metavar="FILE", help="output file (.hjif)")
+    p.add_argument("--effect-seconds", type=positive_float, default=1.0, metavar="S",
+                   help="nominal length of each exported effect (s, default 1)")
+    p.add_argument("--no-importance", action="store_true",
+                   help="when compiling a scene: keep every dimension (export roughness of smooth samples too)")
+    p.add_argument("--seed", type=int, help="when compiling a scene: solver seed")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_export)
+
+    p = sub.add_parser("import", help="read an MPEG-I haptics .hjif file: perceptions, what plays, SDK metadata")
+    p.add_argument("file", metavar="FILE.hjif")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--synth", action="store_true",
+                   help="also synthesise the vibrotactile channels and report their peak frequency and envelope")
+    p.set_defaults(func=cmd_import)
+
+    p = sub.add_parser("play", help="play the vibrotactile content of an .hjif file on the vibration actuators")
+    p.add_argument("file", metavar="FILE.hjif")
+    p.add_argument("--seconds", type=positive_float, help="duration (s, default: the file's length)")
+    p.add_argument("--actuators", default="piezo-virtual,voicecoil-virtual",
+                   help="comma-separated actuator names (default piezo-virtual,voicecoil-virtual)")
+    p.add_argument("--tick", type=positive_float, default=0.001, metavar="S", help="servo period (s, default 0.001)")
+    p.add_argument("--realtime", action="store_true", help="pace ticks to the wall clock")
+    p.add_argument("--piezo-table", metavar="PATH", help="piezo Tab file (default: the generated table)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_play)
+
+
+def _plan_from_arg(text: str, *, no_importance: bool, seed: int | None) -> Any:
+    from ..plan import RenderPlan
+
+    path = Path(text)
+    if path.is_file():
+        from ..schemas_io import read_json
+        data = read_json(path, field="plan")
+        if isinstance(data, dict) and "plan_version" in data:
+            return RenderPlan.from_dict(data)
+    from ..compiler import compile_scene
+    from ..scene import Scene
+    from .scene import _scene_from_arg
+
+    scene = _scene_from_arg(text)
+    over: dict[str, Any] = {}
+    if seed is not None:
+        over.setdefault("solver", {})["seed"] = seed
+    if no_importance:
+        over.setdefault("importance", {})["enabled"] = False
+    if over:
+        from ..scene.model import _merge
+        scene = Scene(objects=scene.objects, devices=scene.devices, settings=_merge(scene.settings, over),
+                      name=scene.name)
+    return compile_scene(scene)
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from ..fileio import check_output_path
+    from ..interop.hjif_export import export_plan, write_hjif
+    from ..interop.hjif_import import sdk_materials
+
+    check_output_path(args.output, field="output")  # before any solving
+    plan = _plan_from_arg(args.source, no_importance=args.no_importance, seed=args.seed)
+    hfile = export_plan(plan, effect_seconds=args.effect_seconds)
+    path = write_hjif(hfile, args.output)
+    out = {"saved": str(path), "format": args.format, "scene": plan.scene,
+           "perceptions": [{"id": p.id, "modality": p.perception_modality,
+                            "description": p.description.split(" hapticsdk-meta:")[0]} for p in hfile.perceptions],
+           "materials": {k: {"features": v.get("features"), "targets": v.get("targets"), "parts": sorted(v["parts"])}
+                         for k, v in sdk_materials(hfile).items()}}
+    if args.json:
+        from . import emit
+        emit(out, True)
+    else:
+        lines = [f"wrote {path} (MPEG-I haptics JSON, {len(hfile.perceptions)} perception(s))"]
+        lines += [f"  perception {p['id']} {p['modality']}: {p['description']}" for p in out["perceptions"]]
+        print("\n".join(lines))
+    return 0
+
+
+def cmd_import(args: argparse.Namespace) -> int:
+    from ..interop.hjif_import import format_summary, import_summary, load
+
+    hfile = load(args.file)
+    s = import_summary(hfile, source=str(args.file))
+    if args.synth:
+        from ..interop.hjif_synth import describe_channel, synthesize
+        syn = synthesize(hfile)
+        s["synthesis"] = {"fs_hz": syn.fs, "duration_s": syn.duration_s,
+                          "channels": [describe_channel(c, syn.fs) for c in syn.channels]}
+    if args.json:
+        from . import emit
+        emit(s, True)
+    else:
+        text = format_summary(s)
+        for c in (s.get("synthesis") or {}).get("channels", []):
+            text += (f"\n  synthesised {c['path']}: peak {c['peak_frequency_hz']:g} Hz, max |x| {c['max_abs']:.4g}, "
+                     f"rms {c['rms']:.4g}")
+        print(text)
+    return 0
+
+
+def cmd_play(args: argparse.Namespace) -> int:
+    from ..errors import ValidationError
+    from ..interop.hjif_import import load
+    from ..interop.hjif_play import format_report, play
+
+    acts = [a.strip() for a in args.actuators.split(",") if a.strip()]
+    if not acts:
+        raise ValidationError("no actuator named", field="actuators")
+    hfile = load(args.file)  # checked whole before anything is opened
+    rep = play(hfile, seconds=args.seconds, actuators=acts, tick_s=args.tick, realtime=args.realtime,
+               piezo_table=args.piezo_table)
+    if args.json:
+        print(json.dumps(rep.to_dict(), indent=2, default=str))
+    else:
+        print(format_report(rep))
+    return 0

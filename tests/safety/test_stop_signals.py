@@ -1,0 +1,157 @@
+"""SIGINT, SIGTERM and SIGHUP stop `hapticsdk render` safely (issue 13, item 2).
+
+The real command runs in a subprocess and drives ``piezo-serial`` through the emulated
+serial bridge of hapticsdk-roughness (a pty served by this test process), so the emulated
+DRV2667's output can be read back while the command runs. The bridge's own firmware
+watchdog is off: only the host can put the chip in standby. Without the signal handling
+SIGTERM/SIGHUP kill the interpreter and the chip keeps playing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from hapticsdk.runtime.signals import SafeStop, StopSignals, safe_stop_on_signals, stop_signals
+
+pytest.importorskip("serial")
+emulation = pytest.importorskip("hapticsdk_roughness.emulation")
+
+needs_posix = pytest.mark.skipif(not hasattr(signal, "SIGHUP") or os.name != "posix",
+                                 reason="POSIX signals and ptys")
+
+
+# ---------------------------------------------------------------------------------
+# the facility, in-process
+# ---------------------------------------------------------------------------------
+@needs_posix
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM", "SIGHUP"])
+def test_signal_becomes_safestop_then_handlers_are_restored(signame):
+    signum = getattr(signal, signame)
+    before = signal.getsignal(signum)
+    with pytest.raises(SafeStop) as info:
+        with safe_stop_on_signals() as st:
+            assert st.installed and signum in st.signals
+            os.kill(os.getpid(), signum)
+            for _ in range(1000):        # the handler runs between bytecodes
+                time.sleep(0.001)
+    assert info.value.signum == signum and info.value.exit_code == 128 + signum
+    assert isinstance(info.value, KeyboardInterrupt)
+    assert st.signum == signum and st.received_at is not None
+    assert signal.getsignal(signum) is before
+
+
+@needs_posix
+def test_a_second_signal_does_not_interrupt_the_safe_stop():
+    stopped = []
+    with pytest.raises(SafeStop):
+        with safe_stop_on_signals() as st:
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(1.0)
+            finally:
+                # the stop path: a second signal arrives while it runs
+                os.kill(os.getpid(), signal.SIGINT)
+                time.sleep(0.05)
+                stopped.append("done")
+    assert stopped == ["done"] and st.repeats == 1
+
+
+def test_outside_the_main_thread_nothing_is_installed():
+    import threading
+    out: list[StopSignals] = []
+
+    def body():
+        with safe_stop_on_signals() as st:
+            out.append(st)
+    th = threading.Thread(target=body)
+    th.start()
+    th.join()
+    assert out and not out[0].installed
+
+
+def test_exit_codes_follow_the_shell_convention():
+    assert SafeStop(signal.SIGINT).exit_code == 130
+    assert SafeStop(signal.SIGTERM).exit_code == 143
+    if hasattr(signal, "SIGHUP"):
+        assert SafeStop(signal.SIGHUP).exit_code == 129
+        assert set(stop_signals()) == {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+
+
+# ---------------------------------------------------------------------------------
+# the real command
+# ---------------------------------------------------------------------------------
+def _scene(tmp_path):
+    scene = {"schema_version": 1, "name": "signals",
+             "objects": [{"name": "m", "material": {"name": "r", "intensities": {"roughness": 0.6}}}],
+             "devices": {"vibration": {"actuator": "piezo-serial"}},
+             "settings": {"servo": {"period_s": 0.001, "realtime": True}}}
+    p = tmp_path / "scene.json"
+    p.write_text(json.dumps(scene))
+    return p
+
+
+SIGNALS = [("SIGINT", 130), ("SIGTERM", 143), ("SIGHUP", 129)]
+
+
+@needs_posix
+def test_render_stops_the_piezo_on_each_signal(tmp_path):
+    """The three commands run at the same time (one emulated bridge each) to keep the
+    suite fast; each gets its signal once its piezo plays."""
+    scene = _scene(tmp_path)
+    runs = []
+    try:
+        for signame, code in SIGNALS:
+            emu = emulation.SerialBridgeEmulator(watchdog_s=0).start()
+            cmd = [sys.executable, "-m", "hapticsdk", "render", "--scene", str(scene),
+                   "--seconds", "30", "--device-option", f"vibration.port={emu.port}"]
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                    start_new_session=True)
+            runs.append({"signame": signame, "code": code, "emu": emu, "proc": proc})
+        # each run: wait until its piezo plays (the probe slides for 1 s), signal it 50 ms
+        # later, then watch its output go to zero
+        t0 = time.monotonic()
+        active = list(runs)
+        while active and time.monotonic() - t0 < 90:
+            for r in list(active):
+                now = time.monotonic()
+                if "t_sig" in r:
+                    if not r["emu"].drv.driving:
+                        r["zero_after_s"] = now - r["t_sig"]
+                        active.remove(r)
+                    elif now - r["t_sig"] > 10:
+                        active.remove(r)
+                    continue
+                o = r["emu"].drv.output()
+                if "t_play" not in r:
+                    if o["playing"] and o["amplitude_v"] > 1.0:
+                        r["t_play"] = now
+                    elif r["proc"].poll() is not None:
+                        pytest.fail(f"{r['signame']} run ended early: {r['proc'].communicate()[1][-800:]}")
+                elif now - r["t_play"] >= 0.05:
+                    # still playing and running right before the signal
+                    assert r["emu"].drv.driving and r["proc"].poll() is None, r["signame"]
+                    r["t_sig"] = time.monotonic()
+                    r["proc"].send_signal(getattr(signal, r["signame"]))
+            time.sleep(0.0005)
+        assert all("t_sig" in r for r in runs), "a piezo never played"
+        for r in runs:
+            emu, proc = r["emu"], r["proc"]
+            out, err = proc.communicate(timeout=30)
+            name = r["signame"]
+            assert not emu.drv.driving and emu.drv.standby, f"piezo still playing after {name}: {err[-500:]}"
+            assert proc.returncode == r["code"], err[-800:]
+            assert f"stopped by {name}" in err and "piezo-serial" in err and "no actuator" not in err
+            assert "Traceback" not in err
+    finally:
+        for r in runs:
+            if r["proc"].poll() is None:
+                r["proc"].kill()
+                r["proc"].wait()
+            r["emu"].stop()
