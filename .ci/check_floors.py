@@ -32,10 +32,17 @@ def _norm(name: str) -> str:
     return re.sub(r"[-_.]+", "-", name).lower()
 
 
+def _version_class() -> type:
+    try:
+        from packaging.version import Version
+    except ModuleNotFoundError:  # a fresh venv: pip's own copy
+        from pip._vendor.packaging.version import Version
+    return Version
+
+
 def declared_floors() -> dict[str, str]:
     """package -> the highest `>=` bound any distribution here declares for it."""
-    from packaging.version import Version
-
+    Version = _version_class()
     out: dict[str, str] = {}
     for pp in PYPROJECTS:
         proj = tomllib.loads(pp.read_text())["project"]
@@ -68,8 +75,7 @@ def pinned_floors() -> dict[str, str]:
 
 
 def problems(installed: bool = False) -> list[str]:
-    from packaging.version import Version
-
+    Version = _version_class()
     errs = []
     declared, pinned = declared_floors(), pinned_floors()
     for name in sorted(set(declared) | set(pinned)):

@@ -14,7 +14,12 @@ report = hs.render({"hardness": hardness, "roughness": roughness}, seconds=2.0, 
 out = report.to_dict()
 solve = out["solve"]
 print(f"targets hardness {hardness}, roughness {roughness}")
-print("predicted:", {k: round(v, 4) for k, v in solve["intensities"].items()},
-      f"success {solve['success']}, error {solve['error']:.4f}")
+# the solve covers the rendered dimensions only
+print("solved for", ", ".join(solve["targets"]) + ":",
+      {k: round(v, 4) for k, v in solve["intensities"].items() if k in solve["targets"]},
+      f"reached: {solve['success']}, error {solve['error']:.4f}")
 print("features:", {k: round(v, 4) for k, v in out["features"].items()})
-print("actuators:", out["actuators"], "| rendered:", out["dimensions"])
+print("rendered:", ", ".join(out["dimensions"]) or "nothing", "| actuators:", out["actuators"])
+# a dimension whose predicted realism loss is small is left out (not rendered): say so
+for d in out["dropped"]:
+    print(f"left out {d['dimension']} (not rendered): {d['reason']}")

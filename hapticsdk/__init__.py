@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load laz
     from .plugins import list_plugins
     from .problems import build_problem, get_solver, load_dimension, load_model, solve
     from .runtime.render import RenderReport, render_plan
+    from .runtime.session import Session, session
     from .scene import Scene, load_scene
     from .solvers import BatchSolveResult, SolveProblem, SolveResult, Solver
 
@@ -61,6 +62,8 @@ _LAZY = {
     "load_scene": "hapticsdk.scene",
     "compile_scene": "hapticsdk.compiler",
     "render_plan": "hapticsdk.runtime.render",
+    "Session": "hapticsdk.runtime.session",
+    "session": "hapticsdk.runtime.session",
     "HapticSDKError": "hapticsdk.errors",
 }
 
@@ -69,7 +72,9 @@ __all__ = sorted(_LAZY) + ["render", "__version__"]
 
 def __getattr__(name: str) -> Any:
     if name in _LAZY:
-        return getattr(import_module(_LAZY[name]), name)
+        value = getattr(import_module(_LAZY[name]), name)
+        globals()[name] = value  # resolved once; later lookups skip __getattr__
+        return value
     raise AttributeError(f"module 'hapticsdk' has no attribute {name!r}")
 
 

@@ -166,7 +166,8 @@ class PerceptionDimension(ABC):
     default_model: ClassVar[str] = "default"
 
     def feature_space(self) -> FeatureSpace:
-        return FeatureSpace(tuple(self.features))
+        """The features this dimension contributes, labelled with their declarer."""
+        return FeatureSpace(tuple(f.owned_by(f.owner or f"dimension {self.name!r}") for f in self.features))
 
     def constraints(self, **context: float) -> list[Constraint]:
         """Physical constraints (default: none). ``context`` carries data-set facts (e.g. ``df_hz``)."""

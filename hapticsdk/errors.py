@@ -21,6 +21,8 @@ class ValidationError(HapticSDKError, ValueError):
 
     def __init__(self, message: str, *, field: str | None = None) -> None:
         self.field = field
+        #: the message without the field in front
+        self.reason = message
         super().__init__(f"{field}: {message}" if field else message)
 
 
@@ -86,3 +88,24 @@ class FormatError(ValidationError):
 class FileWriteError(ValidationError):
     """A file could not be written (missing directory, disk full, permission); the old
     file, if any, is unchanged. ``field`` names the path or the option that gave it."""
+
+
+class FeatureConflictError(ValidationError):
+    """Two plugins (or a model and a dimension) declare one feature name in two units."""
+
+
+class SessionError(HapticSDKError, RuntimeError):
+    """A live :class:`~hapticsdk.runtime.session.Session` cannot do what was asked (it is
+    closed, or its servo has stopped); the message says why."""
+
+
+class ServoProcessDied(SessionError):
+    """The servo of a live session is gone: its process died or was killed, stopped on a
+    signal, or ended on a device fault. ``reason`` says which (``"killed by SIGKILL"``,
+    ``"stopped by SIGTERM"``, ``"device fault: ..."``); ``exitcode`` is the servo
+    process's exit status (None in thread isolation)."""
+
+    def __init__(self, message: str, *, reason: str = "", exitcode: int | None = None) -> None:
+        self.reason = reason
+        self.exitcode = exitcode
+        super().__init__(message)

@@ -5,6 +5,15 @@ A *feature* is one physical quantity of the stimulus (for example global stiffne
 so that a feature vector is a plain ``(n, d)`` numpy array whose columns have names,
 units and bounds. The space a scene solves in is assembled from the features that
 its perception dimensions contribute (:meth:`FeatureSpace.union`).
+
+A feature is identified by its name AND its unit: two dimensions may share a feature
+(the same physical quantity, e.g. a plugin reading the paper's ``GS``) only when they
+declare the same unit; a union of spaces that name one feature in two units raises
+:class:`~hapticsdk.errors.FeatureConflictError` naming both owners. Naming rule for
+plugin authors (docs/plugin-authors.md): the paper's features keep their short names
+(``GS``, ``W``, ``Fpeak``, ``AFpeak``, ``P``); a feature of your own is prefixed with
+your dimension's name and a dot (``stickiness.mu``), so it cannot collide with anyone
+else's.
 """
 
 from __future__ import annotations
@@ -15,7 +24,13 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from .errors import ValidationError
+from .errors import FeatureConflictError, ValidationError
+
+
+def same_unit(a: str, b: str) -> bool:
+    """Whether two unit strings name the same unit (white space and case of the
+    spelling ``N/mm`` vs ``N / mm`` aside; ``N/mm`` and ``N/m`` differ)."""
+    return "".join(str(a).split()) == "".join(str(b).split())
 
 
 @dataclass(frozen=True)
@@ -28,6 +43,8 @@ class Feature:
         lower, upper: inclusive bounds in ``unit``; ``lower == upper`` is a degenerate
             (fixed) feature and is allowed.
         description: one line for docs and CLI output.
+        owner: who declares it (``"dimension hardness"``, ``"model default"``), for
+            conflict messages; not part of the feature's identity.
     """
 
     name: str
@@ -35,6 +52,7 @@ class Feature:
     lower: float
     upper: float
     description: str = ""
+    owner: str = field(default="", compare=False)
 
     def __post_init__(self) -> None:
         if not self.name or not isinstance(self.name, str):
@@ -50,6 +68,10 @@ class Feature:
     @property
     def span(self) -> float:
         return self.upper - self.lower
+
+    def owned_by(self, owner: str) -> "Feature":
+        """Copy labelled with its declarer (for conflict messages)."""
+        return replace(self, owner=owner)
 
     def with_bounds(self, lower: float, upper: float) -> "Feature":
         return replace(self, lower=lower, upper=upper)
@@ -113,13 +135,23 @@ class FeatureSpace:
 
     # -- algebra -----------------------------------------------------------
     def union(self, other: "FeatureSpace | Iterable[Feature]") -> "FeatureSpace":
-        """Features of ``self`` then those of ``other`` not already present (by name)."""
+        """Features of ``self`` then those of ``other`` not already present (by name).
+
+        Raises :class:`~hapticsdk.errors.FeatureConflictError` when ``other`` names a
+        feature of ``self`` in another unit (naming both owners)."""
         feats = list(self.features)
-        seen = set(self.names)
+        seen = {f.name: f for f in self.features}
         for f in other:
-            if f.name not in seen:
+            mine = seen.get(f.name)
+            if mine is None:
                 feats.append(f)
-                seen.add(f.name)
+                seen[f.name] = f
+            elif not same_unit(mine.unit, f.unit):
+                raise FeatureConflictError(
+                    f"feature {f.name!r} is declared in {mine.unit!r} by {mine.owner or 'one plugin'} and in "
+                    f"{f.unit!r} by {f.owner or 'another'}; a feature is one physical quantity in one unit: "
+                    f"rename one (plugin features take the prefix '<dimension>.', e.g. 'stickiness.{f.name}')",
+                    field=f"features.{f.name}")
         return FeatureSpace(tuple(feats))
 
     def subset(self, names: Sequence[str]) -> "FeatureSpace":

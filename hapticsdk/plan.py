@@ -236,14 +236,18 @@ class RenderPlan:
         return json.dumps(self.to_dict(), **{"indent": 2, **kw})
 
     def save(self, path: str | Path) -> Path:
-        p = Path(path)
-        p.write_text(self.to_json() + "\n", encoding="utf-8")
-        return p
+        """Write the plan JSON atomically (temporary file, fsync, rename: a reader or a
+        crash never sees half a plan; a failed write keeps the old file and raises
+        :class:`~hapticsdk.errors.FileWriteError`). Returns the path."""
+        from .fileio import atomic_write_text
+        text = self.to_json() + "\n"  # serialised before the file is touched
+        return atomic_write_text(path, text)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], *, validate: bool = True) -> "RenderPlan":
         """Rebuild a plan from :meth:`to_dict` output; with ``validate`` it is checked
-        against ``schemas/plan.schema.json`` first (errors name the JSON path)."""
+        against ``schemas/plan.schema.json`` first (errors name the JSON path), and its
+        feature values against their ranges (:func:`check_plan_features`)."""
         if validate:
             validate_plan_dict(d)
         api = str(d.get("plugin_api_version", PLUGIN_API_VERSION))
@@ -251,12 +255,15 @@ class RenderPlan:
             raise ValidationError(f"plan compiled for plugin API {api}, this core provides "
                                   f"{PLUGIN_API_VERSION}; compile the scene again",
                                   field="plan.plugin_api_version")
-        return cls(scene=d["scene"],
+        plan = cls(scene=d["scene"],
                    materials={k: MaterialPlan.from_dict(v) for k, v in d["materials"].items()},
                    settings=dict(d.get("settings", {})),
                    plugins=[dict(p) for p in d.get("plugins_loaded", [])],
                    unused_plugins=[dict(p) for p in d.get("unused_plugins", [])],
                    plugin_api_version=api)
+        if validate:
+            check_plan_features(plan)
+        return plan
 
     @classmethod
     def load(cls, path: str | Path) -> "RenderPlan":
@@ -265,9 +272,7 @@ class RenderPlan:
         solving model's data bounds), so a hand-edited ``GS: 1e6`` is refused here
         with the field named, not clamped by the safety layer later."""
         from .schemas_io import read_json
-        plan = cls.from_dict(read_json(path, field="plan"))
-        check_plan_features(plan)
-        return plan
+        return cls.from_dict(read_json(path, field="plan"))
 
     def summary(self) -> dict[str, Any]:
         """The short form printed by ``hapticsdk plan --json``."""

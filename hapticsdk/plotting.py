@@ -1,14 +1,25 @@
-"""Figures of a render (needs the optional ``matplotlib``: ``pip install hapticsdk[plot]``).
+"""Figures (need the optional ``matplotlib``: ``pip install 'hapticsdk[plot]'``).
 
-:func:`plot_render` draws, from the servo loop's per-tick log, the normal force against
-penetration (with the commanded spring law), the vibration commands over time (piezo
-voltage envelope and frequency, voice-coil drive), and the probe's sliding speed.
+* :func:`plot_render`: a render's servo log -- normal force against penetration (every
+  tick, the mean per penetration bin, the fitted slope and the target slope), the probe's
+  motion, and one panel per vibration channel that was driven (drive amplitude in that
+  actuator's unit, drive frequency). Channels that were never driven and dimensions the
+  plan left out are listed under the figure instead of being drawn as empty panels.
+* :func:`plot_stability`: ``hapticsdk bench stability``'s matrix, stiffness x servo
+  period per damping, coloured by the delivered force ratio, energy given to the user
+  written in each cell and unstable cells marked.
+* :func:`plot_plan`: a compiled plan's materials in intensity space, with what was left
+  out of each and why.
+
+Every figure is written atomically (:func:`save_figure`).
 """
 
 from __future__ import annotations
 
+import re
+import textwrap
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -25,20 +36,67 @@ def _pyplot() -> Any:
     return plt
 
 
-def _role_series(a: Any, t: np.ndarray, log: dict, suffix: str, ylabel: str, title: str) -> None:
-    """Plot every ``<role><suffix>`` series of the log on axis ``a``."""
-    keys = sorted(k for k in log if k.endswith(suffix))
-    for key in keys:
-        a.plot(t, log[key], label=key[: -len(suffix)])
-    a.set_xlabel("time (s)")
-    a.set_ylabel(ylabel)
-    a.set_title(title)
-    if keys:
-        a.legend(fontsize=8)
+#: name Scene.for_material gives intensity targets: "hardness 0.8, roughness 0.3"
+_TARGETS_NAME = re.compile(r"[A-Za-z_][\w-]* [0-9.eE+-]+(, [A-Za-z_][\w-]* [0-9.eE+-]+)*")
+
+
+def describe_material(name: str) -> str:
+    """Title text for a rendered material: ``material S7 "leather on sponge" (GENERATED
+    library data)`` for a library material, ``targets hardness 0.8, roughness 0.3`` for
+    intensity targets."""
+    if _TARGETS_NAME.fullmatch(name):
+        return f"targets {name}"
+    try:
+        from .materials import load_library
+        lib = load_library()
+        m = lib.get(name)
+    except Exception:  # not a library material (a scene's own name)
+        return f"material {name}"
+    gen = " (GENERATED library data)" if getattr(lib, "generated", False) else ""
+    return f'material {m.name} "{m.label}"{gen}'
+
+
+def _limits(report: Any, role: str) -> dict[str, Any]:
+    """The ``limits`` of the actuator that served ``role`` (from the report's devices)."""
+    name = (getattr(report, "actuators", {}) or {}).get(role)
+    dev = (getattr(report, "devices", {}) or {}).get(name) or {}
+    return dict(dev.get("limits") or {})
+
+
+def _unit_label(unit: str) -> str:
+    return {"V": "V", "1": "fraction of full scale", "": "drive units"}.get(unit, unit)
+
+
+def force_penetration_summary(pen_mm: np.ndarray, force_n: np.ndarray, *, bins: int = 10
+                              ) -> dict[str, Any]:
+    """Over the ticks in contact (penetration > 0): the least-squares slope through the
+    origin (N/mm), and per penetration bin the centre (mm), mean and standard deviation of
+    the force (N) and the tick count (empty bins dropped)."""
+    pen = np.asarray(pen_mm, float)
+    f = np.asarray(force_n, float)
+    c = pen > 0
+    out: dict[str, Any] = {"n_contact": int(c.sum()), "slope_n_per_mm": float("nan"),
+                           "centre_mm": np.zeros(0), "mean_n": np.zeros(0), "std_n": np.zeros(0),
+                           "count": np.zeros(0, int)}
+    if not c.any():
+        return out
+    y, fc = pen[c], f[c]
+    out["slope_n_per_mm"] = float(np.dot(y, fc) / np.dot(y, y))
+    edges = np.linspace(0.0, float(y.max()), bins + 1)
+    idx = np.clip(np.digitize(y, edges) - 1, 0, bins - 1)
+    count = np.bincount(idx, minlength=bins)
+    s1 = np.bincount(idx, weights=fc, minlength=bins)
+    s2 = np.bincount(idx, weights=fc * fc, minlength=bins)
+    keep = count > 0
+    mean = s1[keep] / count[keep]
+    var = np.maximum(s2[keep] / count[keep] - mean ** 2, 0.0)
+    out.update(centre_mm=0.5 * (edges[:-1] + edges[1:])[keep], mean_n=mean, std_n=np.sqrt(var),
+               count=count[keep])
+    return out
 
 
 def plot_render(report: Any, path: str | Path) -> Path:
-    """Save a 2x2 figure of ``report`` (a render report with a servo ``loop`` log) to ``path``."""
+    """Save a figure of ``report`` (a render report with a servo ``loop`` log) to ``path``."""
     plt = _pyplot()
     loop = getattr(report, "loop", report)
     log = getattr(loop, "log", None) or {}
@@ -48,38 +106,233 @@ def plot_render(report: Any, path: str | Path) -> Path:
     pen = np.asarray(log["penetration_mm"])
     force = np.asarray(log.get("force_n", np.zeros_like(t)))
     vel = np.asarray(log["velocity_mm_s"])
-    fig, ax = plt.subplots(2, 2, figsize=(11, 7.5))
-    title = f"hapticsdk render of {getattr(report, 'material', '')}"
-    fig.suptitle(title)
+    roles = sorted(k[: -len(".amplitude")] for k in log if k.endswith(".amplitude"))
+    driven = [r for r in roles if np.any(np.asarray(log[f"{r}.amplitude"]) != 0)]
+    idle = [r for r in roles if r not in driven]
 
-    a = ax[0, 0]
-    a.plot(np.maximum(pen, 0), force, ".", ms=2, label="rendered")
-    gs = (getattr(report, "features", {}) or {}).get("GS")
-    if gs is not None:
-        y = np.linspace(0, max(pen.max(), 1e-3), 50)
-        a.plot(y, np.minimum(min(gs, 2.3) * y, 3.3), "k--", lw=1, label=f"min(GS, 2.3 N/mm) * Y, GS = {gs:.2f} N/mm")
-    a.set_xlabel("penetration Y (mm)")
-    a.set_ylabel("normal force (N)")
-    a.set_title("hardness: force against penetration")
-    a.legend(fontsize=8)
+    notes = []
+    for r in idle:
+        act = (getattr(report, "actuators", {}) or {}).get(r, "?")
+        notes.append(f"{r} ({act}): never driven in this run (amplitude 0 throughout), not drawn.")
+    for d in getattr(report, "dropped", []) or []:
+        notes.append(f"left out {d.get('dimension')}: {d.get('reason')}")
+    note_lines = [ln for n in notes for ln in textwrap.wrap(n, 150)]
 
-    _role_series(ax[0, 1], t, log, ".amplitude", "drive amplitude (V for the piezo, 0..1 for the coil)",
-                 "vibration drive envelopes")
-    _role_series(ax[1, 0], t, log, ".frequency_hz", "drive frequency (Hz)",
-                 "vibration frequencies (piezo follows sliding speed)")
+    n_rows = 2 if driven else 1
+    fig_h = 4.6 * n_rows + 0.9 + 0.22 * len(note_lines)
+    fig = plt.figure(figsize=(12, fig_h))
+    gs = fig.add_gridspec(n_rows, 2 if len(driven) <= 2 else len(driven))
+    ncol = gs.ncols
+    fig.suptitle(f"hapticsdk render of {describe_material(str(getattr(report, 'material', '')))}",
+                 fontsize=12)
 
-    a = ax[1, 1]
-    a.plot(t, np.abs(vel[:, 0]), label="|v_x| sliding speed")
-    a.axhline(20.0, color="r", lw=0.8, ls=":", label="20 mm/s gate")
+    # -- force against penetration ------------------------------------------------
+    a = fig.add_subplot(gs[0, : ncol // 2])
+    lim = _limits(report, "force")
+    k_max = lim.get("max_stiffness_n_per_mm")
+    f_max = lim.get("max_force_n")
+    summ = force_penetration_summary(pen, force)
+    c = pen > 0
+    a.plot(pen[c], force[c], ".", ms=2, color="0.65", label=f"each tick in contact ({summ['n_contact']})")
+    if summ["count"].size:
+        a.errorbar(summ["centre_mm"], summ["mean_n"], yerr=summ["std_n"], fmt="o-", color="C0", ms=4,
+                   capsize=2, lw=1.2, label="mean per penetration bin (+- 1 sd)")
+    top = float(pen[c].max()) if c.any() else 1.0
+    y = np.linspace(0.0, top, 50)
+    if np.isfinite(summ["slope_n_per_mm"]):
+        a.plot(y, summ["slope_n_per_mm"] * y, "-", color="C3", lw=1.5,
+               label=f"fitted slope {summ['slope_n_per_mm']:.2f} N/mm (least squares through 0)")
+    gsf = (getattr(report, "features", {}) or {}).get("GS")
+    if gsf is not None:
+        k_t = min(gsf, k_max) if k_max else gsf
+        target = k_t * y if not f_max else np.minimum(k_t * y, f_max)
+        extra = f" (GS {gsf:.2f} capped at the arm's {k_max:g})" if k_max and gsf > k_max else ""
+        a.plot(y, target, "k--", lw=1.2, label=f"target slope {k_t:.2f} N/mm{extra}")
+    a.axhline(0.0, color="0.8", lw=0.6)
+    a.set_xlabel("penetration (mm)")
+    a.set_ylabel("normal force on the arm (N)")
+    a.set_title("hardness: force against penetration", fontsize=10)
+    a.legend(fontsize=8, loc="upper left", framealpha=0.9)
+
+    # -- probe motion ---------------------------------------------------------------
+    a = fig.add_subplot(gs[0, ncol // 2:])
+    h1 = a.plot(t, np.abs(vel[:, 0]), color="C0", label="|v_x| sliding speed (mm/s)")
+    h2 = a.axhline(20.0, color="r", lw=0.8, ls=":", label="20 mm/s vibration gate")
     a.set_xlabel("time (s)")
-    a.set_ylabel("speed (mm/s)")
+    a.set_ylabel("sliding speed (mm/s)")
     a2 = a.twinx()
-    a2.plot(t, pen, "g", lw=0.8, label="penetration")
+    h3 = a2.plot(t, pen, color="C2", lw=0.9, label="penetration (mm, < 0 above the surface)")
     a2.set_ylabel("penetration (mm)")
-    a.set_title("probe motion")
-    a.legend(fontsize=8, loc="upper left")
-    fig.tight_layout()
+    a.set_title("probe motion", fontsize=10)
+    handles = [*h1, h2, *h3]
+    a.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper center",
+             bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
+
+    # -- one panel per driven vibration channel --------------------------------------
+    for i, r in enumerate(driven):
+        span = slice(i * ncol // len(driven), (i + 1) * ncol // len(driven))
+        a = fig.add_subplot(gs[1, span])
+        lim = _limits(report, r)
+        unit = _unit_label(str(lim.get("amplitude_unit", "")))
+        act = (getattr(report, "actuators", {}) or {}).get(r, "?")
+        h1 = a.plot(t, log[f"{r}.amplitude"], color="C1", lw=1.0, label=f"drive amplitude ({unit})")
+        a.set_xlabel("time (s)")
+        a.set_ylabel(f"drive amplitude ({unit})")
+        handles = list(h1)
+        fk = f"{r}.frequency_hz"
+        if fk in log:
+            a2 = a.twinx()
+            fr = np.asarray(log[fk], float)
+            fr = np.where(np.asarray(log[f"{r}.amplitude"]) != 0, fr, np.nan)  # frequency while driven
+            handles += a2.plot(t, fr, color="C4", lw=1.0, ls="--", label="drive frequency (Hz, while driven)")
+            a2.set_ylabel("drive frequency (Hz)")
+        a.set_title(f"{r} channel ({act})", fontsize=10)
+        a.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper center",
+                 bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
+
+    bottom = (0.25 + 0.22 * len(note_lines)) / fig_h
+    if note_lines:
+        fig.text(0.01, 0.01, "\n".join(note_lines), fontsize=8, va="bottom", ha="left", family="monospace")
+    fig.tight_layout(rect=(0.0, bottom, 1.0, 0.96), h_pad=2.5)
     out = Path(path)
-    fig.savefig(out, dpi=90)
-    plt.close(fig)
+    save_figure(fig, out, dpi=90)
     return out
+
+
+def _cells_grid(cells: Sequence[Mapping[str, Any]], damping: float, controller: bool
+                ) -> tuple[list[float], list[float], np.ndarray, np.ndarray, np.ndarray]:
+    """K values, T values, and (T x K) arrays of the worst delivered force ratio, the
+    largest energy to the user (J) and stability over fingers, for one damping."""
+    sel = [c for c in cells if c["damping_ns_per_m"] == damping and bool(c["controller"]) == controller]
+    ks = sorted({float(c["stiffness_n_per_mm"]) for c in sel})
+    ts = sorted({float(c["period_s"]) for c in sel})
+    ratio = np.full((len(ts), len(ks)), np.nan)
+    energy = np.full((len(ts), len(ks)), np.nan)
+    stable = np.ones((len(ts), len(ks)), bool)
+    for c in sel:
+        i, j = ts.index(float(c["period_s"])), ks.index(float(c["stiffness_n_per_mm"]))
+        r = float(c.get("delivered_force_ratio", np.nan))
+        ratio[i, j] = r if np.isnan(ratio[i, j]) else np.nanmin([ratio[i, j], r])
+        energy[i, j] = np.nanmax([energy[i, j], float(c["energy_to_user_j"])])
+        stable[i, j] &= bool(c["stable"])
+    return ks, ts, ratio, energy, stable
+
+
+def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
+    """Save ``hapticsdk bench stability``'s matrix (``StabilityResult.to_dict()``) as a
+    figure: for each damping (columns) and controller on/off (rows), a stiffness x period
+    map coloured by the delivered force ratio (worst finger), with the largest energy
+    given to the user (mJ) written in each cell and unstable cells outlined in red."""
+    plt = _pyplot()
+    from matplotlib.patches import Rectangle
+
+    cells = list(result["cells"])
+    if not cells:
+        raise HapticSDKError("the stability result has no cells to plot")
+    dampings = sorted({float(c["damping_ns_per_m"]) for c in cells})
+    ctrl = sorted({bool(c["controller"]) for c in cells}, reverse=True)
+    fig, axes = plt.subplots(len(ctrl), len(dampings), figsize=(4.6 * len(dampings), 3.9 * len(ctrl) + 1.2),
+                             squeeze=False)
+    tol_mj = float(result.get("energy_tolerance_j", np.nan)) * 1e3
+    im = None
+    for r, on in enumerate(ctrl):
+        for col, b in enumerate(dampings):
+            a = axes[r, col]
+            ks, ts, ratio, energy, stable = _cells_grid(cells, b, on)
+            im = a.imshow(ratio, origin="lower", cmap="viridis", vmin=0.0, vmax=1.0, aspect="auto")
+            for i in range(len(ts)):
+                for j in range(len(ks)):
+                    e = energy[i, j] * 1e3
+                    txt = f"{e:.2g}" if e >= 0.01 else "0"
+                    shade = ratio[i, j]
+                    a.text(j, i, txt, ha="center", va="center", fontsize=7,
+                           color="black" if np.isfinite(shade) and shade > 0.6 else "white")
+                    if not stable[i, j]:
+                        a.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="red", lw=2.0))
+            a.set_xticks(range(len(ks)), [f"{k:g}" for k in ks], rotation=45, fontsize=8)
+            a.set_yticks(range(len(ts)), [f"{t * 1e3:g}" for t in ts], fontsize=8)
+            a.set_xlabel("wall stiffness K (N/mm)")
+            a.set_ylabel("servo period T (ms)")
+            a.set_title(f"damping b = {b:g} Ns/m, controller {'on' if on else 'off'}", fontsize=10)
+    fig.suptitle("stability matrix of a virtual wall on the simulated Omni: colour = delivered force ratio "
+                 "(applied / asked, worst finger)\nnumber = largest energy given to the user (mJ); "
+                 f"red outline = unstable (energy > {tol_mj:g} mJ, force after release, or over the limit)",
+                 fontsize=10)
+    fig.tight_layout(rect=(0.0, 0.0, 0.92, 0.93))
+    cax = fig.add_axes((0.93, 0.12, 0.015, 0.7))
+    fig.colorbar(im, cax=cax, label="delivered force ratio")
+    out = Path(path)
+    save_figure(fig, out, dpi=90)
+    return out
+
+
+def plot_plan(plan: Mapping[str, Any], path: str | Path) -> Path:
+    """Save a compiled plan (``RenderPlan.summary()``) as a figure: each material at its
+    target intensities (first two dimensions named), filled where every dimension is
+    rendered, open where one is left out, with what was left out and why (predicted
+    realism loss against the threshold) listed beside it."""
+    plt = _pyplot()
+    mats = plan["materials"]
+    mats = mats if isinstance(mats, Mapping) else {m["name"]: m for m in mats}
+    if not mats:
+        raise HapticSDKError("the plan has no materials to plot")
+    dims: list[str] = []
+    for m in mats.values():
+        for d in m.get("targets", {}):
+            if d not in dims:
+                dims.append(d)
+    dx = dims[0]
+    dy = dims[1] if len(dims) > 1 else None
+    notes = []
+    fig, (a, t) = plt.subplots(1, 2, figsize=(13, 6), gridspec_kw={"width_ratios": [1.0, 1.1]})
+    for i, (name, m) in enumerate(mats.items()):
+        tg = m.get("targets", {})
+        x = tg.get(dx, np.nan)
+        y = tg.get(dy, np.nan) if dy else 0.0
+        dropped = m.get("dropped", [])
+        kept = m.get("dimensions", [])
+        face = "C0" if not dropped else "white"
+        a.scatter([x], [y], s=60, facecolors=face, edgecolors="C0" if not dropped else "C3", zorder=3)
+        a.annotate(f"{i + 1}", (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
+        line = f"{i + 1}. {name}: renders {', '.join(kept) or 'nothing'}"
+        for d in dropped:
+            loss = d.get("predicted_loss_percent")
+            thr = d.get("threshold_percent")
+            why = (f"predicted realism loss {loss:.2f} % < threshold {thr:g} %"
+                   if loss is not None and thr is not None else str(d.get("reason", "")))
+            line += f"; left out {d['dimension']} ({why})"
+        notes.extend(textwrap.wrap(line, 75, subsequent_indent="    "))
+    a.set_xlim(-0.05, 1.05)
+    a.set_ylim(-0.05, 1.05)
+    a.set_xlabel(f"{dx} intensity (0..1)")
+    a.set_ylabel(f"{dy} intensity (0..1)" if dy else "")
+    a.grid(alpha=0.3)
+    a.scatter([], [], s=60, facecolors="C0", edgecolors="C0", label="every dimension rendered")
+    a.scatter([], [], s=60, facecolors="white", edgecolors="C3", label="a dimension left out (see list)")
+    a.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, frameon=False)
+    a.set_title("materials at their target intensities", fontsize=10)
+    t.axis("off")
+    t.text(0.0, 1.0, "\n".join(notes), va="top", ha="left", fontsize=8, family="monospace",
+           transform=t.transAxes)
+    t.set_title("what each material renders, what is left out and why", fontsize=10)
+    fig.suptitle(f"render plan of scene {plan.get('scene', '')}", fontsize=12)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.95))
+    out = Path(path)
+    save_figure(fig, out, dpi=90)
+    return out
+
+
+def save_figure(fig: Any, path: str | Path, *, dpi: int = 100, field: str | None = None) -> Path:
+    """``fig.savefig`` through :func:`hapticsdk.fileio.atomic_writer` (format from the
+    suffix, PNG without one); the figure is closed. A failed write keeps the old file."""
+    import matplotlib.pyplot as plt
+
+    from .fileio import atomic_writer
+    p = Path(path)
+    fmt = p.suffix[1:].lower() or "png"
+    try:
+        with atomic_writer(p, "wb", field=field) as fh:
+            fig.savefig(fh, format=fmt, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return p

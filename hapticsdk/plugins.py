@@ -173,6 +173,14 @@ class Registry:
             raise PluginError(f"{self.kind} plugin {name!r} (distribution {dist}, {ep.value}) "
                               f"failed to import: {type(exc).__name__}: {exc}",
                               plugin=name, kind=self.kind) from exc
+        info = _info(self.kind, ep)
+        if not ep.value.startswith("hapticsdk."):   # the core's own entry points are the core
+            from .plugin_api import check_plugin_api
+            try:
+                check_plugin_api(obj, name=name, distribution=f"{info.distribution} {info.version}")
+            except PluginError as exc:
+                exc.kind = self.kind
+                raise
         self._loaded[name] = obj
         return obj
 
@@ -213,7 +221,7 @@ def list_plugins(kinds: Iterable[str] | None = None, *, check: bool = False) -> 
     listing of the others.
     """
     out: list[dict[str, Any]] = []
-    for kind in kinds or [k for k in GROUPS if k != "hooks"]:
+    for kind in kinds or list(GROUPS):
         reg = registry(kind)
         for name in reg.names():
             info: dict[str, Any] = dict(reg.info(name).to_dict())
@@ -259,6 +267,10 @@ class PluginManager:
         self._done.add(ep.name)
         try:
             mod = ep.load()
+            if not ep.value.startswith("hapticsdk."):
+                from .plugin_api import check_plugin_api
+                info = _info("hooks", ep)
+                check_plugin_api(mod, name=ep.name, distribution=f"{info.distribution} {info.version}")
             self.pm.register(mod, name=f"hooks:{ep.name}")
         except Exception as exc:
             self.failures[ep.name] = f"{type(exc).__name__}: {exc}"

@@ -122,6 +122,11 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
     searched = [n for n in model_inputs if n in space and n not in pinned]
     space = space.subset(searched)
     if mdl.feature_space is not None:
+        from .features import same_unit
+        for n in space.names:
+            if n in mdl.feature_space and not same_unit(mdl.feature_space[n].unit, space[n].unit):
+                raise ModelError(f"model {mdl.name!r} reads feature {n!r} in {mdl.feature_space[n].unit!r}, "
+                                 f"but {space[n].owner or 'its dimension'} declares it in {space[n].unit!r}")
         space = space.with_bounds({n: (mdl.feature_space[n].lower, mdl.feature_space[n].upper)
                                    for n in searched if n in mdl.feature_space})
     defaults = dict(mdl.metadata.get("feature_defaults") or {})
@@ -223,19 +228,27 @@ def _problem_for(targets: Any, build_kw: dict[str, Any]) -> SolveProblem:
     """``build_problem(targets, **build_kw)``, from a cached problem of the same setup when
     there is one (then only the targets are validated)."""
     mapping = isinstance(targets, Mapping)
+    def setup_key() -> tuple:
+        dims = tuple(targets) if mapping and build_kw.get("dimensions") is None else \
+            tuple(build_kw.get("dimensions") or ())
+        # the plugins and models the setup resolves to are part of the key: a plugin
+        # registered anew or a model reloaded gets a new problem
+        plugins = tuple(registry("dimension").load(d) if isinstance(d, str) else d for d in dims)
+        models = tuple((k, id(v)) for k, v in _model_cache.items())
+        return (mapping, dims, plugins, models, _hashable(build_kw) if build_kw else ())
+
     try:
-        if not build_kw:
-            key = ("mapping", tuple(targets)) if mapping else ("array",)
-        else:
-            key = (tuple(targets) if mapping and build_kw.get("dimensions") is None else (), _hashable(build_kw))
+        key = setup_key()
     except TypeError:   # an unhashable option value: no caching
+        return build_problem(targets, **build_kw)
+    except Exception:   # an unknown plugin etc.: build_problem raises the proper error
         return build_problem(targets, **build_kw)
     template = _PROBLEMS.get(key)
     if template is None:
         problem = build_problem(targets, **build_kw)
         if len(_PROBLEMS) >= _MAX_CACHED:
             _PROBLEMS.clear()
-        _PROBLEMS[key] = problem
+        _PROBLEMS[setup_key()] = problem   # after building: the models it loaded are in the key
         return problem
     T, dims = _targets_array(targets, build_kw.get("dimensions"))
     if dims != template.dimensions:   # pragma: no cover - the key holds the dimensions
@@ -248,8 +261,10 @@ def _solver_for(method: str, options: Mapping[str, Any] | None) -> Solver:
     (solvers keep no state between calls besides their options)."""
     opts = dict(options or {})
     try:
-        key = (method, _hashable(opts))
+        key = (method, registry("solver").load(method), _hashable(opts))
     except TypeError:
+        return get_solver(method, **opts)
+    except Exception:   # unknown method: get_solver raises the proper error
         return get_solver(method, **opts)
     s = _SOLVERS.get(key)
     if s is None:

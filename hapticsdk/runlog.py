@@ -213,10 +213,13 @@ class RunLog:
                 raise ValidationError(f"role name {role!r} must not contain '/'", field="runlog.roles")
             for f, v in cols.items():
                 arrays[f"cmd/{role}/{f}"] = v
-        p.parent.mkdir(parents=True, exist_ok=True)
-        with open(p, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-        return p
+        from .fileio import atomic_savez
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            from .errors import FileWriteError
+            raise FileWriteError(f"cannot create the directory: {exc.strerror or exc}", field=str(p)) from None
+        return atomic_savez(p, **arrays)  # temp file + fsync + rename
 
     def summary(self) -> dict[str, Any]:
         """Ticks, duration, rate, per-role command ranges and the header, JSON-ready."""
@@ -256,7 +259,9 @@ def load_run(path: str | Path) -> RunLog:
         with np.load(p, allow_pickle=False) as z:
             data = {k: z[k] for k in z.files}
     except Exception as exc:
-        raise RecordingError(f"{p}: not a readable .npz run file ({exc})", field="runlog") from None
+        why = ("pickled data or not an .npz archive; pickles are never loaded" if "pickle" in str(exc)
+               else f"{type(exc).__name__}: {exc}")
+        raise RecordingError(f"{p}: not a readable .npz run file ({why})", field="runlog") from None
     if "header_json" not in data:
         raise RecordingError(f"{p}: no header_json (not a hapticsdk run file)", field="runlog.header_json")
     from .schemas_io import MAX_JSON_DEPTH, json_depth

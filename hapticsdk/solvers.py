@@ -190,9 +190,13 @@ class Trace:
         """Rows for target ``i`` (scalars), or for the batch (max over targets)."""
         if i is not None:
             return self.per_target()[i]
-        return [{"time_s": t, "nfev": n, "best_error": float(e.max()),
-                 "best_error_median": float(np.median(e)), "constraint_violation": float(v.max())}
-                for t, n, e, v in zip(self.times, self.nfev, self.best_error, self.violation)]
+        if not self.times:
+            return []
+        E = np.array(self.best_error)          # (iterations, m): one reduction per statistic
+        V = np.array(self.violation)
+        emax, emed, vmax = E.max(axis=1).tolist(), np.median(E, axis=1).tolist(), V.max(axis=1).tolist()
+        return [{"time_s": t, "nfev": n, "best_error": e, "best_error_median": md, "constraint_violation": v}
+                for t, n, e, md, v in zip(self.times, self.nfev, emax, emed, vmax)]
 
     def per_target(self) -> list[list[dict[str, Any]]]:
         """Rows of every target, built in one pass (``per_target()[i] == rows(i)``)."""
@@ -361,12 +365,14 @@ class SolveProblem:
 
     # -- evaluation --------------------------------------------------------
     def evaluate(self, X: np.ndarray, *, penalty: str | None = None, details: bool = False,
-                 rows: np.ndarray | None = None) -> Any:
+                 rows: np.ndarray | None = None, per_constraint: bool = False) -> Any:
         """Fitness of formula (6) for ``X`` of shape ``(m, p, d)`` (p candidates per target)
         or ``(m, d)``; ONE model call for all rows. ``rows`` (optional index array) scores
         ``X`` against ``targets[rows]`` instead of all ``m`` targets (solvers that drop solved
         targets). Returns fitness with the leading shape of ``X``; with ``details``, a dict
-        with ``fitness``, ``error``, ``violation``, ``intensities``."""
+        with ``fitness``, ``error``, ``violation``, ``intensities`` and, with
+        ``per_constraint``, ``violations`` (each constraint's, last axis in the order of
+        ``constraints``)."""
         X = np.asarray(X, float)
         lead = X.shape[:-1]
         T = self.targets if rows is None else self.targets[rows]
@@ -390,7 +396,7 @@ class SolveProblem:
         if not self.constraints:
             fitness, viol = err, np.zeros(lead)
         else:
-            pen, viol, per_c = self._penalty_violation(self.columns(G), form, n, per=details)
+            pen, viol, per_c = self._penalty_violation(self.columns(G), form, n, per=per_constraint)
             if self.penalty_weight == 1.0:
                 pen += err.reshape(-1)
                 fitness = pen.reshape(lead)
@@ -399,10 +405,11 @@ class SolveProblem:
             viol = viol.reshape(lead)
         if not details:
             return fitness
-        return {"fitness": fitness, "error": err, "violation": viol,
-                "intensities": I.reshape(lead + (I.shape[-1],)),
-                "violations": (np.zeros(lead + (0,)) if per_c is None
-                               else np.moveaxis(per_c, 0, -1).reshape(lead + (len(self.constraints),)))}
+        out = {"fitness": fitness, "error": err, "violation": viol, "intensities": I.reshape(lead + (I.shape[-1],))}
+        if per_constraint:
+            out["violations"] = (np.zeros(lead + (0,)) if per_c is None
+                                 else np.moveaxis(per_c, 0, -1).reshape(lead + (len(self.constraints),)))
+        return out
 
     def _penalty_violation(self, cols: dict[str, np.ndarray], form: str, n: int, per: bool = False
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
@@ -428,19 +435,19 @@ class SolveProblem:
         V = np.empty((nc, n))
         for j, c in enumerate(self.constraints):
             B[j], V[j] = c.bound_and_value(cols)
-        short = V < B
+        met = ~(V < B)                 # (not V >= B: a NaN row counts as met, as it always did)
         scale = np.abs(B)
         scale[scale == 0] = 1.0
         nvs = np.subtract(B, V)
         nvs /= scale
-        nvs[~short] = 0.0
+        nvs[met] = 0.0
         viol = nvs.max(axis=0) if nc > 1 else nvs[0].copy()
         if form == "normalised":
             return (nvs.sum(axis=0) if nc > 1 else nvs[0].copy()), viol, (nvs if per else None)
         B *= B
         V *= V
         B -= V
-        B[~short] = 0.0
+        B[met] = 0.0
         return (B.sum(axis=0) if nc > 1 else B[0]), viol, (nvs if per else None)
 
 
@@ -535,7 +542,7 @@ class _BatchData:
         self.elapsed = 0.0
 
     def add(self, sub: SolveProblem, x: np.ndarray, out: SolverOutput, trace: Trace, t_offset: float) -> None:
-        ev = sub.evaluate(x, details=True)
+        ev = sub.evaluate(x, details=True, per_constraint=True)
         per_c = ev["violations"]
         part = {"x": x, "fun": ev["fitness"], "error": ev["error"], "violation": ev["violation"],
                 "intensities": ev["intensities"], "per_c": per_c, "message": out.message,

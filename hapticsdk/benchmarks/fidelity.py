@@ -52,7 +52,7 @@ class _TruePen:
         self.pen.append(-self.dev.true_position_mm)
 
 
-def run_fidelity(periods: tuple[float, ...] = PERIODS_S) -> list[dict[str, Any]]:
+def run_fidelity(periods: tuple[float, ...] = PERIODS_S, *, progress: Any = None) -> list[dict[str, Any]]:
     dims = registry("dimension")
     acts = registry("actuator")
     traj = fidelity_trajectory()
@@ -103,4 +103,6 @@ def run_fidelity(periods: tuple[float, ...] = PERIODS_S) -> list[dict[str, Any]]
                     "frequency_channel": role})
         for a in {id(a): a for a in [dev, *actuators.values()]}.values():
             a.close()
+        if progress is not None:  # progress(stage, done, total), see hapticsdk.progress
+            progress("servo periods", len(out), len(periods))
     return out

@@ -12,7 +12,10 @@ Per cell: ``energy_to_user_j`` = max over time of the energy the arm + wall gave
 finger (the negative of the display-port energy ``W_d = 1/2 m v^2 + int b v^2 - int F v``;
 exact under the hold), ``peak_force_n``, ``max_force_step_n`` (largest
 change of the applied force between two ticks, N; includes the wall's own jump at
-contact), ``oscillation_after_release_n`` (largest wall
+contact), ``delivered_force_ratio`` (sum of the force the arm applied over the ticks
+the wall was touched, divided by the sum of the wall force asked there, capped at the
+device limit: 1 = the wall was rendered as asked, lower = the controller or the damping
+took force away; NaN when the wall was never touched), ``oscillation_after_release_n`` (largest wall
 force over the last 0.5 s, when the finger rests 2 mm above the surface: any force
 means the stylus still bounces on the wall), and ``stable`` = energy within
 :data:`ENERGY_TOLERANCE_J`, no force after release (below
@@ -103,8 +106,10 @@ def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[str], on: np.ndarray,
                duration_s: float, *, arm: ArmParams | None = None,
-               settings: ControllerSettings | None = None) -> dict[str, np.ndarray]:
-    """Simulate all cells of one period together; returns per-cell metric arrays."""
+               settings: ControllerSettings | None = None,
+               on_ticks: Any = None) -> dict[str, np.ndarray]:
+    """Simulate all cells of one period together; returns per-cell metric arrays.
+    ``on_ticks(done)`` (optional) is called every 1000 ticks and at the end."""
     arm = arm or ArmParams()
     arms = [arm.with_(damping_ns_per_m=float(bi)) for bi in b]
     fings = [FINGERS[f] for f in fingers]
@@ -121,8 +126,12 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
     resid = np.zeros(len(arms))
     dmax = np.zeros(len(arms))
     f_last = np.zeros(len(arms))
+    asked = np.zeros(len(arms))     # sum of the wall force asked (capped at the limit) in contact, N
+    given = np.zeros(len(arms))     # sum of the force the arm applied on those ticks, N
     t_rel = duration_s - 0.5
     for k in range(n_ticks):
+        if on_ticks is not None and k % 1000 == 0 and k:
+            on_ticks(k)
         y_meas = batch.measured_mm()
         pen = -y_meas
         f_wall = np.where(pen > 0, K * pen, 0.0)
@@ -131,20 +140,30 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
         f_cmd = np.nan_to_num(f_cmd, nan=0.0)
         f = batch.step(f_cmd, r[k], (r[k + 1] - r[k]) / period_s)  # one reference for all cells (broadcast)
         controller_commit_batch(st, f)
+        touching = f_wall > 0
+        asked += np.where(touching, np.minimum(f_wall, limit), 0.0)
+        given += np.where(touching, f, 0.0)
         np.maximum(peak, np.abs(f), out=peak)
         np.maximum(dmax, np.abs(f - f_last), out=dmax)
         f_last = f
         np.maximum(e_max, batch.energy_to_user_j(), out=e_max)
         if tt[k] >= t_rel:
             np.maximum(resid, np.abs(f), out=resid)
+    if on_ticks is not None:
+        on_ticks(n_ticks)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(asked > 0, given / np.where(asked > 0, asked, 1.0), np.nan)
     return {"energy_to_user_j": e_max, "peak_force_n": peak, "oscillation_after_release_n": resid,
-            "max_force_step_n": dmax,
+            "max_force_step_n": dmax, "delivered_force_ratio": ratio,
             "limit_n": limit, "observed_energy_j": st["energy"], "dissipated_j": st["dissipated"]}
 
 
 def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = None,
-               settings: ControllerSettings | None = None) -> StabilityResult:
-    """Run the stability matrix over ``grid`` (keys as :data:`DEFAULT_GRID`)."""
+               settings: ControllerSettings | None = None, progress: Any = None) -> StabilityResult:
+    """Run the stability matrix over ``grid`` (keys as :data:`DEFAULT_GRID`).
+
+    ``progress(stage, done, total)`` (:mod:`hapticsdk.progress`) follows the simulated
+    servo ticks of all periods."""
     g = dict(DEFAULT_GRID)
     g.update(grid or {})
     if not float(g["duration_s"]) >= 3.0:
@@ -152,13 +171,18 @@ def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = No
                               field="duration_s")
     t0 = time.perf_counter()
     cells: list[dict[str, Any]] = []
+    from ..progress import report
+    total = sum(int(round(float(g["duration_s"]) / float(T))) for T in g["period_s"])
+    before = 0
     for T in g["period_s"]:
         combos = list(itertools.product(g["stiffness_n_per_mm"], g["damping_ns_per_m"], g["finger"], (True, False)))
         K = np.array([c[0] for c in combos], float)
         b = np.array([c[1] for c in combos], float)
         fn = [c[2] for c in combos]
         on = np.array([c[3] for c in combos], bool)
-        res = run_period(float(T), K, b, fn, on, float(g["duration_s"]), arm=arm, settings=settings)
+        res = run_period(float(T), K, b, fn, on, float(g["duration_s"]), arm=arm, settings=settings,
+                         on_ticks=lambda k, b0=before: report(progress, "simulated servo ticks", b0 + k, total))
+        before += int(round(float(g["duration_s"]) / float(T)))
         for i, (Ki, bi, fi, oi) in enumerate(combos):
             e = float(res["energy_to_user_j"][i])
             pk = float(res["peak_force_n"][i])
@@ -169,6 +193,7 @@ def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = No
                           "finger": fi, "controller": bool(oi), "energy_to_user_j": e, "peak_force_n": pk,
                           "oscillation_after_release_n": osc, "stable": stable,
                           "max_force_step_n": float(res["max_force_step_n"][i]),
+                          "delivered_force_ratio": float(res["delivered_force_ratio"][i]),
                           "margin_ns_per_m": float(passivity_margin(Ki, 0.0, bi, T, 0))})
     return StabilityResult(cells=cells, tolerance_j=ENERGY_TOLERANCE_J, duration_s=float(g["duration_s"]),
                            runtime_s=time.perf_counter() - t0)

@@ -104,8 +104,9 @@ class DiscriminationAnswers:
 
     def to_csv(self, path: str | Path) -> Path:
         """Write the CSV (a ``# GENERATED`` comment line first for generated answers)."""
+        from ..fileio import atomic_writer
         p = Path(path)
-        with open(p, "w", newline="") as fh:
+        with atomic_writer(p, "w", newline="") as fh:  # temp file + rename: never half a CSV
             if self.generated or self.source:
                 fh.write(f"# {'GENERATED, not measured: ' if self.generated else ''}{self.source}\n")
             w = csv.writer(fh)

@@ -49,7 +49,82 @@ def build_parser() -> argparse.ArgumentParser:
             mod.register(sub)
         if hasattr(mod, "register_bench"):
             mod.register_bench(bench_sub)
+    _finish_help(parser, ())
     return parser
+
+
+#: one example per command (shown at the end of its --help)
+EXAMPLES: dict[str, str] = {
+    "": "hapticsdk render S7",
+    "bench": "hapticsdk bench stability --quick",
+    "bench solvers": "OMP_NUM_THREADS=1 hapticsdk bench solvers --quick --plot solvers.png",
+    "bench stability": "hapticsdk bench stability --quick --plot stability.png",
+    "bench fidelity": "hapticsdk bench fidelity --periods 0.001 0.004",
+    "bench timing": "hapticsdk bench timing --seconds 10 --realtime",
+    "plugins": "hapticsdk plugins --kind solver --check",
+    "materials": "hapticsdk materials --json",
+    "solve": "hapticsdk solve --hardness 0.8 --roughness 0.3 --seed 1",
+    "render": "hapticsdk render --hardness 0.8 --roughness 0.3 --seconds 2 --plot render.png",
+    "plan": "hapticsdk plan examples/scenes/warm-and-rough.json --plot plan.png",
+    "features": "hapticsdk features recordings/",
+    "train": "hapticsdk train hapticsdk/data/dataset --out model.onnx",
+    "dataset": "hapticsdk dataset generate data/ --samples 23",
+    "dataset generate": "hapticsdk dataset generate data/ --samples 23 --materials data/materials.json",
+    "dataset growth": "hapticsdk dataset growth --sizes 23,46",
+    "calibrate": "hapticsdk calibrate list",
+    "calibrate voicecoil": "hapticsdk calibrate voicecoil answers.csv --serial VC-001",
+    "calibrate piezo": "hapticsdk calibrate piezo measurements.csv --serial PZ-001",
+    "calibrate answers": "hapticsdk calibrate answers answers.csv --people 10 --seed 0",
+    "calibrate list": "hapticsdk calibrate list --json",
+    "replay": "hapticsdk replay run.npz",
+    "doctor": "hapticsdk doctor --json",
+    "export": "hapticsdk export plan.json -o materials.hjif",
+    "import": "hapticsdk import materials.hjif",
+    "play": "hapticsdk play materials.hjif --seconds 2",
+}
+
+#: help of flags every command shares, when a command gives none
+COMMON_HELP = {"--json": "print the result as JSON on stdout (no progress bars)"}
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Wraps description and epilog paragraphs but keeps indented lines (examples) as
+    they are, and appends ``(default: X)`` to every option whose help does not already
+    state its default."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        out = []
+        for para in text.split("\n\n"):
+            lines = para.splitlines()
+            if any(ln.startswith("  ") for ln in lines):  # "Example:" + indented command
+                out.append("\n".join(indent + ln for ln in lines))
+            else:
+                out.append(super()._fill_text(para, width, indent))
+        return "\n\n".join(out)
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if ("default" in text or default in (None, False, argparse.SUPPRESS, [], ()) or not action.option_strings
+                or isinstance(action, (argparse._HelpAction, argparse._VersionAction))):
+            return text
+        shown = " ".join(map(str, default)) if isinstance(default, (list, tuple)) else default
+        return f"{text} (default: {shown})"
+
+
+def _finish_help(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> None:
+    """Formatter, shared flag help and the example of every (sub)command."""
+    parser.formatter_class = HelpFormatter
+    for action in parser._actions:
+        if not action.help and action.option_strings and action.option_strings[-1] in COMMON_HELP:
+            action.help = COMMON_HELP[action.option_strings[-1]]
+    example = EXAMPLES.get(" ".join(path))
+    if example and "Example:" not in (parser.epilog or ""):
+        parser.epilog = ((parser.epilog + "\n\n") if parser.epilog else "") + f"Example:\n  {example}"
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                _finish_help(sub, path + (name,))
 
 
 def emit(obj: object, as_json: bool, text: str | None = None) -> None:

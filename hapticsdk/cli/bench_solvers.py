@@ -17,7 +17,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--plot", metavar="FILE", help="write the work-precision plot (PNG; needs matplotlib)")
     p.add_argument("--quick", action="store_true", help="3 seeds and fewer settings (about a minute)")
-    p.add_argument("--seeds", type=int, default=None, help="seeds per setting (default 15, --quick 3)")
+    from .argtypes import bounded_int
+    p.add_argument("--seeds", type=bounded_int(1, 1000), default=None,
+                   help="seeds per setting, 1..1000 (default 15, --quick 3)")
     p.add_argument("--output", metavar="FILE", help="also write the JSON report to FILE")
     p.set_defaults(func=cmd_bench_solvers)
 
@@ -25,11 +27,20 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 def cmd_bench_solvers(args: Any) -> int:
     from ..benchmarks import solvers as bench
 
-    log = (lambda s: print(f"[bench solvers] {s}", file=sys.stderr)) if not args.json else None
-    report = bench.run(quick=bool(args.quick), seeds=args.seeds, log=log)
+    from ..fileio import check_output_path
+    # output paths are checked before the benchmark runs (minutes), not after it
     if args.output:
-        with open(args.output, "w") as fh:
-            json.dump(report, fh, indent=2, default=_default)
+        check_output_path(args.output, field="--output")
+    if args.plot:
+        check_output_path(args.plot, field="--plot")
+    from ..progress import Progress
+    # progress lines go above a bar on a terminal's stderr; nothing in a pipe or with --json
+    with Progress("bench solvers", quiet=args.json) as progress:
+        report = bench.run(quick=bool(args.quick), seeds=args.seeds,
+                           log=progress.note if progress.enabled else None)
+    if args.output:
+        from ..fileio import atomic_write_text
+        atomic_write_text(args.output, json.dumps(report, indent=2, default=_default) + "\n", field="--output")
     if args.plot:
         try:
             bench.plot(report, args.plot)

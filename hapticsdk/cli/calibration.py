@@ -38,7 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                         "the voice-coil fit; not measured data)")
     p.add_argument("out", help="CSV to write")
     p.add_argument("--people", type=bounded_int(1, 1000), default=10, help="simulated people, 1..1000")
-    p.add_argument("--seed", type=nonneg_int, default=0)
+    p.add_argument("--seed", type=nonneg_int, default=0, help="random seed of the simulated answers, >= 0")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_answers)
 
@@ -51,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_list)
 
     p = sub.add_parser("replay", help="summarise a recorded run file (.npz) and check it plays back")
-    p.add_argument("runfile")
+    p.add_argument("runfile", help="run file written by a recorder (.npz)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 from typing import Any
 
 from . import emit
@@ -16,7 +17,7 @@ UNREACHED_RULE = ("Exit status: 0 when every target was reached; 1 when a target
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plugins", help="list installed plugins (without importing them)")
-    p.add_argument("--kind", choices=["dimension", "actuator", "solver", "model", "importance"],
+    p.add_argument("--kind", choices=["dimension", "actuator", "solver", "model", "importance", "hooks"],
                    action="append", help="only these kinds (repeatable)")
     p.add_argument("--check", action="store_true", help="import each plugin and report import errors")
     p.add_argument("--json", action="store_true")
@@ -38,11 +39,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", default="ga-polish",
                    help="solver name (see `hapticsdk plugins --kind solver`; `ga` is the paper's GA alone)")
     p.add_argument("--model", default=None, help="model name or .onnx path (default: the dimensions' model)")
-    p.add_argument("--penalty", default="paper", choices=["paper", "normalised"])
-    p.add_argument("--tolerance", type=positive_float, default=0.01)
+    p.add_argument("--penalty", default="paper", choices=["paper", "normalised"],
+                   help="constraint penalty of formula (6): the paper's raw form, or each constraint "
+                        "normalised by its own scale")
+    p.add_argument("--tolerance", type=positive_float, default=0.01,
+                   help="a target counts as reached when sum |target - predicted| is at most this "
+                        "(intensity units, 0..1 scale)")
     p.add_argument("--data-support", action="store_true",
                    help="keep the answer where the model's recordings were (e.g. recorded press-force range)")
-    p.add_argument("--seed", type=nonneg_int, default=None, help="random seed, a whole number >= 0")
+    p.add_argument("--seed", type=nonneg_int, default=None,
+                   help="random seed, a whole number >= 0 (default: none, a fresh seed each run)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_solve)
 
@@ -51,8 +57,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("material", nargs="?", help="material name (see `hapticsdk materials`)")
     p.add_argument("--scene", help="scene JSON file instead of a material")
     p.add_argument("--hardness", type=intensity, help="render targets instead of a named material")
-    p.add_argument("--roughness", type=intensity)
+    p.add_argument("--roughness", type=intensity, help="render targets instead of a named material")
     p.add_argument("--seconds", type=positive_float, default=3.0, help="render duration (s)")
+    p.add_argument("--realtime", action="store_true",
+                   help="pace the servo loop on the machine clock (wall time = --seconds); by default "
+                        "simulated devices run as fast as they compute")
     p.add_argument("--seed", type=nonneg_int, default=0, help="solver seed, a whole number >= 0")
     p.add_argument("--plot", metavar="PNG", help="save a figure of the render (needs matplotlib)")
     p.add_argument("--device-option", action="append", default=[], metavar="ROLE.KEY=VALUE",
@@ -149,6 +158,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     from ..runtime.render import render_plan
     from ..scene import Scene, load_scene
 
+    from ..runtime.limits import check_seconds
+
+    check_seconds(args.seconds, "--seconds")   # before solving, opening or allocating anything
     targets = _targets(args)
     given = [bool(args.material), bool(args.scene), bool(targets)]
     if sum(given) != 1:
@@ -167,7 +179,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         role, key, value = parse_device_option(item)
         dev_opts.setdefault(role, {})[key] = value
     plan = compile_scene(scene)
-    report = render_plan(plan, seconds=args.seconds, actuator_options=dev_opts)
+    report = render_plan(plan, seconds=args.seconds, actuator_options=dev_opts,
+                         realtime=True if args.realtime else None)
     out = report.to_dict()
     if args.plot:
         from ..plotting import plot_render
@@ -188,12 +201,19 @@ def all_reached(out: dict[str, Any]) -> bool:
     return all((m.get("solve") or {}).get("success") is not False for m in mats)
 
 
+_TARGETS_NAME = re.compile(r"[A-Za-z_][\w-]* [0-9.eE+-]+(, [A-Za-z_][\w-]* [0-9.eE+-]+)*")
+
+
 def format_render(out: dict[str, Any]) -> str:
     lines = []
     for mat in out.get("materials", [out]):
         acts = mat["actuators"]
         acts = ", ".join(f"{r}={a}" for r, a in acts.items()) if isinstance(acts, dict) else ", ".join(acts)
-        lines.append(f"material {mat['material']}: rendered {', '.join(mat.get('dimensions', []))}; "
+        # a library material reads "material S7"; intensity targets ("hardness 0.8,
+        # roughness 0.3", the name Scene.for_material gives them) read "targets ..."
+        name = str(mat["material"])
+        label = f"targets {name}" if _TARGETS_NAME.fullmatch(name) else f"material {name}"
+        lines.append(f"{label}: rendered {', '.join(mat.get('dimensions', [])) or 'nothing'}; "
                      f"actuators {acts}")
         for d in mat.get("dropped", []):
             lines.append(f"  left out {d['dimension']}: {d['reason']}")

@@ -28,19 +28,20 @@ def register(sub: Any) -> None:
                    help="nominal length of each exported effect (s, default 1)")
     p.add_argument("--no-importance", action="store_true",
                    help="when compiling a scene: keep every dimension (export roughness of smooth samples too)")
-    p.add_argument("--seed", type=int, help="when compiling a scene: solver seed")
+    from .argtypes import nonneg_int
+    p.add_argument("--seed", type=nonneg_int, help="when compiling a scene: solver seed, a whole number >= 0")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("import", help="read an MPEG-I haptics .hjif file: perceptions, what plays, SDK metadata")
-    p.add_argument("file", metavar="FILE.hjif")
+    p.add_argument("file", metavar="FILE.hjif", help="MPEG-I haptics file to read")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--synth", action="store_true",
                    help="also synthesise the vibrotactile channels and report their peak frequency and envelope")
     p.set_defaults(func=cmd_import)
 
     p = sub.add_parser("play", help="play the vibrotactile content of an .hjif file on the vibration actuators")
-    p.add_argument("file", metavar="FILE.hjif")
+    p.add_argument("file", metavar="FILE.hjif", help="MPEG-I haptics file whose vibrotactile content to play")
     p.add_argument("--seconds", type=positive_float, help="duration (s, default: the file's length)")
     p.add_argument("--actuators", default="piezo-virtual,voicecoil-virtual",
                    help="comma-separated actuator names (default piezo-virtual,voicecoil-virtual)")

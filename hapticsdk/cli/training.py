@@ -62,9 +62,12 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     cfg = lm.with_overrides(lm.TrainConfig(), seed=args.seed, folds=args.folds, restarts=args.restarts,
                           target_scale=args.target_scale)
+    from ..progress import Progress
+
     try:
         _check_out(args.out, "--out")
-        report, _ = train_dataset(args.dataset, args.out, cfg)
+        with Progress("train", quiet=args.json) as progress:
+            report, _ = train_dataset(args.dataset, args.out, cfg, progress=progress)
     except HapticSDKError as exc:
         return _fail(exc, args)
     if args.json:
@@ -90,9 +93,12 @@ def cmd_generate(args: argparse.Namespace) -> int:
     try:
         _check_generate_out(args.out)
         _check_out(args.materials, "--materials")
-        table = generate_feature_dataset(args.out, args.samples, seed=args.seed, n_trials=args.trials,
-                                         n_raters=args.raters,
-                                         raw_format=None if args.summary_only else args.format)
+        from ..progress import Progress
+        with Progress("dataset generate") as progress:
+            table = generate_feature_dataset(args.out, args.samples, seed=args.seed, n_trials=args.trials,
+                                             n_raters=args.raters,
+                                             raw_format=None if args.summary_only else args.format,
+                                             progress=progress)
         if args.materials:
             write_materials(table, args.materials)
     except HapticSDKError as exc:
@@ -181,6 +187,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     gr = dsub.add_parser("growth", help="accuracy vs number of generated samples")
     gr.add_argument("--sizes", type=int_list, default=[23, 46, 92],
                     help="comma-separated sample counts, each >= 1 (default 23,46,92)")
-    gr.add_argument("--seed", type=nonneg_int, default=None)
+    gr.add_argument("--seed", type=nonneg_int, default=None, help="generator seed (default 20221122)")
     gr.add_argument("--json", action="store_true")
     gr.set_defaults(func=cmd_growth)

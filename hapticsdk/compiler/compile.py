@@ -70,7 +70,8 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
                 try:
                     m = library.get(obj.material)
                 except (KeyError, LookupError, ValidationError) as exc2:
-                    raise ValidationError(f"unknown material {obj.material!r}: {exc2}",
+                    # the library's own message already says "unknown material ...; known: ..."
+                    raise ValidationError(getattr(exc2, "reason", str(exc2)),
                                           field=f"{where}.material") from None
             name, source = m.name, "library"
             targets = {k: float(v) for k, v in m.intensities.items()}

@@ -351,6 +351,11 @@ class ServoLoop:
         self.last_state: DeviceState | None = None
         self.last_penetration_mm = 0.0
         self.last_force_n = 0.0
+        #: servo time (s) of the last tick (None before the first), the hit test's object
+        #: index (-1 none) and the compute time (s) of that tick
+        self.last_t: float | None = None
+        self.last_index = -1
+        self.last_compute_s = 0.0
         self._running = False
 
     # ------------------------------------------------------------------
@@ -381,17 +386,17 @@ class ServoLoop:
             _log.error("stop_all: %s", exc)
 
     # -- changes while running (thread-safe: applied at the start of the next tick) --
-    def set_renderers(self, index: int, renderers: Sequence[DimensionRenderer],
+    def set_renderers(self, obj: "int | str", renderers: Sequence[DimensionRenderer],
                       ramp_s: float | None = None) -> None:
-        """Replace object ``index``'s renderers (a new material). From the next tick the
-        old and new renderers' commands are cross-faded linearly over ``ramp_s``
-        (default ``switch_ramp_s``); the passivity controller keeps running across the
-        switch. Callable from any thread."""
+        """Replace the renderers of object ``obj`` (index or name): a new material. From
+        the next tick the old and new renderers' commands are cross-faded linearly over
+        ``ramp_s`` (default ``switch_ramp_s``); the passivity controller keeps running
+        across the switch. Callable from any thread."""
         rs = _check_renderers(renderers, self.actuators, self.drop_unmapped_roles)
         r = self.switch_ramp_s if ramp_s is None else float(ramp_s)
         if not (math.isfinite(r) and r >= 0):
             raise ValidationError(f"ramp_s must be >= 0 s, got {ramp_s!r}", field="ramp_s")
-        self._ops.append(("renderers", int(index), rs, r))
+        self._ops.append(("renderers", obj, rs, r))
 
     def add_object(self, name: str, renderers: Sequence[DimensionRenderer], shape: Any = None) -> None:
         """Append an object (its index is the next one); ``shape`` goes to the hit
@@ -400,24 +405,34 @@ class ServoLoop:
         self._ops.append(("add", str(name), rs, shape))
 
     def remove_object(self, name: str) -> None:
-        """Remove an object from the hit test (its index stays reserved, renders nothing)."""
+        """Remove an object (later objects move down one index, as in the hit tester)."""
         self._ops.append(("remove", str(name), None, None))
 
-    def set_pose(self, index: int, pose: Any) -> None:
-        """Move object ``index`` (the hit tester's ``set_pose``). Callable from any thread."""
-        self._ops.append(("pose", int(index), pose, None))
+    def set_pose(self, obj: "int | str", pose: Any) -> None:
+        """Move object ``obj`` (index or name; the hit tester's ``set_pose``). Callable
+        from any thread."""
+        self._ops.append(("pose", obj, pose, None))
 
     def call_in_loop(self, fn: Callable[[], None]) -> None:
         """Run ``fn()`` in the servo thread at the start of the next tick."""
         self._ops.append(("call", 0, fn, None))
+
+    def _index(self, obj: "int | str") -> int:
+        if isinstance(obj, str):
+            for i, o in enumerate(self._objs):
+                if o.name == obj:
+                    return i
+            return -1
+        return int(obj) if 0 <= int(obj) < len(self._objs) else -1
 
     def _apply_ops(self, t: float) -> None:
         ops = self._ops
         while ops:
             kind, a, b, c = ops.popleft()
             if kind == "renderers":
-                if 0 <= a < len(self._objs):
-                    o = self._objs[a]
+                i = self._index(a)
+                if i >= 0:
+                    o = self._objs[i]
                     if c > 0:
                         o.old = o.renderers
                         o.ramp_t0 = None  # set on the first tick that renders it
@@ -431,14 +446,17 @@ class ServoLoop:
                     self.hit_tester.add(a, c)
                 self._objs.append(_Obj(a, b))
             elif kind == "remove":
-                if self.hit_tester is not None:
-                    self.hit_tester.remove(a)
-                for o in self._objs:
-                    if o.name == a:
-                        o.renderers, o.old = [], None
+                i = self._index(a)
+                if i >= 0:
+                    if self.hit_tester is not None:
+                        self.hit_tester.remove(a)
+                    del self._objs[i]
+                    self.contact = -1
+                    self._pc_obj = -2 if self._pc_obj == i else (
+                        self._pc_obj - 1 if self._pc_obj > i else self._pc_obj)
             elif kind == "pose":
-                if self.hit_tester is not None:
-                    self.hit_tester.set_pose(a, b)
+                if self.hit_tester is not None and self._index(a) >= 0:
+                    self.hit_tester.set_pose(self._index(a), b)
             elif kind == "call":
                 b()
 
@@ -520,6 +538,24 @@ class ServoLoop:
             self._t_origin = self.clock.now()
             self._deadline = self._t_origin
         self._running = True
+
+    @property
+    def max_compute_s(self) -> float:
+        """Largest compute time of a tick so far in this run (s)."""
+        return getattr(self, "_max_compute", 0.0)
+
+    @property
+    def missed_ticks(self) -> int:
+        """Realtime: periods longer than 1.5 T so far in this run."""
+        return getattr(self, "_missed", 0)
+
+    def clamp_count(self) -> int:
+        """Limit hits of every actuator's safety layer since :meth:`start`."""
+        n = 0
+        for a in _distinct([self.device, *self.actuators.values()]):
+            if hasattr(a.safety, "hits"):
+                n += sum(a.safety.hits.values()) - self._hits0.get(id(a), 0)
+        return n
 
     @property
     def ticks(self) -> int:
@@ -745,6 +781,8 @@ class ServoLoop:
         self.last_state = st
         self.last_penetration_mm = pen
         self.last_force_n = f_sent
+        self.last_t = t
+        self.last_index = idx
         if cpu_time:
             q = (time.thread_time_ns() - q0) * 1e-9
             L["cpu"][i] = q
@@ -753,6 +791,7 @@ class ServoLoop:
         c1 = perf()
         comp = c1 - c0
         L["compute"][i] = comp
+        self.last_compute_s = comp
         if comp > self._max_compute:
             self._max_compute = comp
         if comp > T:

@@ -26,6 +26,7 @@ from ..dimensions import DimensionRenderer
 from ..errors import DeviceError, PluginError, ValidationError
 from ..plan import FALLBACK_SENSOR, MaterialPlan, RenderPlan
 from ..plugin_api import check_plugin_api
+from .limits import check_period, check_seconds
 from .replacements import make_replacement
 
 
@@ -161,12 +162,8 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         plan = RenderPlan.from_dict(plan)
     if not isinstance(plan, RenderPlan):
         raise ValidationError("plan must be a RenderPlan or its dict", field="plan")
-    try:
-        secs = float(seconds)
-    except (TypeError, ValueError):
-        raise ValidationError(f"seconds must be a number, got {seconds!r}", field="seconds") from None
-    if not (secs > 0 and secs < 1e6):
-        raise ValidationError(f"seconds must be > 0, got {seconds!r}", field="seconds")
+    # ranges checked before any actuator opens or any buffer is allocated (runtime.limits)
+    secs = check_seconds(seconds, "seconds")
     mp = plan.material(material)
     app_options = _check_app_options(actuator_options)
     unknown = sorted(set(app_options) - set(mp.actuators))
@@ -174,7 +171,8 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         raise ValidationError(f"roles {unknown} are not roles of material {mp.name!r} "
                               f"(it has {sorted(mp.actuators)})", field="actuator_options")
     servo = dict(plan.settings.get("servo") or {})
-    period = float(period_s if period_s is not None else servo.get("period_s", 0.001))
+    period = check_period(period_s if period_s is not None else servo.get("period_s", 0.001),
+                          "period_s" if period_s is not None else "plan.settings.servo.period_s")
     rt = bool(servo.get("realtime", False) if realtime is None else realtime)
     passivity = bool(servo.get("passivity", True))
 

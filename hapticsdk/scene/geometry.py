@@ -41,9 +41,9 @@ from __future__ import annotations
 
 import math
 import numbers
-from bisect import bisect_left
 from abc import ABC, abstractmethod
-from typing import Any, Callable, ClassVar, Mapping, Sequence
+from bisect import bisect_left
+from typing import Any, ClassVar, Mapping, Sequence
 
 from ..errors import ValidationError
 

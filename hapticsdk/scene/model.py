@@ -171,10 +171,8 @@ class Scene:
         if not isinstance(thr, (int, float)) or not np.isfinite(thr):
             raise ValidationError(f"threshold must be a finite number (%), got {thr!r}",
                                   field="scene.settings.importance.threshold_percent")
-        period = self.settings["servo"]["period_s"]
-        if not isinstance(period, (int, float)) or not 0 < period <= 0.1:
-            raise ValidationError(f"servo period must be in (0, 0.1] s, got {period!r}",
-                                  field="scene.settings.servo.period_s")
+        from ..runtime.limits import check_period
+        check_period(self.settings["servo"]["period_s"], "scene.settings.servo.period_s")
         names = [o.name for o in self.objects]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
@@ -198,8 +196,11 @@ class Scene:
         shapes: dict[int, Shape] = {}
         if isinstance(data, Mapping):
             version = data.get("schema_version", 1)
+            if isinstance(version, bool) or version not in SCHEMA_VERSIONS:
+                raise ValidationError(f"unknown scene schema_version {version!r}; this hapticsdk reads "
+                                      f"{list(SCHEMA_VERSIONS)}", field="scene.schema_version")
             objects = data.get("objects")
-            if version in SCHEMA_VERSIONS and isinstance(objects, list):
+            if isinstance(objects, list):
                 # geometry first: these checks name the exact field and cover what JSON
                 # Schema cannot (finite numbers, unit lengths)
                 for i, o in enumerate(objects):
@@ -248,8 +249,9 @@ class Scene:
             mat: str | dict[str, Any] = material
             name = material
         elif isinstance(material, Mapping):
-            mat = {"name": "material", "intensities": {k: float(v) for k, v in material.items()}}
-            name = "material"
+            # named after its targets: "hardness 0.8, roughness 0.3"
+            name = ", ".join(f"{k} {float(v):g}" for k, v in material.items()) or "intensities"
+            mat = {"name": name, "intensities": {k: float(v) for k, v in material.items()}}
         else:
             raise ValidationError(f"expected a material name or intensities, got {material!r}",
                                   field="material")

@@ -381,7 +381,7 @@ def walk_over(scene: Any, *, press_depth_mm: float = 1.5, speed_mm_s: float = 50
     for name, shape in zip(names, shapes):
         cx, _, cz = shape.pose.position_mm
         half = slide_fraction * _x_half_extent(shape)
-        stroke = []
+        stroke: list[Point3] = []
         for k in range(samples):
             x = cx - half + 2.0 * half * k / (samples - 1) if half > 0 else cx
             y = shape.surface_y(x, cz)

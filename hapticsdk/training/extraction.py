@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence, Sized
 
 import numpy as np
 from scipy import signal
@@ -156,9 +156,17 @@ class FeatureTable:
         return float(np.max(self.df_hz))
 
 
-def extract_trials(trials: Iterable[Trial], *, expected_fs_hz: float | None = 500.0) -> FeatureTable:
-    """Extract features of many trials (each validated; the first broken one raises)."""
-    feats = [extract_trial(t, expected_fs_hz=expected_fs_hz) for t in trials]
+def extract_trials(trials: Iterable[Trial], *, expected_fs_hz: float | None = 500.0,
+                   progress: Any = None) -> FeatureTable:
+    """Extract features of many trials (each validated; the first broken one raises);
+    ``progress(stage, done, total)`` is called after each trial (total -1 when unknown)."""
+    from ..progress import report
+
+    total = len(trials) if isinstance(trials, Sized) else -1
+    feats = []
+    for t in trials:
+        feats.append(extract_trial(t, expected_fs_hz=expected_fs_hz))
+        report(progress, "extracting features", len(feats), total)
     if not feats:
         raise RecordingError("no trials to extract", field="trials")
     return FeatureTable(samples=[f.sample for f in feats], trials=[f.trial for f in feats],

@@ -293,14 +293,18 @@ def _rows(groups: np.ndarray, names: Sequence[str]) -> np.ndarray:
 
 
 def train(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], feature_names: Sequence[str],
-          dimension_names: Sequence[str], cfg: TrainConfig = TrainConfig()) -> TrainResult:
+          dimension_names: Sequence[str], cfg: TrainConfig = TrainConfig(), *,
+          progress: Any = None) -> TrainResult:
     """Train the perception model on trial rows ``X (n, d)`` with targets ``Y (n, k)`` (0..1).
 
     ``groups[i]`` is the sample of row i; the split is by sample. Scaling ranges are
     those of all rows (as MATLAB configures ``mapminmax`` on the whole data set).
     Returns metrics for train/validation/test and, with ``cfg.folds >= 2``, the
     pooled held-out metrics of grouped k-fold cross-validation (``"cv"``).
+    ``progress(stage, done, total)`` is called after the model fit and each fold's fit.
     """
+    from ..progress import report
+
     X = np.asarray(X, float)
     Y = np.asarray(Y, float)
     groups = np.asarray(groups).astype(str)
@@ -314,16 +318,21 @@ def train(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], feature_names: Se
     idx = {s: _rows(groups, split[s]) for s in SPLITS}
     net = fit_network(X, Y, idx["train"], idx["validation"], cfg, x_range=mapminmax_range(X),
                       y_range=target_range(Y, cfg), seed=cfg.seed)
+    n_fits = 1 + (min(cfg.folds, len(names)) if cfg.folds >= 2 else 0)
+    report(progress, "fitting the network (model, then CV folds)", 1, n_fits)
     model = MLPModel(net.weights, feature_names, dimension_names, name="mlp")
     metrics = {s: metrics_dict(Y[idx[s]], model.predict(X[idx[s]]), dimension_names)
                for s in SPLITS if len(idx[s])}
     if cfg.folds >= 2:
-        metrics["cv"] = cross_validate(X, Y, groups, dimension_names, cfg)
+        metrics["cv"] = cross_validate(
+            X, Y, groups, dimension_names, cfg,
+            progress=None if progress is None else
+            (lambda stage, done, total: progress(stage, 1 + done, 1 + total)))
     return TrainResult(model, split, metrics, net.fit, net.restart, cfg)
 
 
 def cross_validate(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], dimension_names: Sequence[str],
-                   cfg: TrainConfig) -> dict[str, dict[str, float]]:
+                   cfg: TrainConfig, *, progress: Any = None) -> dict[str, dict[str, float]]:
     """Grouped k-fold CV: each fold of samples is predicted by a model trained without it.
 
     Inside each fold the remaining samples are split train/validation in the ratio of
@@ -348,6 +357,8 @@ def cross_validate(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], dimensio
                           y_range=target_range(Y[fit_rows], cfg), seed=cfg.seed + 1000 + fi)
         m = MLPModel(net.weights, [f"x{i}" for i in range(X.shape[1])], dimension_names)
         pred[te] = m.predict(X[te])
+        if progress is not None:
+            progress("fitting the network (model, then CV folds)", fi + 1, k)
     out = metrics_dict(Y, pred, dimension_names)
     for d in out:
         out[d]["folds"] = k

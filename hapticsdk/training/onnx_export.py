@@ -117,10 +117,15 @@ def model_bytes(model: MLPModel, metadata: Mapping[str, str]) -> bytes:
 
 def save(model: MLPModel, metadata: Mapping[str, str], path: Path | str) -> bytes:
     """Write the ONNX file; returns its bytes."""
+    from ..fileio import atomic_write_bytes
     data = model_bytes(model, metadata)
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_bytes(data)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        from ..errors import FileWriteError
+        raise FileWriteError(f"cannot create the directory: {exc.strerror or exc}", field=str(p)) from None
+    atomic_write_bytes(p, data)  # temp file + fsync + rename: never a truncated model
     return data
 
 

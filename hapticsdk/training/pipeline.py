@@ -87,9 +87,10 @@ def write_feature_dataset(out: Path | str, ft: FeatureTable, ratings: Ratings, *
                           generated: bool, source: str, fs_hz: float, settings: dict | None = None,
                           truth: dict | None = None) -> Path:
     """Write a feature data set directory (see module doc)."""
+    from ..fileio import atomic_write_text, atomic_writer
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    with open(out / TRIAL_FEATURES, "w", newline="") as fh:
+    _mkdir(out)
+    with atomic_writer(out / TRIAL_FEATURES, "w", newline="") as fh:
         fh.write("sample,trial," + ",".join(FEATURE_NAMES) + ",df_hz\n")
         for s, t, x, d in zip(ft.samples, ft.trials, ft.X, ft.df_hz):
             fh.write(f"{s},{int(t)}," + ",".join(repr(float(v)) for v in x) + f",{float(d)!r}\n")
@@ -97,7 +98,7 @@ def write_feature_dataset(out: Path | str, ft: FeatureTable, ratings: Ratings, *
     summ = ft.summary()
     means = ratings.mean_normalised(names, where=str(out))
     info = {s["name"]: s for s in samples_info}
-    with open(out / SAMPLE_FEATURES, "w", newline="") as fh:
+    with atomic_writer(out / SAMPLE_FEATURES, "w", newline="") as fh:
         wr = csv.writer(fh, lineterminator="\n")
         wr.writerow(["sample", "label", "substrate", "texture"]
                     + [f"{f}_{m}" for f in FEATURE_NAMES for m in ("mean", "std")] + list(ratings.dimensions))
@@ -116,10 +117,19 @@ def write_feature_dataset(out: Path | str, ft: FeatureTable, ratings: Ratings, *
                      "ratings": "ratings.json"}}
     if settings is not None:
         doc["generator"] = settings
-    (out / DATASET_NAME).write_text(json.dumps(doc, indent=1) + "\n")
     if truth is not None:
-        (out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
+        atomic_write_text(out / "truth.json", json.dumps(truth, indent=1) + "\n")
+    # the index last: a data set interrupted before it has no dataset.json
+    atomic_write_text(out / DATASET_NAME, json.dumps(doc, indent=1) + "\n")
     return out
+
+
+def _mkdir(d: Path) -> None:
+    from ..errors import FileWriteError
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise FileWriteError(f"cannot create the directory: {exc.strerror or exc}", field=str(d)) from None
 
 
 def _read_trial_features(path: Path) -> FeatureTable:
@@ -186,16 +196,18 @@ def load_table(path: Path | str) -> TrainingTable:
 # --------------------------------------------------------------------------- generate
 def generate_feature_dataset(out: Path | str, n_samples: int = 23, *, seed: int | None = None,
                              n_trials: int | None = None, n_raters: int | None = None,
-                             raw_format: str | None = None) -> TrainingTable:
-    """Generate a set, extract features and write the feature data set (and raw trials if ``raw_format``)."""
+                             raw_format: str | None = None, progress: Any = None) -> TrainingTable:
+    """Generate a set, extract features and write the feature data set (and raw trials if
+    ``raw_format``); ``progress(stage, done, total)`` follows each stage (:mod:`hapticsdk.progress`)."""
     from . import generator as gen
 
     gs = gen.generate(n_samples, seed=gen.DEFAULT_SEED if seed is None else seed,
-                      n_trials=n_trials or gen.N_TRIALS, n_raters=n_raters or gen.N_RATERS)
+                      n_trials=n_trials or gen.N_TRIALS, n_raters=n_raters or gen.N_RATERS,
+                      progress=progress)
     out = Path(out)
     if raw_format:
-        gen.write_recordings(gs, out, fmt=raw_format)
-    ft = extract_trials(gs.trials, expected_fs_hz=gen.FS_HZ)
+        gen.write_recordings(gs, out, fmt=raw_format, progress=progress)
+    ft = extract_trials(gs.trials, expected_fs_hz=gen.FS_HZ, progress=progress)
     info = [{"name": s.name, "label": s.label, "substrate": s.substrate, "texture": s.texture} for s in gs.specs]
     source = (f"GENERATED (simulated, not measured) by hapticsdk.training.generator v{gen.GENERATOR_VERSION}, "
               f"seed {gs.seed}")
@@ -220,8 +232,11 @@ def constraint_context(X: np.ndarray) -> dict[str, float]:
     return {"press_force_min_n": float(f.min()), "press_force_max_n": float(f.max())}
 
 
-def train_dataset(path: Path | str, out: Path | str | None, cfg=None) -> tuple[dict, Any]:
+def train_dataset(path: Path | str, out: Path | str | None, cfg=None, *,
+                  progress: Any = None) -> tuple[dict, Any]:
     """Train on a data set, export ONNX to ``out`` and return (report, TrainResult).
+
+    ``progress(stage, done, total)`` (:mod:`hapticsdk.progress`) follows the network fits.
 
     Report: ``metrics`` (split -> dimension -> {mse, r, n}), ``onnx_parity_max_abs``,
     ``time_s``, ``data_generated``, ``split``, ``df_hz``, ``training_data_sha256``.
@@ -232,7 +247,7 @@ def train_dataset(path: Path | str, out: Path | str | None, cfg=None) -> tuple[d
     cfg = cfg or lm.TrainConfig()
     table = load_table(path)
     X, Y = table.X, table.Y
-    res = lm.train(X, Y, table.features.samples, FEATURE_NAMES, table.dimensions, cfg)
+    res = lm.train(X, Y, table.features.samples, FEATURE_NAMES, table.dimensions, cfg, progress=progress)
     space = table.feature_space()
     sha = onnx_export.table_sha256(table.features.samples, table.features.trials, X, Y)
     defaults = dict(zip(FEATURE_NAMES, (float(v) for v in np.median(X, axis=0))))
@@ -245,9 +260,10 @@ def train_dataset(path: Path | str, out: Path | str | None, cfg=None) -> tuple[d
     probe = np.concatenate([X, space.random(256, rng)])
     parity = onnx_export.onnx_parity(data, res.model, probe)
     if out is not None:
+        from ..fileio import atomic_write_bytes
         p = Path(out)
-        p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_bytes(data)
+        _mkdir(p.parent)
+        atomic_write_bytes(p, data)  # temp file + fsync + rename: never a truncated model
     report = {"metrics": res.metrics, "onnx_parity_max_abs": parity, "time_s": time.perf_counter() - t0,
               "data_generated": table.generated, "split": res.split, "df_hz": table.df_hz,
               "training_data_sha256": sha, "epochs": res.fit.epochs, "best_epoch": res.fit.best_epoch,
@@ -277,10 +293,10 @@ def build_materials(table: TrainingTable) -> dict:
 
 
 def write_materials(table: TrainingTable, path: Path | str) -> Path:
+    from ..fileio import atomic_write_text
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    p.write_text(json.dumps(build_materials(table), indent=1) + "\n")
-    return p
+    _mkdir(p.parent)
+    return atomic_write_text(p, json.dumps(build_materials(table), indent=1) + "\n")
 
 
 # --------------------------------------------------------------------------- growth

@@ -104,14 +104,15 @@ class Trial:
 # --------------------------------------------------------------------------- files
 def write_trial_file(path: Path, cols: Mapping[str, np.ndarray]) -> None:
     """Write one trial's columns to ``.npz`` or ``.csv`` (chosen by suffix), exactly round-trippable."""
+    from ..fileio import atomic_savez, atomic_writer
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    _mkdir(path.parent)
     if path.suffix == ".npz":
-        np.savez_compressed(path, **{c: np.asarray(cols[c]) for c in COLUMNS})
+        atomic_savez(path, **{c: np.asarray(cols[c]) for c in COLUMNS})
     elif path.suffix == ".csv":
         n = len(cols["time_s"])
         num = np.column_stack([np.asarray(cols[c], float) for c in NUMERIC_COLUMNS])
-        with open(path, "w", newline="") as fh:
+        with atomic_writer(path, "w", newline="") as fh:
             fh.write(",".join(COLUMNS) + "\n")
             for i in range(n):
                 fh.write(",".join(repr(float(v)) for v in num[i]) + "," + str(cols["phase"][i]) + "\n")
@@ -132,7 +133,9 @@ def read_trial_file(path: Path) -> dict[str, np.ndarray]:
                 cols = {k: z[k] for k in z.files}
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
             # truncated or corrupted archive, a pickled member, not a zip at all
-            raise RecordingError(f"{path}: unreadable npz ({type(exc).__name__}: {exc})", field="file") from None
+            why = ("pickled data or not an .npz archive; pickles are never loaded" if "pickle" in str(exc)
+                   else f"{type(exc).__name__}: {exc}")
+            raise RecordingError(f"{path}: unreadable npz ({why})", field="file") from None
     elif path.suffix == ".csv":
         from ..schemas_io import read_csv_rows
         _, rows = read_csv_rows(path, field="file", error=RecordingError)  # UTF-8, bounded, well-formed
@@ -340,12 +343,19 @@ def load_manifest(path: Path | str) -> RecordingSet:
 
 def write_manifest(root: Path, manifest: Mapping[str, Any]) -> Path:
     """Schema-validate and write ``recordings.json`` into ``root``."""
+    from ..fileio import atomic_write_text
     root = Path(root)
-    root.mkdir(parents=True, exist_ok=True)
+    _mkdir(root)
     validate_json(dict(manifest), "recording.schema.json", source=str(root / MANIFEST_NAME))
-    path = root / MANIFEST_NAME
-    path.write_text(json.dumps(manifest, indent=1) + "\n")
-    return path
+    return atomic_write_text(root / MANIFEST_NAME, json.dumps(manifest, indent=1) + "\n")
+
+
+def _mkdir(d: Path) -> None:
+    from ..errors import FileWriteError
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise FileWriteError(f"cannot create the directory: {exc.strerror or exc}", field=str(d)) from None
 
 
 # --------------------------------------------------------------------------- ratings
@@ -399,5 +409,5 @@ def write_ratings(path: Path, ratings: Ratings) -> Path:
     """Schema-validate and write a ratings file."""
     doc = ratings.to_json()
     validate_json(doc, "ratings.schema.json", source=str(path))
-    Path(path).write_text(json.dumps(doc, indent=1) + "\n")
-    return Path(path)
+    from ..fileio import atomic_write_text
+    return atomic_write_text(path, json.dumps(doc, indent=1) + "\n")

@@ -213,9 +213,19 @@ def test_realtime_long_stall_reanchors_and_counts_skipped():
 
 
 def test_realtime_on_the_machine_clock_paces():
-    rep = ServoLoop(VirtualProbe(), [Spring(1.0)], realtime=True).run(0.2)
+    """On the machine clock, tick k never starts before its deadline k*T (it waits for it;
+    a late tick only pushes later ones onto the grid), whatever the machine's load. How
+    close to T the periods are under load is measured by ``hapticsdk bench timing``,
+    not asserted here: a shared machine may deschedule the loop for tens of ms."""
+    T = 1e-3
+    rep = ServoLoop(VirtualProbe(), [Spring(1.0)], realtime=True, period_s=T).run(0.05)
+    t = np.asarray(rep.log["t"])
+    k = np.arange(rep.ticks)
+    assert rep.ticks == 50 and t.shape == (50,)
+    # the grid is built by adding T: allow the float64 rounding of 50 additions (<< 1 ns)
+    assert np.all(t >= k * T - 1e-9), (t - k * T).min()
+    assert t[-1] >= (rep.ticks - 1 + rep.events["skipped_ticks"]) * T - 1e-9
     assert rep.jitter is not None and rep.jitter["periods"] == rep.ticks - 1
-    assert rep.jitter["mean_period_us"] == pytest.approx(1000, rel=0.1)
     assert {"p50_us", "p99_us", "p999_us", "max_us", "missed_tick_rate"} <= set(rep.jitter)
 
 

@@ -43,7 +43,7 @@ def test_roughness_render_follows_formula_9():
     assert np.all(amp[active] > 0) and np.all(amp[~active] == 0)
     d = rep.to_dict()
     json.dumps(d)
-    assert d["tick"]["ticks"] == 1200 and d["material"] == "material"
+    assert d["tick"]["ticks"] == 1200 and d["material"] == "roughness 0.5"
 
 
 def test_render_from_saved_plan_needs_no_solver(tmp_path, monkeypatch):

@@ -179,10 +179,15 @@ def test_two_boards_by_serial_number(emus):
     bridge, boards = emus
     be = boards("LEFT", "RIGHT")
     e1, e2 = bridge(serial_number="B1"), bridge(serial_number="B2")
-    acts = [PiezoMCP2221(serial_number="RIGHT", backend=be), PiezoMCP2221(serial_number="LEFT", backend=be),
-            PiezoSerial(port=e2.port, serial_number="B2", **FAST), PiezoSerial(port=e1.port, serial_number="B1", **FAST)]
-    for i, a in enumerate(acts):
+    # the host watchdog (standby after the command deadline) at its longest: the outputs
+    # are read a few ms after the last command
+    wd = dict(watchdog_s=0.25)
+    acts = [PiezoMCP2221(serial_number="RIGHT", backend=be, **wd), PiezoMCP2221(serial_number="LEFT", backend=be, **wd),
+            PiezoSerial(port=e2.port, serial_number="B2", **FAST, **wd),
+            PiezoSerial(port=e1.port, serial_number="B1", **FAST, **wd)]
+    for a in acts:
         a.open()
+    for i, a in enumerate(acts):
         for _ in range(10):
             a.command(cmd(a=5.0 * (i + 1)))
     assert be.boards[1].drv.output()["amplitude_v"] == pytest.approx(5.0, abs=0.1)

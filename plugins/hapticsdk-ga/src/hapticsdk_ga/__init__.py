@@ -12,5 +12,7 @@
 Modules are imported lazily by the registry; importing this package imports nothing heavy.
 """
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "hapticsdk_api"]
 __version__ = "0.1.0"
+#: plugin API range this distribution was built for (checked when a plugin is loaded)
+hapticsdk_api = ">=1.0,<2"

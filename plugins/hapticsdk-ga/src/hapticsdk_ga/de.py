@@ -23,6 +23,7 @@ from hapticsdk.errors import ValidationError
 from hapticsdk.solvers import SolveProblem, Solver, SolverOutput, Trace
 
 from ._common import Clock, Evaluator, check_budget, check_fraction, check_int, solved_mask, target_error
+from .ga import MAX_GENERATIONS, MAX_POPULATION
 
 
 def _mutation_range(v: Any) -> tuple[float, float]:
@@ -55,8 +56,8 @@ class DESolver(Solver):
 
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
         o = self.options
-        p = check_int(o, "population", 4)
-        gens = check_int(o, "generations", 0)
+        p = check_int(o, "population", 4, MAX_POPULATION)
+        gens = check_int(o, "generations", 0, MAX_GENERATIONS)
         f_lo, f_hi = _mutation_range(o["mutation"])
         cr = check_fraction(o, "recombination")
         if o["strategy"] not in ("best1bin", "rand1bin"):
@@ -153,6 +154,8 @@ class ScipyDESolver(Solver):
         from scipy.optimize import differential_evolution
 
         o = self.options
+        check_int(o, "popsize", 1, 10_000)
+        check_int(o, "maxiter", 0, MAX_GENERATIONS)
         goal = target_error(o, problem)
         clock = Clock(check_budget(o))
         ev = Evaluator(problem)

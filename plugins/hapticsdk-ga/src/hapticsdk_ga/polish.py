@@ -37,9 +37,6 @@ from ._common import (Clock, check_budget, check_fraction, check_int, constraint
 
 #: upper limits of the size options (they bound a mistyped value, not a sensible one)
 MAX_ITER = 100_000
-_SCALED = False
-_DIAG_FLOOR = 1e-6
-_SETTLE_FTOL = 0.0
 MAX_STARTS = 10_000
 
 
@@ -210,11 +207,7 @@ def levenberg_marquardt(problem: SolveProblem, X0: np.ndarray, rows: np.ndarray,
             g[held] = 0.0
         JT = np.transpose(Ja, (0, 2, 1))
         A = JT @ Ja
-        if _SCALED:
-            dg = np.einsum("nii->ni", A)
-            A += (la[:, None] * np.maximum(dg, _DIAG_FLOOR))[:, :, None] * eye
-        else:
-            A += la[:, None, None] * eye
+        A += la[:, None, None] * eye
         step = np.linalg.solve(A, -g[..., None])[..., 0]
         step += Ua
         Un = np.clip(step, 0.0, 1.0, out=step)
@@ -227,11 +220,7 @@ def levenberg_marquardt(problem: SolveProblem, X0: np.ndarray, rows: np.ndarray,
             # an accepted step lowering f by <= ftol*f starts (or extends) a stall; once
             # stalled, rejected steps extend it too (before that they are the normal damping
             # search of LM); an accepted step with real progress ends it
-            if _SETTLE_FTOL and settle is not None:
-                ft = np.where(ea <= settle, max(ftol, _SETTLE_FTOL), ftol)
-                tiny = acc & (fa - fn <= ft * fa)
-            else:
-                tiny = acc & (fa - fn <= ftol * fa)
+            tiny = acc & (fa - fn <= ftol * fa)
             stall = np.where(tiny | (~acc & (stall > 0)), stall + 1, np.where(acc, 0, stall))
             conv = stall >= patience
         if acc.any():
@@ -349,9 +338,12 @@ class _BestTrace:
 class PolishSolver(Solver):
     """Bounded Levenberg-Marquardt (damped Gauss-Newton) from several starts per target.
 
-    Options: ``max_iter`` (30), ``starts`` (4 per target), ``start`` (``"auto"``: rows of
-    ``problem.x0`` when given plus random starts, else random starts; ``"x0"``: only
-    ``problem.x0``; ``"random"``; ``"ga"``: a short GA's best plus random starts),
+    Options: ``max_iter`` (30), ``starts`` (4 per target), ``start`` (``"auto"``: the row
+    of ``problem.x0`` when given, then the feasible samples of a cached sample cloud whose
+    intensities are nearest the target (about half of the starts, see
+    :func:`~hapticsdk_ga._common.sample_cloud`), the rest random; ``"x0"``: only
+    ``problem.x0``; ``"random"``: random starts only; ``"ga"``: a short GA's best, then
+    nearest samples and random starts),
     ``ga_options`` (GA settings for ``start="ga"``), ``target_error`` (1e-6: stop a
     target once one of its starts has an error below this with its constraints met; its
     other starts stop too), ``ftol`` (1e-4: a start also stops after 5 iterations in a row,
@@ -360,7 +352,12 @@ class PolishSolver(Solver):
     target that cannot be met exactly; a start converged there with constraints met and an
     error within the problem's tolerance ends its target's other starts too; 0 = never),
     ``damping`` (initial lambda, 1e-2), ``constraint_margin`` (1e-6, relative),
-    ``constraint_weight`` (1.0), ``time_budget_s`` (None).
+    ``constraint_weight`` (1.0), ``time_budget_s`` (None), ``patience`` (5, the iterations
+    of the ``ftol`` rule), ``rescue_starts`` (8: a target none of whose starts ended within
+    the problem's tolerance is solved again from this many new starts, its next-nearest
+    cloud samples and random points, and the better answer kept; 0 = no rescue).
+    Every random number of a target is drawn up front in target order, so a batch solved
+    in chunks gets the same answers as in one piece.
     """
 
     name: ClassVar[str] = "polish"
@@ -370,6 +367,8 @@ class PolishSolver(Solver):
         "rescue_starts": 8, "patience": 5,
     }
     _ga_defaults: ClassVar[dict[str, Any]] = {"population": 30, "generations": 10}
+    #: GA stage goal (``start="ga"``) = this x the problem's tolerance (None: the GA's own)
+    _ga_goal_factor: ClassVar[float | None] = None
 
     def _starts(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace, n_starts: int,
                 start: str, uniforms: np.ndarray) -> tuple[np.ndarray, int]:
@@ -392,9 +391,11 @@ class PolishSolver(Solver):
                 raise ValidationError("start='x0' needs problem.x0", field="options.start")
         elif start == "ga":
             from .ga import GASolver
-            ga_opts = merge_options(GASolver.default_options,
-                                    {**self._ga_defaults, **(self.options.get("ga_options") or {})},
-                                    "options.ga_options")
+            given = dict(self.options.get("ga_options") or {})
+            ga_opts = merge_options(GASolver.default_options, {**self._ga_defaults, **given}, "options.ga_options")
+            if "target_error" not in given and self._ga_goal_factor is not None:
+                # the GA only has to bring a target near; the LM meets it
+                ga_opts["target_error"] = self._ga_goal_factor * float(problem.tolerance)
             out = GASolver(**ga_opts)._solve(problem, rng, trace)
             X[:, 0] = out.x
             nfev = out.nfev
@@ -464,14 +465,17 @@ class PolishSolver(Solver):
 
 
 class GAPolishSolver(PolishSolver):
-    """A short GA (``ga_options``, default population 100 as in the paper, 20 generations,
-    stopping at the problem's tolerance) whose best individual per target starts the LM
-    polish, with ``starts - 1`` extra random starts (default ``starts=4``). This is the
-    SDK's default solver: on the shipped model, over the 23 library materials x 10 seeds it
-    met every material within tolerance with constraints met (worst 1.0e-3, material S1,
-    whose closest feasible point is 9.4e-4 away; the other 22 at <= 1e-6), where the GA
-    alone missed 3 of the 230 solves and ``polish`` from random starts 1."""
+    """A short GA whose best individual per target starts the LM polish, next to the
+    nearest cloud samples and random starts (``starts=4`` in all). The GA stage
+    (``ga_options``; default population 100 as in the paper, at most 20 generations,
+    ``init="nearest"``: 8 of its individuals are the cloud samples nearest the target)
+    only has to bring a target near: a target leaves it once its best is within 5 x the
+    problem's tolerance with constraints met, or after 3 generations without progress
+    (``stall_generations``), and the LM meets it. This is the SDK's default solver; see
+    docs/solvers.md for its quality and time on the material library."""
 
     name: ClassVar[str] = "ga-polish"
     default_options: ClassVar[dict[str, Any]] = {**PolishSolver.default_options, "start": "ga", "starts": 4}
-    _ga_defaults: ClassVar[dict[str, Any]] = {"population": 100, "generations": 20}
+    _ga_defaults: ClassVar[dict[str, Any]] = {"population": 100, "generations": 20, "init": "nearest",
+                                              "stall_generations": 3}
+    _ga_goal_factor: ClassVar[float | None] = 5.0

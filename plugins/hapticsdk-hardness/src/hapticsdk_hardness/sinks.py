@@ -3,18 +3,27 @@
 A sink has ``write(samples: np.ndarray)`` (float samples, full scale 1.0) and
 ``close()``. :func:`make_sink` builds one from a short spec: ``None``/``"buffer"``
 (in memory, the default), ``"wav:PATH"`` (16-bit mono WAV via the stdlib ``wave``
-module), a callable (called with each block), ``"sounddevice"`` (an audio output, needs
+module, written to a temporary file and renamed over PATH on close), a callable (called with each block), ``"sounddevice"`` (an audio output, needs
 the optional ``sounddevice`` package, imported only then), or any object with ``write``.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import tempfile
 import wave
 from typing import Any, Callable
 
 import numpy as np
 
-from hapticsdk.errors import DeviceNotFoundError, ValidationError
+from hapticsdk.errors import DeviceNotFoundError, FileWriteError, ValidationError
+
+
+def _umask() -> int:
+    m = os.umask(0)
+    os.umask(m)
+    return m
 
 
 class BufferSink:
@@ -43,28 +52,84 @@ class BufferSink:
 
 
 class WavSink:
-    """Writes 16-bit mono PCM at ``fs`` Hz; samples are clipped to [-1, 1]."""
+    """Writes 16-bit mono PCM at ``fs`` Hz; samples are clipped to [-1, 1].
+
+    The samples go to a temporary file next to ``path``; :meth:`close` completes the WAV
+    header, flushes it to disk and renames it over ``path``. So ``path`` only ever holds
+    a complete WAV: the old file stays as it was when a write failed (disk full, file
+    size limit), when the process is killed, or when :meth:`discard` is called; a
+    symbolic link at ``path`` is replaced, not written through.
+    """
 
     def __init__(self, path: str, fs: float) -> None:
+        from hapticsdk.fileio import check_output_path
+
         self.path = str(path)
         self.fs = int(round(fs))
-        self._w: Any = wave.open(self.path, "wb")
+        target = check_output_path(self.path, field="sink")  # missing folder, a directory: now
+        self.failed = False
+        self.n = 0
+        try:
+            fd, self._tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
+                                             dir=str(target.parent) or ".")
+        except OSError as exc:
+            raise FileWriteError(f"cannot create a file next to it: {exc.strerror or exc}", field=self.path) from None
+        os.chmod(self._tmp, 0o644 & ~_umask())
+        self._fh: Any = os.fdopen(fd, "w+b")
+        self._w: Any = wave.open(self._fh, "wb")
         self._w.setnchannels(1)
         self._w.setsampwidth(2)
         self._w.setframerate(self.fs)
-        self.n = 0
 
     def write(self, samples: np.ndarray) -> None:
         if self._w is None or not samples.size:
             return
         pcm = np.round(np.clip(samples, -1.0, 1.0) * 32767.0).astype("<i2")
-        self._w.writeframes(pcm.tobytes())
+        try:
+            self._w.writeframes(pcm.tobytes())
+        except BaseException:
+            self.failed = True  # the target is not replaced by a partial file
+            raise
         self.n += samples.size
 
+    def discard(self) -> None:
+        """Drop what was written; ``path`` keeps its old content."""
+        self.failed = True
+        self.close()
+
+    def __del__(self) -> None:  # never closed (the actuator was never opened): no file
+        if getattr(self, "_w", None) is not None:
+            with contextlib.suppress(Exception):
+                self.discard()
+
     def close(self) -> None:
-        if self._w is not None:
-            self._w.close()
-            self._w = None
+        """Finish the WAV and rename it over ``path`` (nothing is replaced after a failed
+        write or :meth:`discard`). Raises :class:`FileWriteError` when the final write fails."""
+        if self._w is None:
+            return
+        w, self._w = self._w, None
+        ok = False
+        try:
+            if self.failed:
+                with contextlib.suppress(Exception):  # into the temporary file, removed below
+                    w.close()
+            else:
+                w.close()  # header with the frame count; the file object stays open
+                self._fh.flush()
+                os.fsync(self._fh.fileno())
+            self._fh.close()
+            if not self.failed:
+                os.replace(self._tmp, self.path)
+                ok = True
+        except OSError as exc:
+            raise FileWriteError(f"WAV not written, the old file is unchanged: {exc.strerror or exc}",
+                                 field=self.path) from None
+        finally:
+            if not ok:
+                with contextlib.suppress(OSError):
+                    self._fh.close()
+                with contextlib.suppress(OSError):
+                    os.unlink(self._tmp)
 
 
 class CallbackSink:

@@ -25,7 +25,10 @@ from hapticsdk.errors import HapticSDKError, ModelError
 from hapticsdk.features import FeatureSpace
 from hapticsdk.models import MLPModel, PerceptionModel
 
-__all__ = ["OnnxModel", "load_default", "default_model_path", "REQUIRED_METADATA"]
+__all__ = ["OnnxModel", "load_default", "default_model_path", "REQUIRED_METADATA", "hapticsdk_api"]
+
+#: plugin API range this distribution was built for (checked when a plugin is loaded)
+hapticsdk_api = ">=1.0,<2"
 
 PREFIX = "hapticsdk."
 #: metadata keys every model file must carry (without the ``hapticsdk.`` prefix).

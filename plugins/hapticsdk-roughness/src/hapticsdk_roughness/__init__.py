@@ -13,3 +13,5 @@ never imports ``serial`` or ``usb`` (the hardware transports import them inside 
 """
 
 __version__ = "0.1.0"
+#: plugin API range this distribution was built for (checked when a plugin is loaded)
+hapticsdk_api = ">=1.0,<2"

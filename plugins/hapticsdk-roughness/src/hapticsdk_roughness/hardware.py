@@ -8,6 +8,16 @@ ramped in software by at most full scale per ``ramp_s`` (>= 5 ms) so the 20 mm/s
 never clicks. STATUS is read every ``status_interval_s`` (also a keep-alive for the
 bridge watchdog); a fault bit stops the piezo.
 
+Command deadline (host watchdog, :class:`hapticsdk.runtime.watchdog.CommandWatchdog`):
+while open, a daemon thread puts the DRV2667 in standby when no command arrived for
+``max(watchdog_s, 3 servo periods)`` (default ``watchdog_s`` 0.010 s; the servo period is
+the larger of the ``period_s`` option and the period the servo loop gives the safety
+layer). Its write takes the same lock as the servo thread's writes. The next command
+wakes the chip again with the amplitude byte at 0 and ramps up (``ramp_s``). If the
+standby write fails (MCP2221A unplugged or timing out, serial port gone) the actuator is
+marked faulted (the servo thread's next command raises :class:`DeviceError`, so the loop
+stops everything and reports it) and the failure is counted in ``describe()["watchdog"]``.
+
 Safe state (``stop``): CONTROL2 = STANDBY (boost and amplifier off, GO cleared). On any
 transport or device error the core's :meth:`Actuator.command` calls ``stop`` and raises a
 :class:`~hapticsdk.errors.DeviceError` naming the actuator. pyserial / pyusb are imported
@@ -16,16 +26,24 @@ only inside ``open``, ``check_available`` and ``discover``.
 
 from __future__ import annotations
 
+import threading
 import time
 from typing import Any, ClassVar
 
 from hapticsdk.actuators import Actuator
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
+from hapticsdk.runtime.watchdog import CommandWatchdog
 
 from .drv2667 import (ADDRESS, DRV2667, GAIN_FULL_SCALE_V, I2CBus, SynthChunk, amplitude_code,
                       frequency_code)
 from .virtual import piezo_limits
+
+
+#: default shortest host-side command deadline (s) before the DRV2667 is put in standby
+WATCHDOG_S = 0.010
+#: allowed range of the ``watchdog_s`` option (s)
+WATCHDOG_RANGE_S = (0.002, 0.25)
 
 
 class DRV2667Actuator(Actuator):
@@ -34,7 +52,9 @@ class DRV2667Actuator(Actuator):
     Options: ``gain`` (0..3 = 25/50/75/100 V peak; default 0, the safe start of
     docs/devices.md), ``frequency_range_hz`` (piezo band within 7.8125..1992 Hz),
     ``ramp_s`` (amplitude ramp, >= 0.005 s), ``period_s`` (servo period, s),
-    ``status_interval_s`` (STATUS poll, s), ``address`` (I2C, 0x59).
+    ``status_interval_s`` (STATUS poll, s), ``address`` (I2C, 0x59), ``watchdog_s``
+    (shortest command deadline before the host puts the chip in standby, 0.002..0.25 s,
+    default 0.010; the deadline is at least 3 servo periods).
     """
 
     channel: ClassVar[str] = "vibration"
@@ -43,10 +63,14 @@ class DRV2667Actuator(Actuator):
 
     def __init__(self, *, gain: int = 0, frequency_range_hz: tuple[float, float] | None = None,
                  ramp_s: float = 0.005, period_s: float = 0.001, status_interval_s: float = 0.05,
-                 address: int = ADDRESS, **options: Any) -> None:
+                 address: int = ADDRESS, watchdog_s: float = WATCHDOG_S, **options: Any) -> None:
         self.limits = piezo_limits(gain, frequency_range_hz)
         if ramp_s < 0.005 or period_s <= 0 or status_interval_s <= 0:
             raise ValidationError("ramp_s must be >= 0.005 s, period_s and status_interval_s > 0", field="options")
+        if not (isinstance(watchdog_s, (int, float)) and WATCHDOG_RANGE_S[0] <= watchdog_s <= WATCHDOG_RANGE_S[1]):
+            raise ValidationError(f"watchdog_s must be {WATCHDOG_RANGE_S[0]:g}..{WATCHDOG_RANGE_S[1]:g} s "
+                                  f"(the command deadline cannot be turned off), got {watchdog_s!r}",
+                                  field="options.watchdog_s")
         super().__init__(**options)
         self.gain = int(gain)
         self.ramp_s = float(ramp_s)
@@ -59,6 +83,13 @@ class DRV2667Actuator(Actuator):
         self._freq = 0.0
         self._last_status = 0.0
         self.updates = 0
+        self.watchdog_s = float(watchdog_s)
+        #: serialises the servo thread's transport writes with the watchdog's
+        self._io_lock = threading.RLock()
+        self._watchdog: CommandWatchdog | None = None
+        #: the chip is in standby (stop or watchdog): the next command wakes it
+        self._asleep = True
+        self.wakes = 0
 
     def _make_bus(self) -> I2CBus:
         raise NotImplementedError
@@ -85,31 +116,84 @@ class DRV2667Actuator(Actuator):
             raise
         self.bus, self.drv = bus, drv
         self._amp_v = 0.0
+        self._asleep = False
         self._last_status = time.monotonic()
+        self._watchdog = CommandWatchdog(self._watchdog_standby, deadline_s=self.command_deadline_s,
+                                         lock=self._io_lock, on_error=self._watchdog_failed,
+                                         name=f"watchdog {self.label}").start(armed=False)
+        # armed by the first command: until then the chunk amplitude is 0 (0 V out)
 
-    def _command(self, cmd: ChannelCommand) -> None:
-        drv = self._require()
-        target = self._amp_v if cmd.amplitude is None else float(cmd.amplitude)
-        if cmd.frequency_hz is not None:
-            self._freq = float(cmd.frequency_hz)
-        step = GAIN_FULL_SCALE_V[self.gain] * self.period_s / self.ramp_s
-        self._amp_v += max(-step, min(step, target - self._amp_v))
-        if drv.update_chunk(amplitude_code(self._amp_v, self.gain), frequency_code(self._freq)):
-            self.updates += 1
-        now = time.monotonic()
-        if now - self._last_status >= self.status_interval_s:
-            self._last_status = now
-            drv.check_status()
+    def command_deadline_s(self) -> float:
+        """The host watchdog's deadline (s): ``max(watchdog_s, 3 servo periods)``."""
+        s = getattr(self.safety, "settings", None)
+        period = max(self.period_s, float(getattr(s, "stale_after_s", 0.0) or 0.0))
+        return max(self.watchdog_s, 3.0 * period)
 
-    def _stop(self) -> None:
+    def _watchdog_standby(self) -> None:
+        # watchdog thread, io lock held
         self._amp_v = 0.0
+        self._asleep = True
         if self.drv is not None:
             self.drv.standby()
 
+    def _watchdog_failed(self, exc: BaseException) -> None:
+        # watchdog thread, io lock held: the servo thread's next command raises DeviceError
+        self.fault = self.fault or DeviceError(
+            f"no command for {self.command_deadline_s() * 1e3:.0f} ms and the standby write failed "
+            f"({type(exc).__name__}: {exc}); the DRV2667 may still be playing", device=self.label)
+
+    def _wake(self, drv: DRV2667) -> None:
+        """After stop or a watchdog standby: silence the chunk first, then GO, and ramp up
+        from 0 (so the old amplitude never plays on wake)."""
+        self._amp_v = 0.0
+        drv.update_chunk(0, frequency_code(self._freq))
+        drv.go()
+        self._asleep = False
+        self.wakes += 1
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        with self._io_lock:
+            drv = self._require()
+            target = self._amp_v if cmd.amplitude is None else float(cmd.amplitude)
+            if cmd.frequency_hz is not None:
+                self._freq = float(cmd.frequency_hz)
+            if self._asleep:
+                self._wake(drv)
+            step = GAIN_FULL_SCALE_V[self.gain] * self.period_s / self.ramp_s
+            self._amp_v += max(-step, min(step, target - self._amp_v))
+            if drv.update_chunk(amplitude_code(self._amp_v, self.gain), frequency_code(self._freq)):
+                self.updates += 1
+            now = time.monotonic()
+            if now - self._last_status >= self.status_interval_s:
+                self._last_status = now
+                drv.check_status()
+            if self._watchdog is not None:
+                self._watchdog.feed()
+
+    def _stop(self) -> None:
+        with self._io_lock:
+            self._amp_v = 0.0
+            if self.drv is None:
+                return
+            self._asleep = True
+            try:
+                self.drv.standby()
+            except BaseException:
+                # the chip may still play: the watchdog keeps retrying the standby write
+                # every deadline until it succeeds or the actuator is closed
+                if self._watchdog is not None:
+                    self._watchdog.feed()
+                raise
+            if self._watchdog is not None:
+                self._watchdog.disarm()
+
     def _close(self) -> None:
-        if self.bus is not None:
-            self.bus.close()
-        self.bus = self.drv = None
+        if self._watchdog is not None:
+            self._watchdog.stop()       # kept: describe() still shows its counts
+        with self._io_lock:
+            if self.bus is not None:
+                self.bus.close()
+            self.bus = self.drv = None
 
     def _require(self) -> DRV2667:
         if self.drv is None:
@@ -125,7 +209,10 @@ class DRV2667Actuator(Actuator):
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         d.update({"gain": self.gain, "full_scale_v": GAIN_FULL_SCALE_V[self.gain], "bus": getattr(self.bus, "name", None),
-                  "chunk_updates": self.updates})
+                  "chunk_updates": self.updates,
+                  "watchdog": dict(self._watchdog.stats() if self._watchdog is not None else
+                                   {"deadline_s": self.command_deadline_s(), "running": False},
+                                   wakes=self.wakes)})
         return d
 
 

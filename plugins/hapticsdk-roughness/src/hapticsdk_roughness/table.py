@@ -119,9 +119,8 @@ def load_table(path: str | Path) -> PiezoTable:
 
 def save_table(table: PiezoTable, path: str | Path) -> Path:
     """Write ``table`` as JSON (:meth:`PiezoTable.to_dict` form); returns the path."""
-    p = Path(path)
-    p.write_text(json.dumps(table.to_dict(), indent=1))
-    return p
+    from hapticsdk.fileio import atomic_write_text
+    return atomic_write_text(path, json.dumps(table.to_dict(), indent=1))
 
 
 def resolve_table(table: Any = None) -> PiezoTable:

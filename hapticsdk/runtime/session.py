@@ -1,0 +1,1052 @@
+"""Live haptic sessions: the servo loop runs apart from the application, materials and
+objects change while a person touches them.
+
+:class:`Session` compiles a scene, starts the servo (by default in its own process,
+``isolation="process"``; ``"thread"`` runs it in a thread of the application's process,
+for tests and pure simulation), and returns at once. The servo side owns the devices:
+it opens the scene's actuators, runs :class:`~hapticsdk.runtime.loop.ServoLoop` on the
+machine clock (every command through the safety layer and the passivity controller)
+and closes them. The application side never blocks on the servo:
+
+* :meth:`Session.state` reads the latest probe position, velocity, force, the object in
+  contact and tick statistics from shared memory (a seqlock: the servo bumps a sequence
+  number before and after each write; a reader retries while it is odd or changed);
+* :meth:`Session.events` drains the event ring (contact enter/leave with the object's
+  name, renderer errors, clamps, overruns, skipped ticks, material switches, faults);
+* :meth:`Session.set_material`, :meth:`add_object`, :meth:`remove_object`,
+  :meth:`move_object` send a message on a pipe the servo's control thread reads;
+* :meth:`pause`, :meth:`resume` and :meth:`close` set flags in shared memory.
+
+Live retargeting: :meth:`Session.set_material` answers new intensities at once with the
+amortised inverse (the ``amortised`` solver of ``hapticsdk-ga``, a table lookup of about
+a millisecond) and sends those features; a background thread of the application then
+solves again with the scene's solver (``settings.solver.method``) and, when the answer
+differs, sends the refined features. The servo cross-fades each switch: for
+``ramp_s`` (default 50 ms) the old and new renderers both run and their commands are
+mixed linearly, force ``(1 - a) F_old + a F_new`` with ``a`` rising 0 -> 1 (so a force
+step ``dF`` becomes ``dF * T / ramp_s`` per tick), vibration amplitude likewise at the
+new frequency. The passivity controller of the force channel runs across the switch
+unchanged, so a switch from a soft to a stiff material while pressed cannot give the
+user more energy than the controller's budget.
+
+Failure semantics (each one tested in ``tests/runtime/test_session_failures.py``):
+
+* the application process dies (SIGKILL, or SIGTERM/SIGHUP with no handler): the servo
+  process checks every tick that its parent is still its parent, and the heartbeat an
+  application thread writes every 10 ms; either one lost stops every actuator
+  (``heartbeat_timeout_s``, default 0.25 s, for a hung application; the parent check
+  answers within a tick) and the servo exits;
+* the servo process dies: the next call on the session raises
+  :class:`~hapticsdk.errors.ServoProcessDied` with the reason (exit status, signal,
+  device fault);
+* SIGINT, SIGTERM or SIGHUP to the servo process: safe stop (every actuator stopped,
+  devices closed, shared memory released by the application's ``close()``), the servo
+  exits with ``128 + signal``; to the application: Ctrl-C raises ``KeyboardInterrupt``
+  whose ``with`` exit calls :meth:`close`, and the default SIGTERM/SIGHUP kill the
+  application, which the servo notices as above;
+* a renderer raising: counted (``renderer_error`` events and ``state().renderer_errors``);
+* :meth:`close` always leaves every actuator stopped, the servo process reaped and the
+  shared-memory segment unlinked (also after any of the above).
+
+Only the standard library crosses the process boundary (``multiprocessing`` with the
+``spawn`` start method, ``multiprocessing.shared_memory``, pipes).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import multiprocessing as mp
+import os
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from ..errors import HapticSDKError, ServoProcessDied, SessionError, ValidationError
+
+_log = logging.getLogger(__name__)
+
+ISOLATIONS = ("process", "thread")
+
+# -- shared-memory layout (float64 slots) ----------------------------------------------
+_SEQ = 0
+_STATE = slice(1, 24)
+(_T, _PX, _PY, _PZ, _VX, _VY, _VZ, _F, _OBJ, _PEN, _TICKS, _OVERRUNS, _SKIPPED, _RERR, _CLAMPS,
+ _TICK_US, _TICK_MAX_US, _MISSED, _PUB, _NEAR, _PAUSED_S, _SWITCHES, _SPARE) = range(1, 24)
+_HEARTBEAT, _STOP, _PAUSE, _STATUS, _PID, _REASON, _READY = range(32, 39)
+_EV_W = 64
+_EV0 = 65
+_EV_CAP = 1024
+_EV_REC = 4  # t, kind, object id, value
+_NSLOTS = _EV0 + _EV_CAP * _EV_REC
+
+# servo status
+_STARTING, _RUNNING, _STOPPED, _FAILED = 0.0, 1.0, 2.0, 3.0
+
+#: event kinds (the ``kind`` of a :class:`SessionEvent`)
+EVENT_KINDS = ("contact_enter", "contact_leave", "renderer_error", "clamp", "overrun", "skipped_ticks",
+               "fault", "material_switched", "app_lost", "signal", "stopped", "paused", "resumed",
+               "material_refined")
+_KIND = {k: i for i, k in enumerate(EVENT_KINDS)}
+
+_STOP_REASONS = ("", "close", "app_lost", "heartbeat", "signal", "fault", "error")
+
+#: how often the application's heartbeat thread writes (s)
+HEARTBEAT_PERIOD_S = 0.01
+
+
+@dataclass(frozen=True)
+class SessionState:
+    """The servo's latest published state.
+
+    Attributes:
+        t: servo time (s since the servo started).
+        position_mm, velocity_mm_s: probe position (mm) and velocity (mm/s), device frame.
+        force_n: force sent on the last tick, along the contact normal (N).
+        object: name of the object in contact (penetration > 0), or None.
+        near: name of the object nearest the probe (the hit test's answer), or None.
+        penetration_mm: penetration along that object's normal (mm; < 0 outside).
+        ticks, overruns, skipped_ticks, missed_ticks, renderer_errors, clamps,
+        material_switches: counts since the servo started.
+        tick_us, tick_max_us: compute time of the last tick and the largest so far (us).
+        age_s: how long ago the servo published this state (s).
+        paused: the session is paused.
+    """
+
+    t: float
+    position_mm: tuple[float, float, float]
+    velocity_mm_s: tuple[float, float, float]
+    force_n: float
+    object: str | None
+    near: str | None
+    penetration_mm: float
+    ticks: int
+    overruns: int
+    skipped_ticks: int
+    missed_ticks: int
+    renderer_errors: int
+    clamps: int
+    material_switches: int
+    tick_us: float
+    tick_max_us: float
+    age_s: float
+    paused: bool
+
+
+@dataclass(frozen=True)
+class SessionEvent:
+    """One event: ``kind`` (one of :data:`EVENT_KINDS`), servo time ``t`` (s), the
+    ``object`` it concerns (name, or None) and a ``value`` (a count for counters, the
+    signal number for ``signal``, ...)."""
+
+    t: float
+    kind: str
+    object: str | None
+    value: float
+
+
+@dataclass
+class Retarget:
+    """What :meth:`Session.set_material` sent.
+
+    Attributes:
+        object: the object's name; ``targets``: intensities asked (0..1).
+        features: the features sent now (physical units) and ``source`` (``"amortised"``,
+            ``"plan"``, or the solver's name when no amortised table covers the
+            dimensions).
+        success, error: the answer's success and sum of absolute intensity errors.
+        refined: set when the background solve has finished; ``refined_features`` its
+            answer (None before, or when it failed), ``refined_sent`` whether it was sent.
+    """
+
+    object: str
+    targets: dict[str, float]
+    features: dict[str, dict[str, float]]
+    source: str
+    success: bool
+    error: float
+    refined: threading.Event = field(default_factory=threading.Event, repr=False)
+    refined_features: dict[str, dict[str, float]] | None = None
+    refined_sent: bool = False
+
+
+class _Buffer:
+    """The state/event/control slots: a shared-memory segment (process) or a local
+    buffer (thread), viewed as float64."""
+
+    def __init__(self, shared: bool) -> None:
+        size = _NSLOTS * 8
+        if shared:
+            from multiprocessing import shared_memory
+            self.shm = shared_memory.SharedMemory(create=True, size=size)
+            self.name = self.shm.name
+            self.mv = self.shm.buf.cast("d")
+        else:
+            self.shm = None
+            self.name = None
+            self._raw = bytearray(size)
+            self.mv = memoryview(self._raw).cast("d")
+
+    def release(self) -> None:
+        try:
+            self.mv.release()
+        except Exception:  # noqa: BLE001 - a view still exported elsewhere
+            pass
+        if self.shm is not None:
+            try:
+                self.shm.close()
+            except Exception:  # noqa: BLE001
+                pass
+            try:
+                self.shm.unlink()
+            except FileNotFoundError:
+                pass
+
+
+def _attach(name: str) -> tuple[Any, memoryview]:
+    """Attach the application's segment. A spawned child shares the application's
+    resource tracker, so its registration is the same entry: the application's
+    ``close()`` unlinks it, and if the application is killed the tracker unlinks it when
+    both processes are gone."""
+    from multiprocessing import shared_memory
+    shm = shared_memory.SharedMemory(name=name)
+    return shm, shm.buf.cast("d")
+
+
+# =====================================================================================
+# servo side
+# =====================================================================================
+class _Servo:
+    """The servo side: devices, the loop, the control thread, publishing."""
+
+    def __init__(self, spec: dict[str, Any], mv: memoryview, cmd_conn: Any, thread_mode: bool) -> None:
+        self.spec = spec
+        self.mv = mv
+        self.cmd_conn = cmd_conn
+        self.thread_mode = thread_mode
+        self.loop: Any = None
+        self.tags: list[int] = []
+        self._dims: dict[str, Any] = {}
+        self._stack: Any = None
+        self.reason = ""
+        self.message = ""
+        self.stopped_labels: list[str] = []
+
+    # -- building ------------------------------------------------------------------
+    def _dimension(self, name: str) -> Any:
+        d = self._dims.get(name)
+        if d is None:
+            from ..plugins import registry
+            cls = registry("dimension").load(name)
+            d = cls() if isinstance(cls, type) else cls
+            self._dims[name] = d
+        return d
+
+    def renderers_for(self, features: Mapping[str, Mapping[str, float]]) -> list:
+        ropts = self.spec["renderer_options"]
+        return [self._dimension(d).renderer(dict(f), **dict(ropts.get(d, {}))) for d, f in features.items()]
+
+    def build(self) -> None:
+        from contextlib import ExitStack
+
+        from ..actuators import Actuator, HapticDevice
+        from ..plan import FALLBACK_SENSOR, RenderPlan
+        from ..plugins import registry
+        from ..scene.geometry import HitTester, shape_from_dict
+        from .loop import ServoLoop
+        from .render import build_renderers
+
+        spec = self.spec
+        plan = RenderPlan.from_dict(spec["plan"], validate=False)
+        objects = []
+        shapes = []
+        for o in spec["objects"]:
+            if o.get("features") is not None:
+                rs = self.renderers_for(o["features"])
+            else:
+                rs = build_renderers(plan.material(o["material"]), plan.settings)
+            objects.append((o["name"], rs))
+            shapes.append((o["name"], shape_from_dict(o["geometry"], o["pose"])))
+            self.tags.append(o["id"])
+        self._stack = ExitStack()
+        acts: dict[str, Any] = {}
+        made: dict[tuple, Any] = {}
+        traj = spec.get("trajectory")
+        for role, (name, opts) in spec["devices"].items():
+            key = (name, repr(sorted(opts.items())))
+            if key not in made:
+                cls = registry("actuator").load(name)
+                kw = dict(opts)
+                if (traj is not None and isinstance(cls, type) and issubclass(cls, HapticDevice)
+                        and getattr(cls, "simulated", False)):
+                    kw.setdefault("trajectory", traj)
+                act = cls(**kw)
+                if not isinstance(act, Actuator):
+                    raise HapticSDKError(f"actuator plugin {name!r} did not create an Actuator")
+                self._stack.enter_context(act)
+                made[key] = act
+            acts[role] = made[key]
+        sensors = [a for a in made.values() if isinstance(a, HapticDevice)]
+        if sensors:
+            device = sensors[0]
+        else:
+            cls = registry("actuator").load(FALLBACK_SENSOR)
+            device = cls(**({"trajectory": traj} if traj is not None else {}))
+            self._stack.enter_context(device)
+        self.loop = ServoLoop(device, (), acts, period_s=spec["period_s"], realtime=spec["realtime"],
+                              passivity=spec["passivity"], raise_on_fault=False, objects=objects,
+                              hit_tester=HitTester(shapes), log_seconds=spec["log_seconds"],
+                              switch_ramp_s=spec["ramp_s"], drop_unmapped_roles=True)
+
+    # -- control thread ----------------------------------------------------------------
+    def control(self) -> None:
+        """Read commands from the application; build what they need off the servo
+        thread; hand the result to the loop (applied at the start of a tick)."""
+        from ..scene.geometry import Pose, shape_from_dict
+        conn = self.cmd_conn
+        loop = self.loop
+        while True:
+            try:
+                msg = conn.recv()
+            except (EOFError, OSError):
+                return
+            try:
+                kind = msg[0]
+                if kind == "quit":
+                    return
+                if kind == "material":
+                    _, oid, feats, ramp = msg
+                    rs = self.renderers_for(feats)
+                    loop.call_in_loop(lambda oid=oid, rs=rs, ramp=ramp: self._switch(oid, rs, ramp))
+                elif kind == "add":
+                    _, oid, name, feats, geom, pose = msg
+                    rs = self.renderers_for(feats)
+                    shape = shape_from_dict(geom, pose)
+                    loop.add_object(name, rs, shape)
+                    loop.call_in_loop(lambda oid=oid: self.tags.append(oid))
+                elif kind == "remove":
+                    _, oid = msg
+                    loop.call_in_loop(lambda oid=oid: self._remove(oid))
+                elif kind == "pose":
+                    _, oid, pose = msg
+                    p = Pose.from_dict(pose)
+                    loop.call_in_loop(lambda oid=oid, p=p: self._pose(oid, p))
+            except Exception as exc:  # noqa: BLE001 - a bad message must not end the servo
+                _log.error("session command %r failed: %s", msg[:1], exc)
+                loop.call_in_loop(lambda: self.event("fault", -1.0, 0.0))
+
+    # these run in the servo thread (call_in_loop)
+    def _index(self, oid: int) -> int:
+        try:
+            return self.tags.index(oid)
+        except ValueError:
+            return -1
+
+    def _switch(self, oid: int, rs: list, ramp: float) -> None:
+        i = self._index(oid)
+        if i >= 0:
+            self.loop.set_renderers(i, rs, ramp)  # applied later in this same tick
+            self.event("material_switched", oid, ramp)
+
+    def _remove(self, oid: int) -> None:
+        i = self._index(oid)
+        if i >= 0:
+            self.loop.remove_object(self.loop.object_names[i])  # applied later in this same tick
+            del self.tags[i]
+
+    def _pose(self, oid: int, pose: Any) -> None:
+        i = self._index(oid)
+        if i >= 0:
+            self.loop.hit_tester.set_pose(i, pose)
+
+    # -- publishing ---------------------------------------------------------------------
+    def event(self, kind: str, oid: float, value: float) -> None:
+        mv = self.mv
+        w = int(mv[_EV_W])
+        j = _EV0 + (w % _EV_CAP) * _EV_REC
+        mv[j] = (self.loop.last_t or 0.0) if self.loop is not None else 0.0
+        mv[j + 1] = _KIND[kind]
+        mv[j + 2] = oid
+        mv[j + 3] = value
+        mv[_EV_W] = w + 1
+
+    def run(self) -> None:
+        """The servo thread: tick, publish, watch the application, until told to stop."""
+        loop = self.loop
+        mv = self.mv
+        tags = self.tags
+        ev = loop.events
+        ppid = self.spec["ppid"]
+        hb_timeout = self.spec["heartbeat_timeout_s"]
+        watch = not self.thread_mode
+        getppid = os.getppid
+        mono = time.monotonic
+        last_contact = -1
+        seen = {"renderer_error": 0, "overrun": 0, "skipped_ticks": 0}
+        clamps_seen = 0
+        paused = False
+        mv[_PID] = os.getpid()
+        mv[_STATUS] = _RUNNING
+        mv[_READY] = mono()
+        n = 0
+        while True:
+            ok = loop.tick()
+            n += 1
+            st = loop.last_state
+            # ---- publish (seqlock) ----
+            seq = mv[_SEQ]
+            mv[_SEQ] = seq + 1.0
+            if st is not None:
+                p, v = st.position_mm, st.velocity_mm_s
+                mv[_PX] = p[0]
+                mv[_PY] = p[1]
+                mv[_PZ] = p[2]
+                mv[_VX] = v[0]
+                mv[_VY] = v[1]
+                mv[_VZ] = v[2]
+            c = loop.contact
+            mv[_T] = loop.last_t or 0.0
+            mv[_F] = loop.last_force_n
+            mv[_OBJ] = tags[c] if 0 <= c < len(tags) else -1.0
+            near = loop.last_index
+            mv[_NEAR] = tags[near] if 0 <= near < len(tags) else -1.0
+            mv[_PEN] = loop.last_penetration_mm
+            mv[_TICKS] = loop.ticks
+            mv[_OVERRUNS] = ev["overrun"]
+            mv[_SKIPPED] = ev["skipped_ticks"]
+            mv[_RERR] = ev["renderer_error"]
+            mv[_TICK_US] = loop.last_compute_s * 1e6
+            mv[_TICK_MAX_US] = loop.max_compute_s * 1e6
+            mv[_MISSED] = loop.missed_ticks
+            mv[_SWITCHES] = ev["material_switches"]
+            mv[_PUB] = mono()
+            mv[_SEQ] = seq + 2.0
+            # ---- events ----
+            if c != last_contact:
+                if last_contact >= 0 and last_contact < len(tags):
+                    self.event("contact_leave", tags[last_contact], 0.0)
+                if c >= 0:
+                    self.event("contact_enter", tags[c], loop.last_penetration_mm)
+                last_contact = c
+            if not ok:
+                f = loop._fault  # noqa: SLF001
+                self.reason = "fault"
+                self.message = f"device fault: {f['device']}: {f['message']}" if f else "the servo loop ended"
+                self.event("fault", -1.0, 0.0)
+                return
+            if n % 10 == 0:
+                for key in seen:
+                    if ev[key] != seen[key]:
+                        self.event(key, tags[c] if 0 <= c < len(tags) else -1.0, ev[key] - seen[key])
+                        seen[key] = ev[key]
+                cl = loop.clamp_count()
+                mv[_CLAMPS] = cl
+                if cl != clamps_seen:
+                    self.event("clamp", -1.0, cl - clamps_seen)
+                    clamps_seen = cl
+                if watch and hb_timeout is not None:
+                    age = mono() - mv[_HEARTBEAT]
+                    if age > hb_timeout:
+                        self.reason = "heartbeat"
+                        self.message = f"no heartbeat from the application for {age * 1e3:.0f} ms"
+                        self.event("app_lost", -1.0, age)
+                        return
+            pz = mv[_PAUSE] != 0.0
+            if pz != paused:
+                paused = pz
+                loop.paused = pz
+                mv[_PAUSED_S] = 1.0 if pz else 0.0
+                self.event("paused" if pz else "resumed", -1.0, 0.0)
+            if mv[_STOP] != 0.0:
+                self.reason = "close"
+                return
+            if watch and getppid() != ppid:
+                self.reason = "app_lost"
+                now = mono()
+                self.message = (f"the application process ({ppid}) is gone (noticed at monotonic "
+                                f"{now:.6f} s); last heartbeat {(now - mv[_HEARTBEAT]) * 1e3:.1f} ms before")
+                self.event("app_lost", -1.0, mono() - mv[_HEARTBEAT])
+                return
+
+    def shutdown(self) -> dict[str, Any]:
+        """Stop every actuator, end the loop, close the devices; a small summary."""
+        from ..actuators import stops_since
+        t0 = time.monotonic()
+        out: dict[str, Any] = {"reason": self.reason, "message": self.message}
+        loop = self.loop
+        if loop is not None:
+            loop.stop_all()
+            try:
+                if loop._running:  # noqa: SLF001
+                    rep = loop.finish()
+                    out["report"] = {k: v for k, v in rep.to_dict().items()
+                                     if k in ("ticks", "tick_median_us", "tick_p99_us", "tick_max_us", "overruns",
+                                              "jitter", "events", "fault")}
+            except Exception as exc:  # noqa: BLE001
+                out["finish_error"] = f"{type(exc).__name__}: {exc}"
+        if self._stack is not None:
+            self._stack.close()  # closes every actuator (stop, then release)
+        out["stopped"] = sorted({lab for lab, _, ok in stops_since(t0) if ok})
+        out["stop_s"] = time.monotonic() - t0
+        return out
+
+
+def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_conn: Any,
+                local_mv: memoryview | None = None, holder: list | None = None) -> None:
+    """Entry point of the servo (process or thread)."""
+    from .signals import SafeStop, safe_stop_on_signals
+    thread_mode = local_mv is not None
+    shm = None
+    if thread_mode:
+        mv = local_mv
+    else:
+        shm, mv = _attach(shm_name)  # type: ignore[arg-type]
+        sys.setswitchinterval(5e-5)  # the control thread hands the GIL back within 50 us
+    servo = _Servo(spec, mv, cmd_conn, thread_mode)
+    if holder is not None:
+        holder.append(servo)  # thread isolation: the application may inspect its servo
+    summary: dict[str, Any] = {}
+    code = 0
+    with safe_stop_on_signals() as sig:
+        try:
+            try:
+                servo.build()
+                ctl = threading.Thread(target=servo.control, name="hapticsdk-session-control", daemon=True)
+                ctl.start()
+                servo.loop.start(None)
+                servo.run()
+            except SafeStop as exc:
+                servo.reason = "signal"
+                servo.message = f"stopped by {exc.signame}"
+                code = exc.exit_code
+                if servo.loop is not None and servo.loop.last_t is not None:
+                    servo.event("signal", -1.0, exc.signum)
+            except BaseException as exc:  # noqa: BLE001 - report it, after the safe stop
+                servo.reason = "error"
+                servo.message = f"{type(exc).__name__}: {exc}"
+                code = 1
+            finally:
+                summary = servo.shutdown()
+        except SafeStop as exc:  # a signal during the shutdown itself: stop again, quickly
+            servo.loop and servo.loop.stop_all()
+            code = exc.exit_code
+            summary = {"reason": "signal", "message": f"stopped by {exc.signame}"}
+    if sig.signum is not None and code == 0:
+        code = 128 + sig.signum
+    mv[_REASON] = _STOP_REASONS.index(servo.reason) if servo.reason in _STOP_REASONS else 6
+    mv[_STATUS] = _STOPPED if servo.reason in ("close", "") else _FAILED
+    if servo.reason == "app_lost" or servo.reason == "heartbeat":
+        print(f"hapticsdk servo: {summary.get('message', '')}; every actuator stopped "
+              f"({', '.join(summary.get('stopped', []))}) in {summary.get('stop_s', 0) * 1e3:.1f} ms",
+              file=sys.stderr, flush=True)
+    try:
+        done_conn.send(summary)
+    except Exception:  # noqa: BLE001 - the application is gone
+        pass
+    if shm is not None:
+        try:
+            mv.release()
+            shm.close()
+        except Exception:  # noqa: BLE001
+            pass
+    if not thread_mode and code:
+        sys.exit(code)
+
+
+# =====================================================================================
+# application side
+# =====================================================================================
+class Session:
+    """A live haptic session on a scene; see the module docstring.
+
+    Args:
+        scene: a :class:`~hapticsdk.scene.Scene`, its dict form or a path.
+        isolation: ``"process"`` (default: the servo in its own process, started with
+            ``spawn``) or ``"thread"``.
+        trajectory: scripted finger for simulated devices
+            (:class:`~hapticsdk.sim.finger.Trajectory`, e.g.
+            :func:`hapticsdk.sim.finger.walk_over` of the scene).
+        actuator_options: role -> options from the application, merged over the plan's.
+        realtime: pace the servo on the machine clock (default True; False runs
+            simulated time as fast as possible, for tests).
+        period_s: servo period (s); default the scene's ``settings.servo.period_s``.
+        ramp_s: cross-fade of a material switch (s), default 0.05.
+        heartbeat_timeout_s: the servo stops when the application's heartbeat is older
+            than this (s, default 0.25); None: only the parent-process check.
+        refine: refine :meth:`set_material` answers with the scene's solver in a
+            background thread (default True).
+        log_seconds: servo log window (s).
+        start_timeout_s: how long to wait for the servo to be running (s).
+    """
+
+    def __init__(self, scene: Any, *, isolation: str = "process", trajectory: Any = None,
+                 actuator_options: Mapping[str, Mapping[str, Any]] | None = None, realtime: bool = True,
+                 period_s: float | None = None, ramp_s: float = 0.05, heartbeat_timeout_s: float | None = 0.25,
+                 refine: bool = True, log_seconds: float = 60.0, start_timeout_s: float = 120.0) -> None:
+        from ..compiler import compile_scene
+        from ..scene import Scene
+        if isolation not in ISOLATIONS:
+            raise ValidationError(f"isolation must be one of {list(ISOLATIONS)}, got {isolation!r}",
+                                  field="isolation")
+        if not (isinstance(ramp_s, (int, float)) and math.isfinite(ramp_s) and 0 <= ramp_s <= 5):
+            raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
+        if heartbeat_timeout_s is not None and not (
+                isinstance(heartbeat_timeout_s, (int, float)) and 2 * HEARTBEAT_PERIOD_S <= heartbeat_timeout_s):
+            raise ValidationError(f"heartbeat_timeout_s must be >= {2 * HEARTBEAT_PERIOD_S} s or None",
+                                  field="heartbeat_timeout_s")
+        if isinstance(scene, (str, Path)):
+            scene = Scene.load(scene)
+        elif isinstance(scene, Mapping):
+            scene = Scene.from_dict(scene)
+        if not isinstance(scene, Scene):
+            raise ValidationError("scene must be a Scene, its dict form or a path", field="scene")
+        self.scene = scene
+        self.isolation = isolation
+        self.ramp_s = float(ramp_s)
+        self.refine = bool(refine)
+        self._closed = False
+        self._alive_checked = -1.0
+        self._library: Any = None
+        self._lock = threading.Lock()
+        self._events_r = 0
+        self._local_events: list[SessionEvent] = []
+        self._summary: dict[str, Any] | None = None
+        self._threads: list[threading.Thread] = []
+        plan = compile_scene(scene)
+        self.plan = plan
+        settings = plan.settings
+        self._settings = settings
+        servo = dict(settings.get("servo") or {})
+        period = float(period_s if period_s is not None else servo.get("period_s", 0.001))
+        # devices: role -> (actuator, options), one actuator per role for every material
+        devices: dict[str, tuple[str, dict[str, Any]]] = {}
+        for mp_ in plan.materials.values():
+            for role, name in mp_.actuators.items():
+                opts = dict(mp_.actuator_options.get(role, {}))
+                opts.update(dict((actuator_options or {}).get(role, {})))
+                if role in devices and devices[role][0] != name:
+                    raise ValidationError(f"role {role!r} is mapped to {devices[role][0]!r} and {name!r} by "
+                                          f"two materials; a session opens one actuator per role",
+                                          field=f"scene.devices.{role}")
+                devices.setdefault(role, (name, opts))
+        self.devices = {r: n for r, (n, _) in devices.items()}
+        self._names: dict[int, str] = {}
+        self._ids: dict[str, int] = {}
+        self._next_id = 0
+        objects = []
+        material_of = {o: m.name for m in plan.materials.values() for o in m.objects}
+        self._materials: dict[str, Any] = {}
+        for o in scene.objects:
+            oid = self._new_id(o.name)
+            shape = o.shape()
+            objects.append({"id": oid, "name": o.name, "material": material_of[o.name], "features": None,
+                            "geometry": shape.geometry_dict(), "pose": shape.pose.to_dict()})
+            self._materials[o.name] = material_of[o.name]
+        spec = {"plan": plan.to_dict(), "objects": objects, "devices": devices,
+                "renderer_options": dict(settings.get("renderer_options") or {}), "trajectory": trajectory,
+                "period_s": period, "realtime": bool(realtime), "passivity": bool(servo.get("passivity", True)),
+                "ramp_s": self.ramp_s, "heartbeat_timeout_s": heartbeat_timeout_s, "log_seconds": float(log_seconds),
+                "ppid": os.getpid()}
+        self._buf = _Buffer(shared=isolation == "process")
+        self._mv = self._buf.mv
+        self._mv[_HEARTBEAT] = time.monotonic()
+        self._process: Any = None
+        self._thread: threading.Thread | None = None
+        try:
+            if isolation == "process":
+                ctx = mp.get_context("spawn")
+                cmd_r, self._cmd = ctx.Pipe(duplex=False)
+                self._done, done_w = ctx.Pipe(duplex=False)
+                self._process = ctx.Process(target=_servo_main, args=(spec, cmd_r, self._buf.name, done_w),
+                                            name="hapticsdk-servo", daemon=True)
+                self._process.start()
+                cmd_r.close()
+                done_w.close()
+            else:
+                cmd_r, self._cmd = mp.Pipe(duplex=False)
+                self._done, done_w = mp.Pipe(duplex=False)
+                self._servo_holder: list = []
+                self._thread = threading.Thread(target=_servo_main,
+                                                args=(spec, cmd_r, None, done_w, self._mv, self._servo_holder),
+                                                name="hapticsdk-servo", daemon=True)
+                self._thread.start()
+            self._hb_stop = threading.Event()
+            self._hb = threading.Thread(target=self._heartbeat, name="hapticsdk-heartbeat", daemon=True)
+            self._hb.start()
+            self._warm()
+            deadline = time.monotonic() + start_timeout_s
+            while self._mv[_STATUS] == _STARTING:
+                if not self._servo_alive():
+                    break
+                if time.monotonic() > deadline:
+                    raise SessionError(f"the servo did not start within {start_timeout_s} s")
+                time.sleep(0.002)
+            self._check()
+        except BaseException:
+            self.close()
+            raise
+
+    # -- helpers ----------------------------------------------------------------------
+    def _new_id(self, name: str) -> int:
+        oid = self._next_id
+        self._next_id += 1
+        self._names[oid] = name
+        self._ids[name] = oid
+        return oid
+
+    def _heartbeat(self) -> None:
+        mv = self._mv
+        while not self._hb_stop.wait(HEARTBEAT_PERIOD_S):
+            try:
+                mv[_HEARTBEAT] = time.monotonic()
+            except (ValueError, TypeError):  # released
+                return
+
+    def _servo_alive(self) -> bool:
+        if self._process is not None:
+            return self._process.is_alive()
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def servo_pid(self) -> int | None:
+        """Process id of the servo (None in thread isolation)."""
+        return self._process.pid if self._process is not None else None
+
+    def _fetch_summary(self, timeout: float = 0.0) -> dict[str, Any]:
+        if self._summary is None:
+            try:
+                if self._done.poll(timeout):
+                    self._summary = self._done.recv()
+            except (EOFError, OSError):
+                pass
+        return self._summary or {}
+
+    def _check(self) -> None:
+        if self._closed:
+            raise SessionError("the session is closed")
+        status = self._mv[_STATUS]
+        if status == _RUNNING:
+            now = time.monotonic()
+            if now - self._alive_checked < 0.02:
+                return  # the process check (a waitpid) at most every 20 ms
+            if self._servo_alive():
+                self._alive_checked = now
+                return
+        self._fetch_summary(0.5 if status in (_STOPPED, _FAILED) else 0.05)
+        s = self._summary or {}
+        code = None
+        if self._process is not None:
+            self._process.join(1.0)  # the servo has finished its stop: reap it
+            code = self._process.exitcode
+        if s.get("message"):
+            reason = s["message"]
+        elif code is not None and code < 0:
+            import signal as _signal
+            try:
+                reason = f"killed by {_signal.Signals(-code).name}"
+            except ValueError:
+                reason = f"killed by signal {-code}"
+        elif code is not None:
+            reason = f"exited with status {code}"
+        else:
+            reason = s.get("reason") or "stopped"
+        raise ServoProcessDied(f"the session's servo is gone: {reason}", reason=reason, exitcode=code)
+
+    def _send(self, msg: tuple) -> None:
+        with self._lock:
+            self._check()
+            try:
+                self._cmd.send(msg)
+            except (OSError, EOFError, BrokenPipeError) as exc:
+                self._check()
+                raise SessionError(f"the servo does not take commands: {exc}") from None
+
+    def _object_id(self, name: str) -> int:
+        if name not in self._ids:
+            raise ValidationError(f"no object {name!r}; objects: {sorted(self._ids)}", field="object")
+        return self._ids[name]
+
+    # -- material answers ---------------------------------------------------------------
+    def _solve_kw(self) -> dict[str, Any]:
+        s = self._settings["solver"]
+        return {"model": self._settings.get("model"), "penalty": s.get("penalty", "paper"),
+                "tolerance": s.get("tolerance", 0.01), "data_support": bool(s.get("data_support", True))}
+
+    def _warm(self) -> None:
+        """Load (or build once and cache) the amortised tables of the scene's dimensions,
+        while the servo starts."""
+        dims = sorted({d for m in self.plan.materials.values() for d in m.dimensions})
+        for group in ([d] for d in dims) if len(dims) > 2 else [dims]:
+            try:
+                self._amortised({d: 0.5 for d in group})
+            except HapticSDKError:
+                pass
+
+    def _amortised(self, targets: Mapping[str, float]) -> Any:
+        """The table's interpolated answer alone (``polish_steps`` 0): the background
+        refine does the polishing."""
+        from ..problems import solve
+        return solve(dict(targets), method="amortised", seed=0, options={"polish_steps": 0},
+                     **self._solve_kw())
+
+    def _features_by_dim(self, dims: Sequence[str], x: Mapping[str, float]) -> dict[str, dict[str, float]]:
+        from ..plugins import registry
+        out = {}
+        for d in dims:
+            cls = registry("dimension").load(d)
+            names = {f.name for f in cls.features}
+            out[d] = {k: float(v) for k, v in x.items() if k in names}
+        return out
+
+    def _targets(self, material: Any, field: str) -> tuple[str, dict[str, float]]:
+        from ..dimensions import check_intensity
+        if isinstance(material, str):
+            from ..materials import load_library
+            if self._library is None:
+                self._library = load_library()
+            try:
+                m = self._library.get(material)
+            except (KeyError, LookupError, ValidationError):
+                try:
+                    m = load_library(with_plugins=True).get(material)
+                except (KeyError, LookupError, ValidationError) as exc:
+                    raise ValidationError(getattr(exc, "reason", str(exc)), field=field) from None
+            return m.name, {d: check_intensity(v, f"{field}.{d}") for d, v in m.intensities.items()}
+        if isinstance(material, Mapping) and material:
+            return "intensities", {str(d): check_intensity(v, f"{field}.{d}") for d, v in material.items()}
+        raise ValidationError(f"expected a material name or {{dimension: intensity}}, got {material!r}", field=field)
+
+    def _answer(self, targets: Mapping[str, float]) -> tuple[dict[str, dict[str, float]], str, Any]:
+        dims = list(targets)
+        res = None
+        source = "amortised"
+        if len(dims) <= 2:
+            try:
+                res = self._amortised(targets)
+            except HapticSDKError:
+                res = None
+        if res is None:
+            from ..problems import solve
+            method = self._settings["solver"]["method"]
+            res = solve(dict(targets), method=method, seed=self._settings["solver"].get("seed", 0),
+                        options=dict(self._settings["solver"].get("options") or {}), **self._solve_kw())
+            source = method
+        return self._features_by_dim(dims, res.x_dict), source, res
+
+    def _check_roles(self, feats: Mapping[str, Mapping[str, float]], field: str) -> None:
+        from ..plugins import registry
+        for d in feats:
+            cls = registry("dimension").load(d)
+            roles = set(getattr(cls, "default_actuators", {}) or {})
+            missing = sorted(roles - set(self.devices))
+            if missing:
+                raise ValidationError(f"dimension {d!r} needs role(s) {missing}, which this session has not "
+                                      f"opened (roles: {sorted(self.devices)})", field=field)
+
+    def _refine(self, r: Retarget, oid: int) -> None:
+        from ..problems import solve
+        try:
+            s = self._settings["solver"]
+            res = solve(dict(r.targets), method=s["method"], seed=s.get("seed", 0),
+                        options=dict(s.get("options") or {}), **self._solve_kw())
+            feats = self._features_by_dim(list(r.targets), res.x_dict)
+            r.refined_features = feats
+            if res.success and feats != r.features and not self._closed:
+                self._send(("material", oid, feats, self.ramp_s))
+                r.refined_sent = True
+                self._local_events.append(SessionEvent(self._mv[_T], "material_refined", r.object,
+                                                       float(res.error)))
+        except Exception as exc:  # noqa: BLE001 - the amortised answer stays in force
+            _log.warning("refining %s failed: %s", r.object, exc)
+        finally:
+            r.refined.set()
+
+    # -- public API -------------------------------------------------------------------
+    def set_material(self, object: str, material: "str | Mapping[str, float]", *,
+                     ramp_s: float | None = None, refine: bool | None = None) -> Retarget:
+        """Give ``object`` a new material: a library name (``"S7"``) or intensities
+        (``{"hardness": 0.9, "roughness": 0.2}``). The amortised inverse answers at once
+        and the servo switches with a ``ramp_s`` cross-fade; the scene's solver refines
+        the answer in a background thread (``refine``). Returns a :class:`Retarget`."""
+        oid = self._object_id(object)
+        label, targets = self._targets(material, "material")
+        feats, source, res = self._answer(targets)
+        self._check_roles(feats, "material")
+        ramp = self.ramp_s if ramp_s is None else float(ramp_s)
+        if not (math.isfinite(ramp) and 0 <= ramp <= 5):
+            raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
+        self._send(("material", oid, feats, ramp))
+        self._materials[object] = label
+        r = Retarget(object=object, targets=dict(targets), features=feats, source=source,
+                     success=bool(res.success), error=float(res.error))
+        if (self.refine if refine is None else refine) and source == "amortised":
+            th = threading.Thread(target=self._refine, args=(r, oid), name="hapticsdk-refine", daemon=True)
+            self._threads.append(th)
+            th.start()
+        else:
+            r.refined.set()
+        return r
+
+    def add_object(self, name: str, material: "str | Mapping[str, float]", geometry: Mapping[str, Any],
+                   pose: Mapping[str, Any] | None = None) -> None:
+        """Add an object: a material (as for :meth:`set_material`), a geometry in the
+        scene-file form (``{"shape": "sphere", "radius_mm": 15}``) and a pose
+        (``{"position_mm": [x, y, z]}``)."""
+        from ..scene.geometry import shape_from_dict
+        if not isinstance(name, str) or not name or name in self._ids:
+            raise ValidationError(f"object name must be new and non-empty, got {name!r}", field="name")
+        shape = shape_from_dict(geometry, pose)
+        label, targets = self._targets(material, "material")
+        feats, _, _ = self._answer(targets)
+        self._check_roles(feats, "material")
+        self._check()
+        oid = self._new_id(name)
+        self._send(("add", oid, name, feats, shape.geometry_dict(), shape.pose.to_dict()))
+        self._materials[name] = label
+
+    def remove_object(self, name: str) -> None:
+        """Remove an object from the scene the servo renders."""
+        oid = self._object_id(name)
+        self._send(("remove", oid))
+        del self._ids[name]
+        self._materials.pop(name, None)
+
+    def move_object(self, name: str, pose: Mapping[str, Any]) -> None:
+        """Move an object to ``pose`` (``{"position_mm": [x, y, z], "rotation": ...}``, mm)."""
+        from ..scene.geometry import Pose
+        oid = self._object_id(name)
+        p = Pose.from_dict(pose)
+        self._send(("pose", oid, p.to_dict()))
+
+    @property
+    def objects(self) -> dict[str, str]:
+        """Object name -> the material it was last given."""
+        return dict(self._materials)
+
+    def state(self) -> SessionState:
+        """The servo's latest state (never blocks; a few microseconds)."""
+        self._check()
+        mv = self._mv
+        for i in range(10000):
+            s1 = mv[_SEQ]
+            if s1 % 2.0 == 0.0:
+                vals = mv[1:24].tolist()
+                if mv[_SEQ] == s1:
+                    break
+            if i >= 2:
+                time.sleep(0)  # let a writer in this process (thread isolation) finish
+        else:  # a servo that died mid-write
+            self._check()
+            raise SessionError("the servo's state is being written and never settled")
+        (t, px, py, pz, vx, vy, vz, f, obj, pen, ticks, ovr, skipped, rerr, clamps, tick_us, tick_max,
+         missed, pub, near, paused, switches, _) = vals
+        names = self._names
+        return SessionState(t=t, position_mm=(px, py, pz), velocity_mm_s=(vx, vy, vz), force_n=f,
+                            object=names.get(int(obj)) if obj >= 0 else None,
+                            near=names.get(int(near)) if near >= 0 else None, penetration_mm=pen,
+                            ticks=int(ticks), overruns=int(ovr), skipped_ticks=int(skipped),
+                            missed_ticks=int(missed), renderer_errors=int(rerr), clamps=int(clamps),
+                            material_switches=int(switches), tick_us=tick_us, tick_max_us=tick_max,
+                            age_s=time.monotonic() - pub, paused=paused != 0.0)
+
+    def events(self) -> list[SessionEvent]:
+        """Events since the last call, oldest first (never blocks). When more than 1024
+        arrived in between, the oldest are lost and a ``"lost"`` count is not kept."""
+        mv = self._mv
+        out: list[SessionEvent] = []
+        if not self._closed or self._buf is not None:
+            try:
+                w = int(mv[_EV_W])
+            except (ValueError, TypeError):
+                w = self._events_r
+            r = max(self._events_r, w - _EV_CAP)
+            names = self._names
+            while r < w:
+                j = _EV0 + (r % _EV_CAP) * _EV_REC
+                t, kind, oid, val = mv[j], mv[j + 1], mv[j + 2], mv[j + 3]
+                out.append(SessionEvent(t, EVENT_KINDS[int(kind)], names.get(int(oid)) if oid >= 0 else None, val))
+                r += 1
+            self._events_r = w
+        if self._local_events:
+            loc, self._local_events = self._local_events, []
+            out.extend(loc)
+            out.sort(key=lambda e: e.t)
+        return out
+
+    def pause(self, on: bool = True) -> None:
+        """Pause (True) or resume (False): while paused no renderer runs, force 0 and
+        vibration amplitude 0 are sent; the probe is still read."""
+        self._check()
+        self._mv[_PAUSE] = 1.0 if on else 0.0
+
+    def resume(self) -> None:
+        """Resume after :meth:`pause`."""
+        self.pause(False)
+
+    def close(self, timeout_s: float = 5.0) -> dict[str, Any]:
+        """Stop every actuator, end the servo (reap its process), release the shared
+        memory. Idempotent; never raises for a servo that is already gone. Returns the
+        servo's summary (``reason``, ``stopped`` actuator labels, ``report``)."""
+        if self._closed:
+            return self._summary or {}
+        self._closed = True
+        buf = getattr(self, "_buf", None)
+        try:
+            if buf is not None:
+                try:
+                    self._mv[_STOP] = 1.0
+                except (ValueError, TypeError):
+                    pass
+            if self._thread is not None:
+                self._thread.join(timeout_s)
+            if self._process is not None and getattr(self._process, "_popen", None) is not None:
+                self._process.join(timeout_s)
+                if self._process.is_alive():
+                    self._process.terminate()  # SIGTERM: the servo's safe stop
+                    self._process.join(2.0)
+                if self._process.is_alive():
+                    self._process.kill()
+                    self._process.join(2.0)
+            self._fetch_summary(0.1)
+        finally:
+            hb = getattr(self, "_hb_stop", None)
+            if hb is not None:
+                hb.set()
+                self._hb.join(1.0)
+            for c in ("_cmd", "_done"):
+                conn = getattr(self, c, None)
+                if conn is not None:
+                    try:
+                        conn.close()
+                    except OSError:
+                        pass
+            if self._process is not None and getattr(self._process, "_popen", None) is not None:
+                try:
+                    self._process.close()
+                except ValueError:
+                    pass
+            if buf is not None:
+                self._buf = None
+                buf.release()
+        return self._summary or {}
+
+    def __enter__(self) -> "Session":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            if not self._closed:
+                self.close(1.0)
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def session(scene: Any, **options: Any) -> Session:
+    """Open a live :class:`Session` on ``scene`` (same keywords)."""
+    return Session(scene, **options)

@@ -1,0 +1,381 @@
+"""No input ends in a traceback (issue 13, item 9).
+
+Every bad input below goes through ``hapticsdk.cli.main([...])`` in-process and must
+give exit status 2, a ``hapticsdk: error: <field>: <reason>`` line on stderr naming
+the expected field, and no traceback. A few run as real subprocesses (``python -m
+hapticsdk``) so the interpreter's own exit path (pipe closed early, usage errors) is
+covered too.
+
+The cases are data: each is ``(id, argv, field)`` where ``argv`` may name files made by
+the ``files`` fixture as ``{name}``. Output-path cases whose command would run for
+minutes (``bench solvers``) pass only because the path is checked before the work.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hapticsdk.cli import EXIT_BROKEN_PIPE, main
+
+ROOT = Path(__file__).resolve().parents[2]
+DEFAULT_ONNX = ROOT / "plugins/hapticsdk-onnx/src/hapticsdk_onnx/models/default.onnx"
+
+BAD_UTF8 = b'{"objects": [{"material": "S7\xff\xfe"}]}'
+DEEP = "[" * 5000 + "]" * 5000
+DEEP_OBJ = '{"a":' * 5000 + "1" + "}" * 5000
+
+
+def _write_run(path: Path, header: dict, n: int = 5, **override: np.ndarray) -> Path:
+    arrays = {"t": np.arange(n) * 1e-3, "state_t": np.arange(n) * 1e-3, "position_mm": np.zeros((n, 3)),
+              "velocity_mm_s": np.zeros((n, 3)), "device_force_n": np.zeros((n, 3)),
+              "buttons": np.zeros(n, np.int64), "header_json": np.array(json.dumps(header))}
+    arrays.update(override)
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+    return path
+
+
+def _answers(path: Path, freqs: list[float]) -> Path:
+    rows = ["person,frequency_hz,spring_n_per_mm,spring_stiffer"]
+    for p in range(3):
+        for f in freqs:
+            for k, s in enumerate((0.3, 0.8, 1.5, 2.1)):
+                rows.append(f"{p},{f:g},{s},{int(k >= 2)}")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _piezo_csv(path: Path, freqs: list[float], volts: list[float]) -> Path:
+    rows = ["frequency_hz,voltage_v,acceleration_m_s2"]
+    for f in freqs:
+        for i, v in enumerate(volts):
+            rows.append(f"{f:g},{v:g},{0.5 * i:g}")
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _manifest_edit(src: Path, dst: Path, edit) -> Path:
+    shutil.copytree(src, dst)
+    doc = json.loads((dst / "recordings.json").read_text())
+    edit(doc)
+    (dst / "recordings.json").write_text(json.dumps(doc))
+    return dst
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory) -> dict[str, str]:
+    """Every bad file the cases name, keyed by the ``{name}`` used in argv."""
+    from hapticsdk.training.pipeline import generate_feature_dataset
+
+    d = tmp_path_factory.mktemp("bad")
+    f: dict[str, Path] = {"dir": d / "adir", "missing_dir": d / "no" / "such"}
+    f["dir"].mkdir()
+    (d / "bad_utf8.json").write_bytes(BAD_UTF8)
+    (d / "deep.json").write_text(DEEP)
+    (d / "deep_obj.json").write_text(DEEP_OBJ)
+    (d / "nan.json").write_text('{"objects": [{"material": "S7"}], "settings": {"servo": {"period_s": NaN}}}')
+    (d / "empty.json").write_text("")
+    (d / "exists.txt").write_text("keep me\n")
+    (d / "safety_off.json").write_text(json.dumps(
+        {"objects": [{"material": "S7"}],
+         "devices": {"force": {"actuator": "omni-virtual", "options": {"safety": "off"}}}}))
+    (d / "bad_utf8.csv").write_bytes(b"person,frequency_hz,spring_n_per_mm,spring_stiffer\n0,40,\xff1.5,1\n")
+    (d / "quote.csv").write_text('person,frequency_hz,spring_n_per_mm,spring_stiffer\n0,40,"1.5\n')
+    for name in ("bad_utf8.json", "deep.json", "deep_obj.json", "nan.json", "empty.json", "exists.txt",
+                 "safety_off.json", "quote.csv"):
+        f[name.split(".")[0]] = d / name
+    f["bad_utf8_csv"] = d / "bad_utf8.csv"
+    f["answers_ok"] = _answers(d / "answers_ok.csv", [30, 50, 70, 90, 110])
+    f["answers_mhz"] = _answers(d / "answers_mhz.csv", [1e5, 3e5, 6e5, 1e6])
+    f["piezo_neg_hz"] = _piezo_csv(d / "piezo_neg.csv", [-100, 50], [0, 10])
+    f["piezo_10kv"] = _piezo_csv(d / "piezo_10kv.csv", [100, 200], [0, 10000])
+    f["piezo_ok"] = _piezo_csv(d / "piezo_ok.csv", [100, 200], [0, 10, 20])
+    if hasattr(os, "mkfifo"):
+        os.mkfifo(d / "fifo.json")
+        f["fifo"] = d / "fifo.json"
+    # run files
+    head = {"format": "hapticsdk-run", "version": 1, "period_s": 1e-3}
+    f["run_1e9"] = _write_run(d / "run_1e9.npz", {**head, "device": {
+        "name": "omni-virtual", "limits": {"max_force_n": 1e9, "max_stiffness_n_per_mm": 2.3}}})
+    f["run_nan_limit"] = _write_run(d / "run_nan.npz", {**head, "device": {"limits": {"max_force_n": True}}})
+    f["run_strings"] = _write_run(d / "run_str.npz", head, t=np.array(["a", "b", "c", "d", "e"]))
+    good = _write_run(d / "run_ok.npz", head).read_bytes()
+    (d / "run_trunc.npz").write_bytes(good[: len(good) // 2])
+    f["run_trunc"] = d / "run_trunc.npz"
+    # recording sets
+    ds = d / "ds"
+    generate_feature_dataset(ds, 3, n_trials=2, n_raters=2, raw_format="npz")
+    f["ds"] = ds
+    tr = shutil.copytree(ds, d / "ds_trunc")
+    first = sorted((tr / "trials").glob("*.npz"))[0]
+    first.write_bytes(first.read_bytes()[:200])
+    f["ds_trunc"] = tr
+    # a complete archive whose compressed data is damaged in the middle (zlib / CRC errors
+    # while reading a member, not when opening the archive)
+    mid = shutil.copytree(ds, d / "ds_corrupt")
+    victim = sorted((mid / "trials").glob("*.npz"))[0]
+    raw = bytearray(victim.read_bytes())
+    with zipfile.ZipFile(victim) as z:
+        info = z.infolist()[1]
+    start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra)
+    for i in range(start + 8, start + min(info.compress_size, 64)):
+        raw[i] ^= 0x5A
+    victim.write_bytes(bytes(raw))
+    f["ds_corrupt"] = mid
+    zb = shutil.copytree(ds, d / "ds_badzip")
+    (sorted((zb / "trials").glob("*.npz"))[0]).write_bytes(b"PK\x03\x04 not really a zip")
+    f["ds_badzip"] = zb
+    f["ds_abs"] = _manifest_edit(ds, d / "ds_abs", lambda m: m["trials"][0].update(file="/etc/passwd.npz"))
+    f["ds_dotdot"] = _manifest_edit(ds, d / "ds_dotdot",
+                                    lambda m: m["trials"][0].update(file="../ds/trials/x.npz"))
+    f["ds_ratings_out"] = _manifest_edit(ds, d / "ds_ratings", lambda m: m.update(ratings="../../ratings.json"))
+    u8 = shutil.copytree(ds, d / "ds_utf8")
+    (u8 / "recordings.json").write_bytes(b"\xff" + (u8 / "recordings.json").read_bytes())
+    f["ds_utf8"] = u8
+    # a feature data set (no recordings.json) whose trial table is not UTF-8
+    ft = d / "ft_utf8"
+    ft.mkdir()
+    for name in ("dataset.json", "ratings.json"):
+        shutil.copy(ds / name, ft / name)
+    (ft / "trial_features.csv").write_bytes((ds / "trial_features.csv").read_bytes().replace(b"S1", b"S\xff", 1))
+    f["ft_utf8"] = ft
+    # a model whose df_hz is not a number
+    import onnx
+    proto = onnx.load(str(DEFAULT_ONNX))
+    for e in proto.metadata_props:
+        if e.key == "hapticsdk.df_hz":
+            e.value = json.dumps("abc")
+    onnx.save(proto, str(d / "df_abc.onnx"))
+    f["df_abc"] = d / "df_abc.onnx"
+    return {k: str(v) for k, v in f.items()}
+
+
+# (id, argv, field the error line must name)
+CASES = [
+    # --- numeric arguments (argparse types of hapticsdk.cli.argtypes) -------------------
+    ("solve-seed-negative", ["solve", "--hardness", "0.5", "--seed", "-1"], "--seed"),
+    ("solve-seed-text", ["solve", "--hardness", "0.5", "--seed", "abc"], "--seed"),
+    ("solve-seed-float", ["solve", "--hardness", "0.5", "--seed", "1.5"], "--seed"),
+    ("solve-tolerance-nan", ["solve", "--hardness", "0.5", "--tolerance", "nan"], "--tolerance"),
+    ("solve-tolerance-negative", ["solve", "--hardness", "0.5", "--tolerance", "-1"], "--tolerance"),
+    ("solve-hardness-inf", ["solve", "--hardness", "inf"], "--hardness"),
+    ("solve-hardness-true", ["solve", "--hardness", "true"], "--hardness"),
+    ("solve-target-text", ["solve", "--target", "hardness=abc"], "targets.hardness"),
+    ("solve-target-no-value", ["solve", "--target", "hardness"], "target"),
+    ("solve-no-target", ["solve"], "targets"),
+    ("solve-model-df-not-number", ["solve", "--hardness", "0.5", "--model", "{df_abc}"], "df_hz"),
+    ("solve-model-missing", ["solve", "--hardness", "0.5", "--model", "{missing_dir}/m.onnx"], "solve"),
+    ("render-seconds-zero", ["render", "S7", "--seconds", "0"], "--seconds"),
+    ("render-seconds-nan", ["render", "S7", "--seconds", "nan"], "--seconds"),
+    ("render-seconds-inf", ["render", "S7", "--seconds", "inf"], "--seconds"),
+    ("render-seed-negative", ["render", "S7", "--seed", "-5"], "--seed"),
+    ("plan-seed-negative", ["plan", "S7", "--seed", "-1"], "--seed"),
+    ("plan-threshold-negative", ["plan", "S7", "--threshold", "-5"], "--threshold"),
+    ("plan-threshold-nan", ["plan", "S7", "--threshold", "nan"], "--threshold"),
+    ("train-seed-negative", ["train", "{ds}", "--out", "{dir}/m.onnx", "--seed", "-1"], "--seed"),
+    ("train-folds-negative", ["train", "{ds}", "--out", "{dir}/m.onnx", "--folds", "-1"], "--folds"),
+    ("train-restarts-zero", ["train", "{ds}", "--out", "{dir}/m.onnx", "--restarts", "0"], "--restarts"),
+    ("generate-samples-zero", ["dataset", "generate", "{dir}/g", "--samples", "0"], "--samples"),
+    ("generate-samples-huge", ["dataset", "generate", "{dir}/g", "--samples", "1000000000"], "--samples"),
+    ("generate-samples-float", ["dataset", "generate", "{dir}/g", "--samples", "1e3"], "--samples"),
+    ("generate-trials-negative", ["dataset", "generate", "{dir}/g", "--trials", "-1"], "--trials"),
+    ("growth-sizes-text", ["dataset", "growth", "--sizes", "abc"], "--sizes"),
+    ("growth-sizes-empty", ["dataset", "growth", "--sizes", ","], "--sizes"),
+    ("growth-sizes-zero", ["dataset", "growth", "--sizes", "23,0"], "--sizes"),
+    ("growth-sizes-huge", ["dataset", "growth", "--sizes", "23,99999999"], "--sizes"),
+    ("voicecoil-gain-nan", ["calibrate", "voicecoil", "{answers_ok}", "--amplifier-gain", "nan"], "--amplifier-gain"),
+    ("voicecoil-gain-negative", ["calibrate", "voicecoil", "{answers_ok}", "--amplifier-gain", "-2"],
+     "--amplifier-gain"),
+    ("voicecoil-confidence-1.5", ["calibrate", "voicecoil", "{answers_ok}", "--confidence", "1.5"], "--confidence"),
+    ("answers-people-zero", ["calibrate", "answers", "{dir}/a.csv", "--people", "0"], "--people"),
+    ("answers-seed-negative", ["calibrate", "answers", "{dir}/a.csv", "--seed", "-1"], "--seed"),
+    ("bench-solvers-seeds-zero", ["bench", "solvers", "--seeds", "0"], "--seeds"),
+    ("bench-timing-fifo-500", ["bench", "timing", "--fifo-priority", "500"], "--fifo-priority"),
+    ("bench-timing-seconds-negative", ["bench", "timing", "--seconds", "-1"], "--seconds"),
+    ("bench-timing-pin-cpu-negative", ["bench", "timing", "--pin-cpu", "-1"], "--pin-cpu"),
+    ("bench-fidelity-period-zero", ["bench", "fidelity", "--periods", "0"], "--periods"),
+    ("unknown-command", ["nosuch"], "COMMAND"),
+    ("train-missing-out", ["train", "{ds}"], "train"),
+    # --- files that are not UTF-8, nested 5000 deep, not JSON, not regular -------------
+    ("render-scene-non-utf8", ["render", "--scene", "{bad_utf8}"], "scene"),
+    ("render-scene-deep", ["render", "--scene", "{deep}"], "scene"),
+    ("render-scene-deep-object", ["render", "--scene", "{deep_obj}"], "scene"),
+    ("render-scene-nan-literal", ["render", "--scene", "{nan}"], "scene"),
+    ("render-scene-empty", ["render", "--scene", "{empty}"], "scene"),
+    ("render-scene-directory", ["render", "--scene", "{dir}"], "scene"),
+    ("render-scene-fifo", ["render", "--scene", "{fifo}"], "scene"),
+    ("plan-scene-non-utf8", ["plan", "{bad_utf8}"], "scene"),
+    ("plan-scene-deep", ["plan", "{deep}"], "scene"),
+    ("materials-library-non-utf8", ["materials", "--library", "{bad_utf8}"], "materials"),
+    ("materials-library-deep", ["materials", "--library", "{deep}"], "materials"),
+    ("voicecoil-answers-non-utf8", ["calibrate", "voicecoil", "{bad_utf8_csv}"], "answers"),
+    ("voicecoil-answers-unclosed-quote", ["calibrate", "voicecoil", "{quote}"], "answers"),
+    ("voicecoil-answers-directory", ["calibrate", "voicecoil", "{dir}"], "answers"),
+    ("piezo-measurements-non-utf8", ["calibrate", "piezo", "{bad_utf8_csv}"], "measurements"),
+    ("piezo-table-deep-json", ["calibrate", "piezo", "{deep}"], "measurements"),
+    ("piezo-table-non-utf8-json", ["calibrate", "piezo", "{bad_utf8}"], "measurements"),
+    ("features-manifest-non-utf8", ["features", "{ds_utf8}"], "file"),
+    ("features-npz-truncated", ["features", "{ds_trunc}"], "file"),
+    ("features-npz-bad-zip", ["features", "{ds_badzip}"], "file"),
+    ("features-npz-corrupt-member", ["features", "{ds_corrupt}"], "file"),
+    ("train-npz-truncated", ["train", "{ds_trunc}", "--out", "{dir}/m.onnx"], "file"),
+    ("train-trial-table-non-utf8", ["train", "{ft_utf8}", "--out", "{dir}/m.onnx"], "file"),
+    ("replay-truncated", ["replay", "{run_trunc}"], "runlog"),
+    ("replay-not-npz", ["replay", "{bad_utf8}"], "runlog"),
+    ("replay-string-arrays", ["replay", "{run_strings}"], "runlog.t"),
+    # --- output paths, checked before the work ------------------------------------------
+    ("render-plot-missing-dir", ["render", "S7", "--plot", "{missing_dir}/r.png"], "--plot"),
+    ("render-plot-directory", ["render", "S7", "--plot", "{dir}"], "--plot"),
+    ("plan-output-missing-dir", ["plan", "S7", "-o", "{missing_dir}/p.json"], "--output"),
+    ("plan-output-directory", ["plan", "S7", "-o", "{dir}"], "--output"),
+    ("voicecoil-out-missing-dir", ["calibrate", "voicecoil", "{answers_ok}", "--out", "{missing_dir}/c.json"],
+     "--out"),
+    ("voicecoil-out-directory", ["calibrate", "voicecoil", "{answers_ok}", "--out", "{dir}"], "--out"),
+    ("voicecoil-save-onto-file", ["calibrate", "voicecoil", "{answers_ok}", "--save", "{exists}"], "--save"),
+    ("piezo-out-directory", ["calibrate", "piezo", "{piezo_ok}", "--out", "{dir}"], "--out"),
+    ("answers-out-missing-dir", ["calibrate", "answers", "{missing_dir}/a.csv"], "out"),
+    ("answers-out-directory", ["calibrate", "answers", "{dir}"], "out"),
+    ("generate-onto-file", ["dataset", "generate", "{exists}", "--samples", "2"], "out"),
+    ("generate-missing-dir", ["dataset", "generate", "{missing_dir}/g", "--samples", "2"], "out"),
+    ("generate-materials-missing-dir", ["dataset", "generate", "{dir}/g2", "--samples", "2", "--materials",
+                                        "{missing_dir}/m.json"], "--materials"),
+    ("train-out-missing-dir", ["train", "{ds}", "--out", "{missing_dir}/m.onnx"], "--out"),
+    ("train-out-directory", ["train", "{ds}", "--out", "{dir}"], "--out"),
+    ("bench-solvers-output-missing-dir", ["bench", "solvers", "--quick", "--output", "{missing_dir}/b.json"],
+     "--output"),
+    ("bench-solvers-plot-directory", ["bench", "solvers", "--quick", "--plot", "{dir}"], "--plot"),
+    # --- files that are data: implausible values, options a file may not set -----------
+    ("render-scene-safety-off", ["render", "--scene", "{safety_off}", "--seconds", "0.1"], "options.safety"),
+    ("voicecoil-curve-1e5-1e6-hz", ["calibrate", "voicecoil", "{answers_mhz}"], "frequency_hz"),
+    ("piezo-negative-frequency", ["calibrate", "piezo", "{piezo_neg_hz}"], "frequencies_hz"),
+    ("piezo-10kv-column", ["calibrate", "piezo", "{piezo_10kv}"], "voltages_v"),
+    ("replay-header-1e9-newton", ["replay", "{run_1e9}"], "limits.max_force_n"),
+    ("replay-header-bool-limit", ["replay", "{run_nan_limit}"], "limits.max_force_n"),
+    ("features-manifest-absolute-path", ["features", "{ds_abs}"], "trials.0.file"),
+    ("features-manifest-dotdot", ["features", "{ds_dotdot}"], "trials.0.file"),
+    ("train-manifest-ratings-outside", ["train", "{ds_ratings_out}", "--out", "{dir}/m.onnx"], "ratings"),
+]
+
+
+def _argv(argv: list[str], files: dict[str, str]) -> list[str]:
+    out = []
+    for a in argv:
+        if "{fifo}" in a and "fifo" not in files:
+            pytest.skip("no FIFOs on this system")
+        out.append(a.format(**files))
+    return out
+
+
+def _assert_clean_error(code: int, err: str, field: str) -> None:
+    assert code == 2, err
+    assert "Traceback" not in err, err
+    lines = [ln for ln in err.splitlines() if ln.startswith("hapticsdk: error: ")]
+    assert len(lines) == 1, err
+    rest = lines[0][len("hapticsdk: error: "):]
+    # "<field>: <reason>", and the expected field is named in it
+    head, sep, reason = rest.partition(": ")
+    assert sep and head.strip() and reason.strip(), lines[0]
+    assert field in rest, lines[0]
+
+
+def test_at_least_45_cases_across_commands():
+    assert len(CASES) >= 45
+    assert len({c[0] for c in CASES}) == len(CASES)
+    commands = {c[1][0] + (" " + c[1][1] if c[1][0] in ("calibrate", "dataset", "bench") else "") for c in CASES}
+    assert len(commands) >= 15, commands
+
+
+@pytest.mark.parametrize("case_id,argv,field", CASES, ids=[c[0] for c in CASES])
+def test_bad_input_exits_2_with_a_named_field(case_id, argv, field, files, capsys):
+    before = set(os.listdir(files["dir"]))
+    code = main(_argv(argv, files))
+    err = capsys.readouterr().err
+    _assert_clean_error(code, err, field)
+    assert set(os.listdir(files["dir"])) == before, "a refused command wrote a file"
+
+
+@pytest.mark.parametrize("case_id", ["solve-seed-negative", "render-scene-deep", "features-npz-truncated",
+                                     "replay-header-1e9-newton", "unknown-command"])
+def test_bad_input_in_a_subprocess(case_id, files):
+    _, argv, field = next(c for c in CASES if c[0] == case_id)
+    proc = subprocess.run([sys.executable, "-m", "hapticsdk", *_argv(argv, files)], capture_output=True,
+                          text=True, timeout=120)
+    _assert_clean_error(proc.returncode, proc.stderr, field)
+
+
+def test_json_mode_prints_the_error_object_and_the_line(files, capsys):
+    code = main(["render", "--scene", files["deep"], "--json"])
+    cap = capsys.readouterr()
+    assert code == 2
+    out = json.loads(cap.out)
+    assert out["field"] == "scene" and out["type"] == "ValidationError"
+    assert cap.err.startswith("hapticsdk: error: scene: ")
+
+
+# --- pipe closed early: ``hapticsdk ... | head`` ----------------------------------------
+class _ClosedPipe:
+    def write(self, s: str) -> int:
+        raise BrokenPipeError(32, "Broken pipe")
+
+    def flush(self) -> None:
+        raise BrokenPipeError(32, "Broken pipe")
+
+
+def test_broken_pipe_in_process_exits_quietly(monkeypatch, capsys):
+    monkeypatch.setattr(sys, "stdout", _ClosedPipe())
+    code = main(["materials"])
+    assert code == EXIT_BROKEN_PIPE == 141
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_broken_pipe_subprocess_like_head():
+    # the reading end is closed before the command writes (start-up takes far longer
+    # than closing a descriptor), so its first write meets EPIPE
+    proc = subprocess.Popen([sys.executable, "-m", "hapticsdk", "materials", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == EXIT_BROKEN_PIPE, err
+    assert b"Traceback" not in err and b"Exception ignored" not in err, err
+
+
+# --- a bug (not bad input) gets the last-resort message ------------------------------
+def test_unexpected_exception_is_an_internal_error(monkeypatch, capsys):
+    import hapticsdk.cli.core as core
+
+    def boom(args):
+        raise ZeroDivisionError("simulated bug")
+
+    monkeypatch.setattr(core, "cmd_materials", boom)
+    assert main(["materials"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("hapticsdk: internal error: ZeroDivisionError: simulated bug") and "-v" in err
+    assert "Traceback" not in err
+    assert main(["-v", "materials"]) == 1
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_truncated_npz_error_names_the_file(files, capsys):
+    assert main(["features", files["ds_trunc"]]) == 2
+    err = capsys.readouterr().err
+    first = sorted((Path(files["ds_trunc"]) / "trials").glob("*.npz"))[0]
+    assert first.name in err
+
+
+def test_api_seed_text_is_a_validation_error():
+    from hapticsdk.errors import ValidationError
+    from hapticsdk.problems import solve
+
+    for bad in ("abc", -1, 1.5, True):
+        with pytest.raises(ValidationError) as ei:
+            solve({"hardness": 0.5, "roughness": 0.5}, seed=bad)
+        assert ei.value.field == "seed"

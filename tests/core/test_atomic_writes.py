@@ -1,0 +1,188 @@
+"""Every file the SDK writes is replaced atomically (issue 13.5): SIGKILL mid-write, a tiny
+file-size limit, concurrent writers with a reader, a symbolic link in the calibration
+folder, a failing WAV sink."""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import resource
+import signal
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hapticsdk.calibration import PiezoTable, VoiceCoilCalibration, load_calibration, read_calibration
+from hapticsdk.calibration.store import save_calibration
+from hapticsdk.errors import FileWriteError
+from hapticsdk.plugins import registry
+
+
+def _table(scale: float, source: str, nf: int = 80, nv: int = 40) -> PiezoTable:
+    """A plausible piezo table of about 60 kB of JSON."""
+    f = np.linspace(20.0, 400.0, nf)
+    v = np.linspace(0.0, 100.0, nv)
+    acc = scale * (0.01 + np.outer(1.0 + f / 400.0, v / 100.0))
+    return PiezoTable(frequencies_hz=f, voltages_v=v, acceleration=acc, generated=True, source=source)
+
+
+CHILD = textwrap.dedent("""
+    import sys, numpy as np
+    from pathlib import Path
+    from hapticsdk.calibration import PiezoTable
+    from hapticsdk.calibration.store import save_calibration
+    from hapticsdk.training.recordings import write_trial_file, COLUMNS
+    d = Path(sys.argv[1])
+    f = np.linspace(20.0, 400.0, 80); v = np.linspace(0.0, 100.0, 40)
+    n = 40000
+    i = 0
+    while True:
+        i += 1
+        acc = (i % 7 + 1) * (0.01 + np.outer(1.0 + f / 400.0, v / 100.0))
+        save_calibration(PiezoTable(f, v, acc, generated=True, source=f"round {i}"), path=d / "piezo-any.json")
+        cols = {c: np.full(n, float(i)) for c in COLUMNS[:-1]}
+        cols["phase"] = np.array(["press"] * n)
+        write_trial_file(d / "trial.csv", cols)
+        if i == 1:
+            print("ready", flush=True)
+""")
+
+
+def test_sigkill_mid_write_leaves_the_old_or_the_new_file(tmp_path):
+    from hapticsdk.training.recordings import read_trial_file
+
+    script = tmp_path / "child.py"
+    script.write_text(CHILD)
+    rng = random.Random(13)
+    for _ in range(6):
+        p = subprocess.Popen([sys.executable, str(script), str(tmp_path)], stdout=subprocess.PIPE, text=True)
+        assert p.stdout.readline().strip() == "ready"
+        time.sleep(rng.uniform(0.0, 0.4))
+        p.send_signal(signal.SIGKILL)
+        p.wait(10)
+        cal = read_calibration(tmp_path / "piezo-any.json")  # parses, validates: whole
+        assert cal.source.startswith("round ")
+        cols = read_trial_file(tmp_path / "trial.csv")
+        assert len(cols["time_s"]) == 40000 and np.unique(cols["time_s"]).size == 1
+        assert not np.isnan(cols["acc_z"]).any()
+
+
+def _limit_fsize(nbytes: int):
+    def pre() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG
+        resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, nbytes))
+    return pre
+
+
+@pytest.mark.parametrize("argv", [["calibrate", "answers", "{out}", "--people", "30"],
+                                  ["plan", "S7", "-o", "{out}"]])
+def test_file_size_limit_keeps_the_old_file_and_exits_2(tmp_path, argv):
+    out = tmp_path / "out.file"
+    out.write_text("old content\n")
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
+    r = subprocess.run([sys.executable, "-m", "hapticsdk", *[a.format(out=out) for a in argv]],
+                       capture_output=True, text=True, env=env, timeout=120, preexec_fn=_limit_fsize(2048))
+    assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
+    assert r.stderr.startswith(f"hapticsdk: error: {out}: "), r.stderr
+    assert "Traceback" not in r.stderr
+    assert out.read_text() == "old content\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.file"]  # no temporary file left
+
+
+def test_concurrent_writers_and_a_reader_never_see_a_partial_file(tmp_path):
+    tables = [_table(1.0, "writer A"), _table(2.0, "writer B")]
+    save_calibration(tables[0], tmp_path)
+    stop = threading.Event()
+    errors: list[BaseException] = []
+
+    def writer(t: PiezoTable) -> None:
+        try:
+            while not stop.is_set():
+                save_calibration(t, tmp_path)
+        except BaseException as exc:  # pragma: no cover - reported below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=writer, args=(t,)) for t in tables]
+    for t in threads:
+        t.start()
+    seen = {}
+    try:
+        for _ in range(60):
+            got = load_calibration("piezo", directory=tmp_path)
+            assert got.origin == "file-any" and not got.skipped, got.to_dict()
+            seen[got.calibration.source] = seen.get(got.calibration.source, 0) + 1
+    finally:
+        stop.set()
+        for t in threads:
+            t.join(30)
+    assert not errors
+    assert set(seen) <= {"writer A", "writer B"}
+    assert [p.name for p in tmp_path.iterdir()] == ["piezo-any.json"]
+
+
+def test_a_symlink_in_the_calibration_folder_is_replaced_not_followed(tmp_path):
+    cal_dir = tmp_path / "cal"
+    cal_dir.mkdir()
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    link = cal_dir / "voicecoil-any.json"
+    link.symlink_to(victim)
+    path = save_calibration(VoiceCoilCalibration(source="mine"), cal_dir)
+    assert path == link and not link.is_symlink() and link.is_file()
+    assert victim.read_text() == "precious"
+    assert read_calibration(link).source == "mine"
+
+
+def test_write_into_a_missing_folder_is_a_file_write_error(tmp_path):
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.scene import Scene
+    plan = compile_scene(Scene.for_material({"roughness": 0.5}))
+    with pytest.raises(FileWriteError) as ei:
+        plan.save(tmp_path / "nowhere" / "plan.json")
+    assert str(tmp_path / "nowhere") in str(ei.value)
+
+
+@pytest.mark.skipif("voicecoil-virtual" not in registry("actuator"), reason="hapticsdk-hardness not installed")
+def test_wav_sink_replaces_the_file_only_when_complete(tmp_path):
+    import errno
+    import wave
+
+    from hapticsdk.dimensions import ChannelCommand
+    from hapticsdk_hardness.voicecoil import VoiceCoilVirtual
+
+    path = tmp_path / "coil.wav"
+    path.write_bytes(b"old")
+
+    def play(coil: VoiceCoilVirtual, ticks: int) -> None:
+        for k in range(ticks):
+            coil.command(ChannelCommand("coil", frequency_hz=100.0, amplitude=0.8), now=k * 1e-3)
+            coil.step(1e-3)
+
+    coil = VoiceCoilVirtual(sink=f"wav:{path}", sample_rate_hz=8000.0).open()
+    play(coil, 50)
+    assert path.read_bytes() == b"old"  # nothing replaced while playing
+    real = coil.sink._w.writeframes
+
+    def full(data: bytes) -> None:
+        real(data[: len(data) // 2])
+        raise OSError(errno.ENOSPC, "No space left on device")
+    coil.sink._w.writeframes = full
+    with pytest.raises(OSError):
+        play(coil, 1)
+    coil.close()
+    assert path.read_bytes() == b"old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["coil.wav"]
+
+    coil = VoiceCoilVirtual(sink=f"wav:{path}", sample_rate_hz=8000.0).open()
+    play(coil, 50)
+    coil.close()
+    with wave.open(str(path), "rb") as w:
+        assert w.getnframes() == 400 and w.getframerate() == 8000
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["coil.wav"]
