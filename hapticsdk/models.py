@@ -54,6 +54,28 @@ class PerceptionModel(ABC):
     def n_features(self) -> int:
         return len(self.feature_names)
 
+    def provenance(self) -> dict[str, Any]:
+        """Where the model's training data came from, for every output that shows a solve.
+
+        Returns ``{"model", "data_generated", "training_data_sha256", "statement"}``:
+        ``data_generated`` is True for a model trained on generated data (the shipped
+        default: the paper published none), False for recorded data, None when the model
+        does not say; ``statement`` is the one line the CLI prints, which also says what
+        a solve's "error" measures (the distance to this model's prediction, not a
+        perceptual accuracy).
+        """
+        gen = self.metadata.get("data_generated")
+        if isinstance(gen, str):
+            gen = {"true": True, "false": False}.get(gen.strip().lower())
+        gen = bool(gen) if isinstance(gen, (bool, int)) else None
+        sha = self.metadata.get("training_data_sha256")
+        what = ("trained on GENERATED data (not measurements)" if gen else
+                "trained on recorded data" if gen is False else "training data not declared")
+        return {"model": self.name, "data_generated": gen,
+                "training_data_sha256": str(sha) if sha else None,
+                "statement": (f"model {self.name!r}: {what}; 'error' is the distance between the targets and "
+                              f"this model's prediction, not a measured perceptual accuracy")}
+
     @property
     def n_outputs(self) -> int:
         return len(self.dimension_names)
@@ -199,3 +221,16 @@ class CompositeModel(PerceptionModel):
             J[:, row:row + p.n_outputs][:, :, c] = Jp
             row += p.n_outputs
         return J
+
+    def provenance(self) -> dict[str, Any]:
+        """The parts' provenance: generated when any part is (see
+        :meth:`PerceptionModel.provenance`); ``parts`` lists each."""
+        parts = [p.provenance() for p in self.parts]
+        gens = [p["data_generated"] for p in parts]
+        gen = True if any(g is True for g in gens) else (False if all(g is False for g in gens) else None)
+        names = ", ".join(repr(p["model"]) for p in parts)
+        what = ("trained (in part) on GENERATED data (not measurements)" if gen else
+                "trained on recorded data" if gen is False else "training data not declared for every part")
+        return {"model": self.name, "data_generated": gen, "training_data_sha256": None, "parts": parts,
+                "statement": (f"models {names}: {what}; 'error' is the distance between the targets and these "
+                              f"models' prediction, not a measured perceptual accuracy")}

@@ -119,7 +119,7 @@ def plot_render(report: Any, path: str | Path) -> Path:
     note_lines = [ln for n in notes for ln in textwrap.wrap(n, 150)]
 
     n_rows = 2 if driven else 1
-    fig_h = 4.6 * n_rows + 0.9 + 0.22 * len(note_lines)
+    fig_h = 4.6 * n_rows + 0.5 + 0.2 * len(note_lines)
     fig = plt.figure(figsize=(12, fig_h))
     gs = fig.add_gridspec(n_rows, 2 if len(driven) <= 2 else len(driven))
     ncol = gs.ncols
@@ -160,8 +160,12 @@ def plot_render(report: Any, path: str | Path) -> Path:
     h2 = a.axhline(20.0, color="r", lw=0.8, ls=":", label="20 mm/s vibration gate")
     a.set_xlabel("time (s)")
     a.set_ylabel("sliding speed (mm/s)")
+    vmax = float(np.abs(vel[:, 0]).max()) if len(vel) else 1.0
+    a.set_ylim(0.0, max(vmax, 20.0) * 1.45)   # speed in the lower two thirds ...
     a2 = a.twinx()
     h3 = a2.plot(t, pen, color="C2", lw=0.9, label="penetration (mm, < 0 above the surface)")
+    lo, hi = float(pen.min()), float(pen.max())
+    a2.set_ylim(lo - 0.9 * (hi - lo + 1e-9), hi + 0.05 * (hi - lo + 1e-9))  # ... penetration above
     a2.set_ylabel("penetration (mm)")
     a.set_title("probe motion", fontsize=10)
     handles = [*h1, h2, *h3]
@@ -186,11 +190,13 @@ def plot_render(report: Any, path: str | Path) -> Path:
             fr = np.where(np.asarray(log[f"{r}.amplitude"]) != 0, fr, np.nan)  # frequency while driven
             handles += a2.plot(t, fr, color="C4", lw=1.0, ls="--", label="drive frequency (Hz, while driven)")
             a2.set_ylabel("drive frequency (Hz)")
+            if np.isfinite(fr).any():  # from 0, so a constant frequency reads as one
+                a2.set_ylim(0.0, float(np.nanmax(fr)) * 1.25)
         a.set_title(f"{r} channel ({act})", fontsize=10)
         a.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper center",
                  bbox_to_anchor=(0.5, -0.14), ncol=2, frameon=False)
 
-    bottom = (0.25 + 0.22 * len(note_lines)) / fig_h
+    bottom = (0.15 + 0.2 * len(note_lines)) / fig_h
     if note_lines:
         fig.text(0.01, 0.01, "\n".join(note_lines), fontsize=8, va="bottom", ha="left", family="monospace")
     fig.tight_layout(rect=(0.0, bottom, 1.0, 0.96), h_pad=2.5)

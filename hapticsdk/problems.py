@@ -194,7 +194,9 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
     Returns:
         scipy-style result(s): ``x`` (features, physical units), ``x_dict``, ``fun``,
         ``success``, ``message``, ``nfev``, ``nit``, ``error`` (sum of absolute intensity
-        errors), ``intensities``, ``constraint_violation``, ``time_s``, ``trace``.
+        errors), ``intensities``, ``constraint_violation``, ``time_s``, ``trace``, and
+        ``model``: :meth:`~hapticsdk.models.PerceptionModel.provenance` of the model the
+        error is measured against (``data_generated``, ``statement``).
 
     >>> res = solve({"hardness": 0.8, "roughness": 0.3}, seed=1)   # doctest: +SKIP
     >>> res.success, res.error, res.x_dict["GS"]                      # doctest: +SKIP
@@ -202,7 +204,16 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
     from .checks import check_seed
     check_seed(seed)  # before any work: seed='abc' or -1 is bad input, not a solver failure
     problem = _problem_for(targets, build_kw)
-    return _solver_for(method, options).solve(problem, seed=seed)
+    res = _solver_for(method, options).solve(problem, seed=seed)
+    # what the numbers are measured against: the model and its training data
+    prov = problem.model.__dict__.get("_provenance")
+    if prov is None:
+        prov = problem.model.__dict__["_provenance"] = problem.model.provenance()
+    if isinstance(res, dict):
+        res["model"] = prov
+    else:
+        res.model = prov
+    return res
 
 
 #: problems built by :func:`solve`, per setup (dimensions, model, penalty, tolerance, fixed

@@ -68,7 +68,8 @@ class SolveResult(dict):
                 "constraint_violation": float(self.constraint_violation),
                 "constraint_violations": dict(self.constraint_violations),
                 "fun": float(self.fun), "time_s": float(self.time_s),
-                "nfev": int(self.nfev), "nit": int(self.nit), "method": self.method}
+                "nfev": int(self.nfev), "nit": int(self.nit), "method": self.method,
+                **({"model": dict(self["model"])} if "model" in self else {})}
 
     def __repr__(self) -> str:
         return (f"SolveResult(success={self.success}, error={self.error:.3g}, "

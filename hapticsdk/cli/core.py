@@ -149,7 +149,8 @@ def format_solve(out: dict[str, Any]) -> str:
             f"  features:    {feats}\n  intensities: {its}\n"
             f"  error {out['error']:.4g} (sum |target - predicted|), constraint violation "
             f"{out['constraint_violation']:.3g}, {out['nfev']} evaluations in {out['time_s'] * 1e3:.1f} ms\n"
-            f"  {out['message']}")
+            f"  {out['message']}"
+            + (f"\n  {out['model']['statement']}" if out.get("model") else ""))
 
 
 def cmd_render(args: argparse.Namespace) -> int:

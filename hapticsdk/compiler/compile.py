@@ -165,7 +165,10 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
                     penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01),
                     data_support=bool(s.get("data_support", True)))
         results = [res] if isinstance(res, dict) else list(res)  # SolveResult is a dict
+        prov = res.get("model") if isinstance(res, dict) else getattr(res, "model", None)
         for m, r in zip(mats, results):
+            if prov is not None:
+                r["model"] = prov
             out[m.name] = r
     return out
 

@@ -66,6 +66,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from ..errors import HapticSDKError, ServoProcessDied, SessionError, ValidationError
+from ..fileio import check_output_path
 
 _log = logging.getLogger(__name__)
 
@@ -485,6 +486,18 @@ class _Servo:
                     out["report"] = {k: v for k, v in rep.to_dict().items()
                                      if k in ("ticks", "tick_median_us", "tick_p99_us", "tick_max_us", "overruns",
                                               "jitter", "events", "fault")}
+                    path = self.spec.get("log_path")
+                    if path:
+                        import json
+
+                        import numpy as np
+
+                        from ..fileio import atomic_savez
+                        obj = rep.log["object"]
+                        ids = np.array([self.tags[i] if 0 <= i < len(self.tags) else -1 for i in obj.tolist()])
+                        atomic_savez(path, field="log_path", object_id=ids,
+                                     **{k: v for k, v in rep.log.items() if k != "object"})
+                        out["log_path"] = str(path)
             except Exception as exc:  # noqa: BLE001
                 out["finish_error"] = f"{type(exc).__name__}: {exc}"
         if self._stack is not None:
@@ -579,13 +592,19 @@ class Session:
         refine: refine :meth:`set_material` answers with the scene's solver in a
             background thread (default True).
         log_seconds: servo log window (s).
+        log_path: when given, the servo writes its log window (the last ``log_seconds``
+            of ticks: ``t``, ``force_n``, ``penetration_mm``, ``object_id``,
+            ``<role>.frequency_hz`` / ``<role>.amplitude``, ...) to this ``.npz`` file
+            (atomically) when the session closes; ``object_id`` maps to names through
+            :attr:`object_ids`.
         start_timeout_s: how long to wait for the servo to be running (s).
     """
 
     def __init__(self, scene: Any, *, isolation: str = "process", trajectory: Any = None,
                  actuator_options: Mapping[str, Mapping[str, Any]] | None = None, realtime: bool = True,
                  period_s: float | None = None, ramp_s: float = 0.05, heartbeat_timeout_s: float | None = 0.25,
-                 refine: bool = True, log_seconds: float = 60.0, start_timeout_s: float = 120.0) -> None:
+                 refine: bool = True, log_seconds: float = 60.0, log_path: "str | Path | None" = None,
+                 start_timeout_s: float = 120.0) -> None:
         from ..compiler import compile_scene
         from ..scene import Scene
         if isolation not in ISOLATIONS:
@@ -649,6 +668,7 @@ class Session:
                 "renderer_options": dict(settings.get("renderer_options") or {}), "trajectory": trajectory,
                 "period_s": period, "realtime": bool(realtime), "passivity": bool(servo.get("passivity", True)),
                 "ramp_s": self.ramp_s, "heartbeat_timeout_s": heartbeat_timeout_s, "log_seconds": float(log_seconds),
+                "log_path": str(check_output_path(log_path, field="log_path")) if log_path is not None else None,
                 "ppid": os.getpid()}
         self._buf = _Buffer(shared=isolation == "process")
         self._mv = self._buf.mv
@@ -920,6 +940,12 @@ class Session:
         oid = self._object_id(name)
         p = Pose.from_dict(pose)
         self._send(("pose", oid, p.to_dict()))
+
+    @property
+    def object_ids(self) -> dict[int, str]:
+        """Object id (as in a ``log_path`` file's ``object_id``) -> name, every object
+        the session has had."""
+        return dict(self._names)
 
     @property
     def objects(self) -> dict[str, str]:

@@ -1,0 +1,179 @@
+"""Sample-accurate synthesis of .hjif vibrotactile content: frequencies (FFT peak) and
+shapes of each base signal, amplitude and frequency modulation by keyframes, Reference
+effects, bands, channels, transients, curves, gain, timescale."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hjif_docs import band, basis, channel, doc, kf, perception, reference, single, tone
+
+from hapticsdk.interop.hjif_model import parse_hjif
+from hapticsdk.interop.hjif_synth import synthesize
+
+FS = 8000.0
+
+
+def synth(d, seconds=None):
+    return synthesize(parse_hjif(d), fs=FS, seconds=seconds)
+
+
+def samples(d, seconds=None, channel_index=0):
+    return synth(d, seconds).channels[channel_index].samples
+
+
+def fft_peak_hz(x: np.ndarray) -> float:
+    """Bin of the largest magnitude (DC removed): resolution FS / len(x)."""
+    mag = np.abs(np.fft.rfft(x - x.mean()))
+    return float(np.argmax(mag) * FS / x.size)
+
+
+def zero_crossings(x: np.ndarray) -> int:
+    s = np.sign(x)
+    s = s[s != 0]
+    return int(np.count_nonzero(s[1:] != s[:-1]))
+
+
+@pytest.mark.parametrize("signal", ["Sine", "Square", "Triangle", "SawToothUp", "SawToothDown"])
+def test_each_base_signal_peaks_at_its_frequency(signal):
+    x = samples(single(tone(150, 1000, base_signal=signal)))
+    # 1 s at 8 kHz: bins are 1/1.000125 Hz apart, the fundamental is the largest harmonic
+    assert abs(fft_peak_hz(x) - 150.0) <= FS / x.size
+
+
+def test_sine_is_the_sine_of_the_effect_time():
+    x = samples(single(tone(123, 500, amp=0.7)))
+    t = np.arange(x.size) / FS
+    inside = t <= 0.5
+    np.testing.assert_allclose(x[inside], 0.7 * np.sin(2 * np.pi * 123 * t[inside]), atol=1e-9)
+    assert np.all(x[~inside] == 0)
+
+
+def test_square_is_plus_minus_one_with_half_duty():
+    x = samples(single(tone(100, 1000, base_signal="Square")))[:8000]
+    assert set(np.unique(x)) == {-1.0, 1.0}
+    assert x[0] == 1.0 and x[40] == -1.0  # +1 for the first half period (5 ms = 40 samples), then -1
+    assert abs(np.mean(x > 0) - 0.5) < 0.01
+
+
+def test_triangle_starts_at_zero_rising_to_one_at_a_quarter_period():
+    x = samples(single(tone(100, 1000, base_signal="Triangle")))
+    assert x[0] == pytest.approx(0.0, abs=1e-12)
+    assert x[20] == pytest.approx(1.0, abs=1e-12)  # T/4 = 2.5 ms = 20 samples
+    assert x[60] == pytest.approx(-1.0, abs=1e-12)
+    assert np.max(np.abs(np.diff(x[:80]))) == pytest.approx(4 * 100 / FS, rel=1e-9)  # constant slope
+
+
+@pytest.mark.parametrize("signal,sign", [("SawToothUp", 1.0), ("SawToothDown", -1.0)])
+def test_saw_teeth_ramp_and_reset_once_per_period(signal, sign):
+    x = samples(single(tone(100, 1000, base_signal=signal)))[:8000]
+    d = np.diff(x) * sign
+    assert x[0] == pytest.approx(0.0, abs=1e-12)
+    assert np.all(d[d > 0] == pytest.approx(2 * 100 / FS))  # ramp of 2 per period
+    assert np.count_nonzero(d < 0) in (99, 100)  # one reset per period, 100 periods in 1 s
+
+
+def test_phase_shifts_the_base_signal():
+    x = samples(single(tone(100, 100, phase=math.pi / 2)))
+    assert x[0] == pytest.approx(1.0)
+
+
+def test_amplitude_keyframes_give_a_linear_envelope():
+    eff = basis(0, [kf(0, 0.0, 200), kf(500, 1.0), kf(1000, 0.2, 200)])
+    x = samples(single(eff))
+    block = 40  # one 200 Hz period
+    n = x.size // block
+    env = np.abs(x[:n * block]).reshape(n, block).max(axis=1)
+    centre_ms = (np.arange(n) * block + block / 2) / FS * 1000
+    want = np.interp(centre_ms, [0, 500, 1000], [0.0, 1.0, 0.2])
+    # within a half block the ramp moves by at most 2.5 ms * (1/500 ms); sampling a 200 Hz
+    # sine at 8 kHz misses its crest by at most 1 - cos(pi * 200/8000) ~ 0.003
+    assert np.max(np.abs(env - want)) < 2.5 / 500 + 0.004
+
+
+def test_frequency_keyframes_chirp_with_a_continuous_phase():
+    x = samples(single(basis(0, [kf(0, 1.0, 100), kf(1000, 1.0, 300)])))
+    # f(t) = 100 + 200 t: the phase integral holds 200 cycles over 1 s (400 crossings);
+    # first 100 ms: 10 + 1 = 11 cycles; last 100 ms: 10 + 19 = 29 cycles
+    assert abs(zero_crossings(x[:8000]) - 400) <= 1
+    assert abs(zero_crossings(x[:800]) - 22) <= 1
+    assert abs(zero_crossings(x[7200:8000]) - 58) <= 1
+
+
+def test_frequency_is_held_after_the_last_frequency_keyframe():
+    eff = basis(0, [kf(0, 1.0, 100), kf(200, None, 200), kf(1000, 1.0)])
+    x = samples(single(eff))
+    assert abs(fft_peak_hz(x[1600:8000]) - 200.0) <= FS / 6400
+
+
+def test_frequency_is_clamped_to_the_band_limits():
+    x = samples(single(tone(500, 1000), lo=0, hi=300))
+    assert abs(fft_peak_hz(x) - 300.0) <= FS / x.size
+
+
+def test_reference_effect_plays_the_library_effect_at_its_position():
+    lib = [{**basis(0, [kf(0, 1.0, 200), kf(500, 1.0, 200)]), "id": 3}]
+    d = doc([perception([channel([band([reference(250, 3)])])], library=lib)])
+    x = samples(d, seconds=1.0)
+    t = np.arange(x.size) / FS
+    assert np.all(x[t < 0.25] == 0) and np.all(x[t > 0.75 + 1 / FS] == 0)
+    on = x[(t >= 0.25) & (t <= 0.75)]
+    assert np.max(np.abs(on)) == pytest.approx(1.0, abs=0.01)
+    assert abs(fft_peak_hz(on) - 200.0) <= FS / on.size
+
+
+def test_bands_add_up_and_channels_stay_apart():
+    d = doc([perception([channel([band([tone(80, 1000, amp=0.4)]), band([tone(250, 1000, amp=0.4)])]),
+                         channel([band([tone(160, 1000, amp=0.5)])], cid=1)])])
+    syn = synth(d)
+    a, b = syn.channels[0].samples, syn.channels[1].samples
+    mag = np.abs(np.fft.rfft(a))
+    k80, k250 = round(80 * a.size / FS), round(250 * a.size / FS)
+    top2 = set(np.argsort(mag)[-2:])
+    assert top2 == {k80, k250}
+    assert mag[k80] == pytest.approx(mag[k250], rel=0.02)
+    assert abs(fft_peak_hz(b) - 160.0) <= FS / b.size
+    assert syn.channels[1].path == "perceptions[0].channels[1]"
+
+
+def test_transient_is_a_22_ms_pulse_of_two_periods():
+    d = single(basis(0, [kf(100, 0.8, 90)]), band_type="Transient", lo=65, hi=300)
+    x = samples(d, seconds=0.3)
+    t_ms = np.arange(x.size) / FS * 1000
+    assert np.all(x[(t_ms < 100) | (t_ms > 122)] == 0)
+    assert x[round((100 + 22 / 8) * FS / 1000)] == pytest.approx(0.8, abs=1e-9)  # sin(4 pi (22/8)/22) = 1
+    assert zero_crossings(x[(t_ms > 100) & (t_ms < 122)]) == 3  # two periods inside the pulse
+
+
+def test_linear_curve_band_interpolates_amplitudes():
+    d = single({"effect_type": "Basis", "position": 0, "keyframes": [kf(0, 0.0), kf(100, 1.0)]},
+               band_type="Curve", curve_type="Linear", lo=0, hi=72)
+    x = samples(d)
+    assert x[400] == pytest.approx(0.5)  # 50 ms
+
+
+def test_band_sum_is_clipped_then_scaled_by_the_channel_gain():
+    d = doc([perception([channel([band([tone(100, 1000, amp=0.8)]), band([tone(100, 1000, amp=0.8)])],
+                                 gain=0.5)])])
+    x = samples(d)
+    assert np.max(np.abs(x)) == pytest.approx(0.5)
+    assert np.count_nonzero(np.isclose(np.abs(x), 0.5)) > 0.3 * x.size  # flattened crests
+
+
+def test_timescale_sets_the_tick_length():
+    d = doc([perception([channel([band([tone(200, 24000, position=24000)])])])], timescale=48000)
+    x = samples(d)
+    t = np.arange(x.size) / FS
+    assert np.all(x[t < 0.5] == 0) and np.max(np.abs(x[t >= 0.5])) == pytest.approx(1.0, abs=0.01)
+    assert synth(d).duration_s == pytest.approx(1.0)
+
+
+def test_non_vibrotactile_perceptions_are_reported_not_synthesised():
+    d = doc([perception([channel([band([tone(100)])])], modality="Force", pid=0),
+             perception([channel([band([tone(100)])])], pid=1)])
+    syn = synth(d)
+    assert [c.path for c in syn.channels] == ["perceptions[1].channels[0]"]
+    assert [u["path"] for u in syn.unsupported] == ["perceptions[0]"]
+    assert "Force" in syn.unsupported[0]["what"]
