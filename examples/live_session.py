@@ -102,12 +102,13 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
             ax.axvspan(t[a], t[b - 1], color=colors[oid % len(colors)], alpha=0.15,
                        label=name if (ax is ax1 and name not in labelled) else None)
         labelled.add(name)
-        ax1.text(0.5 * (t[a] + t[b - 1]), ax1.get_ylim()[1] * 0.92, name, ha="center", fontsize=9)
+        ax1.text(0.5 * (t[a] + t[b - 1]), 0.93, name, ha="center", fontsize=9,
+                 transform=ax1.get_xaxis_transform())
     if retarget_t is not None:
         for ax in (ax1, ax2):
             ax.axvline(retarget_t, color="k", ls="--", lw=1.0)
-        ax1.annotate(f"{RETARGET[0]} retargeted", (retarget_t, ax1.get_ylim()[1] * 0.8), fontsize=9,
-                     xytext=(5, 0), textcoords="offset points")
+        ax1.annotate(f"{RETARGET[0]} retargeted", (retarget_t, 0.8), xycoords=ax1.get_xaxis_transform(),
+                     fontsize=9, xytext=(5, 0), textcoords="offset points")
     ax1.legend(loc="upper left", fontsize=8)
     ax2.legend(loc="upper left", fontsize=8)
     ax1.set_title("live session on simulated devices: objects under the finger (shaded), generated data")

@@ -125,6 +125,10 @@ class Actuator(ABC):
 
     name: ClassVar[str] = ""
     channel: ClassVar[str] = "other"
+    #: command fields this actuator acts on, each with its unit (``{"force_n": "N"}``,
+    #: ``{"frequency_hz": "Hz", "amplitude": "V"}``); empty: derived from ``channel`` and
+    #: ``limits.amplitude_unit`` (:meth:`accepted_fields`)
+    accepts: ClassVar[dict[str, str]] = {}
     limits: ActuatorLimits = ActuatorLimits()
     simulated: ClassVar[bool] = False
     #: options that name native code to load or files to write (option -> what it names,
@@ -239,6 +243,21 @@ class Actuator(ABC):
         _STOPS.append((self.label, time.monotonic(), ok))
         return ok
 
+    @classmethod
+    def accepted_fields(cls) -> dict[str, str]:
+        """Command fields this actuator acts on, with their units: ``accepts`` when the
+        class declares it; otherwise ``force_n`` in N for a force channel and
+        ``frequency_hz`` in Hz plus ``amplitude`` in ``limits.amplitude_unit`` for the
+        others (the amplitude alone when no frequency range is declared)."""
+        if cls.accepts:
+            return dict(cls.accepts)
+        if cls.channel == "force":
+            return {"force_n": "N"}
+        lim = cls.limits if isinstance(cls.limits, ActuatorLimits) else ActuatorLimits()
+        out = {"frequency_hz": "Hz"} if lim.frequency_range_hz is not None else {}
+        out["amplitude"] = lim.amplitude_unit or "1"
+        return out
+
     # -- discovery (used by `hapticsdk doctor`) -----------------------------
     @classmethod
     def check_available(cls) -> tuple[bool, str]:
@@ -269,7 +288,7 @@ class Actuator(ABC):
     # -- reporting ---------------------------------------------------------
     def describe(self) -> dict[str, Any]:
         return {"name": self.name, "label": self.label, "channel": self.channel,
-                "simulated": self.simulated, "limits": self.limits.to_dict(),
+                "accepts": self.accepted_fields(), "simulated": self.simulated, "limits": self.limits.to_dict(),
                 "safety": self.safety.report()}
 
 

@@ -124,6 +124,50 @@ class ChannelCommand:
     direction: tuple[float, float, float] | None = None
 
 
+#: The command fields of :class:`ChannelCommand` a role can carry.
+COMMAND_FIELDS = ("force_n", "frequency_hz", "amplitude")
+
+
+@dataclass(frozen=True)
+class RoleSpec:
+    """What a dimension's renderer commands on one channel role.
+
+    Attributes:
+        channel: the kind of channel (one of :data:`hapticsdk.actuators.CHANNELS`:
+            ``"force"``, ``"vibration"``, ``"thermal"``, ``"friction"``, ``"other"``).
+        fields: the :class:`ChannelCommand` fields it sets, each with its unit
+            (``{"force_n": "N"}``; ``{"frequency_hz": "Hz", "amplitude": "V"}``; a
+            normalised drive has unit ``"1"``).
+        description: one line for ``hapticsdk plan``.
+
+    The scene compiler maps the role to an actuator only when the actuator serves the
+    same channel and accepts every field in the same unit
+    (:meth:`hapticsdk.actuators.Actuator.accepted_fields`); otherwise it refuses the
+    scene with a :class:`~hapticsdk.errors.ValidationError` naming both.
+    """
+
+    channel: str
+    fields: Mapping[str, str]
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        from .actuators import CHANNELS
+        if self.channel not in CHANNELS:
+            raise ValidationError(f"unknown channel {self.channel!r}; valid: {list(CHANNELS)}", field="role.channel")
+        bad = [f for f in self.fields if f not in COMMAND_FIELDS]
+        if bad or not self.fields:
+            raise ValidationError(f"fields must be a non-empty subset of {list(COMMAND_FIELDS)}, got "
+                                  f"{list(self.fields)}", field="role.fields")
+        object.__setattr__(self, "fields", dict(self.fields))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"channel": self.channel, "fields": dict(self.fields), "description": self.description}
+
+    def describe(self) -> str:
+        """``vibration (frequency_hz Hz, amplitude V)``."""
+        return f"{self.channel} ({', '.join(f'{k} {u}' for k, u in self.fields.items())})"
+
+
 class DimensionRenderer(ABC):
     """Computes commands for one dimension of one material, per tick.
 
@@ -155,6 +199,9 @@ class PerceptionDimension(ABC):
     description: ClassVar[str] = ""
     features: ClassVar[tuple[Feature, ...]] = ()
     default_actuators: ClassVar[dict[str, str]] = {}
+    #: What the renderer commands on each role it may use (role -> :class:`RoleSpec`);
+    #: every role a renderer lists in ``roles`` must be declared here (plugin API 1.1).
+    roles: ClassVar[dict[str, RoleSpec]] = {}
     #: Features a material of this dimension needs to be rendered (subset of ``features``).
     render_features: ClassVar[tuple[str, ...]] = ()
     #: Saved actuator calibrations the renderer takes: renderer option -> (calibration
@@ -180,7 +227,8 @@ class PerceptionDimension(ABC):
     def describe(self) -> dict:
         return {"name": self.name, "description": self.description,
                 "features": [f.to_dict() for f in self.features],
-                "default_actuators": dict(self.default_actuators)}
+                "default_actuators": dict(self.default_actuators),
+                "roles": {r: spec.to_dict() for r, spec in self.roles.items()}}
 
 
 def check_intensity(value: object, field: str) -> float:

@@ -106,6 +106,9 @@ class MaterialPlan:
             vectors reaching the target (median, 80 % interval, confidence, decision;
             :meth:`hapticsdk.compiler.importance.LossEstimate.to_dict`), for every
             dimension the model judged, kept or dropped.
+        role_contracts: role -> what is commanded on it and what carries it:
+            ``{"actuator", "actuator_channel", "accepts": {field: unit}, "commanded_by":
+            {dimension: RoleSpec.to_dict() or None}}``.
         actuators: channel role -> actuator plugin name.
         actuator_options: role -> keyword options for that actuator.
         roles: dimension (or ``"replacement:<dim>"``) -> roles its renderer commands.
@@ -128,6 +131,7 @@ class MaterialPlan:
     pinned_features: dict[str, float] = field(default_factory=dict)
     importance_features: dict[str, float] = field(default_factory=dict)
     importance: dict[str, dict[str, Any]] = field(default_factory=dict)
+    role_contracts: dict[str, dict[str, Any]] = field(default_factory=dict)
     actuators: dict[str, str] = field(default_factory=dict)
     actuator_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     roles: dict[str, list[str]] = field(default_factory=dict)
@@ -148,6 +152,7 @@ class MaterialPlan:
                 "features": dict(self.features), "pinned_features": dict(self.pinned_features),
                 "importance_features": dict(self.importance_features),
                 "importance": json.loads(json.dumps(self.importance)),
+                "role_contracts": json.loads(json.dumps(self.role_contracts)),
                 "actuators": dict(self.actuators),
                 "actuator_options": {k: dict(v) for k, v in self.actuator_options.items()},
                 "roles": {k: list(v) for k, v in self.roles.items()},
@@ -164,6 +169,7 @@ class MaterialPlan:
                    pinned_features={k: float(v) for k, v in d.get("pinned_features", {}).items()},
                    importance_features={k: float(v) for k, v in d.get("importance_features", {}).items()},
                    importance={k: dict(v) for k, v in d.get("importance", {}).items()},
+                   role_contracts={k: dict(v) for k, v in d.get("role_contracts", {}).items()},
                    actuators=dict(d.get("actuators", {})),
                    actuator_options={k: dict(v) for k, v in d.get("actuator_options", {}).items()},
                    roles={k: list(v) for k, v in d.get("roles", {}).items()},
@@ -284,6 +290,7 @@ class RenderPlan:
                                                "confidence": x.confidence,
                                                "replacement": x.replacement} for x in m.dropped],
                                   "importance": json.loads(json.dumps(m.importance)),
+                                  "role_contracts": json.loads(json.dumps(m.role_contracts)),
                                   "features": dict(m.features),
                                   "pinned_features": dict(m.pinned_features),
                                   "actuators": dict(m.actuators),

@@ -249,7 +249,7 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
             for i in range(len(ts)):
                 for j in range(len(ks)):
                     e = energy[i, j] * 1e3
-                    txt = f"{e:.2g}" if e >= 0.01 else "0"
+                    txt = f"{e:.0f}" if e >= 10 else (f"{e:.2g}" if e >= 0.01 else "0")
                     shade = ratio[i, j]
                     a.text(j, i, txt, ha="center", va="center", fontsize=7,
                            color="black" if np.isfinite(shade) and shade > 0.6 else "white")
@@ -264,7 +264,7 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
                  "(applied / asked, worst finger)\nnumber = largest energy given to the user (mJ); "
                  f"red outline = unstable (energy > {tol_mj:g} mJ, force after release, or over the limit)",
                  fontsize=10)
-    fig.tight_layout(rect=(0.0, 0.0, 0.92, 0.93))
+    fig.tight_layout(rect=(0.0, 0.0, 0.92, 0.95))
     cax = fig.add_axes((0.93, 0.12, 0.015, 0.7))
     fig.colorbar(im, cax=cax, label="delivered force ratio")
     out = Path(path)
@@ -272,12 +272,14 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
     return out
 
 
-def plot_plan(plan: Mapping[str, Any], path: str | Path) -> Path:
-    """Save a compiled plan (``RenderPlan.summary()``) as a figure: each material at its
-    target intensities (first two dimensions named), filled where every dimension is
-    rendered, open where one is left out, with what was left out and why (predicted
-    realism loss against the threshold) listed beside it."""
+def plot_plan(plan: Any, path: str | Path) -> Path:
+    """Save a compiled plan (a ``RenderPlan`` or its ``to_dict()``) as a figure: each
+    material at its target intensities (the first two dimensions named), its marker saying
+    which dimensions were left out, and beside the plot one line per material: what was
+    left out, why (predicted realism loss against the threshold) and what replaces it."""
     plt = _pyplot()
+    if hasattr(plan, "to_dict"):
+        plan = plan.to_dict()
     mats = plan["materials"]
     mats = mats if isinstance(mats, Mapping) else {m["name"]: m for m in mats}
     if not mats:
@@ -289,40 +291,52 @@ def plot_plan(plan: Mapping[str, Any], path: str | Path) -> Path:
                 dims.append(d)
     dx = dims[0]
     dy = dims[1] if len(dims) > 1 else None
-    notes = []
-    fig, (a, t) = plt.subplots(1, 2, figsize=(13, 6), gridspec_kw={"width_ratios": [1.0, 1.1]})
-    for i, (name, m) in enumerate(mats.items()):
+    groups: dict[tuple[str, ...], list[tuple[str, float, float]]] = {}
+    lines = []
+    for name, m in mats.items():
         tg = m.get("targets", {})
-        x = tg.get(dx, np.nan)
-        y = tg.get(dy, np.nan) if dy else 0.0
         dropped = m.get("dropped", [])
-        kept = m.get("dimensions", [])
-        face = "C0" if not dropped else "white"
-        a.scatter([x], [y], s=60, facecolors=face, edgecolors="C0" if not dropped else "C3", zorder=3)
-        a.annotate(f"{i + 1}", (x, y), textcoords="offset points", xytext=(5, 4), fontsize=8)
-        line = f"{i + 1}. {name}: renders {', '.join(kept) or 'nothing'}"
+        key = tuple(d["dimension"] for d in dropped)
+        groups.setdefault(key, []).append((name, float(tg.get(dx, np.nan)),
+                                           float(tg.get(dy, np.nan)) if dy else 0.0))
+        if not dropped:
+            lines.append(f"{name:<6} renders {', '.join(m.get('dimensions', []))}")
         for d in dropped:
-            loss = d.get("predicted_loss_percent")
-            thr = d.get("threshold_percent")
-            why = (f"predicted realism loss {loss:.2f} % < threshold {thr:g} %"
-                   if loss is not None and thr is not None else str(d.get("reason", "")))
-            line += f"; left out {d['dimension']} ({why})"
-        notes.extend(textwrap.wrap(line, 75, subsequent_indent="    "))
+            loss, thr = d.get("predicted_loss_percent"), d.get("threshold_percent")
+            why = (f"loss {loss:.1f} % < {thr:g} %" if loss is not None and thr is not None
+                   else textwrap.shorten(str(d.get("reason", "")), 40))
+            rep = (d.get("replacement") or {}).get("renderer")
+            lines.append(f"{name:<6} left out {d['dimension']}: {why}" + (f", replaced by {rep}" if rep else ""))
+    fig_h = max(6.0, 0.19 * len(lines) + 1.8)
+    fig, (a, t) = plt.subplots(1, 2, figsize=(13, fig_h), gridspec_kw={"width_ratios": [1.0, 0.85]})
+    style = [("o", "C0", True), ("s", "C1", False), ("D", "C3", False), ("^", "C2", False), ("v", "C4", False)]
+    for gi, (key, pts) in enumerate(sorted(groups.items(), key=lambda kv: (len(kv[0]), kv[0]))):
+        marker, color, filled = style[gi % len(style)]
+        label = "every dimension rendered" if not key else "left out: " + ", ".join(key)
+        a.scatter([p[1] for p in pts], [p[2] for p in pts], s=55, marker=marker, zorder=3,
+                  facecolors=color if filled else "white", edgecolors=color, linewidths=1.5,
+                  label=f"{label} ({len(pts)})")
+        for name, x, y in pts:
+            a.annotate(name, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
     a.set_xlim(-0.05, 1.05)
     a.set_ylim(-0.05, 1.05)
-    a.set_xlabel(f"{dx} intensity (0..1)")
-    a.set_ylabel(f"{dy} intensity (0..1)" if dy else "")
+    a.set_xlabel(f"target {dx} intensity (0..1)")
+    a.set_ylabel(f"target {dy} intensity (0..1)" if dy else "")
     a.grid(alpha=0.3)
-    a.scatter([], [], s=60, facecolors="C0", edgecolors="C0", label="every dimension rendered")
-    a.scatter([], [], s=60, facecolors="white", edgecolors="C3", label="a dimension left out (see list)")
-    a.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, frameon=False)
+    a.legend(fontsize=8, loc="upper left", framealpha=0.9)
     a.set_title("materials at their target intensities", fontsize=10)
     t.axis("off")
-    t.text(0.0, 1.0, "\n".join(notes), va="top", ha="left", fontsize=8, family="monospace",
+    t.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", fontsize=8, family="monospace",
            transform=t.transAxes)
-    t.set_title("what each material renders, what is left out and why", fontsize=10)
-    fig.suptitle(f"render plan of scene {plan.get('scene', '')}", fontsize=12)
-    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.95))
+    t.set_title("what each material renders; what is left out, why, and what replaces it", fontsize=10)
+    model = next((d.get("importance_model") for m in mats.values() for d in m.get("dropped", [])
+                  if d.get("importance_model")), None)
+    gen = any(m.get("source") == "library" for m in mats.values())
+    fig.suptitle(f"render plan of scene {plan.get('scene', '')}"
+                 + (f": a dimension is left out when importance model '{model}' predicts a realism loss "
+                    "below the threshold" if model else "")
+                 + ("\n(library materials: GENERATED data)" if gen else ""), fontsize=11)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.93))
     out = Path(path)
     save_figure(fig, out, dpi=90)
     return out

@@ -26,7 +26,7 @@ from .errors import PluginError, ValidationError
 #: MAJOR when something is removed or changes meaning. A plugin declares the range it
 #: supports with a ``hapticsdk_api`` attribute (e.g. ``">=1.0,<2"``); see
 #: :func:`check_plugin_api` and docs/plugin-authors.md.
-PLUGIN_API_VERSION = "1.0"
+PLUGIN_API_VERSION = "1.1"
 
 def _parse_version(text: str) -> tuple[int, ...]:
     try:

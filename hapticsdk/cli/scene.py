@@ -26,6 +26,8 @@ def register(sub: Any) -> None:
     p.add_argument("--threshold", type=nonneg_float, metavar="PERCENT",
                    help="importance threshold: drop a dimension whose predicted realism loss is below it (%%)")
     p.add_argument("--no-importance", action="store_true", help="keep every dimension")
+    p.add_argument("--plot", metavar="PNG", help="write a figure: the materials in intensity space, what "
+                                                 "is left out of each and why (needs matplotlib)")
     p.set_defaults(func=cmd_plan)
 
 
@@ -51,6 +53,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.output:  # before the work: an output that cannot be written fails now
         from ..fileio import check_output_path
         check_output_path(args.output, field="--output")
+    if args.plot:
+        from ..fileio import check_output_path
+        check_output_path(args.plot, field="--plot")
     scene = _scene_from_arg(args.scene)
     over: dict[str, Any] = {}
     if args.seed is not None:
@@ -69,6 +74,10 @@ def cmd_plan(args: argparse.Namespace) -> int:
     out = plan.summary()
     if args.output:
         out["saved"] = str(args.output)
+    if args.plot:
+        from ..plotting import plot_plan
+        plot_plan(plan.to_dict(), args.plot)
+        out["plot"] = str(args.plot)
     if args.json:
         from . import emit
         emit(out, True)
@@ -88,6 +97,13 @@ def format_plan(out: dict[str, Any]) -> str:
         if m["pinned_features"]:
             lines.append("  left out of the solve (no kept dimension reads them): "
                          + ", ".join(sorted(m["pinned_features"])))
+        for role, c in (m.get("role_contracts") or {}).items():
+            acc = ", ".join(f"{k} {u}" for k, u in c["accepts"].items())
+            for who, spec in c["commanded_by"].items():
+                what = (f"{spec['channel']} ({', '.join(f'{k} {u}' for k, u in spec['fields'].items())})"
+                        if spec else "undeclared (plugin API 1.0: not checked)")
+                lines.append(f"  role {role}: {who} commands {what} -> {c['actuator']} "
+                             f"({c['actuator_channel']}; accepts {acc})")
         for d in m["dropped"]:
             lines.append(f"  dropped {d['dimension']}: {d['reason']}")
         for dim, e in (m.get("importance") or {}).items():
@@ -103,4 +119,6 @@ def format_plan(out: dict[str, Any]) -> str:
     lines.append("plugins used: " + ", ".join(used))
     if out.get("saved"):
         lines.append(f"plan saved to {out['saved']}")
+    if out.get("plot"):
+        lines.append(f"figure saved to {out['plot']}")
     return "\n".join(lines)

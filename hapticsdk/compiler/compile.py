@@ -33,7 +33,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..calibration.selection import select_calibrations
-from ..dimensions import check_intensity
+from ..dimensions import RoleSpec, check_intensity
 from ..errors import PluginError, ValidationError
 from ..plan import FALLBACK_SENSOR, DroppedDimension, MaterialPlan, RenderPlan
 from ..plugin_api import check_plugin_api
@@ -182,6 +182,51 @@ def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed
     return out
 
 
+#: what the importance model's replacement renderers command (``replacement.renderer`` -> spec)
+_REPLACEMENT_ROLES: dict[str, RoleSpec] = {
+    "constant-force": RoleSpec("force", {"force_n": "N"}, "constant normal force in contact")}
+
+
+def _role_spec(owner: str, dname: str, role: str, dim_objs: Mapping[str, Any], imp_model: Any) -> RoleSpec | None:
+    """The declared spec of ``role`` for a dimension or a replacement (None: undeclared)."""
+    if owner.startswith("replacement:"):
+        rep = imp_model.replacement(dname) if imp_model is not None else None
+        return _REPLACEMENT_ROLES.get(rep["renderer"]) if rep else None
+    return (getattr(dim_objs[dname], "roles", {}) or {}).get(role)
+
+
+def _check_role(owner: str, role: str, rspec: RoleSpec | None, actuator: str,
+                contracts: dict[str, dict[str, Any]]) -> None:
+    """Refuse an actuator that cannot carry what ``owner`` commands on ``role``; record
+    the contract for the plan."""
+    from ..features import same_unit
+    from ..plugins import registry
+    cls = registry("actuator").load(actuator)
+    check_plugin_api(cls, name=actuator)
+    channel = getattr(cls, "channel", "other")
+    accepts = cls.accepted_fields() if hasattr(cls, "accepted_fields") else {}
+    entry = contracts.setdefault(role, {"actuator": actuator, "actuator_channel": channel,
+                                        "accepts": dict(accepts), "commanded_by": {}})
+    if rspec is None:   # a plugin built for plugin API 1.0: nothing declared to check
+        entry["commanded_by"][owner] = None
+        return
+    entry["commanded_by"][owner] = rspec.to_dict()
+    who = f"dimension {owner!r}" if not owner.startswith("replacement:") else f"the {owner.split(':', 1)[1]} replacement"
+    problems = []
+    if rspec.channel != channel:
+        problems.append(f"it serves a {channel} channel")
+    for fname, unit in rspec.fields.items():
+        if fname not in accepts:
+            problems.append(f"it does not act on {fname}")
+        elif not same_unit(accepts[fname], unit):
+            problems.append(f"it takes {fname} in {accepts[fname]!r}, not {unit!r}")
+    if problems:
+        acc = ", ".join(f"{k} {u}" for k, u in accepts.items()) or "nothing"
+        raise ValidationError(f"{who} commands role {role!r} as {rspec.describe()}, but actuator {actuator!r} "
+                              f"cannot carry it: {'; '.join(problems)} (it accepts {acc}); map the role to "
+                              f"an actuator of that kind", field=f"scene.devices.{role}")
+
+
 def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     """Compile a scene (object, dict, or path of a JSON file) into a render plan."""
     from ..plugins import registry
@@ -274,6 +319,12 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                 raise PluginError(f"dimension {d!r} could not build a renderer for material "
                                   f"{m.name!r}: {type(exc).__name__}: {exc}", plugin=d,
                                   kind="dimension") from exc
+            declared = dict(getattr(dim_objs[d], "roles", {}) or {})
+            undeclared = [ro for ro in rend.roles if declared and ro not in declared]
+            if undeclared:
+                raise PluginError(f"dimension {d!r}: its renderer commands role(s) {undeclared} that the "
+                                  f"dimension does not declare in `roles` (declared: {sorted(declared)})",
+                                  plugin=d, kind="dimension")
             roles[d] = list(rend.roles)
         dropped: list[DroppedDimension] = []
         for e in drops[m.name]:
@@ -299,10 +350,13 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                 roles[f"replacement:{d}"] = [rep["role"]]
         actuators: dict[str, str] = {}
         options: dict[str, dict[str, Any]] = {}
+        contracts: dict[str, dict[str, Any]] = {}
         for owner, rl in roles.items():
             dname = owner.split(":", 1)[1] if owner.startswith("replacement:") else owner
             for role in rl:
+                rspec = _role_spec(owner, dname, role, dim_objs, imp_model)
                 if role in actuators:
+                    _check_role(owner, role, rspec, actuators[role], contracts)
                     continue
                 if role in scene.devices:
                     spec = scene.devices[role]
@@ -323,6 +377,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                     check_data_options(registry("actuator").load(spec.actuator), spec.actuator, role,
                                        spec.options, field=f"scene.devices.{role}.options")
                 actuators[role] = spec.actuator
+                _check_role(owner, role, rspec, spec.actuator, contracts)
                 options[role] = dict(spec.options)
         used_dims |= set(kept) | set(gone)
         used_actuators |= set(actuators.values())
@@ -331,7 +386,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         plans[m.name] = MaterialPlan(
             name=m.name, targets=dict(m.targets), dimensions=kept, dropped=dropped,
             features=feats, pinned_features=pinned, importance_features=imp_features[m.name],
-            importance=estimates[m.name], calibrations=cal_records,
+            importance=estimates[m.name], role_contracts=contracts, calibrations=cal_records,
             actuators=actuators, actuator_options=options, roles=roles,
             dimension_distributions=dists,
             solve=_solve_summary(r, kept, models, settings["solver"]["seed"]),

@@ -145,6 +145,11 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
         amp_n = np.zeros(n)
         amp_u = np.zeros(n)
         freq = np.zeros(n)
+        if len(tracks) > 1:
+            both = int((np.sum([tr.amplitude > 0 for tr in tracks], axis=0) > 1).sum())
+            if both:
+                report.notes.append(f"{a}: {both} tick(s) where {len(tracks)} channels overlap; "
+                                    "the loudest one is played")
         for tr in tracks:
             take = tr.amplitude > amp_n
             amp_n = np.where(take, tr.amplitude, amp_n)
@@ -157,7 +162,7 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
             for k in np.flatnonzero(amp_u > 0):
                 key = (float(freq[k]), float(amp_u[k]))
                 if key not in cache:
-                    cache[key] = table.voltage_for(*key)[0]
+                    cache[key] = key[1]
                 out[k] = cache[key]
             commands[a] = (freq, out, amp_u)
         else:

@@ -159,6 +159,7 @@ class Retarget:
             ``"plan"``, or the solver's name when no amortised table covers the
             dimensions).
         success, error: the answer's success and sum of absolute intensity errors.
+        intensities: the perception model's intensities for the features sent (0..1).
         refined: set when the background solve has finished; ``refined_features`` its
             answer (None before, or when it failed), ``refined_sent`` whether it was sent.
     """
@@ -169,6 +170,7 @@ class Retarget:
     source: str
     success: bool
     error: float
+    intensities: dict[str, float] = field(default_factory=dict)
     refined: threading.Event = field(default_factory=threading.Event, repr=False)
     refined_features: dict[str, dict[str, float]] | None = None
     refined_sent: bool = False
@@ -900,8 +902,12 @@ class Session:
             raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
         self._send(("material", oid, feats, ramp))
         self._materials[object] = label
+        ints = getattr(res, "intensities", None)
         r = Retarget(object=object, targets=dict(targets), features=feats, source=source,
-                     success=bool(res.success), error=float(res.error))
+                     success=bool(res.success), error=float(res.error),
+                     intensities=({str(k): float(v) for k, v in ints.items()} if isinstance(ints, Mapping)
+                                  else {d: float(v) for d, v in zip(targets, list(ints))} if ints is not None
+                                  else {}))
         if (self.refine if refine is None else refine) and source == "amortised":
             th = threading.Thread(target=self._refine, args=(r, oid), name="hapticsdk-refine", daemon=True)
             self._threads.append(th)

@@ -252,6 +252,8 @@ class Pose:
     def __eq__(self, other: object) -> bool:
         return isinstance(other, Pose) and self.position_mm == other.position_mm and self.matrix == other.matrix
 
+    __hash__ = None  # type: ignore[assignment]
+
     def __repr__(self) -> str:
         return f"Pose(position_mm={self.position_mm!r}, rotation={self._spec!r})"
 
@@ -337,6 +339,12 @@ class Shape(ABC):
     @abstractmethod
     def with_pose(self, pose: Pose) -> "Shape":
         """The same shape at another pose."""
+
+    def __eq__(self, other: object) -> bool:
+        return (type(other) is type(self) and self.geometry_dict() == other.geometry_dict()  # type: ignore[attr-defined]
+                and self.pose == other.pose)  # type: ignore[attr-defined]
+
+    __hash__ = None  # type: ignore[assignment]
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.geometry_dict()!r}, pose={self.pose!r})"

@@ -77,10 +77,11 @@ def test_plan_file_cannot_name_a_native_library(monkeypatch, tmp_path):
     loaded = []
     monkeypatch.setattr(ctypes, "CDLL", lambda *a, **k: loaded.append(a))
     plan = _plan_with("force", {"library": str(tmp_path / "evil.so")})
-    plan["materials"]["material"]["actuators"]["force"] = "omni-openhaptics"
+    name, mat = next(iter(plan["materials"].items()))
+    mat["actuators"]["force"] = "omni-openhaptics"
     with pytest.raises(PrivilegedOptionError) as ei:
         render_plan(plan, seconds=0.01)
-    assert ei.value.field == "plan.materials.material.actuator_options.force.library"
+    assert ei.value.field == f"plan.materials.{name}.actuator_options.force.library"
     assert loaded == []
 
 
@@ -154,6 +155,8 @@ class _Dumper(Actuator):
 
     name: ClassVar[str] = "test-dumper"
     channel: ClassVar[str] = "vibration"
+    accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
+    hapticsdk_api: ClassVar[str] = ">=1,<2"
     privileged_options: ClassVar[dict[str, str]] = {"dump_path": "output file"}
 
     def __init__(self, *, dump_path: str | None = None, gain: float = 1.0, **options: Any) -> None:

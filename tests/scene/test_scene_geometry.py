@@ -249,7 +249,10 @@ def test_version_2_round_trip_and_hit_tester():
     assert ht.query(0.0, 9.0, 0.0)[:2] == (0, pytest.approx(1.0))
     assert ht.query(60.0, 14.0, 0.0)[0] == 1
     assert ht.query(120.0, 1.0, 0.0)[0] == 2
-    assert Scene.from_dict(json.loads(json.dumps(scene.to_dict()))).to_dict() == scene.to_dict()
+    again = Scene.from_dict(json.loads(json.dumps(scene.to_dict())))
+    assert again.to_dict() == scene.to_dict()
+    assert again.objects == scene.objects                       # shapes and poses compare by value
+    assert again.objects[2].geometry != PlanePatch((20.0, 20.0), thickness_mm=5.0)   # other pose
 
 
 def _bad(path, value):

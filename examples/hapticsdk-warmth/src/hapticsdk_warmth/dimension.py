@@ -6,7 +6,8 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
-from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from hapticsdk.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
+                                  TickInput)
 from hapticsdk.errors import ValidationError
 from hapticsdk.features import Feature
 
@@ -61,6 +62,8 @@ class WarmthDimension(PerceptionDimension):
     description: ClassVar[str] = "perceived warmth on contact; a Peltier holds the material's contact temperature"
     features: ClassVar[tuple[Feature, ...]] = FEATURES
     default_actuators: ClassVar[dict[str, str]] = {"thermal": "peltier-virtual"}
+    roles: ClassVar[dict[str, RoleSpec]] = {
+        "thermal": RoleSpec("thermal", {"amplitude": "degC"}, "Peltier surface temperature set-point")}
     render_features: ClassVar[tuple[str, ...]] = ("Tsurf", "Eff")
     default_model: ClassVar[str] = "warmth"
 

@@ -26,6 +26,7 @@ class PeltierVirtual(Actuator):
     hapticsdk_api: ClassVar[str] = ">=1.0,<2"
     name: ClassVar[str] = "peltier-virtual"
     channel: ClassVar[str] = "thermal"
+    accepts: ClassVar[dict[str, str]] = {"amplitude": "degC"}
     simulated: ClassVar[bool] = True
     limits = ActuatorLimits(max_amplitude=42.0, amplitude_unit="degC")
 

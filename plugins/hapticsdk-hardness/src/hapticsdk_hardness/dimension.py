@@ -15,7 +15,8 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 
 from hapticsdk.calibration import VoiceCoilCalibration
-from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from hapticsdk.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
+                                  TickInput)
 from hapticsdk.errors import ValidationError
 from hapticsdk.features import Feature
 
@@ -146,6 +147,10 @@ class HardnessDimension(PerceptionDimension):
         Feature("W", "mJ", 0.0, 100.0, "work of pressing"),
     )
     default_actuators: ClassVar[dict[str, str]] = {"force": "omni-virtual", "coil": "voicecoil-virtual"}
+    roles: ClassVar[dict[str, RoleSpec]] = {
+        "force": RoleSpec("force", {"force_n": "N"}, "spring force GS * penetration (formula (8), arm part)"),
+        "coil": RoleSpec("vibration", {"frequency_hz": "Hz", "amplitude": "1"},
+                         "voice-coil vibration whose frequency adds perceived stiffness (formula (7))")}
     #: formula (7) comes from the voice coil's saved calibration when there is one
     calibrations: ClassVar[dict[str, tuple[str, str]]] = {"calibration": ("voicecoil", "coil")}
     render_features: ClassVar[tuple[str, ...]] = ("GS",)

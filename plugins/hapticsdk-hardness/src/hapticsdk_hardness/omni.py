@@ -47,6 +47,7 @@ class OmniVirtual(HapticDevice):
 
     name: ClassVar[str] = "omni-virtual"
     channel: ClassVar[str] = "force"
+    accepts: ClassVar[dict[str, str]] = {"force_n": "N"}
     simulated: ClassVar[bool] = True
     limits = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3)
     sources: ClassVar[dict[str, str]] = OMNI_SOURCES

@@ -209,6 +209,7 @@ class OmniOpenHaptics(HapticDevice):
 
     name: ClassVar[str] = "omni-openhaptics"
     channel: ClassVar[str] = "force"
+    accepts: ClassVar[dict[str, str]] = {"force_n": "N"}
     simulated: ClassVar[bool] = False
     limits = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3)
     #: ``library`` is loaded into the process: never from a scene/plan file

@@ -36,6 +36,7 @@ class VoiceCoilVirtual(Actuator):
 
     name: ClassVar[str] = "voicecoil-virtual"
     channel: ClassVar[str] = "vibration"
+    accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "1"}
     simulated: ClassVar[bool] = True
     #: ``sink`` can name a file to write (``"wav:PATH"``) or an audio device: never from a scene/plan file
     privileged_options: ClassVar[dict[str, str]] = {"sink": "output file or audio device"}

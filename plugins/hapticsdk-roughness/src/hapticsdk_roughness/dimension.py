@@ -24,7 +24,8 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
-from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from hapticsdk.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
+                                  TickInput)
 from hapticsdk.errors import ValidationError
 from hapticsdk.features import Feature
 
@@ -150,6 +151,9 @@ class RoughnessDimension(PerceptionDimension):
                 "lateral vibration power (mean square of the high-passed acceleration)"),
     )
     default_actuators: ClassVar[dict[str, str]] = {"vibration": "piezo-virtual"}
+    roles: ClassVar[dict[str, RoleSpec]] = {
+        "vibration": RoleSpec("vibration", {"frequency_hz": "Hz", "amplitude": "V"},
+                              "piezo drive V_out sin(2 pi f_p t), f_p following the sliding speed (formula (9))")}
     #: the piezo table Tab comes from the piezo's saved calibration when there is one
     calibrations: ClassVar[dict[str, tuple[str, str]]] = {"table": ("piezo", "vibration")}
     render_features: ClassVar[tuple[str, ...]] = ("Fpeak", "AFpeak")

@@ -58,6 +58,7 @@ class DRV2667Actuator(Actuator):
     """
 
     channel: ClassVar[str] = "vibration"
+    accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = False
     limits = piezo_limits(0, None)
 

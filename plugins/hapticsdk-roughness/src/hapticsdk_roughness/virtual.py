@@ -52,6 +52,7 @@ class PiezoVirtual(Actuator):
 
     name: ClassVar[str] = "piezo-virtual"
     channel: ClassVar[str] = "vibration"
+    accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = True
     limits = piezo_limits(1, None)
 
