@@ -72,6 +72,16 @@ class ActuatorLimits:
         amplitude_unit: ``"V"`` (piezo), ``"1"`` (normalised drive), ...
         max_velocity_mm_s: speed above which force output is not trusted (mm/s).
         max_force_rate_n_per_tick: largest force change per servo tick (N).
+        frequency_resolution_hz: step of the frequencies the hardware can produce (Hz;
+            e.g. 7.8125 Hz for the DRV2667's synthesiser); ``None``: continuous.
+        amplitude_resolution: step of the amplitudes it can produce (``amplitude_unit``);
+            ``None``: continuous.
+        min_amplitude: smallest amplitude it can produce, for actuators whose amplitude
+            is a set-point rather than an on/off level (a Peltier's coolest surface
+            temperature, ``amplitude_unit``); ``None``: 0.
+
+    The conformance kit compares what an actuator reports it outputs
+    (:meth:`Actuator.read_back`) with what it was commanded to within half these steps.
     """
 
     max_force_n: float | None = None
@@ -81,6 +91,9 @@ class ActuatorLimits:
     amplitude_unit: str = ""
     max_velocity_mm_s: float | None = None
     max_force_rate_n_per_tick: float | None = None
+    frequency_resolution_hz: float | None = None
+    amplitude_resolution: float | None = None
+    min_amplitude: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
@@ -119,8 +132,10 @@ class Actuator(ABC):
     ``privileged_options``.
 
     Public API (do not override): :meth:`open`, :meth:`close`, :meth:`command`,
-    :meth:`stop`, context manager. Backend API: ``_open``, ``_command``, ``_stop``,
-    ``_close`` (all but ``_command`` and ``_stop`` optional).
+    :meth:`stop`, :meth:`read_back`, context manager. Backend API: ``_open``,
+    ``_command``, ``_stop``, ``_close``, ``_read_back`` (all but ``_command`` and
+    ``_stop`` optional; a backend without ``_read_back`` fails the conformance kit's
+    ``read-back`` rule, so every first-party backend has one).
     """
 
     name: ClassVar[str] = ""
@@ -136,6 +151,16 @@ class Actuator(ABC):
     #: scene or plan files, only from code, CLI flags, the environment or the user's device
     #: configuration (:mod:`hapticsdk.device_options`). Merged over base classes.
     privileged_options: ClassVar[dict[str, str]] = {}
+    #: amplitude the output rests at in its safe state (``stop()``): 0 for vibration and
+    #: friction; a thermal actuator rests at a neutral temperature (its ``amplitude_unit``)
+    rest_amplitude: ClassVar[float] = 0.0
+
+    @classmethod
+    def conformance_options(cls) -> dict[str, Any]:
+        """Keyword options the conformance kit creates a test instance with (default
+        none). A backend that cannot be built without arguments (a playback device needs
+        a run) returns what a self-contained test instance needs."""
+        return {}
 
     def __init__(self, *, label: str | None = None, safety: Any = None, **options: Any) -> None:
         if options:
@@ -257,6 +282,34 @@ class Actuator(ABC):
         out = {"frequency_hz": "Hz"} if lim.frequency_range_hz is not None else {}
         out["amplitude"] = lim.amplitude_unit or "1"
         return out
+
+    def read_back(self) -> ChannelCommand | None:
+        """What the hardware outputs now, as a command of this actuator's channel (role =
+        its ``channel``): from the device where it can report it (a register, a sensor),
+        else from the backend's own record of what it last wrote to the hardware (after
+        every conversion and quantisation of its own). A closed actuator outputs nothing:
+        a zero force, or its ``rest_amplitude``. ``None``: the backend offers no read-back.
+
+        Raises :class:`DeviceError` when the read fails or reports a non-finite value."""
+        if not self._is_open:
+            return ChannelCommand(self.channel, force_n=0.0 if self.channel == "force" else None,
+                                  amplitude=None if self.channel == "force" else float(self.rest_amplitude))
+        try:
+            rb = self._read_back()
+        except HapticSDKError:
+            raise
+        except Exception as exc:
+            raise DeviceError(f"read-back failed: {type(exc).__name__}: {exc}", device=self.label) from exc
+        if rb is not None:
+            for attr in ("force_n", "frequency_hz", "amplitude"):
+                v = getattr(rb, attr)
+                if v is not None and not math.isfinite(v):
+                    raise DeviceError(f"read-back reported {attr}={v!r}", device=self.label)
+        return rb
+
+    def _read_back(self) -> ChannelCommand | None:
+        """Backend: the output now (see :meth:`read_back`); default: not available."""
+        return None
 
     # -- discovery (used by `hapticsdk doctor`) -----------------------------
     @classmethod

@@ -18,6 +18,11 @@ import numpy as np
 from .errors import ValidationError
 from .features import Feature, FeatureSpace
 
+def first_line(doc: str | None) -> str:
+    """The first non-empty line of a docstring ("" when there is none)."""
+    return next((ln.strip() for ln in (doc or "").splitlines() if ln.strip()), "")
+
+
 #: Penalty forms a constraint can report. ``"paper"`` is formula (6) of the reference
 #: paper (squared physical units); ``"normalised"`` is the relative violation
 #: (dimensionless, 0 when met), comparable across constraints.
@@ -73,7 +78,7 @@ class Constraint(ABC):
         return self.penalty(cols, "normalised")
 
     def describe(self) -> dict:
-        return {"name": self.name, "features": list(self.features), "doc": (self.__doc__ or "").strip().splitlines()[0]}
+        return {"name": self.name, "features": list(self.features), "doc": first_line(self.__doc__)}
 
 
 @dataclass

@@ -386,6 +386,28 @@ class ControllerSettings:
     generation_floor_j: float = 1.0e-3
     dither_damping_ns_per_m: float = 3.0
     count_play_ratio: float = 0.75
+    stiffness_cap: bool = True
+    cap_damping_share: float = 0.3
+    cap_count_force_n: float | None = None
+
+
+def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float,
+                           damping_ns_per_m: float | None = None,
+                           resolution_mm: float | None = None) -> float:
+    """Stiffness cap ``K_c`` (N/mm) of :class:`PassivityController` for period ``dt`` (s):
+    the stiffest spring the device renders passively with the controller's damper as the
+    margin, ``K_c = 2 (b + share * alpha_max) / dt`` (Colgate's ``b > K T / 2`` with the
+    device damping ``b`` plus ``cap_damping_share`` of the damper's bound
+    ``max_damping_ns_per_m``), and, when ``cap_count_force_n`` is set and the encoder is
+    quantised, at most that force per encoder count. ``inf`` when the cap is off."""
+    if not settings.stiffness_cap or not dt > 0:
+        return math.inf
+    b = settings.device_damping_ns_per_m if damping_ns_per_m is None else float(damping_ns_per_m)
+    kc = 2.0 * (max(b, 0.0) + settings.cap_damping_share * settings.max_damping_ns_per_m) / dt / 1000.0
+    res = settings.position_resolution_mm if resolution_mm is None else float(resolution_mm)
+    if settings.cap_count_force_n is not None and res > 0:
+        kc = min(kc, settings.cap_count_force_n / res)
+    return kc
 
 
 def _cap(budget: float, v: float, dt: float, mass: float | None, quantum_m: float = 0.0) -> float:
@@ -434,7 +456,8 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "generation_j", "dissipated_j", "bounded_j", "active_ticks",
-                 "_x_prev", "_f_prev", "_f_pc_prev", "_v", "_out_prev", "_fw_prev", "_x_play")
+                 "capped_n", "_x_prev", "_f_prev", "_f_pc_prev", "_v", "_out_prev", "_fw_prev", "_x_play",
+                 "_cap_dt", "_cap_k")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: float) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -448,6 +471,9 @@ class PassivityController:
         self.dissipated_j = 0.0    # energy removed by the damper (J)
         self.bounded_j = 0.0       # sum over ticks of the force withheld by the energy bound (N)
         self.active_ticks = 0
+        self.capped_n = 0.0        # sum over ticks of the force removed by the stiffness cap (N)
+        self._cap_dt = -1.0
+        self._cap_k = math.inf
         self._x_prev: float | None = None
         self._f_prev = 0.0
         self._f_pc_prev = 0.0
@@ -457,6 +483,16 @@ class PassivityController:
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Observe, then return the force (N) to command this tick."""
         s = self.settings
+        if s.stiffness_cap and f_wall > 0.0 and x_mm < 0.0:
+            # stiffness cap: the wall's force is at most K_c x penetration (the surface is
+            # at x = 0), a conservative spring of the stiffness the device renders passively
+            if dt != self._cap_dt:
+                self._cap_dt = dt
+                self._cap_k = cap_stiffness_n_per_mm(s, dt)
+            fc = -self._cap_k * x_mm
+            if f_wall > fc:
+                self.capped_n += f_wall - fc
+                f_wall = fc
         if self._x_prev is None or not dt > 0:
             self._x_prev = x_mm
             self._x_play = x_mm
@@ -581,6 +617,7 @@ class PassivityController:
         return {"observed_energy_j": self.energy_j, "generation_j": self.generation_j,
                 "dissipated_j": self.dissipated_j,
                 "withheld_n_ticks": self.bounded_j, "active_ticks": self.active_ticks,
+                "stiffness_capped_n_ticks": self.capped_n,
                 "energy_tolerance_j": self.settings.energy_tolerance_j,
                 "bound_tolerance_j": self.settings.bound_tolerance_j}
 
@@ -613,6 +650,14 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     adx = np.abs(dx)
     count_level = (qm > 0) & (adx <= 1.000001 * qm)
     f = np.array(f_wall, float)
+    if s.stiffness_cap and dt > 0:
+        kc = 2.0 * (np.maximum(bb, 0.0) + s.cap_damping_share * s.max_damping_ns_per_m) / dt / 1000.0
+        if s.cap_count_force_n is not None:
+            kc = np.where(res > 0, np.minimum(kc, s.cap_count_force_n / np.where(res > 0, res, 1.0)), kc)
+        xa = np.asarray(x_mm, float)
+        fc = np.where((f > 0.0) & (xa < 0.0), np.minimum(f, -kc * xa), f)
+        f = np.where(on, fc, f)  # cells with the controller off keep the raw wall
+        f_wall = f
     dfw = np.abs(f - state["fw_prev"]) * dt
     h = res * 0.5
     xp0 = np.where(started, state["x_play"], x_mm)

@@ -107,7 +107,7 @@ def plot_render(report: Any, path: str | Path) -> Path:
     force = np.asarray(log.get("force_n", np.zeros_like(t)))
     vel = np.asarray(log["velocity_mm_s"])
     roles = sorted(k[: -len(".amplitude")] for k in log if k.endswith(".amplitude"))
-    driven = [r for r in roles if np.any(np.asarray(log[f"{r}.amplitude"]) != 0)]
+    driven = list(roles)
     idle = [r for r in roles if r not in driven]
 
     notes = []
@@ -170,7 +170,7 @@ def plot_render(report: Any, path: str | Path) -> Path:
     a.set_title("probe motion", fontsize=10)
     handles = [*h1, h2, *h3]
     a.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper center",
-             bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
+             ncol=3, frameon=False)
 
     # -- one panel per driven vibration channel --------------------------------------
     for i, r in enumerate(driven):
@@ -179,15 +179,16 @@ def plot_render(report: Any, path: str | Path) -> Path:
         lim = _limits(report, r)
         unit = _unit_label(str(lim.get("amplitude_unit", "")))
         act = (getattr(report, "actuators", {}) or {}).get(r, "?")
-        h1 = a.plot(t, log[f"{r}.amplitude"], color="C1", lw=1.0, label=f"drive amplitude ({unit})")
+        h1 = a.plot(t, log[f"{r}.amplitude"], color="C1", lw=1.0, label=f"drive ({unit})")
         a.set_xlabel("time (s)")
-        a.set_ylabel(f"drive amplitude ({unit})")
+        a.set_ylabel(f"drive ({unit})")
         handles = list(h1)
         fk = f"{r}.frequency_hz"
-        if fk in log:
-            a2 = a.twinx()
-            fr = np.asarray(log[fk], float)
+        fr = np.asarray(log.get(fk, np.zeros(0)), float)
+        if fr.size:
             fr = np.where(np.asarray(log[f"{r}.amplitude"]) != 0, fr, np.nan)  # frequency while driven
+        if fr.size and np.nanmax(np.nan_to_num(fr, nan=0.0)) > 0:  # a channel without frequency: none drawn
+            a2 = a.twinx()
             handles += a2.plot(t, fr, color="C4", lw=1.0, ls="--", label="drive frequency (Hz, while driven)")
             a2.set_ylabel("drive frequency (Hz)")
             if np.isfinite(fr).any():  # from 0, so a constant frequency reads as one
@@ -218,7 +219,7 @@ def _cells_grid(cells: Sequence[Mapping[str, Any]], damping: float, controller: 
     for c in sel:
         i, j = ts.index(float(c["period_s"])), ks.index(float(c["stiffness_n_per_mm"]))
         r = float(c.get("delivered_force_ratio", np.nan))
-        ratio[i, j] = r if np.isnan(ratio[i, j]) else np.nanmin([ratio[i, j], r])
+        ratio[i, j] = r if np.isnan(ratio[i, j]) else np.nanmax([ratio[i, j], r])
         energy[i, j] = np.nanmax([energy[i, j], float(c["energy_to_user_j"])])
         stable[i, j] &= bool(c["stable"])
     return ks, ts, ratio, energy, stable

@@ -438,7 +438,10 @@ class PlaybackDevice(HapticDevice):
     simulated: ClassVar[bool] = True
 
     def __init__(self, *, run: RunLog | str | Path, at_end: str = "hold", limits: ActuatorLimits | None = None,
-                 label: str | None = None, safety: Any = None) -> None:
+                 label: str | None = None, safety: Any = None, **options: Any) -> None:
+        if options:
+            raise ValidationError(f"unknown option(s) {sorted(options)} for actuator {self.name!r}",
+                                  field="options")
         self.run = run if isinstance(run, RunLog) else load_run(run)
         if at_end not in ("hold", "error"):
             raise ValidationError(f"at_end must be 'hold' or 'error', got {at_end!r}", field="at_end")
@@ -495,7 +498,25 @@ class PlaybackDevice(HapticDevice):
         self.received.append(cmd)
 
     def _stop(self) -> None:
-        pass
+        self.received.append(ChannelCommand(self.channel, force_n=0.0))
+
+    def _read_back(self) -> ChannelCommand:
+        """A playback applies nothing; its record of the last command received."""
+        last = self.received[-1] if self.received else None
+        return ChannelCommand(self.channel, force_n=0.0 if last is None or last.force_n is None else last.force_n)
+
+    @classmethod
+    def conformance_options(cls) -> dict[str, Any]:
+        """A self-contained 200-tick run of a probe pressing 2 mm (for the conformance kit)."""
+        from .sim.finger import press_slide
+        from .sim.probe import VirtualProbe
+        rec = RunRecorder(None, device=VirtualProbe(trajectory=press_slide()))
+        dev = VirtualProbe(trajectory=press_slide())
+        with dev:
+            for k in range(200):
+                rec.record(k * 1e-3, dev.read_state(), {})
+                dev.step(1e-3)
+        return {"run": rec.to_runlog()}
 
     def received_array(self, field_name: str = "force_n") -> np.ndarray:
         """One field of the commands received so far, ``(n,)`` (NaN where ``None``)."""

@@ -243,6 +243,10 @@ class SafetyLayer:
             force = float(force)
         if amp is not None and s.ramp_amplitude:
             amp = gain * amp
+        lo_amp = getattr(lim, "min_amplitude", None)
+        if amp is not None and lo_amp is not None and amp < lo_amp:
+            self._hit("min_amplitude")
+            amp = float(lo_amp)
         # one new command per tick (dataclasses.replace costs several us on the servo path)
         out = ChannelCommand(cmd.role, force, freq, amp, cmd.direction)
         self._last = out

@@ -92,6 +92,7 @@ class BatchSolveResult(list):  # type: ignore[type-arg]
     nit: int
     trace: list[dict[str, Any]]
     method: str
+    model: dict[str, Any]      # provenance of the model, set by hapticsdk.problems.solve
 
     def __init__(self, results: Sequence[SolveResult] | None = None, *, data: "_BatchData | None" = None,
                  **attrs: Any) -> None:

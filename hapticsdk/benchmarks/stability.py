@@ -1,4 +1,5 @@
-"""Stability matrix of a virtual wall on the simulated Omni (``hapticsdk bench stability``).
+"""Stability and transparency matrix of a virtual wall on the simulated Omni
+(``hapticsdk bench stability``).
 
 Every cell is one 10 s simulated run of a raw spring wall ``F = K * penetration``
 (deliberately *not* split by formula (8), so stiffnesses far above the Omni's limit
@@ -6,22 +7,51 @@ reach the arm and test the passivity controller) on the simulated Omni axis
 (:mod:`hapticsdk.sim.arm`: exact ZOH integration, force saturation 3.3 N, encoder
 0.055 mm), pushed by a finger impedance along a scripted press/slide/tap trajectory,
 then released for the last second. All cells of one servo period run together as numpy
-arrays (one vectorised step per tick for the whole grid).
+arrays (one vectorised step per tick for the whole grid). Each cell runs with the
+passivity controller on and off.
 
-Per cell: ``energy_to_user_j`` = max over time of the energy the arm + wall gave to the
-finger (the negative of the display-port energy ``W_d = 1/2 m v^2 + int b v^2 - int F v``;
-exact under the hold), ``peak_force_n``, ``max_force_step_n`` (largest
-change of the applied force between two ticks, N; includes the wall's own jump at
-contact), ``delivered_force_ratio`` (sum of the force the arm applied over the ticks
-the wall was touched, divided by the sum of the wall force asked there, capped at the
-device limit: 1 = the wall was rendered as asked, lower = the controller or the damping
-took force away; NaN when the wall was never touched), ``oscillation_after_release_n`` (largest wall
-force over the last 0.5 s, when the finger rests 2 mm above the surface: any force
-means the stylus still bounces on the wall), and ``stable`` = energy within
-:data:`ENERGY_TOLERANCE_J`, no force after release (below
-:data:`OSCILLATION_TOLERANCE_N`) and peak force within the device limit. Each cell is
-run with the controller on and off; ``margin_ns_per_m`` is the Colgate prediction
-(:func:`hapticsdk.passivity.passivity_margin`, d = 0).
+What a cell measures (all from the simulation, nothing from the controller's own
+bookkeeping):
+
+* ``energy_to_user_j``: max over time of the energy the arm + wall gave to the finger
+  (the negative of the display-port energy ``W_d = 1/2 m v^2 + int b v^2 - int F v``;
+  exact under the hold).
+* ``peak_commanded_force_n``: largest force the renderer + controller *commanded*, before
+  the arm's 3.3 N saturation; ``peak_force_n``: largest force the arm applied (after it).
+* ``max_force_step_n``: largest change of the applied force between two ticks (N;
+  includes the wall's own jump at contact).
+* Transparency over the *contact ticks* (reading inside the wall), the applied force
+  against a target evaluated at the same reading the wall was computed from, each target
+  capped at the arm's force limit (it cannot push harder):
+  ``delivered_vs_wall_ratio`` = sum(applied) / sum(min(K pen, limit));
+  ``delivered_vs_wall_min_ratio_above_1mm`` = the smallest per-tick ratio of the same on
+  ticks deeper than 1 mm; ``delivered_vs_passive_ratio`` = sum(applied) /
+  sum(min(min(K, K_pass) pen, limit)) against the stiffest passive spring of the cell;
+  ``min_force_above_1mm_n`` and ``felt_force_ratio_min`` = min over ticks deeper than
+  1 mm of applied / min(:data:`FELT_FORCE_N`, :data:`FELT_FRACTION` K pen) (>= 1: a
+  person feels the wall on every such tick).
+* ``passive_stiffness_n_per_mm`` (K_pass): the stiffest wall the same cell (period,
+  device damping, finger; same trajectory, same simulation) keeps *stable with the
+  controller off*, found per (T, b, finger) on a log grid of :data:`KPASS_GRID_POINTS`
+  stiffnesses over :data:`KPASS_RANGE_N_PER_MM`, refined once on
+  :data:`KPASS_REFINE_POINTS` log-spaced points between the last stable and the first
+  unstable grid stiffness (so within a factor ``KPASS_REFINE_RATIO`` below the true
+  boundary, assuming stability is monotone in K, which the grid checks only at its
+  points). 0 when even the softest grid wall is unstable.
+* ``stable``: energy to the user <= :data:`ENERGY_TOLERANCE_J` and no wall force after
+  release (<= :data:`OSCILLATION_TOLERANCE_N`, the finger rests 2 mm above the surface).
+  The peak force is reported, not judged: a saturated command is not an instability.
+* ``outcome``: ``"unstable"``, ``"stable and transparent"`` (delivered >=
+  :data:`TRANSPARENT_FRACTION` of min(K, K_pass) x penetration) or ``"stable by
+  withholding"``.
+
+Not measured: Coulomb friction (the simulator has none, so the quantisation mode of
+Abbott & Okamura is not damped by it), computation delay beyond the zero-order hold,
+multi-axis coupling, loop jitter (the period is exact), a human's reaction (the finger is
+a fixed impedance following a script).
+
+The tolerances here are the benchmark's own, set from what a user must get (the wall
+felt, no energy handed out), independent of any constant of the controller.
 """
 
 from __future__ import annotations
@@ -39,14 +69,29 @@ from ..passivity import (ControllerSettings, controller_commit_batch, controller
 from ..sim.arm import ArmBatch, ArmParams
 from ..sim.finger import FINGERS, Trajectory, press_slide, taps
 
-#: Energy the wall may give to the user with the controller on (J): 2.5 mJ, i.e. the
-#: controller's bound tolerance (1 mJ, ControllerSettings.bound_tolerance_j: lower values
-#: make the controller chatter on encoder-quantisation noise, see docs/runtime.md) plus
-#: 1.5 mJ for what a one-period prediction cannot see: the finger's own push during the
-#: period and the encoder's quantisation (3.3 N x 0.055 mm = 0.18 mJ per count).
-ENERGY_TOLERANCE_J = 2.5e-3
+#: Energy the wall may give to the user over a 10 s cell (J): 0.1 mJ, about what the
+#: finger gets from one tap on a 2 x 2b/T wall (a small fraction of the ~10 mJ of work the
+#: finger does on the wall per press). Set from the goal, not from the controller.
+ENERGY_TOLERANCE_J = 1.0e-4
 #: Wall force after release counted as continuing oscillation (N).
 OSCILLATION_TOLERANCE_N = 1e-6
+#: Fraction of min(K, K_pass) x penetration that must be delivered over the contact ticks.
+TRANSPARENT_FRACTION = 0.9
+#: Force a person must feel on every contact tick deeper than FELT_DEPTH_MM (N), or
+#: FELT_FRACTION x K x penetration for a softer wall.
+FELT_FORCE_N = 0.5
+FELT_FRACTION = 0.9
+FELT_DEPTH_MM = 1.0
+#: K_pass search: log grid (N/mm), points, then one refinement between the bracket.
+KPASS_RANGE_N_PER_MM = (1e-4, 1e2)
+KPASS_GRID_POINTS = 25
+KPASS_REFINE_POINTS = 16
+KPASS_REFINE_RATIO = float((KPASS_RANGE_N_PER_MM[1] / KPASS_RANGE_N_PER_MM[0])
+                           ** (1.0 / (KPASS_GRID_POINTS - 1) / (KPASS_REFINE_POINTS + 1)))
+
+STABLE_TRANSPARENT = "stable and transparent"
+STABLE_WITHHOLDING = "stable by withholding"
+UNSTABLE = "unstable"
 
 DEFAULT_GRID = {
     "stiffness_n_per_mm": [0.01, 0.1, 0.7, 2.3, 10.0, 100.0, 1000.0, 10000.0],
@@ -87,30 +132,63 @@ class StabilityResult:
 
     def to_dict(self) -> dict[str, Any]:
         return {"cells": self.cells, "energy_tolerance_j": self.tolerance_j,
-                "oscillation_tolerance_n": OSCILLATION_TOLERANCE_N, "duration_s": self.duration_s,
-                "runtime_s": self.runtime_s, "summary": summarise(self.cells)}
+                "oscillation_tolerance_n": OSCILLATION_TOLERANCE_N,
+                "transparent_fraction": TRANSPARENT_FRACTION,
+                "felt_force_n": FELT_FORCE_N, "felt_fraction": FELT_FRACTION, "felt_depth_mm": FELT_DEPTH_MM,
+                "passive_stiffness_search": {
+                    "method": "log grid then one log refinement between the last stable and first unstable "
+                              "grid stiffness, same simulation with the controller off",
+                    "range_n_per_mm": list(KPASS_RANGE_N_PER_MM), "grid_points": KPASS_GRID_POINTS,
+                    "refine_points": KPASS_REFINE_POINTS, "resolution_ratio": KPASS_REFINE_RATIO},
+                "duration_s": self.duration_s, "runtime_s": self.runtime_s, "summary": summarise(self.cells)}
+
+
+def _nanmin(vals: Sequence[float]) -> float:
+    v = [x for x in vals if x == x]
+    return min(v) if v else float("nan")
 
 
 def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Counts per outcome and worst figures, controller on and off."""
     on = [c for c in cells if c["controller"]]
     off = [c for c in cells if not c["controller"]]
+
+    def count(group: Sequence[dict[str, Any]], outcome: str) -> int:
+        return sum(c["outcome"] == outcome for c in group)
+
+    felt_miss = [c for c in on if c["felt_force_ratio_min"] == c["felt_force_ratio_min"]
+                 and c["felt_force_ratio_min"] < 1.0]
     return {"cells": len(cells),
-            "controller_on_unstable": sum(not c["stable"] for c in on),
+            "controller_on_stable_transparent": count(on, STABLE_TRANSPARENT),
+            "controller_on_stable_withholding": count(on, STABLE_WITHHOLDING),
+            "controller_on_unstable": count(on, UNSTABLE),
+            "controller_on_felt_force_missed": len(felt_miss),
             "controller_on_max_energy_j": max((c["energy_to_user_j"] for c in on), default=float("nan")),
+            "controller_on_min_delivered_vs_passive": _nanmin([c["delivered_vs_passive_ratio"] for c in on]),
+            "controller_on_min_delivered_vs_wall": _nanmin([c["delivered_vs_wall_ratio"] for c in on]),
+            "controller_on_min_felt_force_ratio": _nanmin([c["felt_force_ratio_min"] for c in on]),
             "controller_on_max_peak_force_n": max((c["peak_force_n"] for c in on), default=float("nan")),
-            "controller_on_max_force_step_n": max((c.get("max_force_step_n", float("nan")) for c in on),
-                                                  default=float("nan")),
-            "controller_off_unstable": sum(not c["stable"] for c in off),
+            "controller_on_max_peak_commanded_force_n": max((c["peak_commanded_force_n"] for c in on),
+                                                            default=float("nan")),
+            "controller_on_max_force_step_n": max((c["max_force_step_n"] for c in on), default=float("nan")),
+            "controller_off_stable_transparent": count(off, STABLE_TRANSPARENT),
+            "controller_off_stable_withholding": count(off, STABLE_WITHHOLDING),
+            "controller_off_unstable": count(off, UNSTABLE),
             "controller_off_predicted_active": sum(c["margin_ns_per_m"] < 0 for c in off)}
 
 
 def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[str], on: np.ndarray,
                duration_s: float, *, arm: ArmParams | None = None,
-               settings: ControllerSettings | None = None,
+               settings: ControllerSettings | None = None, k_pass: Any = None,
                on_ticks: Any = None) -> dict[str, np.ndarray]:
-    """Simulate all cells of one period together; returns per-cell metric arrays.
-    ``on_ticks(done)`` (optional) is called every 1000 ticks and at the end."""
+    """Simulate all cells of one period together; returns per-cell metric arrays (see the
+    module docstring). ``k_pass`` (N/mm, per cell; optional) is the stiffest passive
+    spring the delivered force is also compared with (``delivered_vs_passive_ratio``,
+    NaN without it). ``on_ticks(done)`` (optional) is called every 1000 ticks and at the
+    end."""
     arm = arm or ArmParams()
+    K = np.asarray(K, float)
+    n = K.size
     arms = [arm.with_(damping_ns_per_m=float(bi)) for bi in b]
     fings = [FINGERS[f] for f in fingers]
     traj = matrix_trajectory(duration_s)
@@ -119,30 +197,50 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
     _, r = traj.position(tt)
     x0 = float(r[0])
     batch = ArmBatch(period_s, arms, fings, y0_mm=x0, track_energy=True)
-    st = controller_state_batch(len(arms))
+    st = controller_state_batch(n)
     limit = batch.fmax
-    peak = np.zeros(len(arms))
-    e_max = np.zeros(len(arms))
-    resid = np.zeros(len(arms))
-    dmax = np.zeros(len(arms))
-    f_last = np.zeros(len(arms))
-    asked = np.zeros(len(arms))     # sum of the wall force asked (capped at the limit) in contact, N
-    given = np.zeros(len(arms))     # sum of the force the arm applied on those ticks, N
+    kp = np.full(n, np.nan) if k_pass is None else np.broadcast_to(np.asarray(k_pass, float), (n,))
+    k_eff = np.minimum(K, kp)
+    peak = np.zeros(n)
+    peak_cmd = np.zeros(n)
+    e_max = np.zeros(n)
+    resid = np.zeros(n)
+    dmax = np.zeros(n)
+    f_last = np.zeros(n)
+    given = np.zeros(n)      # sum of the applied force over the contact ticks (N)
+    asked = np.zeros(n)      # sum of min(K pen, limit) there (N)
+    asked_p = np.zeros(n)    # sum of min(min(K, K_pass) pen, limit) there (N)
+    contact = np.zeros(n, int)
+    min_wall = np.full(n, np.inf)   # min over ticks deeper than FELT_DEPTH_MM of applied / min(K pen, limit)
+    min_felt = np.full(n, np.inf)   # ... of applied / min(FELT_FORCE_N, FELT_FRACTION K pen)
+    min_f = np.full(n, np.inf)      # ... of the applied force (N)
     t_rel = duration_s - 0.5
     for k in range(n_ticks):
         if on_ticks is not None and k % 1000 == 0 and k:
             on_ticks(k)
         y_meas = batch.measured_mm()
         pen = -y_meas
-        f_wall = np.where(pen > 0, K * pen, 0.0)
+        touching = pen > 0
+        f_wall = np.where(touching, K * pen, 0.0)
         f_cmd = controller_step_batch(st, y_meas, period_s, f_wall, on, settings, damping_ns_per_m=b,
                                       resolution_mm=batch.res_mm)
         f_cmd = np.nan_to_num(f_cmd, nan=0.0)
+        np.maximum(peak_cmd, np.abs(f_cmd), out=peak_cmd)
         f = batch.step(f_cmd, r[k], (r[k + 1] - r[k]) / period_s)  # one reference for all cells (broadcast)
         controller_commit_batch(st, f)
-        touching = f_wall > 0
-        asked += np.where(touching, np.minimum(f_wall, limit), 0.0)
-        given += np.where(touching, f, 0.0)
+        if touching.any():
+            law = np.minimum(f_wall, limit)
+            given += np.where(touching, f, 0.0)
+            asked += np.where(touching, law, 0.0)
+            asked_p += np.where(touching, np.minimum(k_eff * pen, limit), 0.0)
+            contact += touching
+            deep = pen > FELT_DEPTH_MM
+            if deep.any():
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    np.minimum(min_wall, np.where(deep, f / law, np.inf), out=min_wall)
+                    floor = np.minimum(FELT_FORCE_N, FELT_FRACTION * f_wall)
+                    np.minimum(min_felt, np.where(deep, f / floor, np.inf), out=min_felt)
+                np.minimum(min_f, np.where(deep, f, np.inf), out=min_f)
         np.maximum(peak, np.abs(f), out=peak)
         np.maximum(dmax, np.abs(f - f_last), out=dmax)
         f_last = f
@@ -153,17 +251,83 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
         on_ticks(n_ticks)
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.where(asked > 0, given / np.where(asked > 0, asked, 1.0), np.nan)
-    return {"energy_to_user_j": e_max, "peak_force_n": peak, "oscillation_after_release_n": resid,
-            "max_force_step_n": dmax, "delivered_force_ratio": ratio,
+        ratio_p = np.where(asked_p > 0, given / np.where(asked_p > 0, asked_p, 1.0), np.nan)
+    none = ~np.isfinite(min_wall)
+    return {"energy_to_user_j": e_max, "peak_force_n": peak, "peak_commanded_force_n": peak_cmd,
+            "oscillation_after_release_n": resid, "max_force_step_n": dmax,
+            "delivered_vs_wall_ratio": ratio, "delivered_vs_passive_ratio": ratio_p,
+            "delivered_vs_wall_min_ratio_above_1mm": np.where(none, np.nan, min_wall),
+            "felt_force_ratio_min": np.where(none, np.nan, min_felt),
+            "min_force_above_1mm_n": np.where(none, np.nan, min_f), "contact_ticks": contact,
             "limit_n": limit, "observed_energy_j": st["energy"], "dissipated_j": st["dissipated"]}
+
+
+def _is_stable(res: dict[str, np.ndarray]) -> np.ndarray:
+    return (res["energy_to_user_j"] <= ENERGY_TOLERANCE_J) & (res["oscillation_after_release_n"]
+                                                               <= OSCILLATION_TOLERANCE_N)
+
+
+def passive_stiffness(period_s: float, b: Sequence[float], fingers: Sequence[str], duration_s: float, *,
+                      arm: ArmParams | None = None, on_ticks: Any = None) -> np.ndarray:
+    """K_pass (N/mm) per (b, finger) pair at one period: the stiffest wall the same
+    simulation keeps stable (:func:`_is_stable`) with the controller *off*.
+
+    A log grid of :data:`KPASS_GRID_POINTS` stiffnesses over :data:`KPASS_RANGE_N_PER_MM`
+    (one vectorised run for all pairs), then :data:`KPASS_REFINE_POINTS` log-spaced
+    stiffnesses strictly between the last stable grid point below the first unstable one
+    and that unstable one (a second run). Returns the largest stable stiffness below the
+    first unstable one (0 if the softest is unstable; the range's top if none is)."""
+    b = [float(x) for x in b]
+    m = len(b)
+    lo, hi = KPASS_RANGE_N_PER_MM
+    grid = np.geomspace(lo, hi, KPASS_GRID_POINTS)
+
+    def first_stable_run(ks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """ks (m, p): per pair the index of the last stable point before the first unstable one (-1)."""
+        p = ks.shape[1]
+        K = ks.reshape(-1)
+        bb = np.repeat(b, p)
+        ff = [f for f in fingers for _ in range(p)]
+        res = run_period(period_s, K, bb, ff, np.zeros(K.size, bool), duration_s, arm=arm, on_ticks=on_ticks)
+        ok = _is_stable(res).reshape(m, p)
+        bad = ~ok
+        first_bad = np.where(bad.any(axis=1), bad.argmax(axis=1), p)
+        return first_bad - 1, first_bad
+
+    ks = np.tile(grid, (m, 1))
+    last, first_bad = first_stable_run(ks)
+    out = np.where(last >= 0, grid[np.maximum(last, 0)], 0.0)
+    need = first_bad < grid.size
+    if need.any():
+        a = np.where(last >= 0, grid[np.maximum(last, 0)], lo / (grid[1] / grid[0]))
+        z = grid[np.minimum(first_bad, grid.size - 1)]
+        frac = np.arange(1, KPASS_REFINE_POINTS + 1) / (KPASS_REFINE_POINTS + 1)
+        fine = a[:, None] * (z / a)[:, None] ** frac[None, :]
+        last2, _ = first_stable_run(fine)
+        refined = np.where(last2 >= 0, fine[np.arange(m), np.maximum(last2, 0)], out)
+        out = np.where(need, refined, out)
+    else:
+        out = np.full(m, hi)
+    return out
+
+
+def classify(stable: bool, delivered_vs_passive: float) -> str:
+    """Outcome label of a cell (see the module docstring)."""
+    if not stable:
+        return UNSTABLE
+    if delivered_vs_passive == delivered_vs_passive and delivered_vs_passive < TRANSPARENT_FRACTION:
+        return STABLE_WITHHOLDING
+    return STABLE_TRANSPARENT
 
 
 def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = None,
                settings: ControllerSettings | None = None, progress: Any = None) -> StabilityResult:
     """Run the stability matrix over ``grid`` (keys as :data:`DEFAULT_GRID`).
 
+    Per period: K_pass per (b, finger) (:func:`passive_stiffness`, two runs with the
+    controller off), then all cells with the controller on and off.
     ``progress(stage, done, total)`` (:mod:`hapticsdk.progress`) follows the simulated
-    servo ticks of all periods."""
+    servo ticks of all runs."""
     g = dict(DEFAULT_GRID)
     g.update(grid or {})
     if not float(g["duration_s"]) >= 3.0:
@@ -172,28 +336,41 @@ def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = No
     t0 = time.perf_counter()
     cells: list[dict[str, Any]] = []
     from ..progress import report
-    total = sum(int(round(float(g["duration_s"]) / float(T))) for T in g["period_s"])
-    before = 0
+    dur = float(g["duration_s"])
+    total = sum(3 * int(round(dur / float(T))) for T in g["period_s"])
+    done = [0]
+
+    def ticker(k: int, base: list[int] = done) -> None:
+        report(progress, "simulated servo ticks", base[0] + k, total)
+
     for T in g["period_s"]:
+        T = float(T)
+        nt = int(round(dur / T))
+        pairs = list(itertools.product(g["damping_ns_per_m"], g["finger"]))
+        kp_pairs = passive_stiffness(T, [p[0] for p in pairs], [p[1] for p in pairs], dur, arm=arm,
+                                     on_ticks=ticker)
+        done[0] += 2 * nt
+        kp_of = {p: float(k) for p, k in zip(pairs, kp_pairs)}
         combos = list(itertools.product(g["stiffness_n_per_mm"], g["damping_ns_per_m"], g["finger"], (True, False)))
         K = np.array([c[0] for c in combos], float)
         b = np.array([c[1] for c in combos], float)
         fn = [c[2] for c in combos]
         on = np.array([c[3] for c in combos], bool)
-        res = run_period(float(T), K, b, fn, on, float(g["duration_s"]), arm=arm, settings=settings,
-                         on_ticks=lambda k, b0=before: report(progress, "simulated servo ticks", b0 + k, total))
-        before += int(round(float(g["duration_s"]) / float(T)))
+        kp = np.array([kp_of[(c[1], c[2])] for c in combos])
+        res = run_period(T, K, b, fn, on, dur, arm=arm, settings=settings, k_pass=kp, on_ticks=ticker)
+        done[0] += nt
+        stable = _is_stable(res)
         for i, (Ki, bi, fi, oi) in enumerate(combos):
-            e = float(res["energy_to_user_j"][i])
-            pk = float(res["peak_force_n"][i])
-            osc = float(res["oscillation_after_release_n"][i])
-            stable = bool(e <= ENERGY_TOLERANCE_J and osc <= OSCILLATION_TOLERANCE_N
-                          and pk <= float(res["limit_n"][i]) + 1e-9)
-            cells.append({"stiffness_n_per_mm": float(Ki), "period_s": float(T), "damping_ns_per_m": float(bi),
-                          "finger": fi, "controller": bool(oi), "energy_to_user_j": e, "peak_force_n": pk,
-                          "oscillation_after_release_n": osc, "stable": stable,
-                          "max_force_step_n": float(res["max_force_step_n"][i]),
-                          "delivered_force_ratio": float(res["delivered_force_ratio"][i]),
-                          "margin_ns_per_m": float(passivity_margin(Ki, 0.0, bi, T, 0))})
-    return StabilityResult(cells=cells, tolerance_j=ENERGY_TOLERANCE_J, duration_s=float(g["duration_s"]),
+            cell = {"stiffness_n_per_mm": float(Ki), "period_s": T, "damping_ns_per_m": float(bi),
+                    "finger": fi, "controller": bool(oi), "stable": bool(stable[i]),
+                    "passive_stiffness_n_per_mm": float(kp[i]),
+                    "margin_ns_per_m": float(passivity_margin(Ki, 0.0, bi, T, 0))}
+            for key in ("energy_to_user_j", "peak_force_n", "peak_commanded_force_n", "oscillation_after_release_n",
+                        "max_force_step_n", "delivered_vs_wall_ratio", "delivered_vs_wall_min_ratio_above_1mm",
+                        "delivered_vs_passive_ratio", "felt_force_ratio_min", "min_force_above_1mm_n"):
+                cell[key] = float(res[key][i])
+            cell["contact_ticks"] = int(res["contact_ticks"][i])
+            cell["outcome"] = classify(cell["stable"], cell["delivered_vs_passive_ratio"])
+            cells.append(cell)
+    return StabilityResult(cells=cells, tolerance_j=ENERGY_TOLERANCE_J, duration_s=dur,
                            runtime_s=time.perf_counter() - t0)

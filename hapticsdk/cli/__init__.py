@@ -61,6 +61,7 @@ EXAMPLES: dict[str, str] = {
     "bench stability": "hapticsdk bench stability --quick --plot stability.png",
     "bench fidelity": "hapticsdk bench fidelity --periods 0.001 0.004",
     "bench timing": "hapticsdk bench timing --seconds 10 --realtime",
+    "bench live": "hapticsdk bench live --isolation process --app-load all --seconds 5",
     "plugins": "hapticsdk plugins --kind solver --check",
     "materials": "hapticsdk materials --json",
     "solve": "hapticsdk solve --hardness 0.8 --roughness 0.3 --seed 1",

@@ -15,7 +15,11 @@ import json
 from pathlib import Path
 from typing import Any
 
-from . import positive_float
+from .argtypes import positive_float
+
+
+#: ``import --synth`` analyses at most this much of a file (s)
+SYNTH_REPORT_S = 60.0
 
 
 def register(sub: Any) -> None:
@@ -108,9 +112,10 @@ def cmd_import(args: argparse.Namespace) -> int:
     hfile = load(args.file)
     s = import_summary(hfile, source=str(args.file))
     if args.synth:
-        from ..interop.hjif_synth import describe_channel, synthesize
-        syn = synthesize(hfile)
-        s["synthesis"] = {"fs_hz": syn.fs, "duration_s": syn.duration_s,
+        from ..interop.hjif_synth import describe_channel, file_duration_s, synthesize
+        full = file_duration_s(hfile)
+        syn = synthesize(hfile, seconds=min(full, SYNTH_REPORT_S))
+        s["synthesis"] = {"fs_hz": syn.fs, "duration_s": syn.duration_s, "truncated": full > SYNTH_REPORT_S,
                           "channels": [describe_channel(c, syn.fs) for c in syn.channels]}
     if args.json:
         from . import emit

@@ -187,6 +187,31 @@ _REPLACEMENT_ROLES: dict[str, RoleSpec] = {
     "constant-force": RoleSpec("force", {"force_n": "N"}, "constant normal force in contact")}
 
 
+def _check_satisfiable(dims: Sequence[str], settings: Mapping[str, Any]) -> None:
+    """Refuse dimensions whose constraints cannot hold anywhere in the searched feature
+    box (a 16384-point Halton design, the one the solution sets use): a plugin error at
+    compile time, not a material that renders something the constraints forbid."""
+    from ..problems import build_problem
+    from .solution_set import _design
+    s = settings["solver"]
+    problem = build_problem({d: 0.5 for d in dims}, model=settings.get("model"),
+                            penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01),
+                            data_support=bool(s.get("data_support", True)))
+    if not problem.constraints:
+        return
+    U, _, feasible = _design(problem, 16384)
+    if feasible.any():
+        return
+    G = problem.full_inputs(problem.space.from_unit(U))
+    cols = problem.columns(G)
+    never = [c.name for c in problem.constraints if not (np.asarray(c.violation(cols)) <= 0.0).any()]
+    what = (f"constraint(s) {never} hold nowhere" if never else
+            f"the constraints {[c.name for c in problem.constraints]} never hold together")
+    raise PluginError(f"dimensions {list(dims)}: {what} in the searched feature bounds (16384-point design); "
+                      f"no material can satisfy them, so nothing is rendered", kind="dimension",
+                      plugin=",".join(dims))
+
+
 def _role_spec(owner: str, dname: str, role: str, dim_objs: Mapping[str, Any], imp_model: Any) -> RoleSpec | None:
     """The declared spec of ``role`` for a dimension or a replacement (None: undeclared)."""
     if owner.startswith("replacement:"):
@@ -248,6 +273,8 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     groups: dict[tuple[str, ...], list[_Mat]] = {}
     for m in mats:
         groups.setdefault(tuple(m.targets), []).append(m)
+    for dims in groups:
+        _check_satisfiable(dims, settings)
     first = _solve_groups(groups, settings)
 
     # 2. importance: the predicted loss over every feature vector reaching the target

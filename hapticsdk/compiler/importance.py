@@ -95,7 +95,8 @@ class ImportanceModel(ABC):
         return None
 
     def describe(self) -> dict[str, Any]:
-        return {"name": self.name, "doc": (self.__doc__ or "").strip().splitlines()[0]}
+        from ..dimensions import first_line
+        return {"name": self.name, "doc": first_line(self.__doc__)}
 
 
 class PaperRegressionImportance(ImportanceModel):

@@ -37,7 +37,15 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import ValidationError
-from .hjif_model import Band, Channel, Effect, HapticFile, Keyframe, Perception, ReferenceDevice
+from .hjif_model import (
+    Band,
+    Channel,
+    Effect,
+    HapticFile,
+    Keyframe,
+    Perception,
+    ReferenceDevice,
+)
 
 #: separates the human text of a description from the SDK's JSON metadata
 META_MARKER = " hapticsdk-meta:"

@@ -17,8 +17,14 @@ from typing import Any
 from ..errors import FormatError
 from .hjif_export import META_FORMAT, META_MARKER
 from .hjif_model import HapticFile, Perception, read_hjif
-from .hjif_synth import (SYNTH_BAND_TYPES, effect_length_ticks, file_duration_s, is_vibrotactile, resolve_effect,
-                         unsupported_parts)
+from .hjif_synth import (
+    SYNTH_BAND_TYPES,
+    effect_length_ticks,
+    file_duration_s,
+    is_vibrotactile,
+    resolve_effect,
+    unsupported_parts,
+)
 
 __all__ = ["load", "split_description", "sdk_materials", "import_summary"]
 

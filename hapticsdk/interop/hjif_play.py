@@ -36,8 +36,14 @@ import numpy as np
 
 from ..errors import ValidationError
 from .hjif_model import HapticFile
-from .hjif_synth import (MAX_SYNTH_SECONDS, control_track, file_duration_s, is_vibrotactile, spectrum_peak_hz,
-                         unsupported_parts)
+from .hjif_synth import (
+    MAX_SYNTH_SECONDS,
+    control_track,
+    file_duration_s,
+    is_vibrotactile,
+    spectrum_peak_hz,
+    unsupported_parts,
+)
 
 DEFAULT_ACTUATORS = ("piezo-virtual", "voicecoil-virtual")
 #: SDK actuator names a reference device may name to route a channel
@@ -74,7 +80,7 @@ def _route(hfile: HapticFile, actuators: Sequence[str]) -> tuple[list[tuple[int,
         for ci, ch in enumerate(p.channels):
             dev = p.reference_device(ch.reference_device_id)
             name = dev.name if dev else None
-            if name in actuators:
+            if name is not None and name in actuators:
                 targets = [name]
             elif name in SDK_VIBRATION_ACTUATORS:
                 skipped.append({"path": ch.path, "what": f"channel {ch.id}",
@@ -89,7 +95,9 @@ def _route(hfile: HapticFile, actuators: Sequence[str]) -> tuple[list[tuple[int,
 
 
 def _piezo_table(table: Any) -> Any:
-    from hapticsdk_roughness.table import resolve_table  # the piezo's calibration (roughness Tab)
+    from hapticsdk_roughness.table import (
+        resolve_table,  # the piezo's calibration (roughness Tab)
+    )
     return resolve_table(table)
 
 
@@ -159,11 +167,11 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
             table = table or _piezo_table(piezo_table)
             out = np.zeros(n)
             cache: dict[tuple[float, float], float] = {}
-            for k in np.flatnonzero(amp_u > 0):
-                key = (float(freq[k]), float(amp_u[k]))
+            for j in np.flatnonzero(amp_u > 0):
+                key = (float(freq[j]), float(amp_u[j]))
                 if key not in cache:
-                    cache[key] = key[1]
-                out[k] = cache[key]
+                    cache[key] = table.voltage_for(*key)[0]
+                out[j] = cache[key]
             commands[a] = (freq, out, amp_u)
         else:
             commands[a] = (freq, amp_n, amp_u)
@@ -178,6 +186,10 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
             act = create_actuator(a, **dict((actuator_options or {}).get(a, {})))
             opened[a] = act
             act.open()
+            if hasattr(act.safety, "set_period"):
+                # like the servo loop: stale-command age and the backend's command
+                # deadline (DRV2667 host watchdog: 3 periods at least) follow the tick
+                act.safety.set_period(tick_s)
         from ..dimensions import ChannelCommand
 
         t0 = time.monotonic()
@@ -217,7 +229,7 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
             info["max_acceleration_m_s2_requested"] = float(amp_u.max()) if n else 0.0
             info["table_generated"] = bool(getattr(table, "generated", False))
             if hasattr(act, "waveform"):
-                tt, v = act.waveform()
+                _, v = act.waveform()
                 info["output_peak_frequency_hz"] = round(spectrum_peak_hz(v, act.fs), 3)
                 info["output_max_v"] = float(np.max(np.abs(v))) if v.size else 0.0
         else:
@@ -247,8 +259,9 @@ def format_report(r: PlayReport) -> str:
         out = f", output peak {info['output_peak_frequency_hz']:g} Hz" if "output_peak_frequency_hz" in info else ""
         hits = info["safety"].get("limit_hits") if isinstance(info["safety"], dict) else None
         lines.append(f"  {a}: {info['active_ticks']}/{info['ticks']} ticks active, {frs}, max amplitude "
-                     f"{info['max_amplitude']:.4g} {info['amplitude_unit']}{out}"
-                     + (f", safety limits hit {hits}" if hits else ""))
+                     f"{info['max_amplitude']:.4g} {'(normalised)' if info['amplitude_unit'] in ('1', '') else info['amplitude_unit']}{out}"
+                     + (f", safety limits hit {hits}" if hits else "")
+                     + (" (voltages from the GENERATED piezo table)" if info.get("table_generated") else ""))
     for x in r.routing:
         lines.append(f"  {x['channel']} -> {', '.join(x['actuators'])}")
     for u in r.not_played:

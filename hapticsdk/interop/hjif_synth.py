@@ -187,12 +187,12 @@ def _vectorial(effect: Effect, band: Band, rel: np.ndarray, timescale: int) -> n
 def _transient(effect: Effect, rel: np.ndarray, timescale: int) -> np.ndarray:
     d = TRANSIENT_DURATION_MS * timescale / 1000.0
     out = np.zeros_like(rel)
-    for k in effect.keyframes:
+    for k in effect.keyframes:  # rel is ascending: each pulse touches only its own window
         if k.amplitude_modulation is None:
             continue
         p = 0 if k.relative_position is None else k.relative_position
-        m = (rel >= p) & (rel <= p + d)
-        out[m] += k.amplitude_modulation * np.sin(4.0 * np.pi * (rel[m] - p) / d)
+        i0, i1 = np.searchsorted(rel, p, side="left"), np.searchsorted(rel, p + d, side="right")
+        out[i0:i1] += k.amplitude_modulation * np.sin(4.0 * np.pi * (rel[i0:i1] - p) / d)
     return out
 
 
@@ -286,7 +286,9 @@ def unsupported_parts(hfile: HapticFile) -> list[dict[str, str]]:
         if not is_vibrotactile(p):
             kind = ("kinesthetic" if p.perception_modality in ("Force", "Stiffness", "Position", "Velocity",
                                                                 "Acceleration", "Friction") else "non-vibrotactile")
-            out.append({"path": p.path, "what": f"perception {p.id} ({p.perception_modality})",
+            label = p.description.split(" hapticsdk-meta:")[0].strip()
+            label = f" {label[:60]!r}" if label else ""
+            out.append({"path": p.path, "what": f"perception {p.id} ({p.perception_modality}){label}",
                         "reason": f"{kind} perception: the SDK plays only vibrotactile content from .hjif files"})
             continue
         for ch in p.channels:
@@ -404,36 +406,37 @@ def control_track(hfile: HapticFile, perception_index: int, channel_index: int,
             r = resolve_effect(p, e)
             if r.effect_type == "Composite" or not r.keyframes:
                 continue
-            rel = t - r.position
             length = effect_length_ticks(r, b.band_type, ts)
-            inside = (rel >= 0) & (rel <= length)
-            if not inside.any():
+            # t is ascending: work on the effect's own window only
+            i0 = int(np.searchsorted(t, r.position, side="left"))
+            i1 = int(np.searchsorted(t, r.position + length, side="right"))
+            if i1 <= i0:
                 continue
+            rel = t[i0:i1] - r.position
             if b.band_type == "Curve":
-                curve |= inside
+                curve[i0:i1] = True
                 continue
-            a = np.zeros_like(t)
-            f = np.zeros_like(t)
             if b.band_type == "VectorialWave":
                 signals.add(r.base_signal or "Sine")
-                a[inside] = np.abs(amplitude_track(r, rel[inside]))
+                a = np.abs(amplitude_track(r, rel))
                 xs, fs_ = frequency_breakpoints(r, b.lower_frequency_limit, b.upper_frequency_limit)
-                f[inside] = frequency_track(xs, fs_, rel[inside])
+                f = frequency_track(xs, fs_, rel)
             else:  # Transient: 22 ms pulses of two sine periods
+                a = np.zeros_like(rel)
+                f = np.zeros_like(rel)
                 d = TRANSIENT_DURATION_MS * ts / 1000.0
                 for k in r.keyframes:
                     if k.amplitude_modulation is None:
                         continue
                     pk = 0 if k.relative_position is None else k.relative_position
-                    m = (rel >= pk) & (rel <= pk + d)
-                    a[m] = np.maximum(a[m], abs(k.amplitude_modulation))
-                    f[m] = 2.0 * 1000.0 / TRANSIENT_DURATION_MS
+                    j0, j1 = np.searchsorted(rel, pk, side="left"), np.searchsorted(rel, pk + d, side="right")
+                    a[j0:j1] = np.maximum(a[j0:j1], abs(k.amplitude_modulation))
+                    f[j0:j1] = 2.0 * 1000.0 / TRANSIENT_DURATION_MS
                 signals.add("Transient")
-            on = a > 0
-            active += on
-            take = a > best_a
-            best_a = np.where(take, a, best_a)
-            best_f = np.where(take, f, best_f)
+            active[i0:i1] += a > 0
+            take = a > best_a[i0:i1]
+            best_a[i0:i1] = np.where(take, a, best_a[i0:i1])
+            best_f[i0:i1] = np.where(take, f, best_f[i0:i1])
     amp = np.minimum(best_a, 1.0) * abs(ch.gain)
     dev = p.reference_device(ch.reference_device_id)
     return ControlTrack(path=ch.path, frequency_hz=best_f, amplitude=amp, overlaps=int((active > 1).sum()),
@@ -451,11 +454,12 @@ def spectrum_peak_hz(x: np.ndarray, fs: float) -> float:
     mag = np.abs(np.fft.rfft((x - x.mean()) * w))
     mag[0] = 0.0
     k = int(np.argmax(mag))
+    pos = float(k)
     if 0 < k < mag.size - 1:
         a, b, c = np.log(mag[k - 1:k + 2] + 1e-300)
         den = a - 2 * b + c
-        k = k + (0.5 * (a - c) / den if den != 0 else 0.0)
-    return float(k * fs / x.size)
+        pos += 0.5 * (a - c) / den if den != 0 else 0.0
+    return pos * fs / x.size
 
 
 def describe_channel(sig: ChannelSignal, fs: float) -> dict[str, Any]:

@@ -63,6 +63,7 @@ class CommandWatchdog:
         self._thread: threading.Thread | None = None
         self.trips = 0
         self.failures = 0
+        self._failing = 0
         self.last_error: str | None = None
         #: age of the last command when the safe-state write finished (s), per trip
         self.trip_ages_s: list[float] = []
@@ -143,15 +144,22 @@ class CommandWatchdog:
                         except BaseException:  # noqa: BLE001
                             pass
                     self.failures += 1         # after on_error: a reader seeing it sees the fault
-                    _log.error("%s: safe-state write after %.1f ms without a command failed (%d so far; "
-                               "retrying every %.0f ms): %s", self._name, age * 1e3, self.failures,
-                               deadline * 1e3, self.last_error)
+                    # the first failure of a series as an error, the retries quietly
+                    _log.log(logging.ERROR if self._failing == 0 else logging.DEBUG,
+                             "%s: safe-state write after %.1f ms without a command failed (%d so far; "
+                             "retrying every %.0f ms): %s", self._name, age * 1e3, self.failures,
+                             deadline * 1e3, self.last_error)
+                    self._failing += 1
                     # stay armed: try again one deadline later (a link that comes back, a
                     # transient timeout), until a write succeeds, a command arrives or stop()
                     self._last = time.monotonic()
                     continue
                 self._armed = False
                 self.trips += 1
+                if self._failing:
+                    _log.warning("%s: safe-state write succeeded after %d failed attempts", self._name,
+                                 self._failing)
+                    self._failing = 0
                 self.trip_ages_s.append(time.monotonic() - self._last)
                 if len(self.trip_ages_s) > 1024:
                     del self.trip_ages_s[:512]

@@ -64,5 +64,9 @@ class VirtualProbe(HapticDevice):
     def _stop(self) -> None:
         self.ignored_force_n = 0.0
 
+    def _read_back(self) -> ChannelCommand:
+        """A kinematic probe applies no force (``max_force_n`` is None: it only senses)."""
+        return ChannelCommand("force", force_n=0.0)
+
     def _open(self) -> None:
         self.t = 0.0

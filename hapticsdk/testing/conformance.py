@@ -8,12 +8,24 @@ above max_amplitude 100 V``.
 
 Kinds and rules (``RULES[kind]``):
 
-* ``actuator``: import, class, limits-declared, options, lifecycle, bad-input,
-  limits-enforced, safe-stop, determinism.
-* ``device`` (an actuator that senses): the actuator rules plus state, step.
-* ``dimension``: import, class, features, constraints-vectorised, renderer,
-  renderer-bad-input, determinism.
+* ``actuator``: import, class, template, limits-declared, options, lifecycle, close,
+  bad-input, limits-enforced, safe-stop, read-back, output-follows-command, reopen,
+  determinism, timing.
+* ``device`` (an actuator that senses): the actuator rules plus state.
+* ``dimension``: import, class, features, roles-declared, constraints-vectorised,
+  constraints-feasible, model-match, renderer, renderer-commands, renderer-bad-input,
+  determinism, timing.
 * ``model``: import, shapes, vectorised, determinism, bad-input, jacobian, metadata.
+
+The rules that judge what an actuator *outputs* read it back
+(:meth:`hapticsdk.actuators.Actuator.read_back`: from the device where it can report
+it, else the backend's own record of its last write) and compare it with the command
+the safety layer let through, within half the declared resolution
+(``limits.frequency_resolution_hz``, ``limits.amplitude_resolution``) or
+:data:`READBACK_RTOL` of full scale. Timing rules take the fastest of
+:data:`TIMING_CALLS` calls (so a preempted call does not count) against a fraction of
+the servo period: :data:`COMMAND_BUDGET` for ``command()``, :data:`TICK_BUDGET` for a
+renderer's ``tick()``.
 * ``solver``: import, class, options, solves, determinism, batch, bad-input.
 
 The pytest side (classes to subclass, fixtures) is in :mod:`hapticsdk.testing.suites`
@@ -81,6 +93,8 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None) -> tuple
             obj = _load(kind, target)
         except PluginError as exc:
             return target, None, None, str(exc)
+        if isinstance(obj, type) and hasattr(obj, "conformance_options"):
+            opts = {**obj.conformance_options(), **opts}
         return target, (lambda: obj(**opts)), obj, None
     if callable(target) and not isinstance(target, type):
         name = getattr(target, "__name__", kind)
@@ -90,6 +104,8 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None) -> tuple
             return name, None, None, f"{type(exc).__name__}: {exc}"
         return getattr(probe, "name", name) or name, target, type(probe), None
     if isinstance(target, type):
+        if hasattr(target, "conformance_options"):
+            opts = {**target.conformance_options(), **opts}
         return getattr(target, "name", target.__name__) or target.__name__, (lambda: target(**opts)), target, None
     return getattr(target, "name", kind), (lambda: target), type(target), None
 
@@ -113,6 +129,39 @@ def _run_rules(ctx: _Ctx, rules: Sequence[tuple[str, Callable[[], None]]], *,
         _guard(ctx, rule, fn)
         if rule in stop_after and ctx.violations:
             break
+
+
+#: how far outside 0..1 a model's intensity may be (float rounding of a float32 graph)
+INTENSITY_TOL = 1e-5
+#: central-difference step of the Jacobian check (share of each feature's range) and the
+#: relative tolerance: a float32 model's differences carry ~1e-7 / 1e-4 = 1e-3 noise
+JACOBIAN_STEP = 1e-4
+JACOBIAN_RTOL = 0.01
+#: servo period the timing rules assume (s)
+KIT_PERIOD_S = 1e-3
+#: share of the period one actuator command may take (the loop runs several per tick)
+COMMAND_BUDGET = 0.25
+#: share of the period one renderer tick may take
+TICK_BUDGET = 0.25
+#: calls timed per timing rule (the fastest counts)
+TIMING_CALLS = 25
+#: relative tolerance of a read-back against its command, of full scale, where the
+#: actuator declares no resolution (float rounding of a unit conversion, not a drift)
+READBACK_RTOL = 1e-6
+#: a renderer's force in contact may exceed its default actuator's max_force_n (which
+#: the safety layer clamps) up to this factor at penetrations <= 3 mm; a multiple of it
+#: is a unit or formula error, not a stiff material
+FORCE_PLAUSIBILITY_FACTOR = 10.0
+
+
+def _fastest(fn: Callable[[], Any], n: int = TIMING_CALLS) -> float:
+    import time
+    best = math.inf
+    for _ in range(n):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
 
 
 def _finite(x: Any) -> bool:
@@ -150,10 +199,14 @@ def _normal_commands(act: Actuator) -> list[ChannelCommand]:
         fmax = lim.max_force_n if lim.max_force_n is not None else 1.0
         out += [ChannelCommand(role, force_n=v * fmax) for v in (0.0, 0.25, 0.5, 0.25, 0.0)]
     if lim.frequency_range_hz is not None or lim.max_amplitude is not None:
-        lo, hi = lim.frequency_range_hz or (50.0, 250.0)
         a = lim.max_amplitude if lim.max_amplitude is not None else 1.0
-        out += [ChannelCommand(role, frequency_hz=lo + (hi - lo) * u, amplitude=a * u)
-                for u in (0.1, 0.5, 0.9, 0.5, 0.0)]
+        a0 = float(getattr(lim, "min_amplitude", None) or 0.0)
+        if lim.frequency_range_hz is not None:
+            lo, hi = lim.frequency_range_hz
+            out += [ChannelCommand(role, frequency_hz=lo + (hi - lo) * u, amplitude=a0 + (a - a0) * u)
+                    for u in (0.1, 0.5, 0.9, 0.5, 0.0)]
+        else:
+            out += [ChannelCommand(role, amplitude=a0 + (a - a0) * u) for u in (0.1, 0.5, 0.9, 0.5, 0.0)]
     if not out:
         out = [ChannelCommand(role)]
     return out
@@ -192,7 +245,53 @@ def _drive(act: Actuator, cmds: Sequence[ChannelCommand], dt: float = 0.001) -> 
                         np.array(st.force_n, float).round(12).tolist()))
         else:
             out.append((sent.force_n, sent.frequency_hz, sent.amplitude))
+        rb = act.read_back()
+        if rb is not None:
+            out.append(("read-back", rb.force_n, rb.frequency_hz, rb.amplitude))
     return out
+
+
+def _full_scale(act: Actuator) -> tuple[float, float, float]:
+    """(force N, frequency Hz, amplitude) scales for read-back tolerances."""
+    lim = act.limits
+    return (float(lim.max_force_n or 1.0), float(lim.frequency_range_hz[1] if lim.frequency_range_hz else 1.0),
+            float(lim.max_amplitude or 1.0))
+
+
+def _assert_rest(act: Actuator, rb: ChannelCommand | None, when: str) -> None:
+    if rb is None:
+        return
+    fs_f, _, fs_a = _full_scale(act)
+    if rb.force_n is not None:
+        assert abs(rb.force_n) <= READBACK_RTOL * fs_f + 1e-9, f"output {rb.force_n:g} N {when}, expected 0 N"
+    if rb.amplitude is not None:
+        rest = float(getattr(act, "rest_amplitude", 0.0))
+        tol = max(READBACK_RTOL * fs_a, 0.5 * (act.limits.amplitude_resolution or 0.0)) + 1e-9
+        assert abs(rb.amplitude - rest) <= tol, \
+            f"output amplitude {rb.amplitude:g} {act.limits.amplitude_unit} {when}, expected {rest:g} (rest)"
+
+
+def _assert_matches(act: Actuator, sent: ChannelCommand | None, rb: ChannelCommand | None) -> None:
+    """The read-back equals the command the safety layer let through."""
+    if sent is None or rb is None:
+        return
+    lim = act.limits
+    fs_f, fs_hz, fs_a = _full_scale(act)
+    if sent.force_n is not None and not (isinstance(act, HapticDevice) and lim.max_force_n is None):
+        got = rb.force_n if rb.force_n is not None else 0.0
+        assert abs(got - sent.force_n) <= READBACK_RTOL * fs_f + 1e-9, \
+            f"commanded {sent.force_n:g} N (within its declared limits), the device outputs {got:g} N"
+    if sent.amplitude is not None:
+        got = rb.amplitude if rb.amplitude is not None else 0.0
+        tol = max(READBACK_RTOL * fs_a, 0.5 * (lim.amplitude_resolution or 0.0)) + 1e-9
+        assert abs(got - sent.amplitude) <= tol, \
+            (f"commanded amplitude {sent.amplitude:g} {lim.amplitude_unit}, the device outputs {got:g} "
+             f"(tolerance {tol:.3g})")
+        if sent.frequency_hz is not None and sent.amplitude > 0:
+            gf = rb.frequency_hz if rb.frequency_hz is not None else float("nan")
+            tolf = max(READBACK_RTOL * fs_hz, 0.5 * (lim.frequency_resolution_hz or 0.0)) + 1e-9
+            assert abs(gf - sent.frequency_hz) <= tolf, \
+                f"commanded {sent.frequency_hz:g} Hz, the device outputs {gf:g} Hz (tolerance {tolf:.3g} Hz)"
 
 
 def _actuator_rules(ctx: _Ctx, device: bool) -> None:
@@ -229,10 +328,18 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             assert lim.frequency_range_hz is not None and lim.max_amplitude is not None, \
                 "a vibration actuator must declare frequency_range_hz and max_amplitude"
             assert lim.amplitude_unit, "a vibration actuator must name its amplitude_unit"
+        if cls.channel in ("thermal", "friction", "other"):
+            assert lim.max_amplitude is not None and lim.amplitude_unit, \
+                f"a {cls.channel} actuator must declare max_amplitude and amplitude_unit (the safety layer " \
+                f"has nothing else to clamp)"
+        for k in ("frequency_resolution_hz", "amplitude_resolution"):
+            v = getattr(lim, k, None)
+            assert _finite(v) and (v is None or v > 0), f"limit {k}={v!r} must be a finite number > 0 or None"
 
     def r_options() -> None:
+        base = cls.conformance_options() if hasattr(cls, "conformance_options") else {}
         try:
-            cls(no_such_option_xyz=1)
+            cls(**base, no_such_option_xyz=1)
         except ValidationError:
             return
         except TypeError as exc:
@@ -362,10 +469,94 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         else:
             raise AssertionError("read_state() on a closed device did not raise DeviceError")
 
+    def r_template() -> None:
+        over = [m for m in ("open", "close", "command", "stop", "read_back")
+                if getattr(cls, m) is not getattr(Actuator, m)]
+        if device:
+            over += [m for m in ("read_state", "step") if getattr(cls, m) is not getattr(HapticDevice, m)
+                     and not getattr(cls, "simulated", False)]
+        assert not over, (f"overrides the public method(s) {over}: implement the backend's _{over[0]} instead, "
+                          f"so the core's checks and safety layer run")
+
+    def r_close() -> None:
+        a = ctx.make()
+        a.open()
+        _drive(a, _normal_commands(a)[:2])
+        try:
+            a.close()
+        except Exception as exc:
+            raise AssertionError(f"close() raised {type(exc).__name__}: {exc} (it must never raise)") from None
+        assert not a.is_open, "close() left the actuator open"
+        b = ctx.make()
+        b.open()
+
+        def broken() -> None:
+            raise OSError("simulated close failure")
+        b._close = broken  # type: ignore[method-assign]
+        try:
+            b.close()
+        except Exception as exc:
+            raise AssertionError(f"close() raised {type(exc).__name__} when the backend's _close failed") from None
+
+    def r_read_back() -> None:
+        a = ctx.make()
+        with a:
+            rb = a.read_back()
+            assert rb is not None, ("read_back() gives None: implement _read_back (what the device outputs, "
+                                    "or the backend's record of its last write)")
+            _assert_rest(a, rb, "right after open()")
+            _drive(a, _normal_commands(a)[:3])
+            a.stop()
+            _assert_rest(a, a.read_back(), "after stop()")
+        _assert_rest(a, a.read_back(), "after close()")
+
+    def r_follows() -> None:
+        a = ctx.make()
+        with a:
+            if a.read_back() is None:
+                return   # reported by read-back
+            t = 0.0
+            for c in _normal_commands(a):
+                sent = None
+                for _ in range(30):   # held: backends that slew (a DRV2667 ramp) settle
+                    t += KIT_PERIOD_S
+                    sent = a.command(c, now=t)
+                    if isinstance(a, HapticDevice):
+                        a.step(KIT_PERIOD_S)
+                _assert_matches(a, sent, a.read_back())
+
+    def r_reopen() -> None:
+        a = ctx.make()
+        a.open()
+        _drive(a, _normal_commands(a)[:4])
+        a.close()
+        a.open()
+        try:
+            _assert_rest(a, a.read_back(), "after close() and open() again (stale output)")
+        finally:
+            a.close()
+
+    def r_timing() -> None:
+        a = ctx.make()
+        with a:
+            cmds = _normal_commands(a)
+            state = {"t": 0.0, "i": 0}
+
+            def one() -> None:
+                state["t"] += KIT_PERIOD_S
+                a.command(cmds[state["i"] % len(cmds)], now=state["t"])
+                state["i"] += 1
+            best = _fastest(one)
+        assert best <= COMMAND_BUDGET * KIT_PERIOD_S, \
+            (f"command() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS}); a {KIT_PERIOD_S * 1e3:g} ms "
+             f"servo period allows {COMMAND_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per actuator")
+
     rules: list[tuple[str, Callable[[], None]]] = [
-        ("class", r_class), ("limits-declared", r_limits), ("options", r_options),
-        ("lifecycle", r_lifecycle), ("bad-input", r_bad_input), ("limits-enforced", r_limits_enforced),
-        ("safe-stop", r_safe_stop), ("determinism", r_determinism)]
+        ("class", r_class), ("template", r_template), ("limits-declared", r_limits), ("options", r_options),
+        ("lifecycle", r_lifecycle), ("close", r_close), ("bad-input", r_bad_input),
+        ("limits-enforced", r_limits_enforced), ("safe-stop", r_safe_stop), ("read-back", r_read_back),
+        ("output-follows-command", r_follows), ("reopen", r_reopen), ("determinism", r_determinism),
+        ("timing", r_timing)]
     if device:
         rules.append(("state", r_state))
     _run_rules(ctx, rules, stop_after=("class",))
@@ -486,9 +677,117 @@ def _dimension_rules(ctx: _Ctx) -> None:
                          for i in _tick_inputs()])
         assert outs[0] == outs[1], "two renderers of the same features gave different commands"
 
-    _run_rules(ctx, [("class", r_class), ("features", r_features), ("constraints-vectorised", r_constraints),
-                     ("renderer", r_renderer), ("renderer-bad-input", r_renderer_bad),
-                     ("determinism", r_determinism)], always=("class",), stop_after=("class", "features"))
+    def r_roles() -> None:
+        d = holder["d"]
+        from ..dimensions import RoleSpec
+        declared = dict(getattr(d, "roles", {}) or {})
+        r = d.renderer(mid())
+        assert declared, (f"the dimension declares no `roles` (role -> RoleSpec(channel, fields with units)) "
+                          f"for its renderer's roles {list(r.roles)}")
+        for role, spec in declared.items():
+            assert isinstance(spec, RoleSpec), f"roles[{role!r}] is {spec!r}, not a RoleSpec"
+        missing = [ro for ro in r.roles if ro not in declared]
+        assert not missing, f"the renderer commands role(s) {missing} that `roles` does not declare"
+        from ..compiler.compile import _check_role
+        for role in r.roles:
+            act = d.default_actuators.get(role)
+            if act is not None:
+                try:
+                    _check_role(d.name, role, declared[role], act, {})
+                except ValidationError as exc:
+                    raise AssertionError(f"its default actuator cannot carry role {role!r}: {exc}") from None
+
+    def r_feasible() -> None:
+        d = holder["d"]
+        cons = d.constraints()
+        if not cons:
+            return
+        from ..compiler.solution_set import halton
+        space = d.feature_space()
+        X = space.from_unit(halton(4096, len(space)))
+        cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        ok_all = np.ones(len(X), bool)
+        for c in cons:
+            ok = np.asarray(c.violation(cols)) <= 0.0
+            assert ok.any(), (f"constraint {c.name!r} holds nowhere in the dimension's feature bounds (4096-point "
+                              f"Halton sample): no material can satisfy it")
+            ok_all &= ok
+        assert ok_all.any(), (f"the constraints {[c.name for c in cons]} never hold together in the feature "
+                              f"bounds (4096-point Halton sample)")
+
+    def r_model_match() -> None:
+        d = holder["d"]
+        from ..features import same_unit
+        from ..plugins import registry
+        try:
+            m = registry("model").load(d.default_model)
+            m = m() if callable(m) and not isinstance(m, PerceptionModel) else m
+        except Exception as exc:
+            raise AssertionError(f"default_model {d.default_model!r} could not be built: {exc}") from None
+        assert d.name in m.dimension_names, \
+            f"default_model {d.default_model!r} predicts {list(m.dimension_names)}, not {d.name!r}"
+        mine = {f.name: f for f in d.features}
+        for n in m.feature_names:
+            if n in mine and m.feature_space is not None and n in m.feature_space:
+                assert same_unit(m.feature_space[n].unit, mine[n].unit), \
+                    f"model reads {n} in {m.feature_space[n].unit!r}, the dimension declares {mine[n].unit!r}"
+        # every model input must be contributed by a dimension the model covers
+        covered: set[str] = set()
+        for dn in m.dimension_names:
+            if dn == d.name:
+                covered |= set(mine)
+            elif dn in registry("dimension"):
+                try:
+                    other = registry("dimension").load(dn)
+                    covered |= {f.name for f in (other() if isinstance(other, type) else other).features}
+                except Exception:
+                    covered |= set(m.feature_names)   # cannot tell: not this plugin's fault
+            else:
+                covered |= set(m.feature_names)
+        stray = [n for n in m.feature_names if n not in covered]
+        assert not stray, (f"default_model {d.default_model!r} reads feature(s) {stray} that no dimension it "
+                           f"predicts contributes")
+
+    def r_commands() -> None:
+        d = holder["d"]
+        from ..plugins import registry
+        r = d.renderer(mid())
+        seen: set[str] = set()
+        fmax = None
+        act = d.default_actuators.get("force")
+        if act is not None and act in registry("actuator"):
+            fmax = getattr(registry("actuator").load(act).limits, "max_force_n", None)
+        for inp in _tick_inputs():
+            if not inp.in_contact:
+                continue
+            for c in r.tick(inp):
+                seen.add(c.role)
+                if c.force_n is not None and fmax is not None and inp.penetration_mm <= 3.0:
+                    assert abs(c.force_n) <= FORCE_PLAUSIBILITY_FACTOR * fmax, \
+                        (f"commands {c.force_n:g} N at {inp.penetration_mm:g} mm, more than "
+                         f"{FORCE_PLAUSIBILITY_FACTOR:g} x the {fmax:g} N its force actuator declares")
+        silent = [ro for ro in r.roles if ro not in seen]
+        assert not silent, f"the renderer sends nothing on role(s) {silent} while in contact"
+
+    def r_timing() -> None:
+        d = holder["d"]
+        r = d.renderer(mid())
+        inputs = _tick_inputs()
+        state = {"i": 0}
+
+        def one() -> None:
+            r.tick(inputs[state["i"] % len(inputs)])
+            state["i"] += 1
+        best = _fastest(one)
+        assert best <= TICK_BUDGET * KIT_PERIOD_S, \
+            (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS}); a {KIT_PERIOD_S * 1e3:g} ms "
+             f"servo period allows {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per renderer")
+
+    _run_rules(ctx, [("class", r_class), ("features", r_features), ("roles-declared", r_roles),
+                     ("constraints-vectorised", r_constraints), ("constraints-feasible", r_feasible),
+                     ("model-match", r_model_match), ("renderer", r_renderer), ("renderer-commands", r_commands),
+                     ("renderer-bad-input", r_renderer_bad), ("determinism", r_determinism), ("timing", r_timing)],
+               always=("class",), stop_after=("class", "features"))
 
 
 # ---------------------------------------------------------------------------
@@ -514,8 +813,16 @@ def _model_rules(ctx: _Ctx) -> None:
             Y = m.predict(inputs(n))
             assert Y.shape == (n, m.n_outputs), f"predict gave shape {Y.shape}, expected {(n, m.n_outputs)}"
             assert np.isfinite(Y).all(), "non-finite intensities"
-            assert (Y >= -0.05).all() and (Y <= 1.05).all(), \
-                f"intensities outside 0..1 (min {Y.min():.3g}, max {Y.max():.3g}) inside the feature bounds"
+            assert (Y >= -INTENSITY_TOL).all() and (Y <= 1 + INTENSITY_TOL).all(), \
+                f"intensities outside 0..1 (min {Y.min():.6g}, max {Y.max():.6g}) inside the feature bounds"
+        if m.feature_space is not None:   # the corners of the box too (where extrapolation starts)
+            lo, hi = m.feature_space.lower, m.feature_space.upper
+            k = min(m.n_features, 10)
+            corners = np.array([[hi[j] if (i >> j) & 1 else lo[j] for j in range(m.n_features)]
+                                for i in range(2 ** k)])
+            Y = m.predict(corners)
+            assert (Y >= -INTENSITY_TOL).all() and (Y <= 1 + INTENSITY_TOL).all(), \
+                f"intensities outside 0..1 at the corners of the feature bounds (min {Y.min():.6g}, max {Y.max():.6g})"
         assert m.predict(inputs(1)[0]).shape == (1, m.n_outputs), "a 1-D input must give one row"
 
     def r_vectorised() -> None:
@@ -552,13 +859,16 @@ def _model_rules(ctx: _Ctx) -> None:
         assert np.isfinite(J).all(), "non-finite jacobian"
         span = (m.feature_space.upper - m.feature_space.lower) if m.feature_space is not None else np.ones(m.n_features)
         for j in range(m.n_features):
-            h = 1e-3 * max(span[j], 1e-6)
+            h = JACOBIAN_STEP * max(span[j], 1e-6)
             e = np.zeros(m.n_features)
             e[j] = h
             fd = (m.predict(X + e) - m.predict(X - e)) / (2 * h)
-            scale = np.abs(fd).max() + np.abs(J[:, :, j]).max() + 1e-3 / max(span[j], 1e-9)
-            assert np.abs(fd - J[:, :, j]).max() <= 0.05 * scale, \
-                f"jacobian column {m.feature_names[j]} differs from finite differences"
+            # per unit of the feature's range: compare the change over the whole span
+            err = np.abs(fd - J[:, :, j]).max() * span[j]
+            scale = max(np.abs(fd).max() * span[j], 1e-6)
+            assert err <= JACOBIAN_RTOL * scale + 1e-6, \
+                (f"jacobian column {m.feature_names[j]} differs from central finite differences by "
+                 f"{err / scale:.2%} of its size (tolerance {JACOBIAN_RTOL:.1%})")
 
     def r_metadata() -> None:
         m = holder["m"]
@@ -676,12 +986,15 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
 # ---------------------------------------------------------------------------
 
 RULES: dict[str, tuple[str, ...]] = {
-    "actuator": ("import", "class", "limits-declared", "options", "lifecycle", "bad-input",
-                 "limits-enforced", "safe-stop", "determinism"),
-    "device": ("import", "class", "limits-declared", "options", "lifecycle", "bad-input",
-               "limits-enforced", "safe-stop", "determinism", "state"),
-    "dimension": ("import", "class", "features", "constraints-vectorised", "renderer",
-                  "renderer-bad-input", "determinism"),
+    "actuator": ("import", "class", "template", "limits-declared", "options", "lifecycle", "close", "bad-input",
+                 "limits-enforced", "safe-stop", "read-back", "output-follows-command", "reopen", "determinism",
+                 "timing"),
+    "device": ("import", "class", "template", "limits-declared", "options", "lifecycle", "close", "bad-input",
+               "limits-enforced", "safe-stop", "read-back", "output-follows-command", "reopen", "determinism",
+               "timing", "state"),
+    "dimension": ("import", "class", "features", "roles-declared", "constraints-vectorised",
+                  "constraints-feasible", "model-match", "renderer", "renderer-commands", "renderer-bad-input",
+                  "determinism", "timing"),
     "model": ("import", "shapes", "vectorised", "determinism", "bad-input", "jacobian", "metadata"),
     "solver": ("import", "class", "options", "solves", "determinism", "batch", "bad-input"),
 }

@@ -97,6 +97,10 @@ def test_render_uses_a_saved_piezo_table(tmp_path, monkeypatch):
     rec = rep.calibrations["roughness"]
     assert rec["file"] == str(path) and rec["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
     assert "changed_since_plan" not in rec
+    # the renderer looked V_out up in the saved table
+    rend = rep.renderers["roughness"]
+    assert rend["table_source"] == "bench test" and rend["table_generated"] is False
+    assert rend["v_out_v"] == pytest.approx(mine.voltage_for(rend["Fpeak_hz"], rend["AFpeak_m_s2"])[0])
     # the file changes after compiling: the render uses the new one and says so
     save_calibration(PiezoTable(frequencies_hz=base.frequencies_hz, voltages_v=base.voltages_v,
                                 acceleration=np.asarray(base.acceleration) * 3.0, generated=False,

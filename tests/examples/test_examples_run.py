@@ -19,7 +19,7 @@ def run(script, *args, cwd=None):
 def test_every_example_script_is_covered():
     scripts = {p.name for p in EXAMPLES.glob("*.py")}
     assert scripts == {"render_named_material.py", "render_intensities.py", "list_plugins.py",
-                       "plot_render.py", "solve_many.py"}
+                       "plot_render.py", "solve_many.py", "live_session.py", "experiment.py"}
 
 
 def test_render_named_material():
@@ -54,3 +54,33 @@ def test_plot_render_writes_a_png(tmp_path):
     run("plot_render.py", "S12", str(out_png))
     data = out_png.read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def test_live_session_prints_events_and_writes_a_figure(tmp_path):
+    pytest.importorskip("matplotlib")
+    out_png = tmp_path / "live.png"
+    out = run("live_session.py", str(out_png))
+    for name in ("foam", "rubber", "leather"):
+        assert f"contact_enter {name}" in out
+    assert "rubber retargeted" in out and "material_switched rubber" in out
+    assert "stopped: " in out and "(generated data)" in out
+    data = out_png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 20_000
+
+
+def test_experiment_saves_ratings_in_the_ratings_format(tmp_path):
+    import json
+
+    from hapticsdk.schemas_io import validate
+    out_json = tmp_path / "ratings.json"
+    out = run("experiment.py", str(out_json), "--participants", "2", "--present", "0.05")
+    doc = json.loads(out_json.read_text())
+    validate(doc, "ratings")
+    assert doc["generated"] is True and doc["raters"] == ["P01", "P02"]
+    assert set(doc["ratings"]) == {"S1", "S2", "S7", "S12", "S13", "S14", "S16", "S20"}
+    assert all(len(v) == 2 for s in doc["ratings"].values() for v in s.values())
+    # the simulated participants rate what was rendered: the paper's hardest sample (S12)
+    # is rated harder than its softest (S1)
+    mean = lambda s, d: sum(doc["ratings"][s][d]) / 2  # noqa: E731
+    assert mean("S12", "hardness") > mean("S1", "hardness") + 30
+    assert "(generated data)" in out

@@ -10,7 +10,13 @@ from hjif_docs import mutated, valid_doc, write
 
 from hapticsdk.cli import main
 from hapticsdk.errors import FormatError, ValidationError
-from hapticsdk.interop.hjif_model import MAX_DEPTH, MAX_FILE_BYTES, parse_hjif, parse_hjif_text, read_hjif
+from hapticsdk.interop.hjif_model import (
+    MAX_DEPTH,
+    MAX_FILE_BYTES,
+    parse_hjif,
+    parse_hjif_text,
+    read_hjif,
+)
 
 CH0 = "perceptions[0].channels[0]"
 
@@ -96,12 +102,17 @@ def test_nan_literal_and_duplicate_keys_are_refused():
         parse_hjif_text(text.replace('"gain": 1.0', '"gain": 1.0, "gain": 2.0', 1))
 
 
-def test_huge_file_is_refused_before_reading(tmp_path):
+def test_huge_file_is_refused_before_reading(tmp_path, monkeypatch):
+    import pathlib
+
     p = tmp_path / "huge.hjif"
     with p.open("wb") as fh:  # sparse: no 32 MiB written
         fh.truncate(MAX_FILE_BYTES + 1)
+    real_open = pathlib.Path.open
+    monkeypatch.setattr(pathlib.Path, "open", lambda self, *a, **k: pytest.fail("opened for reading"))
     with pytest.raises(FormatError, match="cap") as ei:
         read_hjif(p)
+    monkeypatch.setattr(pathlib.Path, "open", real_open)
     assert ei.value.field == str(p)
     small = write(tmp_path / "small.hjif", valid_doc())
     with pytest.raises(FormatError, match="cap"):
@@ -157,3 +168,26 @@ def test_cli_json_error_carries_the_field(tmp_path, capsys):
     code = main(["import", str(bad), "--json"])
     out = json.loads(capsys.readouterr().out)
     assert code == 2 and out["type"] == "FormatError" and out["field"] == "perceptions[0].perception_modality"
+
+
+def test_library_reference_loop_is_refused_before_anything_plays(spy_create):
+    from hapticsdk.interop.hjif_play import play
+
+    d = valid_doc()
+    # the band's Reference to id 5 finds library effect 5, itself a Reference to id 5: a loop
+    d["perceptions"][0]["effect_library"] = [{"effect_type": "Reference", "id": 5, "position": 0}]
+    h = parse_hjif(d)
+    with pytest.raises(FormatError, match="loop") as ei:
+        play(h)
+    assert ei.value.field == f"{CH0}.bands[0].effects[1]"
+    assert spy_create == []
+
+
+@pytest.fixture
+def spy_create(monkeypatch):
+    import hapticsdk.actuators as acts
+
+    made: list = []
+    real = acts.create_actuator
+    monkeypatch.setattr(acts, "create_actuator", lambda name, **kw: made.append(name) or real(name, **kw))
+    return made

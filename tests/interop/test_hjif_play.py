@@ -67,7 +67,7 @@ def test_piezo_amplitude_comes_from_its_table_at_the_requested_acceleration(spy)
     rep = play(parse_hjif(d), actuators=["piezo-virtual"])
     want, _ = resolve_table(None).voltage_for(150.0, 2.0)  # 1.0 x gain 2 x 10^0 = 2 m/s^2
     assert rep.actuators["piezo-virtual"]["max_amplitude"] == pytest.approx(want)
-    tt, v = spy[0].waveform()
+    _, v = spy[0].waveform()
     assert np.max(np.abs(v)) == pytest.approx(want, rel=1e-6)
 
 

@@ -177,3 +177,15 @@ def test_non_vibrotactile_perceptions_are_reported_not_synthesised():
     assert [c.path for c in syn.channels] == ["perceptions[1].channels[0]"]
     assert [u["path"] for u in syn.unsupported] == ["perceptions[0]"]
     assert "Force" in syn.unsupported[0]["what"]
+
+
+def test_wavelet_bands_and_composite_effects_are_reported_by_path():
+    wav = {"band_type": "WaveletWave", "block_length": 32, "lower_frequency_limit": 72,
+           "upper_frequency_limit": 1000, "effects": [{"effect_type": "Basis", "position": 0, "wavelet_stream": "AAAA"}]}
+    comp = {"effect_type": "Composite", "position": 0, "keyframes": []}
+    d = doc([perception([channel([wav, band([tone(100, 100), comp])])])])
+    syn = synth(d)
+    got = {(u["path"], u["what"]) for u in syn.unsupported}
+    assert got == {("perceptions[0].channels[0].bands[0]", "WaveletWave band"),
+                   ("perceptions[0].channels[0].bands[1].effects[1]", "Composite effect")}
+    assert abs(fft_peak_hz(syn.channels[0].samples) - 100.0) <= FS / syn.channels[0].samples.size

@@ -62,7 +62,7 @@ def test_plan_round_trips_through_json_and_schema(tmp_path):
 def test_plan_schema_rejects_a_broken_plan():
     plan = compile_scene(Scene.for_material({"roughness": 0.3}))
     d = plan.to_dict()
-    d["materials"]["material"]["targets"]["roughness"] = 1.7
+    d["materials"][next(iter(d["materials"]))]["targets"]["roughness"] = 1.7
     with pytest.raises(ValidationError) as ei:
         RenderPlan.from_dict(d)
     assert "targets" in str(ei.value.field)

@@ -148,3 +148,22 @@ def test_first_party_dimensions_declare_every_role_their_renderers_use():
                        (RoughnessDimension(), {"Fpeak": 100.0, "AFpeak": 2.0, "P": 3.0})):
         r = dim.renderer(feats)
         assert set(r.roles) <= set(dim.roles), dim.name
+
+
+def test_an_unsatisfiable_constraint_is_a_compile_error(monkeypatch):
+    from hapticsdk.dimensions import Constraint
+    from hapticsdk_roughness.dimension import RoughnessDimension
+    import numpy as np
+
+    class Never(Constraint):
+        name = "roughness.never"
+        features = ("P",)
+
+        def _bound_and_value(self, cols):
+            p = np.asarray(cols["P"])
+            return p + 1.0, p
+
+    orig = RoughnessDimension.constraints
+    monkeypatch.setattr(RoughnessDimension, "constraints", lambda self, **c: orig(self, **c) + [Never()])
+    with pytest.raises(PluginError, match="roughness.never"):
+        compile_scene(_scene({"name": "m", "intensities": {"roughness": 0.5}}, {}))

@@ -35,8 +35,14 @@ class GoodCoil(Actuator):
     def _command(self, cmd: ChannelCommand) -> None:
         self.out = (cmd.frequency_hz or 0.0, cmd.amplitude or 0.0)
 
+    def _open(self) -> None:
+        self.out = (0.0, 0.0)
+
     def _stop(self) -> None:
         self.out = (0.0, 0.0)
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("vibration", frequency_hz=self.out[0], amplitude=self.out[1])
 
 
 class BypassCoil(GoodCoil):

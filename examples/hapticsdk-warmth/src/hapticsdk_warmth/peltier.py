@@ -28,7 +28,8 @@ class PeltierVirtual(Actuator):
     channel: ClassVar[str] = "thermal"
     accepts: ClassVar[dict[str, str]] = {"amplitude": "degC"}
     simulated: ClassVar[bool] = True
-    limits = ActuatorLimits(max_amplitude=42.0, amplitude_unit="degC")
+    limits = ActuatorLimits(max_amplitude=42.0, amplitude_unit="degC", min_amplitude=10.0)
+    rest_amplitude: ClassVar[float] = T_SKIN_C
 
     def __init__(self, *, tau_s: float = 0.4, max_rate_c_per_s: float = 8.0, min_c: float = 10.0,
                  **options: Any) -> None:
@@ -52,6 +53,10 @@ class PeltierVirtual(Actuator):
 
     def _stop(self) -> None:
         self.target_c = T_SKIN_C
+
+    def _read_back(self) -> ChannelCommand:
+        """The surface temperature set-point (°C) the controller holds."""
+        return ChannelCommand("thermal", amplitude=self.target_c)
 
     def step(self, dt: float) -> None:
         """Advance the thermal plant by ``dt`` seconds (called by the servo loop)."""

@@ -49,7 +49,7 @@ from .polish import levenberg_marquardt
 log = logging.getLogger(__name__)
 _dot = np.dot
 
-TABLE_VERSION = 1
+TABLE_VERSION = 2   # 2: the file records its build time
 _MEMO: dict[str, "AmortisedTable"] = {}
 
 

@@ -87,12 +87,22 @@ class OmniVirtual(HapticDevice):
     # -- actuator backend ------------------------------------------------
     def _open(self) -> None:
         self._reset()
+        self._f_set = 0.0
 
     def _command(self, cmd: ChannelCommand) -> None:
-        """The command is kept by the safety layer; :meth:`step` applies it."""
+        """The command is kept by the safety layer; :meth:`step` applies it. The motor
+        set-point it gives (saturated by the arm's own force limit) is kept for
+        :meth:`read_back`."""
+        f = 0.0 if cmd.force_n is None else cmd.force_n * (1.0 if cmd.direction is None else cmd.direction[1])
+        fmax = self.arm.max_force_n
+        self._f_set = max(-fmax, min(fmax, f))
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("force", force_n=self._f_set)
 
     def _stop(self) -> None:
         self._f_applied = 0.0
+        self._f_set = 0.0
 
     def _at(self, t: float) -> tuple[float, float, float, float]:
         """``trajectory.at(t)``, reusing the last lookup: a tick reads, then steps from,

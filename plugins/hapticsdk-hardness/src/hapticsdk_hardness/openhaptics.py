@@ -384,6 +384,10 @@ class OmniOpenHaptics(HapticDevice):
             self._force_t = time.monotonic()
             self._force = (0.0, float(cmd.force_n), 0.0)
 
+    def _read_back(self) -> ChannelCommand:
+        """The force the servo callback hands to ``hdSetDoublev(HD_CURRENT_FORCE)`` (N)."""
+        return ChannelCommand("force", force_n=float(self._force[1]))
+
     def _stop(self) -> None:
         self._force = (0.0, 0.0, 0.0)
         if self.lib is not None and self.handle is not None and self._hd_error is not None:

@@ -61,6 +61,13 @@ class VoiceCoilVirtual(Actuator):
         if cmd.amplitude is not None:
             self._amp = cmd.amplitude
 
+    def _read_back(self) -> ChannelCommand:
+        """The drive the oscillator is set to (frequency Hz, amplitude 0..1)."""
+        return ChannelCommand("vibration", frequency_hz=self._freq, amplitude=self._amp)
+
+    def _open(self) -> None:
+        self._amp = 0.0
+
     def _stop(self) -> None:
         self._amp = 0.0
         self.osc.amplitude = 0.0  # safe state: output off now, not after a ramp

@@ -35,7 +35,7 @@ from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime.watchdog import CommandWatchdog
 
-from .drv2667 import (ADDRESS, DRV2667, GAIN_FULL_SCALE_V, I2CBus, SynthChunk, amplitude_code,
+from .drv2667 import (ADDRESS, DRV2667, FREQ_STEP_HZ, GAIN_FULL_SCALE_V, I2CBus, SynthChunk, amplitude_code,
                       frequency_code)
 from .virtual import piezo_limits
 
@@ -170,6 +170,13 @@ class DRV2667Actuator(Actuator):
                 drv.check_status()
             if self._watchdog is not None:
                 self._watchdog.feed()
+
+    def _read_back(self) -> ChannelCommand:
+        """The synthesis chunk last written to the DRV2667 (its amplitude and frequency
+        codes, in V and Hz); 0 V while the chip is in standby."""
+        with self._io_lock:
+            amp = 0.0 if self._asleep else amplitude_code(self._amp_v, self.gain) / 255.0 * GAIN_FULL_SCALE_V[self.gain]
+            return ChannelCommand("vibration", frequency_hz=frequency_code(self._freq) * FREQ_STEP_HZ, amplitude=amp)
 
     def _stop(self) -> None:
         with self._io_lock:

@@ -24,8 +24,10 @@ from hapticsdk.synthesis import Oscillator
 from .drv2667 import FREQ_STEP_HZ, GAIN_FULL_SCALE_V, SYNTH_FREQ_RANGE_HZ, amplitude_code, frequency_code
 
 
-def piezo_limits(gain: int, frequency_range_hz: tuple[float, float] | None) -> ActuatorLimits:
-    """Declared limits of a DRV2667-driven piezo at ``gain`` (0..3)."""
+def piezo_limits(gain: int, frequency_range_hz: tuple[float, float] | None, *,
+                 quantised: bool = True) -> ActuatorLimits:
+    """Declared limits of a DRV2667-driven piezo at ``gain`` (0..3); ``quantised``: the
+    output moves in the synthesiser's steps (7.8125 Hz, full scale / 255)."""
     if gain not in (0, 1, 2, 3):
         raise ValidationError(f"gain {gain!r} not in 0..3 (25/50/75/100 V peak)", field="options.gain")
     lo, hi = SYNTH_FREQ_RANGE_HZ if frequency_range_hz is None else (float(frequency_range_hz[0]),
@@ -33,7 +35,9 @@ def piezo_limits(gain: int, frequency_range_hz: tuple[float, float] | None) -> A
     if not SYNTH_FREQ_RANGE_HZ[0] - 1e-9 <= lo < hi <= SYNTH_FREQ_RANGE_HZ[1] + 1e-9:
         raise ValidationError(f"frequency_range_hz {(lo, hi)} must lie within the DRV2667 synthesiser range "
                               f"{SYNTH_FREQ_RANGE_HZ} Hz", field="options.frequency_range_hz")
-    return ActuatorLimits(frequency_range_hz=(lo, hi), max_amplitude=GAIN_FULL_SCALE_V[gain], amplitude_unit="V")
+    return ActuatorLimits(frequency_range_hz=(lo, hi), max_amplitude=GAIN_FULL_SCALE_V[gain], amplitude_unit="V",
+                          frequency_resolution_hz=FREQ_STEP_HZ if quantised else None,
+                          amplitude_resolution=GAIN_FULL_SCALE_V[gain] / 255.0 if quantised else None)
 
 
 class PiezoVirtual(Actuator):
@@ -54,12 +58,12 @@ class PiezoVirtual(Actuator):
     channel: ClassVar[str] = "vibration"
     accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = True
-    limits = piezo_limits(1, None)
+    limits = piezo_limits(1, None, quantised=False)
 
     def __init__(self, *, gain: int = 1, fs: float = 8000.0, period_s: float = 0.001, ramp_s: float = 0.005,
                  frequency_range_hz: tuple[float, float] | None = None, quantize: bool = False,
                  keep_s: float = 60.0, **options: Any) -> None:
-        self.limits = piezo_limits(gain, frequency_range_hz)
+        self.limits = piezo_limits(gain, frequency_range_hz, quantised=bool(quantize))
         if not (fs > 0 and period_s > 0 and keep_s > 0):
             raise ValidationError("fs, period_s and keep_s must be positive", field="options")
         if ramp_s < 0.005:
@@ -138,6 +142,10 @@ class PiezoVirtual(Actuator):
     def step(self, dt: float) -> None:
         """Simulation phase of a servo tick: synthesise the waveform commanded so far."""
         self._flush()
+
+    def _read_back(self) -> ChannelCommand:
+        """The drive the simulated chip was last set to (after quantisation when on)."""
+        return ChannelCommand("vibration", frequency_hz=self._freq, amplitude=self._target_amp)
 
     def _stop(self) -> None:
         """Vibration off: the amplitude ramps to 0 (``ramp_s``) so the record ends silent."""

@@ -1,0 +1,310 @@
+"""Time until every actuator is at zero, per stop path (docs/safety.md).
+
+``python bench/bench_stop_paths.py [--repeat 10] [--signal-repeat 5] [--json]``
+
+What it measures: for each stop path, the wall time from the stop event to the moment
+the emulated DRV2667 (hapticsdk-roughness's register-level emulator, behind the emulated
+serial bridge on a pty with real pyserial, or behind the emulated MCP2221A with real
+pyusb) stops driving the piezo (standby, GO cleared or amplitude 0). The emulator
+timestamps the I2C write that silenced it, so no polling latency is added. The piezo
+plays a roughness texture (a realtime 1 kHz servo loop, a kinematic probe sliding at
+80 mm/s) when each stop happens.
+
+Stop events (t = 0):
+
+* normal end: the last command of a run (the loop returns; ``with`` closes the actuator);
+* exception: the moment a renderer raises KeyboardInterrupt / a simulated device's
+  step raises OSError(ENOSPC);
+* SIGINT/SIGTERM/SIGHUP: ``os.kill`` on a ``hapticsdk render --scene ...`` subprocess
+  driving ``piezo-serial`` (its emulated bridge lives in this process);
+* loop stall: the last command before a renderer sleeps 300 ms (the host watchdog);
+* unplug: MCP2221A unplugged (every USB transfer fails): time until the host reports it
+  (the chip cannot be reached; it keeps playing); serial cable pulled with the bridge
+  firmware watchdog at 0.25 s: time until the firmware cuts the piezo (polled every 1 ms).
+
+What it does not measure: a real chip's I2C/USB/serial latencies (the emulators answer
+in microseconds; a real MCP2221A takes about 1 ms per HID report, a serial bridge about
+0.1-1 ms per frame at 115200 baud), nor the simulated actuators of the same runs (omni-
+virtual, voicecoil-virtual: stopped in-process in the same unwinding, before the
+piezo in these runs). The machine may be shared: times include scheduling delays of
+other processes. A "failure" is a run where the output never went to zero within 2 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import errno
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from hapticsdk.dimensions import DimensionRenderer
+from hapticsdk.runtime import ServoLoop
+from hapticsdk.sim.finger import press_slide
+from hapticsdk.sim.probe import VirtualProbe
+from hapticsdk_roughness.dimension import RoughnessDimension
+from hapticsdk_roughness.emulation import DRV2667Emulator, SerialBridgeEmulator
+from hapticsdk_roughness.hardware import PiezoMCP2221, PiezoSerial
+
+GIVE_UP_S = 2.0
+
+
+class TimedDRV(DRV2667Emulator):
+    """The emulated chip, timestamping each I2C write that silenced it."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.silent_at: list[float] = []
+
+    def i2c_write(self, data: bytes) -> None:
+        before = self.driving
+        try:
+            super().i2c_write(data)
+        finally:
+            if before and not self.driving:
+                self.silent_at.append(time.monotonic())
+
+    def first_silent_after(self, t0: float) -> float | None:
+        later = [t for t in self.silent_at if t >= t0]
+        return later[0] if later else None
+
+
+class _Timed:
+    t_last = 0.0
+
+    def _command(self, cmd):  # type: ignore[no-untyped-def]
+        super()._command(cmd)  # type: ignore[misc]
+        self.t_last = time.monotonic()
+
+
+class TSerial(_Timed, PiezoSerial):
+    pass
+
+
+class TMCP(_Timed, PiezoMCP2221):
+    pass
+
+
+def _make(transport: str, *, firmware_watchdog_s: float = 0.0) -> tuple[Any, TimedDRV, Any]:
+    drv = TimedDRV()
+    if transport == "serial":
+        emu = SerialBridgeEmulator({0x59: drv}, watchdog_s=firmware_watchdog_s).start()
+        return TSerial(port=emu.port, timeout=0.05, retries=1), drv, emu
+    from hapticsdk_roughness.usb_emulation import EmulatedMCP2221, MCP2221Backend
+    board = EmulatedMCP2221("BENCH1", targets={0x59: drv})
+    return TMCP(backend=MCP2221Backend([board]), timeout_ms=20), drv, board
+
+
+class Scripted(DimensionRenderer):
+    """The roughness renderer; at ``at_s`` of servo time calls ``action`` once."""
+
+    roles = ("vibration",)
+
+    def __init__(self, action: Callable[[], None] | None, at_s: float = 0.2) -> None:
+        self.inner = RoughnessDimension().renderer({"Fpeak": 100.0, "AFpeak": 2.0})
+        self.action, self.at_s, self.done = action, at_s, False
+        self.t_event: float | None = None
+
+    def tick(self, inp):  # type: ignore[no-untyped-def]
+        if self.action is not None and not self.done and inp.t >= self.at_s:
+            self.done = True
+            self.action()
+        return self.inner.tick(inp)
+
+
+class Probe(VirtualProbe):
+    def __init__(self) -> None:
+        super().__init__(trajectory=press_slide(press_s=0.05, hold_s=0.05, slide_s=2.0))
+        self.raise_at: float | None = None
+        self.t_event: float | None = None
+
+    def _step(self, dt: float) -> None:
+        super()._step(dt)
+        if self.raise_at is not None and self.t >= self.raise_at:
+            self.raise_at = None
+            self.t_event = time.monotonic()
+            raise OSError(errno.ENOSPC, "No space left on device (injected)")
+
+
+def one_loop_run(transport: str, path: str) -> tuple[float | None, str]:
+    """One in-process run of stop path ``path``; returns (seconds to zero or None, note)."""
+    act, drv, emu = _make(transport)
+    probe = Probe()
+    box: dict[str, float] = {}
+    try:
+        if path == "normal end":
+            r = Scripted(None)
+            with act:
+                ServoLoop(probe, [r], {"vibration": act}, realtime=True).run(0.3)
+                t0 = act.t_last
+        elif path == "exception: KeyboardInterrupt in a renderer":
+            def interrupt() -> None:
+                box["t0"] = time.monotonic()
+                raise KeyboardInterrupt
+            r = Scripted(interrupt)
+            try:
+                with act:
+                    ServoLoop(probe, [r], {"vibration": act}, realtime=True).run(1.0)
+            except KeyboardInterrupt:
+                pass
+            t0 = box["t0"]
+        elif path == "exception: OSError(ENOSPC) from a device step":
+            probe.raise_at = 0.2
+            try:
+                with act:
+                    ServoLoop(probe, [Scripted(None)], {"vibration": act}, realtime=True).run(1.0)
+            except OSError:
+                pass
+            t0 = probe.t_event
+        elif path == "loop stall (renderer sleeps 300 ms)":
+            def stall() -> None:
+                box["t0"] = act.t_last
+                time.sleep(0.3)
+            r = Scripted(stall)
+            with act:
+                ServoLoop(probe, [r], {"vibration": act}, realtime=True).run(0.4)
+            t0 = box["t0"]
+        else:
+            raise ValueError(path)
+        t1 = drv.first_silent_after(t0)
+        return (None if t1 is None or t1 - t0 > GIVE_UP_S else t1 - t0), ""
+    finally:
+        if act.is_open:
+            act.close()
+        if transport == "serial":
+            emu.stop()
+
+
+def one_unplug(transport: str) -> tuple[float | None, str]:
+    """USB: unplug -> the host's report (the chip keeps playing). Serial: cable pulled ->
+    the bridge firmware watchdog (0.25 s) cuts the piezo."""
+    act, drv, emu = _make(transport, firmware_watchdog_s=0.25)
+    try:
+        act.open()
+        for _ in range(30):
+            act.command(_cmd())
+            time.sleep(0.001)
+        if transport == "usb":
+            t0 = act.t_last
+            emu.unplugged = True
+            while time.monotonic() - t0 < GIVE_UP_S and act.describe()["watchdog"]["failures"] == 0:
+                time.sleep(0.0005)
+            t1 = time.monotonic()     # polled every 0.5 ms
+            ok = act.describe()["watchdog"]["failures"] > 0
+            still = drv.driving
+            emu.unplugged = False       # let the watchdog's retry land before closing
+            return ((t1 - t0) if ok else None,
+                    "time to the host's report; chip still playing" if still else "time to the host's report")
+        t0 = act.t_last
+        emu.unplug()
+        while time.monotonic() - t0 < GIVE_UP_S and drv.driving:
+            time.sleep(0.001)
+        return (None if drv.driving else time.monotonic() - t0), "firmware watchdog 0.25 s"
+    finally:
+        act.close()
+        if transport == "serial":
+            emu.stop()
+
+
+def _cmd():  # type: ignore[no-untyped-def]
+    from hapticsdk.dimensions import ChannelCommand
+    return ChannelCommand("vibration", frequency_hz=120.0, amplitude=10.0)
+
+
+def one_signal(signame: str, scene_path: str) -> tuple[float | None, str]:
+    drv = TimedDRV()
+    emu = SerialBridgeEmulator({0x59: drv}, watchdog_s=0).start()
+    proc = subprocess.Popen([sys.executable, "-m", "hapticsdk", "render", "--scene", scene_path, "--seconds", "30",
+                             "--device-option", f"vibration.port={emu.port}"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        t_start = time.monotonic()
+        while time.monotonic() - t_start < 60 and proc.poll() is None:
+            o = drv.output()
+            if o["playing"] and o["amplitude_v"] > 1.0:
+                break
+            time.sleep(0.002)
+        else:
+            return None, f"never played: {proc.communicate()[1][-300:]}"
+        time.sleep(0.05)
+        t0 = time.monotonic()
+        proc.send_signal(getattr(signal, signame))
+        _, err = proc.communicate(timeout=30)
+        t1 = drv.first_silent_after(t0)
+        code = proc.returncode
+        return (None if t1 is None or t1 - t0 > GIVE_UP_S else t1 - t0), f"exit {code}"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        emu.stop()
+
+
+def summarise(name: str, transport: str, mechanism: str, results: list[tuple[float | None, str]]) -> dict:
+    vals = np.array([r for r, _ in results if r is not None]) * 1e3
+    notes = sorted({n for _, n in results if n})
+    row = {"path": name, "transport": transport, "stopped by": mechanism, "n": len(results),
+           "failures": sum(r is None for r, _ in results),
+           "median_ms": float(np.median(vals)) if vals.size else None,
+           "p90_ms": float(np.percentile(vals, 90)) if vals.size else None,
+           "max_ms": float(vals.max()) if vals.size else None, "notes": "; ".join(notes)}
+    return row
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--repeat", type=int, default=10, help="runs per in-process stop path and transport")
+    ap.add_argument("--signal-repeat", type=int, default=5, help="subprocess runs per signal")
+    ap.add_argument("--json", action="store_true")
+    a = ap.parse_args()
+    if not (1 <= a.repeat <= 1000 and 0 <= a.signal_repeat <= 100):
+        ap.error("--repeat 1..1000, --signal-repeat 0..100")
+    rows = []
+    paths = [("normal end", "servo loop returns; `with` closes the actuator (standby)"),
+             ("exception: KeyboardInterrupt in a renderer", "ServoLoop stops every actuator, then re-raises"),
+             ("exception: OSError(ENOSPC) from a device step", "ServoLoop stops every actuator, then re-raises"),
+             ("loop stall (renderer sleeps 300 ms)", "host watchdog thread (deadline 10 ms)")]
+    for path, mech in paths:
+        for transport in ("serial", "usb"):
+            res = [one_loop_run(transport, path) for _ in range(a.repeat)]
+            rows.append(summarise(path, transport, mech, res))
+            print(f"done: {path} / {transport}", file=sys.stderr, flush=True)
+    rows.append(summarise("unplug: MCP2221A gone", "usb", "host watchdog reports (fault); no path to the chip",
+                          [one_unplug("usb") for _ in range(a.repeat)]))
+    rows.append(summarise("unplug: serial cable pulled", "serial", "bridge firmware watchdog",
+                          [one_unplug("serial") for _ in range(max(1, a.repeat // 2))]))
+    if a.signal_repeat:
+        with tempfile.TemporaryDirectory() as tmp:
+            scene = os.path.join(tmp, "scene.json")
+            with open(scene, "w") as f:
+                json.dump({"schema_version": 1, "name": "bench-stop",
+                           "objects": [{"name": "m", "material": {"name": "r", "intensities": {"roughness": 0.6}}}],
+                           "devices": {"vibration": {"actuator": "piezo-serial"}},
+                           "settings": {"servo": {"period_s": 0.001, "realtime": True}}}, f)
+            for signame in ("SIGINT", "SIGTERM", "SIGHUP"):
+                res = [one_signal(signame, scene) for _ in range(a.signal_repeat)]
+                rows.append(summarise(f"signal: {signame} to `hapticsdk render`", "serial",
+                                      "SafeStop -> ServoLoop stop -> close", res))
+                print(f"done: {signame}", file=sys.stderr, flush=True)
+    if a.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print("time from the stop event until the piezo is silent (emulated DRV2667; ms)")
+    print(f"{'stop path':<48} {'transport':<9} {'n':>3} {'median':>8} {'p90':>8} {'max':>8} {'fail':>4}  notes")
+    for r in rows:
+        f = (lambda v: f"{v:8.2f}" if v is not None else f"{'-':>8}")
+        print(f"{r['path']:<48} {r['transport']:<9} {r['n']:>3} {f(r['median_ms'])} {f(r['p90_ms'])} "
+              f"{f(r['max_ms'])} {r['failures']:>4}  {r['notes']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
