@@ -1,5 +1,6 @@
 """Dependency floors: `.ci/floors.txt` pins, for every dependency the distributions of
-this repository declare, the lowest version their `>=` bounds allow.
+this repository declare, the lowest version their `>=` bounds allow; every distribution
+declares that same bound (so the floor run tests each distribution's floor).
 
     python .ci/check_floors.py            # floors.txt == declared lower bounds
     python .ci/check_floors.py --installed  # ... and this environment has exactly them
@@ -40,10 +41,9 @@ def _version_class() -> type:
     return Version
 
 
-def declared_floors() -> dict[str, str]:
-    """package -> the highest `>=` bound any distribution here declares for it."""
-    Version = _version_class()
-    out: dict[str, str] = {}
+def declared_bounds() -> dict[str, dict[str, str]]:
+    """package -> {pyproject path: its `>=` bound} over every distribution here."""
+    out: dict[str, dict[str, str]] = {}
     for pp in PYPROJECTS:
         proj = tomllib.loads(pp.read_text())["project"]
         reqs = list(proj.get("dependencies", []))
@@ -58,9 +58,14 @@ def declared_floors() -> dict[str, str]:
             low = re.search(r">=\s*([0-9][0-9A-Za-z.]*)", spec)
             if low is None:
                 raise SystemExit(f"{pp.relative_to(ROOT)}: {req!r} has no lower bound")
-            if name not in out or Version(low.group(1)) > Version(out[name]):
-                out[name] = low.group(1)
+            out.setdefault(name, {})[str(pp.relative_to(ROOT))] = low.group(1)
     return out
+
+
+def declared_floors() -> dict[str, str]:
+    """package -> the highest `>=` bound any distribution here declares for it."""
+    Version = _version_class()
+    return {name: max(b.values(), key=Version) for name, b in declared_bounds().items()}
 
 
 def pinned_floors() -> dict[str, str]:
@@ -86,6 +91,12 @@ def problems(installed: bool = False) -> list[str]:
                 errs.append(f"{name}: pinned in floors.txt but declared by no distribution")
         elif Version(pinned[name]) != Version(declared[name]):
             errs.append(f"{name}: floors.txt pins {pinned[name]}, the declared lower bound is {declared[name]}")
+    # one floor per package: a distribution declaring a lower bound than the one tested
+    # would allow versions no CI run has seen
+    for name, bounds in sorted(declared_bounds().items()):
+        for where, low in sorted(bounds.items()):
+            if name in pinned and Version(low) != Version(pinned[name]):
+                errs.append(f"{where}: {name}>={low}, but the tested floor is {pinned[name]}")
     if installed:
         for name, ver in sorted(pinned.items()):
             try:

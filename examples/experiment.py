@@ -58,7 +58,7 @@ def ask(participant, sample, dimension, retarget):
 
 def run_experiment(session, participants, answer: Answer, present_s: float, seed: int) -> dict:
     rng = random.Random(seed)
-    ratings = {s: {d: [] for d in DIMENSIONS} for s in SAMPLES}
+    ratings: dict[str, dict[str, list[float]]] = {s: {d: [] for d in DIMENSIONS} for s in SAMPLES}
     for p in participants:
         for d in DIMENSIONS:                      # one experiment per dimension
             order = list(SAMPLES)

@@ -77,7 +77,7 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
 
     t = log["t"]
     obj = log["object_id"]
-    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(10, 6))
+    fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(12, 6))
     ax1.plot(t, log["force_n"], color="k", lw=1.0, label="force along the normal (N)")
     ax1.set_ylabel("force (N)")
     for role, color in (("coil", "tab:orange"), ("vibration", "tab:blue")):
@@ -109,8 +109,8 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
             ax.axvline(retarget_t, color="k", ls="--", lw=1.0)
         ax1.annotate(f"{RETARGET[0]} retargeted", (retarget_t, 0.8), xycoords=ax1.get_xaxis_transform(),
                      fontsize=9, xytext=(5, 0), textcoords="offset points")
-    ax1.legend(loc="upper left", fontsize=8)
-    ax2.legend(loc="upper left", fontsize=8)
+    ax1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     ax1.set_title("live session on simulated devices: objects under the finger (shaded), generated data")
     fig.tight_layout()
     with atomic_writer(out_png, "wb") as fh:

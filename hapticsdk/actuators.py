@@ -21,7 +21,7 @@ import weakref
 from collections import deque
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
@@ -96,7 +96,44 @@ class ActuatorLimits:
     min_amplitude: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The limits as a JSON-ready dict (tuples as lists; ``None`` where a limit does not
+        apply).
+        """
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+
+@dataclass(frozen=True)
+class DriveCapability:
+    """What an actuator can produce, for solving features it can render (device-aware
+    solving, :meth:`Actuator.capability_for`).
+
+    Attributes:
+        channel: its channel.
+        frequency_range_hz: the band it plays (Hz), or None.
+        max_drive: the largest drive amplitude it takes (``drive_unit``), or None.
+        drive_unit: unit of the drive amplitude (``"V"``).
+        table: optional drive table of the actuator itself (an object with
+            ``acceleration_at(f_hz, drive)`` and ``voltage_for(f_hz, accel)``, e.g. a
+            :class:`hapticsdk.calibration.PiezoTable`): the output per drive over
+            frequency. None: the dimension's own (calibrated) table applies.
+        source: where the figures come from (model, datasheet, calibration file).
+    """
+
+    channel: str
+    frequency_range_hz: tuple[float, float] | None = None
+    max_drive: float | None = None
+    drive_unit: str = ""
+    table: Any = field(default=None, compare=False)
+    source: str = ""
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready figures (the table by its source)."""
+        return {"channel": self.channel,
+                "frequency_range_hz": list(self.frequency_range_hz) if self.frequency_range_hz else None,
+                "max_drive": self.max_drive, "drive_unit": self.drive_unit,
+                "table": getattr(self.table, "source", None) if self.table is not None else None,
+                "table_generated": getattr(self.table, "generated", None) if self.table is not None else None,
+                "source": self.source}
 
 
 @dataclass
@@ -156,6 +193,21 @@ class Actuator(ABC):
     rest_amplitude: ClassVar[float] = 0.0
 
     @classmethod
+    def capability_for(cls, options: Mapping[str, Any] | None = None) -> DriveCapability | None:
+        """What this actuator, created with ``options`` (gain, band, ...), can produce, so
+        that the scene compiler solves for features it can render. Called on the class:
+        nothing is created, opened or loaded. Default: the band and largest amplitude of
+        the class's :attr:`limits`; None for a force channel. Backends whose limits depend
+        on options override it; backends with a drive table of their own (an LRA's
+        response) return it in ``table``."""
+        if cls.channel == "force":
+            return None
+        lim = cls.limits if isinstance(cls.limits, ActuatorLimits) else ActuatorLimits()
+        return DriveCapability(channel=cls.channel, frequency_range_hz=lim.frequency_range_hz,
+                               max_drive=lim.max_amplitude, drive_unit=lim.amplitude_unit,
+                               source=f"declared limits of {cls.name or cls.__name__}")
+
+    @classmethod
     def conformance_options(cls) -> dict[str, Any]:
         """Keyword options the conformance kit creates a test instance with (default
         none). A backend that cannot be built without arguments (a playback device needs
@@ -184,6 +236,7 @@ class Actuator(ABC):
     # -- lifecycle ---------------------------------------------------------
     @property
     def is_open(self) -> bool:
+        """Whether :meth:`open` succeeded and :meth:`close` has not run yet."""
         return self._is_open
 
     def open(self) -> "Actuator":
@@ -340,6 +393,10 @@ class Actuator(ABC):
 
     # -- reporting ---------------------------------------------------------
     def describe(self) -> dict[str, Any]:
+        """Facts about this actuator for reports and ``hapticsdk doctor``: name, label,
+        channel, accepted command fields, simulated or not, limits and the safety layer's
+        report.
+        """
         return {"name": self.name, "label": self.label, "channel": self.channel,
                 "accepts": self.accepted_fields(), "simulated": self.simulated, "limits": self.limits.to_dict(),
                 "safety": self.safety.report()}

@@ -79,9 +79,9 @@ def check_data_options(cls: Any, actuator: str, role: str, options: Mapping[str,
             where = WHERE_TO_SET.format(role=role, key=key, env=ENV_OPTIONS, actuator=actuator,
                                         config=device_config_path())
             raise PrivilegedOptionError(
-                f"option {key!r} of actuator {actuator!r} names a {priv[key]}; scene and plan files "
-                f"may not set it (a file you open must not choose native code to load or files to "
-                f"write): {where}", field=f"{field}.{key}", option=key)
+                f"option {key!r} of actuator {actuator!r} is privileged ({priv[key]}); scene and plan "
+                f"files may not set it (a file you open must not choose native code to load or files "
+                f"to write): {where}", field=f"{field}.{key}", option=key)
 
 
 def device_config_path() -> Path:

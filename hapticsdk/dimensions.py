@@ -78,6 +78,7 @@ class Constraint(ABC):
         return self.penalty(cols, "normalised")
 
     def describe(self) -> dict:
+        """Name, the features the constraint reads and its one-line description."""
         return {"name": self.name, "features": list(self.features), "doc": first_line(self.__doc__)}
 
 
@@ -166,6 +167,9 @@ class RoleSpec:
         object.__setattr__(self, "fields", dict(self.fields))
 
     def to_dict(self) -> dict[str, Any]:
+        """The role as a JSON-ready dict: channel, command fields with their units,
+        description.
+        """
         return {"channel": self.channel, "fields": dict(self.fields), "description": self.description}
 
     def describe(self) -> str:
@@ -225,11 +229,31 @@ class PerceptionDimension(ABC):
         """Physical constraints (default: none). ``context`` carries data-set facts (e.g. ``df_hz``)."""
         return []
 
+    def device_constraints(self, capabilities: Mapping[str, Any], **options: Any) -> list[Constraint]:
+        """Constraints that keep the solved features within what the actuators mapped to
+        this dimension's roles can produce (device-aware solving; default: none).
+
+        Args:
+            capabilities: role -> :class:`~hapticsdk.actuators.DriveCapability` of the
+                actuator on that role (roles whose actuator publishes none are absent).
+            options: the renderer options the material will be rendered with (e.g. the
+                calibrated table), so the constraint and the renderer agree.
+        """
+        return []
+
+    def capability_options(self, capabilities: Mapping[str, Any]) -> dict[str, Any]:
+        """Renderer options taken from the mapped actuators' capabilities (default none;
+        e.g. an actuator's own drive table). Explicit ``renderer_options`` win."""
+        return {}
+
     @abstractmethod
     def renderer(self, features: Mapping[str, float], **options: Any) -> DimensionRenderer:
         """A renderer for a material with these solved features (physical units)."""
 
     def describe(self) -> dict:
+        """Name, description, features (with units and bounds), default actuator per role
+        and the roles' command contracts.
+        """
         return {"name": self.name, "description": self.description,
                 "features": [f.to_dict() for f in self.features],
                 "default_actuators": dict(self.default_actuators),

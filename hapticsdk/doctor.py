@@ -78,6 +78,9 @@ def check_backends() -> tuple[dict[str, dict[str, Any]], dict[str, type]]:
 
 
 def discover_devices(classes: dict[str, type], backends: dict[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    """Devices each available backend's ``discover()`` finds (``{"backend", ...}`` per
+    device); a failing discover is reported as an entry with ``error``, never raised.
+    """
     devices: list[dict[str, Any]] = []
     for name, cls in classes.items():
         if not backends[name]["available"]:
@@ -93,6 +96,9 @@ def discover_devices(classes: dict[str, type], backends: dict[str, dict[str, Any
 
 
 def check_libraries() -> dict[str, dict[str, Any]]:
+    """Optional Python modules and shared libraries: ``name -> {"kind", "found", "detail",
+    "needed_by"}`` (``detail`` says what to install when missing).
+    """
     out: dict[str, dict[str, Any]] = {}
     for mod, needed in OPTIONAL_MODULES.items():
         try:
@@ -170,5 +176,6 @@ def format_report(rep: dict[str, Any]) -> str:
     for c in rep["calibrations"]:
         tag = " GENERATED" if c.get("generated") else ""
         where = c.get("backend") or c.get("scope") or c.get("path", "")
-        lines.append(f"  {c.get('kind', '?')} [{where}]{tag}: {c.get('source') or c.get('error', '')}")
+        what = c.get("source") or (f"skipped {c.get('path') or ''}: {c['error']}" if c.get("error") else "")
+        lines.append(f"  {c.get('kind') or 'unreadable'} [{where}]{tag}: {what}")
     return "\n".join(lines)

@@ -67,6 +67,7 @@ class Feature:
 
     @property
     def span(self) -> float:
+        """``upper - lower``, in the feature's unit."""
         return self.upper - self.lower
 
     def owned_by(self, owner: str) -> "Feature":
@@ -74,9 +75,11 @@ class Feature:
         return replace(self, owner=owner)
 
     def with_bounds(self, lower: float, upper: float) -> "Feature":
+        """A copy with other bounds (same name, unit, description)."""
         return replace(self, lower=lower, upper=upper)
 
     def to_dict(self) -> dict:
+        """The feature as a JSON-ready dict (name, unit, lower, upper, description)."""
         return {"name": self.name, "unit": self.unit, "lower": self.lower,
                 "upper": self.upper, "description": self.description}
 
@@ -113,21 +116,28 @@ class FeatureSpace:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """Feature names, in column order."""
         return tuple(f.name for f in self.features)
 
     @property
     def units(self) -> tuple[str, ...]:
+        """Feature units, in column order."""
         return tuple(f.unit for f in self.features)
 
     @property
     def lower(self) -> np.ndarray:
+        """Lower bounds ``(d,)``, physical units."""
         return np.array([f.lower for f in self.features], dtype=float)
 
     @property
     def upper(self) -> np.ndarray:
+        """Upper bounds ``(d,)``, physical units."""
         return np.array([f.upper for f in self.features], dtype=float)
 
     def index(self, name: str) -> int:
+        """Column of feature ``name``; raises :class:`~hapticsdk.errors.ValidationError` for
+        an unknown name.
+        """
         for i, f in enumerate(self.features):
             if f.name == name:
                 return i
@@ -155,6 +165,7 @@ class FeatureSpace:
         return FeatureSpace(tuple(feats))
 
     def subset(self, names: Sequence[str]) -> "FeatureSpace":
+        """The space of the features ``names``, in that order."""
         return FeatureSpace(tuple(self[n] for n in names))
 
     def with_bounds(self, bounds: Mapping[str, tuple[float, float]]) -> "FeatureSpace":
@@ -194,6 +205,7 @@ class FeatureSpace:
         return arr
 
     def clip(self, X: np.ndarray) -> np.ndarray:
+        """``X`` clipped into the bounds, column by column."""
         return np.clip(X, self.lower, self.upper)
 
     def contains(self, X: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
@@ -209,9 +221,12 @@ class FeatureSpace:
         return np.where(span > 0, (np.asarray(X, float) - self.lower) / safe, 0.0)
 
     def from_unit(self, U: np.ndarray) -> np.ndarray:
+        """Map ``U`` in the unit box ``[0, 1]^d`` to physical units (``lower + U * span``).
+        """
         return self.lower + np.asarray(U, float) * (self.upper - self.lower)
 
     def random(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """``n`` feature vectors drawn uniformly in the box, ``(n, d)``, physical units."""
         return self.from_unit(rng.random((n, len(self))))
 
     def vector(self, values: Mapping[str, float], *, field: str = "features") -> np.ndarray:
@@ -225,14 +240,19 @@ class FeatureSpace:
         return self.validate([float(values[n]) for n in self.names], field=field)[0]
 
     def as_dict(self, x: np.ndarray) -> dict[str, float]:
+        """One feature vector ``(d,)`` as ``{name: value}``."""
         x = np.asarray(x, float).reshape(-1)
         return {n: float(v) for n, v in zip(self.names, x)}
 
     def to_dict(self) -> list[dict]:
+        """The features as a list of JSON-ready dicts (see :meth:`Feature.to_dict`)."""
         return [f.to_dict() for f in self.features]
 
     @classmethod
     def from_dicts(cls, items: Iterable[Mapping]) -> "FeatureSpace":
+        """Build a space from dicts with ``name``, ``lower``, ``upper`` (``unit`` and
+        ``description`` optional).
+        """
         return cls(tuple(Feature(name=i["name"], unit=i.get("unit", ""), lower=i["lower"],
                                  upper=i["upper"], description=i.get("description", ""))
                          for i in items))

@@ -44,6 +44,9 @@ class Material:
     source: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """The material as a JSON-ready dict (name, label, substrate, texture, intensities,
+        features, generated, source).
+        """
         return {"name": self.name, "label": self.label, "substrate": self.substrate,
                 "texture": self.texture, "intensities": dict(self.intensities),
                 "features": dict(self.features), "generated": self.generated, "source": self.source}
@@ -82,6 +85,7 @@ class MaterialLibrary:
             return False
 
     def names(self) -> list[str]:
+        """Material names, in library order."""
         return [m.name for m in self._items.values()]
 
     def get(self, name: str) -> Material:
@@ -100,6 +104,9 @@ class MaterialLibrary:
                               field="material")
 
     def add(self, material: Material) -> None:
+        """Add a material; raises :class:`~hapticsdk.errors.ValidationError` when its name
+        (case-insensitive) is taken.
+        """
         if material.name.lower() in self._items:
             raise ValidationError(f"material {material.name!r} already exists", field="materials")
         self._items[material.name.lower()] = material

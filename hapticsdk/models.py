@@ -52,6 +52,7 @@ class PerceptionModel(ABC):
 
     @property
     def n_features(self) -> int:
+        """Number of model inputs."""
         return len(self.feature_names)
 
     def provenance(self) -> dict[str, Any]:
@@ -78,6 +79,7 @@ class PerceptionModel(ABC):
 
     @property
     def n_outputs(self) -> int:
+        """Number of predicted dimensions."""
         return len(self.dimension_names)
 
     def predict(self, G: npt.ArrayLike) -> np.ndarray:
@@ -117,6 +119,9 @@ class PerceptionModel(ABC):
         return np.transpose((Yp - Ym) / (2 * h[:, :, None]), (0, 2, 1))
 
     def describe(self) -> dict:
+        """Name, input features, output dimensions, feature space (with units and bounds)
+        and metadata (weights left out).
+        """
         return {"name": self.name, "features": list(self.feature_names),
                 "dimensions": list(self.dimension_names),
                 "feature_space": self.feature_space.to_dict() if self.feature_space else None,
@@ -160,6 +165,9 @@ class MLPModel(PerceptionModel):
 
     @property
     def weights(self) -> dict[str, np.ndarray]:
+        """The network's arrays: ``W1, b1, W2, b2`` and the scaling ranges ``x_min, x_max,
+        y_min, y_max``.
+        """
         return {"W1": self.W1, "b1": self.b1, "W2": self.W2, "b2": self.b2,
                 "x_min": self.x_min, "x_max": self.x_max, "y_min": self.y_min, "y_max": self.y_max}
 

@@ -374,7 +374,7 @@ class ControllerSettings:
     velocity_deadband_mm_s: float = 1.0
     velocity_filter_hz: float = 30.0
     energy_tolerance_j: float = 0.0
-    bound_tolerance_j: float = 1.0e-3
+    bound_tolerance_j: float = 5.0e-5
     energy_bound: bool = True
     device_mass_kg: float | None = 0.045
     device_damping_ns_per_m: float = 0.0
@@ -389,6 +389,8 @@ class ControllerSettings:
     stiffness_cap: bool = True
     cap_damping_share: float = 0.3
     cap_count_force_n: float | None = None
+    max_damper_cut: float | None = 0.05
+    no_pull: bool = True
 
 
 def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float,
@@ -464,6 +466,7 @@ class PassivityController:
         self.reset()
 
     def reset(self) -> None:
+        """Forget the energy observed so far (at contact start or a new run)."""
         self.energy_j = 0.0        # energy absorbed by the wall (J), PO
         self.generation_j = 0.0    # hold's work relative to the wall's own law + credit (J)
         self._fw_prev = 0.0
@@ -538,6 +541,7 @@ class PassivityController:
         budget = self.energy_j + s.bound_tolerance_j
         f = f_wall
         active = False
+        cut = s.max_damper_cut
         if s.generation_observer:
             # the hold's generation relative to the wall's own law (held-force work minus
             # the trapezoid of the wall's force), plus the credited device damping
@@ -568,6 +572,8 @@ class PassivityController:
                 if alpha > s.max_damping_ns_per_m:
                     alpha = s.max_damping_ns_per_m
                 f -= alpha * v_raw
+                if cut is not None and f_wall > 0.0 and f < (1.0 - cut) * f_wall:
+                    f = (1.0 - cut) * f_wall  # withdrawing: the damper takes at most `cut` of the wall
                 active = True
         step = s.max_force_step_n
         hard = math.inf
@@ -589,6 +595,12 @@ class PassivityController:
             f_pc = -alpha * v
             active = True
         out = f + f_pc
+        if cut is not None and f_pc < 0.0 and f_wall > 0.0:
+            lo_w = (1.0 - cut) * f_wall
+            if lo_w > f:
+                lo_w = f  # the energy bound has cut deeper: it stands
+            if out < lo_w:
+                out = lo_w
         if active:
             self.active_ticks += 1
         if step is not None and (active or self._f_pc_prev != 0.0):
@@ -598,6 +610,8 @@ class PassivityController:
             if lo > hard:
                 lo = hard
             out = lo if out < lo else (hi if out > hi else out)
+        if s.no_pull and out < 0.0 <= f_wall:
+            out = 0.0  # a wall pushes; the controller never pulls the stylus in
         self._f_pc_prev = out - f_wall
         self._out_prev = out
         self._fw_prev = f_wall
@@ -688,6 +702,9 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
             gen_damp = started & (g < 0.0) & (f != 0.0) & (np.abs(v_raw) * 1e3 > s.velocity_deadband_mm_s)
             alpha_g = np.where(gen_damp, np.minimum(-g / (dt * v_raw * v_raw), s.max_damping_ns_per_m), 0.0)
         f = f - alpha_g * np.where(gen_damp, v_raw, 0.0)
+        if s.max_damper_cut is not None:
+            lo_w = (1.0 - s.max_damper_cut) * f_wall
+            f = np.where(gen_damp & (f_wall > 0.0) & (f < lo_w), lo_w, f)
     step = s.max_force_step_n
     hard = np.full(f.shape, np.inf)
     if s.energy_bound:
@@ -715,12 +732,18 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         damp = (avail < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s)
         alpha = np.where(damp, np.minimum(-avail / (dt * v * v), s.max_damping_ns_per_m), 0.0)
     active = started & (capped | damp | gen_damp)
-    out = f + np.where(started, -alpha * v, 0.0)
+    f_pc = np.where(started, -alpha * v, 0.0)
+    out = f + f_pc
+    if s.max_damper_cut is not None:
+        lo_w = np.minimum((1.0 - s.max_damper_cut) * f_wall, f)
+        out = np.where((f_pc < 0.0) & (f_wall > 0.0) & (out < lo_w), lo_w, out)
     if step is not None:
         prev = state["out_prev"]
         limit = started & (active | (state["f_pc_prev"] != 0.0))
         lo = np.minimum(prev - step, hard)  # a cut below the one-tick cap is never delayed
         out = np.where(limit, np.clip(out, lo, prev + step), out)
+    if s.no_pull:
+        out = np.where((out < 0.0) & (f_wall >= 0.0), 0.0, out)
     out = np.where(started, out, f_wall)
     state["f_pc_prev"] = np.where(on, out - f_wall, 0.0)
     state["out_prev"] = out

@@ -64,6 +64,7 @@ class DroppedDimension:
     extrapolated_fraction: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The entry as a JSON-ready dict (see the attributes)."""
         return {"dimension": self.dimension, "reason": self.reason,
                 "predicted_loss_percent": self.predicted_loss_percent,
                 "threshold_percent": self.threshold_percent,
@@ -76,6 +77,7 @@ class DroppedDimension:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "DroppedDimension":
+        """Rebuild an entry from :meth:`to_dict`'s output."""
         iv = d.get("loss_interval_percent")
         return cls(dimension=d["dimension"], reason=d["reason"],
                    predicted_loss_percent=d.get("predicted_loss_percent"),
@@ -106,6 +108,10 @@ class MaterialPlan:
             vectors reaching the target (median, 80 % interval, confidence, decision;
             :meth:`hapticsdk.compiler.importance.LossEstimate.to_dict`), for every
             dimension the model judged, kept or dropped.
+        device: device-aware solving: ``capabilities`` (dimension -> role -> what the
+            actuator can produce), the device ``constraints`` solved under and the
+            ``binding`` ones, and per kept dimension the ``predicted`` intensity of what
+            will be rendered and its ``residual`` (target - predicted).
         role_contracts: role -> what is commanded on it and what carries it:
             ``{"actuator", "actuator_channel", "accepts": {field: unit}, "commanded_by":
             {dimension: RoleSpec.to_dict() or None}}``.
@@ -132,6 +138,7 @@ class MaterialPlan:
     importance_features: dict[str, float] = field(default_factory=dict)
     importance: dict[str, dict[str, Any]] = field(default_factory=dict)
     role_contracts: dict[str, dict[str, Any]] = field(default_factory=dict)
+    device: dict[str, Any] = field(default_factory=dict)
     actuators: dict[str, str] = field(default_factory=dict)
     actuator_options: dict[str, dict[str, Any]] = field(default_factory=dict)
     roles: dict[str, list[str]] = field(default_factory=dict)
@@ -143,9 +150,11 @@ class MaterialPlan:
 
     @property
     def replacements(self) -> list[DroppedDimension]:
+        """The dropped dimensions that something renders in their place."""
         return [d for d in self.dropped if d.replacement]
 
     def to_dict(self) -> dict[str, Any]:
+        """The material's plan as a JSON-ready dict (see the attributes)."""
         return {"name": self.name, "source": self.source, "objects": list(self.objects),
                 "targets": dict(self.targets), "dimensions": list(self.dimensions),
                 "dropped": [d.to_dict() for d in self.dropped],
@@ -153,6 +162,7 @@ class MaterialPlan:
                 "importance_features": dict(self.importance_features),
                 "importance": json.loads(json.dumps(self.importance)),
                 "role_contracts": json.loads(json.dumps(self.role_contracts)),
+                "device": json.loads(json.dumps(self.device)),
                 "actuators": dict(self.actuators),
                 "actuator_options": {k: dict(v) for k, v in self.actuator_options.items()},
                 "roles": {k: list(v) for k, v in self.roles.items()},
@@ -162,6 +172,7 @@ class MaterialPlan:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "MaterialPlan":
+        """Rebuild a material's plan from :meth:`to_dict`'s output."""
         return cls(name=d["name"], targets={k: float(v) for k, v in d["targets"].items()},
                    dimensions=list(d["dimensions"]),
                    dropped=[DroppedDimension.from_dict(x) for x in d.get("dropped", [])],
@@ -170,6 +181,7 @@ class MaterialPlan:
                    importance_features={k: float(v) for k, v in d.get("importance_features", {}).items()},
                    importance={k: dict(v) for k, v in d.get("importance", {}).items()},
                    role_contracts={k: dict(v) for k, v in d.get("role_contracts", {}).items()},
+                   device=dict(d.get("device", {})),
                    actuators=dict(d.get("actuators", {})),
                    actuator_options={k: dict(v) for k, v in d.get("actuator_options", {}).items()},
                    roles={k: list(v) for k, v in d.get("roles", {}).items()},
@@ -232,6 +244,7 @@ class RenderPlan:
 
     # -- serialisation -----------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
+        """The plan as JSON-ready data (``schemas/plan.schema.json``)."""
         return {"plan_version": PLAN_VERSION, "plugin_api_version": self.plugin_api_version,
                 "scene": self.scene, "settings": json.loads(json.dumps(self.settings)),
                 "materials": {k: v.to_dict() for k, v in self.materials.items()},
@@ -239,6 +252,9 @@ class RenderPlan:
                 "unused_plugins": [dict(p) for p in self.unused_plugins]}
 
     def to_json(self, **kw: Any) -> str:
+        """The plan as JSON text (indent 2 unless ``kw`` says otherwise; ``kw`` goes to
+        :func:`json.dumps`).
+        """
         return json.dumps(self.to_dict(), **{"indent": 2, **kw})
 
     def save(self, path: str | Path) -> Path:
@@ -291,9 +307,11 @@ class RenderPlan:
                                                "replacement": x.replacement} for x in m.dropped],
                                   "importance": json.loads(json.dumps(m.importance)),
                                   "role_contracts": json.loads(json.dumps(m.role_contracts)),
+                                  "device": json.loads(json.dumps(m.device)),
                                   "features": dict(m.features),
                                   "pinned_features": dict(m.pinned_features),
                                   "actuators": dict(m.actuators),
+                                  "calibrations": {k2: dict(v2) for k2, v2 in m.calibrations.items()},
                                   "solve": {k2: m.solve.get(k2) for k2 in
                                             ("success", "error", "intensities", "message")}}
                               for k, m in self.materials.items()},

@@ -107,7 +107,7 @@ def plot_render(report: Any, path: str | Path) -> Path:
     force = np.asarray(log.get("force_n", np.zeros_like(t)))
     vel = np.asarray(log["velocity_mm_s"])
     roles = sorted(k[: -len(".amplitude")] for k in log if k.endswith(".amplitude"))
-    driven = list(roles)
+    driven = [r for r in roles if np.any(np.asarray(log[f"{r}.amplitude"]) != 0)]
     idle = [r for r in roles if r not in driven]
 
     notes = []
@@ -170,7 +170,7 @@ def plot_render(report: Any, path: str | Path) -> Path:
     a.set_title("probe motion", fontsize=10)
     handles = [*h1, h2, *h3]
     a.legend(handles, [h.get_label() for h in handles], fontsize=8, loc="upper center",
-             ncol=3, frameon=False)
+             bbox_to_anchor=(0.5, -0.14), ncol=3, frameon=False)
 
     # -- one panel per driven vibration channel --------------------------------------
     for i, r in enumerate(driven):
@@ -208,8 +208,9 @@ def plot_render(report: Any, path: str | Path) -> Path:
 
 def _cells_grid(cells: Sequence[Mapping[str, Any]], damping: float, controller: bool
                 ) -> tuple[list[float], list[float], np.ndarray, np.ndarray, np.ndarray]:
-    """K values, T values, and (T x K) arrays of the worst delivered force ratio, the
-    largest energy to the user (J) and stability over fingers, for one damping."""
+    """K values, T values, and (T x K) arrays of the worst delivered force ratio (against
+    min(K, K_pass) x penetration), the largest energy to the user (J) and stability over
+    fingers, for one damping."""
     sel = [c for c in cells if c["damping_ns_per_m"] == damping and bool(c["controller"]) == controller]
     ks = sorted({float(c["stiffness_n_per_mm"]) for c in sel})
     ts = sorted({float(c["period_s"]) for c in sel})
@@ -218,8 +219,8 @@ def _cells_grid(cells: Sequence[Mapping[str, Any]], damping: float, controller: 
     stable = np.ones((len(ts), len(ks)), bool)
     for c in sel:
         i, j = ts.index(float(c["period_s"])), ks.index(float(c["stiffness_n_per_mm"]))
-        r = float(c.get("delivered_force_ratio", np.nan))
-        ratio[i, j] = r if np.isnan(ratio[i, j]) else np.nanmax([ratio[i, j], r])
+        r = float(c.get("delivered_vs_passive_ratio", c.get("delivered_force_ratio", np.nan)))
+        ratio[i, j] = r if np.isnan(ratio[i, j]) else np.nanmin([ratio[i, j], r])
         energy[i, j] = np.nanmax([energy[i, j], float(c["energy_to_user_j"])])
         stable[i, j] &= bool(c["stable"])
     return ks, ts, ratio, energy, stable
@@ -228,8 +229,10 @@ def _cells_grid(cells: Sequence[Mapping[str, Any]], damping: float, controller: 
 def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
     """Save ``hapticsdk bench stability``'s matrix (``StabilityResult.to_dict()``) as a
     figure: for each damping (columns) and controller on/off (rows), a stiffness x period
-    map coloured by the delivered force ratio (worst finger), with the largest energy
-    given to the user (mJ) written in each cell and unstable cells outlined in red."""
+    map coloured by the delivered force ratio against the stiffest passive spring,
+    ``delivered_vs_passive_ratio`` (worst finger; 1 = min(K, K_pass) x penetration
+    delivered), with the largest energy given to the user (mJ) written in each cell and
+    unstable cells outlined in red."""
     plt = _pyplot()
     from matplotlib.patches import Rectangle
 
@@ -261,13 +264,13 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
             a.set_xlabel("wall stiffness K (N/mm)")
             a.set_ylabel("servo period T (ms)")
             a.set_title(f"damping b = {b:g} Ns/m, controller {'on' if on else 'off'}", fontsize=10)
-    fig.suptitle("stability matrix of a virtual wall on the simulated Omni: colour = delivered force ratio "
-                 "(applied / asked, worst finger)\nnumber = largest energy given to the user (mJ); "
-                 f"red outline = unstable (energy > {tol_mj:g} mJ, force after release, or over the limit)",
+    fig.suptitle("stability matrix of a virtual wall on the simulated Omni: colour = delivered force "
+                 "/ (min(K, K_pass) x penetration), worst finger\nnumber = largest energy given to the user "
+                 f"(mJ); red outline = unstable (energy > {tol_mj:g} mJ or force after release)",
                  fontsize=10)
     fig.tight_layout(rect=(0.0, 0.0, 0.92, 0.95))
     cax = fig.add_axes((0.93, 0.12, 0.015, 0.7))
-    fig.colorbar(im, cax=cax, label="delivered force ratio")
+    fig.colorbar(im, cax=cax, label="delivered / (min(K, K_pass) x penetration)")
     out = Path(path)
     save_figure(fig, out, dpi=90)
     return out

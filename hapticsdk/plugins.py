@@ -79,9 +79,11 @@ class PluginInfo:
 
     @property
     def module(self) -> str:
+        """The module part of the entry point's value."""
         return self.value.split(":", 1)[0]
 
     def to_dict(self) -> dict[str, str]:
+        """The entry as a JSON-ready dict (kind, name, distribution, version, value)."""
         return {"kind": self.kind, "name": self.name, "distribution": self.distribution,
                 "version": self.version, "value": self.value}
 
@@ -130,12 +132,18 @@ class Registry:
         self._local[name] = obj
 
     def unregister(self, name: str) -> None:
+        """Remove an in-process registration (no error when there is none)."""
         self._local.pop(name, None)
 
     def names(self) -> list[str]:
+        """Every name of this kind: installed and registered in-process, sorted."""
         return sorted(set(self._table()) | set(self._local))
 
     def info(self, name: str) -> PluginInfo:
+        """What is known of ``name`` without importing it; raises
+        :class:`~hapticsdk.errors.UnknownPluginError` (naming the distribution to install
+        for a first-party plugin) when it is not installed.
+        """
         if name in self._local:
             obj = self._local[name]
             return PluginInfo(self.kind, name, f"{getattr(obj, '__module__', '?')}:{getattr(obj, '__qualname__', '?')}",
@@ -185,6 +193,9 @@ class Registry:
         return obj
 
     def distribution_of(self, name: str) -> str | None:
+        """The distribution that provides ``name`` (``None`` for in-process or unknown
+        names).
+        """
         if name in self._local:
             return None
         ep = self._table().get(name)
@@ -247,6 +258,7 @@ class PluginManager:
         self.reset()
 
     def reset(self) -> None:
+        """Start over: a new pluggy manager, no hook module registered, no failures."""
         self.pm = pluggy.PluginManager(hookspecs.PROJECT)
         self.pm.add_hookspecs(hookspecs)
         self.failures: dict[str, str] = {}
@@ -254,6 +266,7 @@ class PluginManager:
 
     @property
     def hook(self) -> Any:
+        """pluggy's hook relay (``manager().hook.<hook_name>(...)``)."""
         return self.pm.hook
 
     def register(self, plugin: Any, name: str | None = None) -> None:
@@ -277,11 +290,15 @@ class PluginManager:
             log.warning("hapticsdk hook plugin %r failed to load: %s", ep.name, exc)
 
     def load_all(self) -> "PluginManager":
+        """Register every installed hook module; a broken one is recorded in
+        :attr:`failures`, not raised.
+        """
         for ep in _entry_points(GROUPS["hooks"]):
             self._load_ep(ep)
         return self
 
     def load_for(self, distributions: Iterable[str]) -> "PluginManager":
+        """Register only the hook modules of ``distributions`` (the ones a scene uses)."""
         wanted = {d.lower().replace("_", "-") for d in distributions if d}
         for ep in _entry_points(GROUPS["hooks"]):
             dist = getattr(ep, "dist", None)

@@ -76,7 +76,8 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
                   model: str | PerceptionModel | None = None,
                   penalty: str = "paper", tolerance: float = 0.01,
                   fixed: Mapping[str, float] | None = None,
-                  penalty_weight: float = 1.0, data_support: bool = False) -> SolveProblem:
+                  penalty_weight: float = 1.0, data_support: bool = False,
+                  extra_constraints: Sequence[Any] = ()) -> SolveProblem:
     """Assemble a :class:`~hapticsdk.solvers.SolveProblem`.
 
     Args:
@@ -93,6 +94,9 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
             press-force range for hardness). Off by default, as in the paper: the inverse is
             not unique, and without it the solver may return feature combinations no
             recording had (see docs/solvers.md, "Data support").
+        extra_constraints: further :class:`~hapticsdk.dimensions.Constraint` objects on
+            the model's features, e.g. what the mapped actuators can produce (the scene
+            compiler's device-aware solving).
     """
     T, dims = _targets_array(targets, dimensions)
     if len(set(dims)) != len(dims):
@@ -148,6 +152,8 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
     constraints = []
     for d in dim_objs:
         constraints.extend(d.constraints(**context))
+    # device-aware solving: what the mapped actuators can produce (PerceptionDimension.device_constraints)
+    constraints.extend(extra_constraints)
     return SolveProblem(targets=T, dimensions=dims, model=mdl, space=space, fixed=pinned,
                         constraints=tuple(constraints), penalty=penalty, tolerance=tolerance,
                         penalty_weight=penalty_weight)

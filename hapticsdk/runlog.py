@@ -182,10 +182,12 @@ class RunLog:
 
     @property
     def roles(self) -> list[str]:
+        """Channel roles with recorded commands, sorted."""
         return sorted(self.commands)
 
     @property
     def period_s(self) -> float | None:
+        """Servo period of the recorded run (s), when the header has it."""
         return self.header.get("period_s")
 
     def state(self, i: int) -> DeviceState:
@@ -524,6 +526,9 @@ class PlaybackDevice(HapticDevice):
                          for c in self.received], float)
 
     def describe(self) -> dict[str, Any]:
+        """The actuator's description plus the run's length in ticks, the playback position
+        and the recorded device's name.
+        """
         d = super().describe()
         d.update({"run_ticks": len(self.run), "index": self.index, "finished": self.finished,
                   "recorded_device": self.run.header.get("device")})

@@ -92,6 +92,7 @@ class SafetySettings:
             raise ValidationError(f"must be in [0, 1), got {self.velocity_knee!r}", field="safety.velocity_knee")
 
     def to_dict(self) -> dict[str, Any]:
+        """The settings as a dict (every field, SI units as named)."""
         return asdict(self)
 
 

@@ -145,22 +145,27 @@ class BatchSolveResult(list):  # type: ignore[type-arg]
 
     @property
     def x(self) -> np.ndarray:
+        """Solved features of every target, ``(m, d)``, physical units."""
         return self._column("x")
 
     @property
     def error(self) -> np.ndarray:
+        """Sum of absolute intensity errors of every target, ``(m,)``."""
         return self._column("error")
 
     @property
     def success(self) -> np.ndarray:
+        """Whether each target was reached, ``(m,)``."""
         return self._column("success")
 
     @property
     def fun(self) -> np.ndarray:
+        """Objective value (formula (6)) of every target, ``(m,)``."""
         return self._column("fun")
 
     @property
     def constraint_violation(self) -> np.ndarray:
+        """Largest relative constraint violation of every target, ``(m,)`` (0 when met)."""
         return self._column("constraint_violation")
 
     def __repr__(self) -> str:
@@ -182,6 +187,9 @@ class Trace:
         self.violation: list[np.ndarray] = []
 
     def record(self, nfev: int, best_error: np.ndarray, violation: np.ndarray | None = None) -> None:
+        """Record one iteration: evaluations so far, best error per target ``(m,)`` and its
+        constraint violation (zeros when not given); the time is taken now.
+        """
         self.times.append(time.perf_counter() - self.t0)
         self.nfev.append(int(nfev))
         self.best_error.append(np.array(best_error, float).reshape(self.n_targets))
@@ -345,14 +353,17 @@ class SolveProblem:
     # -- sizes -------------------------------------------------------------
     @property
     def n_targets(self) -> int:
+        """Number of targets ``m``."""
         return int(self.targets.shape[0])
 
     @property
     def n_features(self) -> int:
+        """Number of searched features ``d``."""
         return len(self.space)
 
     @property
     def feature_names(self) -> tuple[str, ...]:
+        """Names of the searched features, in column order."""
         return self.space.names
 
     def full_inputs(self, X: np.ndarray) -> np.ndarray:
@@ -363,6 +374,9 @@ class SolveProblem:
         return G
 
     def columns(self, G: np.ndarray) -> dict[str, np.ndarray]:
+        """Model inputs ``G`` (``(..., n_inputs)``, physical units) as ``{feature name:
+        column}`` for the constraints.
+        """
         return {n: G[..., i] for i, n in enumerate(self.model.feature_names)}
 
     # -- evaluation --------------------------------------------------------
@@ -473,6 +487,10 @@ class Solver(ABC):
 
     name: ClassVar[str] = ""
     default_options: ClassVar[dict[str, Any]] = {}
+    #: False for solvers that draw no random numbers: ``solve`` then skips seeding a
+    #: generator (~8-40 us, a large part of a one-target lookup call) and hands ``_solve``
+    #: a shared, unused one
+    uses_rng: ClassVar[bool] = True
 
     def __init__(self, **options: Any) -> None:
         unknown = [k for k in options if k not in self.default_options]
@@ -495,7 +513,8 @@ class Solver(ABC):
         if not isinstance(problem, SolveProblem):
             raise ValidationError("problem must be a SolveProblem", field="problem")
         from .checks import check_seed
-        rng = np.random.default_rng(check_seed(seed))
+        seed = check_seed(seed)
+        rng = np.random.default_rng(seed) if self.uses_rng else _NO_RNG
         chunk = DEFAULT_CHUNK_SIZE if chunk_size is None else chunk_size
         if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or not 1 <= chunk <= MAX_CHUNK_SIZE:
             raise ValidationError(f"must be an integer in 1..{MAX_CHUNK_SIZE}, got {chunk_size!r}",
@@ -527,6 +546,9 @@ class Solver(ABC):
     @abstractmethod
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
         """Search; call ``trace.record`` once per iteration."""
+
+
+_NO_RNG = np.random.default_rng(0)
 
 
 class _BatchData:

@@ -95,6 +95,8 @@ class PhaseAccumulator:
         return self.phase + self._lo
 
     def total_cycles(self) -> float:
+        """Cycles accumulated since the start (whole and fractional), exact over long runs.
+        """
         return self.cycles + self.phase + self._lo
 
     def block(self, frequency_hz: float, n: int, fs: float) -> np.ndarray:
@@ -166,6 +168,7 @@ class Oscillator:
         return amps * ph
 
     def reset(self) -> None:
+        """Back to phase 0 and amplitude 0."""
         self.acc = PhaseAccumulator()
         self.amplitude = 0.0
 

@@ -85,6 +85,9 @@ def make_problem_factory() -> tuple[Callable[..., SolveProblem], str]:
 
 
 def feasible_samples(problem: SolveProblem, n: int = 20000, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` random feature vectors of ``problem``'s space that meet every constraint, and
+    the model's predicted intensities for them (the reachable intensity set).
+    """
     X = problem.space.random(n, np.random.default_rng(seed))
     G = problem.full_inputs(X)
     names = problem.model.dimension_names
@@ -98,6 +101,10 @@ def feasible_samples(problem: SolveProblem, n: int = 20000, seed: int = 0) -> tu
 
 def bench_targets(factory: Callable[..., SolveProblem], material_path: str | None = None
                   ) -> dict[str, Any]:
+    """The benchmark's targets: the material library's intensities plus extreme points of
+    the reachable intensity set (min/max of each dimension and of their sum and
+    difference).
+    """
     names, TM = load_material_targets(material_path)
     probe = factory(np.array([[0.5, 0.5]]))
     _, Y = feasible_samples(probe)
@@ -118,6 +125,9 @@ def bench_targets(factory: Callable[..., SolveProblem], material_path: str | Non
 
 
 def reference_errors(factory: Callable[..., SolveProblem], T: np.ndarray) -> np.ndarray:
+    """Best error per target reached by a long polish and a long GA run (the reference a
+    solver's error is compared with; ``inf`` where neither meets the constraints).
+    """
     from hapticsdk_ga.ga import GASolver
     from hapticsdk_ga.polish import PolishSolver
 
@@ -147,6 +157,10 @@ def _trace_p90(res: Any) -> tuple[np.ndarray, np.ndarray]:
 def work_precision(factory: Callable[..., SolveProblem], T: np.ndarray, name: str,
                    settings: list[dict[str, Any]], seeds: list[int], *, penalty: str = "paper",
                    prepare: Callable[[SolveProblem, Any], None] | None = None) -> dict[str, Any]:
+    """Run solver ``name`` with each option set in ``settings`` and each seed on targets
+    ``T``; returns its work-precision points (time per target vs error) and its times to
+    reach each error threshold.
+    """
     p = factory(T, penalty=penalty)
     m = len(T)
     points = []
@@ -198,6 +212,9 @@ def _peer_fitness(p: SolveProblem, i: int) -> Callable[[np.ndarray], np.ndarray]
 
 
 def peer_pygad(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
+    """Solve target ``i`` of ``p`` with pygad's GA (population ``pop``, ``gens``
+    generations); returns the best feature vector (physical units).
+    """
     import pygad
     f = _peer_fitness(p, i)
     lo, hi = p.space.lower, p.space.upper
@@ -216,6 +233,9 @@ def peer_pygad(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 5
 
 
 def peer_deap(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
+    """Solve target ``i`` of ``p`` with DEAP's simple GA (population ``pop``, ``gens``
+    generations); returns the best feature vector (physical units).
+    """
     import random
     from deap import algorithms, base, creator, tools
     f = _peer_fitness(p, i)
@@ -260,6 +280,9 @@ def peer_deap(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50
 
 
 def peer_pymoo(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int = 50) -> np.ndarray:
+    """Solve target ``i`` of ``p`` with pymoo's GA (population ``pop``, ``gens``
+    generations); returns the best feature vector (physical units).
+    """
     from pymoo.algorithms.soo.nonconvex.ga import GA
     from pymoo.core.problem import Problem
     from pymoo.optimize import minimize
@@ -476,6 +499,10 @@ def profile_ga(factory: Callable[..., SolveProblem], T: np.ndarray) -> dict[str,
 
 def amortised_stats(factory: Callable[..., SolveProblem], T: np.ndarray, ref_ga_error: np.ndarray,
                     n_lookup: int = 20000) -> dict[str, Any]:
+    """Build the amortised solver's table for ``factory``'s problem and report its build
+    time (s), lookup time per target (us) and its errors next to the GA's
+    ``ref_ga_error``.
+    """
     from hapticsdk_ga.amortised import AmortisedSolver
     p = factory(T)
     S = AmortisedSolver()
@@ -551,6 +578,9 @@ def batch_call_times(factory: Callable[..., SolveProblem], T: np.ndarray, seeds:
 
 
 def machine_info() -> dict[str, Any]:
+    """The machine and library versions the benchmark ran on (CPU, cores, Python, numpy,
+    scipy, onnxruntime, OMP_NUM_THREADS).
+    """
     import scipy
     info = {"machine": platform.machine(), "processor": platform.processor() or _cpu_name(),
             "cpus": os.cpu_count(), "python": sys.version.split()[0], "numpy": np.__version__,

@@ -131,6 +131,9 @@ class StabilityResult:
     runtime_s: float
 
     def to_dict(self) -> dict[str, Any]:
+        """The matrix as JSON-ready data: every cell, the tolerances it was judged with, the
+        passive-stiffness search and the summary counts.
+        """
         return {"cells": self.cells, "energy_tolerance_j": self.tolerance_j,
                 "oscillation_tolerance_n": OSCILLATION_TOLERANCE_N,
                 "transparent_fraction": TRANSPARENT_FRACTION,

@@ -100,6 +100,7 @@ class DiscriminationAnswers:
 
     @property
     def levels_hz(self) -> np.ndarray:
+        """The distinct voice-coil frequencies tested (Hz), sorted."""
         return np.unique(self.frequency_hz)
 
     def to_csv(self, path: str | Path) -> Path:
@@ -224,6 +225,9 @@ class PsychometricFit:
         return special.ndtr((np.asarray(k, float) - self.pse_n_per_mm) / self.sigma_n_per_mm)
 
     def to_dict(self) -> dict[str, Any]:
+        """The fit as a JSON-ready dict: PSE and sigma (N/mm), the PSE's confidence interval
+        and standard error, whether it was censored, and the per-spring trial counts.
+        """
         return {"frequency_hz": self.frequency_hz, "pse_n_per_mm": self.pse_n_per_mm,
                 "sigma_n_per_mm": self.sigma_n_per_mm, "pse_ci": list(self.pse_ci), "pse_se": self.pse_se,
                 "censored": self.censored, "n_answers": self.n_answers,

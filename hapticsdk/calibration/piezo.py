@@ -86,6 +86,7 @@ class PiezoTable:
 
     @property
     def frequency_range_hz(self) -> tuple[float, float]:
+        """Lowest and highest tabulated frequency (Hz)."""
         return float(self.frequencies_hz[0]), float(self.frequencies_hz[-1])
 
     def _row(self, f_hz: float) -> np.ndarray:

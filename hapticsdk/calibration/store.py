@@ -119,7 +119,7 @@ def _read_regular(p: Path, max_bytes: int) -> bytes:
         raise refuse(f"cannot read: {exc.strerror or exc}") from None
     if not stat.S_ISREG(st.st_mode):
         kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file (FIFO, socket or device)"
-        raise refuse(f"{kind}; skipped")
+        raise refuse(kind)
     flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_BINARY", 0)
     try:
         fd = os.open(p, flags)
@@ -127,7 +127,7 @@ def _read_regular(p: Path, max_bytes: int) -> bytes:
         raise refuse(f"cannot open: {exc.strerror or exc}") from None
     try:
         if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise refuse("not a regular file (FIFO, socket or device); skipped")
+            raise refuse("not a regular file (FIFO, socket or device)")
         chunks, total = [], 0
         while total <= max_bytes:
             b = os.read(fd, min(1 << 16, max_bytes + 1 - total))
@@ -140,7 +140,7 @@ def _read_regular(p: Path, max_bytes: int) -> bytes:
     finally:
         os.close(fd)
     if total > max_bytes:
-        raise refuse(f"larger than {max_bytes} bytes; skipped")
+        raise refuse(f"larger than {max_bytes} bytes")
     return b"".join(chunks)
 
 
@@ -201,6 +201,9 @@ class CalibrationEntry:
     claimed_kind: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The entry as a JSON-ready dict (path, kind, serial, generated, source, error,
+        sha256).
+        """
         return {"path": str(self.path), "kind": self.kind, "serial": self.serial,
                 "generated": self.generated, "source": self.source, "error": self.error,
                 "sha256": self.sha256}
@@ -223,7 +226,9 @@ def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, VoiceCoi
             cal, digest = _from_file(p)
         except Exception as exc:  # one bad file never stops the others: skipped, named
             msg = str(exc) if isinstance(exc, (ValidationError, CalibrationError)) else \
-                f"{p}: {type(exc).__name__}: {exc}"
+                f"{type(exc).__name__}: {exc}"
+            for prefix in ("calibration: ", f"{p}: "):  # the entry names the file already
+                msg = msg[len(prefix):] if msg.startswith(prefix) else msg
             if (str(p), msg) not in _WARNED:  # once per file and reason in a process
                 _WARNED.add((str(p), msg))
                 log.warning("skipped calibration file %s: %s", p, msg)
@@ -264,6 +269,9 @@ class LoadedCalibration:
 
     @property
     def generated(self) -> bool | None:
+        """Whether the calibration in use was generated rather than measured (``None`` when
+        none was loaded).
+        """
         return None if self.calibration is None else bool(self.calibration.generated)
 
     @property
@@ -276,6 +284,9 @@ class LoadedCalibration:
         return f"{self.path}: {self.calibration.source}"
 
     def to_dict(self) -> dict[str, Any]:
+        """What was loaded, as a JSON-ready dict: kind, serial, origin, file and its sha256,
+        generated, source, and the files skipped with why.
+        """
         return {"kind": self.kind, "serial": self.serial, "origin": self.origin,
                 "path": str(self.path) if self.path else None, "file": str(self.path) if self.path else None,
                 "sha256": self.sha256, "generated": self.generated,

@@ -105,6 +105,9 @@ class VoiceCoilCalibration:
 
     @classmethod
     def paper(cls) -> "VoiceCoilCalibration":
+        """The calibration of the reference paper (formula (7) with its published
+        coefficients).
+        """
         return cls()
 
     def gs_coil(self, f_hz: Any) -> np.ndarray:

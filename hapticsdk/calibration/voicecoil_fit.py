@@ -51,6 +51,10 @@ class VoiceCoilFit:
     generated: bool
 
     def to_dict(self) -> dict[str, Any]:
+        """The fit as a JSON-ready dict: outcome, coefficients with standard errors and
+        confidence intervals, reduced chi-square, the per-frequency psychometric fits and
+        the resulting calibration.
+        """
         return {"success": self.success, "message": self.message, "coefficients": list(self.coefficients),
                 "stderr": list(self.stderr), "confidence_intervals": [list(c) for c in self.confidence_intervals],
                 "confidence": self.confidence, "chi2_reduced": self.chi2_reduced, "generated": self.generated,

@@ -23,6 +23,9 @@ COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``hapticsdk`` argument parser with every command module's subcommands (help with
+    defaults and one example per command).
+    """
     from .. import __version__
 
     parser = Parser(
@@ -37,8 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     bench = sub.add_parser("bench", help="benchmarks (solvers, stability, fidelity, timing)")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCH")
-    bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
-    parser.set_defaults(func=lambda args: (parser.print_help(), 2)[1])
+    bench.set_defaults(func=missing_subcommand(bench, "BENCH"))
+    parser.set_defaults(func=missing_subcommand(parser, "COMMAND"))
     for name in COMMAND_MODULES:
         try:
             mod = importlib.import_module(f"{__name__}.{name}")
@@ -126,6 +129,18 @@ def _finish_help(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> None
         if isinstance(action, argparse._SubParsersAction):
             for name, sub in action.choices.items():
                 _finish_help(sub, path + (name,))
+
+
+def missing_subcommand(p: argparse.ArgumentParser, what: str):
+    """Handler of a command group run without its subcommand: the group's help and
+    ``hapticsdk: error: <WHAT>: ...`` on stderr, exit status 2."""
+
+    def handler(args: argparse.Namespace) -> int:
+        p.print_help(sys.stderr)
+        print(f"hapticsdk: error: {what}: choose one of the commands listed above", file=sys.stderr)
+        return 2
+
+    return handler
 
 
 def emit(obj: object, as_json: bool, text: str | None = None) -> None:

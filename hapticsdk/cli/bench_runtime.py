@@ -10,6 +10,9 @@ from typing import Any
 
 
 def register_bench(bench_sub: Any) -> None:
+    """Add ``bench stability``, ``bench fidelity``, ``bench timing`` (and the other runtime
+    benchmarks) under ``hapticsdk bench``.
+    """
     from .argtypes import bounded_int, nonneg_int, positive_float
 
     p = bench_sub.add_parser("stability", help="stability matrix of a virtual wall on the simulated Omni "
@@ -79,11 +82,22 @@ def _stability(args: argparse.Namespace) -> int:
         plot_stability(res, args.plot)
         res["plot"] = args.plot
     s = res["summary"]
+    pct = res["transparent_fraction"] * 100
     text = (f"{s['cells']} cells, {grid['duration_s']:g} s each, {res['runtime_s']:.1f} s\n"
-            f"controller on : {s['controller_on_unstable']} unstable, max energy to user "
-            f"{s['controller_on_max_energy_j'] * 1e3:.3f} mJ (tolerance {res['energy_tolerance_j'] * 1e3:.2f} mJ), "
-            f"max peak force {s['controller_on_max_peak_force_n']:.2f} N\n"
-            f"controller off: {s['controller_off_unstable']} unstable "
+            f"controller on : {s['controller_on_stable_transparent']} stable and transparent, "
+            f"{s['controller_on_stable_withholding']} stable by withholding "
+            f"(< {pct:g} % of min(K, K_pass) x penetration delivered), {s['controller_on_unstable']} unstable\n"
+            f"                max energy to user {s['controller_on_max_energy_j'] * 1e3:.3f} mJ "
+            f"(tolerance {res['energy_tolerance_j'] * 1e3:g} mJ); delivered force >= "
+            f"{s['controller_on_min_delivered_vs_passive'] * 100:.0f} % of min(K, K_pass) x penetration and >= "
+            f"{s['controller_on_min_delivered_vs_wall'] * 100:.0f} % of K x penetration in every cell\n"
+            f"                force below min({res['felt_force_n']:g} N, {res['felt_fraction']:g} K x penetration) "
+            f"on some tick deeper than {res['felt_depth_mm']:g} mm: {s['controller_on_felt_force_missed']} cells\n"
+            f"                peak force commanded {s['controller_on_max_peak_commanded_force_n']:.2f} N, "
+            f"applied {s['controller_on_max_peak_force_n']:.2f} N; largest force step "
+            f"{s['controller_on_max_force_step_n']:.2f} N per tick\n"
+            f"controller off: {s['controller_off_stable_transparent'] + s['controller_off_stable_withholding']} "
+            f"stable, {s['controller_off_unstable']} unstable "
             f"({s['controller_off_predicted_active']} predicted active by b < K T / 2)"
             + (f"\nfigure saved to {args.plot}" if args.plot else ""))
     emit(res, args.json, text)
@@ -96,9 +110,13 @@ def _fidelity(args: argparse.Namespace) -> int:
     from . import emit
     with Progress("bench fidelity", quiet=args.json) as progress:
         rows = run_fidelity(tuple(args.periods) if args.periods else PERIODS_S, progress=progress)
-    text = "\n".join(["period_ms  force_err_rms_N  freq_err_Hz  tick_median_us"] +
-                     [f"{r['period_s'] * 1e3:9.2f}  {r['force_error_rms_n']:15.4f}  {r['frequency_error_hz']:11.3f}  "
-                      f"{r['tick_median_us']:14.1f}" for r in rows])
+    text = "\n".join(["period_ms  force_err_rms_N  freq_err_Hz rms/max  unquantised rms/max  tick_median_us"] +
+                     [f"{r['period_s'] * 1e3:9.2f}  {r['force_error_rms_n']:15.4f}  "
+                      f"{r['frequency_error_hz']:8.3f} / {r['frequency_error_max_hz']:6.2f}  "
+                      f"{r['frequency_error_unquantised_hz']:10.3f} / {r['frequency_error_unquantised_max_hz']:6.2f}  "
+                      f"{r['tick_median_us']:14.1f}" for r in rows]
+                     + ["(freq_err: the frequency the DRV2667 holds, in its 7.8125 Hz steps; unquantised: the "
+                        "frequency commanded)"])
     emit(rows, args.json, text)
     return 0
 

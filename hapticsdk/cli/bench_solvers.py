@@ -13,6 +13,7 @@ from typing import Any
 
 
 def register_bench(bench_sub: argparse._SubParsersAction) -> None:
+    """Add ``bench solvers`` under ``hapticsdk bench``."""
     p = bench_sub.add_parser("solvers", help="solver work-precision, runtime-to-target, peers (pygad, DEAP, pymoo)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--plot", metavar="FILE", help="write the work-precision plot (PNG; needs matplotlib)")
@@ -25,6 +26,9 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_bench_solvers(args: Any) -> int:
+    """Run the solver benchmark; print its summary (or JSON), optionally write the JSON
+    report and the work-precision plot. Returns the exit status.
+    """
     from ..benchmarks import solvers as bench
 
     from ..fileio import check_output_path

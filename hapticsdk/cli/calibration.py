@@ -10,9 +10,13 @@ from .argtypes import bounded_int, nonneg_int, open_unit_interval, positive_floa
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``calibrate`` (``voicecoil``, ``piezo``, ``answers``, ``list``) and ``replay`` to
+    the ``hapticsdk`` command.
+    """
     cal = sub.add_parser("calibrate", help="fit actuator calibrations (voice coil formula (7), piezo Tab)")
     csub = cal.add_subparsers(dest="calibrate_command", metavar="KIND")
-    cal.set_defaults(func=lambda args: (cal.print_help(), 2)[1])
+    from . import missing_subcommand
+    cal.set_defaults(func=missing_subcommand(cal, "KIND"))
 
     p = csub.add_parser("voicecoil", help="fit formula (7) to stiffness-discrimination answers (CSV)")
     p.add_argument("answers", help="CSV with columns person, frequency_hz, spring_n_per_mm, spring_stiffer")
@@ -87,6 +91,9 @@ def _save(args: argparse.Namespace, cal: Any) -> str | None:
 
 
 def cmd_voicecoil(args: argparse.Namespace) -> int:
+    """``calibrate voicecoil``: fit formula (7) to discrimination answers, print the fit and
+    optionally save the calibration. Returns the exit status.
+    """
     from ..calibration import fit_voicecoil
     from ..calibration.voicecoil import PAPER_COEFFICIENTS
 
@@ -120,6 +127,9 @@ def cmd_voicecoil(args: argparse.Namespace) -> int:
 
 
 def cmd_piezo(args: argparse.Namespace) -> int:
+    """``calibrate piezo``: build the piezo table from acceleration measurements, print it
+    and optionally save it. Returns the exit status.
+    """
     from pathlib import Path
 
     import numpy as np
@@ -169,6 +179,9 @@ def cmd_piezo(args: argparse.Namespace) -> int:
 
 
 def cmd_answers(args: argparse.Namespace) -> int:
+    """``calibrate answers``: write GENERATED discrimination answers simulated from formula
+    (7). Returns the exit status.
+    """
     from ..calibration import generate_answers
 
     from ..fileio import check_output_path
@@ -181,6 +194,9 @@ def cmd_answers(args: argparse.Namespace) -> int:
 
 
 def cmd_list(args: argparse.Namespace) -> int:
+    """``calibrate list``: calibration files in the calibration directory and the
+    calibration each kind uses. Returns the exit status.
+    """
     from ..calibration import calibration_dir, calibrations_in_use, list_calibrations
     from ..errors import ValidationError
 
@@ -198,8 +214,8 @@ def cmd_list(args: argparse.Namespace) -> int:
         emit(out, True)
     else:
         lines = [f"calibration directory: {directory}"]
-        lines += [f"  {e['path']}: {e['kind']} serial={e['serial']}"
-                  + (f" ERROR {e['error']}" if e["error"] else "") for e in out["files"]] or ["  (no files)"]
+        lines += [f"  {e['path']}: " + (f"skipped: {e['error']}" if e["error"] else f"{e['kind']} serial={e['serial']}")
+                  for e in out["files"]] or ["  (no files)"]
         lines.append("in use:")
         lines += [f"  {u['kind']:9} serial={u['serial']} {u['origin']}: {u['source']}" for u in out["in_use"]]
         print("\n".join(lines))
@@ -207,6 +223,9 @@ def cmd_list(args: argparse.Namespace) -> int:
 
 
 def cmd_replay(args: argparse.Namespace) -> int:
+    """``replay``: summarise a recorded run file and check that it plays back unchanged.
+    Returns the exit status.
+    """
     import numpy as np
 
     from ..runlog import PlaybackDevice, load_run

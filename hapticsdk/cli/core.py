@@ -16,6 +16,9 @@ UNREACHED_RULE = ("Exit status: 0 when every target was reached; 1 when a target
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``plugins``, ``materials``, ``solve`` and ``render`` to the ``hapticsdk``
+    command.
+    """
     p = sub.add_parser("plugins", help="list installed plugins (without importing them)")
     p.add_argument("--kind", choices=["dimension", "actuator", "solver", "model", "importance", "hooks"],
                    action="append", help="only these kinds (repeatable)")
@@ -73,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def cmd_plugins(args: argparse.Namespace) -> int:
+    """``plugins``: list installed plugins (kind, name, distribution, version) from entry-
+    point metadata; with ``--check`` import each and report broken ones. Returns the exit
+    status.
+    """
     from ..plugins import list_plugins
 
     rows = list_plugins(args.kind, check=args.check)
@@ -90,6 +97,9 @@ def cmd_plugins(args: argparse.Namespace) -> int:
 
 
 def cmd_materials(args: argparse.Namespace) -> int:
+    """``materials``: print the material library (name, label, intensities), marked
+    GENERATED when it is. Returns the exit status.
+    """
     from ..materials import load_library
 
     lib = load_library(args.library, with_plugins=args.with_plugins)
@@ -124,6 +134,9 @@ def _targets(args: argparse.Namespace) -> dict[str, float]:
 
 
 def cmd_solve(args: argparse.Namespace) -> int:
+    """``solve``: solve features for the targets given and print them (or JSON). Returns 0
+    when reached, 1 when not.
+    """
     from ..errors import ValidationError
     from ..problems import solve
 
@@ -142,6 +155,9 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
 
 def format_solve(out: dict[str, Any]) -> str:
+    """Text of one solve result (``SolveResult.to_json()``): features, predicted against
+    target intensities, error, constraint violation, evaluations and time.
+    """
     feats = ", ".join(f"{k}={v:.4g}" for k, v in out["x"].items())
     its = ", ".join(f"{k} {v:.4f} (target {out['targets'].get(k, float('nan')):.4f})"
                     for k, v in out["intensities"].items() if k in out["targets"])
@@ -154,6 +170,10 @@ def format_solve(out: dict[str, Any]) -> str:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    """``render``: compile a material, intensities or a scene, render it on its devices
+    (paced on the clock with ``--realtime``), print what was rendered and optionally save
+    a figure. Returns 0 when every target was reached, 1 when not.
+    """
     from ..errors import ValidationError
     from ..compiler import compile_scene
     from ..runtime.render import render_plan
@@ -206,6 +226,9 @@ _TARGETS_NAME = re.compile(r"[A-Za-z_][\w-]* [0-9.eE+-]+(, [A-Za-z_][\w-]* [0-9.
 
 
 def format_render(out: dict[str, Any]) -> str:
+    """Text of a render report: per material what was rendered on which actuators, what was
+    left out and why, the solve, then the servo tick statistics.
+    """
     lines = []
     for mat in out.get("materials", [out]):
         acts = mat["actuators"]

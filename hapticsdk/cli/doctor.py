@@ -6,6 +6,7 @@ import argparse
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``doctor`` to the ``hapticsdk`` command."""
     p = sub.add_parser("doctor", help="check which actuator backends, devices, libraries and "
                                       "calibrations are usable here")
     p.add_argument("--json", action="store_true", help="print the report as JSON")

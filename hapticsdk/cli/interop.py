@@ -23,6 +23,9 @@ SYNTH_REPORT_S = 60.0
 
 
 def register(sub: Any) -> None:
+    """Add ``export``, ``import`` and ``play`` (MPEG-I haptics files) to the ``hapticsdk``
+    command.
+    """
     p = sub.add_parser("export", help="export solved materials (plan or scene) as MPEG-I haptics (.hjif)")
     p.add_argument("source", metavar="PLAN_OR_SCENE",
                    help="plan JSON (hapticsdk plan -o), scene JSON, or a library material name (S7)")
@@ -83,6 +86,9 @@ def _plan_from_arg(text: str, *, no_importance: bool, seed: int | None) -> Any:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
+    """``export``: write the solved materials of a plan or scene as an MPEG-I haptics
+    (.hjif) file. Returns the exit status.
+    """
     from ..fileio import check_output_path
     from ..interop.hjif_export import export_plan, write_hjif
     from ..interop.hjif_import import sdk_materials
@@ -107,6 +113,9 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def cmd_import(args: argparse.Namespace) -> int:
+    """``import``: read an .hjif file and print its perceptions, what the SDK plays of them
+    and its SDK metadata. Returns the exit status.
+    """
     from ..interop.hjif_import import format_summary, import_summary, load
 
     hfile = load(args.file)
@@ -130,6 +139,9 @@ def cmd_import(args: argparse.Namespace) -> int:
 
 
 def cmd_play(args: argparse.Namespace) -> int:
+    """``play``: play the vibrotactile content of an .hjif file on the vibration actuators
+    and print what was played. Returns the exit status.
+    """
     from ..errors import ValidationError
     from ..interop.hjif_import import load
     from ..interop.hjif_play import format_report, play

@@ -14,6 +14,7 @@ from typing import Any
 
 
 def register(sub: Any) -> None:
+    """Add ``plan`` to the ``hapticsdk`` command."""
     from .argtypes import nonneg_float, nonneg_int
     from .core import UNREACHED_RULE
 
@@ -47,6 +48,10 @@ def _scene_from_arg(text: str) -> Any:
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
+    """``plan``: compile a scene (or a library material) into a render plan, print what is
+    kept and dropped and why, optionally save the plan (``-o``) and a figure
+    (``--plot``). Returns 0 when every target was reached, 1 when not.
+    """
     from ..compiler import compile_scene
     from ..scene import Scene
 
@@ -88,6 +93,9 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 
 def format_plan(out: dict[str, Any]) -> str:
+    """Text of a plan summary: per material the dimensions rendered and on which actuators,
+    the features, what was dropped or kept and why, the solve; then the plugins used.
+    """
     lines = [f"scene {out['scene']}"]
     for name, m in out["materials"].items():
         feats = ", ".join(f"{k}={v:.4g}" for k, v in m["features"].items())
@@ -104,6 +112,17 @@ def format_plan(out: dict[str, Any]) -> str:
                         if spec else "undeclared (plugin API 1.0: not checked)")
                 lines.append(f"  role {role}: {who} commands {what} -> {c['actuator']} "
                              f"({c['actuator_channel']}; accepts {acc})")
+        dev = m.get("device") or {}
+        for dim, res in (dev.get("residual") or {}).items():
+            caps = ", ".join(f"{role}: {c['frequency_range_hz'][0]:g}-{c['frequency_range_hz'][1]:g} Hz, "
+                             f"max {c['max_drive']:g} {c['drive_unit']}"
+                             for role, c in (dev.get("capabilities", {}).get(dim) or {}).items()
+                             if c.get("frequency_range_hz") and c.get("max_drive") is not None)
+            if caps or abs(res) > 0 or dev.get("binding"):
+                lines.append(f"  on the mapped device{'s' if ',' in caps else ''} ({caps or 'no limits published'}): "
+                             f"{dim} predicted {dev['predicted'][dim]:.4f} for target {dev['predicted'][dim] + res:.4f}, "
+                             f"residual {res:+.4f}; binding device constraints: "
+                             f"{', '.join(dev.get('binding') or []) or 'none'}")
         for d in m["dropped"]:
             lines.append(f"  dropped {d['dimension']}: {d['reason']}")
         for dim, e in (m.get("importance") or {}).items():

@@ -138,6 +138,52 @@ def _role_options(scene: Scene, dim: Any) -> dict[str, dict[str, Any]]:
     return out
 
 
+def _capabilities(scene: Scene, dim: Any) -> tuple[dict[str, Any], dict[str, str]]:
+    """What the actuators on ``dim``'s roles can produce (role -> DriveCapability), asked
+    of their classes with the scene's (non-privileged) options: nothing is created,
+    opened or loaded; and role -> why none is known."""
+    from ..device_options import trusted_options
+    from ..plugins import registry
+    caps: dict[str, Any] = {}
+    notes: dict[str, str] = {}
+    roles = list(getattr(dim, "roles", {}) or {}) or list(dim.default_actuators)
+    for role in roles:
+        spec = scene.devices.get(role)
+        name = spec.actuator if spec is not None else dim.default_actuators.get(role)
+        if not name or name not in registry("actuator"):
+            continue
+        cls = registry("actuator").load(name)
+        priv = set(getattr(cls, "privileged_options", {}) or {})
+        opts = {k: v for k, v in {**trusted_options(name), **(dict(spec.options) if spec is not None else {})}.items()
+                if k not in priv}
+        try:
+            cap = cls.capability_for(opts) if hasattr(cls, "capability_for") else None
+        except Exception as exc:   # options it cannot judge without the application's
+            notes[role] = f"{name}: capability unknown at compile time ({type(exc).__name__}: {exc})"
+            continue
+        if cap is not None:
+            caps[role] = cap
+    return caps, notes
+
+
+def _renderer_options(d: str, dim: Any, scene: Scene, ropts: Mapping[str, Any],
+                      caps: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """The options ``d``'s renderer gets, and the calibration records: the scene's
+    ``renderer_options`` win, then what the mapped actuator itself supplies (its own drive
+    table, :meth:`PerceptionDimension.capability_options`), then saved calibrations."""
+    given = dict(ropts.get(d, {}))
+    cal_opts, recs = select_calibrations(d, dim, renderer_options=given, role_options=_role_options(scene, dim))
+    cap_opts = dim.capability_options(caps) if hasattr(dim, "capability_options") else {}
+    merged = {**given, **cal_opts}
+    for k, v in cap_opts.items():
+        if k not in given:
+            merged[k] = v
+            for rec in recs.values():
+                if rec.get("kind") and k in ("table", "calibration"):
+                    rec["superseded_by"] = "the actuator's own drive table (device capability)"
+    return merged, recs
+
+
 def _load_dimension(name: str, field: str) -> Any:
     from ..plugins import registry
     reg = registry("dimension")
@@ -150,9 +196,10 @@ def _load_dimension(name: str, field: str) -> Any:
     return cls() if isinstance(cls, type) else cls
 
 
-def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[str, Any]
-                  ) -> dict[str, Any]:
-    """Solve each group of materials sharing a dimension tuple in one batch."""
+def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[str, Any],
+                  device: Mapping[str, Sequence[Any]] | None = None) -> dict[str, Any]:
+    """Solve each group of materials sharing a dimension tuple in one batch; ``device``:
+    dimension -> constraints of what its mapped actuators can produce."""
     from ..problems import solve
     s = settings["solver"]
     out: dict[str, Any] = {}
@@ -160,10 +207,12 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
         if not dims:
             continue
         T = np.array([[m.targets[d] for d in dims] for m in mats], dtype=float)
+        extra = tuple(c for d in dims for c in (device or {}).get(d, ()))
         res = solve(T, dimensions=list(dims), model=settings.get("model"), method=s["method"],
                     seed=s["seed"], options=dict(s.get("options") or {}),
                     penalty=s.get("penalty", "paper"), tolerance=s.get("tolerance", 0.01),
-                    data_support=bool(s.get("data_support", True)))
+                    data_support=bool(s.get("data_support", True)),
+                    **({"extra_constraints": extra} if extra else {}))
         results = [res] if isinstance(res, dict) else list(res)  # SolveResult is a dict
         prov = res.get("model") if isinstance(res, dict) else getattr(res, "model", None)
         for m, r in zip(mats, results):
@@ -210,6 +259,34 @@ def _check_satisfiable(dims: Sequence[str], settings: Mapping[str, Any]) -> None
     raise PluginError(f"dimensions {list(dims)}: {what} in the searched feature bounds (16384-point design); "
                       f"no material can satisfy them, so nothing is rendered", kind="dimension",
                       plugin=",".join(dims))
+
+
+def _device_summary(r: Any, targets: Mapping[str, float], kept: Sequence[str], caps: Mapping[str, Any],
+                    notes: Mapping[str, Mapping[str, str]], device: Mapping[str, Sequence[Any]]) -> dict[str, Any]:
+    """What the mapped actuators can produce and what remains of the target because of it:
+    per kept dimension the predicted intensity of the features that will be rendered
+    (solved within the device constraints) against the target, and which device
+    constraints bind at the answer (within 0.1 % of their bound)."""
+    cols = {k: np.array([float(v)]) for k, v in r.x_dict.items()}
+    active: list[str] = []
+    described: list[dict[str, Any]] = []
+    for d in kept:
+        for c in device.get(d, ()):
+            desc = c.describe()
+            try:
+                b, v = (float(np.asarray(a)[0]) for a in c.bound_and_value(cols))
+                desc.update(bound=b, value=v)
+                if v - b <= 1e-3 * max(abs(b), 1e-9):
+                    active.append(c.name)
+            except Exception:   # a feature of the constraint is not in this solve
+                pass
+            described.append(desc)
+    pred = dict(r.intensities)
+    return {"capabilities": {d: {role: cap.summary() for role, cap in caps.get(d, {}).items()} for d in kept},
+            "notes": {d: dict(notes.get(d, {})) for d in kept if notes.get(d)},
+            "constraints": described, "binding": active,
+            "predicted": {d: float(pred[d]) for d in kept if d in pred},
+            "residual": {d: float(targets[d] - pred[d]) for d in kept if d in pred}}
 
 
 def _role_spec(owner: str, dname: str, role: str, dim_objs: Mapping[str, Any], imp_model: Any) -> RoleSpec | None:
@@ -275,7 +352,18 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         groups.setdefault(tuple(m.targets), []).append(m)
     for dims in groups:
         _check_satisfiable(dims, settings)
-    first = _solve_groups(groups, settings)
+    # device-aware solving: what the actuators mapped to each dimension can produce
+    ropts = settings.get("renderer_options") or {}
+    caps: dict[str, dict[str, Any]] = {}
+    cap_notes: dict[str, dict[str, str]] = {}
+    render_opts: dict[str, dict[str, Any]] = {}
+    render_cal: dict[str, dict[str, dict[str, Any]]] = {}
+    device: dict[str, list[Any]] = {}
+    for d, dobj in dim_objs.items():
+        caps[d], cap_notes[d] = _capabilities(scene, dobj)
+        render_opts[d], render_cal[d] = _renderer_options(d, dobj, scene, ropts, caps[d])
+        device[d] = list(dobj.device_constraints(caps[d], **render_opts[d])) if caps[d] else []
+    first = _solve_groups(groups, settings, device)
 
     # 2. importance: the predicted loss over every feature vector reaching the target
     #    (seed-independent; hapticsdk.compiler.solution_set), not over the solver's one
@@ -301,7 +389,8 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
             problem = build_problem(np.array([[m.targets[d] for d in dims] for m in gm]), dimensions=list(dims),
                                     model=settings.get("model"), penalty=s_cfg.get("penalty", "paper"),
                                     tolerance=s_cfg.get("tolerance", 0.01),
-                                    data_support=bool(s_cfg.get("data_support", True)))
+                                    data_support=bool(s_cfg.get("data_support", True)),
+                                    extra_constraints=tuple(c for d in dims for c in device.get(d, ())))
             ests = estimate_losses(imp_model, dims, solution_sets(problem), imp_cfg.get("thresholds") or {},
                                    float(imp_cfg["threshold_percent"]), fixed=problem.fixed)
             for m, est, dl in zip(gm, ests, decide_from_estimates(imp_model, dims, ests)):
@@ -316,7 +405,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         if drops[m.name]:
             gone = {e.dimension for e in drops[m.name]}
             regroup.setdefault(tuple(d for d in m.targets if d not in gone), []).append(m)
-    second = _solve_groups(regroup, settings)
+    second = _solve_groups(regroup, settings, device)
     final = {**first, **second}
 
     # 4. renderers' roles and actuators
@@ -335,11 +424,9 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         roles: dict[str, list[str]] = {}
         cal_records: dict[str, dict[str, Any]] = {}
         for d in kept:
-            cal_opts, recs = select_calibrations(d, dim_objs[d], renderer_options=ropts.get(d, {}),
-                                                 role_options=_role_options(scene, dim_objs[d]))
-            cal_records.update(recs)
+            cal_records.update(render_cal[d])
             try:
-                rend = dim_objs[d].renderer(dict(feats), **{**dict(ropts.get(d, {})), **cal_opts})
+                rend = dim_objs[d].renderer(dict(feats), **render_opts[d])
             except ValidationError:
                 raise
             except Exception as exc:
@@ -417,6 +504,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
             actuators=actuators, actuator_options=options, roles=roles,
             dimension_distributions=dists,
             solve=_solve_summary(r, kept, models, settings["solver"]["seed"]),
+            device=_device_summary(r, m.targets, kept, caps, cap_notes, device),
             source=m.source, objects=list(m.objects))
 
     # plugins used / never imported

@@ -95,6 +95,7 @@ class ImportanceModel(ABC):
         return None
 
     def describe(self) -> dict[str, Any]:
+        """Name and one-line description of this importance model."""
         from ..dimensions import first_line
         return {"name": self.name, "doc": first_line(self.__doc__)}
 
@@ -252,6 +253,10 @@ class LossEstimate:
         return self.p_below if self.drop else 1.0 - self.p_below
 
     def to_dict(self) -> dict[str, Any]:
+        """The estimate as a JSON-ready dict: median and 80 % interval of the predicted
+        realism loss (%), threshold, confidence, number of solutions, extrapolated share,
+        and the decision (``"drop"`` or ``"keep"``).
+        """
         return {"dimension": self.dimension, "median_percent": self.median_percent,
                 "interval_percent": [self.low_percent, self.high_percent], "interval_level": 0.8,
                 "threshold_percent": self.threshold_percent, "p_below": self.p_below,

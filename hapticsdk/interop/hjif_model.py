@@ -91,6 +91,7 @@ class Keyframe:
     frequency_modulation: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The keyframe in .hjif JSON form (only the fields that are set)."""
         d: dict[str, Any] = {}
         if self.relative_position is not None:
             d["relative_position"] = self.relative_position
@@ -117,6 +118,9 @@ class Effect:
     path: str = ""
 
     def to_dict(self, *, library: bool = False) -> dict[str, Any]:
+        """The effect in .hjif JSON form; ``library=True`` for an entry of a perception's
+        effect library (always with an ``id``).
+        """
         d: dict[str, Any] = {"effect_type": self.effect_type}
         if library or (self.id is not None and self.effect_type == "Reference"):
             d["id"] = self.id if self.id is not None else 0
@@ -149,6 +153,7 @@ class Band:
     path: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """The band in .hjif JSON form (only the optional fields that are set)."""
         d: dict[str, Any] = {"band_type": self.band_type}
         if self.priority is not None:
             d["priority"] = self.priority
@@ -181,6 +186,7 @@ class Channel:
     path: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """The channel in .hjif JSON form (only the optional fields that are set)."""
         d: dict[str, Any] = {"id": self.id, "description": self.description, "gain": self.gain,
                              "mixing_coefficient": self.mixing_coefficient,
                              "body_part_mask": self.body_part_mask}
@@ -202,6 +208,8 @@ class ReferenceDevice:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The reference device in .hjif JSON form (id, name and its other fields as read).
+        """
         return {"id": self.id, "name": self.name, **self.extra}
 
 
@@ -229,26 +237,33 @@ class Perception:
 
     @property
     def unit_exponent_or_default(self) -> int:
+        """The perception's unit exponent, or the format's default when the file gives none.
+        """
         return DEFAULT_UNIT_EXPONENT if self.unit_exponent is None else self.unit_exponent
 
     @property
     def perception_unit_exponent_or_default(self) -> int:
+        """The perception unit exponent, or the format's default when the file gives none.
+        """
         return (DEFAULT_PERCEPTION_UNIT_EXPONENT if self.perception_unit_exponent is None
                 else self.perception_unit_exponent)
 
     def library_effect(self, effect_id: int) -> Effect | None:
+        """The effect library entry with ``effect_id``, or ``None``."""
         for e in self.effect_library:
             if e.id == effect_id:
                 return e
         return None
 
     def reference_device(self, device_id: int | None) -> ReferenceDevice | None:
+        """The reference device with ``device_id``, or ``None``."""
         for d in self.reference_devices:
             if d.id == device_id:
                 return d
         return None
 
     def to_dict(self) -> dict[str, Any]:
+        """The perception in .hjif JSON form (only the optional fields that are set)."""
         d: dict[str, Any] = {"id": self.id, "avatar_id": self.avatar_id, "description": self.description,
                              "perception_modality": self.perception_modality}
         if self.priority is not None:
@@ -273,6 +288,7 @@ class Avatar:
     mesh: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The avatar in .hjif JSON form."""
         d: dict[str, Any] = {"id": self.id, "lod": self.lod, "type": self.type}
         if self.mesh is not None:
             d["mesh"] = self.mesh
@@ -285,6 +301,7 @@ class Sync:
     timescale: int | None = None
 
     def to_dict(self) -> dict[str, Any]:
+        """The sync point in .hjif JSON form."""
         d: dict[str, Any] = {"timestamp": self.timestamp}
         if self.timescale is not None:
             d["timescale"] = self.timescale
@@ -308,9 +325,11 @@ class HapticFile:
 
     @property
     def ticks_per_second(self) -> int:
+        """Time ticks per second of the file (its timescale, or the format's default)."""
         return DEFAULT_TIMESCALE if self.timescale is None else self.timescale
 
     def to_dict(self) -> dict[str, Any]:
+        """The whole file in .hjif JSON form."""
         d: dict[str, Any] = {"version": self.version, "profile": self.profile, "level": self.level,
                              "date": self.date, "description": self.description}
         if self.timescale is not None:

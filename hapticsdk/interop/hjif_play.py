@@ -64,6 +64,9 @@ class PlayReport:
     notes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
+        """The report as a JSON-ready dict: duration (s), tick (s), real time or not, per-
+        actuator summary, routing, what was not played and notes.
+        """
         return {"seconds": self.seconds, "tick_s": self.tick_s, "realtime": self.realtime,
                 "actuators": self.actuators, "routing": self.routing, "not_played": self.not_played,
                 "notes": self.notes}
@@ -252,6 +255,9 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
 
 
 def format_report(r: PlayReport) -> str:
+    """Text of a play report: what was played on which actuator (frequency and amplitude
+    ranges), and what was not played and why.
+    """
     lines = [f"played {r.seconds:.3f} s ({'real time' if r.realtime else 'simulated time'}, tick {r.tick_s * 1e3:g} ms)"]
     for a, info in r.actuators.items():
         fr = info["frequency_hz"]

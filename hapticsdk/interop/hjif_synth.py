@@ -269,6 +269,9 @@ class Synthesis:
     unsupported: list[dict[str, str]]
 
     def channel(self, path: str) -> ChannelSignal:
+        """The synthesised signal of channel ``path``; raises
+        :class:`~hapticsdk.errors.ValidationError` when there is none.
+        """
         for c in self.channels:
             if c.path == path:
                 return c
@@ -276,6 +279,7 @@ class Synthesis:
 
 
 def is_vibrotactile(p: Perception) -> bool:
+    """Whether the perception's modality is one the vibration actuators play."""
     return p.perception_modality in VIBROTACTILE_MODALITIES
 
 

@@ -38,9 +38,13 @@ class MonotonicClock:
         self.spin_s = float(spin_s)
 
     def now(self) -> float:
+        """Current time (s) of :func:`time.perf_counter`."""
         return time.perf_counter()
 
     def wait_until(self, deadline: float) -> None:
+        """Return at ``deadline`` (s, on :meth:`now`'s clock): sleep while far from it, then
+        spin the last ``spin_s``; returns at once when already past.
+        """
         pc = time.perf_counter
         while True:
             remaining = deadline - pc()
@@ -75,13 +79,20 @@ class SimulatedClock:
         self.wake_latency_s = float(wake_latency_s)
 
     def now(self) -> float:
+        """Current simulated time (s)."""
         return self.t
 
     def wait_until(self, deadline: float) -> None:
+        """Jump to ``deadline`` (plus the wake-up latency) when it is ahead; nothing when
+        already past.
+        """
         if deadline > self.t:
             self.t = deadline + self.wake_latency_s
 
     def work(self, tick: int, seconds: float) -> None:
+        """Charge a tick's computation: the fixed compute time plus any stall injected for
+        tick ``tick``; ``seconds`` (what the tick measured) is ignored.
+        """
         self.t += self.compute_s + self.stalls.get(tick, 0.0)
 
 

@@ -28,8 +28,9 @@ Each tick:
 4. the force role goes through the passivity observer/controller
    (:class:`~hapticsdk.passivity.PassivityController`, on by default) along the contact
    normal (its position is the signed distance ``-penetration``; the observer restarts
-   when the probe moves from one object to another, as when a wall is met from outside);
-   the force command carries the normal as ``direction``;
+   when the probe moves from one object to another, as when a wall is met from outside,
+   and out of contact in a spatial scene it holds its last position); the force command
+   carries the normal as ``direction``;
 5. each role's command is sent with ``actuator.command(cmd, now=t)`` (the safety layer
    clamps it) and optionally recorded;
 6. simulated devices are stepped (``device.step(dt)``, then every other simulated
@@ -361,6 +362,9 @@ class ServoLoop:
     # ------------------------------------------------------------------
     @property
     def object_names(self) -> list[str]:
+        """Names of the scene objects the loop renders, in index order (the ``object`` log
+        column).
+        """
         return [o.name for o in self._objs]
 
     def _stop_all(self) -> None:
@@ -722,8 +726,13 @@ class ServoLoop:
                             (co.amplitude or 0.0) if co is not None else 0.0)
                         vib[role] = ChannelCommand(role, frequency_hz=fr, amplitude=am)
         # ---- 4. passivity + send --------------------------------------
-        x_n = -pen if not bad else self._last_x
-        if not bad:
+        if bad or (ht is not None and idx < 0):
+            # a spatial scene out of contact: the distance to the nearest object jumps
+            # when another object becomes the nearest, so the observer holds its last
+            # in-contact position (no motion booked, no damping in free space)
+            x_n = self._last_x
+        else:
+            x_n = -pen
             self._last_x = x_n
         if idx != self._pc_obj and idx >= 0:
             if self._pc_obj != -2:

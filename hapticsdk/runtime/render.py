@@ -76,6 +76,8 @@ class RenderReport:
     calibrations: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """The report as JSON-ready data (the servo loop's report without its per-tick log).
+        """
         loop = self.loop.to_dict() if hasattr(self.loop, "to_dict") else self.loop
         return json.loads(json.dumps({
             "material": self.material, "scene": self.scene, "dimensions": list(self.dimensions),
@@ -111,10 +113,14 @@ def _accepts(cls: type, kw: str) -> bool:
 
 
 def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None, *,
-                    calibrations: Mapping[str, Mapping[str, Any]] | None = None) -> list[DimensionRenderer]:
+                    calibrations: Mapping[str, Mapping[str, Any]] | None = None,
+                    capabilities: Mapping[str, Any] | None = None) -> list[DimensionRenderer]:
     """Renderers of one material plan: kept dimensions from the plan's features, then the
     replacements of dropped ones (no solving). ``calibrations``: dimension -> renderer
-    options holding saved calibrations (:func:`hapticsdk.calibration.selection.select_calibrations`)."""
+    options holding saved calibrations (:func:`hapticsdk.calibration.selection.select_calibrations`);
+    ``capabilities``: role -> :class:`~hapticsdk.actuators.DriveCapability` of the actuator
+    on that role (an actuator's own drive table goes to the renderer, as at compile time:
+    the scene's ``renderer_options`` win, then the actuator's own table, then calibrations)."""
     from ..plugins import registry
     ropts = dict((settings or {}).get("renderer_options") or {})
     out: list[DimensionRenderer] = []
@@ -122,7 +128,13 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None,
         cls = registry("dimension").load(d)
         check_plugin_api(cls, name=d)
         dim = cls() if isinstance(cls, type) else cls
-        r = dim.renderer(dict(mp.features), **{**dict(ropts.get(d, {})), **dict((calibrations or {}).get(d, {}))})
+        given = dict(ropts.get(d, {}))
+        opts = {**given, **dict((calibrations or {}).get(d, {}))}
+        if capabilities and hasattr(dim, "capability_options"):
+            roles = list(getattr(dim, "roles", {}) or {}) or list(dim.default_actuators)
+            own = dim.capability_options({ro: capabilities[ro] for ro in roles if ro in capabilities})
+            opts.update({k: v for k, v in own.items() if k not in given})
+        r = dim.renderer(dict(mp.features), **opts)
         missing = [role for role in r.roles if role not in mp.actuators]
         if missing:
             raise ValidationError(f"renderer of {d!r} commands roles {missing} that the plan maps to "
@@ -131,6 +143,22 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None,
         out.append(r)
     for dd in mp.replacements:
         out.append(make_replacement(dd.replacement or {}, dd.dimension))
+    return out
+
+
+def _capabilities(chosen: Mapping[str, tuple[Any, dict[str, Any]]]) -> dict[str, Any]:
+    """role -> what the actuator that will be opened there can produce (asked of its class
+    with the same options); roles whose actuator publishes nothing are absent."""
+    out: dict[str, Any] = {}
+    for role, (cls, opts) in chosen.items():
+        if not hasattr(cls, "capability_for"):
+            continue
+        try:
+            cap = cls.capability_for(dict(opts))
+        except Exception:   # the real instance reports the problem when it is created
+            continue
+        if cap is not None:
+            out[role] = cap
     return out
 
 
@@ -187,7 +215,8 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         chosen[role] = (cls, _actuator_options(cls, mp.actuators[role], role, mp, app_options))
 
     cal_opts, cal_records = _calibrations(mp, plan.settings, {r: o for r, (_, o) in chosen.items()})
-    renderers = build_renderers(mp, plan.settings, calibrations=cal_opts)
+    renderers = build_renderers(mp, plan.settings, calibrations=cal_opts,
+                                capabilities=_capabilities(chosen))
     roles_used = {role for r in renderers for role in r.roles}
     used_dists = plan.distributions(mp.name)
     pm = manager().load_for(used_dists) if hooks else None

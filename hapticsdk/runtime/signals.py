@@ -65,6 +65,7 @@ class SafeStop(KeyboardInterrupt):
 
     @property
     def exit_code(self) -> int:
+        """Exit status after this signal: 128 + its number."""
         return 128 + self.signum
 
 

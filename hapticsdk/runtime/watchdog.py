@@ -14,8 +14,9 @@ If ``on_expire`` raises (the transport is gone: USB unplugged, serial port close
 I2C wedged), the failure is counted, handed to ``on_error`` (the backend marks itself
 faulted, so the servo thread's next command raises a
 :class:`~hapticsdk.errors.DeviceError` and the loop stops every actuator), and never
-raised in any thread; the watchdog stays armed and tries again every deadline until a
-write succeeds (a transient timeout, a link that comes back), a command arrives, or
+raised in any thread; the watchdog stays armed and tries again -- the n-th retry
+``min(RETRY_MAX_S, deadline * 2**(n-1))`` after the previous failure -- until a write
+succeeds (a transient timeout, a link that comes back), a command arrives, or
 :meth:`~CommandWatchdog.stop`.
 
 Latency from the last command to the safe-state write: ``deadline_s`` + the thread's
@@ -33,6 +34,9 @@ import time
 from typing import Any, Callable
 
 _log = logging.getLogger(__name__)
+
+#: longest wait between two retries of a failing safe-state write (s)
+RETRY_MAX_S = 1.0
 
 
 class CommandWatchdog:
@@ -70,10 +74,14 @@ class CommandWatchdog:
 
     @property
     def deadline_s(self) -> float:
+        """Time (s) the next command is due before the watchdog stops the actuators."""
         return float(self._deadline())
 
     @property
     def armed(self) -> bool:
+        """Whether the watchdog is watching (it arms with the first command and disarms when
+        stopped).
+        """
         return self._armed
 
     def start(self, *, armed: bool = True) -> "CommandWatchdog":
@@ -110,6 +118,9 @@ class CommandWatchdog:
         self._armed = False
 
     def stats(self) -> dict[str, Any]:
+        """Counters as a dict: the deadline (s), trips, stop failures, the last error and
+        the ages (s) of the commands that tripped it.
+        """
         ages = self.trip_ages_s
         return {"deadline_s": self.deadline_s, "trips": self.trips, "failures": self.failures,
                 "last_error": self.last_error,
@@ -150,9 +161,11 @@ class CommandWatchdog:
                              "retrying every %.0f ms): %s", self._name, age * 1e3, self.failures,
                              deadline * 1e3, self.last_error)
                     self._failing += 1
-                    # stay armed: try again one deadline later (a link that comes back, a
-                    # transient timeout), until a write succeeds, a command arrives or stop()
-                    self._last = time.monotonic()
+                    # stay armed: try again (a link that comes back, a transient timeout)
+                    # until a write succeeds, a command arrives or stop(); the n-th retry
+                    # waits min(RETRY_MAX_S, deadline * 2**(n-1))
+                    delay = min(RETRY_MAX_S, deadline * 2.0 ** min(self._failing - 1, 30))
+                    self._last = time.monotonic() + delay - deadline
                     continue
                 self._armed = False
                 self.trips += 1

@@ -236,6 +236,7 @@ class Pose:
 
     @property
     def is_identity_rotation(self) -> bool:
+        """Whether the pose does not rotate (translation only)."""
         return self.matrix == _IDENTITY
 
     def apply(self, x: float, y: float, z: float) -> tuple[float, float, float]:
@@ -395,6 +396,7 @@ class PlanePatch(Shape):
 
     @property
     def infinite(self) -> bool:
+        """Whether the plane has no edges (no half size given)."""
         return self.half_size_mm is None
 
     @property
@@ -608,10 +610,12 @@ class HitTester:
     # -- objects -----------------------------------------------------------
     @property
     def names(self) -> tuple[str, ...]:
+        """Object names, in shape order."""
         return tuple(self._names)
 
     @property
     def shapes(self) -> tuple[Shape, ...]:
+        """The objects' shapes, in object order."""
         return tuple(self._shapes)
 
     @property

@@ -80,6 +80,10 @@ class DeviceSpec:
 
     @classmethod
     def parse(cls, value: Any, role: str) -> "DeviceSpec":
+        """A device spec from scene JSON for ``role``: an actuator name, or ``{"actuator":
+        ..., "options": {...}}`` (a :class:`DeviceSpec` is returned as is); raises
+        :class:`~hapticsdk.errors.ValidationError` otherwise.
+        """
         if isinstance(value, DeviceSpec):
             return value
         if isinstance(value, str) and value:
@@ -93,6 +97,7 @@ class DeviceSpec:
                               f"got {value!r}", field=f"scene.devices.{role}")
 
     def to_dict(self) -> dict[str, Any]:
+        """The spec as scene JSON (``actuator`` and ``options``)."""
         return {"actuator": self.actuator, "options": dict(self.options)}
 
 
@@ -143,6 +148,7 @@ class SceneObject:
         return g if g.pose == self.pose else g.with_pose(self.pose)
 
     def to_dict(self) -> dict[str, Any]:
+        """The object as scene JSON (only the optional fields that are set)."""
         d: dict[str, Any] = {"name": self.name, "material": copy.deepcopy(self.material)}
         if self.intensities:
             d["intensities"] = dict(self.intensities)
@@ -227,6 +233,7 @@ class Scene:
 
     @classmethod
     def load(cls, path: str | Path) -> "Scene":
+        """Read and validate a scene JSON file (``schemas/scene.schema.json``)."""
         from ..schemas_io import read_json
         p = Path(path)
         data = read_json(p, field="scene")

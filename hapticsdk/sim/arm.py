@@ -75,6 +75,7 @@ class ArmParams:
                 raise ValidationError(f"must be finite and >= 0, got {v!r}", field=f"arm.{k}")
 
     def with_(self, **kw: float) -> "ArmParams":
+        """A copy with the given parameters changed (same units as the fields)."""
         return replace(self, **kw)
 
 
@@ -173,6 +174,9 @@ class ArmBatch:
         self._z = np.zeros((n, 5))
 
     def measured_mm(self) -> np.ndarray:
+        """Every arm's position as its encoder reports it (mm, rounded to the encoder
+        resolution).
+        """
         y = self.y * 1e3
         q = np.where(self.res_mm > 0, np.round(y / np.where(self.res_mm > 0, self.res_mm, 1.0)) * self.res_mm, y)
         return q
@@ -234,6 +238,9 @@ class ArmSim:
         return f
 
     def measured_mm(self) -> float:
+        """The arm's position as its encoder reports it (mm, rounded to the encoder
+        resolution).
+        """
         res = self.arm.encoder_resolution_mm
         y = self.y * 1e3
         return round(y / res) * res if res > 0 else y

@@ -131,6 +131,7 @@ class Trajectory:
 
     @property
     def duration_s(self) -> float:
+        """Length of the trajectory (s)."""
         return float(self.t[-1])
 
     def position(self, t: "float | np.ndarray") -> tuple[np.ndarray, np.ndarray]:

@@ -1043,6 +1043,9 @@ def check_device(target: Any, **options: Any) -> list[Violation]:
 
 
 def check_dimension(target: Any) -> list[Violation]:
+    """Conformance violations of a dimension plugin (class or instance); empty when it
+    conforms.
+    """
     return check("dimension", target)
 
 
@@ -1052,6 +1055,9 @@ def check_model(target: Any) -> list[Violation]:
 
 
 def check_solver(target: Any, **options: Any) -> list[Violation]:
+    """Conformance violations of a solver plugin, built with ``options``; empty when it
+    conforms.
+    """
     return check("solver", target, options=options)
 
 
@@ -1082,6 +1088,7 @@ def check_installed(kinds: Sequence[str] = ("actuator", "dimension", "model", "s
 
 
 def format_violations(violations: Sequence[Violation]) -> str:
+    """The violations as text, one per line."""
     return "\n".join(str(v) for v in violations)
 
 

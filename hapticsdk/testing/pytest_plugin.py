@@ -27,4 +27,5 @@ def hapticsdk_conformance() -> Callable[..., list]:
 
 
 def pytest_configure(config: pytest.Config) -> None:
+    """Register the ``hapticsdk_conformance`` marker."""
     config.addinivalue_line("markers", "hapticsdk_conformance: a hapticsdk plugin conformance test")

@@ -57,6 +57,9 @@ class ActuatorConformance(_Conformance):
 
     @pytest.mark.parametrize("rule", _rules("actuator"))
     def test_rule(self, rule: str, actuator_factory: Any) -> None:
+        """One conformance rule of actuator plugins, checked on the actuator the factory
+        builds.
+        """
         self._assert_rule(rule, actuator_factory, self.plugin_options)
 
 
@@ -71,6 +74,9 @@ class DeviceConformance(ActuatorConformance):
 
     @pytest.mark.parametrize("rule", _rules("device"))
     def test_rule(self, rule: str, device_factory: Any) -> None:  # type: ignore[override]
+        """One conformance rule of sensing devices, checked on the device the factory
+        builds.
+        """
         self._assert_rule(rule, device_factory, self.plugin_options)
 
 
@@ -85,6 +91,9 @@ class DimensionConformance(_Conformance):
 
     @pytest.mark.parametrize("rule", _rules("dimension"))
     def test_rule(self, rule: str, dimension_factory: Any) -> None:
+        """One conformance rule of dimension plugins, checked on the dimension the factory
+        builds.
+        """
         self._assert_rule(rule, dimension_factory)
 
 
@@ -99,6 +108,9 @@ class ModelConformance(_Conformance):
 
     @pytest.mark.parametrize("rule", _rules("model"))
     def test_rule(self, rule: str, model_factory: Any) -> None:
+        """One conformance rule of perception models, checked on the model the factory
+        builds.
+        """
         self._assert_rule(rule, model_factory)
 
 
@@ -111,6 +123,8 @@ class SolverConformance(_Conformance):
 
     @pytest.mark.parametrize("rule", _rules("solver"))
     def test_rule(self, rule: str) -> None:
+        """One conformance rule of solver plugins, checked with the class's solver options.
+        """
         self._assert_rule(rule, None, self.solver_options)
 
 
@@ -120,6 +134,7 @@ class ImportConformance:
     plugins: ClassVar[list[tuple[str, str]]] = []
 
     def test_imports(self) -> None:
+        """Every plugin the class names imports through the registry without error."""
         from .conformance import Violation
         from ..plugins import registry
         from ..errors import PluginError

@@ -65,6 +65,8 @@ class TrialFeatures:
     v_mm_s: float
 
     def vector(self) -> np.ndarray:
+        """The features as ``[GS, W, Fpeak, AFpeak, P]`` (N/mm, mJ, Hz, m/s^2, (m/s^2)^2).
+        """
         return np.array([self.GS, self.W, self.Fpeak, self.AFpeak, self.P])
 
 
@@ -147,6 +149,9 @@ class FeatureTable:
         return out
 
     def sample_means(self) -> np.ndarray:
+        """Mean feature vector of each sample, ``(samples, 5)``, in :attr:`sample_names`
+        order.
+        """
         s = np.array(self.samples)
         return np.array([self.X[s == n].mean(axis=0) for n in self.sample_names])
 
@@ -187,4 +192,5 @@ def constraint_margins(X: np.ndarray, df_hz: float, mf_n: float = 3.3) -> tuple[
 
 
 def column_names(names: Sequence[str] = FEATURE_NAMES) -> list[str]:
+    """The feature table's column names, in order."""
     return list(names)

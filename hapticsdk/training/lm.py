@@ -58,6 +58,7 @@ class TrainConfig:
     target_scale: str = "intensity"
 
     def to_dict(self) -> dict:
+        """The settings as a JSON-ready dict (tuples as lists)."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
 
 
@@ -92,6 +93,7 @@ def _unpack(theta: np.ndarray, d: int, H: int, k: int):
 
 
 def n_params(d: int, H: int, k: int) -> int:
+    """Number of weights of a ``d``-``H``-``k`` network (both layers, with biases)."""
     return H * d + H + k * H + k
 
 
@@ -366,4 +368,5 @@ def cross_validate(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], dimensio
 
 
 def with_overrides(cfg: TrainConfig, **kw: Any) -> TrainConfig:
+    """A copy of ``cfg`` with the keyword settings that are not ``None`` replaced."""
     return replace(cfg, **{k: v for k, v in kw.items() if v is not None})

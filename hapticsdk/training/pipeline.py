@@ -55,18 +55,22 @@ class TrainingTable:
 
     @property
     def X(self) -> np.ndarray:
+        """Trial feature rows ``(n, 5)``, physical units."""
         return self.features.X
 
     @property
     def Y(self) -> np.ndarray:
+        """Mean rating of each row's sample, normalised to 0..1, ``(n, k)``."""
         return self.ratings.mean_normalised(self.features.samples)
 
     @property
     def dimensions(self) -> tuple[str, ...]:
+        """The rated dimensions, in column order of :attr:`Y`."""
         return self.ratings.dimensions
 
     @property
     def df_hz(self) -> float:
+        """Frequency resolution of the data set's spectra (Hz)."""
         return self.features.dataset_df_hz
 
     def feature_space(self) -> FeatureSpace:
@@ -76,6 +80,7 @@ class TrainingTable:
                                   for n, a, b in zip(FEATURE_NAMES, lo, hi)))
 
     def info(self, name: str) -> dict:
+        """The sample description (name, label, substrate, texture) of sample ``name``."""
         for s in self.samples_info:
             if s["name"] == name:
                 return s
@@ -293,6 +298,9 @@ def build_materials(table: TrainingTable) -> dict:
 
 
 def write_materials(table: TrainingTable, path: Path | str) -> Path:
+    """Write the material library built from ``table`` (:func:`build_materials`) to
+    ``path``, atomically; returns the path.
+    """
     from ..fileio import atomic_write_text
     p = Path(path)
     _mkdir(p.parent)

@@ -272,14 +272,17 @@ class RecordingSet:
 
     @property
     def fs_hz(self) -> float:
+        """Sampling rate of the recordings (Hz)."""
         return float(self.manifest["fs_hz"])
 
     @property
     def samples(self) -> list[dict]:
+        """The manifest's sample descriptions."""
         return list(self.manifest.get("samples", []))
 
     @property
     def entries(self) -> list[dict]:
+        """The manifest's trial entries (sample, trial, file)."""
         return list(self.manifest["trials"])
 
     def load_trial(self, entry: Mapping[str, Any]) -> Trial:
@@ -294,6 +297,9 @@ class RecordingSet:
                                   source=str(path), full_scale=m.get("full_scale"))
 
     def iter_trials(self):
+        """Load and yield every trial of the manifest, in order (each validated as it is
+        read).
+        """
         for e in self.entries:
             yield self.load_trial(e)
 
@@ -381,6 +387,7 @@ class Ratings:
         return out
 
     def to_json(self) -> dict:
+        """The ratings as ``schemas/ratings.schema.json`` JSON."""
         return {"schema_version": 1, "generated": self.generated, "source": self.source,
                 "scale": {"min": 0, "max": self.scale_max}, "dimensions": list(self.dimensions),
                 "raters": list(self.raters), "ratings": self.values}

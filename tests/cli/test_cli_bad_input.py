@@ -82,6 +82,10 @@ def files(tmp_path_factory) -> dict[str, str]:
     (d / "bad_utf8.json").write_bytes(BAD_UTF8)
     (d / "deep.json").write_text(DEEP)
     (d / "deep_obj.json").write_text(DEEP_OBJ)
+    # parseable by json (under the recursion limit) but deep enough that validating it
+    # (or printing the validation error) exhausts the stack: only the depth cap stops it
+    deep = 960
+    (d / "deep_field.json").write_text('{"objects": [{"material": "S7", "x": ' + "[" * deep + "]" * deep + "}]}")
     (d / "nan.json").write_text('{"objects": [{"material": "S7"}], "settings": {"servo": {"period_s": NaN}}}')
     (d / "empty.json").write_text("")
     (d / "exists.txt").write_text("keep me\n")
@@ -90,7 +94,7 @@ def files(tmp_path_factory) -> dict[str, str]:
          "devices": {"force": {"actuator": "omni-virtual", "options": {"safety": "off"}}}}))
     (d / "bad_utf8.csv").write_bytes(b"person,frequency_hz,spring_n_per_mm,spring_stiffer\n0,40,\xff1.5,1\n")
     (d / "quote.csv").write_text('person,frequency_hz,spring_n_per_mm,spring_stiffer\n0,40,"1.5\n')
-    for name in ("bad_utf8.json", "deep.json", "deep_obj.json", "nan.json", "empty.json", "exists.txt",
+    for name in ("bad_utf8.json", "deep.json", "deep_obj.json", "deep_field.json", "nan.json", "empty.json", "exists.txt",
                  "safety_off.json", "quote.csv"):
         f[name.split(".")[0]] = d / name
     f["bad_utf8_csv"] = d / "bad_utf8.csv"
@@ -148,6 +152,13 @@ def files(tmp_path_factory) -> dict[str, str]:
         shutil.copy(ds / name, ft / name)
     (ft / "trial_features.csv").write_bytes((ds / "trial_features.csv").read_bytes().replace(b"S1", b"S\xff", 1))
     f["ft_utf8"] = ft
+    # a plan whose GS is 1e6 N/mm
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.scene import Scene
+    plan = compile_scene(Scene.for_material("S7")).to_dict()
+    plan["materials"]["S7"]["features"]["GS"] = 1e6
+    (d / "plan_gs.json").write_text(json.dumps(plan))
+    f["plan_gs"] = d / "plan_gs.json"
     # a model whose df_hz is not a number
     import onnx
     proto = onnx.load(str(DEFAULT_ONNX))
@@ -159,7 +170,7 @@ def files(tmp_path_factory) -> dict[str, str]:
     return {k: str(v) for k, v in f.items()}
 
 
-# (id, argv, field the error line must name)
+# (id, argv, field the error line must name[, text its reason must hold])
 CASES = [
     # --- numeric arguments (argparse types of hapticsdk.cli.argtypes) -------------------
     ("solve-seed-negative", ["solve", "--hardness", "0.5", "--seed", "-1"], "--seed"),
@@ -204,31 +215,36 @@ CASES = [
     ("bench-timing-pin-cpu-negative", ["bench", "timing", "--pin-cpu", "-1"], "--pin-cpu"),
     ("bench-fidelity-period-zero", ["bench", "fidelity", "--periods", "0"], "--periods"),
     ("unknown-command", ["nosuch"], "COMMAND"),
+    ("no-command", [], "COMMAND"),
+    ("calibrate-without-kind", ["calibrate"], "KIND"),
+    ("bench-without-benchmark", ["bench"], "BENCH"),
+    ("dataset-without-command", ["dataset"], "dataset"),
     ("train-missing-out", ["train", "{ds}"], "train"),
     # --- files that are not UTF-8, nested 5000 deep, not JSON, not regular -------------
-    ("render-scene-non-utf8", ["render", "--scene", "{bad_utf8}"], "scene"),
-    ("render-scene-deep", ["render", "--scene", "{deep}"], "scene"),
-    ("render-scene-deep-object", ["render", "--scene", "{deep_obj}"], "scene"),
-    ("render-scene-nan-literal", ["render", "--scene", "{nan}"], "scene"),
+    ("render-scene-non-utf8", ["render", "--scene", "{bad_utf8}"], "scene", "not UTF-8"),
+    ("render-scene-deep", ["render", "--scene", "{deep}"], "scene", "nested 5000 levels"),
+    ("render-scene-deep-object", ["render", "--scene", "{deep_obj}"], "scene", "nested 5000 levels"),
+    ("render-scene-960-deep-field", ["render", "--scene", "{deep_field}"], "scene", "nested 963 levels"),
+    ("render-scene-nan-literal", ["render", "--scene", "{nan}"], "scene", "NaN"),
     ("render-scene-empty", ["render", "--scene", "{empty}"], "scene"),
-    ("render-scene-directory", ["render", "--scene", "{dir}"], "scene"),
-    ("render-scene-fifo", ["render", "--scene", "{fifo}"], "scene"),
-    ("plan-scene-non-utf8", ["plan", "{bad_utf8}"], "scene"),
-    ("plan-scene-deep", ["plan", "{deep}"], "scene"),
-    ("materials-library-non-utf8", ["materials", "--library", "{bad_utf8}"], "materials"),
-    ("materials-library-deep", ["materials", "--library", "{deep}"], "materials"),
-    ("voicecoil-answers-non-utf8", ["calibrate", "voicecoil", "{bad_utf8_csv}"], "answers"),
+    ("render-scene-directory", ["render", "--scene", "{dir}"], "scene", "directory"),
+    ("render-scene-fifo", ["render", "--scene", "{fifo}"], "scene", "not a regular file"),
+    ("plan-scene-non-utf8", ["plan", "{bad_utf8}"], "scene", "not UTF-8"),
+    ("plan-scene-deep", ["plan", "{deep}"], "scene", "nested"),
+    ("materials-library-non-utf8", ["materials", "--library", "{bad_utf8}"], "materials", "not UTF-8"),
+    ("materials-library-deep", ["materials", "--library", "{deep}"], "materials", "nested"),
+    ("voicecoil-answers-non-utf8", ["calibrate", "voicecoil", "{bad_utf8_csv}"], "answers", "not UTF-8"),
     ("voicecoil-answers-unclosed-quote", ["calibrate", "voicecoil", "{quote}"], "answers"),
     ("voicecoil-answers-directory", ["calibrate", "voicecoil", "{dir}"], "answers"),
-    ("piezo-measurements-non-utf8", ["calibrate", "piezo", "{bad_utf8_csv}"], "measurements"),
-    ("piezo-table-deep-json", ["calibrate", "piezo", "{deep}"], "measurements"),
-    ("piezo-table-non-utf8-json", ["calibrate", "piezo", "{bad_utf8}"], "measurements"),
-    ("features-manifest-non-utf8", ["features", "{ds_utf8}"], "file"),
-    ("features-npz-truncated", ["features", "{ds_trunc}"], "file"),
+    ("piezo-measurements-non-utf8", ["calibrate", "piezo", "{bad_utf8_csv}"], "measurements", "not UTF-8"),
+    ("piezo-table-deep-json", ["calibrate", "piezo", "{deep}"], "measurements", "nested"),
+    ("piezo-table-non-utf8-json", ["calibrate", "piezo", "{bad_utf8}"], "measurements", "not UTF-8"),
+    ("features-manifest-non-utf8", ["features", "{ds_utf8}"], "file", "not UTF-8"),
+    ("features-npz-truncated", ["features", "{ds_trunc}"], "file", "npz"),
     ("features-npz-bad-zip", ["features", "{ds_badzip}"], "file"),
-    ("features-npz-corrupt-member", ["features", "{ds_corrupt}"], "file"),
+    ("features-npz-corrupt-member", ["features", "{ds_corrupt}"], "file", "npz"),
     ("train-npz-truncated", ["train", "{ds_trunc}", "--out", "{dir}/m.onnx"], "file"),
-    ("train-trial-table-non-utf8", ["train", "{ft_utf8}", "--out", "{dir}/m.onnx"], "file"),
+    ("train-trial-table-non-utf8", ["train", "{ft_utf8}", "--out", "{dir}/m.onnx"], "file", "not UTF-8"),
     ("replay-truncated", ["replay", "{run_trunc}"], "runlog"),
     ("replay-not-npz", ["replay", "{bad_utf8}"], "runlog"),
     ("replay-string-arrays", ["replay", "{run_strings}"], "runlog.t"),
@@ -262,6 +278,12 @@ CASES = [
     ("replay-header-bool-limit", ["replay", "{run_nan_limit}"], "limits.max_force_n"),
     ("features-manifest-absolute-path", ["features", "{ds_abs}"], "trials.0.file"),
     ("features-manifest-dotdot", ["features", "{ds_dotdot}"], "trials.0.file"),
+    ("export-plan-gs-1e6", ["export", "{plan_gs}", "-o", "{dir}/x.hjif"], "plan.materials.S7.features.GS"),
+    ("export-output-directory", ["export", "S7", "-o", "{dir}"], "output"),
+    ("export-seed-negative", ["export", "S7", "-o", "{dir}/x.hjif", "--seed", "-1"], "--seed"),
+    ("import-non-utf8", ["import", "{bad_utf8}"], "bad_utf8.json", "UTF-8"),
+    ("import-deep", ["import", "{deep}"], "deep.json", "nested"),
+    ("play-seconds-nan", ["play", "{deep}", "--seconds", "nan"], "--seconds"),
     ("train-manifest-ratings-outside", ["train", "{ds_ratings_out}", "--out", "{dir}/m.onnx"], "ratings"),
 ]
 
@@ -275,41 +297,49 @@ def _argv(argv: list[str], files: dict[str, str]) -> list[str]:
     return out
 
 
-def _assert_clean_error(code: int, err: str, field: str) -> None:
+def _assert_clean_error(code: int, err: str, field: str, reason: str = "") -> None:
     assert code == 2, err
     assert "Traceback" not in err, err
     lines = [ln for ln in err.splitlines() if ln.startswith("hapticsdk: error: ")]
     assert len(lines) == 1, err
     rest = lines[0][len("hapticsdk: error: "):]
     # "<field>: <reason>", and the expected field is named in it
-    head, sep, reason = rest.partition(": ")
-    assert sep and head.strip() and reason.strip(), lines[0]
+    head, sep, why = rest.partition(": ")
+    assert sep and head.strip() and why.strip(), lines[0]
     assert field in rest, lines[0]
+    assert reason in rest, lines[0]
 
 
 def test_at_least_45_cases_across_commands():
     assert len(CASES) >= 45
     assert len({c[0] for c in CASES}) == len(CASES)
-    commands = {c[1][0] + (" " + c[1][1] if c[1][0] in ("calibrate", "dataset", "bench") else "") for c in CASES}
-    assert len(commands) >= 15, commands
+    commands = {" ".join(c[1][:2] if c[1][:1] in (["calibrate"], ["dataset"], ["bench"]) else c[1][:1])
+                for c in CASES if c[1]}
+    # every command of `hapticsdk --help` gets bad input (doctor and plugins take none)
+    from hapticsdk.cli import build_parser
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    untried = set(sub.choices) - {c.split()[0] for c in commands} - {"doctor", "plugins"}
+    assert not untried, untried
+    assert len(commands) >= 20, commands
 
 
-@pytest.mark.parametrize("case_id,argv,field", CASES, ids=[c[0] for c in CASES])
-def test_bad_input_exits_2_with_a_named_field(case_id, argv, field, files, capsys):
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_bad_input_exits_2_with_a_named_field(case, files, capsys):
+    _, argv, field, *reason = case
     before = set(os.listdir(files["dir"]))
     code = main(_argv(argv, files))
     err = capsys.readouterr().err
-    _assert_clean_error(code, err, field)
+    _assert_clean_error(code, err, field, *reason)
     assert set(os.listdir(files["dir"])) == before, "a refused command wrote a file"
 
 
 @pytest.mark.parametrize("case_id", ["solve-seed-negative", "render-scene-deep", "features-npz-truncated",
                                      "replay-header-1e9-newton", "unknown-command"])
 def test_bad_input_in_a_subprocess(case_id, files):
-    _, argv, field = next(c for c in CASES if c[0] == case_id)
+    _, argv, field, *reason = next(c for c in CASES if c[0] == case_id)
     proc = subprocess.run([sys.executable, "-m", "hapticsdk", *_argv(argv, files)], capture_output=True,
                           text=True, timeout=120)
-    _assert_clean_error(proc.returncode, proc.stderr, field)
+    _assert_clean_error(proc.returncode, proc.stderr, field, *reason)
 
 
 def test_json_mode_prints_the_error_object_and_the_line(files, capsys):

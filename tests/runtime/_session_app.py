@@ -14,10 +14,14 @@ SCENE = {"schema_version": 1, "name": "pad",
 
 def main() -> None:
     tr = Trajectory([(0.0, 0.0, 2.0), (0.3, 0.0, -1.5), (600.0, 0.0, -1.5)])
-    s = hs.Session(SCENE, trajectory=tr)
-    print(f"servo {s.servo_pid} shm {s._buf.name}", flush=True)
-    while True:
-        time.sleep(0.05)
+    with hs.Session(SCENE, trajectory=tr) as s:
+        print(f"servo {s.servo_pid} shm {s._buf.name}", flush=True)
+        try:
+            while True:
+                time.sleep(0.05)
+        finally:  # Ctrl-C (KeyboardInterrupt) leaves the with block: close() runs
+            summary = s.close()
+            print("closed:", ", ".join(summary.get("stopped", [])), flush=True)
 
 
 if __name__ == "__main__":

@@ -155,11 +155,13 @@ def test_stop_signals_to_the_servo_stop_safely(sig):
         assert set(summary["stopped"]) >= {"omni-virtual", "voicecoil-virtual"}
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
 def test_application_death_stops_the_servo(sig):
-    """The application dies without closing its session: the servo notices (parent
-    check every tick, heartbeat), stops every actuator and exits; the resource tracker
-    removes the shared memory."""
+    """The application dies without closing its session (SIGKILL; SIGTERM and SIGHUP
+    with their default action): the servo notices (parent check every tick, heartbeat),
+    stops every actuator and exits; the resource tracker removes the shared memory.
+    SIGINT raises KeyboardInterrupt in the application, whose ``with`` exit closes the
+    session: every actuator stopped, the servo reaped, the memory unlinked."""
     p = subprocess.Popen([sys.executable, str(HERE / "_session_app.py")], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     try:
@@ -171,6 +173,11 @@ def test_application_death_stops_the_servo(sig):
         os.kill(p.pid, sig)
         p.wait(10)
         assert _wait(lambda: not os.path.exists(f"/proc/{pid}"), 10.0), "servo still running"
+        if sig == signal.SIGINT:
+            out = p.stdout.read()
+            assert "closed:" in out and "omni-virtual" in out and "voicecoil-virtual" in out
+            assert shm not in _shm()
+            return
         err = p.stderr.read()
         assert "every actuator stopped" in err and "omni-virtual" in err
         # monotonic clocks are system-wide: the servo says when it noticed. The goal is
@@ -182,3 +189,16 @@ def test_application_death_stops_the_servo(sig):
     finally:
         if p.poll() is None:
             p.kill()
+
+
+def test_hung_application_heartbeat_timeout_stops_the_servo():
+    """An application that is alive but hung (its heartbeat thread no longer runs):
+    after heartbeat_timeout_s the servo stops every actuator and exits; the next call
+    says why."""
+    with Session(PAD, trajectory=SLIDE, heartbeat_timeout_s=0.1) as s:
+        assert _wait(lambda: s.state().ticks > 20)
+        s._hb_stop.set()  # the heartbeat thread ends: as if the application hung
+        with pytest.raises(ServoProcessDied) as ei:
+            assert _wait(lambda: s.state() is None, 10.0)
+        assert "no heartbeat" in str(ei.value)
+        assert set(s._summary["stopped"]) >= {"omni-virtual", "voicecoil-virtual"}

@@ -211,3 +211,28 @@ def test_parse_device_option():
     for bad in ("library=/x", "force.library", ".x=1"):
         with pytest.raises(ValidationError):
             parse_device_option(bad)
+
+
+@needs_hardness
+def test_libhd_loader_refuses_untrusted_candidates(tmp_path, monkeypatch):
+    from hapticsdk.errors import DeviceNotFoundError
+    from hapticsdk_hardness import openhaptics as oh
+
+    monkeypatch.delenv("HAPTICSDK_LIBHD", raising=False)
+    opened = []
+    monkeypatch.setattr(oh.ctypes, "CDLL", lambda name, *a, **k: opened.append(name) or (_ for _ in ()).throw(
+        OSError("not loaded in this test")))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "libHD.so").write_bytes(b"\x7fELF")
+    (tmp_path / "dir.so").mkdir()
+    assert oh.check_candidate("libHD.so") is None and oh.check_candidate("libHD.so.3") is None
+    assert oh.check_candidate("HD.dll") is None
+    assert "HD library name" in oh.check_candidate("libevil.so")
+    assert "relative" in oh.check_candidate("./libHD.so")
+    assert "regular file" in oh.check_candidate(str(tmp_path / "dir.so"))
+    assert oh.check_candidate(str(tmp_path / "libHD.so")) is None
+    for bad in ("./libHD.so", "libevil.so", str(tmp_path / "dir.so")):
+        opened.clear()
+        with pytest.raises(DeviceNotFoundError) as ei:
+            oh.load_library(bad)
+        assert bad not in opened and "refused" in str(ei.value)

@@ -195,8 +195,12 @@ def test_library_plan_drops_exactly_below_threshold():
     # the estimate is recomputed here from its definition: the median over the feature
     # vectors reaching the target of the loss the paper's regression predicts (< 0 -> 0)
     lib = load_library()
+    # the scene solves within what its default actuators can produce (device-aware)
+    from hapticsdk_roughness.dimension import RoughnessDimension
+    from hapticsdk_roughness.virtual import PiezoVirtual
+    extra = RoughnessDimension().device_constraints({"vibration": PiezoVirtual.capability_for({})})
     problem = build_problem(np.array([[lib.get(n).intensities[d] for d in both] for n in names]),
-                            dimensions=both, data_support=True)
+                            dimensions=both, data_support=True, extra_constraints=tuple(extra))
     sets = solution_sets(problem)
     n_r = n_h = 0
     for n, sset in zip(names, sets):

@@ -171,6 +171,7 @@ class AmortisedTable:
 
     @classmethod
     def load(cls, path: Path) -> "AmortisedTable":
+        """Read a table written by :meth:`save` (numpy archive, no pickles)."""
         with np.load(path, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             bt = meta.get("build_time_s")
@@ -278,6 +279,7 @@ class AmortisedSolver(Solver):
     """
 
     name: ClassVar[str] = "amortised"
+    uses_rng: ClassVar[bool] = False     # deterministic: lookup + LM steps
     default_options: ClassVar[dict[str, Any]] = {
         "grid": 101, "polish_steps": 1, "build_samples": 20000, "build_iter": 15,
         "cache": True, "cache_dir": None,

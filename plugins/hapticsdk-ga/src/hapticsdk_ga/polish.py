@@ -346,13 +346,13 @@ class PolishSolver(Solver):
     nearest samples and random starts),
     ``ga_options`` (GA settings for ``start="ga"``), ``target_error`` (1e-6: stop a
     target once one of its starts has an error below this with its constraints met; its
-    other starts stop too), ``ftol`` (1e-4: a start also stops after 5 iterations in a row,
+    other starts stop too), ``ftol`` (1e-4: a start also stops after ``patience`` iterations in a row,
     the first an accepted step, that did not lower its sum of squared residuals by more
     than this fraction: converged to a stationary point, typically the closest point of a
     target that cannot be met exactly; a start converged there with constraints met and an
     error within the problem's tolerance ends its target's other starts too; 0 = never),
     ``damping`` (initial lambda, 1e-2), ``constraint_margin`` (1e-6, relative),
-    ``constraint_weight`` (1.0), ``time_budget_s`` (None), ``patience`` (5, the iterations
+    ``constraint_weight`` (1.0), ``time_budget_s`` (None), ``patience`` (3, the iterations
     of the ``ftol`` rule), ``rescue_starts`` (8: a target none of whose starts ended within
     the problem's tolerance is solved again from this many new starts, its next-nearest
     cloud samples and random points, and the better answer kept; 0 = no rescue).
@@ -364,7 +364,7 @@ class PolishSolver(Solver):
     default_options: ClassVar[dict[str, Any]] = {
         "max_iter": 30, "starts": 4, "start": "auto", "ga_options": None, "target_error": 1e-6,
         "ftol": 1e-4, "damping": 1e-2, "constraint_margin": 1e-6, "constraint_weight": 1.0, "time_budget_s": None,
-        "rescue_starts": 8, "patience": 5,
+        "rescue_starts": 8, "patience": 3,
     }
     _ga_defaults: ClassVar[dict[str, Any]] = {"population": 30, "generations": 10}
     #: GA stage goal (``start="ga"``) = this x the problem's tolerance (None: the GA's own)

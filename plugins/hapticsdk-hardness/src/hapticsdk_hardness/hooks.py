@@ -9,6 +9,7 @@ from hapticsdk.hookspecs import hookimpl
 
 @hookimpl
 def hapticsdk_dimension_info() -> list[dict[str, Any]]:
+    """Describe the hardness dimension for hook callers (name, description, features)."""
     return [{"name": "hardness",
              "description": "perceived hardness while pressing (GS rendered by the Omni up to 2.3 N/mm, "
                             "the rest by a voice coil, formula (8))",

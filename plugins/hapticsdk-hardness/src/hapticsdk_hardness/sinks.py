@@ -34,16 +34,19 @@ class BufferSink:
         self.n = 0
 
     def write(self, samples: np.ndarray) -> None:
+        """Keep a block of drive samples (-1..1)."""
         if samples.size:
             self._chunks.append(samples)
             self.n += samples.size
 
     def samples(self) -> np.ndarray:
+        """Every sample kept so far, as one array."""
         if len(self._chunks) > 1:
             self._chunks = [np.concatenate(self._chunks)]
         return self._chunks[0].copy() if self._chunks else np.zeros(0)
 
     def clear(self) -> None:
+        """Forget the samples kept."""
         self._chunks.clear()
         self.n = 0
 
@@ -82,6 +85,8 @@ class WavSink:
         self._w.setframerate(self.fs)
 
     def write(self, samples: np.ndarray) -> None:
+        """Append a block of drive samples (-1..1, clipped) to the WAV file as 16-bit PCM.
+        """
         if self._w is None or not samples.size:
             return
         pcm = np.round(np.clip(samples, -1.0, 1.0) * 32767.0).astype("<i2")
@@ -140,6 +145,7 @@ class CallbackSink:
         self.n = 0
 
     def write(self, samples: np.ndarray) -> None:
+        """Hand a block of drive samples (-1..1) to the callback."""
         if samples.size:
             self.fn(samples)
             self.n += samples.size
@@ -164,11 +170,14 @@ class SoundDeviceSink:
         self.n = 0
 
     def write(self, samples: np.ndarray) -> None:
+        """Play a block of drive samples (-1..1) on the sound card (blocking until queued).
+        """
         if samples.size:
             self._stream.write(np.asarray(samples, np.float32).reshape(-1, 1))
             self.n += samples.size
 
     def close(self) -> None:
+        """Stop and close the sound card stream."""
         self._stream.stop()
         self._stream.close()
 

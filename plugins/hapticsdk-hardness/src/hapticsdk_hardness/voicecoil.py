@@ -91,6 +91,7 @@ class VoiceCoilVirtual(Actuator):
 
     @property
     def frequency_hz(self) -> float:
+        """Current drive frequency (Hz)."""
         return self._freq
 
     def describe(self) -> dict[str, Any]:

@@ -122,7 +122,7 @@ class OnnxModel(PerceptionModel):
         if not isinstance(defaults, dict) or set(defaults) - set(space.names):
             raise ModelError(f"{where}: 'hapticsdk.feature_defaults' names unknown features "
                              f"{sorted(set(defaults) - set(space.names)) if isinstance(defaults, dict) else defaults}")
-        df_hz = float(meta["df_hz"])
+        df_hz = _number(meta["df_hz"], "df_hz", where, positive=True)
         defaults = {k: _number(v, f"feature_defaults.{k}", where) for k, v in defaults.items()}
         meta["source_path"] = where
         super().__init__(space.names, dims, feature_space=space, metadata=meta, name=name or p.stem)

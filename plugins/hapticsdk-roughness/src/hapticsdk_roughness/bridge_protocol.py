@@ -71,6 +71,9 @@ class Frame:
     payload: bytes = b""
 
     def encode(self) -> bytes:
+        """The frame as bytes on the wire (start byte, payload length, sequence, command,
+        payload, CRC-16); raises :class:`ValueError` for a payload over the maximum.
+        """
         if len(self.payload) > MAX_PAYLOAD:
             raise ValueError(f"payload of {len(self.payload)} bytes > {MAX_PAYLOAD}")
         body = bytes((len(self.payload), self.seq & 0xFF, self.cmd & 0xFF)) + bytes(self.payload)
@@ -91,9 +94,14 @@ class FrameParser:
         self.crc_errors = 0
 
     def reset(self) -> None:
+        """Drop any partial frame."""
         self.buf.clear()
 
     def feed(self, data: bytes) -> list[Frame]:
+        """Add received bytes; return the complete frames they finish (a partial frame
+        waits for more bytes; bytes before a start byte and frames with a bad length or CRC
+        are skipped and counted in ``garbage`` / ``crc_errors``).
+        """
         self.buf += data
         out: list[Frame] = []
         while True:

@@ -137,6 +137,59 @@ class RoughnessRenderer(DimensionRenderer):
                 "active_ticks": self.active_ticks}
 
 
+class DeviceBandConstraint(Constraint):
+    """Fpeak within the band of the actuator that renders roughness (device-aware
+    solving): ``Fpeak >= lo`` (``side="low"``) or ``hi >= Fpeak`` (``side="high"``), Hz."""
+
+    features: ClassVar[tuple[str, ...]] = ("Fpeak",)
+
+    def __init__(self, bound_hz: float, side: str, actuator: str = "") -> None:
+        if side not in ("low", "high"):
+            raise ValidationError(f"side must be 'low' or 'high', got {side!r}", field="side")
+        self.bound_hz, self.side, self.actuator = float(bound_hz), side, actuator
+        self.name = f"roughness.device-band-{side}"
+
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        f = np.asarray(cols["Fpeak"], float)
+        b = np.full_like(f, self.bound_hz)
+        return (b, f) if self.side == "low" else (f, b)
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(bound_hz=self.bound_hz, side=self.side, actuator=self.actuator)
+        return d
+
+
+class DeviceAmplitudeConstraint(Constraint):
+    """AFpeak no larger than the actuator reaches at Fpeak with its largest drive:
+    ``A_max(Fpeak) >= AFpeak`` (m/s^2), ``A_max`` from the drive table at ``max_drive``."""
+
+    name: ClassVar[str] = "roughness.device-amplitude"
+    features: ClassVar[tuple[str, ...]] = ("Fpeak", "AFpeak")
+
+    def __init__(self, table: Any, max_drive: float, f_range_hz: tuple[float, float], actuator: str = "") -> None:
+        lo, hi = float(f_range_hz[0]), float(f_range_hz[1])
+        self.max_drive, self.actuator = float(max_drive), actuator
+        t_lo, t_hi = table.frequency_range_hz
+        self._f = np.linspace(lo, hi, 512)
+        self._a = np.array([table.acceleration_at(f, self.max_drive) if t_lo <= f <= t_hi else 0.0
+                            for f in self._f])
+        self.table_source = getattr(table, "source", "")
+
+    def max_acceleration(self, f_hz: Any) -> np.ndarray:
+        """Largest AFpeak (m/s^2) the actuator reaches at ``f_hz`` (Hz)."""
+        return np.interp(np.asarray(f_hz, float), self._f, self._a, left=0.0, right=0.0)
+
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        a = np.asarray(cols["AFpeak"], float)
+        return a, self.max_acceleration(cols["Fpeak"])
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(max_drive=self.max_drive, actuator=self.actuator, table=self.table_source)
+        return d
+
+
 class RoughnessDimension(PerceptionDimension):
     """Perceived roughness (0 smooth .. 1 rough) rendered by a speed-following piezo vibration."""
 
@@ -162,6 +215,43 @@ class RoughnessDimension(PerceptionDimension):
         """``[PowerConstraint(df_hz)]``; ``df_hz`` defaults to :data:`DEFAULT_DF_HZ`."""
         df = context.get("df_hz")
         return [PowerConstraint(DEFAULT_DF_HZ if df is None else df)]
+
+    def capability_options(self, capabilities: Mapping[str, Any]) -> dict[str, Any]:
+        """An actuator with a drive table of its own (an LRA) renders with that table and
+        within its band; a piezo uses the (calibrated) ``Tab``."""
+        cap = capabilities.get("vibration")
+        if cap is None or getattr(cap, "table", None) is None:
+            return {}
+        out: dict[str, Any] = {"table": cap.table}
+        if cap.frequency_range_hz is not None:
+            t_lo, t_hi = cap.table.frequency_range_hz
+            out["frequency_range_hz"] = (max(cap.frequency_range_hz[0], t_lo), min(cap.frequency_range_hz[1], t_hi))
+        return out
+
+    def device_constraints(self, capabilities: Mapping[str, Any], **options: Any) -> list[Constraint]:
+        """Fpeak within the mapped actuator's band, AFpeak within what its largest drive
+        reaches at Fpeak through the table the renderer will use (``options["table"]``,
+        else the actuator's own, else the default ``Tab``)."""
+        from .table import resolve_table
+        cap = capabilities.get("vibration")
+        if cap is None:
+            return []
+        table = resolve_table(options.get("table") if options.get("table") is not None else cap.table)
+        who = getattr(cap, "source", "")
+        out: list[Constraint] = []
+        f_lo, f_hi = self.features[0].lower, self.features[0].upper
+        if cap.frequency_range_hz is not None:
+            b_lo, b_hi = (float(v) for v in cap.frequency_range_hz)
+            if b_lo > f_lo:
+                out.append(DeviceBandConstraint(b_lo, "low", who))
+            if b_hi < f_hi:
+                out.append(DeviceBandConstraint(b_hi, "high", who))
+            f_lo, f_hi = min(max(f_lo, b_lo), f_hi), max(min(f_hi, b_hi), f_lo)
+        if cap.max_drive is not None:
+            v_max = min(float(cap.max_drive), float(table.voltages_v[-1])) if hasattr(table, "voltages_v") \
+                else float(cap.max_drive)
+            out.append(DeviceAmplitudeConstraint(table, v_max, (self.features[0].lower, self.features[0].upper), who))
+        return out
 
     def renderer(self, features: Mapping[str, float], **options: Any) -> RoughnessRenderer:
         """Options: ``table`` (PiezoTable, dict or JSON path; default the generated table),

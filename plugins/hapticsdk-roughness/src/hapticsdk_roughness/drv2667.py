@@ -139,6 +139,9 @@ class SynthChunk:
                 raise ValidationError(f"{v} outside {lo}..255", field=f"chunk.{name}")
 
     def to_bytes(self) -> bytes:
+        """The chunk as the DRV2667's four synthesis bytes (amplitude, frequency, cycles,
+        envelope).
+        """
         return bytes((self.amplitude, self.frequency, self.cycles, self.envelope))
 
 
@@ -186,9 +189,13 @@ class DRV2667:
 
     # -- raw access ----------------------------------------------------------
     def write(self, reg: int, *data: int) -> None:
+        """Write ``data`` to register ``reg`` (and the following ones)."""
         self.bus.write(self.address, bytes((reg, *data)))
 
     def read(self, reg: int, n: int = 1) -> bytes:
+        """Read ``n`` bytes from register ``reg``; raises
+        :class:`~hapticsdk.errors.TransportError` on a short read.
+        """
         out = self.bus.write_read(self.address, bytes((reg,)), n)
         if len(out) != n:
             raise TransportError(f"read of register 0x{reg:02x}: expected {n} bytes, got {len(out)}",
@@ -242,6 +249,7 @@ class DRV2667:
         self.gain = gain
 
     def status(self) -> int:
+        """The status register (page 0)."""
         self.set_page(0)
         return self.read(REG_STATUS)[0]
 

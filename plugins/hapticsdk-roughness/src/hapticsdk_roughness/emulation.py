@@ -50,6 +50,7 @@ class DRV2667Emulator:
         self.reset()
 
     def reset(self) -> None:
+        """Power-on state: registers cleared, FIFO empty, device id set."""
         self.regs = bytearray(256)
         self.regs[d.REG_STATUS] = d.STATUS_FIFO_EMPTY
         self.regs[d.REG_CONTROL1] = d.DEVICE_ID << 3
@@ -127,6 +128,9 @@ class DRV2667Emulator:
                         return
 
     def i2c_write_read(self, data: bytes, n: int) -> bytes:
+        """An I2C write of ``data`` (register address last) followed by a read of ``n``
+        bytes, as the chip answers it.
+        """
         with self.lock:
             self.log.append(("r", bytes(data) + bytes((n,))))
             reg = data[-1] if data else 0
@@ -149,10 +153,12 @@ class DRV2667Emulator:
     # -- what it plays --------------------------------------------------------------
     @property
     def standby(self) -> bool:
+        """Whether the chip is in standby (control register 2)."""
         return bool(self.regs[d.REG_CONTROL2] & d.CTRL2_STANDBY)
 
     @property
     def gain(self) -> int:
+        """The gain setting, 0..3 (25, 50, 75, 100 V peak)."""
         return self.regs[d.REG_CONTROL1] & 0x03
 
     def output(self) -> dict[str, Any]:
@@ -181,6 +187,7 @@ class DRV2667Emulator:
         return (o["playing"] and o["amplitude_v"] > 0) or o["fifo_bytes"] > 0
 
     def writes(self) -> list[bytes]:
+        """Every I2C write received, in order."""
         return [b for k, b in self.log if k == "w"]
 
 
@@ -220,9 +227,11 @@ class SerialBridgeEmulator:
 
     @property
     def drv(self) -> DRV2667Emulator:
+        """The emulated DRV2667 behind the bridge."""
         return self.targets[d.ADDRESS]
 
     def start(self) -> "SerialBridgeEmulator":
+        """Serve the bridge protocol on the port in a daemon thread; returns self."""
         self._thread = threading.Thread(target=self._run, name=f"bridge-emu {self.port}", daemon=True)
         self._thread.start()
         return self
@@ -234,6 +243,7 @@ class SerialBridgeEmulator:
         self.stop()
 
     def stop(self) -> None:
+        """Stop serving and wait (up to 2 s) for the thread."""
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)

@@ -30,7 +30,7 @@ import threading
 import time
 from typing import Any, ClassVar
 
-from hapticsdk.actuators import Actuator
+from hapticsdk.actuators import Actuator, DriveCapability
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime.watchdog import CommandWatchdog
@@ -170,6 +170,16 @@ class DRV2667Actuator(Actuator):
                 drv.check_status()
             if self._watchdog is not None:
                 self._watchdog.feed()
+
+    @classmethod
+    def capability_for(cls, options: Any = None) -> DriveCapability:
+        """Band and full scale of the DRV2667 at the ``gain`` / ``frequency_range_hz``
+        options (default gain 0, 25 V peak); the table is the dimension's ``Tab``."""
+        o = dict(options or {})
+        gain = int(o.get("gain", 0))
+        lim = piezo_limits(gain, o.get("frequency_range_hz"))
+        return DriveCapability("vibration", lim.frequency_range_hz, lim.max_amplitude, "V",
+                               source=f"{cls.name}: DRV2667 gain {gain}, {lim.max_amplitude:g} V peak full scale")
 
     def _read_back(self) -> ChannelCommand:
         """The synthesis chunk last written to the DRV2667 (its amplitude and frequency

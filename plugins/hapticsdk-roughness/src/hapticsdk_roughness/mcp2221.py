@@ -105,6 +105,9 @@ class MCP2221Bus(I2CBus):
 
     # -- open / close ------------------------------------------------------------------
     def open(self) -> "MCP2221Bus":
+        """Find and claim the MCP2221A (by serial number when given) through pyusb; returns
+        self.
+        """
         usb = self._usb = _import_usb()
         devs = find_devices(self.backend)
         found = [(_serial_of(d), d) for d in devs]
@@ -177,6 +180,9 @@ class MCP2221Bus(I2CBus):
         return resp
 
     def status(self, cancel: bool = False, divider: int | None = None) -> bytes:
+        """Send the status/set-parameters report (optionally cancelling the current I2C
+        transfer or setting the clock divider) and return the 64-byte answer.
+        """
         rep = bytearray(8)
         rep[0] = CMD_STATUS
         if cancel:

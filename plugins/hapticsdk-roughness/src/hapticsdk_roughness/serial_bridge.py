@@ -78,6 +78,7 @@ class SerialBridgeBus(I2CBus):
 
     # -- link ---------------------------------------------------------------------
     def open(self) -> "SerialBridgeBus":
+        """Open the serial port (pyserial) and check the bridge answers; returns self."""
         try:
             import serial
         except ImportError:

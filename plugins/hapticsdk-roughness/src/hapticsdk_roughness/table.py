@@ -104,13 +104,16 @@ def table_from_dict(data: dict) -> PiezoTable:
 
 def load_table(path: str | Path) -> PiezoTable:
     """Load a measured (or generated) table from a JSON file in :meth:`PiezoTable.to_dict` form."""
+    from hapticsdk.errors import ValidationError
+    from hapticsdk.schemas_io import read_json
+
     p = Path(path)
-    try:
-        data = json.loads(p.read_text())
-    except FileNotFoundError:
-        raise CalibrationError(f"piezo table file not found: {p}") from None
-    except json.JSONDecodeError as exc:
-        raise CalibrationError(f"piezo table {p} is not valid JSON: {exc}") from None
+    if not p.exists():
+        raise CalibrationError(f"piezo table file not found: {p}")
+    try:  # a regular UTF-8 file of bounded size and depth (a scene may name this path)
+        data = read_json(p, field="table")
+    except ValidationError as exc:
+        raise CalibrationError(f"piezo table {p}: {exc}") from None
     table = table_from_dict(data)
     if not table.source:
         table.source = str(p)

@@ -51,10 +51,12 @@ class EmulatedMCP2221:
 
     @property
     def drv(self) -> DRV2667Emulator:
+        """The emulated DRV2667 on the I2C bus (address 0x59)."""
         return self.targets[0x59]
 
     # -- HID command set ------------------------------------------------------------
     def handle(self, rep: bytes) -> bytes:
+        """Answer one 64-byte HID report as the MCP2221A would."""
         self.reports.append(bytes(rep))
         cmd = rep[0]
         out = bytearray(64)

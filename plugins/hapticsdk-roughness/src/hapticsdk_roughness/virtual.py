@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.actuators import Actuator, ActuatorLimits, DriveCapability
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
 from hapticsdk.synthesis import Oscillator
@@ -143,6 +143,16 @@ class PiezoVirtual(Actuator):
         """Simulation phase of a servo tick: synthesise the waveform commanded so far."""
         self._flush()
 
+    @classmethod
+    def capability_for(cls, options: Any = None) -> DriveCapability:
+        """Band and full scale of the DRV2667 at the ``gain`` / ``frequency_range_hz``
+        options; the drive table is the roughness dimension's (calibrated) ``Tab``."""
+        o = dict(options or {})
+        lim = piezo_limits(int(o.get("gain", 1)), o.get("frequency_range_hz"))
+        return DriveCapability("vibration", lim.frequency_range_hz, lim.max_amplitude, "V",
+                               source=f"{cls.name}: DRV2667 gain {int(o.get('gain', 1))}, "
+                                      f"{lim.max_amplitude:g} V peak full scale")
+
     def _read_back(self) -> ChannelCommand:
         """The drive the simulated chip was last set to (after quantisation when on)."""
         return ChannelCommand("vibration", frequency_hz=self._freq, amplitude=self._target_amp)
@@ -164,6 +174,7 @@ class PiezoVirtual(Actuator):
 
     @property
     def output_amplitude_v(self) -> float:
+        """Current output amplitude of the simulated piezo (V peak)."""
         self._flush()
         return float(self.osc.amplitude)
 
@@ -175,6 +186,7 @@ class PiezoVirtual(Actuator):
         return (start + np.arange(v.size)) / self.fs, v
 
     def clear_waveform(self) -> None:
+        """Forget the recorded output waveform."""
         self._flush()
         self._blocks.clear()
         self._kept = 0
