@@ -61,6 +61,9 @@ STABLE_BY_ASSUMPTION = "stable-by-assumption (not passive)"
 
 
 def _check_nonneg(name: str, value: float) -> float:
+    from .checks import is_number
+    if not is_number(value):
+        raise ValidationError(f"must be a finite number >= 0, got {value!r}", field=name)
     v = float(value)
     if not math.isfinite(v) or v < 0:
         raise ValidationError(f"must be a finite number >= 0, got {value!r}", field=name)

@@ -76,6 +76,12 @@ class SafetySettings:
     ramp_amplitude: bool = False
 
     def __post_init__(self) -> None:
+        from .checks import is_number
+        for name in ("ramp_time_s", "stiffness_offset_n", "stale_after_s", "restart_after_s", "velocity_knee",
+                     "start_max_penetration_mm", "start_max_force_n"):
+            v = getattr(self, name)
+            if not (v is None and name.startswith("start_")) and not is_number(v):
+                raise ValidationError(f"must be a number, got {v!r}", field=f"safety.{name}")
         for name in ("ramp_time_s", "stiffness_offset_n"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):

@@ -232,25 +232,31 @@ class _Servo:
         self.thread_mode = thread_mode
         self.loop: Any = None
         self.tags: list[int] = []
-        self._dims: dict[str, Any] = {}
+        self._cal: dict[tuple, dict] = {}
+        self._settings: dict[str, Any] = {}
+        self._role_options: dict[str, dict[str, Any]] = {}
+        self._caps: dict[str, Any] = {}
         self._stack: Any = None
         self.reason = ""
         self.message = ""
         self.stopped_labels: list[str] = []
 
     # -- building ------------------------------------------------------------------
-    def _dimension(self, name: str) -> Any:
-        d = self._dims.get(name)
-        if d is None:
-            from ..plugins import registry
-            cls = registry("dimension").load(name)
-            d = cls() if isinstance(cls, type) else cls
-            self._dims[name] = d
-        return d
-
     def renderers_for(self, features: Mapping[str, Mapping[str, float]]) -> list:
-        ropts = self.spec["renderer_options"]
-        return [self._dimension(d).renderer(dict(f), **dict(ropts.get(d, {}))) for d, f in features.items()]
+        """Renderers for live features ``{dimension: {feature: value}}``, built as
+        :func:`~hapticsdk.runtime.render.render_plan` builds them (scene renderer
+        options, the actuators' own drive tables, saved calibrations)."""
+        from ..plan import MaterialPlan
+        from .render import _calibrations, build_renderers
+        dims = list(features)
+        mp = MaterialPlan(name="live", targets={d: 0.0 for d in dims}, dimensions=dims,
+                          features={k: float(v) for f in features.values() for k, v in f.items()},
+                          actuators={r: n for r, (n, _) in self.spec["devices"].items()})
+        key = tuple(dims)
+        cal = self._cal.get(key)
+        if cal is None:
+            cal = self._cal[key] = _calibrations(mp, self._settings, self._role_options)[0]
+        return build_renderers(mp, self._settings, calibrations=cal, capabilities=self._caps)
 
     def build(self) -> None:
         from contextlib import ExitStack
@@ -262,15 +268,23 @@ class _Servo:
         from .loop import ServoLoop
         from .render import build_renderers
 
+        from .render import _calibrations, _capabilities
+
         spec = self.spec
         plan = RenderPlan.from_dict(spec["plan"], validate=False)
+        self._settings = plan.settings
+        chosen = {role: (registry("actuator").load(name), dict(opts)) for role, (name, opts) in spec["devices"].items()}
+        self._role_options = {r: o for r, (_, o) in chosen.items()}
+        self._caps = _capabilities(chosen)
         objects = []
         shapes = []
         for o in spec["objects"]:
             if o.get("features") is not None:
                 rs = self.renderers_for(o["features"])
             else:
-                rs = build_renderers(plan.material(o["material"]), plan.settings)
+                mp = plan.material(o["material"])
+                cal = _calibrations(mp, plan.settings, self._role_options)[0]
+                rs = build_renderers(mp, plan.settings, calibrations=cal, capabilities=self._caps)
             objects.append((o["name"], rs))
             shapes.append((o["name"], shape_from_dict(o["geometry"], o["pose"])))
             self.tags.append(o["id"])
@@ -452,7 +466,7 @@ class _Servo:
                     clamps_seen = cl
                 if watch and hb_timeout is not None:
                     age = mono() - mv[_HEARTBEAT]
-                    if False:
+                    if age > hb_timeout:
                         self.reason = "heartbeat"
                         self.message = f"no heartbeat from the application for {age * 1e3:.0f} ms"
                         self.event("app_lost", -1.0, age)
@@ -490,8 +504,6 @@ class _Servo:
                                               "jitter", "events", "fault")}
                     path = self.spec.get("log_path")
                     if path:
-                        import json
-
                         import numpy as np
 
                         from ..fileio import atomic_savez

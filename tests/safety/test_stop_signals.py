@@ -155,3 +155,56 @@ def test_render_stops_the_piezo_on_each_signal(tmp_path):
                 r["proc"].kill()
                 r["proc"].wait()
             r["emu"].stop()
+
+
+# ---------------------------------------------------------------------------------
+# the CLI's exit path, in-process
+# ---------------------------------------------------------------------------------
+def _patch_command(monkeypatch, body):
+    from hapticsdk.cli import core
+    monkeypatch.setattr(core, "cmd_materials", lambda args: body())
+
+
+def test_cli_names_the_actuators_the_stop_path_stopped(monkeypatch, capsys):
+    """Before: the actuators were stopped and closed on the way out, so the last-resort
+    stop_all() found none and the message said 'stopped no actuators'."""
+    from hapticsdk.cli import main
+    from hapticsdk.sim.probe import VirtualProbe
+
+    def body():
+        with VirtualProbe(label="probe-under-test"):
+            raise SafeStop(signal.SIGTERM)
+    _patch_command(monkeypatch, body)
+    assert main(["materials"]) == 143
+    err = capsys.readouterr().err
+    assert "stopped by SIGTERM" in err and "probe-under-test" in err and "no actuator" not in err
+
+
+def test_cli_stops_an_actuator_the_command_left_open(monkeypatch, capsys):
+    from hapticsdk.cli import main
+    from hapticsdk.sim.probe import VirtualProbe
+    left = VirtualProbe(label="left-open")
+
+    def body():
+        left.open()
+        left.command(__import__("hapticsdk.dimensions", fromlist=["x"]).ChannelCommand("force", force_n=0.5),
+                     now=0.0)
+        left.ignored_force_n = 0.5
+        raise SafeStop(signal.SIGHUP)
+    _patch_command(monkeypatch, body)
+    try:
+        assert main(["materials"]) == 129
+        assert left.ignored_force_n == 0.0            # stop_all() reached it
+        assert "left-open" in capsys.readouterr().err
+    finally:
+        left.close()
+
+
+def test_cli_with_nothing_open_says_so(monkeypatch, capsys):
+    from hapticsdk.cli import main
+
+    def body():
+        raise SafeStop(signal.SIGINT)
+    _patch_command(monkeypatch, body)
+    assert main(["materials"]) == 130
+    assert "stopped by SIGINT; no actuator was open" in capsys.readouterr().err

@@ -238,12 +238,26 @@ class GASolver(Solver):
         rng.random((m, p, d), out=pop)
         pop *= span
         pop += lower
+        k0 = 0
         if self.options["init"] == "nearest":
-            k = min(NEAREST_INIT, p)
-            pop[:, :k] = sample_cloud(problem).nearest(problem.targets, k)
+            k0 = min(NEAREST_INIT, p)
+            pop[:, :k0] = sample_cloud(problem).nearest(problem.targets, k0)
         if problem.x0 is not None:
             pop[:, 0] = problem.x0
-        fit, err, viol = ev(pop)
+        if k0:
+            # the nearest samples first: a target one of them already meets leaves at once,
+            # and only the others' uniform individuals are evaluated
+            f0, e0, v0 = ev(pop[:, :k0])
+            j0 = f0.argmin(axis=1)
+            ar = np.arange(m)
+            done = solved_mask(e0[ar, j0], v0[ar, j0], goal)
+            fit, err, viol = (np.full((m, p), np.inf), np.full((m, p), np.inf), np.full((m, p), np.inf))
+            fit[:, :k0], err[:, :k0], viol[:, :k0] = f0, e0, v0
+            todo = np.flatnonzero(~done)
+            if todo.size:
+                fit[todo, k0:], err[todo, k0:], viol[todo, k0:] = ev(pop[todo, k0:], todo)
+        else:
+            fit, err, viol = ev(pop)
         best_i = fit.argmin(axis=1)
         ar = np.arange(m)
         best_x = pop[ar, best_i].copy()
