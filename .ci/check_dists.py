@@ -12,6 +12,7 @@ installed in this environment (no build isolation) and check what a user gets:
 from __future__ import annotations
 
 import email
+import shutil
 import subprocess
 import sys
 import tarfile
@@ -29,15 +30,26 @@ DISTS = {
 }
 
 
+def _copy(src: str, out: Path) -> Path:
+    """A copy of one distribution's source to build from (builds leave build/ and
+    egg-info directories behind; the working tree stays clean)."""
+    skip = shutil.ignore_patterns(".git", "build", "dist", "*.egg-info", "__pycache__", ".venv",
+                                  *(["plugins", "examples", "tests", "docs", "bench"] if src == "." else []))
+    dest = out / "src" / (Path(src).name if src != "." else "hapticsdk")
+    shutil.copytree(ROOT / src, dest, ignore=skip)
+    return dest
+
+
 def check(src: str, pkg: str, out: Path) -> list[str]:
     dest = out / pkg
     dest.mkdir(parents=True)
+    tree = _copy(src, out)
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "--no-build-isolation",
-                    "--wheel-dir", str(dest), str(ROOT / src)], check=True)
+                    "--wheel-dir", str(dest), str(tree)], check=True)
     # sdist through the PEP 517 hook of the same backend
     code = ("import os, sys; from setuptools import build_meta as b; os.chdir(sys.argv[1]); "
             "print(b.build_sdist(sys.argv[2]))")
-    subprocess.run([sys.executable, "-c", code, str(ROOT / src), str(dest)], check=True,
+    subprocess.run([sys.executable, "-c", code, str(tree), str(dest)], check=True,
                    capture_output=True)
     errs: list[str] = []
     (whl,) = dest.glob("*.whl")

@@ -35,6 +35,11 @@ Two tools:
   it goes negative: the Colgate deficit ``K T / 2 - b`` is paid as it arises instead of
   after the wall's stored energy is spent, which is what keeps walls up to 4 x 2b/T
   passive, settled and at their full spring law (goal 4 of the reference).
+  Before all of these, a **stiffness cap** limits the wall's outward force to
+  ``K_c x penetration`` (:func:`cap_stiffness_n_per_mm`): a wall stiffer than the device
+  can render passively is rendered as the stiffest spring it can (a conservative spring,
+  after the idea of a virtual coupling), with the observers as the backstop, instead of
+  a relay the observers withhold.
 
 Sign conventions: ``x`` is the probe position along the surface normal (mm, y axis,
 inside the material at x < 0); ``F`` is the force on the probe along +x (N, "pushing the
@@ -303,10 +308,11 @@ class ControllerSettings:
         bound_tolerance_j: energy deficit at which the energy bound starts capping the
             outward force (J). With a quantised encoder the cap's predicted work includes
             one count (``F Delta``), which an empty budget never covers: with 0 a wall
-            met from outside would never be rendered at all. 1 mJ (a saturated stiff
-            wall reaches it within a few cycles) lets the wall start and absorb energy;
-            the observed energy's count-level drift is removed by the half-count play
-            (``count_play_ratio``), and the gentle dampers act at once.
+            met from outside would never be rendered at all. 50 uJ lets the (capped) wall
+            start and absorb energy; the observed energy's count-level drift is removed
+            by the half-count play (``count_play_ratio``), and the gentle dampers act at
+            once. (Before the stiffness cap it was 1 mJ, which the stability matrix then
+            showed handing up to 0.86 mJ to the finger.)
         energy_bound: also bound the outward force by the observed energy (on by default).
         device_mass_kg: apparent mass of the device (kg) used to bound how far the held
             force itself can push the stylus within one period (``F T^2 / 2m``). Without
@@ -371,6 +377,27 @@ class ControllerSettings:
             wall and a device of unknown damping (b = 0) are booked count by count in
             full. Without the play the observer's count-level drift (about -K Delta^2 per
             dither cycle) withheld a 1.5 x 2b/T wall after about 4 s of holding.
+        stiffness_cap: render a wall stiffer than :func:`cap_stiffness_n_per_mm` as that
+            spring (on by default): the wall's outward force is limited to ``K_c x
+            penetration`` (penetration = ``-x``; the surface is at x = 0) before the
+            observers see it. A wall the device cannot render passively is then rendered
+            as the stiffest spring it can, a conservative (path-independent) spring and
+            not a relay that the observers withhold. A wall softer than ``K_c`` is untouched.
+        cap_colgate_multiple: ``K_c`` is at least this multiple of Colgate's ``2 b / T``
+            (4: the range goal 4 of the reference asks the generation observer to keep
+            passive, settled and at its full spring law).
+        cap_damping_share: ... and at least ``2 (b + share * max_damping_ns_per_m) / T``:
+            the device damping plus this share of the damper's bound taken as margin
+            (0.3: 1.5 N*s/m; this is what lets a device with b = 0 render a wall at all,
+            3 N/mm at 1 kHz, with the observers paying the hold's deficit).
+        cap_count_force_n: with a quantised encoder, ``K_c`` is at most this force per
+            count divided by the resolution (N; 0.35 N: 6.4 N/mm at 0.055 mm). Above it
+            the count-level limit cycle of a quantised wall (Abbott & Okamura: ``K Delta
+            <= 2 f_c``; no Coulomb friction is known or simulated) feeds the finger more
+            than the observers can catch. None: no such limit.
+        bound_tolerance_j: (see above) 50 uJ: with the stiffness cap the first count of
+            a wall met from outside is worth at most ``cap_count_force_n`` x Delta, so a
+            small tolerance no longer keeps the wall from starting.
     """
 
     max_damping_ns_per_m: float = 5.0
@@ -390,10 +417,9 @@ class ControllerSettings:
     dither_damping_ns_per_m: float = 3.0
     count_play_ratio: float = 0.75
     stiffness_cap: bool = True
+    cap_colgate_multiple: float = 4.0
     cap_damping_share: float = 0.3
-    cap_count_force_n: float | None = None
-    max_damper_cut: float | None = 0.05
-    no_pull: bool = True
+    cap_count_force_n: float | None = 0.35
 
 
 def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float,
@@ -408,7 +434,9 @@ def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float,
     if not settings.stiffness_cap or not dt > 0:
         return math.inf
     b = settings.device_damping_ns_per_m if damping_ns_per_m is None else float(damping_ns_per_m)
-    kc = 2.0 * (max(b, 0.0) + settings.cap_damping_share * settings.max_damping_ns_per_m) / dt / 1000.0
+    b = max(b, 0.0)
+    kc = 2.0 * max(settings.cap_colgate_multiple * b,
+                   b + settings.cap_damping_share * settings.max_damping_ns_per_m) / dt / 1000.0
     res = settings.position_resolution_mm if resolution_mm is None else float(resolution_mm)
     if settings.cap_count_force_n is not None and res > 0:
         kc = min(kc, settings.cap_count_force_n / res)
@@ -544,7 +572,6 @@ class PassivityController:
         budget = self.energy_j + s.bound_tolerance_j
         f = f_wall
         active = False
-        cut = s.max_damper_cut
         if s.generation_observer:
             # the hold's generation relative to the wall's own law (held-force work minus
             # the trapezoid of the wall's force), plus the credited device damping
@@ -575,8 +602,6 @@ class PassivityController:
                 if alpha > s.max_damping_ns_per_m:
                     alpha = s.max_damping_ns_per_m
                 f -= alpha * v_raw
-                if cut is not None and f_wall > 0.0 and f < (1.0 - cut) * f_wall:
-                    f = (1.0 - cut) * f_wall  # withdrawing: the damper takes at most `cut` of the wall
                 active = True
         step = s.max_force_step_n
         hard = math.inf
@@ -598,12 +623,6 @@ class PassivityController:
             f_pc = -alpha * v
             active = True
         out = f + f_pc
-        if cut is not None and f_pc < 0.0 and f_wall > 0.0:
-            lo_w = (1.0 - cut) * f_wall
-            if lo_w > f:
-                lo_w = f  # the energy bound has cut deeper: it stands
-            if out < lo_w:
-                out = lo_w
         if active:
             self.active_ticks += 1
         if step is not None and (active or self._f_pc_prev != 0.0):
@@ -613,8 +632,6 @@ class PassivityController:
             if lo > hard:
                 lo = hard
             out = lo if out < lo else (hi if out > hi else out)
-        if s.no_pull and out < 0.0 <= f_wall:
-            out = 0.0  # a wall pushes; the controller never pulls the stylus in
         self._f_pc_prev = out - f_wall
         self._out_prev = out
         self._fw_prev = f_wall
@@ -668,7 +685,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     count_level = (qm > 0) & (adx <= 1.000001 * qm)
     f = np.array(f_wall, float)
     if s.stiffness_cap and dt > 0:
-        kc = 2.0 * (np.maximum(bb, 0.0) + s.cap_damping_share * s.max_damping_ns_per_m) / dt / 1000.0
+        bp = np.maximum(bb, 0.0)
+        kc = 2.0 * np.maximum(s.cap_colgate_multiple * bp, bp + s.cap_damping_share * s.max_damping_ns_per_m) / dt / 1000.0
         if s.cap_count_force_n is not None:
             kc = np.where(res > 0, np.minimum(kc, s.cap_count_force_n / np.where(res > 0, res, 1.0)), kc)
         xa = np.asarray(x_mm, float)
@@ -705,9 +723,6 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
             gen_damp = started & (g < 0.0) & (f != 0.0) & (np.abs(v_raw) * 1e3 > s.velocity_deadband_mm_s)
             alpha_g = np.where(gen_damp, np.minimum(-g / (dt * v_raw * v_raw), s.max_damping_ns_per_m), 0.0)
         f = f - alpha_g * np.where(gen_damp, v_raw, 0.0)
-        if s.max_damper_cut is not None:
-            lo_w = (1.0 - s.max_damper_cut) * f_wall
-            f = np.where(gen_damp & (f_wall > 0.0) & (f < lo_w), lo_w, f)
     step = s.max_force_step_n
     hard = np.full(f.shape, np.inf)
     if s.energy_bound:
@@ -737,16 +752,11 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     active = started & (capped | damp | gen_damp)
     f_pc = np.where(started, -alpha * v, 0.0)
     out = f + f_pc
-    if s.max_damper_cut is not None:
-        lo_w = np.minimum((1.0 - s.max_damper_cut) * f_wall, f)
-        out = np.where((f_pc < 0.0) & (f_wall > 0.0) & (out < lo_w), lo_w, out)
     if step is not None:
         prev = state["out_prev"]
         limit = started & (active | (state["f_pc_prev"] != 0.0))
         lo = np.minimum(prev - step, hard)  # a cut below the one-tick cap is never delayed
         out = np.where(limit, np.clip(out, lo, prev + step), out)
-    if s.no_pull:
-        out = np.where((out < 0.0) & (f_wall >= 0.0), 0.0, out)
     out = np.where(started, out, f_wall)
     state["f_pc_prev"] = np.where(on, out - f_wall, 0.0)
     state["out_prev"] = out

@@ -41,7 +41,7 @@ _TARGETS_NAME = re.compile(r"[A-Za-z_][\w-]* [0-9.eE+-]+(, [A-Za-z_][\w-]* [0-9.
 
 
 def describe_material(name: str) -> str:
-    """Title text for a rendered material: ``material S7 "leather on sponge" (GENERATED
+    """Title text for a rendered material: ``material S7 "fabric on EVA" (GENERATED
     library data)`` for a library material, ``targets hardness 0.8, roughness 0.3`` for
     intensity targets."""
     if _TARGETS_NAME.fullmatch(name):

@@ -50,6 +50,8 @@ from .errors import DeviceError, RecordingError, ValidationError
 FORMAT = "hapticsdk-run"
 VERSION = 1
 _CMD_FIELDS = ("force_n", "frequency_hz", "amplitude")
+#: largest unpacked size of a run file read (bytes): an hour at 1 kHz is about 0.5 GB
+MAX_RUN_BYTES = 2 * 1024 ** 3
 
 
 def _as_vec3(v: Any) -> np.ndarray:
@@ -259,7 +261,13 @@ def load_run(path: str | Path) -> RunLog:
         raise RecordingError(f"run file not found: {p}", field="runlog")
     try:
         with np.load(p, allow_pickle=False) as z:
+            unpacked = sum(i.file_size for i in z.zip.infolist()) if hasattr(z, "zip") else 0
+            if unpacked > MAX_RUN_BYTES:  # checked before anything is decompressed
+                raise RecordingError(f"{p}: unpacks to {unpacked} bytes, more than the {MAX_RUN_BYTES} accepted",
+                                     field="runlog")
             data = {k: z[k] for k in z.files}
+    except RecordingError:
+        raise
     except Exception as exc:
         why = ("pickled data or not an .npz archive; pickles are never loaded" if "pickle" in str(exc)
                else f"{type(exc).__name__}: {exc}")
@@ -376,42 +384,35 @@ def narrowed_limits(base: ActuatorLimits, header: Any) -> ActuatorLimits:
     return ActuatorLimits(**out)
 
 
-def stricter_settings(header: Any) -> Any:
-    """The SDK's default :class:`~hapticsdk.safety.SafetySettings`, made stricter (never
-    looser) by a run-file header: per field the stricter of the default and the header
-    (a longer ramp, an earlier stale cut-off, a smaller start gate ...). Bad values raise
-    :class:`RecordingError` naming the field."""
+def recorded_settings(header: Any) -> Any:
+    """The :class:`~hapticsdk.safety.SafetySettings` recorded in a run-file header, checked
+    as data: every value must be a number (never a bool; ``ramp_amplitude`` a bool,
+    the start gates may be null) inside the ranges :class:`SafetySettings` accepts, else
+    :class:`RecordingError` naming the field. Unknown keys are ignored. They are applied
+    as recorded, so a replay reproduces the run sample for sample; the playback device
+    is simulated, and its force limits stay those of the device class (:func:`narrowed_limits`)."""
     from .checks import is_number
     from .safety import SafetySettings
 
+    base = "runlog.header_json.device.safety_settings"
     if not isinstance(header, dict):
-        raise RecordingError("safety_settings must be an object", field="runlog.header_json.device.safety_settings")
-    d = SafetySettings()
-    larger_is_stricter = {"ramp_time_s"}
-    smaller_is_stricter = {"stale_after_s", "restart_after_s", "start_max_penetration_mm", "start_max_force_n",
-                           "velocity_knee", "stiffness_offset_n"}
-    out = d.to_dict()
+        raise RecordingError("safety_settings must be an object", field=base)
+    known = SafetySettings.__dataclass_fields__
+    out: dict[str, Any] = {}
     for key, value in header.items():
-        field_ = f"runlog.header_json.device.safety_settings.{key}"
+        if key not in known:
+            continue
         if key == "ramp_amplitude":
             if not isinstance(value, bool):
-                raise RecordingError(f"must be true or false, got {value!r}", field=field_)
-            out[key] = out[key] or value
-            continue
-        if key not in larger_is_stricter | smaller_is_stricter or value is None:
-            continue
-        if not is_number(value) or not np.isfinite(float(value)) or float(value) < 0:
-            raise RecordingError(f"must be a finite number >= 0, got {value!r}", field=field_)
-        cur = out[key]
-        v = float(value)
-        if key in larger_is_stricter:
-            out[key] = max(cur, v)
-        else:
-            out[key] = v if cur is None else min(cur, v)
+                raise RecordingError(f"must be true or false, got {value!r}", field=f"{base}.{key}")
+        elif not (value is None and key.startswith("start_")) and not (
+                is_number(value) and np.isfinite(float(value))):
+            raise RecordingError(f"must be a finite number, got {value!r}", field=f"{base}.{key}")
+        out[key] = value
     try:
         return SafetySettings(**out)
     except ValidationError as exc:
-        raise RecordingError(str(exc), field="runlog.header_json.device.safety_settings") from None
+        raise RecordingError(str(exc), field=f"{base}.{exc.field.split('.')[-1] if exc.field else ''}") from None
 
 
 class PlaybackDevice(HapticDevice):
@@ -425,7 +426,7 @@ class PlaybackDevice(HapticDevice):
     data: the limits are those the recorded device's class declares (installed
     actuator ``header.device.name``, else :data:`PLAYBACK_DEFAULT_LIMITS`), narrowed
     by the header's limits, which may never widen them (:func:`narrowed_limits`); the
-    header's safety settings only make the defaults stricter (:func:`stricter_settings`).
+    header's safety settings are checked and applied as recorded (:func:`recorded_settings`).
     ``limits`` / ``safety`` given in code replace both. Commands received are kept in
     :attr:`received`.
 
@@ -459,7 +460,7 @@ class PlaybackDevice(HapticDevice):
         self.limits = limits
         if safety is None and dev.get("safety_settings"):
             from .safety import SafetyLayer
-            safety = SafetyLayer(self.limits, stricter_settings(dev["safety_settings"]))
+            safety = SafetyLayer(self.limits, recorded_settings(dev["safety_settings"]))
         super().__init__(label=label or f"playback:{dev.get('label') or dev.get('name') or 'run'}", safety=safety)
         self.at_end = at_end
         self.index = 0

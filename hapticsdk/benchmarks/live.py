@@ -71,7 +71,7 @@ def _pcts(us: list[float]) -> dict[str, float]:
 
 
 def run_session(isolation: str = "process", app_load: str = "python-thread", seconds: float = 10.0,
-                switches: int = 8) -> dict[str, Any]:
+                switches: int = 8, rt: dict[str, Any] | None = None) -> dict[str, Any]:
     """One live run; see the module docstring."""
     from ..runtime.session import Session
     from ..sim.finger import press_slide
@@ -86,7 +86,7 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     state_cpu_us: list[float] = []
     set_cpu_us: list[float] = []
     latency_ms: list[float] = []
-    with Session(SCENE, isolation=isolation, trajectory=tr, refine=False) as s:
+    with Session(SCENE, isolation=isolation, trajectory=tr, refine=False, rt=rt) as s:
         s.set_material("pad", "S7")  # warm the amortised table of these dimensions
         time.sleep(0.5)
         s.events()
@@ -183,12 +183,13 @@ def switch_figures(ramp_s: float = 0.05) -> dict[str, float]:
 
 
 def run_live(isolation: str = "process", app_loads: tuple[str, ...] = ("python-thread",),
-             seconds: float = 10.0) -> dict[str, Any] | list[dict[str, Any]]:
+             seconds: float = 10.0, rt: dict[str, Any] | None = None) -> dict[str, Any] | list[dict[str, Any]]:
     """Runs for each application load; the switch figures are shared (simulated)."""
     sw = switch_figures()
     rows = []
     for load in app_loads:
-        r = run_session(isolation, load, seconds)
+        r = run_session(isolation, load, seconds, rt=rt)
+        r["rt"] = dict(rt or {})
         lat = r.pop("switch_latency_ms")
         r["switch"] = {"latency_ms": lat["max"], "latency_ms_p50": lat["p50"], "switches": lat["n"],
                        "max_force_step_n": sw["max_force_step_n"], "ramp_step_n": sw["ramp_step_n"],

@@ -31,6 +31,8 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--app-load", choices=("none", "python-thread", "numpy-thread", "all"), default="python-thread",
                    help="what the application does meanwhile (default python-thread)")
     p.add_argument("--seconds", type=positive_float, default=10.0, help="run length per load (default 10 s)")
+    p.add_argument("--pin-cpu", type=int, default=None, metavar="N",
+                   help="pin the servo thread to CPU N (reported if refused)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_live)
 
@@ -59,7 +61,8 @@ def _live(args: argparse.Namespace) -> int:
     from ..benchmarks.live import APP_LOADS, format_rows, run_live
     from . import emit
     loads = APP_LOADS if args.app_load == "all" else (args.app_load,)
-    res = run_live(args.isolation, loads, args.seconds)
+    rt = {"cpu": args.pin_cpu} if args.pin_cpu is not None else None
+    res = run_live(args.isolation, loads, args.seconds, rt=rt)
     rows = res if isinstance(res, list) else [res]
     emit(res, args.json, format_rows(rows) + "\n(shared machines: other processes' load is in these figures)")
     return 0

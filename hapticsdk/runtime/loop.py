@@ -608,6 +608,10 @@ class ServoLoop:
             clock = self.clock
             clock.wait_until(self._deadline)
             now = clock.now()
+            if k == 0:
+                # the grid starts at the first tick: t = 0 there, so a simulated device's
+                # time (the sum of the measured dt) is the loop's time
+                self._t_origin = self._deadline = now
             t = now - self._t_origin
             dt = t - self._t_prev if k else T
             if k and self._sim_device:

@@ -316,7 +316,7 @@ class _Servo:
         self.loop = ServoLoop(device, (), acts, period_s=spec["period_s"], realtime=spec["realtime"],
                               passivity=spec["passivity"], raise_on_fault=False, objects=objects,
                               hit_tester=HitTester(shapes), log_seconds=spec["log_seconds"],
-                              switch_ramp_s=spec["ramp_s"], drop_unmapped_roles=True)
+                              switch_ramp_s=spec["ramp_s"], drop_unmapped_roles=True, rt=spec.get("rt"))
 
     # -- control thread ----------------------------------------------------------------
     def control(self) -> None:
@@ -454,6 +454,13 @@ class _Servo:
                 self.message = f"device fault: {f['device']}: {f['message']}" if f else "the servo loop ended"
                 self.event("fault", -1.0, 0.0)
                 return
+            if watch and getppid() != ppid:
+                self.reason = "app_lost"
+                now = mono()
+                self.message = (f"the application process ({ppid}) is gone (noticed at monotonic "
+                                f"{now:.6f} s); last heartbeat {(now - mv[_HEARTBEAT]) * 1e3:.1f} ms before")
+                self.event("app_lost", -1.0, mono() - mv[_HEARTBEAT])
+                return
             if n % 10 == 0:
                 for key in seen:
                     if ev[key] != seen[key]:
@@ -479,13 +486,6 @@ class _Servo:
                 self.event("paused" if pz else "resumed", -1.0, 0.0)
             if mv[_STOP] != 0.0:
                 self.reason = "close"
-                return
-            if watch and getppid() != ppid:
-                self.reason = "app_lost"
-                now = mono()
-                self.message = (f"the application process ({ppid}) is gone (noticed at monotonic "
-                                f"{now:.6f} s); last heartbeat {(now - mv[_HEARTBEAT]) * 1e3:.1f} ms before")
-                self.event("app_lost", -1.0, mono() - mv[_HEARTBEAT])
                 return
 
     def shutdown(self) -> dict[str, Any]:
@@ -611,6 +611,9 @@ class Session:
             ``<role>.frequency_hz`` / ``<role>.amplitude``, ...) to this ``.npz`` file
             (atomically) when the session closes; ``object_id`` maps to names through
             :attr:`object_ids`.
+        rt: OS options for the servo thread, as ``ServoLoop(rt=...)``: ``{"cpu": 1,
+            "fifo_priority": 50, "mlockall": True}`` (each reported, never raised, when
+            the OS refuses); e.g. pin the servo to a CPU the application does not use.
         start_timeout_s: how long to wait for the servo to be running (s).
     """
 
@@ -618,7 +621,7 @@ class Session:
                  actuator_options: Mapping[str, Mapping[str, Any]] | None = None, realtime: bool = True,
                  period_s: float | None = None, ramp_s: float = 0.05, heartbeat_timeout_s: float | None = 0.25,
                  refine: bool = True, log_seconds: float = 60.0, log_path: "str | Path | None" = None,
-                 start_timeout_s: float = 120.0) -> None:
+                 rt: Mapping[str, Any] | None = None, start_timeout_s: float = 120.0) -> None:
         from ..compiler import compile_scene
         from ..scene import Scene
         if isolation not in ISOLATIONS:
@@ -630,6 +633,9 @@ class Session:
                 isinstance(heartbeat_timeout_s, (int, float)) and 2 * HEARTBEAT_PERIOD_S <= heartbeat_timeout_s):
             raise ValidationError(f"heartbeat_timeout_s must be >= {2 * HEARTBEAT_PERIOD_S} s or None",
                                   field="heartbeat_timeout_s")
+        if rt is not None:
+            from .clock import RealtimeSettings
+            RealtimeSettings.coerce(rt)  # unknown option names fail here, not in the servo
         if isinstance(scene, (str, Path)):
             scene = Scene.load(scene)
         elif isinstance(scene, Mapping):
@@ -688,7 +694,7 @@ class Session:
                 "period_s": period, "realtime": bool(realtime), "passivity": bool(servo.get("passivity", True)),
                 "ramp_s": self.ramp_s, "heartbeat_timeout_s": heartbeat_timeout_s, "log_seconds": float(log_seconds),
                 "log_path": str(check_output_path(log_path, field="log_path")) if log_path is not None else None,
-                "ppid": os.getpid()}
+                "ppid": os.getpid(), "rt": dict(rt) if rt is not None else None}
         self._buf = _Buffer(shared=isolation == "process")
         self._mv = self._buf.mv
         self._mv[_HEARTBEAT] = time.monotonic()
@@ -790,6 +796,10 @@ class Session:
                 reason = f"killed by signal {-code}"
         elif code is not None:
             reason = f"exited with status {code}"
+            if code == 1 and not s:
+                reason += (" before it started (isolation='process' starts the servo with 'spawn', which "
+                           "imports the application's main module again: guard its top-level code with "
+                           "if __name__ == '__main__':)")
         else:
             reason = s.get("reason") or "stopped"
         raise ServoProcessDied(f"the session's servo is gone: {reason}", reason=reason, exitcode=code)

@@ -108,6 +108,7 @@ class CommandWatchdog:
     def feed(self, now: float | None = None) -> None:
         """A command was applied now: re-arm and restart the deadline."""
         self._last = time.monotonic() if now is None else float(now)
+        self._failing = 0            # a command went through: the link works again
         if not self._armed:
             self._armed = True
             self._wake.set()
@@ -158,8 +159,8 @@ class CommandWatchdog:
                     # the first failure of a series as an error, the retries quietly
                     _log.log(logging.ERROR if self._failing == 0 else logging.DEBUG,
                              "%s: safe-state write after %.1f ms without a command failed (%d so far; "
-                             "retrying every %.0f ms): %s", self._name, age * 1e3, self.failures,
-                             deadline * 1e3, self.last_error)
+                             "retrying, first after %.0f ms, backing off to %.0f s): %s", self._name, age * 1e3,
+                             self.failures, deadline * 1e3, RETRY_MAX_S, self.last_error)
                     self._failing += 1
                     # stay armed: try again (a link that comes back, a transient timeout)
                     # until a write succeeds, a command arrives or stop(); the n-th retry

@@ -256,9 +256,11 @@ class Scene:
             mat: str | dict[str, Any] = material
             name = material
         elif isinstance(material, Mapping):
-            # named after its targets: "hardness 0.8, roughness 0.3"
-            name = ", ".join(f"{k} {float(v):g}" for k, v in material.items()) or "intensities"
-            mat = {"name": name, "intensities": {k: float(v) for k, v in material.items()}}
+            # named after its targets: "hardness 0.8, roughness 0.3"; each checked (True is no intensity)
+            from ..dimensions import check_intensity
+            its = {k: check_intensity(v, f"targets.{k}") for k, v in material.items()}
+            name = ", ".join(f"{k} {v:g}" for k, v in its.items()) or "intensities"
+            mat = {"name": name, "intensities": its}
         else:
             raise ValidationError(f"expected a material name or intensities, got {material!r}",
                                   field="material")

@@ -48,6 +48,8 @@ PHASES: tuple[str, ...] = ("press", "slide")
 G0 = 9.80665
 MANIFEST_NAME = "recordings.json"
 RATINGS_NAME = "ratings.json"
+#: Largest unpacked size of one trial file (bytes); a 4 s trial at 500 Hz is about 130 kB.
+MAX_TRIAL_BYTES = 64 * 1024 * 1024
 #: Minimum press and slide durations (s) a trial must have.
 MIN_PRESS_S = 0.3
 MIN_SLIDE_S = 2.2
@@ -130,7 +132,13 @@ def read_trial_file(path: Path) -> dict[str, np.ndarray]:
         import zlib
         try:
             with np.load(path, allow_pickle=False) as z:
+                unpacked = sum(i.file_size for i in z.zip.infolist()) if hasattr(z, "zip") else 0
+                if unpacked > MAX_TRIAL_BYTES:  # a zip bomb is refused before it is decompressed
+                    raise RecordingError(f"{path}: unpacks to {unpacked} bytes, more than the "
+                                         f"{MAX_TRIAL_BYTES} accepted for one trial", field="file")
                 cols = {k: z[k] for k in z.files}
+        except RecordingError:
+            raise
         except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
             # truncated or corrupted archive, a pickled member, not a zip at all
             why = ("pickled data or not an .npz archive; pickles are never loaded" if "pickle" in str(exc)

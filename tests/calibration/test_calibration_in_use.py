@@ -29,7 +29,7 @@ def _cli(args: list[str], cal_dir: Path, timeout: float = 120) -> subprocess.Com
 
 
 @needs_hardness
-def test_render_uses_the_saved_voicecoil_calibration(tmp_path):
+def test_render_uses_the_saved_voicecoil_calibration(tmp_path, monkeypatch):
     cal_dir = tmp_path / "cal"
     # answers of an observer whose coil feels 1.5 times stiffer than the paper's formula (7)
     paper = VoiceCoilCalibration.paper()
@@ -56,14 +56,12 @@ def test_render_uses_the_saved_voicecoil_calibration(tmp_path):
     assert abs(want - paper_f) > 5.0  # 1.5x stiffer per Hz: a clearly lower frequency
 
     # the plan records it too
-    plan_path = tmp_path / "plan.json"
-    r = _cli(["plan", "S7", "-o", str(plan_path), "--json"], cal_dir)
-    assert r.returncode == 0, r.stderr
-    plan = json.loads(plan_path.read_text())
-    recs = [m.get("calibrations", {}).get("hardness") for m in plan["materials"].values()]
-    if any(recs):  # S7 may have its hardness left out by the importance model
-        rec = next(x for x in recs if x)
-        assert rec["file"] == str(saved) and rec["sha256"] == digest
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.scene import Scene
+    monkeypatch.setenv(ENV_DIR, str(cal_dir))
+    plan = compile_scene(Scene.for_material({"hardness": 0.9}, importance={"enabled": False})).to_dict()
+    rec = next(iter(plan["materials"].values()))["calibrations"]["hardness"]
+    assert rec["file"] == str(saved) and rec["sha256"] == digest
 
 
 @needs_hardness

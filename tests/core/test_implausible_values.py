@@ -117,11 +117,14 @@ def test_check_number_refuses_bool_nan_and_range():
             check_seed(bad)
 
 
-def test_solve_refuses_true_as_a_target():
+def test_solve_and_scenes_refuse_true_as_a_target():
     from hapticsdk.problems import solve
+    from hapticsdk.scene import Scene
 
     with pytest.raises(ValidationError):
         solve({"hardness": True, "roughness": 0.5}, seed=0)
+    with pytest.raises(ValidationError, match="targets.hardness"):
+        Scene.for_material({"hardness": True})
 
 
 # --- run file header: limits come from the device class, a header may only narrow -----
@@ -158,18 +161,16 @@ def test_run_header_may_narrow_and_unknown_devices_get_the_default_limits(tmp_pa
         PlaybackDevice(run=_run(tmp_path, {"name": "no-such-device", "limits": {"max_force_n": 50.0}}))
 
 
-def test_run_header_safety_settings_only_tighten(tmp_path):
+@pytest.mark.parametrize("settings,field", [
+    ({"ramp_time_s": "off"}, "ramp_time_s"), ({"stale_after_s": True}, "stale_after_s"),
+    ({"ramp_time_s": -1.0}, "ramp_time_s"), ({"velocity_knee": float("nan")}, "velocity_knee"),
+    ({"ramp_amplitude": "yes"}, "ramp_amplitude"), ("off", "safety_settings")])
+def test_run_header_safety_settings_are_checked_as_data(tmp_path, settings, field):
     from hapticsdk.runlog import PlaybackDevice
-    from hapticsdk.safety import SafetySettings
 
-    default = SafetySettings()
-    dev = PlaybackDevice(run=_run(tmp_path, {"name": "omni-virtual", "safety_settings": {
-        "ramp_time_s": 0.0, "start_max_force_n": None, "stiffness_offset_n": 1e9, "stale_after_s": 1e-4}}))
-    s = dev.safety.settings
-    assert s.ramp_time_s == default.ramp_time_s            # no ramp-off from a file
-    assert s.start_max_force_n == default.start_max_force_n
-    assert s.stiffness_offset_n == default.stiffness_offset_n
-    assert s.stale_after_s == 1e-4                          # stricter: taken
+    with pytest.raises(RecordingError) as ei:
+        PlaybackDevice(run=_run(tmp_path, {"name": "omni-virtual", "safety_settings": settings}))
+    assert ei.value.field.startswith("runlog.header_json.device.safety_settings") and field in ei.value.field
 
 
 # --- plan features against their ranges --------------------------------------------------

@@ -19,7 +19,8 @@ def run(script, *args, cwd=None):
 def test_every_example_script_is_covered():
     scripts = {p.name for p in EXAMPLES.glob("*.py")}
     assert scripts == {"render_named_material.py", "render_intensities.py", "list_plugins.py",
-                       "plot_render.py", "solve_many.py", "live_session.py", "experiment.py"}
+                       "plot_render.py", "solve_many.py", "live_session.py", "experiment.py",
+                       "lra_device_aware.py"}
 
 
 def test_render_named_material():
@@ -84,3 +85,8 @@ def test_experiment_saves_ratings_in_the_ratings_format(tmp_path):
     mean = lambda s, d: sum(doc["ratings"][s][d]) / 2  # noqa: E731
     assert mean("S12", "hardness") > mean("S1", "hardness") + 30
     assert "(generated data)" in out
+
+
+def test_lra_device_aware():
+    out = run("lra_device_aware.py", "--roughness", "0.6", "--seconds", "0.2")
+    assert "piezo-virtual" in out and "lra-virtual" in out and "residual" in out

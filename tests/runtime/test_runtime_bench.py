@@ -5,7 +5,10 @@ import json
 
 import pytest
 
-from hapticsdk.benchmarks.stability import ENERGY_TOLERANCE_J, QUICK_GRID, run_matrix
+from hapticsdk.benchmarks.stability import QUICK_GRID, run_matrix
+
+#: energy the wall may give the finger with the controller on (issue 15 (b): 0.1 mJ)
+ENERGY_J = 1e-4
 
 
 @pytest.fixture(scope="module")
@@ -16,8 +19,15 @@ def quick_matrix():
 def test_stability_controller_on_never_gives_energy(quick_matrix):
     on = [c for c in quick_matrix["cells"] if c["controller"]]
     assert on and all(c["stable"] for c in on)
-    assert max(c["energy_to_user_j"] for c in on) <= ENERGY_TOLERANCE_J
+    assert max(c["energy_to_user_j"] for c in on) <= ENERGY_J
+    # the peak is measured before the arm's saturation too: a 10 kN/mm wall commands more
     assert max(c["peak_force_n"] for c in on) <= 3.3 + 1e-12
+    off = [c for c in quick_matrix["cells"] if not c["controller"]]
+    assert max(c["peak_commanded_force_n"] for c in off) > 3.3
+    # with device damping the walls are rendered, not withheld (>= 90 % of min(K, K_pass) x pen)
+    damped = [c for c in on if c["damping_ns_per_m"] > 0]
+    assert damped and all(c["delivered_vs_passive_ratio"] >= 0.9 for c in damped)
+    assert all(c["outcome"] == "stable and transparent" for c in damped)
 
 
 def test_stability_predicted_active_cells_do_go_unstable_without_controller(quick_matrix):

@@ -10,7 +10,7 @@ import pytest
 from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.runtime.loop import MAX_LOG_TICKS
-from hapticsdk.scene.geometry import Box, HitTester, PlanePatch, Pose, Sphere
+from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
 from hapticsdk.sim.probe import VirtualProbe
 

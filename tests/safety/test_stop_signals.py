@@ -134,9 +134,10 @@ def test_render_stops_the_piezo_on_each_signal(tmp_path):
                         r["t_play"] = now
                     elif r["proc"].poll() is not None:
                         pytest.fail(f"{r['signame']} run ended early: {r['proc'].communicate()[1][-800:]}")
-                elif now - r["t_play"] >= 0.05:
-                    # still playing and running right before the signal
-                    assert r["emu"].drv.driving and r["proc"].poll() is None, r["signame"]
+                elif now - r["t_play"] >= 0.05 and r["emu"].drv.driving:
+                    # playing right before the signal (on a loaded machine a command
+                    # deadline may have cut it for a moment: then wait for the next play)
+                    assert r["proc"].poll() is None, r["signame"]
                     r["t_sig"] = time.monotonic()
                     r["proc"].send_signal(getattr(signal, r["signame"]))
             time.sleep(0.0005)

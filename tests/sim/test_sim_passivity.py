@@ -170,8 +170,8 @@ def test_controller_has_no_force_spikes_up_to_four_times_critical_stiffness(K):
 
 
 #: the controller before the generation observer and the half-count play (energy
-#: observer, bounded damper and energy bound only)
-OLD = {"generation_observer": False, "count_play_ratio": 0.0}
+#: observer, bounded damper and energy bound only; no stiffness cap, 1 mJ bound tolerance)
+OLD = {"generation_observer": False, "count_play_ratio": 0.0, "stiffness_cap": False, "bound_tolerance_j": 1e-3}
 
 
 def test_spike_criterion_fails_without_the_slew_limit():

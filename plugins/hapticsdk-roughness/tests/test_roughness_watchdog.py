@@ -112,11 +112,13 @@ class StallingRenderer(DimensionRenderer):
         self.after = []
 
     def tick(self, inp):
-        if not self.stalled and inp.t >= self.at_s:
+        # stall on the first tick from at_s on where the chip plays (a loaded machine may
+        # have cut it a moment before by a watchdog trip after a preempted tick)
+        if not self.stalled and inp.t >= self.at_s and self.drv.driving:
             self.stalled = True
             self.t_stall = time.monotonic()
             self.t_last_cmd = self.act.t_last
-            self.driving_at_stall = self.drv.driving
+            self.driving_at_stall = True
             while time.monotonic() - self.t_stall < self.max_s:
                 if self.t_zero is None and not self.drv.driving:
                     self.t_zero = time.monotonic()
@@ -153,14 +155,21 @@ def test_stalled_loop_puts_the_chip_in_standby_within_the_deadline(rig, kind):
 @pytest.mark.parametrize("kind", ["serial", "usb"])
 def test_no_trip_while_commands_keep_coming(rig, kind):
     act, drv, _ = rig(kind)
+    # the documented deadline: max(watchdog_s = 10 ms, 3 periods of 1 ms)
+    deadline = max(0.010, 3 * 0.001)
+    late = 0
     with act:
-        t0 = time.monotonic()
+        t0 = prev = time.monotonic()
         while time.monotonic() - t0 < 0.15:
             act.command(_cmd())
+            now = time.monotonic()
+            late += now - prev > deadline     # this test itself was preempted that long
+            prev = now
             time.sleep(0.001)
         assert drv.driving
         wd = act.describe()["watchdog"]
-    assert wd["trips"] == 0 and wd["wakes"] == 0
+    # no trip unless the test's own command stream had a gap longer than the deadline
+    assert wd["trips"] <= late and wd["wakes"] == wd["trips"]
 
 
 def test_deadline_follows_the_servo_period_and_cannot_be_turned_off(rig):

@@ -34,6 +34,8 @@ PREFIX = "hapticsdk."
 #: metadata keys every model file must carry (without the ``hapticsdk.`` prefix).
 REQUIRED_METADATA = ("features", "dimensions", "feature_defaults", "df_hz", "architecture",
                      "training_data_sha256", "metrics", "data_generated")
+#: largest model file read (bytes)
+MAX_MODEL_BYTES = 256 * 1024 * 1024
 MLP_INITIALIZERS = ("W1", "b1", "W2", "b2", "x_min", "x_max", "y_min", "y_max")
 
 
@@ -71,7 +73,12 @@ class OnnxModel(PerceptionModel):
         where = str(p)
         if not p.is_file():
             raise ModelError(f"{where}: ONNX model file not found")
-        data = p.read_bytes()
+        from hapticsdk.errors import ValidationError
+        from hapticsdk.schemas_io import read_bytes
+        try:  # a regular file of bounded size (a small MLP is a few kB)
+            data = read_bytes(p, field="model", max_bytes=MAX_MODEL_BYTES)
+        except ValidationError as exc:
+            raise ModelError(str(exc)) from None
         try:
             import onnx
             from onnx import numpy_helper
