@@ -470,6 +470,7 @@ class PlaybackDevice(HapticDevice):
         self.received: list[ChannelCommand] = []
 
     def _open(self) -> None:
+        self._out = 0.0
         self.index = 0
         self._reads = 0
         self._pending = 0
@@ -499,14 +500,14 @@ class PlaybackDevice(HapticDevice):
 
     def _command(self, cmd: ChannelCommand) -> None:
         self.received.append(cmd)
+        self._out = 0.0 if cmd.force_n is None else float(cmd.force_n)
 
     def _stop(self) -> None:
-        self.received.append(ChannelCommand(self.channel, force_n=0.0))
+        self._out = 0.0
 
     def _read_back(self) -> ChannelCommand:
-        """A playback applies nothing; its record of the last command received."""
-        last = self.received[-1] if self.received else None
-        return ChannelCommand(self.channel, force_n=0.0 if last is None or last.force_n is None else last.force_n)
+        """A playback applies nothing; its record of the last force received (0 after stop)."""
+        return ChannelCommand(self.channel, force_n=getattr(self, "_out", 0.0))
 
     @classmethod
     def conformance_options(cls) -> dict[str, Any]:
