@@ -6,7 +6,9 @@ What it measures: for each stop path, the wall time from the stop event to the m
 the emulated DRV2667 (hapticsdk-roughness's register-level emulator, behind the emulated
 serial bridge on a pty with real pyserial, or behind the emulated MCP2221A with real
 pyusb) stops driving the piezo (standby, GO cleared or amplitude 0). The emulator
-timestamps the I2C write that silenced it, so no polling latency is added. The piezo
+timestamps the I2C write that silenced it, or the moment its synthesis sequence ran out
+(the finite repeat count, the chip-side dead-man's switch), so no polling latency is
+added. The piezo
 plays a roughness texture (a realtime 1 kHz servo loop, a kinematic probe sliding at
 80 mm/s) when each stop happens.
 
@@ -18,9 +20,10 @@ Stop events (t = 0):
 * SIGINT/SIGTERM/SIGHUP: ``os.kill`` on a ``hapticsdk render --scene ...`` subprocess
   driving ``piezo-serial`` (its emulated bridge lives in this process);
 * loop stall: the last command before a renderer sleeps 300 ms (the host watchdog);
-* unplug: MCP2221A unplugged (every USB transfer fails): time until the host reports it
-  (the chip cannot be reached; it keeps playing); serial cable pulled with the bridge
-  firmware watchdog at 0.25 s: time until the firmware cuts the piezo (polled every 1 ms).
+* unplug: MCP2221A unplugged (every USB transfer fails), from the last command: time
+  until the chip stops by itself (its synthesis sequence runs out; the host cannot reach
+  it); serial cable pulled (bridge firmware watchdog at 0.25 s), from the pull: time until
+  the piezo is silent (the chip's own stop comes first; polled every 1 ms).
 
 What it does not measure: a real chip's I2C/USB/serial latencies (the emulators answer
 in microseconds; a real MCP2221A takes about 1 ms per HID report, a serial bridge about
@@ -80,7 +83,8 @@ class TimedDRV(DRV2667Emulator):
                 self.silent_at.append(time.monotonic())
 
     def first_silent_after(self, t0: float) -> float | None:
-        later = [t for t in self.silent_at if t >= t0]
+        self.output()                  # bring the sequencer's time model up to now
+        later = sorted(t for t in self.silent_at + self.sequence_ends if t >= t0)
         return later[0] if later else None
 
 
@@ -211,8 +215,8 @@ def one_loop_run(transport: str, path: str) -> tuple[float | None, str]:
 
 
 def one_unplug(transport: str) -> tuple[float | None, str]:
-    """USB: unplug -> the host's report (the chip keeps playing). Serial: cable pulled ->
-    the bridge firmware watchdog (0.25 s) cuts the piezo."""
+    """USB: unplug -> the chip's own stop (its finite sequence runs out). Serial: cable
+    pulled -> the piezo silent (the chip's own stop, or the firmware watchdog, 0.25 s)."""
     act, drv, emu = _make(transport, firmware_watchdog_s=0.25)
     try:
         act.open()
@@ -224,14 +228,14 @@ def one_unplug(transport: str) -> tuple[float | None, str]:
         if transport == "usb":
             t0 = act.t_last
             emu.unplugged = True
-            while time.monotonic() - t0 < GIVE_UP_S and act.describe()["watchdog"]["failures"] == 0:
+            while time.monotonic() - t0 < GIVE_UP_S and drv.driving:
                 time.sleep(0.0005)
-            t1 = time.monotonic()     # polled every 0.5 ms
-            ok = act.describe()["watchdog"]["failures"] > 0
-            still = drv.driving
+            t1 = drv.first_silent_after(t0)     # when the sequence ran out (no write reached it)
+            reported = act.describe()["watchdog"]["failures"] > 0
             emu.unplugged = False       # let the watchdog's retry land before closing
-            return ((t1 - t0) if ok else None,
-                    "time to the host's report; chip still playing" if still else "time to the host's report")
+            return (None if t1 is None or t1 - t0 > GIVE_UP_S else t1 - t0,
+                    "from the last command; the host reported the fault" if reported else
+                    "from the last command; the host had not reported it yet")
         # pull the cable while the servo keeps commanding (so the host watchdog cannot
         # stop the chip through a link that is still up); t = 0 when the cable is pulled
         gone: dict[str, float] = {}
@@ -254,7 +258,7 @@ def one_unplug(transport: str) -> tuple[float | None, str]:
         while time.monotonic() - t0 < GIVE_UP_S and drv.driving:
             time.sleep(0.001)
         return (None if drv.driving else time.monotonic() - t0), \
-            "from the cable pulled; bridge firmware watchdog 0.25 s after its last request (polled 1 ms)"
+            "from the cable pulled; chip sequence ran out, firmware watchdog 0.25 s as backup (polled 1 ms)"
     finally:
         act.close()
         if transport == "serial":
@@ -330,9 +334,9 @@ def main() -> int:
             res = [one_loop_run(transport, path) for _ in range(a.repeat)]
             rows.append(summarise(path, transport, mech, res))
             print(f"done: {path} / {transport}", file=sys.stderr, flush=True)
-    rows.append(summarise("unplug: MCP2221A gone", "usb", "host watchdog reports (fault); no path to the chip",
+    rows.append(summarise("unplug: MCP2221A gone", "usb", "chip: finite synthesis sequence runs out",
                           [one_unplug("usb") for _ in range(a.repeat)]))
-    rows.append(summarise("unplug: serial cable pulled", "serial", "bridge firmware watchdog",
+    rows.append(summarise("unplug: serial cable pulled", "serial", "chip sequence runs out; firmware watchdog",
                           [one_unplug("serial") for _ in range(max(1, a.repeat // 2))]))
     if a.signal_repeat:
         with tempfile.TemporaryDirectory() as tmp:

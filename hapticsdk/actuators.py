@@ -284,10 +284,16 @@ class Actuator(ABC):
         if self.fault is not None:
             raise DeviceError(f"actuator is faulted ({self.fault}); stop() and open() again",
                               device=self.label)
-        for attr in ("force_n", "frequency_hz", "amplitude"):  # constant tuple: no per-call allocation
-            v = getattr(cmd, attr)
-            if v is not None and not math.isfinite(v):
-                raise ValidationError(f"{attr} is NaN or infinite", field=f"{self.label}.{attr}")
+        # unrolled (no getattr by name): this runs every servo tick for every actuator
+        v = cmd.force_n
+        if v is not None and not math.isfinite(v):
+            raise ValidationError("force_n is NaN or infinite", field=f"{self.label}.force_n")
+        v = cmd.frequency_hz
+        if v is not None and not math.isfinite(v):
+            raise ValidationError("frequency_hz is NaN or infinite", field=f"{self.label}.frequency_hz")
+        v = cmd.amplitude
+        if v is not None and not math.isfinite(v):
+            raise ValidationError("amplitude is NaN or infinite", field=f"{self.label}.amplitude")
         safe = self.safety.filter(cmd, time.monotonic() if now is None else now)
         try:
             self._command(safe)

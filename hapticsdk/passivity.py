@@ -388,10 +388,10 @@ class ControllerSettings:
             passive, settled and at its full spring law).
         cap_damping_share: ... and at least ``2 (b + share * max_damping_ns_per_m) / T``:
             the device damping plus this share of the damper's bound taken as margin
-            (0.3: 1.5 N*s/m; this is what lets a device with b = 0 render a wall at all,
-            3 N/mm at 1 kHz, with the observers paying the hold's deficit).
+            (0.25: 1.25 N*s/m; this is what lets a device with b = 0 render a wall at
+            all, 2.5 N/mm at 1 kHz, with the observers paying the hold's deficit).
         cap_count_force_n: with a quantised encoder, ``K_c`` is at most this force per
-            count divided by the resolution (N; 0.35 N: 6.4 N/mm at 0.055 mm). Above it
+            count divided by the resolution (N; 0.4 N: 7.3 N/mm at 0.055 mm). Above it
             the count-level limit cycle of a quantised wall (Abbott & Okamura: ``K Delta
             <= 2 f_c``; no Coulomb friction is known or simulated) feeds the finger more
             than the observers can catch. None: no such limit.
@@ -418,8 +418,8 @@ class ControllerSettings:
     count_play_ratio: float = 0.75
     stiffness_cap: bool = True
     cap_colgate_multiple: float = 4.0
-    cap_damping_share: float = 0.3
-    cap_count_force_n: float | None = 0.35
+    cap_damping_share: float = 0.25
+    cap_count_force_n: float | None = 0.4
 
 
 def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float,
@@ -477,7 +477,10 @@ class PassivityController:
     Per tick call :meth:`step` with the measured position (mm), the measured period
     ``dt`` (s) and the wall's force (N); send the returned force; then call
     :meth:`commit` with the force the device actually applied (after the safety
-    clamp). The observer books ``E -= F_applied(n-1) * dx(n)``; the controller keeps
+    clamp). First the stiffness cap limits the wall's outward force to ``K_c x
+    penetration`` (:func:`cap_stiffness_n_per_mm`; the surface is at x = 0), so a wall
+    the device cannot render passively is rendered as the stiffest spring it can. The
+    observer books ``E -= F_applied(n-1) * dx(n)``; the controller keeps
     ``E >= -energy_tolerance_j`` by (1) capping an outward push so its predicted work
     ``F v dt`` does not exceed the energy available and (2) a damper
     ``alpha = -E_avail / (v^2 dt)``, ``alpha <= max_damping_ns_per_m``, when the budget
@@ -492,7 +495,7 @@ class PassivityController:
                  "capped_n", "_x_prev", "_f_prev", "_f_pc_prev", "_v", "_out_prev", "_fw_prev", "_x_play",
                  "_cap_dt", "_cap_k")
 
-    def __init__(self, settings: ControllerSettings | None = None, **kw: float) -> None:
+    def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
         self.reset()
 
@@ -647,7 +650,9 @@ class PassivityController:
         """Observer state: ``observed_energy_j`` (E, J), ``generation_j`` (G, J),
         ``dissipated_j`` (work of the corrections booked on the reading, J: with a
         quantised encoder the count-level pulses make it noisy and it can be negative
-        while the true energy is not), ``withheld_n_ticks`` (N), ``active_ticks``."""
+        while the true energy is not), ``withheld_n_ticks`` (N), ``active_ticks``,
+        ``stiffness_capped_n_ticks`` (sum over ticks of the force the stiffness cap
+        removed, N)."""
         return {"observed_energy_j": self.energy_j, "generation_j": self.generation_j,
                 "dissipated_j": self.dissipated_j,
                 "withheld_n_ticks": self.bounded_j, "active_ticks": self.active_ticks,

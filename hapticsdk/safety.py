@@ -121,7 +121,7 @@ class SafetyLayer:
     """
 
     def __init__(self, limits: Any, settings: SafetySettings | None = None, **overrides: Any) -> None:
-        self.limits = limits
+        self._limits = limits
         base = settings if settings is not None else SafetySettings()
         try:
             self.settings = replace(base, **overrides) if overrides else base
@@ -143,6 +143,48 @@ class SafetyLayer:
         self._speed_now: float | None = None  # |v| of the observed state (mm/s), when checked
 
     # -- configuration -----------------------------------------------------
+    @property
+    def limits(self) -> Any:
+        """The declared :class:`~hapticsdk.actuators.ActuatorLimits` enforced (assignable)."""
+        return self._limits
+
+    @limits.setter
+    def limits(self, value: Any) -> None:
+        self._limits = value
+        self._cache()
+
+    @property
+    def settings(self) -> SafetySettings:
+        """The :class:`SafetySettings` in force (assignable; see also :meth:`configure`)."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, value: SafetySettings) -> None:
+        self._settings = value
+        self._cache()
+
+    def _cache(self) -> None:
+        """Copy the limits and settings the per-tick path reads into plain attributes
+        (both are frozen dataclasses: replaced, never changed in place, so the copies
+        stay valid until the next assignment, which refreshes them)."""
+        if not (hasattr(self, "_limits") and hasattr(self, "_settings")):
+            return  # __init__ sets both before the first command
+        lim, s = self._limits, self._settings
+        # read directly: a limits object without these fields fails here, not mid-run
+        self._fmax = lim.max_force_n
+        self._amax = lim.max_amplitude
+        self._frange = lim.frequency_range_hz
+        self._vmax = getattr(lim, "max_velocity_mm_s", None)
+        self._kmax = getattr(lim, "max_stiffness_n_per_mm", None)
+        self._rate = getattr(lim, "max_force_rate_n_per_tick", None)
+        self._amin = getattr(lim, "min_amplitude", None)
+        self._knee = s.velocity_knee
+        self._k_offset = s.stiffness_offset_n
+        self._ramp_amp = s.ramp_amplitude
+        # the same sums the comparisons made on every call before
+        self._restart_limit = s.restart_after_s + _TIME_EPS
+        self._stale_limit = s.stale_after_s + _TIME_EPS
+
     def configure(self, **changes: Any) -> None:
         """Change settings (fields of :class:`SafetySettings`)."""
         self.settings = replace(self.settings, **changes)
@@ -184,16 +226,17 @@ class SafetyLayer:
         """Called by the servo loop once per tick with the device state
         (:class:`~hapticsdk.actuators.DeviceState`), before the tick's commands."""
         self._state = state
-        vmax = getattr(self.limits, "max_velocity_mm_s", None)
-        self._speed_now = None
-        if vmax is not None:
-            self._speed_now = self._speed()
-            over = self._speed_now > vmax
-            if over:
-                self._hit("max_velocity_mm_s")
-                if not self._overspeed:
-                    self.fault("max_velocity_mm_s: probe speed above the declared limit")
-            self._overspeed = over
+        vmax = self._vmax
+        if vmax is None:
+            self._speed_now = None
+            return
+        speed = self._speed_now = self._speed()
+        over = speed > vmax
+        if over:
+            self._hit("max_velocity_mm_s")
+            if not self._overspeed:
+                self.fault("max_velocity_mm_s: probe speed above the declared limit")
+        self._overspeed = over
 
     # -- per command -------------------------------------------------------
     def current(self, now: float) -> ChannelCommand | None:
@@ -202,9 +245,10 @@ class SafetyLayer:
         a zero command (same role, force 0 / amplitude 0) once it is stale, ``None``
         before the first command."""
         last = self._last
-        if last is None or self._t_last is None:
+        t_last = self._t_last
+        if last is None or t_last is None:
             return None
-        if now - self._t_last > self.settings.stale_after_s + _TIME_EPS:
+        if now - t_last > self._stale_limit:
             if not self._stale_counted:
                 self.events["stale_zeroed"] += 1
                 self._stale_counted = True
@@ -213,47 +257,91 @@ class SafetyLayer:
 
     def filter(self, cmd: ChannelCommand, now: float) -> ChannelCommand:
         """The command to actually send at ``now`` (s): clamped, gated, ramped; every
-        limit that bites is counted in :attr:`hits`."""
-        s = self.settings
-        lim = self.limits
+        limit that bites is counted in :attr:`hits`.
+
+        Runs every servo tick for every actuator: it reads limits and settings from
+        plain attributes (:meth:`_cache`), works on Python floats and allocates one
+        :class:`~hapticsdk.dimensions.ChannelCommand`."""
         if self.phase == "closed":
             self._restart()
-        if self._t_last is not None and now - self._t_last > s.restart_after_s + _TIME_EPS:
-            self.fault(f"command gap of {now - self._t_last:.4f} s (> restart_after_s)")
+        t_last = self._t_last
+        if t_last is not None and now - t_last > self._restart_limit:
+            self.fault(f"command gap of {now - t_last:.4f} s (> restart_after_s)")
         force = cmd.force_n
         if force is not None:
-            force = self._limit_force(float(force))
+            # clamp to the force, speed and stiffness limits (inline: one call less a tick)
+            f = float(force)
+            fmax = self._fmax
+            if fmax is not None and abs(f) > fmax:
+                self._hit("max_force_n")
+                f = math.copysign(fmax, f)
+            st = self._state
+            if st is not None:
+                vmax = self._vmax
+                if vmax is not None:
+                    # observe() already measured this state's speed
+                    speed = self._speed_now if self._speed_now is not None else self._speed()
+                    if speed > vmax:
+                        f = 0.0  # counted in observe() (once per tick)
+                    elif fmax is not None:
+                        knee = self._knee * vmax
+                        if speed > knee:
+                            cap = fmax * (vmax - speed) / (vmax - knee)
+                            if abs(f) > cap:
+                                self._hit("max_velocity_mm_s")
+                                f = math.copysign(cap, f)
+                kmax = self._kmax
+                if kmax is not None:
+                    pen = getattr(st, "penetration_mm", None)
+                    if pen is None:
+                        pen = -np.asarray(st.position_mm, float)[1]
+                    pen = float(pen)
+                    if pen < 0.0:  # max(pen, 0.0) without the call: NaN and -0.0 pass as before
+                        pen = 0.0
+                    cap = kmax * pen + self._k_offset
+                    if abs(f) > cap:
+                        self._hit("max_stiffness_n_per_mm")
+                        f = math.copysign(cap, f)
+            force = f
         amp = cmd.amplitude
         if amp is not None:
             amp = float(amp)
             if amp < 0:
                 self._hit("negative_amplitude")
                 amp = 0.0
-            if lim.max_amplitude is not None and amp > lim.max_amplitude:
+            amax = self._amax
+            if amax is not None and amp > amax:
                 self._hit("max_amplitude")
-                amp = float(lim.max_amplitude)
+                amp = float(amax)
         freq = cmd.frequency_hz
-        if freq is not None and lim.frequency_range_hz is not None:
-            lo, hi = lim.frequency_range_hz
-            if not lo <= freq <= hi:
-                self._hit("frequency_range_hz")
-                freq = float(min(max(freq, lo), hi))
+        if freq is not None:
+            frange = self._frange
+            if frange is not None:
+                lo, hi = frange
+                if not lo <= freq <= hi:
+                    self._hit("frequency_range_hz")
+                    freq = float(min(max(freq, lo), hi))
 
-        gain = self._envelope(force, now)
+        if self._overspeed or self.phase != "running":
+            gain = self._envelope(force, now)
+            if force is not None:
+                force = gain * force
+            if amp is not None and self._ramp_amp:
+                amp = gain * amp
+        # running: the gain is 1.0 and 1.0 * x == x exactly, so no multiplication
         if force is not None:
-            force = gain * force
-            rate = getattr(lim, "max_force_rate_n_per_tick", None)
-            if rate is not None and abs(force - self._prev_force) > rate:
-                self._hit("max_force_rate_n_per_tick")
-                force = self._prev_force + math.copysign(rate, force - self._prev_force)
+            rate = self._rate
+            if rate is not None:
+                prev = self._prev_force
+                if abs(force - prev) > rate:
+                    self._hit("max_force_rate_n_per_tick")
+                    force = prev + math.copysign(rate, force - prev)
             self._prev_force = force
-            force = float(force)
-        if amp is not None and s.ramp_amplitude:
-            amp = gain * amp
-        lo_amp = getattr(lim, "min_amplitude", None)
-        if amp is not None and lo_amp is not None and amp < lo_amp:
-            self._hit("min_amplitude")
-            amp = float(lo_amp)
+        if amp is not None:
+            amin = self._amin
+            if amin is not None and amp < amin:
+                self._hit("min_amplitude")
+                amp = float(amin)
         # one new command per tick (dataclasses.replace costs several us on the servo path)
         out = ChannelCommand(cmd.role, force, freq, amp, cmd.direction)
         self._last = out
@@ -261,37 +349,9 @@ class SafetyLayer:
         self._stale_counted = False
         return out
 
-    def _limit_force(self, f: float) -> float:
-        """Clamp a force (N) to the force, speed and stiffness limits."""
-        lim = self.limits
-        fmax = lim.max_force_n
-        if fmax is not None and abs(f) > fmax:
-            self._hit("max_force_n")
-            f = math.copysign(fmax, f)
-        vmax = getattr(lim, "max_velocity_mm_s", None)
-        if vmax is not None and self._state is not None:
-            # observe() already measured this state's speed
-            speed = self._speed_now if self._speed_now is not None else self._speed()
-            if speed > vmax:
-                f = 0.0  # counted in observe() (once per tick)
-            elif fmax is not None:
-                knee = self.settings.velocity_knee * vmax
-                if speed > knee:
-                    cap = fmax * (vmax - speed) / (vmax - knee)
-                    if abs(f) > cap:
-                        self._hit("max_velocity_mm_s")
-                        f = math.copysign(cap, f)
-        kmax = getattr(lim, "max_stiffness_n_per_mm", None)
-        if kmax is not None and self._state is not None:
-            cap = kmax * max(self._penetration(), 0.0) + self.settings.stiffness_offset_n
-            if abs(f) > cap:
-                self._hit("max_stiffness_n_per_mm")
-                f = math.copysign(cap, f)
-        return f
-
     def _envelope(self, force: float | None, now: float) -> float:
         """Gate and ramp gain (0..1) for this command; advances the phase machine."""
-        s = self.settings
+        s = self._settings
         if self._overspeed:
             self.events["start_hold_ticks"] += 1
             return 0.0

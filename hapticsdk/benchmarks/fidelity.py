@@ -132,7 +132,7 @@ def run_fidelity(periods: tuple[float, ...] = PERIODS_S, *, progress: Any = None
         out.append({"period_s": T, "force_error_rms_n": ferr, "frequency_error_hz": frerr,
                     "frequency_error_max_hz": frmax, "frequency_error_unquantised_hz": fuerr,
                     "frequency_error_unquantised_max_hz": fumax,
-                    "frequency_quantised": bool(have_rough),
+                    "frequency_quantised": bool(getattr(actuators.get(role), "quantize", False)),
                     "tick_median_us": rep.tick_median_us, "tick_p99_us": rep.tick_p99_us,
                     "frequency_channel": role})
         for a in {id(a): a for a in [dev, *actuators.values()]}.values():

@@ -361,20 +361,26 @@ def peer_scipy_de(p: SolveProblem, i: int, seed: int, pop: int = 100, gens: int 
 
 def peer_lbfgsb(p: SolveProblem, i: int, seed: int, starts: int = 8, gens: int | None = None,
                 **_: Any) -> np.ndarray:
-    """Multi-start ``scipy.optimize.minimize(method="L-BFGS-B")`` on formula (6) with the
-    box as bounds and finite-difference gradients (scipy's default), ``starts`` uniform
-    starts, the best answer kept (``gens``: iteration limit per start, default scipy's)."""
+    """Multi-start ``scipy.optimize.minimize(method="L-BFGS-B")`` on formula (6), features
+    scaled to the unit box (``x = lower + u * span``, bounds 0..1: in physical units the
+    gradient is so small along Hz or mJ that scipy's default ``gtol`` stops at once),
+    scipy's finite-difference gradient with a step of 3e-4 (about the square root of a
+    float32 model's resolution; scipy's default 1e-8 is below it and gives a gradient of
+    rounding noise), ``starts`` uniform starts, the best answer kept (``gens``: iteration
+    limit per start, default scipy's)."""
     from scipy.optimize import minimize
     f = _peer_fitness(p, i)
     lo, hi = p.space.lower, p.space.upper
+    span = hi - lo
     rng = np.random.default_rng(seed)
     best, best_f = None, np.inf
     for _ in range(starts):
-        x0 = lo + rng.random(len(lo)) * (hi - lo)
-        r = minimize(lambda x: float(f(x[None])[0]), x0, method="L-BFGS-B", bounds=list(zip(lo, hi)),
-                     options={} if gens is None else {"maxiter": gens})
+        u0 = rng.random(len(lo))
+        r = minimize(lambda u: float(f((lo + u * span)[None])[0]), u0, method="L-BFGS-B",
+                     bounds=[(0.0, 1.0)] * len(lo),
+                     options={"eps": 3e-4, **({} if gens is None else {"maxiter": gens})})
         if r.fun < best_f:
-            best, best_f = r.x, r.fun
+            best, best_f = lo + r.x * span, r.fun
     return np.asarray(best, float)
 
 

@@ -309,8 +309,6 @@ def passive_stiffness(period_s: float, b: Sequence[float], fingers: Sequence[str
         last2, _ = first_stable_run(fine)
         refined = np.where(last2 >= 0, fine[np.arange(m), np.maximum(last2, 0)], out)
         out = np.where(need, refined, out)
-    else:
-        out = np.full(m, hi)
     return out
 
 
@@ -331,7 +329,7 @@ def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = No
     controller off), then all cells with the controller on and off.
     ``progress(stage, done, total)`` (:mod:`hapticsdk.progress`) follows the simulated
     servo ticks of all runs."""
-    g = dict(DEFAULT_GRID)
+    g: dict[str, Any] = dict(DEFAULT_GRID)
     g.update(grid or {})
     if not float(g["duration_s"]) >= 3.0:
         raise ValidationError("a stability cell needs >= 3 s (one press/slide/tap cycle, then 1 s of release)",

@@ -58,6 +58,11 @@ def test_cli_handlers(capsys):
     assert [r["period_s"] for r in rows] == [0.001, 0.004]
     assert {"period_s", "force_error_rms_n", "frequency_error_hz", "tick_median_us"} <= set(rows[0])
     assert rows[1]["frequency_error_hz"] > rows[0]["frequency_error_hz"]  # coarser servo, larger error
+    # the piezo holds the DRV2667's 7.8125 Hz codes: rounding alone is 7.8125 / sqrt(12) =
+    # 2.26 Hz RMS, far above the 1 ms hold's own error (0.6 Hz), and adds at most half a step
+    assert all(r["frequency_quantised"] for r in rows)
+    assert rows[0]["frequency_error_hz"] > 1.5 > rows[0]["frequency_error_unquantised_hz"]
+    assert rows[0]["frequency_error_max_hz"] <= 7.8125 / 2 + rows[0]["frequency_error_unquantised_max_hz"] + 1e-6
     args = parser.parse_args(["timing", "--seconds", "0.5", "--json"])
     assert args.func(args) == 0
     d = json.loads(capsys.readouterr().out)

@@ -157,16 +157,16 @@ def test_controller_keeps_wall_passive_without_spikes(K):
 @pytest.mark.parametrize("K", [3.0, 3.5, 4.0])
 def test_controller_has_no_force_spikes_up_to_four_times_critical_stiffness(K):
     """Goal 4 spike criterion at K = 3 ... 4 x 2b/T (quantised encoder): |dF| <= 1 N per
-    tick and |F| <= 3.3 N on every tick, energy to the hand within the bound tolerance.
+    tick and |F| <= 3.3 N on every tick, energy to the hand <= 1e-6 J (goal 4's W_d bound).
     The controller before the predictive ramp cut the force in one tick here (|dF| up
-    to 3.2-3.25 N), so this test fails on that behaviour."""
+    to 3.2-3.25 N), so this test fails on that behaviour. (The tolerances are the
+    goal's; the energy bound was the controller's own 1 mJ tolerance before issue 15.)"""
     e_off, _, _ = _press(K, on=False, res=0.055)
     e_on, x, f = _press(K, on=True, res=0.055)
     assert e_off > 1e-3
-    assert e_on <= ControllerSettings().bound_tolerance_j
+    assert e_on <= 1e-6
     assert np.abs(f).max() <= 3.3 + 1e-12
     assert np.abs(np.diff(f)).max() <= 1.0
-    assert np.abs(np.diff(f)).max() <= ControllerSettings().max_force_step_n + 1e-9
 
 
 #: the controller before the generation observer and the half-count play (energy

@@ -117,10 +117,12 @@ class HardnessRenderer(DimensionRenderer):
         self._f = self.coil_frequency_hz
 
     def tick(self, inp: TickInput) -> list[ChannelCommand]:
+        # positional fields (role, force_n, frequency_hz, amplitude): keyword binding
+        # costs measurably at 1 kHz
         if inp.in_contact:
-            return [ChannelCommand("force", force_n=self._k * inp.penetration_mm),
-                    ChannelCommand("coil", frequency_hz=self._f, amplitude=self._amp)]
-        return [ChannelCommand("force", force_n=0.0), ChannelCommand("coil", frequency_hz=self._f, amplitude=0.0)]
+            return [ChannelCommand("force", self._k * inp.penetration_mm),
+                    ChannelCommand("coil", None, self._f, self._amp)]
+        return [ChannelCommand("force", 0.0), ChannelCommand("coil", None, self._f, 0.0)]
 
     def rendered_stiffness_n_per_mm(self) -> float:
         """Total stiffness of formula (8): arm spring + calibrated coil stiffness (N/mm)."""

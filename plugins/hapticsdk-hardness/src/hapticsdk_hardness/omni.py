@@ -115,11 +115,12 @@ class OmniVirtual(HapticDevice):
         return ref
 
     def _read_state(self) -> DeviceState:
-        x, _, vx, _ = self._at(self.t)
-        z, vz = self.trajectory.z_at(self.t)  # (0, 0) for a 2-D trajectory
-        return DeviceState(t=self.t, position_mm=np.array([x, self._y_meas, z]),
-                           velocity_mm_s=np.array([vx, self._v_est, vz]),
-                           force_n=np.array([0.0, self._f_applied, 0.0]))
+        t = self.t
+        x, _, vx, _ = self._at(t)
+        z, vz = self.trajectory.z_at(t)  # (0, 0) for a 2-D trajectory
+        # positional (t, position_mm, velocity_mm_s, force_n): read every servo tick
+        return DeviceState(t, np.array([x, self._y_meas, z]), np.array([vx, self._v_est, vz]),
+                           np.array([0.0, self._f_applied, 0.0]))
 
     def _force_at(self, now: float) -> float:
         """Force along the simulated axis y (N): the command's force projected on y when

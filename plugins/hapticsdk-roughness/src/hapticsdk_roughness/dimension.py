@@ -112,11 +112,12 @@ class RoughnessRenderer(DimensionRenderer):
 
     def tick(self, inp: TickInput) -> list[ChannelCommand]:
         self.ticks += 1
-        vx = float(inp.velocity_mm_s[0])
-        active = abs(vx) >= self.v_gate_mm_s and (inp.in_contact or not self.require_contact)
-        if not active:
-            return [ChannelCommand(role="vibration", frequency_hz=self._last_f, amplitude=0.0)]
-        f = self.fpeak_hz * abs(vx) / self.v_ref_mm_s
+        avx = abs(float(inp.velocity_mm_s[0]))
+        # written as "not (... >= ...)" so a NaN speed stays silent
+        if not (avx >= self.v_gate_mm_s and (inp.in_contact or not self.require_contact)):
+            # positional fields (role, force_n, frequency_hz, amplitude)
+            return [ChannelCommand("vibration", None, self._last_f, 0.0)]
+        f = self.fpeak_hz * avx / self.v_ref_mm_s  # formula (9), same operation order as frequency_for
         if f < self.f_lo or f > self.f_hi:
             self.frequency_clamps += 1
             f = self.f_lo if f < self.f_lo else self.f_hi
@@ -124,7 +125,7 @@ class RoughnessRenderer(DimensionRenderer):
         self.active_ticks += 1
         if not self.in_table:
             self.table_clamps += 1
-        return [ChannelCommand(role="vibration", frequency_hz=f, amplitude=self.v_out)]
+        return [ChannelCommand("vibration", None, f, self.v_out)]
 
     def describe(self) -> dict:
         return {"Fpeak_hz": self.fpeak_hz, "AFpeak_m_s2": self.afpeak_m_s2, "v_out_v": self.v_out,

@@ -159,6 +159,23 @@ def synthesis_ram_image(chunks: Sequence[SynthChunk], repeat: int = 0) -> bytes:
     return header + b"".join(c.to_bytes() for c in chunks)
 
 
+def chunk_seconds(frequency: int, cycles: int) -> float:
+    """Play time (s) of a synthesis chunk without envelope: ``cycles / (7.8125 Hz * code)``."""
+    return cycles / (FREQ_STEP_HZ * frequency)
+
+
+def cycles_for(frequency: int, chunk_s: float) -> int:
+    """Whole cycles per chunk at frequency ``code`` so the chunk lasts at most ``chunk_s``
+    (s), at least one cycle (below ``1 / chunk_s`` Hz one cycle is longer), at most 255."""
+    return int(min(255, max(1, math.floor(chunk_s * FREQ_STEP_HZ * frequency + 1e-9))))
+
+
+def repeat_for(frequency: int, cycles: int, window_s: float) -> int:
+    """Smallest repeat count (1..255) whose chunks play at least ``window_s`` (s):
+    ``ceil(window_s / chunk_seconds)``."""
+    return int(min(255, max(1, math.ceil(window_s / chunk_seconds(frequency, cycles) - 1e-9))))
+
+
 def decode_status(status: int) -> list[str]:
     """Names of the set STATUS flags."""
     names = []
@@ -186,6 +203,8 @@ class DRV2667:
         self._page: int | None = None
         self.gain = 0
         self.chunk: SynthChunk | None = None
+        #: repeat count last written to the header of waveform 1 (0 = until GO is cleared)
+        self.repeat = 0
 
     # -- raw access ----------------------------------------------------------
     def write(self, reg: int, *data: int) -> None:
@@ -273,6 +292,7 @@ class DRV2667:
         self.set_page(0)
         self.write(REG_SEQ0, 1, 0)
         self.chunk = chunks[0]
+        self.repeat = int(repeat)
 
     def go(self, timeout_ms: int = 20) -> None:
         """Start the sequencer (STANDBY=0, GO=1)."""
@@ -294,6 +314,24 @@ class DRV2667:
         self.set_page(1)
         self.write(CHUNK_ADDR, amplitude, frequency)
         self.chunk = new
+        return True
+
+    def update_waveform(self, amplitude: int, frequency: int, cycles: int, repeat: int) -> bool:
+        """Rewrite the first chunk's amplitude, frequency and cycles bytes, and the
+        waveform's repeat count when it changed, in one page-1 write (``[0x06, amp, freq,
+        cycles]``, or ``[0x05, repeat, amp, freq, cycles]``). The chip latches the repeat
+        count at the next GO (see :meth:`go`). Returns True when bytes were sent."""
+        new = SynthChunk(amplitude, frequency, cycles, self.chunk.envelope if self.chunk else 0)
+        if not 0 <= repeat <= 255:
+            raise ValidationError(f"repeat {repeat} outside 0..255", field="repeat")
+        if new == self.chunk and repeat == self.repeat:
+            return False
+        self.set_page(1)
+        if repeat != self.repeat:
+            self.write(HEADER_END, repeat, amplitude, frequency, cycles)
+        else:
+            self.write(CHUNK_ADDR, amplitude, frequency, cycles)
+        self.chunk, self.repeat = new, int(repeat)
         return True
 
     # -- FIFO (mode 1) ---------------------------------------------------------

@@ -1,8 +1,10 @@
 """Emulators for tests and demos without hardware (SIMULATED devices, not drivers).
 
 * :class:`DRV2667Emulator`: the DRV2667 register file (page 0 control registers, pages
-  1..8 RAM, FIFO with 8 kHz drain and NAK when full, reset, standby, the ID field), with an
-  I2C transaction log and a decoder of what it would play (:meth:`DRV2667Emulator.output`).
+  1..8 RAM, FIFO with 8 kHz drain and NAK when full, reset, standby, the ID field), the
+  waveform-synthesis sequencer in time (a finite repeat count plays the waveform that many
+  times and then stops; see :class:`DRV2667Emulator`), with an I2C transaction log and a
+  decoder of what it would play (:meth:`DRV2667Emulator.output`).
 * :class:`SerialBridgeEmulator`: the bridge microcontroller's firmware speaking
   :mod:`~hapticsdk_roughness.bridge_protocol` on the master end of a pseudo-terminal
   (``os.openpty``) in a thread, so the real pyserial code runs on the other end. Fault
@@ -37,7 +39,21 @@ class I2CNak(Exception):
 class DRV2667Emulator:
     """Register-level model of a DRV2667 (see :mod:`hapticsdk_roughness.drv2667`).
 
-    ``fifo_drain_hz`` is the FIFO read-out rate (8 kHz; 0 = never drains).
+    ``fifo_drain_hz`` is the FIFO read-out rate (8 kHz; 0 = never drains). ``clock`` gives
+    the emulated time (s); a test may pass its own to advance the chip's time by hand.
+
+    Waveform-synthesis sequencer (mode 3), modelled in time from the datasheet facts: a
+    waveform (header identifier) is the chunks from its start to its stop address; chunk
+    ``k`` lasts ``cycles / (7.8125 Hz * code)`` plus its envelope's ramp-down time, and its
+    bytes are read when the chunk starts (so amplitude/frequency/cycles rewrites land on
+    chunk boundaries). Repeat count 0 plays until GO is cleared; a repeat count ``R > 0``
+    plays the whole set ``R`` times, then the sequencer stops and the output is zero.
+    Modelling choices where the public documents are silent (to be checked on hardware,
+    see docs/devices.md): (1) the repeat count is latched when GO is written; (2) writing
+    GO = 1 while the sequence plays re-arms it: the pass in progress finishes, then ``R``
+    further passes play (no restart mid-cycle, no gap); (3) GO clears itself when the
+    sequence ends. ``sequence_ends`` lists the emulated times at which a finite sequence
+    ran out; ``last_write_t`` is the emulated time of the last I2C write received.
     """
 
     def __init__(self, *, fifo_drain_hz: float = d.FIFO_RATE_HZ, clock=time.monotonic) -> None:
@@ -47,6 +63,9 @@ class DRV2667Emulator:
         self.fifo_log = bytearray()
         self.lock = threading.Lock()
         self.ram = [bytearray(256) for _ in range(9)]     # index 1..8 used
+        self.sequence_ends: list[float] = []
+        self.gos = 0
+        self.last_write_t: float | None = None
         self.reset()
 
     def reset(self) -> None:
@@ -58,7 +77,93 @@ class DRV2667Emulator:
         self.page = 0
         self.fifo = 0.0
         self._fifo_t = self.clock()
+        self._seq_stop()
         self.resets = getattr(self, "resets", -1) + 1
+
+    # -- synthesis sequencer time model -------------------------------------------
+    def _seq_stop(self) -> None:
+        self._seq_active = False
+        self._seq_idx = 0
+        self._seq_end = 0.0
+        self._seq_passes = 0          # passes left, the one in progress included (0 = infinite)
+
+    def _waveform(self) -> tuple[int, int, int] | None:
+        """(RAM address from page 1, number of chunks, repeat count) of the waveform in
+        sequencer slot 0, or None when there is none in synthesis mode."""
+        wid = self.regs[d.REG_SEQ0]
+        if wid == 0:
+            return None
+        p1 = self.ram[1]
+        base = 1 + 5 * (wid - 1)
+        if base + 4 > p1[0] or not p1[base] & 0x80:
+            return None
+        start = ((p1[base] & 0x07) << 8) | p1[base + 1]
+        stop = ((p1[base + 2] & 0x07) << 8) | p1[base + 3]
+        n = max(1, (stop - start + 1) // 4)
+        return start, n, p1[base + 4]
+
+    def _chunk(self, k: int) -> bytes:
+        wf = self._waveform()
+        addr = (wf[0] if wf else d.CHUNK_ADDR) + 4 * k
+        page, off = 1 + addr // 256, addr % 256
+        return bytes(self.ram[page][off:off + 4]) if page <= 8 else bytes(4)
+
+    @staticmethod
+    def _chunk_s(chunk: bytes) -> float:
+        """Play time (s) of a chunk: ``cycles / (7.8125 Hz * code)`` + the ramp-down time."""
+        code, cycles, env = chunk[1], chunk[2], chunk[3]
+        if code == 0:
+            return 0.0
+        return cycles / (d.FREQ_STEP_HZ * code) + d.ENVELOPE_MS[env & 0x0F] / 1000.0
+
+    def _seq_go(self) -> None:
+        """A CONTROL2 write with GO = 1 (and STANDBY = 0): start, or re-arm while playing."""
+        self._seq_advance()
+        wf = self._waveform()
+        self.gos += 1
+        if wf is None:
+            self._seq_stop()
+            return
+        repeat = wf[2]
+        if self._seq_active:
+            self._seq_passes = 0 if repeat == 0 else repeat + 1     # the pass in progress, then R more
+            return
+        self._seq_active, self._seq_idx = True, 0
+        self._seq_passes = repeat
+        self._seq_end = self.clock() + self._chunk_s(self._chunk(0))
+
+    def _seq_advance(self) -> None:
+        """Move the sequencer to the emulated time now (chunk bytes are read as each chunk
+        starts; called before every transaction applies, so bytes written later are not
+        applied to chunks that started earlier)."""
+        c2 = self.regs[d.REG_CONTROL2]
+        if not self._seq_active or not c2 & d.CTRL2_GO or c2 & d.CTRL2_STANDBY:
+            self._seq_active = False
+            return
+        wf = self._waveform()
+        if wf is None:
+            self._seq_stop()
+            return
+        now = self.clock()
+        nchunks = wf[1]
+        guard = 0
+        while now >= self._seq_end:
+            self._seq_idx += 1
+            if self._seq_idx >= nchunks:
+                self._seq_idx = 0
+                if self._seq_passes > 0:
+                    self._seq_passes -= 1
+                    if self._seq_passes == 0:
+                        self.sequence_ends.append(self._seq_end)
+                        self.regs[d.REG_CONTROL2] &= ~d.CTRL2_GO & 0xFF     # GO clears itself
+                        self._seq_stop()
+                        return
+            dur = self._chunk_s(self._chunk(self._seq_idx))
+            guard = guard + 1 if dur <= 0 else 0
+            if guard > nchunks:             # a waveform of zero length: nothing to play
+                self._seq_stop()
+                return
+            self._seq_end += dur
 
     # -- FIFO time model ------------------------------------------------------
     def _drain(self) -> None:
@@ -81,6 +186,8 @@ class DRV2667Emulator:
         """A write transaction ``[reg, data...]``; raises :class:`I2CNak` on a full FIFO."""
         with self.lock:
             self.log.append(("w", bytes(data)))
+            self.last_write_t = self.clock()
+            self._seq_advance()
             if not data:
                 return
             reg, payload = data[0], data[1:]
@@ -116,6 +223,11 @@ class DRV2667Emulator:
                         self.reset()
                         return
                     self.regs[r] = b
+                    if r == d.REG_CONTROL2:
+                        if b & d.CTRL2_GO and not b & d.CTRL2_STANDBY:
+                            self._seq_go()
+                        else:
+                            self._seq_stop()
                 return
             page, addr = self.page, reg
             for b in payload:
@@ -133,6 +245,7 @@ class DRV2667Emulator:
         """
         with self.lock:
             self.log.append(("r", bytes(data) + bytes((n,))))
+            self._seq_advance()
             reg = data[-1] if data else 0
             if self.page == 0:
                 out = bytearray()
@@ -164,18 +277,15 @@ class DRV2667Emulator:
     def output(self) -> dict[str, Any]:
         """Decoded output: ``{"playing", "amplitude_v", "frequency_hz", "fifo_bytes"}``."""
         with self.lock:
+            self._seq_advance()
             c2 = self.regs[d.REG_CONTROL2]
             playing = bool(c2 & d.CTRL2_GO) and not c2 & d.CTRL2_STANDBY and self.regs[d.REG_SEQ0] != 0
             amp_v = freq = 0.0
-            if playing:
-                p1 = self.ram[1]
-                wid = self.regs[d.REG_SEQ0]
-                base = 1 + 5 * (wid - 1)
-                start = ((p1[base] & 0x07) + 1, p1[base + 1])
-                if p1[base] & 0x80:
-                    chunk = self.ram[start[0]][start[1]:start[1] + 4]
-                    amp_v = chunk[0] / 255.0 * d.GAIN_FULL_SCALE_V[self.gain]
-                    freq = chunk[1] * d.FREQ_STEP_HZ
+            if playing and self._waveform() is not None:
+                # a GO set behind the sequencer's back (a test poking regs) plays as before
+                chunk = self._chunk(self._seq_idx if self._seq_active else 0)
+                amp_v = chunk[0] / 255.0 * d.GAIN_FULL_SCALE_V[self.gain]
+                freq = chunk[1] * d.FREQ_STEP_HZ
             self._drain()
             fifo = 0 if c2 & d.CTRL2_STANDBY else int(self.fifo)
             return {"playing": playing, "amplitude_v": amp_v, "frequency_hz": freq, "fifo_bytes": fifo}
@@ -298,7 +408,7 @@ class SerialBridgeEmulator:
             except (OSError, ValueError):
                 self.master = -1
                 continue
-            if not data:
+            if not data or self.unplugged:      # nothing sent after the cable is pulled arrives
                 continue
             crc_before = self.parser.crc_errors
             frames = self.parser.feed(data)

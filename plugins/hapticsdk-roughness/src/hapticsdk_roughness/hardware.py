@@ -1,9 +1,29 @@
 """Real DRV2667 piezo actuators: ``piezo-serial`` and ``piezo-mcp2221``.
 
-Both drive the DRV2667 in waveform-synthesis mode (mode 3): one 1-cycle chunk repeated
-until GO is cleared, whose amplitude and frequency bytes are rewritten when the command
-changes (frequency in 7.8125 Hz steps, amplitude in full-scale/255 steps; each chunk
-starts and ends at a zero crossing, so updates land on cycle boundaries). The amplitude is
+Both drive the DRV2667 in waveform-synthesis mode (mode 3): one chunk of whole cycles,
+whose amplitude, frequency and cycles bytes are rewritten when the command changes
+(frequency in 7.8125 Hz steps, amplitude in full-scale/255 steps; each chunk starts and
+ends at a zero crossing, so updates land on chunk boundaries, at most ``CHUNK_S`` = 4 ms
+apart above 250 Hz, one cycle apart below).
+
+Chip-side dead-man's switch (issue 13: the chip must stop by itself when the host can no
+longer reach it, e.g. MCP2221A unplugged or serial link gone): the waveform's repeat count
+is finite, so each GO plays a bounded time, and the host re-arms it with a GO write
+before it runs out. Per frequency code ``c`` (f = 7.8125 Hz * c): ``cycles(c) =
+max(1, floor(CHUNK_S * f))`` (chunk time ``Tc(c) = cycles / f``), ``repeat(c) =
+ceil(chip_window_s / Tc(c))`` (so one GO plays at least ``chip_window_s``, default
+15 ms, and less than ``chip_window_s + Tc``). The host re-arms (page 0, CONTROL2 = GO)
+every ``rearm_s`` (default 4 ms, also counted in commands: every ``rearm_s / period_s``
+commands) and at once when the repeat count changes with the frequency. Continuity:
+a re-arm lands at least ``chip_window_s - rearm_s`` (11 ms) before the play would end,
+so commands flowing with gaps shorter than that never leave a gap in the output. Bound:
+after the last re-arm that reached the chip, it plays at most the chunk in progress plus
+``repeat`` chunks: :meth:`DRV2667Actuator.chip_stop_bound_s` (max over the band's codes
+of ``Tc``, plus max of ``repeat * Tc``): 20 ms for a band above 250 Hz, 42.7 ms for a
+band from 46.875 Hz (two 21.3 ms cycles), but 256 ms at 7.8125 Hz, because a
+synthesis cycle cannot be cut short; ``describe()["chip_stop"]`` reports it. Assumed,
+not documented by TI (see docs/devices.md): a GO write during playback re-arms without
+restarting the cycle in progress, and GO clears itself when the sequence ends. The amplitude is
 ramped in software by at most full scale per ``ramp_s`` (>= 5 ms) so the 20 mm/s gate
 never clicks. STATUS is read every ``status_interval_s`` (also a keep-alive for the
 bridge watchdog); a fault bit stops the piezo.
@@ -36,7 +56,7 @@ from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime.watchdog import CommandWatchdog
 
 from .drv2667 import (ADDRESS, DRV2667, FREQ_STEP_HZ, GAIN_FULL_SCALE_V, I2CBus, SynthChunk, amplitude_code,
-                      frequency_code)
+                      chunk_seconds, cycles_for, frequency_code, repeat_for)
 from .virtual import piezo_limits
 
 
@@ -44,6 +64,12 @@ from .virtual import piezo_limits
 WATCHDOG_S = 0.010
 #: allowed range of the ``watchdog_s`` option (s)
 WATCHDOG_RANGE_S = (0.002, 0.25)
+#: longest synthesis chunk (s) above 1/CHUNK_S Hz: cycles per chunk = floor(CHUNK_S * f)
+CHUNK_S = 0.004
+#: default shortest play time of one GO (s) (the chip-side dead-man's window)
+CHIP_WINDOW_S = 0.015
+#: default longest time between two GO re-arms while commands flow (s)
+REARM_S = 0.004
 
 
 class DRV2667Actuator(Actuator):
@@ -54,7 +80,10 @@ class DRV2667Actuator(Actuator):
     ``ramp_s`` (amplitude ramp, >= 0.005 s), ``period_s`` (servo period, s),
     ``status_interval_s`` (STATUS poll, s), ``address`` (I2C, 0x59), ``watchdog_s``
     (shortest command deadline before the host puts the chip in standby, 0.002..0.25 s,
-    default 0.010; the deadline is at least 3 servo periods).
+    default 0.010; the deadline is at least 3 servo periods), ``chip_window_s`` (shortest
+    play time of one GO, 0.005..0.04 s, default 0.015) and ``rearm_s`` (GO re-arm interval,
+    0.001 s..``chip_window_s``/2, default 0.004): the chip-side dead-man's switch of the
+    module docstring.
     """
 
     channel: ClassVar[str] = "vibration"
@@ -64,7 +93,8 @@ class DRV2667Actuator(Actuator):
 
     def __init__(self, *, gain: int = 0, frequency_range_hz: tuple[float, float] | None = None,
                  ramp_s: float = 0.005, period_s: float = 0.001, status_interval_s: float = 0.05,
-                 address: int = ADDRESS, watchdog_s: float = WATCHDOG_S, **options: Any) -> None:
+                 address: int = ADDRESS, watchdog_s: float = WATCHDOG_S, chip_window_s: float = CHIP_WINDOW_S,
+                 rearm_s: float = REARM_S, **options: Any) -> None:
         self.limits = piezo_limits(gain, frequency_range_hz)
         if ramp_s < 0.005 or period_s <= 0 or status_interval_s <= 0:
             raise ValidationError("ramp_s must be >= 0.005 s, period_s and status_interval_s > 0", field="options")
@@ -72,6 +102,12 @@ class DRV2667Actuator(Actuator):
             raise ValidationError(f"watchdog_s must be {WATCHDOG_RANGE_S[0]:g}..{WATCHDOG_RANGE_S[1]:g} s "
                                   f"(the command deadline cannot be turned off), got {watchdog_s!r}",
                                   field="options.watchdog_s")
+        if not (isinstance(chip_window_s, (int, float)) and 0.005 <= chip_window_s <= 0.04):
+            raise ValidationError(f"chip_window_s must be 0.005..0.04 s, got {chip_window_s!r}",
+                                  field="options.chip_window_s")
+        if not (isinstance(rearm_s, (int, float)) and 0.001 <= rearm_s <= chip_window_s / 2):
+            raise ValidationError(f"rearm_s must be 0.001 s..chip_window_s/2 ({chip_window_s / 2:g} s), "
+                                  f"got {rearm_s!r}", field="options.rearm_s")
         super().__init__(**options)
         self.gain = int(gain)
         self.ramp_s = float(ramp_s)
@@ -91,6 +127,13 @@ class DRV2667Actuator(Actuator):
         #: the chip is in standby (stop or watchdog): the next command wakes it
         self._asleep = True
         self.wakes = 0
+        self.chip_window_s = float(chip_window_s)
+        self.rearm_s = float(rearm_s)
+        self._rearm_every = max(1, int(self.rearm_s / self.period_s + 1e-9))
+        self._go_t = 0.0
+        self._go_repeat = 0
+        self._since_go = 0
+        self.rearms = 0
 
     def _make_bus(self) -> I2CBus:
         raise NotImplementedError
@@ -105,9 +148,12 @@ class DRV2667Actuator(Actuator):
             drv.set_gain(self.gain)
             f0 = self.limits.frequency_range_hz[0]
             self._freq = f0
-            drv.load_synthesis([SynthChunk(amplitude=0, frequency=frequency_code(f0), cycles=1)], repeat=0)
+            code = frequency_code(f0)
+            cycles, repeat = self._synth_counts(code)
+            drv.load_synthesis([SynthChunk(amplitude=0, frequency=code, cycles=cycles)], repeat=repeat)
             drv.check_status()
             drv.go()
+            self._armed(repeat)
         except BaseException:
             try:
                 DRV2667(bus, address=self.address, device=self.label).standby()
@@ -123,6 +169,31 @@ class DRV2667Actuator(Actuator):
                                          lock=self._io_lock, on_error=self._watchdog_failed,
                                          name=f"watchdog {self.label}").start(armed=False)
         # armed by the first command: until then the chunk amplitude is 0 (0 V out)
+
+    def _synth_counts(self, code: int) -> tuple[int, int]:
+        """(cycles per chunk, repeat count) at frequency ``code`` (module docstring)."""
+        cycles = cycles_for(code, CHUNK_S)
+        return cycles, repeat_for(code, cycles, self.chip_window_s)
+
+    def _armed(self, repeat: int) -> None:
+        self._go_t = time.monotonic()
+        self._go_repeat = repeat
+        self._since_go = 0
+        self.rearms += 1
+
+    def chip_stop_bound_s(self) -> float:
+        """Longest time (s) the DRV2667 can play after the last GO that reached it, over
+        every frequency code of the band: the chunk in progress (at most the longest chunk)
+        plus ``repeat`` chunks at the last frequency written (at most the longest
+        ``repeat * Tc``). This is the stop time when the host can no longer write (USB
+        unplugged, serial link gone, host process dead)."""
+        lo, hi = self.limits.frequency_range_hz
+        longest_chunk = longest_play = 0.0
+        for code in range(frequency_code(lo), frequency_code(hi) + 1):
+            cycles, repeat = self._synth_counts(code)
+            tc = chunk_seconds(code, cycles)
+            longest_chunk, longest_play = max(longest_chunk, tc), max(longest_play, repeat * tc)
+        return longest_chunk + longest_play
 
     def command_deadline_s(self) -> float:
         """The host watchdog's deadline (s): ``max(watchdog_s, 3 servo periods)``."""
@@ -147,8 +218,11 @@ class DRV2667Actuator(Actuator):
         """After stop or a watchdog standby: silence the chunk first, then GO, and ramp up
         from 0 (so the old amplitude never plays on wake)."""
         self._amp_v = 0.0
-        drv.update_chunk(0, frequency_code(self._freq))
+        code = frequency_code(self._freq)
+        cycles, repeat = self._synth_counts(code)
+        drv.update_waveform(0, code, cycles, repeat)
         drv.go()
+        self._armed(repeat)
         self._asleep = False
         self.wakes += 1
 
@@ -162,12 +236,20 @@ class DRV2667Actuator(Actuator):
                 self._wake(drv)
             step = GAIN_FULL_SCALE_V[self.gain] * self.period_s / self.ramp_s
             self._amp_v += max(-step, min(step, target - self._amp_v))
-            if drv.update_chunk(amplitude_code(self._amp_v, self.gain), frequency_code(self._freq)):
+            code = frequency_code(self._freq)
+            cycles, repeat = self._synth_counts(code)
+            if drv.update_waveform(amplitude_code(self._amp_v, self.gain), code, cycles, repeat):
                 self.updates += 1
             now = time.monotonic()
             if now - self._last_status >= self.status_interval_s:
                 self._last_status = now
                 drv.check_status()
+            # chip-side dead-man's switch: re-arm the finite sequence before it runs out
+            self._since_go += 1
+            if (repeat != self._go_repeat or self._since_go >= self._rearm_every
+                    or now - self._go_t >= self.rearm_s):
+                drv.go()
+                self._armed(repeat)
             if self._watchdog is not None:
                 self._watchdog.feed()
 
@@ -198,7 +280,7 @@ class DRV2667Actuator(Actuator):
                 self.drv.standby()
             except BaseException:
                 # the chip may still play: the watchdog keeps retrying the standby write
-                # every deadline until it succeeds or the actuator is closed
+                # (with backoff) until it succeeds or the actuator is closed
                 if self._watchdog is not None:
                     self._watchdog.feed()
                 raise
@@ -228,6 +310,8 @@ class DRV2667Actuator(Actuator):
         d = super().describe()
         d.update({"gain": self.gain, "full_scale_v": GAIN_FULL_SCALE_V[self.gain], "bus": getattr(self.bus, "name", None),
                   "chunk_updates": self.updates,
+                  "chip_stop": {"bound_s": self.chip_stop_bound_s(), "window_s": self.chip_window_s,
+                                "rearm_s": self.rearm_s, "rearms": self.rearms},
                   "watchdog": dict(self._watchdog.stats() if self._watchdog is not None else
                                    {"deadline_s": self.command_deadline_s(), "running": False},
                                    wakes=self.wakes)})

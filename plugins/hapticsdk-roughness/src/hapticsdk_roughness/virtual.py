@@ -123,14 +123,21 @@ class PiezoVirtual(Actuator):
             self._kept -= self._blocks.pop(0).size
 
     def _command(self, cmd: ChannelCommand) -> None:
-        f = self._freq if cmd.frequency_hz is None else float(cmd.frequency_hz)
-        a = self._target_amp if cmd.amplitude is None else float(cmd.amplitude)
+        f = cmd.frequency_hz
+        f = self._freq if f is None else float(f)
+        a = cmd.amplitude
+        a = self._target_amp if a is None else float(a)
         if self.quantize:
             f = frequency_code(f) * FREQ_STEP_HZ
             a = amplitude_code(a, self.gain) / 255.0 * GAIN_FULL_SCALE_V[self.gain]
-        self._freq, self._target_amp = f, a
+        self._freq = f
+        self._target_amp = a
         self.commands += 1
-        self._pending.append((f, a, self._n_samples(self.period_s)))
+        # _n_samples(period_s) inlined (same arithmetic): this runs every servo tick
+        exact = self.period_s * self.fs + self._frac
+        n = int(exact)
+        self._frac = exact - n
+        self._pending.append((f, a, n))
 
     def _flush(self) -> None:
         """Synthesise the commands recorded since the last flush, in order."""
