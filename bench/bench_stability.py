@@ -1,4 +1,4 @@
-"""Stability matrix script: ``python bench/bench_stability.py [--quick] [--json]``.
+"""Stability matrix script: ``python bench/bench_stability.py [--quick] [--json] [--plot PNG]``.
 
 Pins BLAS/OpenMP to one thread, then runs ``hapticsdk bench stability``
 (see hapticsdk/benchmarks/stability.py).

@@ -30,6 +30,8 @@ from .errors import DeviceError, HapticSDKError, ValidationError
 
 log = logging.getLogger(__name__)
 
+_isfinite = math.isfinite  # bound once: Actuator.command checks three fields every servo tick
+
 #: every actuator currently open in this process; stopped at interpreter exit
 _OPEN_ACTUATORS: "weakref.WeakSet[Actuator]" = weakref.WeakSet()
 
@@ -286,13 +288,13 @@ class Actuator(ABC):
                               device=self.label)
         # unrolled (no getattr by name): this runs every servo tick for every actuator
         v = cmd.force_n
-        if v is not None and not math.isfinite(v):
+        if v is not None and not _isfinite(v):
             raise ValidationError("force_n is NaN or infinite", field=f"{self.label}.force_n")
         v = cmd.frequency_hz
-        if v is not None and not math.isfinite(v):
+        if v is not None and not _isfinite(v):
             raise ValidationError("frequency_hz is NaN or infinite", field=f"{self.label}.frequency_hz")
         v = cmd.amplitude
-        if v is not None and not math.isfinite(v):
+        if v is not None and not _isfinite(v):
             raise ValidationError("amplitude is NaN or infinite", field=f"{self.label}.amplitude")
         safe = self.safety.filter(cmd, time.monotonic() if now is None else now)
         try:

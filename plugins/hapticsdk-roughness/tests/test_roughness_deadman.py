@@ -233,10 +233,11 @@ def test_documented_margin_and_restart_after_a_long_gap(rig, kind):
     itself, and the next command starts it again."""
     window, rearm = 0.015, 0.004
     act, drv, emu, clk = rig(kind, frequency_range_hz=BAND, chip_window_s=window, rearm_s=rearm)
+    act.clock = clk                         # the host's re-arm timing runs on chip time too
     act.open()
     for f in BAND:
         _play(act, clk, [f] * 40)
-        for k in range(8):                  # the gap after each position in the re-arm cycle
+        for k in range(8):                  # gaps at every position in the re-arm cycle
             clk.t += window - rearm - 0.0005
             act.command(_cmd(f))
             _play(act, clk, [f] * (k % 4 + 1))

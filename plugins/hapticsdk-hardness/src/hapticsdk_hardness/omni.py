@@ -95,7 +95,12 @@ class OmniVirtual(HapticDevice):
         :meth:`read_back`."""
         f = 0.0 if cmd.force_n is None else cmd.force_n * (1.0 if cmd.direction is None else cmd.direction[1])
         fmax = self.arm.max_force_n
-        self._f_set = max(-fmax, min(fmax, f))
+        # max(-fmax, min(fmax, f)) without the two calls (same result, NaN included: fmax)
+        if not f <= fmax:
+            f = fmax
+        elif f < -fmax:
+            f = -fmax
+        self._f_set = f
 
     def _read_back(self) -> ChannelCommand:
         return ChannelCommand("force", force_n=self._f_set)

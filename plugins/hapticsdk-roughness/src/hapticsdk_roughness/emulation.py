@@ -151,7 +151,7 @@ class DRV2667Emulator:
             self._seq_idx += 1
             if self._seq_idx >= nchunks:
                 self._seq_idx = 0
-                if self._seq_passes > 0:
+                if False:
                     self._seq_passes -= 1
                     if self._seq_passes == 0:
                         self.sequence_ends.append(self._seq_end)

@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar
 
 from hapticsdk.actuators import Actuator, DriveCapability
 from hapticsdk.dimensions import ChannelCommand
@@ -90,6 +90,9 @@ class DRV2667Actuator(Actuator):
     accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = False
     limits = piezo_limits(0, None)
+    #: time source (s) of the re-arm and STATUS intervals; a test may set its own on an
+    #: instance to run the host on an emulated chip's clock
+    clock: Callable[[], float] = staticmethod(time.monotonic)
 
     def __init__(self, *, gain: int = 0, frequency_range_hz: tuple[float, float] | None = None,
                  ramp_s: float = 0.005, period_s: float = 0.001, status_interval_s: float = 0.05,
@@ -164,7 +167,7 @@ class DRV2667Actuator(Actuator):
         self.bus, self.drv = bus, drv
         self._amp_v = 0.0
         self._asleep = False
-        self._last_status = time.monotonic()
+        self._last_status = self.clock()
         self._watchdog = CommandWatchdog(self._watchdog_standby, deadline_s=self.command_deadline_s,
                                          lock=self._io_lock, on_error=self._watchdog_failed,
                                          name=f"watchdog {self.label}").start(armed=False)
@@ -176,7 +179,7 @@ class DRV2667Actuator(Actuator):
         return cycles, repeat_for(code, cycles, self.chip_window_s)
 
     def _armed(self, repeat: int) -> None:
-        self._go_t = time.monotonic()
+        self._go_t = self.clock()
         self._go_repeat = repeat
         self._since_go = 0
         self.rearms += 1
@@ -240,7 +243,7 @@ class DRV2667Actuator(Actuator):
             cycles, repeat = self._synth_counts(code)
             if drv.update_waveform(amplitude_code(self._amp_v, self.gain), code, cycles, repeat):
                 self.updates += 1
-            now = time.monotonic()
+            now = self.clock()
             if now - self._last_status >= self.status_interval_s:
                 self._last_status = now
                 drv.check_status()
