@@ -296,7 +296,7 @@ class SafetyLayer:
                     if pen is None:
                         pen = -np.asarray(st.position_mm, float)[1]
                     pen = float(pen)
-                    if pen < 0.0:  # max(pen, 0.0) without the call: NaN and -0.0 pass as before
+                    if pen < 0.0:  # noqa: PLR1730 -- max(pen, 0.0) without the call; NaN and -0.0 pass as before
                         pen = 0.0
                     cap = kmax * pen + self._k_offset
                     if abs(f) > cap:

@@ -29,8 +29,8 @@ FORCE_LIMITS = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3, max_v
                               max_force_rate_n_per_tick=0.5)
 VIB_LIMITS = ActuatorLimits(frequency_range_hz=(30.0, 120.0), max_amplitude=25.0, amplitude_unit="V",
                             min_amplitude=0.5)
-SETTINGS = dict(ramp_time_s=0.01, stale_after_s=0.001, restart_after_s=0.05, start_max_penetration_mm=1.0,
-                start_max_force_n=1.0, velocity_knee=0.5, stiffness_offset_n=1.0)
+SETTINGS = {"ramp_time_s": 0.01, "stale_after_s": 0.001, "restart_after_s": 0.05, "start_max_penetration_mm": 1.0,
+            "start_max_force_n": 1.0, "velocity_knee": 0.5, "stiffness_offset_n": 1.0}
 EPS = 1e-9  # the layer's documented time slack (s)
 
 
@@ -359,3 +359,18 @@ def test_piezo_virtual_records_each_command_and_its_sample_count():
         assert act._pending[-1] == (f, a, n)
     act.step(period)
     assert act.samples_total == total and act.commands == 50
+
+
+def test_omni_virtual_command_keeps_the_arm_saturated_set_point():
+    omni = pytest.importorskip("hapticsdk_hardness.omni")
+    from hapticsdk.sim.arm import ArmParams
+    dev = omni.OmniVirtual(arm=ArmParams().with_(max_force_n=2.0),
+                           safety=SafetyLayer(omni.OmniVirtual.limits, ramp_time_s=0.0)).open()
+    dev.safety.observe(_state(1.0, 0.0))
+    k = 0
+    for f in (0.5, 1.0, 1.9, 2.0, 2.6, 3.3, 3.0, -0.5):
+        for d in (None, (0.6, 0.8, 0.0)):
+            k += 1
+            out = dev.command(ChannelCommand("force", f, None, None, d), now=k * 0.001)
+            proj = out.force_n * (1.0 if d is None else d[1])
+            assert dev.read_back().force_n == max(-2.0, min(2.0, proj))

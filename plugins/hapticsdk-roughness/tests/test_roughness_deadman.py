@@ -18,10 +18,10 @@ from __future__ import annotations
 import sys
 
 import pytest
-
-from hapticsdk.dimensions import ChannelCommand
 from hapticsdk_roughness.emulation import DRV2667Emulator, SerialBridgeEmulator
 from hapticsdk_roughness.hardware import PiezoMCP2221, PiezoSerial
+
+from hapticsdk.dimensions import ChannelCommand
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pty tests need POSIX")
 pytest.importorskip("serial")
@@ -37,7 +37,7 @@ BAND = (6 * STEP_HZ, 255 * STEP_HZ)
 #: chip time between two commands at 1 kHz (s)
 TICK = 0.001
 #: the host's real-time watchdog kept out of the way (its own tests are elsewhere)
-QUIET_HOST_WATCHDOG = dict(watchdog_s=0.25)
+QUIET_HOST_WATCHDOG = {"watchdog_s": 0.25}
 
 
 class Clock:
@@ -187,6 +187,20 @@ def test_chip_stops_by_itself_after_unplug(rig, kind, f):
 
 
 @pytest.mark.parametrize("kind", ["usb", "serial"])
+def test_frequency_drop_just_before_unplug(rig, kind):
+    """Playing at the band's top (short chunks, a large repeat count latched at the last
+    GO), one command at the bottom (long chunks), then the cable goes: the repeat count the
+    chip latched must be the new one, or it would play many long chunks."""
+    act, drv, emu, clk = rig(kind, frequency_range_hz=BAND)
+    act.open()
+    _play(act, clk, [BAND[1]] * 50 + [BAND[0]])
+    _unplug(kind, emu)
+    bound = _worst_case_s(drv)
+    t = _time_to_silence(drv, clk, give_up_s=1.0)
+    assert t is not None and t <= bound + 2e-4 and t <= GOAL_S + 2e-4, (t, bound)
+
+
+@pytest.mark.parametrize("kind", ["usb", "serial"])
 def test_lowest_synthesis_frequency_stops_within_two_cycles(rig, kind):
     """The default band reaches 7.8125 Hz, where one cycle lasts 128 ms and cannot be cut
     short by the chip: the bound there is two cycles, and describe() says so."""
@@ -214,7 +228,7 @@ def test_no_gap_while_commands_flow_at_1khz(rig, kind):
     """Commands every 1 ms of chip time at the band's lowest and highest frequency and a
     sweep between them (the repeat count changes with the frequency): the chip's
     sequence never runs out, so the output never pauses."""
-    act, drv, emu, clk = rig(kind, frequency_range_hz=BAND)
+    act, drv, _emu, clk = rig(kind, frequency_range_hz=BAND)
     act.open()
     lo, hi = BAND
     sweep = [lo + (hi - lo) * abs(((k / 150.0) % 2.0) - 1.0) for k in range(600)]
@@ -232,7 +246,7 @@ def test_documented_margin_and_restart_after_a_long_gap(rig, kind):
     margin) leaves no pause; a gap longer than the worst-case play lets the chip stop by
     itself, and the next command starts it again."""
     window, rearm = 0.015, 0.004
-    act, drv, emu, clk = rig(kind, frequency_range_hz=BAND, chip_window_s=window, rearm_s=rearm)
+    act, drv, _emu, clk = rig(kind, frequency_range_hz=BAND, chip_window_s=window, rearm_s=rearm)
     act.clock = clk                         # the host's re-arm timing runs on chip time too
     act.open()
     for f in BAND:

@@ -54,6 +54,9 @@ class DRV2667Emulator:
     further passes play (no restart mid-cycle, no gap); (3) GO clears itself when the
     sequence ends. ``sequence_ends`` lists the emulated times at which a finite sequence
     ran out; ``last_write_t`` is the emulated time of the last I2C write received.
+    :meth:`output` reports the playing chunk's bytes as they are in RAM now (a rewrite
+    shows at once, though the chip applies it at the next chunk start): conservative for
+    "is it still driving" checks.
     """
 
     def __init__(self, *, fifo_drain_hz: float = d.FIFO_RATE_HZ, clock=time.monotonic) -> None:
@@ -151,7 +154,7 @@ class DRV2667Emulator:
             self._seq_idx += 1
             if self._seq_idx >= nchunks:
                 self._seq_idx = 0
-                if False:
+                if self._seq_passes > 0:
                     self._seq_passes -= 1
                     if self._seq_passes == 0:
                         self.sequence_ends.append(self._seq_end)

@@ -4,7 +4,10 @@ Both drive the DRV2667 in waveform-synthesis mode (mode 3): one chunk of whole c
 whose amplitude, frequency and cycles bytes are rewritten when the command changes
 (frequency in 7.8125 Hz steps, amplitude in full-scale/255 steps; each chunk starts and
 ends at a zero crossing, so updates land on chunk boundaries, at most ``CHUNK_S`` = 4 ms
-apart above 250 Hz, one cycle apart below).
+apart above 250 Hz, one cycle apart below). The amplitude is ramped in software by at
+most full scale per ``ramp_s`` (>= 5 ms) so the 20 mm/s gate never clicks. STATUS is
+read every ``status_interval_s`` (also a keep-alive for the bridge watchdog); a fault
+bit stops the piezo.
 
 Chip-side dead-man's switch (issue 13: the chip must stop by itself when the host can no
 longer reach it, e.g. MCP2221A unplugged or serial link gone): the waveform's repeat count
@@ -19,14 +22,11 @@ a re-arm lands at least ``chip_window_s - rearm_s`` (11 ms) before the play woul
 so commands flowing with gaps shorter than that never leave a gap in the output. Bound:
 after the last re-arm that reached the chip, it plays at most the chunk in progress plus
 ``repeat`` chunks: :meth:`DRV2667Actuator.chip_stop_bound_s` (max over the band's codes
-of ``Tc``, plus max of ``repeat * Tc``): 20 ms for a band above 250 Hz, 42.7 ms for a
-band from 46.875 Hz (two 21.3 ms cycles), but 256 ms at 7.8125 Hz, because a
-synthesis cycle cannot be cut short; ``describe()["chip_stop"]`` reports it. Assumed,
+of ``Tc``, plus max of ``repeat * Tc``): 22.7 ms for a band of 250..1992 Hz, 49.8 ms
+for a band from 46.875 Hz, but 256 ms at 7.8125 Hz (two cycles), because a synthesis
+cycle cannot be cut short; ``describe()["chip_stop"]`` reports it. Assumed,
 not documented by TI (see docs/devices.md): a GO write during playback re-arms without
-restarting the cycle in progress, and GO clears itself when the sequence ends. The amplitude is
-ramped in software by at most full scale per ``ramp_s`` (>= 5 ms) so the 20 mm/s gate
-never clicks. STATUS is read every ``status_interval_s`` (also a keep-alive for the
-bridge watchdog); a fault bit stops the piezo.
+restarting the cycle in progress, and GO clears itself when the sequence ends.
 
 Command deadline (host watchdog, :class:`hapticsdk.runtime.watchdog.CommandWatchdog`):
 while open, a daemon thread puts the DRV2667 in standby when no command arrived for
@@ -48,17 +48,29 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable, ClassVar
+from collections.abc import Callable
+from typing import Any, ClassVar
 
 from hapticsdk.actuators import Actuator, DriveCapability
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime.watchdog import CommandWatchdog
 
-from .drv2667 import (ADDRESS, DRV2667, FREQ_STEP_HZ, GAIN_FULL_SCALE_V, I2CBus, SynthChunk, amplitude_code,
-                      chunk_seconds, cycles_for, frequency_code, repeat_for)
+from .drv2667 import (
+    ADDRESS,
+    DRV2667,
+    FREQ_STEP_HZ,
+    GAIN_FULL_SCALE_V,
+    SYNTH_FREQ_RANGE_HZ,
+    I2CBus,
+    SynthChunk,
+    amplitude_code,
+    chunk_seconds,
+    cycles_for,
+    frequency_code,
+    repeat_for,
+)
 from .virtual import piezo_limits
-
 
 #: default shortest host-side command deadline (s) before the DRV2667 is put in standby
 WATCHDOG_S = 0.010
@@ -149,9 +161,11 @@ class DRV2667Actuator(Actuator):
             drv.probe()
             drv.reset()
             drv.set_gain(self.gain)
-            f0 = self.limits.frequency_range_hz[0]
+            f0, f1 = self._band()
             self._freq = f0
-            code = frequency_code(f0)
+            # the silent first chunk at the band's top: the shortest chunk, so the first
+            # command's bytes play within CHUNK_S (one 128 ms cycle at 7.8 Hz otherwise)
+            code = frequency_code(f1)
             cycles, repeat = self._synth_counts(code)
             drv.load_synthesis([SynthChunk(amplitude=0, frequency=code, cycles=cycles)], repeat=repeat)
             drv.check_status()
@@ -173,6 +187,10 @@ class DRV2667Actuator(Actuator):
                                          name=f"watchdog {self.label}").start(armed=False)
         # armed by the first command: until then the chunk amplitude is 0 (0 V out)
 
+    def _band(self) -> tuple[float, float]:
+        """The piezo band (Hz); the synthesiser's range if the limits give none."""
+        return self.limits.frequency_range_hz or SYNTH_FREQ_RANGE_HZ
+
     def _synth_counts(self, code: int) -> tuple[int, int]:
         """(cycles per chunk, repeat count) at frequency ``code`` (module docstring)."""
         cycles = cycles_for(code, CHUNK_S)
@@ -190,7 +208,7 @@ class DRV2667Actuator(Actuator):
         plus ``repeat`` chunks at the last frequency written (at most the longest
         ``repeat * Tc``). This is the stop time when the host can no longer write (USB
         unplugged, serial link gone, host process dead)."""
-        lo, hi = self.limits.frequency_range_hz
+        lo, hi = self._band()
         longest_chunk = longest_play = 0.0
         for code in range(frequency_code(lo), frequency_code(hi) + 1):
             cycles, repeat = self._synth_counts(code)
