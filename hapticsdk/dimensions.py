@@ -100,6 +100,11 @@ class TickInput:
         normal: the object's outward unit normal at the contact, ``(nx, ny, nz)`` in device
             coordinates; ``(0, 1, 0)`` for the version-1 plane y = 0.
         object: name of the object under the probe (None when no scene object is named).
+        velocity_filtered_mm_s: the same contact-frame velocity through a first-order
+            low-pass (the loop's ``velocity_filter_hz``, default 30 Hz), as plain floats
+            ``(v0, v1, v2)`` (mm/s): for renderers that must not follow the +-50 mm/s
+            count-level chatter a quantised encoder gives a backward difference; None when
+            the loop gives none.
     """
 
     t: float
@@ -109,6 +114,7 @@ class TickInput:
     in_contact: bool
     normal: tuple[float, float, float] = (0.0, 1.0, 0.0)
     object: str | None = None
+    velocity_filtered_mm_s: tuple[float, float, float] | None = None
 
 
 @dataclass

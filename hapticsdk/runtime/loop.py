@@ -87,6 +87,8 @@ from .stats import PREEMPT_THRESHOLD_S, jitter_stats, preemption_stats, tick_sta
 
 _log = logging.getLogger(__name__)
 
+_NAN = float("nan")
+
 #: event counters every report carries (0 when nothing happened)
 EVENT_KEYS = ("nonfinite_state", "huge_state", "velocity_spike", "renderer_error", "nonfinite_command",
               "negative_force", "role_conflict", "overrun", "clamp", "skipped_ticks", "passivity_active",
@@ -137,8 +139,9 @@ class LoopReport:
         log: numpy arrays per tick of the last ``log_window_s``: ``t`` (s), ``dt`` (s),
             ``penetration_mm`` (along the contact normal), ``object`` (index of the object
             under the probe, -1 none), ``position_mm`` (n, 3), ``velocity_mm_s`` (n, 3),
-            ``force_n`` (sent, along the normal), and per vibration role
-            ``<role>.frequency_hz`` / ``<role>.amplitude``.
+            ``force_n`` (sent, along the normal), and per role every field it was sent:
+            ``<role>.force_n`` (N, NaN when the command carried none),
+            ``<role>.frequency_hz`` (Hz, NaN when none) and ``<role>.amplitude``.
         log_window_s: length of the log window (s); ``objects``: object names by index.
     """
 
@@ -193,7 +196,7 @@ def _distinct(acts: Any) -> list:
 class _Slot:
     """Per-role bookkeeping."""
 
-    __slots__ = ("role", "act", "force", "pc", "log_f", "log_a", "is_force", "pending")
+    __slots__ = ("role", "act", "force", "pc", "log_f", "log_a", "log_n", "is_force", "pending")
 
     def __init__(self, role: str, act: Actuator, is_force: bool) -> None:
         self.role = role
@@ -281,6 +284,9 @@ class ServoLoop:
             penetration_mm, nx, ny, nz)`` (:class:`hapticsdk.scene.geometry.HitTester`).
             None: the version-1 plane y = 0 (penetration ``-y``, normal +y).
         log_seconds: length of the per-tick log window (s), default 60.
+        velocity_filter_hz: corner (Hz) of the first-order low-pass giving renderers
+            ``TickInput.velocity_filtered_mm_s`` (default 30 Hz; the raw velocity stays in
+            ``velocity_mm_s``).
         switch_ramp_s: default cross-fade of :meth:`set_renderers` (s), default 0.05.
     """
 
@@ -295,7 +301,7 @@ class ServoLoop:
                  rt: RealtimeSettings | Mapping[str, Any] | None = None,
                  objects: Sequence[tuple[str, Sequence[DimensionRenderer]]] | None = None,
                  hit_tester: Any = None, log_seconds: float = DEFAULT_LOG_SECONDS,
-                 switch_ramp_s: float = DEFAULT_SWITCH_RAMP_S) -> None:
+                 switch_ramp_s: float = DEFAULT_SWITCH_RAMP_S, velocity_filter_hz: float = 30.0) -> None:
         if not isinstance(device, HapticDevice):
             raise ValidationError("device must be a HapticDevice", field="device")
         if not (isinstance(period_s, (int, float)) and math.isfinite(period_s) and 1e-5 <= period_s <= 1.0):
@@ -331,6 +337,12 @@ class ServoLoop:
         self.max_accel_mm_s2 = float(max_accel_mm_s2)
         self.max_catchup_ticks = int(max_catchup_ticks)
         self.log_seconds = float(log_seconds)
+        if not (isinstance(velocity_filter_hz, (int, float)) and not isinstance(velocity_filter_hz, bool)
+                and math.isfinite(velocity_filter_hz) and velocity_filter_hz > 0):
+            raise ValidationError(f"must be a number of Hz > 0, got {velocity_filter_hz!r}",
+                                  field="velocity_filter_hz")
+        self.velocity_filter_hz = float(velocity_filter_hz)
+        self._vf = (0.0, 0.0, 0.0)
         self.switch_ramp_s = float(switch_ramp_s)
         if passivity_settings is None:
             # the device's apparent mass (if it declares one) bounds the in-period push
@@ -492,9 +504,10 @@ class ServoLoop:
                 s.pc = PassivityController(self.passivity_settings)
             if is_force and self.delay_ticks:
                 s.pending = deque([0.0] * self.delay_ticks)
-            if not is_force:
-                s.log_f = np.zeros(cap)
-                s.log_a = np.zeros(cap)
+            # every field the role was sent: force (N), frequency (Hz), amplitude
+            s.log_n = np.zeros(cap)
+            s.log_f = np.zeros(cap)
+            s.log_a = np.zeros(cap)
             slots.append(s)
         self._slots = slots
         self._by_role = {s.role: s for s in slots}
@@ -516,6 +529,7 @@ class ServoLoop:
         self._last_vel = np.zeros(3)
         self._last_x = 0.0
         self._have_good = False
+        self._vf = (0.0, 0.0, 0.0)
         self._good_state: DeviceState | None = None
         self._cpu_cost_us = 2e6 * thread_cpu_clock_cost_s() if self.cpu_time else float("nan")
         self._max_compute = 0.0
@@ -706,8 +720,14 @@ class ServoLoop:
                 tx, ty, tz = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
                 vin = np.array([math.sqrt(tx * tx + ty * ty + tz * tz), vn, 0.0])
                 normal = direction
+            a = 1.0 - math.exp(-6.283185307179586 * self.velocity_filter_hz * dt)
+            f0, f1, f2 = self._vf
+            f0 += a * (float(vin[0]) - f0)
+            f1 += a * (float(vin[1]) - f1)
+            f2 += a * (float(vin[2]) - f2)
+            self._vf = (f0, f1, f2)
             inp = TickInput(t=t, dt=dt, penetration_mm=pen, velocity_mm_s=vin, in_contact=in_contact,
-                            normal=normal, object=o.name)
+                            normal=normal, object=o.name, velocity_filtered_mm_s=self._vf)
             self._render(o.renderers, inp, forces, vib, events)
             if o.old is not None:
                 if o.ramp_t0 is None:
@@ -776,9 +796,10 @@ class ServoLoop:
                 if s.pc is not None:
                     s.pc.commit(out.force_n if out.force_n is not None else 0.0)
                 f_sent = out.force_n or 0.0
-            else:
-                s.log_f[i] = out.frequency_hz if out.frequency_hz is not None else np.nan
-                s.log_a[i] = out.amplitude or 0.0
+            fn, fr = out.force_n, out.frequency_hz
+            s.log_n[i] = fn if fn is not None else _NAN
+            s.log_f[i] = fr if fr is not None else _NAN
+            s.log_a[i] = out.amplitude or 0.0
         L["f"][i] = f_sent
         if self.recorder is not None:
             try:
@@ -947,10 +968,10 @@ class ServoLoop:
                "compute_s": comp_w}
         if self.cpu_time:
             log["compute_cpu_s"] = cpu_w
-        for s in self._slots:
-            if not s.is_force:
-                log[f"{s.role}.frequency_hz"] = W(s.log_f, n)
-                log[f"{s.role}.amplitude"] = W(s.log_a, n)
+        for s in self._slots:   # every commanded field of every role
+            log[f"{s.role}.force_n"] = W(s.log_n, n)
+            log[f"{s.role}.frequency_hz"] = W(s.log_f, n)
+            log[f"{s.role}.amplitude"] = W(s.log_a, n)
         sim_w = W(L["sim"], n)
         sim_us = float(np.median(sim_w) * 1e6) if n else float("nan")
         return LoopReport(ticks=n, period_s=T, realtime=self.realtime, tick_median_us=comp["median_us"],

@@ -132,6 +132,9 @@ def test_public_call_reuses_the_setup_but_not_the_targets(monkeypatch):
     from hapticsdk.errors import PluginError
     from hapticsdk import problems
 
+    # an empty cache: other tests leave setups with the same dimensions behind
+    monkeypatch.setattr(problems, "_PROBLEMS", {})
+    monkeypatch.setattr(problems, "_SOLVERS", {})
     try:
         a = problems.solve({"hardness": 0.4, "roughness": 0.6}, method="amortised", seed=0,
                            options={"polish_steps": 0})
