@@ -202,9 +202,10 @@ def test_frequency_drop_just_before_unplug(rig, kind):
 
 @pytest.mark.parametrize("kind", ["usb", "serial"])
 def test_lowest_synthesis_frequency_stops_within_two_cycles(rig, kind):
-    """The default band reaches 7.8125 Hz, where one cycle lasts 128 ms and cannot be cut
-    short by the chip: the bound there is two cycles, and describe() says so."""
-    act, drv, emu, clk = rig(kind)
+    """A band reaching down to 7.8125 Hz (given explicitly: the default starts at 46.875 Hz),
+    where one cycle lasts 128 ms and cannot be cut short by the chip: the bound there is
+    two cycles, and describe() says so."""
+    act, drv, emu, clk = rig(kind, frequency_range_hz=(STEP_HZ, 500.0))
     act.open()
     assert act.describe()["chip_stop"]["bound_s"] == pytest.approx(2 / STEP_HZ)
     _play(act, clk, [STEP_HZ] * 50)
@@ -263,3 +264,11 @@ def test_documented_margin_and_restart_after_a_long_gap(rig, kind):
     assert not drv.driving and len(drv.sequence_ends) == 1
     _play(act, clk, [f] * 3)
     assert drv.output()["playing"]
+
+
+def test_the_default_band_keeps_the_chip_stop_within_the_goal():
+    from hapticsdk_roughness.hardware import DEFAULT_BAND_HZ, PiezoMCP2221
+    for cls, kw in ((PiezoSerial, {"port": "/dev/null"}), (PiezoMCP2221, {})):
+        act = cls(**kw)
+        assert act.limits.frequency_range_hz == DEFAULT_BAND_HZ
+        assert act.describe()["chip_stop"]["bound_s"] <= GOAL_S

@@ -84,6 +84,13 @@ CHIP_WINDOW_S = 0.015
 REARM_S = 0.004
 
 
+#: default band of the hardware backends (Hz): from 6 synthesiser steps (46.875 Hz), where
+#: the chip-side dead-man's switch stops the chip within 50 ms of the last GO that reached
+#: it (``chip_stop_bound_s``; one cycle at 7.8 Hz alone lasts 128 ms), to the top code.
+#: Lower frequencies need an explicit ``frequency_range_hz`` and lengthen that bound.
+DEFAULT_BAND_HZ = (6 * FREQ_STEP_HZ, SYNTH_FREQ_RANGE_HZ[1])
+
+
 class DRV2667Actuator(Actuator):
     """Base of the DRV2667 backends; subclasses build the bus in :meth:`_make_bus`.
 
@@ -101,7 +108,7 @@ class DRV2667Actuator(Actuator):
     channel: ClassVar[str] = "vibration"
     accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = False
-    limits = piezo_limits(0, None)
+    limits = piezo_limits(0, None)  # replaced per instance (gain, band: DEFAULT_BAND_HZ)
     #: time source (s) of the re-arm and STATUS intervals; a test may set its own on an
     #: instance to run the host on an emulated chip's clock
     clock: Callable[[], float] = staticmethod(time.monotonic)
@@ -110,7 +117,8 @@ class DRV2667Actuator(Actuator):
                  ramp_s: float = 0.005, period_s: float = 0.001, status_interval_s: float = 0.05,
                  address: int = ADDRESS, watchdog_s: float = WATCHDOG_S, chip_window_s: float = CHIP_WINDOW_S,
                  rearm_s: float = REARM_S, **options: Any) -> None:
-        self.limits = piezo_limits(gain, frequency_range_hz)
+        # the default band starts where the chip-side stop bound is within 50 ms
+        self.limits = piezo_limits(gain, DEFAULT_BAND_HZ if frequency_range_hz is None else frequency_range_hz)
         if ramp_s < 0.005 or period_s <= 0 or status_interval_s <= 0:
             raise ValidationError("ramp_s must be >= 0.005 s, period_s and status_interval_s > 0", field="options")
         if not (isinstance(watchdog_s, (int, float)) and WATCHDOG_RANGE_S[0] <= watchdog_s <= WATCHDOG_RANGE_S[1]):
@@ -280,7 +288,7 @@ class DRV2667Actuator(Actuator):
         options (default gain 0, 25 V peak); the table is the dimension's ``Tab``."""
         o = dict(options or {})
         gain = int(o.get("gain", 0))
-        lim = piezo_limits(gain, o.get("frequency_range_hz"))
+        lim = piezo_limits(gain, o.get("frequency_range_hz") or DEFAULT_BAND_HZ)
         return DriveCapability("vibration", lim.frequency_range_hz, lim.max_amplitude, "V",
                                source=f"{cls.name}: DRV2667 gain {gain}, {lim.max_amplitude:g} V peak full scale")
 
