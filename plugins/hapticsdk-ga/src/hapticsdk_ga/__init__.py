@@ -4,8 +4,10 @@
 * ``de`` -- differential evolution batched over targets x population; ``de-scipy`` runs
   :func:`scipy.optimize.differential_evolution` per target (:mod:`hapticsdk_ga.de`).
 * ``polish`` -- bounded Levenberg-Marquardt (damped Gauss-Newton) on the intensity residuals
-  with constraints as extra residuals, using the model's Jacobian; ``ga-polish`` chains a
-  short GA and the polish (:mod:`hapticsdk_ga.polish`).
+  with constraints as extra residuals, using the model's Jacobian, started from the nearest
+  points of a cached sample cloud (:func:`hapticsdk_ga._common.sample_cloud`) and random
+  points, with a rescue round for missed targets; ``ga-polish`` chains a short GA and the
+  polish (:mod:`hapticsdk_ga.polish`).
 * ``amortised`` -- a precomputed target-grid table answered by interpolation
   (:mod:`hapticsdk_ga.amortised`).
 
