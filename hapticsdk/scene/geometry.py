@@ -315,7 +315,9 @@ class Shape(ABC):
         """Radius of a sphere about ``pose.position_mm`` holding the solid (inf: unbounded)."""
 
     def _bounds(self) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
-        raise NotImplementedError
+        """The solid's local (lo, hi) extent per axis (mm), read by the default
+        :meth:`surface_y`; a shape that overrides :meth:`surface_y` need not give it."""
+        raise NotImplementedError(f"{type(self).__name__} overrides neither surface_y nor _bounds")
 
     def surface_y(self, x_mm: float, z_mm: float) -> float | None:
         """Height (mm) where a probe coming straight down at ``(x_mm, z_mm)`` first meets

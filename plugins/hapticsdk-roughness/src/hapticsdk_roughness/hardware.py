@@ -46,6 +46,8 @@ only inside ``open``, ``check_available`` and ``discover``.
 
 from __future__ import annotations
 
+from abc import abstractmethod
+
 import threading
 import time
 from collections.abc import Callable
@@ -158,8 +160,9 @@ class DRV2667Actuator(Actuator):
         self._since_go = 0
         self.rearms = 0
 
+    @abstractmethod
     def _make_bus(self) -> I2CBus:
-        raise NotImplementedError
+        """The I2C bus the DRV2667 is on (a serial bridge, an MCP2221A), not yet used."""
 
     # -- backend API --------------------------------------------------------------------------
     def _open(self) -> None:
