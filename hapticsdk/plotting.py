@@ -106,7 +106,10 @@ def plot_render(report: Any, path: str | Path) -> Path:
     pen = np.asarray(log["penetration_mm"])
     force = np.asarray(log.get("force_n", np.zeros_like(t)))
     vel = np.asarray(log["velocity_mm_s"])
-    roles = sorted(k[: -len(".amplitude")] for k in log if k.endswith(".amplitude"))
+    # drive-amplitude channels: the log keeps every field of every role, so a role that was
+    # sent forces (the force channel, drawn in the force panel) is not one of them
+    roles = sorted(r for r in (k[: -len(".amplitude")] for k in log if k.endswith(".amplitude"))
+                   if not np.isfinite(np.asarray(log.get(f"{r}.force_n", [np.nan]), float)).any())
     driven = [r for r in roles if np.any(np.asarray(log[f"{r}.amplitude"]) != 0)]
     idle = [r for r in roles if r not in driven]
 

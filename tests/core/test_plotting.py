@@ -68,6 +68,7 @@ def test_render_figure_with_a_dropped_dimension(figures):
     notes = " ".join(t.get_text() for t in fig.texts)
     assert "left out roughness" in notes
     assert "coil (voicecoil-virtual): never driven" in notes
+    assert "force (" not in notes   # the force role was driven: the log also holds its (zero) amplitude
     # every drawn axis has data on it
     for a in fig.axes:
         assert any(len(ln.get_xdata()) > 1 for ln in a.get_lines()), a.get_title()
