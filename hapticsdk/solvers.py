@@ -18,7 +18,7 @@ import operator
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, Iterator, Sequence, overload
+from typing import Any, ClassVar, Iterator, Sequence
 
 import numpy as np
 
@@ -640,12 +640,3 @@ class _BatchData:
             targets={d: float(v) for d, v in zip(dims, Ti.tolist())},
             constraint_violation=viol, constraint_violations=dict(zip(cnames, pc)),
             time_s=self.elapsed, trace=trace, method=self.method)
-
-
-def assemble_results(problem: SolveProblem, x: np.ndarray, out: SolverOutput, elapsed: float,
-                     trace: Trace, method: str) -> list[SolveResult]:
-    """Evaluate ``x`` honestly and build one :class:`SolveResult` per target."""
-    data = _BatchData(problem, method, True)
-    data.add(problem, problem.space.clip(np.asarray(x, float)), out, trace, 0.0)
-    data.finish(elapsed)
-    return [data.result(i) for i in range(problem.n_targets)]

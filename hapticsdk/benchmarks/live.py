@@ -39,9 +39,10 @@ the one it ran on: the figures of a shared machine include the other processes.
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -88,7 +89,7 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     state_cpu_us: list[float] = []
     set_cpu_us: list[float] = []
     latency_ms: list[float] = []
-    with Session(SCENE, isolation=isolation, trajectory=tr, refine=False, rt=rt) as s:
+    with Session(SCENE, isolation=isolation, trajectory=tr, refine=False, rt=rt) as s, _stopping(stop, th):
         s.set_material("pad", "S7")  # warm the amortised table of these dimensions
         time.sleep(0.5)
         s.events()
@@ -139,6 +140,17 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
                       "overruns": rep.get("overruns"), "renderer_errors": ev.get("renderer_error")}}
 
 
+@contextlib.contextmanager
+def _stopping(stop: threading.Event, th: threading.Thread) -> Iterator[None]:
+    """Stop and join the application-load thread on every exit path."""
+    try:
+        yield
+    finally:
+        stop.set()
+        if th.is_alive():
+            th.join(2.0)
+
+
 def switch_figures(ramp_s: float = 0.05) -> dict[str, float]:
     """Force step and energy of a soft -> stiff switch while pressed (simulated time)."""
     from hapticsdk_hardness.dimension import HardnessRenderer
@@ -154,12 +166,14 @@ def switch_figures(ramp_s: float = 0.05) -> dict[str, float]:
     loop = ServoLoop(probe, [HardnessRenderer(0.2)], {"force": probe, "coil": VoiceCoilVirtual()},
                      switch_ramp_s=ramp_s)
     loop.start(1.0)
-    while loop.ticks < 500:
-        loop.tick()
-    loop.set_renderers(0, [HardnessRenderer(2.3)])
-    while loop.tick():
-        pass
-    f = loop.finish().log["force_n"]
+    try:
+        while loop.ticks < 500:
+            loop.tick()
+        loop.set_renderers(0, [HardnessRenderer(2.3)])
+        while loop.tick():
+            pass
+    finally:
+        f = loop.finish().log["force_n"]   # GC and the actuators back to normal on any exit
     win = f[490:700]
     step = float(np.abs(np.diff(win)).max())
     ramp_step = abs(2.3 * 2.0 - 0.2 * 2.0) * loop.period_s / ramp_s
@@ -173,17 +187,19 @@ def switch_figures(ramp_s: float = 0.05) -> dict[str, float]:
         lp.start(3.5)
         b, m = dev.arm.damping_ns_per_m, dev.arm.mass_kg
         damper = worst = 0.0
-        while True:
-            if lp.ticks == 1000:
-                lp.set_renderers(0, [HardnessRenderer(2.3)])
-            v0 = dev.sim.v
-            more = lp.tick()
-            v1 = dev.sim.v
-            damper += b * 0.5 * (v0 * v0 + v1 * v1) * lp.period_s
-            worst = max(worst, dev.motor_work_j - 0.5 * m * v1 * v1 - damper)
-            if not more:
-                break
-        lp.finish()
+        try:
+            while True:
+                if lp.ticks == 1000:
+                    lp.set_renderers(0, [HardnessRenderer(2.3)])
+                v0 = dev.sim.v
+                more = lp.tick()
+                v1 = dev.sim.v
+                damper += b * 0.5 * (v0 * v0 + v1 * v1) * lp.period_s
+                worst = max(worst, dev.motor_work_j - 0.5 * m * v1 * v1 - damper)
+                if not more:
+                    break
+        finally:
+            lp.finish()
         return worst
 
     return {"max_force_step_n": step, "ramp_step_n": ramp_step, "ramp_s": ramp_s,

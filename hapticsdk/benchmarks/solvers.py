@@ -40,7 +40,6 @@ plugin and model loading; see docs/runtime.md), and any machine but the one it r
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import statistics

@@ -15,7 +15,7 @@ import logging
 import sys
 from typing import NoReturn, Sequence
 
-from ..errors import HapticSDKError, ValidationError
+from ..errors import HapticSDKError
 
 #: command modules, in help order
 COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_solvers", "bench_runtime",

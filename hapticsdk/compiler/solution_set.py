@@ -26,6 +26,7 @@ feature-reading prediction varies across equally good solutions.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -97,9 +98,12 @@ _CACHE: dict[Any, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
 
 def _design(problem: SolveProblem, n_design: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unit-box design points, their intensities (targeted columns) and feasibility."""
+    # constraints by what they are (class and parameters, ``describe()``), not by name: two
+    # device bands share a name but not a feasible set
+    cons = tuple((type(c).__qualname__, json.dumps(c.describe(), sort_keys=True, default=repr))
+                 for c in problem.constraints)
     key = (id(problem.model), problem.dimensions, problem.space.names, tuple(problem.space.lower),
-           tuple(problem.space.upper), tuple(sorted(problem.fixed.items())),
-           tuple(c.name for c in problem.constraints), n_design)
+           tuple(problem.space.upper), tuple(sorted(problem.fixed.items())), cons, n_design)
     hit = _CACHE.get(key)
     if hit is not None:
         return hit

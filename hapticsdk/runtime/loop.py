@@ -342,7 +342,9 @@ class ServoLoop:
             raise ValidationError(f"must be a number of Hz > 0, got {velocity_filter_hz!r}",
                                   field="velocity_filter_hz")
         self.velocity_filter_hz = float(velocity_filter_hz)
-        self._vf = (0.0, 0.0, 0.0)
+        self._vf0 = self._vf1 = self._vf2 = 0.0
+        self._vf_dt = -1.0
+        self._vf_a = 1.0
         self.switch_ramp_s = float(switch_ramp_s)
         if passivity_settings is None:
             # the device's apparent mass (if it declares one) bounds the in-period push
@@ -480,7 +482,10 @@ class ServoLoop:
     def start(self, seconds: float | None = None) -> None:
         """Open every actuator and set up a run of ``seconds`` (s; None: until
         :meth:`finish`). Disables the garbage collector and applies the ``rt`` options
-        until :meth:`finish`."""
+        until :meth:`finish`. Raises :class:`ValidationError` while a run is going (call
+        :meth:`finish` first)."""
+        if self._running:
+            raise ValidationError("the loop is running: finish() it before start() again", field="start")
         T = self.period_s
         if seconds is None:
             n_max = sys.maxsize
@@ -529,7 +534,7 @@ class ServoLoop:
         self._last_vel = np.zeros(3)
         self._last_x = 0.0
         self._have_good = False
-        self._vf = (0.0, 0.0, 0.0)
+        self._vf0 = self._vf1 = self._vf2 = 0.0
         self._good_state: DeviceState | None = None
         self._cpu_cost_us = 2e6 * thread_cpu_clock_cost_s() if self.cpu_time else float("nan")
         self._max_compute = 0.0
@@ -589,7 +594,7 @@ class ServoLoop:
         """Run one servo period. Returns False when the run is over (the duration given
         to :meth:`start` was reached, or a device fault stopped every actuator: see
         ``report.fault``). Any exception leaving the tick stops every actuator first."""
-        if self._k >= self._n_max or self._fault is not None:
+        if not self._running or self._k >= self._n_max or self._fault is not None:
             return False
         try:
             return self._tick()
@@ -720,14 +725,15 @@ class ServoLoop:
                 tx, ty, tz = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
                 vin = np.array([math.sqrt(tx * tx + ty * ty + tz * tz), vn, 0.0])
                 normal = direction
-            a = 1.0 - math.exp(-6.283185307179586 * self.velocity_filter_hz * dt)
-            f0, f1, f2 = self._vf
-            f0 += a * (float(vin[0]) - f0)
-            f1 += a * (float(vin[1]) - f1)
-            f2 += a * (float(vin[2]) - f2)
-            self._vf = (f0, f1, f2)
+            if dt != self._vf_dt:   # the coefficient changes only with dt (realtime mode)
+                self._vf_dt = dt
+                self._vf_a = 1.0 - math.exp(-6.283185307179586 * self.velocity_filter_hz * dt)
+            a = self._vf_a
+            f0 = self._vf0 = self._vf0 + a * (float(vin[0]) - self._vf0)
+            f1 = self._vf1 = self._vf1 + a * (float(vin[1]) - self._vf1)
+            f2 = self._vf2 = self._vf2 + a * (float(vin[2]) - self._vf2)
             inp = TickInput(t=t, dt=dt, penetration_mm=pen, velocity_mm_s=vin, in_contact=in_contact,
-                            normal=normal, object=o.name, velocity_filtered_mm_s=self._vf)
+                            normal=normal, object=o.name, velocity_filtered_mm_s=(f0, f1, f2))
             self._render(o.renderers, inp, forces, vib, events)
             if o.old is not None:
                 if o.ramp_t0 is None:

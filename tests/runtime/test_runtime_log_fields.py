@@ -76,3 +76,17 @@ def test_the_filter_corner_is_validated(bad):
     with pytest.raises(ValidationError) as ei:
         ServoLoop(VirtualProbe(), [], velocity_filter_hz=bad)
     assert ei.value.field == "velocity_filter_hz"
+
+
+def test_tick_after_finish_does_nothing_and_start_twice_is_refused():
+    import gc
+    dev = VirtualProbe()
+    loop = ServoLoop(dev, [])
+    was = gc.isenabled()
+    loop.start(None)
+    with pytest.raises(ValidationError):
+        loop.start(None)                 # would record GC as disabled and leave it so
+    assert loop.tick()
+    loop.finish()
+    assert gc.isenabled() == was
+    assert loop.tick() is False          # no commands after finish()

@@ -86,3 +86,17 @@ def test_the_example_runs(capsys, lra):
     assert lra.main(["--roughness", "0.6", "--seconds", "0.3"]) == 0
     out = capsys.readouterr().out
     assert "piezo-virtual" in out and "lra-virtual" in out and "residual" in out and "GENERATED" in out
+
+
+def test_the_solution_family_follows_the_device_band_not_the_constraints_name():
+    """Two problems whose device bands differ only in their bound: each family respects
+    its own band (the design's feasibility is cached per constraint parameters)."""
+    from hapticsdk.compiler.solution_set import solution_sets
+    from hapticsdk.problems import build_problem
+    from hapticsdk_roughness.dimension import DeviceBandConstraint
+    for lo in (60.0, 150.0, 60.0, 150.0):
+        # reachable targets and an unreachable one (whose set is the nearest feasible design points)
+        p = build_problem(np.array([[0.3, 0.3], [0.05, 0.98]]), dimensions=["hardness", "roughness"],
+                          data_support=True, extra_constraints=(DeviceBandConstraint(lo, "low", "test"),))
+        for s in solution_sets(p):
+            assert len(s) and s.X[:, list(s.names).index("Fpeak")].min() >= lo - 1e-6, (lo, s.reached)

@@ -107,12 +107,6 @@ class PiezoVirtual(Actuator):
         self._pending.clear()
         self._target_amp = 0.0
 
-    def _n_samples(self, seconds: float) -> int:
-        exact = seconds * self.fs + self._frac
-        n = int(exact)
-        self._frac = exact - n
-        return n
-
     def _emit(self, block: np.ndarray) -> None:
         if block.size == 0:
             return
@@ -133,7 +127,7 @@ class PiezoVirtual(Actuator):
         self._freq = f
         self._target_amp = a
         self.commands += 1
-        # _n_samples(period_s) inlined (same arithmetic): this runs every servo tick
+        # the samples this command covers (period_s x fs plus the carried fraction), inline: every servo tick
         exact = self.period_s * self.fs + self._frac
         n = int(exact)
         self._frac = exact - n
