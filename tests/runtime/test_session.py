@@ -36,6 +36,10 @@ TWO = {"schema_version": 2, "name": "two",
 #: press 1.5 mm into the left box, slide onto the right one, hold, lift
 SLIDE = Trajectory([(0.0, -30.0, 3.0), (0.2, -30.0, -1.5), (0.5, -30.0, -1.5), (1.1, 30.0, -1.5),
                     (3.0, 30.0, -1.5), (3.3, 30.0, 3.0), (600.0, 30.0, 3.0)])
+#: the same slide, then held on the right box: a servo in simulated time runs the 2 s on
+#: the right box in ~0.1 s of wall time, which a loaded machine's polling can miss
+SLIDE_AND_HOLD = Trajectory([(0.0, -30.0, 3.0), (0.2, -30.0, -1.5), (0.5, -30.0, -1.5), (1.1, 30.0, -1.5),
+                             (600.0, 30.0, -1.5)])
 
 
 def _shm():
@@ -57,7 +61,7 @@ def test_thread_session_contacts_state_events_and_switch():
     contact (counted by the servo), close() stops every actuator."""
     # simulated time: a thread servo shares the interpreter lock with this test, and a
     # command gap > 50 ms would (rightly) re-arm the safety layer's start gate
-    with hs.session(TWO, isolation="thread", trajectory=SLIDE, realtime=False) as s:
+    with hs.session(TWO, isolation="thread", trajectory=SLIDE_AND_HOLD, realtime=False) as s:
         assert _wait(lambda: s.state().object == "right" and s.state().position_mm[0] > 25.0, 20.0)
         st = s.state()
         # pressed 1.5 mm into the right box's top: penetration along +y, a spring force
