@@ -24,6 +24,7 @@ code / command line. Options that are not privileged may come from every source.
 
 from __future__ import annotations
 
+import copy
 import json
 import os
 import stat
@@ -103,6 +104,10 @@ def _by_actuator(data: Any, source: str) -> dict[str, dict[str, Any]]:
     return {str(k): dict(v) for k, v in data.items()}
 
 
+#: the last device configuration file read: ``{"key": (path, inode, mtime_ns, size), "by_actuator": ...}``
+_CONFIG_CACHE: dict[str, Any] = {}
+
+
 def _read_config(path: Path) -> dict[str, dict[str, Any]]:
     try:
         st = os.stat(path)
@@ -117,13 +122,18 @@ def _read_config(path: Path) -> dict[str, dict[str, Any]]:
                               "writable by others", field=str(path))
     if st.st_size > MAX_CONFIG_BYTES:
         raise ValidationError(f"larger than {MAX_CONFIG_BYTES} bytes", field=str(path))
-    try:
-        with open(path, "rb") as fh:
-            text = fh.read(MAX_CONFIG_BYTES + 1).decode("utf-8")
-        data = json.loads(text)
-    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-        raise ValidationError(f"not a readable UTF-8 JSON file: {exc}", field=str(path)) from None
-    return _by_actuator(data, str(path))
+    # read and parsed once per version of the file (a compile asks once per role)
+    key = (str(path), st.st_ino, st.st_mtime_ns, st.st_size)
+    if _CONFIG_CACHE.get("key") != key:
+        try:
+            with open(path, "rb") as fh:
+                text = fh.read(MAX_CONFIG_BYTES + 1).decode("utf-8")
+            data = json.loads(text)
+        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+            raise ValidationError(f"not a readable UTF-8 JSON file: {exc}", field=str(path)) from None
+        _CONFIG_CACHE.clear()
+        _CONFIG_CACHE.update(key=key, by_actuator=_by_actuator(data, str(path)))
+    return copy.deepcopy(_CONFIG_CACHE["by_actuator"])
 
 
 def trusted_options(actuator: str) -> dict[str, Any]:

@@ -88,9 +88,9 @@ def _read_file(p: Path) -> tuple[Any, str]:
     shallow. Raises :class:`ValidationError` naming the file."""
     import hashlib
 
-    from ..schemas_io import MAX_JSON_DEPTH, json_depth
+    from ..schemas_io import MAX_JSON_DEPTH, json_depth, read_bytes
 
-    data = _read_regular(p, MAX_CALIBRATION_BYTES)
+    data = read_bytes(p, field="calibration", max_bytes=MAX_CALIBRATION_BYTES)
     digest = hashlib.sha256(data).hexdigest()
     try:
         text = data.decode("utf-8-sig")
@@ -102,46 +102,6 @@ def _read_file(p: Path) -> tuple[Any, str]:
         return json.loads(text), digest
     except (ValueError, RecursionError) as exc:
         raise ValidationError(f"{p}: not valid JSON: {exc}", field="calibration") from None
-
-
-def _read_regular(p: Path, max_bytes: int) -> bytes:
-    """The bytes of ``p`` if it is a regular file of at most ``max_bytes``. The file is
-    opened non-blocking (a FIFO swapped in after the check cannot block the open) and
-    checked again on the open descriptor."""
-    import stat
-
-    def refuse(why: str) -> ValidationError:
-        return ValidationError(f"{p}: {why}", field="calibration")
-
-    try:
-        st = os.stat(p)
-    except OSError as exc:
-        raise refuse(f"cannot read: {exc.strerror or exc}") from None
-    if not stat.S_ISREG(st.st_mode):
-        kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file (FIFO, socket or device)"
-        raise refuse(kind)
-    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_NOCTTY", 0) | getattr(os, "O_BINARY", 0)
-    try:
-        fd = os.open(p, flags)
-    except OSError as exc:
-        raise refuse(f"cannot open: {exc.strerror or exc}") from None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            raise refuse("not a regular file (FIFO, socket or device)")
-        chunks, total = [], 0
-        while total <= max_bytes:
-            b = os.read(fd, min(1 << 16, max_bytes + 1 - total))
-            if not b:
-                break
-            chunks.append(b)
-            total += len(b)
-    except OSError as exc:
-        raise refuse(f"cannot read: {exc.strerror or exc}") from None
-    finally:
-        os.close(fd)
-    if total > max_bytes:
-        raise refuse(f"larger than {max_bytes} bytes")
-    return b"".join(chunks)
 
 
 def _from_file(p: Path) -> tuple[VoiceCoilCalibration | PiezoTable, str]:

@@ -44,12 +44,12 @@ from __future__ import annotations
 import json
 import math
 import os
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import FormatError
+from ..schemas_io import json_depth
 
 #: largest ``.hjif`` accepted (bytes). Real vibrotactile files are kilobytes to a few
 #: megabytes (wavelet streams included); 32 MiB leaves room and bounds memory.
@@ -381,20 +381,6 @@ def parse_hjif_bytes(data: bytes, *, source: str = "hjif") -> HapticFile:
         raise FormatError(f"not UTF-8 text (byte {exc.start}: {data[exc.start:exc.start + 1]!r})",
                           field=source) from None
     return parse_hjif_text(text, source=source)
-
-
-_STRING_RE = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)
-
-
-def json_depth(text: str) -> int:
-    """Deepest ``[``/``{`` nesting of a JSON text (strings skipped); linear time."""
-    import numpy as np
-
-    bare = _STRING_RE.sub("", text)
-    b = np.frombuffer(bare.encode("utf-8", "replace"), dtype=np.uint8)
-    steps = (np.isin(b, (ord("["), ord("{"))).astype(np.int32)
-             - np.isin(b, (ord("]"), ord("}"))).astype(np.int32))
-    return int(np.cumsum(steps).max()) if steps.size else 0
 
 
 def _no_constants(name: str) -> Any:

@@ -236,3 +236,21 @@ def test_libhd_loader_refuses_untrusted_candidates(tmp_path, monkeypatch):
         with pytest.raises(DeviceNotFoundError) as ei:
             oh.load_library(bad)
         assert bad not in opened and "refused" in str(ei.value)
+
+
+def test_the_device_configuration_is_read_again_when_it_changes(tmp_path, monkeypatch):
+    import json as _json
+
+    from hapticsdk.device_options import trusted_options
+    from hapticsdk.fileio import atomic_write_json
+    cfg = tmp_path / "devices.json"
+    monkeypatch.setenv("HAPTICSDK_DEVICE_CONFIG", str(cfg))
+    monkeypatch.delenv("HAPTICSDK_DEVICE_OPTIONS", raising=False)
+    atomic_write_json(cfg, {"piezo-serial": {"port": "/dev/ttyA", "frequency_range_hz": [50, 500]}})
+    assert trusted_options("piezo-serial") == {"port": "/dev/ttyA", "frequency_range_hz": [50, 500]}
+    got = trusted_options("piezo-serial")
+    got["frequency_range_hz"].append(1)              # a deep copy: the cache is not shared
+    assert trusted_options("piezo-serial")["frequency_range_hz"] == [50, 500]
+    atomic_write_json(cfg, {"piezo-serial": {"port": "/dev/ttyB"}})
+    assert trusted_options("piezo-serial") == {"port": "/dev/ttyB"}
+    assert _json.loads(cfg.read_text())["piezo-serial"]["port"] == "/dev/ttyB"
