@@ -88,22 +88,28 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
     ax2.set_ylabel("vibration amplitude")
     ax2.set_xlabel("servo time (s)")
     colors = ["tab:green", "tab:red", "tab:purple", "tab:brown"]
-    # shade each stretch of contact with one object
+    # shade each stretch of contact with one object; contact that flickers at an edge
+    # (gaps under 0.1 s with the same object on both sides) counts as one stretch
     change = np.flatnonzero(np.diff(obj) != 0) + 1
     starts = np.concatenate([[0], change])
     ends = np.concatenate([change, [obj.size]])
-    labelled = set()
+    spans: list[list] = []
     for a, b in zip(starts, ends):
         oid = int(obj[a])
         if oid < 0 or b - a < 2:
             continue
+        if spans and spans[-1][0] == oid and t[a] - spans[-1][2] < 0.1:
+            spans[-1][2] = t[b - 1]
+        else:
+            spans.append([oid, t[a], t[b - 1]])
+    labelled = set()
+    for oid, ta, tb in spans:
         name = names.get(oid, str(oid))
         for ax in (ax1, ax2):
-            ax.axvspan(t[a], t[b - 1], color=colors[oid % len(colors)], alpha=0.15,
+            ax.axvspan(ta, tb, color=colors[oid % len(colors)], alpha=0.15,
                        label=name if (ax is ax1 and name not in labelled) else None)
         labelled.add(name)
-        ax1.text(0.5 * (t[a] + t[b - 1]), 0.93, name, ha="center", fontsize=9,
-                 transform=ax1.get_xaxis_transform())
+        ax1.text(0.5 * (ta + tb), 0.93, name, ha="center", fontsize=9, transform=ax1.get_xaxis_transform())
     if retarget_t is not None:
         for ax in (ax1, ax2):
             ax.axvline(retarget_t, color="k", ls="--", lw=1.0)
