@@ -119,11 +119,42 @@ class PiezoTable:
                 return cs
         return PchipInterpolator(self.voltages_v, row, extrapolate=False)
 
+    def _rows(self, f_hz: np.ndarray) -> np.ndarray:
+        """:meth:`_row` for many frequencies at once, shape ``(n, n_voltages)``."""
+        f = np.clip(np.asarray(f_hz, float), self.frequencies_hz[0], self.frequencies_hz[-1])
+        rows = np.empty((f.size, self.voltages_v.size))
+        if self._over_logf is not None:
+            rows[:, self._pos] = np.exp(self._over_logf(np.log(f)))
+        if self._over_f is not None:
+            rows[:, ~self._pos] = self._over_f(f)
+        bad = ~(np.all(np.diff(rows, axis=1) > 0, axis=1) & np.isfinite(rows).all(axis=1))
+        if bad.any():  # the linear fallback of _row, row by row
+            rows[bad] = np.array([self._row(x) for x in f[bad]])
+        return rows
+
+    def _knot(self, volts: float) -> int | None:
+        """Index of the measured voltage equal to ``volts`` (already clamped), or None."""
+        j = int(np.searchsorted(self.voltages_v, volts))
+        return j if j < self.voltages_v.size and self.voltages_v[j] == volts else None
+
     def acceleration_at(self, f_hz: float, volts: float) -> float:
         """Acceleration amplitude (m/s^2) at frequency ``f_hz`` (Hz) and drive ``volts``
         (V peak); both clamped to the table."""
         v = float(np.clip(volts, self.voltages_v[0], self.voltages_v[-1]))
+        j = self._knot(v)
+        if j is not None:  # a measured voltage: the curve passes through the row there
+            return float(self._row(f_hz)[j])
         return float(self._curve(f_hz)(v))
+
+    def accelerations_at(self, f_hz: Any, volts: float) -> np.ndarray:
+        """:meth:`acceleration_at` over an array of frequencies ``f_hz`` (Hz) at one drive
+        ``volts`` (V peak); vectorised when ``volts`` (clamped) is a measured voltage."""
+        f = np.asarray(f_hz, float).ravel()
+        v = float(np.clip(volts, self.voltages_v[0], self.voltages_v[-1]))
+        j = self._knot(v)
+        if j is not None:
+            return self._rows(f)[:, j]
+        return np.array([float(self._curve(x)(v)) for x in f])
 
     def in_range(self, f_hz: float, accel_m_s2: float) -> bool:
         """Whether ``(f_hz, accel_m_s2)`` lies inside the measured table."""

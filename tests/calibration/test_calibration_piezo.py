@@ -104,3 +104,16 @@ def test_measurement_csv_and_repeats(tmp_path):
 def test_dict_round_trip(table):
     t2 = PiezoTable.from_dict(table.to_dict())
     assert t2.voltage_for(123.0, 5.0) == table.voltage_for(123.0, 5.0)
+
+
+def test_accelerations_at_matches_the_curve_per_frequency(table):
+    """The vectorised sweep (used by the roughness amplitude constraint) gives what the
+    per-frequency curve gives, at measured and in-between voltages, also for frequencies
+    outside the table (clamped)."""
+    fs = np.linspace(5.0, 450.0, 157)
+    for volts in (0.0, 30.0, 100.0, 137.0, 45.5):
+        per_f = np.array([float(table._curve(f)(min(volts, 100.0))) for f in fs])
+        sweep = table.accelerations_at(fs, volts)
+        np.testing.assert_allclose(sweep, per_f, rtol=1e-12, atol=1e-12)
+        single = np.array([table.acceleration_at(f, volts) for f in fs])
+        np.testing.assert_allclose(single, per_f, rtol=1e-12, atol=1e-12)

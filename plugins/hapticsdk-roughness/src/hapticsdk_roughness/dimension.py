@@ -173,8 +173,13 @@ class DeviceAmplitudeConstraint(Constraint):
         self.max_drive, self.actuator = float(max_drive), actuator
         t_lo, t_hi = table.frequency_range_hz
         self._f = np.linspace(lo, hi, 512)
-        self._a = np.array([table.acceleration_at(f, self.max_drive) if t_lo <= f <= t_hi else 0.0
-                            for f in self._f])
+        inside = (t_lo <= self._f) & (self._f <= t_hi)
+        self._a = np.zeros(self._f.size)
+        many = getattr(table, "accelerations_at", None)  # a PiezoTable: vectorised over frequency
+        if many is not None:
+            self._a[inside] = many(self._f[inside], self.max_drive)
+        else:
+            self._a[inside] = [table.acceleration_at(f, self.max_drive) for f in self._f[inside]]
         self.table_source = getattr(table, "source", "")
 
     def max_acceleration(self, f_hz: Any) -> np.ndarray:
