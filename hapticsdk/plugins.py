@@ -114,6 +114,7 @@ class Registry:
         self._eps: dict[str, metadata.EntryPoint] | None = None
         self._loaded: dict[str, Any] = {}
         self._local: dict[str, Any] = {}
+        self._infos: dict[str, PluginInfo] = {}  # distribution metadata read once per name
 
     def _table(self) -> dict[str, metadata.EntryPoint]:
         if self._eps is None:
@@ -126,6 +127,7 @@ class Registry:
         """Forget the cached table (after installing or removing a distribution)."""
         self._eps = None
         self._loaded.clear()
+        self._infos.clear()
 
     def register(self, name: str, obj: Any) -> None:
         """Register an in-process object under ``name`` (overrides installed ones)."""
@@ -148,8 +150,10 @@ class Registry:
             obj = self._local[name]
             return PluginInfo(self.kind, name, f"{getattr(obj, '__module__', '?')}:{getattr(obj, '__qualname__', '?')}",
                               "(in-process)", "")
-        ep = self._lookup(name)
-        return _info(self.kind, ep)
+        got = self._infos.get(name)
+        if got is None:
+            got = self._infos[name] = _info(self.kind, self._lookup(name))
+        return got
 
     def _lookup(self, name: str) -> metadata.EntryPoint:
         table = self._table()

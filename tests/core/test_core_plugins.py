@@ -84,3 +84,15 @@ def test_hook_failures_are_isolated():
     out = pm.call_safely("hapticsdk_materials")
     assert out == [[{"name": "X1", "intensities": {"hardness": 0.5}}]]
     assert "bad plugin" in pm.failures["bad"]
+
+
+def test_info_reads_metadata_once_and_again_after_refresh(fake_dists, tmp_path):
+    """A distribution's metadata is read once per name (compile asks for it per group),
+    and read again after ``refresh()``: an upgraded distribution shows its new version."""
+    reg = plugins.registry("solver")
+    assert reg.info("goodplug-solver").version == "1.2.3"
+    info_dir = tmp_path / "goodplug-1.2.3.dist-info"
+    (info_dir / "METADATA").write_text("Metadata-Version: 2.1\nName: goodplug\nVersion: 9.9.9\n")
+    assert reg.info("goodplug-solver").version == "1.2.3"  # cached until a refresh
+    plugins.refresh()
+    assert plugins.registry("solver").info("goodplug-solver").version == "9.9.9"
