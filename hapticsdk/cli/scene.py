@@ -103,8 +103,10 @@ def format_plan(out: dict[str, Any]) -> str:
         lines.append(f"material {name}: renders {', '.join(m['dimensions']) or '(nothing)'} on {acts}")
         lines.append(f"  features: {feats}")
         if m["pinned_features"]:
+            at = ("the full solve's values: the model's defaults miss the kept targets"
+                  if (m.get("solve") or {}).get("pinned_from") == "full solve" else "the model's defaults")
             lines.append("  left out of the solve (no kept dimension reads them): "
-                         + ", ".join(sorted(m["pinned_features"])))
+                         + ", ".join(sorted(m["pinned_features"])) + f"; pinned at {at}")
         for role, c in (m.get("role_contracts") or {}).items():
             acc = ", ".join(f"{k} {u}" for k, u in c["accepts"].items())
             for who, spec in c["commanded_by"].items():

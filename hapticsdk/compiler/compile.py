@@ -222,12 +222,44 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
     return out
 
 
+def _pin_at_first_solve(second: dict[str, Any], first: Mapping[str, Any], mats: Sequence[_Mat],
+                        drops: Mapping[str, list[Any]], dim_objs: Mapping[str, Any], settings: Mapping[str, Any],
+                        device: Mapping[str, Sequence[Any]]) -> None:
+    """A material whose kept dimensions miss their targets with the left-out features
+    pinned at the model's defaults (e.g. a perception model whose hardness at the stiff
+    end depends on the texture features) is solved again, alone, with those features
+    pinned at the values of the full solve, which reached every target. ``second`` is
+    updated in place; the result's ``pinned_from`` says which pinning was used."""
+    from ..problems import solve
+    s = settings["solver"]
+    for m in mats:
+        r = second.get(m.name)
+        if r is None or not drops[m.name] or r.success or not first[m.name].success:
+            continue
+        gone = {e.dimension for e in drops[m.name]}
+        kept = [d for d in m.targets if d not in gone]
+        read = {f.name for d in kept for f in dim_objs[d].features}
+        fixed = {k: float(v) for k, v in first[m.name].x_dict.items() if k not in read}
+        extra = tuple(c for d in kept for c in (device or {}).get(d, ()))
+        r2 = solve({d: m.targets[d] for d in kept}, model=settings.get("model"), method=s["method"],
+                   seed=s["seed"], options=dict(s.get("options") or {}), penalty=s.get("penalty", "paper"),
+                   tolerance=s.get("tolerance", 0.01), data_support=bool(s.get("data_support", True)),
+                   fixed=fixed, **({"extra_constraints": extra} if extra else {}))
+        if r2.success:
+            if r.get("model") is not None:
+                r2["model"] = r["model"]
+            r2["pinned_from"] = "full solve"
+            second[m.name] = r2
+
+
 def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed: Any) -> dict[str, Any]:
     """The final solve's result (``SolveResult.to_json()``) plus the models and seed."""
     out = json.loads(json.dumps(r.to_json(), default=float))
     out["models"] = list(model_names)
     out["seed"] = seed
     out["dimensions"] = list(dims)
+    if r.get("pinned_from"):
+        out["pinned_from"] = r["pinned_from"]
     return out
 
 
@@ -406,6 +438,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
             gone = {e.dimension for e in drops[m.name]}
             regroup.setdefault(tuple(d for d in m.targets if d not in gone), []).append(m)
     second = _solve_groups(regroup, settings, device)
+    _pin_at_first_solve(second, first, mats, drops, dim_objs, settings, device)
     final = {**first, **second}
 
     # 4. renderers' roles and actuators

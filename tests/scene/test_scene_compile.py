@@ -306,3 +306,28 @@ def test_negative_predicted_losses_are_clamped_and_flagged():
     (drops,) = decide_from_estimates(Linear(), ["hardness", "roughness"], [est])
     assert [d.dimension for d in drops] == ["roughness"]
     assert isinstance(drops[0], LossEstimate)
+
+
+def test_left_out_features_pinned_at_the_full_solve_when_the_defaults_miss_the_target():
+    """S12 (hardest in the library) drops roughness; with the texture features at the
+    model's medians its hardness target is out of reach, so the compiler pins them at the
+    full solve's values. The kept target must then be reached, checked here by running the
+    model on the plan's features ourselves."""
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.materials import load_library
+    from hapticsdk.problems import load_model
+
+    plan = compile_scene({"schema_version": 1, "name": "s12", "objects": [{"name": "pad", "material": "S12"}],
+                          "settings": {"solver": {"seed": 0}}})
+    m = plan.materials["S12"]
+    assert m.dimensions == ["hardness"] and [d.dimension for d in m.dropped] == ["roughness"]
+    assert m.solve["success"] and m.solve.get("pinned_from") == "full solve"
+    model = load_model("default")
+    x = {**m.features, **m.pinned_features}
+    pred = model.predict([[x[n] for n in model.feature_names]])[0]
+    target = load_library().get("S12").intensities["hardness"]
+    tol = 0.01  # the scene's default solve tolerance (schema default), in intensity units
+    assert abs(pred[model.dimension_names.index("hardness")] - target) <= tol
+    # the defaults alone do not reach it (else this test would not exercise the fallback)
+    defaults = dict(model.metadata["feature_defaults"])
+    assert any(abs(m.pinned_features[k] - defaults[k]) > 1e-9 for k in m.pinned_features)
