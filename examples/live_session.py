@@ -25,11 +25,11 @@ SCENE = {
     "schema_version": 2,
     "name": "three-samples",
     "objects": [
-        {"name": "foam", "material": "S1",
+        {"name": "sponge", "material": "S1",   # leather on sponge
          "geometry": {"shape": "box", "half_size_mm": [20, 10, 20]}, "pose": {"position_mm": [-55, -10, 0]}},
-        {"name": "rubber", "material": "S12",
+        {"name": "rubber", "material": "S12",  # fabric on rubber
          "geometry": {"shape": "box", "half_size_mm": [20, 10, 20]}, "pose": {"position_mm": [0, -10, 0]}},
-        {"name": "leather", "material": "S7",
+        {"name": "eva", "material": "S7",      # fabric on EVA
          "geometry": {"shape": "sphere", "radius_mm": 25}, "pose": {"position_mm": [55, -25, 0]}},
     ],
     # keep every dimension of every object, so each one is felt as force and vibration

@@ -13,7 +13,7 @@ The LRA's drive table is GENERATED from a textbook resonator model (f0 175 Hz, d
 ratio 0.08, 12 m/s^2 per volt at resonance): replace it with your device's measured
 response (same format as a piezo table, ``hapticsdk calibrate piezo``).
 
-Run:  python examples/lra_device_aware.py [--roughness 0.6] [--hardness 0.3]
+Run:  python examples/lra_device_aware.py [--roughness 0.75] [--hardness 0.3]
 """
 
 from __future__ import annotations
@@ -90,7 +90,7 @@ def compile_on(actuator: str, targets: dict[str, float]) -> Any:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--roughness", type=float, default=0.6, help="target roughness 0..1 (default 0.6)")
+    ap.add_argument("--roughness", type=float, default=0.75, help="target roughness 0..1 (default 0.75)")
     ap.add_argument("--hardness", type=float, default=None, help="also a hardness target (default none)")
     ap.add_argument("--seconds", type=float, default=1.0, help="render time per actuator (s, default 1)")
     args = ap.parse_args(argv)

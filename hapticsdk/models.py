@@ -7,7 +7,8 @@ validate and then call the backend's ``_predict``; every backend gets the same c
 
 :class:`MLPModel` is the paper's network (5-20-2, tanh hidden and output, MATLAB
 ``mapminmax`` scaling folded in) evaluated with numpy; it has an analytic Jacobian.
-The ONNX plugin runs the same network through onnxruntime.
+The ONNX plugin runs the same network from its ONNX file (with numpy in float32 when
+the graph is a plain dense chain, else through onnxruntime).
 """
 
 from __future__ import annotations

@@ -40,6 +40,11 @@ Two tools:
   can render passively is rendered as the stiffest spring it can (a conservative spring,
   after the idea of a virtual coupling), with the observers as the backstop, instead of
   a relay the observers withhold.
+  After all of these, a **felt floor** keeps the output, deeper than 1 mm, at no less than
+  ``min(0.6 N, 0.95 x the wall's own force)`` whenever the floor's work over one tick is
+  affordable, and a **pre-paid budget** makes the damper pay, while the probe moves into
+  the wall (extra resistance, not less force), for the withdrawal where the floor limits
+  it (see :class:`ControllerSettings`).
 
 Sign conventions: ``x`` is the probe position along the surface normal (mm, y axis,
 inside the material at x < 0); ``F`` is the force on the probe along +x (N, "pushing the
@@ -54,10 +59,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy.linalg import expm
-from scipy.special import gammainc
 
 from .errors import ValidationError
+from .linalg import expm
+from .special import gammainc2
 
 #: Label of a wall that is passive by the Colgate condition (margin > 0).
 PASSIVE = "passive"
@@ -133,7 +138,7 @@ def mass_correction(b: Any, T: Any, d: Any, mass_kg: Any) -> Any:
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         a = np.tanh(0.5 * dl)
         small = dl < 1e-4
-        exact0 = dl * -np.expm1(-dl) / (2.0 * gammainc(2.0, dl))
+        exact0 = dl * -np.expm1(-dl) / (2.0 * gammainc2(dl))
         far = 1.0 / (1.0 - 2.0 * a / dl)
         f0 = np.where(small, 1.0 + dl / 6.0 + dl * dl / 36.0,
                       np.where(2.0 * a * (1.0 + a) > dl, exact0, far))
@@ -398,6 +403,42 @@ class ControllerSettings:
         bound_tolerance_j: (see above) 50 uJ: with the stiffness cap the first count of
             a wall met from outside is worth at most ``cap_count_force_n`` x Delta, so a
             small tolerance no longer keeps the wall from starting.
+        felt_floor_fraction: **felt floor** (on by default; None: off). Deeper than
+            ``felt_depth_mm`` (reading), no correction (damper, energy bound, slew limit)
+            takes the output below ``min(felt_force_n, felt_floor_fraction x F_wall)``,
+            ``F_wall`` the wall's own force before the stiffness cap: a person pressing
+            into a wall always feels it. Without it the dampers that keep a device with
+            little or no damping (b = 0) passive take the force off during withdrawal,
+            down to a pull on the stylus. Above the floor, and shallower than
+            ``felt_depth_mm``, the dampers act as before, so hold oscillations and the
+            count-level dither are still damped. A flat floor stores nothing and its
+            hold generates nothing except at its edge (about ``F v T`` per crossing).
+            0.95: the floor stays within 5 % of a soft wall's law.
+        felt_force_n: the floor's cap (N; 0.6 N, above the 0.5 N a person must feel on
+            a wall with some margin). None: only the fraction.
+        felt_depth_mm: penetration (mm, of the reading) from which the floor holds (1 mm).
+        felt_tick_energy_j: the floor holds on a tick only while its work over one tick
+            of the current motion, ``F_floor (|dx| + Delta)`` (J), is at most this plus
+            ``felt_damping_multiple x b dx^2 / dt`` (the device damping's dissipation over
+            that tick, at the cap's Colgate multiple). Passivity comes first: at long
+            periods on a device without damping a fast tap moves 1-1.5 mm per tick (4 ms),
+            a 0.6 N floor would hand the finger 0.6-0.9 mJ in the tick it leaves, and the
+            floor yields (0.4 mJ).
+        felt_damping_multiple: see ``felt_tick_energy_j`` (4).
+        prepay_factor: **pre-paid energy budget** for the withdrawal. While the probe
+            moves into the wall (reading moving in, wall force > 0) the generation
+            observer books ``(1 + prepay_factor)`` x the hold's excess, so its damper
+            (which *adds* outward force while the probe moves in: resistance, not a
+            loss of felt force) also pays ``prepay_factor`` x that excess in advance;
+            the advance is kept as a reserve (``prepaid_reserve_j`` in :meth:`report`)
+            and any debt booked while the probe is not moving in is paid from it first,
+            so the withdrawal, where the felt floor limits the damper, draws on energy
+            already dissipated. The reserve is dropped when contact ends. 0: off; 1
+            would pay for a withdrawal as fast as the entry; 0.5, because the damper
+            still acts on the withdrawal above the floor and shallower than
+            ``felt_depth_mm`` (in the stability matrix 0.5 meets the floor and the
+            energy goal in every cell 1 does, and leaves less energy in the damped cells).
+        prepay_budget_j: largest reserve (J; 1 mJ, the generation observer's floor).
     """
 
     max_damping_ns_per_m: float = 5.0
@@ -420,6 +461,13 @@ class ControllerSettings:
     cap_colgate_multiple: float = 4.0
     cap_damping_share: float = 0.25
     cap_count_force_n: float | None = 0.4
+    felt_floor_fraction: float | None = 0.95
+    felt_force_n: float | None = 0.6
+    felt_depth_mm: float = 1.0
+    felt_tick_energy_j: float = 4.0e-4
+    felt_damping_multiple: float = 4.0
+    prepay_factor: float = 0.5
+    prepay_budget_j: float = 1.0e-3
 
 
 def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float,
@@ -488,10 +536,13 @@ class PassivityController:
     tick, with the cap in (1) computed for the whole ramp-down at that rate. Before
     those, the generation observer ``G`` (see :class:`ControllerSettings`) adds a damper
     on the raw velocity as soon as the hold makes more energy than the device damping
-    dissipates, so a wall above 2b/T is damped while it still renders its full spring.
+    dissipates, so a wall above 2b/T is damped while it still renders its full spring;
+    moving in, it also pre-pays the withdrawal. Last, the felt floor
+    (``felt_floor_fraction``) keeps the output deeper than ``felt_depth_mm`` at or above
+    ``min(felt_force_n, felt_floor_fraction x wall force)`` while affordable.
     """
 
-    __slots__ = ("settings", "energy_j", "generation_j", "dissipated_j", "bounded_j", "active_ticks",
+    __slots__ = ("settings", "energy_j", "generation_j", "reserve_j", "dissipated_j", "bounded_j", "active_ticks",
                  "capped_n", "_x_prev", "_f_prev", "_f_pc_prev", "_v", "_out_prev", "_fw_prev", "_x_play",
                  "_cap_dt", "_cap_k")
 
@@ -503,6 +554,7 @@ class PassivityController:
         """Forget the energy observed so far (at contact start or a new run)."""
         self.energy_j = 0.0        # energy absorbed by the wall (J), PO
         self.generation_j = 0.0    # hold's work relative to the wall's own law + credit (J)
+        self.reserve_j = 0.0       # energy pre-paid by the damper on entry, not yet used (J)
         self._fw_prev = 0.0
         self._x_play = 0.0
         self.dissipated_j = 0.0    # energy removed by the damper (J)
@@ -520,6 +572,7 @@ class PassivityController:
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Observe, then return the force (N) to command this tick."""
         s = self.settings
+        f_raw = f_wall
         if s.stiffness_cap and f_wall > 0.0 and x_mm < 0.0:
             # stiffness cap: the wall's force is at most K_c x penetration (the surface is
             # at x = 0), a conservative spring of the stiffness the device renders passively
@@ -584,9 +637,23 @@ class PassivityController:
                 # (|dF| <= 2 b |dx| / dt): the device damping covers the hold's
                 # K dx^2 / 2, so the count is credited whole instead of not at all
                 cg = bd * dx * dx / dt
-            g = self.generation_j - work + 0.5 * (self._fw_prev + f_wall) * dx + cg
+            delta = -work + 0.5 * (self._fw_prev + f_wall) * dx + cg
+            g = self.generation_j + delta
+            if s.prepay_factor > 0.0:
+                # pre-paid budget (see ControllerSettings.prepay_factor)
+                if dx < 0.0 and f_wall > 0.0:
+                    extra = s.prepay_factor * -delta if delta < 0.0 else 0.0
+                    room = s.prepay_budget_j - self.reserve_j
+                    extra = min(extra, room) if room > 0.0 else 0.0
+                    g -= extra
+                    self.reserve_j += extra
+                elif g < 0.0 and self.reserve_j > 0.0:
+                    draw = min(self.reserve_j, -g)
+                    g += draw
+                    self.reserve_j -= draw
             if f_wall == 0.0 and self._fw_prev == 0.0:
                 g = 0.0  # out of contact: the empty wall holds and generates nothing
+                self.reserve_j = 0.0
             if g > s.generation_budget_j:
                 g = s.generation_budget_j
             else:
@@ -635,6 +702,14 @@ class PassivityController:
             if lo > hard:
                 lo = hard
             out = lo if out < lo else (hi if out > hi else out)
+        if s.felt_floor_fraction and f_raw > 0.0 and -x_mm >= s.felt_depth_mm:
+            # felt floor (see ControllerSettings.felt_floor_fraction)
+            fl = s.felt_floor_fraction * f_raw
+            if s.felt_force_n is not None and fl > s.felt_force_n:
+                fl = s.felt_force_n
+            bp = bd if bd > 0.0 else 0.0
+            if out < fl and fl * (adx + q) <= s.felt_tick_energy_j + s.felt_damping_multiple * bp * adx * adx / dt:
+                out = fl
         self._f_pc_prev = out - f_wall
         self._out_prev = out
         self._fw_prev = f_wall
@@ -654,6 +729,7 @@ class PassivityController:
         ``stiffness_capped_n_ticks`` (sum over ticks of the force the stiffness cap
         removed, N)."""
         return {"observed_energy_j": self.energy_j, "generation_j": self.generation_j,
+                "prepaid_reserve_j": self.reserve_j,
                 "dissipated_j": self.dissipated_j,
                 "withheld_n_ticks": self.bounded_j, "active_ticks": self.active_ticks,
                 "stiffness_capped_n_ticks": self.capped_n,
@@ -666,7 +742,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     z = np.zeros(n)
     return {"energy": z.copy(), "dissipated": z.copy(), "x_prev": z.copy(), "f_prev": z.copy(),
             "f_pc_prev": z.copy(), "v": z.copy(), "out_prev": z.copy(), "started": np.zeros(n, bool),
-            "generation": z.copy(), "fw_prev": z.copy(), "x_play": z.copy()}
+            "generation": z.copy(), "fw_prev": z.copy(), "x_play": z.copy(), "reserve": z.copy()}
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: float,
@@ -689,6 +765,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     adx = np.abs(dx)
     count_level = (qm > 0) & (adx <= 1.000001 * qm)
     f = np.array(f_wall, float)
+    f_raw = f
     if s.stiffness_cap and dt > 0:
         bp = np.maximum(bb, 0.0)
         kc = 2.0 * np.maximum(s.cap_colgate_multiple * bp, bp + s.cap_damping_share * s.max_damping_ns_per_m) / dt / 1000.0
@@ -719,10 +796,27 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     if s.generation_observer:
         whole = count_level & (dx != 0) & (dfw <= 2.0 * bb * adx)
         cg = np.where(whole, bb * dx * dx / dt, credit)
-        g = state["generation"] - work + 0.5 * (state["fw_prev"] + f) * dx + cg
+        delta = -work + 0.5 * (state["fw_prev"] + f) * dx + cg
+        g = state["generation"] + delta
+        res_j = state["reserve"] if "reserve" in state else np.zeros_like(g)
+        if s.prepay_factor > 0.0:
+            # pre-paid budget: while the probe moves into the wall the damper also pays
+            # prepay_factor x the hold's generation in advance (kept as a reserve), so the
+            # withdrawal, where the felt floor limits the damper, draws on energy already
+            # dissipated
+            entering = (dx < 0.0) & (f > 0.0)
+            extra = np.where(entering, s.prepay_factor * np.maximum(-delta, 0.0), 0.0)
+            extra = np.minimum(extra, np.maximum(s.prepay_budget_j - res_j, 0.0))
+            g = g - extra
+            res_j = res_j + extra
+            draw = np.where(entering, 0.0, np.minimum(res_j, np.maximum(-g, 0.0)))
+            g = g + draw
+            res_j = res_j - draw
         floor = np.where(count_level, np.minimum(s.dither_damping_ns_per_m * qm * qm / dt, s.generation_floor_j),
                          s.generation_floor_j)
-        g = np.clip(np.where((f == 0.0) & (state["fw_prev"] == 0.0), 0.0, g), -floor, s.generation_budget_j)
+        out_of_contact = (f == 0.0) & (state["fw_prev"] == 0.0)
+        g = np.clip(np.where(out_of_contact, 0.0, g), -floor, s.generation_budget_j)
+        state["reserve"] = np.where(out_of_contact, 0.0, res_j)
         state["generation"] = g
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             gen_damp = started & (g < 0.0) & (f != 0.0) & (np.abs(v_raw) * 1e3 > s.velocity_deadband_mm_s)
@@ -762,6 +856,17 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         limit = started & (active | (state["f_pc_prev"] != 0.0))
         lo = np.minimum(prev - step, hard)  # a cut below the one-tick cap is never delayed
         out = np.where(limit, np.clip(out, lo, prev + step), out)
+    if s.felt_floor_fraction:
+        # felt floor (see ControllerSettings.felt_floor_fraction): deeper than
+        # felt_depth_mm no correction takes the output below min(felt_force_n,
+        # felt_floor_fraction x the wall's own force) ...
+        fl = s.felt_floor_fraction * f_raw
+        if s.felt_force_n is not None:
+            fl = np.minimum(fl, s.felt_force_n)
+        # ... as long as its work over one tick of the current motion is affordable
+        afford = fl * (adx + qm) <= s.felt_tick_energy_j + s.felt_damping_multiple * np.maximum(bb, 0.0) * adx * adx / dt
+        deep = (f_raw > 0.0) & (-np.asarray(x_mm, float) >= s.felt_depth_mm) & afford
+        out = np.where(deep, np.maximum(out, fl), out)
     out = np.where(started, out, f_wall)
     state["f_pc_prev"] = np.where(on, out - f_wall, 0.0)
     state["out_prev"] = out

@@ -10,10 +10,12 @@ constraints. ``solve(...)`` then resolves ``method=`` through the solver table, 
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Sequence, overload
+from collections.abc import Mapping
+from typing import Any, Sequence, overload
 
 import numpy as np
 
+from .checks import MAX_SEED, check_seed
 from .dimensions import PerceptionDimension, check_intensity
 from .errors import ModelError, ValidationError
 from .features import FeatureSpace
@@ -62,7 +64,11 @@ def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.n
         if extra or missing:
             raise ValidationError(f"targets name {list(targets)} but dimensions are {list(dims)}",
                                   field="targets")
-        row = [check_intensity(targets[d], f"targets.{d}") for d in dims]
+        row = []
+        for d in dims:
+            v = targets[d]
+            # a plain float in 0..1 is what check_intensity returns for it (NaN fails both)
+            row.append(v if type(v) is float and 0.0 <= v <= 1.0 else check_intensity(v, f"targets.{d}"))
         return np.array(row, float), dims
     if dimensions is None:
         raise ValidationError("array targets need dimensions=[...] naming their columns", field="dimensions")
@@ -207,8 +213,8 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
     >>> res = solve({"hardness": 0.8, "roughness": 0.3}, seed=1)   # doctest: +SKIP
     >>> res.success, res.error, res.x_dict["GS"]                      # doctest: +SKIP
     """
-    from .checks import check_seed
-    check_seed(seed)  # before any work: seed='abc' or -1 is bad input, not a solver failure
+    if not (seed is None or (type(seed) is int and 0 <= seed <= MAX_SEED)):
+        check_seed(seed)  # before any work: seed='abc' or -1 is bad input, not a solver failure
     problem = _problem_for(targets, build_kw)
     res = _solver_for(method, options).solve(problem, seed=seed)
     # what the numbers are measured against: the model and its training data
@@ -228,9 +234,14 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
 _PROBLEMS: dict[tuple, SolveProblem] = {}
 _SOLVERS: dict[tuple, Solver] = {}
 _MAX_CACHED = 64
+_PLAIN = frozenset((str, int, float, bool, type(None)))
 
 
 def _hashable(v: Any) -> Any:
+    if type(v) in _PLAIN:
+        return v
+    if type(v) is dict:
+        return tuple(sorted((k, _hashable(x)) for k, x in v.items()))
     if isinstance(v, PerceptionModel):
         return ("model", id(v))        # the cached problem holds the model: the id stays unique
     if isinstance(v, Mapping):
@@ -244,7 +255,7 @@ def _hashable(v: Any) -> Any:
 def _problem_for(targets: Any, build_kw: dict[str, Any]) -> SolveProblem:
     """``build_problem(targets, **build_kw)``, from a cached problem of the same setup when
     there is one (then only the targets are validated)."""
-    mapping = isinstance(targets, Mapping)
+    mapping = type(targets) is dict or isinstance(targets, Mapping)
     def setup_key() -> tuple:
         dims = tuple(targets) if mapping and build_kw.get("dimensions") is None else \
             tuple(build_kw.get("dimensions") or ())
@@ -270,7 +281,8 @@ def _problem_for(targets: Any, build_kw: dict[str, Any]) -> SolveProblem:
     T, dims = _targets_array(targets, build_kw.get("dimensions"))
     if dims != template.dimensions:   # pragma: no cover - the key holds the dimensions
         return build_problem(targets, **build_kw)
-    return template.with_targets(T)
+    # a mapping's values were checked one by one (check_intensity: finite, in 0..1)
+    return template.with_targets(T, validate=not mapping)
 
 
 def _solver_for(method: str, options: Mapping[str, Any] | None) -> Solver:

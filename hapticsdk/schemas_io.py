@@ -190,7 +190,56 @@ def read_json(path: str | Path, *, field: str, error: type[ValidationError] = Va
 
 
 def load_json(path: str | Path, schema: str) -> Any:
-    """Read a JSON file and validate it; errors name the file and the field."""
+    """Read a JSON file and validate it; errors name the file and the field.
+
+    Validation is memoised (:func:`_validated_marker`): a file whose content, schema and
+    ``jsonschema`` version are exactly those of a file that passed before is not
+    validated again (``jsonschema`` costs 40-90 ms to import and warm up, e.g. on every
+    ``hapticsdk render`` of a library material). Failures are never memoised.
+    """
     data = read_json(path, field=schema)
+    marker = _validated_marker(data, schema)
+    if marker is not None and marker.is_file():
+        return data
     validate(data, schema, source=str(path))
+    if marker is not None:
+        try:
+            from .fileio import atomic_write_bytes
+            marker.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_bytes(marker, b"")
+        except Exception:  # a read-only cache folder: validation still happened
+            pass
     return data
+
+
+def _cache_dir() -> Path:
+    """``$HAPTICSDK_CACHE_DIR`` or ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk``."""
+    import os
+
+    env = os.environ.get("HAPTICSDK_CACHE_DIR")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
+
+
+def _validated_marker(data: Any, schema: str) -> Path | None:
+    """Where the "passed" marker of ``data`` (as parsed by :func:`read_json`) against schema
+    ``schema`` lives: ``<cache>/validated/<sha256>``, the hash taken over the instance's
+    canonical JSON (sorted keys; ints and floats stay distinct), the schema file's bytes,
+    the schema name and the installed ``jsonschema`` version. ``None`` (always validate)
+    when any of them cannot be read."""
+    import hashlib
+    from importlib import metadata
+
+    try:
+        blob = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
+        schema_bytes = (schema_dir() / f"{schema}.schema.json").read_bytes()
+        version = metadata.version("jsonschema")
+    except Exception:
+        return None
+    h = hashlib.sha256()
+    for part in (schema.encode(), schema_bytes, version.encode(), blob):
+        h.update(len(part).to_bytes(8, "little"))
+        h.update(part)
+    return _cache_dir() / "validated" / h.hexdigest()

@@ -13,7 +13,6 @@ returned ``x``: a solver cannot report an error it did not reach.
 
 from __future__ import annotations
 
-import copy
 import operator
 import time
 from abc import ABC, abstractmethod
@@ -22,8 +21,9 @@ from typing import Any, ClassVar, Iterator, Sequence
 
 import numpy as np
 
+from .checks import MAX_SEED, check_seed
 from .dimensions import PENALTY_FORMS, Constraint
-from .errors import SolverError, ValidationError
+from .errors import ModelError, SolverError, ValidationError
 from .features import FeatureSpace
 from .models import PerceptionModel
 
@@ -192,9 +192,13 @@ class Trace:
         """
         self.times.append(time.perf_counter() - self.t0)
         self.nfev.append(int(nfev))
-        self.best_error.append(np.array(best_error, float).reshape(self.n_targets))
-        self.violation.append(np.zeros(self.n_targets) if violation is None
-                              else np.array(violation, float).reshape(self.n_targets))
+        n = self.n_targets
+        # a copy (the solver keeps updating its arrays); float (n,) arrays copy directly
+        self.best_error.append(best_error.copy() if type(best_error) is np.ndarray and best_error.shape == (n,)
+                               and best_error.dtype == np.float64 else np.array(best_error, float).reshape(n))
+        self.violation.append(np.zeros(n) if violation is None else
+                              violation.copy() if type(violation) is np.ndarray and violation.shape == (n,)
+                              and violation.dtype == np.float64 else np.array(violation, float).reshape(n))
 
     def rows(self, i: int | None = None) -> list[dict[str, Any]]:
         """Rows for target ``i`` (scalars), or for the batch (max over targets)."""
@@ -306,6 +310,10 @@ class SolveProblem:
         self._identity = tuple(self.space.names) == tuple(model_in)   # X rows are model inputs
         self._base_formulas = all(type(c).uses_base_formulas() for c in self.constraints)
         self._space_cols = np.array([model_in.index(n) for n in self.space.names], dtype=int)
+        # plain-float copies for the one-target path (evaluate_one, results)
+        self._out_list = self._out_idx.tolist()
+        self._cnames = [c.name for c in self.constraints]
+        self._bounds_list = (self.space.lower.tolist(), self.space.upper.tolist())
         #: per-setup memo (search caches: sample clouds, lookup tables, keys) shared by the
         #: problems :meth:`with_targets` derives, which differ only in their targets
         self._setup_cache: dict[Any, Any] = {}
@@ -337,7 +345,8 @@ class SolveProblem:
             T = T[None, :]
         if validate:
             _check_targets(T, self.dimensions, np.shape(targets))
-        new = copy.copy(self)
+        new = object.__new__(type(self))      # a shallow copy (copy.copy costs ~3 us more)
+        new.__dict__.update(self.__dict__)
         new.targets = T
         new.single = single
         new.x0 = x0
@@ -375,20 +384,26 @@ class SolveProblem:
 
     def columns(self, G: np.ndarray) -> dict[str, np.ndarray]:
         """Model inputs ``G`` (``(..., n_inputs)``, physical units) as ``{feature name:
-        column}`` for the constraints.
-        """
+        column}`` for the constraints. For more than 64 rows the columns are rows of one
+        transposed copy (contiguous: the constraints' arithmetic on them runs ~1.5x faster
+        than on strided views, well above the cost of the copy)."""
+        if G.ndim == 2 and G.shape[0] > 64:
+            GT = G.T.copy()
+            return {n: GT[i] for i, n in enumerate(self.model.feature_names)}
         return {n: G[..., i] for i, n in enumerate(self.model.feature_names)}
 
     # -- evaluation --------------------------------------------------------
     def evaluate(self, X: np.ndarray, *, penalty: str | None = None, details: bool = False,
-                 rows: np.ndarray | None = None, per_constraint: bool = False) -> Any:
+                 rows: np.ndarray | None = None, per_constraint: bool = False,
+                 finite: bool = False) -> Any:
         """Fitness of formula (6) for ``X`` of shape ``(m, p, d)`` (p candidates per target)
         or ``(m, d)``; ONE model call for all rows. ``rows`` (optional index array) scores
         ``X`` against ``targets[rows]`` instead of all ``m`` targets (solvers that drop solved
         targets). Returns fitness with the leading shape of ``X``; with ``details``, a dict
         with ``fitness``, ``error``, ``violation``, ``intensities`` and, with
         ``per_constraint``, ``violations`` (each constraint's, last axis in the order of
-        ``constraints``)."""
+        ``constraints``). ``finite=True`` (solvers, for candidates they generated inside the
+        bounds) skips the model's input check for NaN/inf rows."""
         X = np.asarray(X, float)
         lead = X.shape[:-1]
         T = self.targets if rows is None else self.targets[rows]
@@ -398,7 +413,14 @@ class SolveProblem:
         form = penalty or self.penalty
         X2 = X.reshape(-1, self.n_features)
         G = X2 if self._identity else self.full_inputs(X2)
-        I = self.model.predict(G)
+        model = self.model
+        if finite and _plain_predict(model):
+            I = np.asarray(model._predict(G), dtype=float)
+            if I.shape != (G.shape[0], model.n_outputs):
+                raise ModelError(f"model {model.name!r} returned shape {I.shape}, "
+                                 f"expected {(G.shape[0], model.n_outputs)}")
+        else:
+            I = model.predict(G)
         n = G.shape[0]
         # sum_j |I_j - T_j|: one subtraction, |.| in place, then the columns added (a
         # reduction over a length-2 axis costs more than the additions)
@@ -427,6 +449,52 @@ class SolveProblem:
                                  else np.moveaxis(per_c, 0, -1).reshape(lead + (len(self.constraints),)))
         return out
 
+    def evaluate_one(self, x: np.ndarray) -> tuple[float, float, float, list[float], list[float]]:
+        """Formula (6) at one answer ``x`` ``(d,)`` of the first target, on plain floats:
+        ``(fitness, error, violation, intensities, violations)`` with every model output's
+        intensity and each constraint's violation as lists; the same numbers as
+        :meth:`evaluate` with ``details`` and ``per_constraint`` on a batch of one."""
+        G = (x if self._identity else self.full_inputs(x))[None, :]
+        model = self.model
+        if _plain_predict(model):
+            # a validated, finite row of the right width: the backend directly
+            Y = np.asarray(model._predict(G), dtype=float)
+            if Y.shape != (1, model.n_outputs):
+                raise ModelError(f"model {model.name!r} returned shape {Y.shape}, expected {(1, model.n_outputs)}")
+        else:
+            Y = model.predict(G)
+        I = Y[0].tolist()
+        T = self.targets[0].tolist()
+        err = 0.0
+        for j, o in enumerate(self._out_list):
+            err += abs(I[o] - T[j])
+        if not self.constraints:
+            return err, err, 0.0, I, []
+        cols = self.columns(G)
+        form = self.penalty
+        pc: list[float] = []
+        pen = 0.0
+        if self._base_formulas:
+            for c in self.constraints:
+                bnd, val = c.bound_and_value(cols)
+                b, v = _first(bnd), _first(val)
+                if v < b:     # a NaN row counts as met, as in evaluate
+                    nv = (b - v) / (abs(b) or 1.0)
+                    pen += nv if form == "normalised" else b * b - v * v
+                else:
+                    nv = 0.0
+                pc.append(nv)
+            viol = max(pc)
+        else:
+            for c in self.constraints:
+                pen += _first(c.penalty(cols, form))
+                pc.append(_first(c.violation(cols)))
+            viol = max(0.0, *pc)
+        if viol == viol and any(v != v for v in pc):   # NaN propagates, as numpy's max
+            viol = float("nan")
+        fit = err + pen if self.penalty_weight == 1.0 else err + self.penalty_weight * pen
+        return fit, err, viol, I, pc
+
     def _penalty_violation(self, cols: dict[str, np.ndarray], form: str, n: int, per: bool = False
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """Summed penalty (``form``) and max violation of all constraints, ``(n,)`` each,
@@ -451,20 +519,31 @@ class SolveProblem:
         V = np.empty((nc, n))
         for j, c in enumerate(self.constraints):
             B[j], V[j] = c.bound_and_value(cols)
-        met = ~(V < B)                 # (not V >= B: a NaN row counts as met, as it always did)
-        scale = np.abs(B)
-        scale[scale == 0] = 1.0
+        short = V < B                  # not met (a NaN row counts as met, as it always did)
         nvs = np.subtract(B, V)
-        nvs /= scale
-        nvs[met] = 0.0
-        viol = nvs.max(axis=0) if nc > 1 else nvs[0].copy()
+        scale = np.abs(B)
+        np.divide(nvs, scale, out=nvs, where=scale != 0)     # |b| = 0: divided by 1
+        nvs = np.where(short, nvs, 0.0)
+        # ufunc reductions directly (ndarray.max/sum go through a Python wrapper: ~1 us each)
+        viol = np.maximum.reduce(nvs, axis=0) if nc > 1 else nvs[0].copy()
         if form == "normalised":
-            return (nvs.sum(axis=0) if nc > 1 else nvs[0].copy()), viol, (nvs if per else None)
+            return (np.add.reduce(nvs, axis=0) if nc > 1 else nvs[0].copy()), viol, (nvs if per else None)
         B *= B
         V *= V
         B -= V
-        B[met] = 0.0
-        return (B.sum(axis=0) if nc > 1 else B[0]), viol, (nvs if per else None)
+        P = np.where(short, B, 0.0)
+        return (np.add.reduce(P, axis=0) if nc > 1 else P[0]), viol, (nvs if per else None)
+
+
+def _first(a: Any) -> float:
+    """The first (only) value of a one-row constraint result (array, numpy or Python scalar)."""
+    return float(a[0]) if getattr(a, "ndim", 0) else float(a)
+
+
+def _plain_predict(model: PerceptionModel) -> bool:
+    """True when ``model.predict`` is :meth:`PerceptionModel.predict` (validation, then
+    ``_predict``), not overridden by the class or the instance."""
+    return type(model).predict is PerceptionModel.predict and "predict" not in vars(model)
 
 
 @dataclass
@@ -512,14 +591,16 @@ class Solver(ABC):
         chunk size, as they depend on a target's position in the batch."""
         if not isinstance(problem, SolveProblem):
             raise ValidationError("problem must be a SolveProblem", field="problem")
-        from .checks import check_seed
-        seed = check_seed(seed)
+        if not (seed is None or (type(seed) is int and 0 <= seed <= MAX_SEED)):
+            seed = check_seed(seed)
         rng = np.random.default_rng(seed) if self.uses_rng else _NO_RNG
         chunk = DEFAULT_CHUNK_SIZE if chunk_size is None else chunk_size
         if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or not 1 <= chunk <= MAX_CHUNK_SIZE:
             raise ValidationError(f"must be an integer in 1..{MAX_CHUNK_SIZE}, got {chunk_size!r}",
                                   field="chunk_size")
         m = problem.n_targets
+        if problem.single:
+            return self._solve_single(problem, rng)
         keep_traces = m <= PER_TARGET_TRACE_MAX
         data = _BatchData(problem, self.name, keep_traces)
         t0 = time.perf_counter()
@@ -542,6 +623,35 @@ class Solver(ABC):
             return data.result(0)
         return BatchSolveResult(data=data, time_s=data.elapsed, nfev=data.nfev, nit=data.nit,
                                 trace=data.batch_trace, method=self.name)
+
+    def _solve_single(self, problem: SolveProblem, rng: np.random.Generator) -> SolveResult:
+        """One target (``problem.single``): the same search and the same result as a batch of
+        one, with the answer re-evaluated on plain floats (:meth:`SolveProblem.evaluate_one`)
+        instead of through the batch arrays."""
+        t0 = time.perf_counter()
+        trace = Trace(1)
+        try:
+            out = self._solve(problem, rng, trace)
+        except (ValidationError, SolverError):
+            raise
+        except Exception as exc:
+            raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
+        x = np.asarray(out.x, float)
+        d = problem.n_features
+        row = x[0].tolist() if x.shape == (1, d) else None
+        if row is None or not all(v - v == 0.0 for v in row):    # v - v is NaN for NaN and +-inf
+            raise SolverError(f"solver {self.name!r} returned x of shape {x.shape} "
+                              f"(expected {(1, d)}) or non-finite values")
+        lo, hi = problem._bounds_list      # clipped to the bounds as problem.clip does, on floats
+        x = np.array([h if v > h else (l if v < l else v) for v, l, h in zip(row, lo, hi)])
+        fun, error, viol, I, pc = problem.evaluate_one(x)
+        elapsed = time.perf_counter() - t0
+        rows: list[dict[str, Any]] = []
+        if trace.times:   # as a batch's per-target trace: times from the solver's start
+            rows = [{"time_s": t, "nfev": n, "best_error": float(e[0]), "constraint_violation": float(v[0])}
+                    for t, n, e, v in zip(trace.times, trace.nfev, trace.best_error, trace.violation)]
+        return _make_result(problem, 0, x, I, error, fun, viol, pc, out.message, rows,
+                            int(out.nfev), int(out.nit), elapsed, self.name)
 
     @abstractmethod
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
@@ -595,48 +705,54 @@ class _BatchData:
         self._start = [0] if one else np.cumsum([0] + [q["n"] for q in parts]).tolist()
 
     def result(self, i: int) -> SolveResult:
-        problem = self.problem
         k = 0 if self._part_of is None else int(self._part_of[i])
         part = self._parts[k]
-        I = self.intensities[i]
-        dims = problem.dimensions
-        out_idx = problem._out_idx
-        Ti = problem.targets[i]
-        err_dims = {d: float(abs(I[out_idx[j]] - Ti[j])) for j, d in enumerate(dims)}
-        error = float(self.error[i])
-        viol = float(self.constraint_violation[i])
-        ok = bool(self.success[i])
-        names = problem.model.dimension_names
-        preds = {d: float(v) for d, v in zip(names, I.tolist())}
-        cnames = [c.name for c in problem.constraints]
-        pc = self.per_c[i].tolist()
-        if ok:
-            msg = f"target reached: error {error:.3g} <= tolerance {problem.tolerance:g}, constraints met"
-        else:
-            parts = []
-            if error > problem.tolerance:
-                parts.append(f"error {error:.3g} > tolerance {problem.tolerance:g}; residual per "
-                             f"dimension {{{', '.join(f'{a}: {v:.3g}' for a, v in err_dims.items())}}}; "
-                             f"nearest intensities found {{{', '.join(f'{a}: {preds[a]:.3g}' for a in dims)}}}")
-            if viol > CONSTRAINT_TOL:
-                bad = [n for n, v in zip(cnames, pc) if v > CONSTRAINT_TOL]
-                parts.append(f"constraints violated: {bad} (max relative violation {viol:.3g})")
-            msg = "target not reached: " + "; ".join(parts)
-        if part["message"]:
-            msg += f" [{self.method}: {part['message']}]"
-        x = self.x[i].copy()
-        G = x if problem._identity else problem.full_inputs(x[None])[0]
         trace: list[dict[str, Any]] = []
         if part["traces"] is not None:
             times, nfev, E, V = part["traces"]
             j = i - int(self._start[k])
             trace = [{"time_s": t, "nfev": n, "best_error": e, "constraint_violation": v}
                      for t, n, e, v in zip(times.tolist(), nfev.tolist(), E[j].tolist(), V[j].tolist())]
-        return SolveResult(
-            x=x, x_dict=dict(zip(problem.model.feature_names, G.tolist())),
-            feature_names=problem.feature_names, fun=float(self.fun[i]), success=ok,
-            message=msg, nfev=self.nfev, nit=self.nit, error=error,
-            error_per_dimension=err_dims, intensities=preds,
-            targets={d: float(v) for d, v in zip(dims, Ti.tolist())},
-            constraint_violation=viol, constraint_violations=dict(zip(cnames, pc)),
-            time_s=self.elapsed, trace=trace, method=self.method)
+        return _make_result(self.problem, i, self.x[i].copy(), self.intensities[i].tolist(),
+                            float(self.error[i]), float(self.fun[i]), float(self.constraint_violation[i]),
+                            self.per_c[i].tolist(), part["message"], trace, self.nfev, self.nit,
+                            self.elapsed, self.method)
+
+
+def _make_result(problem: SolveProblem, i: int, x: np.ndarray, I: list[float], error: float, fun: float,
+                 viol: float, pc: list[float], solver_message: str, trace: list[dict[str, Any]],
+                 nfev: int, nit: int, elapsed: float, method: str) -> SolveResult:
+    """The :class:`SolveResult` of target ``i`` from its evaluated answer: ``x`` (searched
+    features), ``I`` (every model output), error, fitness, max violation and each
+    constraint's violation ``pc``, as plain floats."""
+    dims = problem.dimensions
+    out_idx = problem._out_list
+    Ti = problem.targets[i].tolist()
+    err_dims = {d: abs(I[out_idx[j]] - Ti[j]) for j, d in enumerate(dims)}
+    ok = error <= problem.tolerance and viol <= CONSTRAINT_TOL
+    names = problem.model.dimension_names
+    preds = dict(zip(names, I))
+    cnames = problem._cnames
+    if ok:
+        msg = f"target reached: error {error:.3g} <= tolerance {problem.tolerance:g}, constraints met"
+    else:
+        parts = []
+        if error > problem.tolerance:
+            parts.append(f"error {error:.3g} > tolerance {problem.tolerance:g}; residual per "
+                         f"dimension {{{', '.join(f'{a}: {v:.3g}' for a, v in err_dims.items())}}}; "
+                         f"nearest intensities found {{{', '.join(f'{a}: {preds[a]:.3g}' for a in dims)}}}")
+        if viol > CONSTRAINT_TOL:
+            bad = [n for n, v in zip(cnames, pc) if v > CONSTRAINT_TOL]
+            parts.append(f"constraints violated: {bad} (max relative violation {viol:.3g})")
+        msg = "target not reached: " + "; ".join(parts)
+    if solver_message:
+        msg += f" [{method}: {solver_message}]"
+    G = x if problem._identity else problem.full_inputs(x[None])[0]
+    return SolveResult(
+        x=x, x_dict=dict(zip(problem.model.feature_names, G.tolist())),
+        feature_names=problem.feature_names, fun=fun, success=ok,
+        message=msg, nfev=nfev, nit=nit, error=error,
+        error_per_dimension=err_dims, intensities=preds,
+        targets=dict(zip(dims, Ti)),
+        constraint_violation=viol, constraint_violations=dict(zip(cnames, pc)),
+        time_s=elapsed, trace=trace, method=method)

@@ -74,7 +74,11 @@ def make_problem_factory() -> tuple[Callable[..., SolveProblem], str]:
     from ..problems import build_problem
 
     probe = build_problem(np.array([[0.5, 0.5]]), dimensions=DIMS)
-    desc = f"{type(probe.model).__name__} {probe.model.name!r} (default model), space {list(probe.space.names)}, " \
+    mdl = probe.model
+    sha = getattr(mdl, "file_sha256", None) or getattr(mdl, "_sha256", None)
+    runtime = getattr(mdl, "runtime", None)   # OnnxModel: "numpy" (dense chain) or "onnxruntime"
+    desc = f"{type(mdl).__name__} {mdl.name!r} (default model" + (f", file sha256 {sha[:12]}" if sha else "") + \
+           (f", evaluated with {runtime}" if runtime else "") + f"), space {list(probe.space.names)}, " \
            f"constraints {[c.name for c in probe.constraints]}"
 
     def factory(T: np.ndarray, penalty: str = "paper", **kw: Any) -> SolveProblem:

@@ -152,7 +152,11 @@ def _nanmin(vals: Sequence[float]) -> float:
 
 
 def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Counts per outcome and worst figures, controller on and off."""
+    """Counts per outcome and worst figures, controller on and off, and with the controller
+    on how many cells meet each goal: energy to the user <= :data:`ENERGY_TOLERANCE_J`,
+    delivered >= :data:`TRANSPARENT_FRACTION` of min(K, K_pass) x penetration (a cell
+    without contact ticks owes nothing), the felt force on every tick deeper than
+    :data:`FELT_DEPTH_MM` (met / missed / never that deep), and all three."""
     on = [c for c in cells if c["controller"]]
     off = [c for c in cells if not c["controller"]]
 
@@ -161,7 +165,20 @@ def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
     felt_miss = [c for c in on if c["felt_force_ratio_min"] == c["felt_force_ratio_min"]
                  and c["felt_force_ratio_min"] < 1.0]
+    felt_na = [c for c in on if c["felt_force_ratio_min"] != c["felt_force_ratio_min"]]
+    energy_ok = [c for c in on if c["energy_to_user_j"] <= ENERGY_TOLERANCE_J]
+    # a cell without contact ticks (NaN ratio) has nothing to deliver
+    deliver_ok = [c for c in on if not c["delivered_vs_passive_ratio"] < TRANSPARENT_FRACTION]
+    all_ok = [c for c in on if c["energy_to_user_j"] <= ENERGY_TOLERANCE_J
+              and not c["delivered_vs_passive_ratio"] < TRANSPARENT_FRACTION
+              and not c["felt_force_ratio_min"] < 1.0]
     return {"cells": len(cells),
+            "controller_on_cells": len(on),
+            "controller_on_energy_within_tolerance": len(energy_ok),
+            "controller_on_delivered_within_tolerance": len(deliver_ok),
+            "controller_on_felt_force_met": len(on) - len(felt_miss) - len(felt_na),
+            "controller_on_felt_force_not_applicable": len(felt_na),
+            "controller_on_all_three_met": len(all_ok),
             "controller_on_stable_transparent": count(on, STABLE_TRANSPARENT),
             "controller_on_stable_withholding": count(on, STABLE_WITHHOLDING),
             "controller_on_unstable": count(on, UNSTABLE),

@@ -74,15 +74,14 @@ class PiezoTable:
                                    "at every frequency")
         _check_plausible(f, v, a)
         self.frequencies_hz, self.voltages_v, self.acceleration = f, v, a
-        from scipy.interpolate import PchipInterpolator
+        from ..interpolate import Pchip  # numpy PCHIP: building a table does not import scipy
         # over frequency: PCHIP of log(acceleration) over log(frequency) for columns that
         # are positive (a resonator's a ~ f^2 far below resonance is then a straight
-        # line), plain PCHIP for columns holding zeros (e.g. the 0 V column)
+        # line), plain PCHIP for columns holding zeros (e.g. the 0 V column); NaN
+        # outside the measured frequencies (callers clamp first)
         self._pos = np.all(a > 0, axis=0) & (f[0] > 0)
-        self._over_logf = (PchipInterpolator(np.log(f), np.log(a[:, self._pos]), axis=0, extrapolate=False)
-                           if self._pos.any() else None)
-        self._over_f = (PchipInterpolator(f, a[:, ~self._pos], axis=0, extrapolate=False)
-                        if (~self._pos).any() else None)
+        self._over_logf = Pchip(np.log(f), np.log(a[:, self._pos])) if self._pos.any() else None
+        self._over_f = Pchip(f, a[:, ~self._pos]) if (~self._pos).any() else None
 
     @property
     def frequency_range_hz(self) -> tuple[float, float]:
@@ -109,15 +108,15 @@ class PiezoTable:
         """Acceleration over voltage at ``f_hz`` (``row``: its :meth:`_row`, if known): a
         cubic spline when it is strictly increasing between every pair of measured
         voltages (checked exactly on the derivative), else PCHIP (monotone by construction)."""
-        from scipy.interpolate import CubicSpline, PchipInterpolator
+        from ..interpolate import CubicSpline, Pchip  # numpy: no scipy import on the render path
 
         if row is None:
             row = self._row(f_hz)
         if self.voltages_v.size >= 4:
-            cs = CubicSpline(self.voltages_v, row, extrapolate=False)
+            cs = CubicSpline(self.voltages_v, row)
             if _spline_increasing(cs.c, np.diff(self.voltages_v)):
                 return cs
-        return PchipInterpolator(self.voltages_v, row, extrapolate=False)
+        return Pchip(self.voltages_v, row)
 
     def _rows(self, f_hz: np.ndarray) -> np.ndarray:
         """:meth:`_row` for many frequencies at once, shape ``(n, n_voltages)``."""
@@ -176,7 +175,7 @@ class PiezoTable:
         acceleration lies outside the table (the frequency is then clamped to the table
         and the voltage to its lowest / highest measured value).
         """
-        from scipy.optimize import brentq
+        from ..interpolate import bisect_increasing
 
         row = self._row(f_hz)
         ok = self._in_range(f_hz, accel_m_s2, row)
@@ -189,7 +188,7 @@ class PiezoTable:
         if accel_m_s2 == row[j]:
             return v1, ok
         curve = self._curve(f_hz, row)
-        v = brentq(lambda x: float(curve(x)) - accel_m_s2, v0, v1, xtol=1e-12, rtol=1e-12)
+        v = bisect_increasing(lambda x: float(curve(x)), v0, v1, accel_m_s2, xtol=1e-12, rtol=1e-12)
         return float(v), ok
 
     def voltages_for(self, f_hz: Any, accel_m_s2: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -93,7 +93,7 @@ class SolutionSet:
         return cols
 
 
-_CACHE: dict[Any, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+_CACHE: dict[Any, tuple[Any, np.ndarray, np.ndarray, np.ndarray]] = {}
 
 
 def _design(problem: SolveProblem, n_design: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -105,8 +105,10 @@ def _design(problem: SolveProblem, n_design: int) -> tuple[np.ndarray, np.ndarra
     key = (id(problem.model), problem.dimensions, problem.space.names, tuple(problem.space.lower),
            tuple(problem.space.upper), tuple(sorted(problem.fixed.items())), cons, n_design)
     hit = _CACHE.get(key)
-    if hit is not None:
-        return hit
+    # the entry holds its model, so the id in the key cannot be reused by another model
+    # while the entry lives; the identity check makes that explicit
+    if hit is not None and hit[0] is problem.model:
+        return hit[1:]
     U = halton(n_design, problem.n_features)
     X = problem.space.from_unit(U)
     det = problem.evaluate(X[None], rows=np.array([0]), details=True)
@@ -116,7 +118,7 @@ def _design(problem: SolveProblem, n_design: int) -> tuple[np.ndarray, np.ndarra
     feasible = np.asarray(det["violation"])[0] <= 0.0
     if len(_CACHE) > 16:
         _CACHE.clear()
-    _CACHE[key] = (U, I, feasible)
+    _CACHE[key] = (problem.model, U, I, feasible)
     return U, I, feasible
 
 

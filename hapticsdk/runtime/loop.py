@@ -22,9 +22,13 @@ Each tick:
    normal component; ``normal`` and ``object`` set); force commands of the same role
    are summed, a renderer that raises or returns NaN is counted and contributes nothing.
    While an object's material is being switched (:meth:`ServoLoop.set_renderers`) its
-   old and new renderers both run and their commands are cross-faded linearly over the
-   switch ramp (``switch_ramp_s``, default 50 ms): force ``(1 - a) F_old + a F_new``,
-   vibration amplitude likewise at the new frequency, ``a`` rising from 0 to 1;
+   old and new renderers both run. A force that the switch would raise keeps its value
+   and takes the new law's slope (``F = max(F_new - D, 0)``, ``D = F_new - F_old`` at the
+   switch: the rest point moved inwards, released at zero force and when the contact
+   ends), so stiffening a pressed material creates no energy and makes no step; a force
+   the switch lowers, and every vibration amplitude (at the new frequency), is
+   cross-faded linearly over the switch ramp (``switch_ramp_s``, default 50 ms):
+   ``(1 - a) F_old + a F_new``, ``a`` rising from 0 to 1 (see :meth:`ServoLoop._law`);
 4. the force role goes through the passivity observer/controller
    (:class:`~hapticsdk.passivity.PassivityController`, on by default) along the contact
    normal (its position is the signed distance ``-penetration``; the observer restarts
@@ -100,6 +104,10 @@ DEFAULT_LOG_SECONDS = 60.0
 MAX_LOG_TICKS = 2 ** 17
 #: default duration of the cross-fade when an object's renderers are replaced (s)
 DEFAULT_SWITCH_RAMP_S = 0.05
+#: rules of :meth:`ServoLoop.set_renderers` for the force roles
+SWITCH_RULES = ("passive", "cross-fade")
+#: default bound on what a switch's cross-fade moves a force in one tick (N)
+DEFAULT_SWITCH_MAX_STEP_N = 0.1
 
 _UP = (0.0, 1.0, 0.0)
 
@@ -206,17 +214,49 @@ class _Slot:
         self.pending: deque | None = None
 
 
+class _Switch:
+    """A material switch in progress on one object (see :meth:`ServoLoop.set_renderers`).
+
+    ``old`` and ``old_sw`` are the force law in effect before the switch (renderers, and
+    the switch that was still in progress on them, if any); ``t0`` the time of the last
+    tick that rendered the switch (None before the first); ``a`` the cross-fade's progress
+    (0 .. 1); ``offset`` (set on that tick) maps each
+    force role that stiffened to the force (N) the new law holds back, ``fade`` the force
+    roles cross-faded (softened, or every role under the ``"cross-fade"`` rule);
+    ``touched``: the probe was on the object when the switch was made (else the forces
+    take the new law at once: nothing was pressed into the old one)."""
+
+    __slots__ = ("old", "old_sw", "ramp_s", "t0", "a", "offset", "fade", "touched")
+
+    def __init__(self, old: list | None, old_sw: "_Switch | None", ramp_s: float, touched: bool) -> None:
+        self.old: list[DimensionRenderer] | None = old
+        self.old_sw = old_sw
+        self.ramp_s = ramp_s
+        self.touched = touched
+        self.t0: float | None = None
+        self.a = 0.0
+        self.offset: dict[str, float] | None = None
+        self.fade: tuple[str, ...] = ()
+
+    def end_contact(self) -> None:
+        """Contact with the object ended: every held-back force is released (the moved
+        rest point is back on the surface), here and in the switch it started from."""
+        sw: _Switch | None = self
+        while sw is not None:
+            if sw.offset:
+                sw.offset.clear()
+            sw = sw.old_sw
+
+
 class _Obj:
     """One object's renderers and its material switch in progress."""
 
-    __slots__ = ("name", "renderers", "old", "ramp_t0", "ramp_s")
+    __slots__ = ("name", "renderers", "sw")
 
     def __init__(self, name: str, renderers: Sequence[DimensionRenderer]) -> None:
         self.name = name
         self.renderers = list(renderers)
-        self.old: list[DimensionRenderer] | None = None
-        self.ramp_t0: float | None = None
-        self.ramp_s = DEFAULT_SWITCH_RAMP_S
+        self.sw: _Switch | None = None
 
 
 class _ContactState:
@@ -288,6 +328,14 @@ class ServoLoop:
             ``TickInput.velocity_filtered_mm_s`` (default 30 Hz; the raw velocity stays in
             ``velocity_mm_s``).
         switch_ramp_s: default cross-fade of :meth:`set_renderers` (s), default 0.05.
+        switch_rule: ``"passive"`` (default): a force a material switch raises is held
+            at its value with the new law's slope, one it lowers is ramped (see
+            :meth:`set_renderers`); ``"cross-fade"``: every force cross-faded linearly
+            (the earlier rule, kept for comparison: stiffening a pressed material then
+            hands the finger up to ``(K2 - K1) p^2 / 2``).
+        switch_max_step_n: the cross-fade of a switch moves a force by at most this much
+            per tick (N, default 0.1): a ramp that would step more is slowed (lasts
+            longer than ``ramp_s``).
     """
 
     def __init__(self, device: HapticDevice, renderers: Sequence[DimensionRenderer] = (),
@@ -301,7 +349,8 @@ class ServoLoop:
                  rt: RealtimeSettings | Mapping[str, Any] | None = None,
                  objects: Sequence[tuple[str, Sequence[DimensionRenderer]]] | None = None,
                  hit_tester: Any = None, log_seconds: float = DEFAULT_LOG_SECONDS,
-                 switch_ramp_s: float = DEFAULT_SWITCH_RAMP_S, velocity_filter_hz: float = 30.0) -> None:
+                 switch_ramp_s: float = DEFAULT_SWITCH_RAMP_S, velocity_filter_hz: float = 30.0,
+                 switch_rule: str = "passive", switch_max_step_n: float = DEFAULT_SWITCH_MAX_STEP_N) -> None:
         if not isinstance(device, HapticDevice):
             raise ValidationError("device must be a HapticDevice", field="device")
         if not (isinstance(period_s, (int, float)) and math.isfinite(period_s) and 1e-5 <= period_s <= 1.0):
@@ -312,6 +361,13 @@ class ServoLoop:
             raise ValidationError(f"log_seconds must be in (0, 3600] s, got {log_seconds!r}", field="log_seconds")
         if not (isinstance(switch_ramp_s, (int, float)) and math.isfinite(switch_ramp_s) and switch_ramp_s >= 0):
             raise ValidationError(f"switch_ramp_s must be >= 0 s, got {switch_ramp_s!r}", field="switch_ramp_s")
+        if switch_rule not in SWITCH_RULES:
+            raise ValidationError(f"must be one of {list(SWITCH_RULES)}, got {switch_rule!r}", field="switch_rule")
+        self.switch_rule = switch_rule
+        if not (isinstance(switch_max_step_n, (int, float)) and math.isfinite(switch_max_step_n)
+                and switch_max_step_n > 0):
+            raise ValidationError(f"must be a force > 0 N, got {switch_max_step_n!r}", field="switch_max_step_n")
+        self.switch_max_step_n = float(switch_max_step_n)
         self.device = device
         self.actuators: dict[str, Actuator] = dict(actuators) if actuators is not None else {"force": device}
         self.drop_unmapped_roles = bool(drop_unmapped_roles)
@@ -406,10 +462,33 @@ class ServoLoop:
     # -- changes while running (thread-safe: applied at the start of the next tick) --
     def set_renderers(self, obj: "int | str", renderers: Sequence[DimensionRenderer],
                       ramp_s: float | None = None) -> None:
-        """Replace the renderers of object ``obj`` (index or name): a new material. From
-        the next tick the old and new renderers' commands are cross-faded linearly over
-        ``ramp_s`` (default ``switch_ramp_s``); the passivity controller keeps running
-        across the switch. Callable from any thread."""
+        """Replace the renderers of object ``obj`` (index or name): a new material.
+        Callable from any thread; applied at the start of the next tick.
+
+        From that tick both materials run and, per force role, at the probe's input of
+        that tick:
+
+        * the new force is higher (stiffening while pressed): the force keeps its value
+          and follows the new law's changes, ``F = max(F_new - D, 0)`` with
+          ``D = F_new - F_old`` (for springs ``F_old(p0) + K2 (p - p0)``: the rest point
+          moved inwards, so the switch stores no energy and the force has no step). ``D``
+          falls only where that force is zero (``D = min(D, F_new)``, the rest point
+          following a withdrawing finger) and is released when the contact ends: the
+          full new force is felt from the next touch on, and no energy the finger did
+          not put in is ever handed back;
+        * the new force is lower (softening): linear cross-fade ``(1 - a) F_old + a F_new``
+          over ``ramp_s`` (default ``switch_ramp_s``, 50 ms), a step of
+          ``|F_old - F_new| T / ramp_s`` per tick, slowed so that it never exceeds
+          ``switch_max_step_n`` (0.1 N: the ramp lasts longer than ``ramp_s`` when the
+          forces differ by more than 5 N at 1 kHz); for springs a stiffness falling in
+          time, which only removes stored energy.
+
+        Vibration amplitudes cross-fade over the same ramp at the new frequency. A switch
+        made while the probe is not in contact with the object puts the forces on the new
+        law at once (they start with the next contact, as a wall met from outside). With
+        ``ramp_s = 0`` a softening force drops at once. The passivity controller keeps
+        running across the switch. A switch made during another one starts from the
+        force the first one gives."""
         rs = _check_renderers(renderers, self.actuators, self.drop_unmapped_roles)
         r = self.switch_ramp_s if ramp_s is None else float(ramp_s)
         if not (math.isfinite(r) and r >= 0):
@@ -451,12 +530,16 @@ class ServoLoop:
                 i = self._index(a)
                 if i >= 0:
                     o = self._objs[i]
-                    if c > 0:
-                        o.old = o.renderers
-                        o.ramp_t0 = None  # set on the first tick that renders it
-                        o.ramp_s = c
+                    # the law in effect (with its own switch still in progress) becomes
+                    # the old law; the rule is set on the first tick that renders it. A
+                    # switch never rendered (the probe was elsewhere) was never felt: the
+                    # new one starts from its old law, so the chain stays short
+                    sw = o.sw
+                    touched = self.contact == i
+                    if sw is not None and sw.t0 is None:
+                        o.sw = _Switch(sw.old, sw.old_sw, c, touched)
                     else:
-                        o.old = None
+                        o.sw = _Switch(o.renderers, sw, c, touched)
                     o.renderers = b
                     self._events["material_switches"] += 1
             elif kind == "add":
@@ -707,6 +790,9 @@ class ServoLoop:
         contact = idx if in_contact else -1
         if contact != self.contact:
             events["contact_changes"] += 1
+            prev = self.contact
+            if 0 <= prev < len(self._objs) and self._objs[prev].sw is not None:
+                self._objs[prev].sw.end_contact()
             self.contact = contact
         obs_state = st if (direction is None and ht is None) or bad else _ContactState(st, pen)
         for obs in self._observers:
@@ -734,27 +820,10 @@ class ServoLoop:
             f2 = self._vf2 = self._vf2 + a * (float(vin[2]) - self._vf2)
             inp = TickInput(t=t, dt=dt, penetration_mm=pen, velocity_mm_s=vin, in_contact=in_contact,
                             normal=normal, object=o.name, velocity_filtered_mm_s=(f0, f1, f2))
-            self._render(o.renderers, inp, forces, vib, events)
-            if o.old is not None:
-                if o.ramp_t0 is None:
-                    o.ramp_t0 = t
-                a = (t - o.ramp_t0) / o.ramp_s if o.ramp_s > 0 else 1.0
-                if a >= 1.0:
-                    o.old = None
-                else:
-                    f_old: dict[str, float] = {}
-                    v_old: dict[str, ChannelCommand] = {}
-                    self._render(o.old, inp, f_old, v_old, events)
-                    b = 1.0 - a
-                    for role in set(forces) | set(f_old):
-                        forces[role] = a * forces.get(role, 0.0) + b * f_old.get(role, 0.0)
-                    for role in set(vib) | set(v_old):
-                        cn, co = vib.get(role), v_old.get(role)
-                        fr = cn.frequency_hz if cn is not None and cn.frequency_hz is not None else (
-                            co.frequency_hz if co is not None else None)
-                        am = a * ((cn.amplitude or 0.0) if cn is not None else 0.0) + b * (
-                            (co.amplitude or 0.0) if co is not None else 0.0)
-                        vib[role] = ChannelCommand(role, frequency_hz=fr, amplitude=am)
+            if o.sw is None:
+                self._render(o.renderers, inp, forces, vib, events)
+            elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):
+                o.sw = None   # the switch is over: the new law alone
         # ---- 4. passivity + send --------------------------------------
         if bad or (ht is not None and idx < 0):
             # a spatial scene out of contact: the distance to the nearest object jumps
@@ -860,6 +929,99 @@ class ServoLoop:
             L["sim"][i] = perf() - s0
         self._k = k + 1
         return self._k < self._n_max
+
+    def _law(self, renderers: list, sw: _Switch, inp: TickInput, forces: dict, vib: dict, events: dict,
+             t: float) -> bool:
+        """Render ``renderers`` with the material switch ``sw`` in progress; return True
+        when the switch is over (the new law alone from now on).
+
+        First tick of the switch: both laws are rendered at the same input and, under the
+        ``"passive"`` rule, each force role whose new force ``F_new`` exceeds the old one
+        ``F_old`` keeps the old force and the new law's slope: ``F = max(F_new - D, 0)``
+        with ``D = F_new - F_old`` held back (a spring whose rest point moved inwards:
+        ``F = F_old(p0) + K2 (p - p0)`` for springs), so stiffening creates no energy and
+        makes no step. ``D`` only ever falls to ``F_new`` where the held-back law gives no
+        force (``D = min(D, F_new)``: the rest point follows a withdrawing finger at zero
+        force) and is released when the contact ends, so the rest point returns to the
+        surface without adding energy. A force role that softened (``F_new < F_old``) is
+        cross-faded ``(1 - a) F_old + a F_new`` with ``a`` rising linearly from 0 to 1 over
+        ``ramp_s`` (for springs a stiffness falling in time, which only removes stored
+        energy): the documented ramp, ``|F_old - F_new| T / ramp_s`` per tick, slowed to
+        at most ``switch_max_step_n`` per tick. Vibration
+        roles cross-fade their amplitude over the same ramp at the new frequency. The
+        ``"cross-fade"`` rule (for comparison only; not passive when stiffening)
+        cross-fades every force role."""
+        self._render(renderers, inp, forces, vib, events)
+        first = sw.offset is None
+        if first:
+            da = 0.0
+            a = sw.a = 0.0 if sw.ramp_s > 0 else 1.0
+        else:
+            da = (t - sw.t0) / sw.ramp_s if sw.ramp_s > 0 else 1.0   # type: ignore[operator]
+            a = sw.a
+        sw.t0 = t
+        f_old: dict[str, float] = {}
+        v_old: dict[str, ChannelCommand] = {}
+        if sw.old is not None and (first or a < 1.0):
+            if sw.old_sw is None:
+                self._render(sw.old, inp, f_old, v_old, events)
+            elif self._law(sw.old, sw.old_sw, inp, f_old, v_old, events, t):
+                sw.old_sw = None
+        if first:
+            held: dict[str, float] = {}
+            fade = []
+            passive = self.switch_rule == "passive"
+            # a switch made while the probe was off the object: the forces start with the
+            # contact (a wall met from outside), on the new law at once
+            roles = set(forces) | set(f_old) if sw.touched or not passive else ()
+            for role in roles:
+                fn, fo = forces.get(role, 0.0), f_old.get(role, 0.0)
+                if passive and fn > fo:
+                    held[role] = fn - fo
+                elif fn != fo:
+                    fade.append(role)
+            sw.offset = held
+            sw.fade = tuple(fade)
+        offset = sw.offset
+        if offset:
+            # (the contact's end releases every offset: _Switch.end_contact from _tick)
+            for role in list(offset):
+                fn = forces.get(role, 0.0)
+                d = offset[role]
+                if fn <= d:
+                    # no force from the held-back law: the rest point follows the finger
+                    # out at zero force (no energy)
+                    forces[role] = 0.0
+                    if fn <= 0.0:
+                        del offset[role]
+                    else:
+                        offset[role] = fn
+                else:
+                    forces[role] = fn - d
+        if a < 1.0 and da > 0.0:
+            # the ramp advances by dt / ramp_s, slowed where that would move a cross-faded
+            # force by more than switch_max_step_n this tick
+            cap = self.switch_max_step_n
+            for role in sw.fade:
+                gap = abs(forces.get(role, 0.0) - f_old.get(role, 0.0))
+                if gap * da > cap:
+                    da = cap / gap
+            a = sw.a = min(a + da, 1.0)
+        if a < 1.0:
+            b = 1.0 - a
+            for role in sw.fade:
+                forces[role] = a * forces.get(role, 0.0) + b * f_old.get(role, 0.0)
+            for role in set(vib) | set(v_old):
+                cn, co = vib.get(role), v_old.get(role)
+                fr = cn.frequency_hz if cn is not None and cn.frequency_hz is not None else (
+                    co.frequency_hz if co is not None else None)
+                am = a * ((cn.amplitude or 0.0) if cn is not None else 0.0) + b * (
+                    (co.amplitude or 0.0) if co is not None else 0.0)
+                vib[role] = ChannelCommand(role, frequency_hz=fr, amplitude=am)
+            return False
+        sw.old = None
+        sw.old_sw = None
+        return not offset
 
     def _render(self, renderers: list, inp: TickInput, forces: dict, vib: dict, events: dict) -> None:
         by_role = self._by_role

@@ -14,7 +14,15 @@ and closes them. The application side never blocks on the servo:
 * :meth:`Session.events` drains the event ring (contact enter/leave with the object's
   name, renderer errors, clamps, overruns, skipped ticks, material switches, faults);
 * :meth:`Session.set_material`, :meth:`add_object`, :meth:`remove_object`,
-  :meth:`move_object` send a message on a pipe the servo's control thread reads;
+  :meth:`move_object` send a message on a pipe. :meth:`Session.set_material` builds
+  the new renderers in the application (as the servo would: same settings, actuator
+  options, capabilities and calibrations) and sends them pickled, so the servo only
+  unpickles them; renderers that cannot be pickled here go as features, and the servo
+  builds them. The servo process has one thread of its own: it reads the pipe without
+  blocking, before each sleep of its clock and after each tick, and does a command's
+  work in the slack left before the next deadline (see :class:`_Servo`); the new
+  renderers take over at the start of the next tick, and ``state().switched_at`` says
+  when;
 * :meth:`pause`, :meth:`resume` and :meth:`close` set flags in shared memory.
 
 Live retargeting: :meth:`Session.set_material` answers new intensities at once with the
@@ -32,10 +40,15 @@ user more energy than the controller's budget.
 Failure semantics (each one tested in ``tests/runtime/test_session.py``):
 
 * the application process dies (SIGKILL, or SIGTERM/SIGHUP with no handler): the servo
-  process checks every tick that its parent is still its parent, and the heartbeat an
-  application thread writes every 10 ms; either one lost stops every actuator
-  (``heartbeat_timeout_s``, default 0.25 s, for a hung application; the parent check
-  answers within a tick) and the servo exits;
+  process checks every tick that its parent is still its parent and that the command
+  pipe still has a writer (end of file once the application's descriptors are closed),
+  and watches the heartbeat an application thread writes every 10 ms; any one lost
+  stops every actuator (``heartbeat_timeout_s``, default 0.25 s, for a hung
+  application; the parent and pipe checks answer within a tick of the kernel tearing
+  the application down) and the servo exits. (``prctl(PR_SET_PDEATHSIG)`` is not used:
+  the kernel sends it at the same moment the parent check sees the new parent, and it
+  also fires when the *thread* that started the servo ends while the application
+  lives on);
 * the servo process dies: the next call on the session raises
   :class:`~hapticsdk.errors.ServoProcessDied` with the reason (exit status, signal,
   device fault);
@@ -49,7 +62,10 @@ Failure semantics (each one tested in ``tests/runtime/test_session.py``):
   shared-memory segment unlinked (also after any of the above).
 
 Only the standard library crosses the process boundary (``multiprocessing`` with the
-``spawn`` start method, ``multiprocessing.shared_memory``, pipes).
+``spawn`` start method, ``multiprocessing.shared_memory``, pipes). The servo process
+limits its BLAS / OpenMP thread pools to one thread (:func:`_one_pool_thread`): a pool
+worker that busy-waits between the servo's small matrix calls would take a CPU from
+the servo.
 """
 
 from __future__ import annotations
@@ -76,7 +92,7 @@ ISOLATIONS = ("process", "thread")
 _SEQ = 0
 _STATE = slice(1, 24)
 (_T, _PX, _PY, _PZ, _VX, _VY, _VZ, _F, _OBJ, _PEN, _TICKS, _OVERRUNS, _SKIPPED, _RERR, _CLAMPS,
- _TICK_US, _TICK_MAX_US, _MISSED, _PUB, _NEAR, _PAUSED_S, _SWITCHES, _SPARE) = range(1, 24)
+ _TICK_US, _TICK_MAX_US, _MISSED, _PUB, _NEAR, _PAUSED_S, _SWITCHES, _SWITCHED_AT) = range(1, 24)
 _HEARTBEAT, _STOP, _PAUSE, _STATUS, _PID, _REASON, _READY = range(32, 39)
 _EV_W = 64
 _EV0 = 65
@@ -115,6 +131,9 @@ class SessionState(NamedTuple):
         tick_us, tick_max_us: compute time of the last tick and the largest so far (us).
         age_s: how long ago the servo published this state (s).
         paused: the session is paused.
+        switched_at: ``time.monotonic()`` (s, the machine's clock, the same in both
+            processes) when the servo published the first tick that rendered the latest
+            material switch; 0.0 before any.
     """
 
     t: float
@@ -135,6 +154,7 @@ class SessionState(NamedTuple):
     tick_max_us: float
     age_s: float
     paused: bool
+    switched_at: float
 
 
 @dataclass(frozen=True)
@@ -209,6 +229,18 @@ class _Buffer:
                 pass
 
 
+def _grow_pipe(conn: Any) -> None:
+    """Linux: give the command pipe 1 MiB (the default limit for an unprivileged
+    process), so that a message of pickled renderers (about 300 kB for S7) is written
+    at once instead of as the servo drains 64 kB at a time. Elsewhere, or when refused,
+    the servo's reader takes a message in as many ticks as it needs."""
+    try:
+        import fcntl
+        fcntl.fcntl(conn.fileno(), fcntl.F_SETPIPE_SZ, 1 << 20)
+    except (ImportError, AttributeError, OSError, ValueError):
+        pass
+
+
 def _attach(name: str) -> tuple[Any, memoryview]:
     """Attach the application's segment. A spawned child shares the application's
     resource tracker, so its registration is the same entry: the application's
@@ -222,8 +254,195 @@ def _attach(name: str) -> tuple[Any, memoryview]:
 # =====================================================================================
 # servo side
 # =====================================================================================
+#: BLAS / OpenMP thread-pool setters tried on every already-loaded library (first found wins)
+_POOL_SETTERS = ("openblas_set_num_threads", "openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
+                 "scipy_openblas_set_num_threads64_", "MKL_Set_Num_Threads", "bli_thread_set_num_threads",
+                 "omp_set_num_threads")
+_POOL_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+
+
+def _one_pool_thread() -> str:
+    """Limit the BLAS / OpenMP thread pools of this process (the servo process) to one
+    thread; returns what was done (for the servo's summary).
+
+    Why: a BLAS call the servo makes every tick (the simulated arm's exact step calls
+    ``scipy.linalg.expm`` for each measured period) hands work to the pool's worker
+    thread, which then busy-waits for the next job, and with one job per millisecond it
+    never goes to sleep: it kept a whole CPU busy (measured with ``perf``:
+    ``blas_thread_server``), so on a 2-CPU machine with a busy application thread the
+    servo thread itself waited for a CPU for milliseconds. The environment variables
+    cover libraries loaded from now on; libraries already loaded (the spawn start method
+    imports the application's main module, and with it numpy, before the servo runs)
+    get their ``*_set_num_threads(1)``. Only libraries already in the process are
+    touched (``RTLD_NOLOAD``): no native code is loaded by this."""
+    for k in _POOL_ENV:
+        os.environ[k] = "1"
+    if not sys.platform.startswith("linux"):
+        return f"environment only ({', '.join(_POOL_ENV)} = 1; loaded libraries not inspected on {sys.platform})"
+    import ctypes
+    try:
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
+            paths = sorted({ln.split(None, 5)[5].strip() for ln in fh if len(ln.split(None, 5)) == 6})
+    except OSError as exc:
+        return f"environment only (/proc/self/maps: {exc})"
+    done = []
+    for p in paths:
+        base = os.path.basename(p)
+        low = base.lower()
+        if ".so" not in low or not any(k in low for k in ("blas", "mkl", "blis", "omp", "lapack")):
+            continue
+        try:
+            lib = ctypes.CDLL(p, mode=os.RTLD_NOLOAD | os.RTLD_LOCAL)
+        except OSError:
+            continue
+        for sym in _POOL_SETTERS:
+            fn = getattr(lib, sym, None)
+            if fn is None:
+                continue
+            try:
+                fn.argtypes = [ctypes.c_int]
+                fn.restype = None
+                fn(1)
+                done.append(f"{base}: {sym}(1)")
+            except Exception as exc:  # noqa: BLE001 - reported, never fatal
+                done.append(f"{base}: {sym} failed: {exc}")
+            break
+    return "; ".join(done) if done else "no thread pool loaded (environment set for later ones)"
+
+
+class _CommandReader:
+    """The servo's end of the command pipe, read without ever blocking.
+
+    POSIX: the pipe's descriptor is made non-blocking and whatever has arrived is read
+    into a buffer each call; complete messages are cut out of it with
+    ``multiprocessing.connection``'s framing (a 4-byte big-endian length, or -1 and an
+    8-byte length, then the pickle), so a message the application is still writing
+    (larger than the pipe's atomic write) waits for the next call instead of stalling
+    the servo. Elsewhere ``Connection.poll(0)`` / ``recv()``. ``eof`` turns True when
+    every writer has closed the pipe (the application exited)."""
+
+    def __init__(self, conn: Any) -> None:
+        self.conn = conn
+        self.fd: int | None = None
+        self.buf = bytearray()
+        self.eof = False
+        if os.name == "posix":
+            try:
+                fd = conn.fileno()
+                os.set_blocking(fd, False)
+                self.fd = fd
+            except (OSError, AttributeError, ValueError):
+                self.fd = None
+
+    def read(self) -> list:
+        """The messages complete now (possibly none); never blocks."""
+        if self.fd is None:
+            out = []
+            if not self.eof:
+                try:
+                    while self.conn.poll(0):
+                        out.append(self.conn.recv())
+                except (EOFError, OSError):
+                    self.eof = True
+            return out
+        buf = self.buf
+        while not self.eof:
+            try:
+                chunk = os.read(self.fd, 65536)
+            except BlockingIOError:
+                break
+            except OSError:
+                self.eof = True
+                break
+            if not chunk:
+                self.eof = True
+                break
+            buf += chunk
+            if len(chunk) < 65536:
+                break
+        msgs = []
+        import pickle
+        while len(buf) >= 4:
+            n = int.from_bytes(buf[:4], "big", signed=True)
+            head = 4
+            if n == -1:
+                if len(buf) < 12:
+                    break
+                n = int.from_bytes(buf[4:12], "big")
+                head = 12
+            if len(buf) < head + n:
+                break
+            msgs.append(pickle.loads(bytes(buf[head:head + n])))
+            del buf[:head + n]
+        return msgs
+
+
+#: a command's build waits at most this many ticks for a slack long enough for it
+_MAX_WAIT_TICKS = 3
+#: kept free before the next deadline (s)
+_SLACK_MARGIN_S = 100e-6
+#: estimated cost of building one dimension's renderers never measured yet (s)
+_UNKNOWN_BUILD_S = 1e-3
+#: estimated cost of a command with nothing to build (s)
+_SMALL_S = 30e-6
+
+
+class _ServingClock:
+    """The servo's clock in a process or thread session: the wait of
+    :class:`~hapticsdk.runtime.clock.MonotonicClock` (sleep while more than ``spin_s``
+    remains, then spin), and before each sleep a call of ``serve``, which reads the
+    command pipe and does what fits of a command's work in the time that would
+    otherwise be slept. A command is then taken up within one sleep (at most half
+    the time left) of arriving, instead of after the next tick."""
+
+    simulated = False
+
+    def __init__(self, serve: Any, spin_s: float = 200e-6) -> None:
+        from .clock import MonotonicClock
+        self._base = MonotonicClock(spin_s)
+        self.spin_s = self._base.spin_s
+        self._serve = serve
+
+    def now(self) -> float:
+        """Current time (s) of :func:`time.perf_counter`."""
+        return time.perf_counter()
+
+    def wait_until(self, deadline: float) -> None:
+        """Serve commands in the slack, then wait as ``MonotonicClock.wait_until``."""
+        pc = time.perf_counter
+        spin = self.spin_s
+        while True:
+            remaining = deadline - pc()
+            if remaining <= spin:
+                break
+            self._serve()
+            remaining = deadline - pc()
+            if remaining <= spin:
+                break
+            time.sleep((remaining - spin) * 0.5 if remaining > 2 * spin else remaining - spin)
+        while pc() < deadline:
+            pass
+
+    def work(self, tick: int, seconds: float) -> None:
+        """Real time already passed while the tick computed."""
+
+
 class _Servo:
-    """The servo side: devices, the loop, the control thread, publishing."""
+    """The servo side: devices, the loop, publishing, and the commands.
+
+    One thread (the servo's) does everything: before each sleep of its clock
+    (:class:`_ServingClock`) and after each tick has published, it reads the command
+    pipe without blocking and does a command's work in the slack left before the next
+    deadline: unpickling renderers the application built, or building them from
+    features (one dimension at a time) when the application could not. The estimated cost of a slice is the CPU time the last build of that
+    dimension took (rising at once, falling by half per build). A slice that does not
+    fit in what is left waits for a later period, at most ``_MAX_WAIT_TICKS`` ticks, then
+    runs anyway; a slice longer than any period's slack runs at once (both counted as
+    ``forced_slices``: the next tick starts late by the excess; at most one forced slice
+    per tick). There is no second
+    thread that could hold the interpreter lock while the OS has descheduled it (the
+    control thread this replaced woke on every command and built the renderers beside
+    the servo thread, competing with it for the lock)."""
 
     def __init__(self, spec: dict[str, Any], mv: memoryview, cmd_conn: Any, thread_mode: bool) -> None:
         self.spec = spec
@@ -232,7 +451,8 @@ class _Servo:
         self.thread_mode = thread_mode
         self.loop: Any = None
         self.tags: list[int] = []
-        self._cal: dict[tuple, dict] = {}
+        self.names: list[str] = []
+        self._cal: dict[str, dict] = {}
         self._settings: dict[str, Any] = {}
         self._role_options: dict[str, dict[str, Any]] = {}
         self._caps: dict[str, Any] = {}
@@ -240,23 +460,68 @@ class _Servo:
         self.reason = ""
         self.message = ""
         self.stopped_labels: list[str] = []
+        self.pools = "not limited (thread isolation: the application's process)"
+        # commands
+        self._reader: _CommandReader | None = None
+        self._queue: Any = None
+        self._job: Any = None
+        self._job_est = 0.0
+        self._job_waited = 0
+        self._job_msg: tuple = ()
+        self._build_s: dict[str, float] = {}
+        self._job_t0 = 0.0
+        self._wait_tick: Any = None
+        #: commands received / done / failed; build slices run, forced (did not fit) and
+        #: longer than the slack they had, the longest (us); from receipt to done (ms)
+        self.cmd_stats = {"received": 0, "done": 0, "failed": 0, "slices": 0, "forced_slices": 0,
+                          "slice_over_slack": 0, "slice_max_us": 0.0, "wait_ms_sum": 0.0, "wait_ms_max": 0.0}
 
     # -- building ------------------------------------------------------------------
-    def renderers_for(self, features: Mapping[str, Mapping[str, float]]) -> list:
-        """Renderers for live features ``{dimension: {feature: value}}``, built as
-        :func:`~hapticsdk.runtime.render.render_plan` builds them (scene renderer
-        options, the actuators' own drive tables, saved calibrations)."""
+    def _renderers_dim(self, features: Mapping[str, Mapping[str, float]], d: str) -> list:
+        """Renderers of dimension ``d`` for live features ``{dimension: {feature:
+        value}}``, built as :func:`~hapticsdk.runtime.render.render_plan` builds them
+        (scene renderer options, the actuators' own drive tables, saved calibrations)."""
         from ..plan import MaterialPlan
         from .render import _calibrations, build_renderers
-        dims = list(features)
-        mp = MaterialPlan(name="live", targets={d: 0.0 for d in dims}, dimensions=dims,
+        mp = MaterialPlan(name="live", targets={d: 0.0}, dimensions=[d],
                           features={k: float(v) for f in features.values() for k, v in f.items()},
                           actuators={r: n for r, (n, _) in self.spec["devices"].items()})
-        key = tuple(dims)
-        cal = self._cal.get(key)
+        cal = self._cal.get(d)
         if cal is None:
-            cal = self._cal[key] = _calibrations(mp, self._settings, self._role_options)[0]
+            cal = self._cal[d] = _calibrations(mp, self._settings, self._role_options)[0]
         return build_renderers(mp, self._settings, calibrations=cal, capabilities=self._caps)
+
+    def _timed_dim(self, features: Mapping[str, Mapping[str, float]], d: str) -> list:
+        # the estimate is CPU time: time the servo was descheduled is not the build's cost
+        t0 = time.thread_time()
+        rs = self._renderers_dim(features, d)
+        took = time.thread_time() - t0
+        old = self._build_s.get(d)
+        # rises at once, falls slowly: the estimate of the next build of this dimension
+        self._build_s[d] = took if old is None else max(took, 0.5 * (old + took))
+        return rs
+
+    def renderers_for(self, features: Mapping[str, Mapping[str, float]]) -> list:
+        """Renderers for live features ``{dimension: {feature: value}}`` (every dimension)."""
+        out: list = []
+        for d in features:
+            out.extend(self._timed_dim(features, d))
+        return out
+
+    def prepare(self, plan: Any = None) -> None:
+        """What building renderers needs (settings, actuator options, the actuators'
+        capabilities), without opening anything: the servo calls it from :meth:`build`,
+        the application to build renderers itself (see :meth:`Session.set_material`)."""
+        from ..plan import RenderPlan
+        from ..plugins import registry
+        from .render import _capabilities
+        spec = self.spec
+        if plan is None:
+            plan = RenderPlan.from_dict(spec["plan"], validate=False)
+        self._settings = plan.settings
+        chosen = {role: (registry("actuator").load(name), dict(opts)) for role, (name, opts) in spec["devices"].items()}
+        self._role_options = {r: o for r, (_, o) in chosen.items()}
+        self._caps = _capabilities(chosen)
 
     def build(self) -> None:
         from contextlib import ExitStack
@@ -266,16 +531,11 @@ class _Servo:
         from ..plugins import registry
         from ..scene.geometry import HitTester, shape_from_dict
         from .loop import ServoLoop
-        from .render import build_renderers
-
-        from .render import _calibrations, _capabilities
+        from .render import _calibrations, build_renderers
 
         spec = self.spec
         plan = RenderPlan.from_dict(spec["plan"], validate=False)
-        self._settings = plan.settings
-        chosen = {role: (registry("actuator").load(name), dict(opts)) for role, (name, opts) in spec["devices"].items()}
-        self._role_options = {r: o for r, (_, o) in chosen.items()}
-        self._caps = _capabilities(chosen)
+        self.prepare(plan)
         objects = []
         shapes = []
         for o in spec["objects"]:
@@ -285,9 +545,18 @@ class _Servo:
                 mp = plan.material(o["material"])
                 cal = _calibrations(mp, plan.settings, self._role_options)[0]
                 rs = build_renderers(mp, plan.settings, calibrations=cal, capabilities=self._caps)
+                # warm the per-dimension calibrations and build-cost estimates a live
+                # set_material of these dimensions will use
+                feats = {d: dict(mp.features) for d in mp.dimensions}
+                for d in mp.dimensions:
+                    try:
+                        self._timed_dim(feats, d)
+                    except Exception:  # noqa: BLE001 - only an estimate; the live build reports
+                        pass
             objects.append((o["name"], rs))
             shapes.append((o["name"], shape_from_dict(o["geometry"], o["pose"])))
             self.tags.append(o["id"])
+            self.names.append(o["name"])
         self._stack = ExitStack()
         acts: dict[str, Any] = {}
         made: dict[tuple, Any] = {}
@@ -313,71 +582,167 @@ class _Servo:
             cls = registry("actuator").load(FALLBACK_SENSOR)
             device = cls(**({"trajectory": traj} if traj is not None else {}))
             self._stack.enter_context(device)
+        clock = _ServingClock(self._serve_if_ready) if spec["realtime"] else None
         self.loop = ServoLoop(device, (), acts, period_s=spec["period_s"], realtime=spec["realtime"],
-                              passivity=spec["passivity"], raise_on_fault=False, objects=objects,
+                              clock=clock, passivity=spec["passivity"], raise_on_fault=False, objects=objects,
                               hit_tester=HitTester(shapes), log_seconds=spec["log_seconds"],
                               switch_ramp_s=spec["ramp_s"], drop_unmapped_roles=True, rt=spec.get("rt"))
+        from collections import deque
+        self._queue = deque()
+        self._reader = _CommandReader(self.cmd_conn)
 
-    # -- control thread ----------------------------------------------------------------
-    def control(self) -> None:
-        """Read commands from the application; build what they need off the servo
-        thread; hand the result to the loop (applied at the start of a tick)."""
-        from ..scene.geometry import Pose, shape_from_dict
-        conn = self.cmd_conn
+    # -- commands (in the servo thread, in the slack of a period) ------------------------
+    def _slack(self) -> float:
+        """Seconds left before the next tick must start, minus a margin; unlimited on
+        simulated time. (Work may use the clock's final spin: the spin only covers the
+        sleep's wake-up latency, and a slice that ends before the deadline leaves the
+        clock to spin the rest.)"""
         loop = self.loop
-        while True:
-            try:
-                msg = conn.recv()
-            except (EOFError, OSError):
-                return
-            try:
-                kind = msg[0]
-                if kind == "quit":
-                    return
-                if kind == "material":
-                    _, oid, feats, ramp = msg
-                    rs = self.renderers_for(feats)
-                    loop.call_in_loop(lambda oid=oid, rs=rs, ramp=ramp: self._switch(oid, rs, ramp))
-                elif kind == "add":
-                    _, oid, name, feats, geom, pose = msg
-                    rs = self.renderers_for(feats)
-                    shape = shape_from_dict(geom, pose)
-                    loop.add_object(name, rs, shape)
-                    loop.call_in_loop(lambda oid=oid: self.tags.append(oid))
-                elif kind == "remove":
-                    _, oid = msg
-                    loop.call_in_loop(lambda oid=oid: self._remove(oid))
-                elif kind == "pose":
-                    _, oid, pose = msg
-                    p = Pose.from_dict(pose)
-                    loop.call_in_loop(lambda oid=oid, p=p: self._pose(oid, p))
-            except Exception as exc:  # noqa: BLE001 - a bad message must not end the servo
-                _log.error("session command %r failed: %s", msg[:1], exc)
-                loop.call_in_loop(lambda: self.event("fault", -1.0, 0.0))
+        if not loop.realtime:
+            return math.inf
+        return loop._deadline - loop.clock.now() - _SLACK_MARGIN_S  # noqa: SLF001
 
-    # these run in the servo thread (call_in_loop)
+    def _room(self) -> float:
+        """What a period leaves for commands after a tick that computes twice as long as
+        the last one, minus the margin (s)."""
+        loop = self.loop
+        return loop.period_s - _SLACK_MARGIN_S - 2.0 * loop.last_compute_s
+
+    def _est(self, d: str) -> float:
+        return self._build_s.get(d, _UNKNOWN_BUILD_S)
+
     def _index(self, oid: int) -> int:
         try:
             return self.tags.index(oid)
         except ValueError:
             return -1
 
-    def _switch(self, oid: int, rs: list, ramp: float) -> None:
-        i = self._index(oid)
-        if i >= 0:
-            self.loop.set_renderers(i, rs, ramp)  # applied later in this same tick
-            self.event("material_switched", oid, ramp)
+    def _command(self, msg: tuple) -> Any:
+        """A command as a generator: each ``yield`` gives the estimated cost (s) of the
+        work up to the next ``yield``; the first one comes before any work."""
+        kind = msg[0]
+        loop = self.loop
+        if kind == "material":
+            _, oid, feats, ramp = msg
+            built: list = []
+            for d in feats:
+                yield self._est(d)
+                built.extend(self._timed_dim(feats, d))
+            i = self._index(oid)
+            if i >= 0:
+                loop.set_renderers(self.names[i], built, ramp)  # applied at the start of the next tick
+                self.event("material_switched", oid, ramp)
+        elif kind == "renderers":
+            # renderers the application built and pickled: only unpickling is left
+            import pickle
+            _, oid, payload, ramp = msg
+            yield self._build_s.get("<unpickle>", _SMALL_S)
+            t0 = time.thread_time()
+            built = pickle.loads(payload)
+            took = time.thread_time() - t0
+            old = self._build_s.get("<unpickle>")
+            self._build_s["<unpickle>"] = took if old is None else max(took, 0.5 * (old + took))
+            i = self._index(oid)
+            if i >= 0:
+                loop.set_renderers(self.names[i], built, ramp)
+                self.event("material_switched", oid, ramp)
+        elif kind == "add":
+            from ..scene.geometry import shape_from_dict
+            _, oid, name, feats, geom, pose = msg
+            built = []
+            for d in feats:
+                yield self._est(d)
+                built.extend(self._timed_dim(feats, d))
+            loop.add_object(name, built, shape_from_dict(geom, pose))
+            self.tags.append(oid)
+            self.names.append(name)
+        elif kind == "remove":
+            yield _SMALL_S
+            i = self._index(msg[1])
+            if i >= 0:
+                loop.remove_object(self.names[i])
+                del self.tags[i]
+                del self.names[i]
+        elif kind == "pose":
+            from ..scene.geometry import Pose
+            yield _SMALL_S
+            i = self._index(msg[1])
+            if i >= 0:
+                loop.set_pose(self.names[i], Pose.from_dict(msg[2]))
+        else:
+            raise HapticSDKError(f"unknown session command {kind!r}")
 
-    def _remove(self, oid: int) -> None:
-        i = self._index(oid)
-        if i >= 0:
-            self.loop.remove_object(self.loop.object_names[i])  # applied later in this same tick
-            del self.tags[i]
+    def _serve_if_ready(self) -> None:
+        if self._reader is not None and self.loop is not None:
+            self.serve()
 
-    def _pose(self, oid: int, pose: Any) -> None:
-        i = self._index(oid)
-        if i >= 0:
-            self.loop.hit_tester.set_pose(i, pose)
+    def serve(self) -> None:
+        """Read the commands that have arrived and do their work while it fits in this
+        period's slack (see the class docstring). Never blocks on the pipe."""
+        stats = self.cmd_stats
+        new = self._reader.read()
+        if new:
+            now = time.monotonic()
+            self._queue.extend((now, m) for m in new)
+            stats["received"] += len(new)
+        perf = time.perf_counter
+        while self._job is not None or self._queue:
+            if self._job is None:
+                self._job_t0, msg = self._queue.popleft()
+                try:
+                    self._job = self._command(msg)
+                    self._job_est = next(self._job)
+                except StopIteration:
+                    self._job = None
+                    continue
+                except Exception as exc:  # noqa: BLE001 - a bad message must not end the servo
+                    self._failed(msg, exc)
+                    continue
+                self._job_waited = 0
+                self._wait_tick = None
+                self._job_msg = msg
+            left = self._slack()
+            forced = False
+            if self._job_est > left:
+                # wait for a later period only when a normal one has room for it: serve()
+                # runs right after a tick, so a slice longer than a whole period's slack
+                # would never fit, and waiting would only delay it
+                tick = getattr(self.loop, "_deadline", None)  # count periods, not calls
+                if tick != self._wait_tick:
+                    self._wait_tick = tick
+                    self._job_waited += 1
+                if self._job_waited <= _MAX_WAIT_TICKS and self._job_est <= self._room():
+                    return
+                forced = True
+            t0 = perf()
+            done = False
+            try:
+                self._job_est = next(self._job)
+            except StopIteration:
+                done = True
+            except Exception as exc:  # noqa: BLE001
+                self._failed(self._job_msg, exc)
+            took = perf() - t0
+            stats["slices"] += 1
+            stats["forced_slices"] += forced
+            stats["slice_over_slack"] += took > left
+            stats["slice_max_us"] = max(stats["slice_max_us"], took * 1e6)
+            self._job_waited = 0
+            self._wait_tick = None
+            if done:
+                self._job = None
+                wait = (time.monotonic() - self._job_t0) * 1e3
+                stats["done"] += 1
+                stats["wait_ms_sum"] += wait
+                stats["wait_ms_max"] = max(stats["wait_ms_max"], wait)
+            if forced:
+                return  # the next tick is due (or late): never two forced slices in a row
+
+    def _failed(self, msg: tuple, exc: BaseException) -> None:
+        self._job = None
+        self.cmd_stats["failed"] += 1
+        _log.error("session command %r failed: %s: %s", msg[:1], type(exc).__name__, exc)
+        self.event("fault", -1.0, 0.0)
 
     # -- publishing ---------------------------------------------------------------------
     def event(self, kind: str, oid: float, value: float) -> None:
@@ -391,7 +756,8 @@ class _Servo:
         mv[_EV_W] = w + 1
 
     def run(self) -> None:
-        """The servo thread: tick, publish, watch the application, until told to stop."""
+        """The servo thread: tick, publish, watch the application, serve its commands,
+        until told to stop."""
         loop = self.loop
         mv = self.mv
         tags = self.tags
@@ -401,8 +767,10 @@ class _Servo:
         watch = not self.thread_mode
         getppid = os.getppid
         mono = time.monotonic
+        reader = self._reader
         last_contact = -1
         seen = {"renderer_error": 0, "overrun": 0, "skipped_ticks": 0}
+        switches_seen = 0
         clamps_seen = 0
         paused = False
         mv[_PID] = os.getpid()
@@ -438,8 +806,13 @@ class _Servo:
             mv[_TICK_US] = loop.last_compute_s * 1e6
             mv[_TICK_MAX_US] = loop.max_compute_s * 1e6
             mv[_MISSED] = loop.missed_ticks
-            mv[_SWITCHES] = ev["material_switches"]
-            mv[_PUB] = mono()
+            sw = ev["material_switches"]
+            now = mono()
+            if sw != switches_seen:
+                switches_seen = sw
+                mv[_SWITCHED_AT] = now  # this tick rendered the new material first
+            mv[_SWITCHES] = sw
+            mv[_PUB] = now
             mv[_SEQ] = seq + 2.0
             # ---- events ----
             if c != last_contact:
@@ -454,10 +827,11 @@ class _Servo:
                 self.message = f"device fault: {f['device']}: {f['message']}" if f else "the servo loop ended"
                 self.event("fault", -1.0, 0.0)
                 return
-            if watch and getppid() != ppid:
+            if watch and (getppid() != ppid or reader.eof):
                 self.reason = "app_lost"
                 now = mono()
-                self.message = (f"the application process ({ppid}) is gone (noticed at monotonic "
+                how = "is gone" if getppid() != ppid else "closed its command pipe"
+                self.message = (f"the application process ({ppid}) {how} (noticed at monotonic "
                                 f"{now:.6f} s); last heartbeat {(now - mv[_HEARTBEAT]) * 1e3:.1f} ms before")
                 self.event("app_lost", -1.0, mono() - mv[_HEARTBEAT])
                 return
@@ -487,15 +861,21 @@ class _Servo:
             if mv[_STOP] != 0.0:
                 self.reason = "close"
                 return
+            # ---- commands, in what is left of this period ----
+            self.serve()
 
     def shutdown(self) -> dict[str, Any]:
         """Stop every actuator, end the loop, close the devices; a small summary."""
         from ..actuators import stops_since
         t0 = time.monotonic()
-        out: dict[str, Any] = {"reason": self.reason, "message": self.message}
+        out: dict[str, Any] = {"reason": self.reason, "message": self.message,
+                               "commands": {**self.cmd_stats,
+                                            "build_estimate_us": {d: v * 1e6 for d, v in self._build_s.items()}},
+                               "thread_pools": self.pools}
         loop = self.loop
         if loop is not None:
             loop.stop_all()
+            out["stop_all_s"] = time.monotonic() - t0  # every actuator told to stop
             try:
                 if loop._running:  # noqa: SLF001
                     rep = loop.finish()
@@ -531,7 +911,11 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
         mv = local_mv
     else:
         shm, mv = _attach(shm_name)  # type: ignore[arg-type]
-        sys.setswitchinterval(5e-5)  # the control thread hands the GIL back within 50 us
+        # the servo process runs one Python thread of its own; a plugin's thread (a
+        # transport reader) hands the interpreter lock back within 50 us
+        sys.setswitchinterval(5e-5)
+        for k in _POOL_ENV:  # BLAS / OpenMP pools loaded from now on: one thread
+            os.environ[k] = "1"
     servo = _Servo(spec, mv, cmd_conn, thread_mode)
     if holder is not None:
         holder.append(servo)  # thread isolation: the application may inspect its servo
@@ -541,8 +925,8 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
         try:
             try:
                 servo.build()
-                ctl = threading.Thread(target=servo.control, name="hapticsdk-session-control", daemon=True)
-                ctl.start()
+                if not thread_mode:
+                    servo.pools = _one_pool_thread()  # after build(): scipy.linalg is loaded by now
                 servo.loop.start(None)
                 servo.run()
             except SafeStop as exc:
@@ -567,7 +951,8 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
     mv[_STATUS] = _STOPPED if servo.reason in ("close", "") else _FAILED
     if servo.reason == "app_lost" or servo.reason == "heartbeat":
         print(f"hapticsdk servo: {summary.get('message', '')}; every actuator stopped "
-              f"({', '.join(summary.get('stopped', []))}) in {summary.get('stop_s', 0) * 1e3:.1f} ms",
+              f"({', '.join(summary.get('stopped', []))}): stop commands after "
+              f"{summary.get('stop_all_s', 0) * 1e3:.1f} ms, devices closed after {summary.get('stop_s', 0) * 1e3:.1f} ms",
               file=sys.stderr, flush=True)
     try:
         done_conn.send(summary)
@@ -695,6 +1080,9 @@ class Session:
                 "ramp_s": self.ramp_s, "heartbeat_timeout_s": heartbeat_timeout_s, "log_seconds": float(log_seconds),
                 "log_path": str(check_output_path(log_path, field="log_path")) if log_path is not None else None,
                 "ppid": os.getpid(), "rt": dict(rt) if rt is not None else None}
+        self._spec = spec
+        self._builder: _Servo | None = None
+        self._build_lock = threading.Lock()
         self._buf = _Buffer(shared=isolation == "process")
         self._mv = self._buf.mv
         self._mv[_HEARTBEAT] = time.monotonic()
@@ -710,9 +1098,11 @@ class Session:
                 self._process.start()
                 cmd_r.close()
                 done_w.close()
+                _grow_pipe(self._cmd)
             else:
                 cmd_r, self._cmd = mp.Pipe(duplex=False)
                 self._done, done_w = mp.Pipe(duplex=False)
+                _grow_pipe(self._cmd)
                 self._servo_holder: list = []
                 self._thread = threading.Thread(target=_servo_main,
                                                 args=(spec, cmd_r, None, done_w, self._mv, self._servo_holder),
@@ -816,6 +1206,31 @@ class Session:
                 self._check()
                 raise SessionError(f"the servo does not take commands: {exc}") from None
 
+    def _prebuilt(self, feats: Mapping[str, Mapping[str, float]]) -> bytes | None:
+        """The renderers of ``feats``, built here exactly as the servo would build them
+        (same settings, actuator options and capabilities, calibrations) and pickled;
+        None when they cannot be built or pickled here (the servo then builds them from
+        the features). Building here keeps the build (about 1.4 ms of CPU for S7, more
+        with cold caches, longer than a servo period's slack) out of the servo: it only
+        unpickles (tens of microseconds)."""
+        import pickle
+        try:
+            with self._build_lock:
+                if self._builder is None:
+                    b = _Servo(self._spec, memoryview(bytearray(8)).cast("d"), None, True)
+                    b.prepare()
+                    self._builder = b
+                rs = self._builder.renderers_for(feats)
+                return pickle.dumps(rs, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as exc:  # noqa: BLE001 - the servo builds them instead
+            _log.debug("building renderers in the application failed (%s: %s); the servo builds them",
+                       type(exc).__name__, exc)
+            return None
+
+    def _material_msg(self, oid: int, feats: Mapping[str, Mapping[str, float]], ramp: float) -> tuple:
+        payload = self._prebuilt(feats)
+        return ("renderers", oid, payload, ramp) if payload is not None else ("material", oid, feats, ramp)
+
     def _object_id(self, name: str) -> int:
         if name not in self._ids:
             raise ValidationError(f"no object {name!r}; objects: {sorted(self._ids)}", field="object")
@@ -829,13 +1244,16 @@ class Session:
 
     def _warm(self) -> None:
         """Load (or build once and cache) the amortised tables of the scene's dimensions,
-        while the servo starts."""
+        and set up the application's renderer builder (actuator capabilities, saved
+        calibrations) with the scene's own materials, while the servo starts."""
         dims = sorted({d for m in self.plan.materials.values() for d in m.dimensions})
         for group in ([d] for d in dims) if len(dims) > 2 else [dims]:
             try:
                 self._amortised({d: 0.5 for d in group})
             except HapticSDKError:
                 pass
+        for m in self.plan.materials.values():
+            self._prebuilt({d: dict(m.features) for d in m.dimensions})
 
     def _amortised(self, targets: Mapping[str, float]) -> Any:
         """The table's interpolated answer alone (``polish_steps`` 0): the background
@@ -907,7 +1325,7 @@ class Session:
             feats = self._features_by_dim(list(r.targets), res.x_dict)
             r.refined_features = feats
             if res.success and feats != r.features and not self._closed:
-                self._send(("material", oid, feats, self.ramp_s))
+                self._send(self._material_msg(oid, feats, self.ramp_s))
                 r.refined_sent = True
                 self._local_events.append(SessionEvent(self._mv[_T], "material_refined", r.object,
                                                        float(res.error)))
@@ -930,7 +1348,7 @@ class Session:
         ramp = self.ramp_s if ramp_s is None else float(ramp_s)
         if not (math.isfinite(ramp) and 0 <= ramp <= 5):
             raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
-        self._send(("material", oid, feats, ramp))
+        self._send(self._material_msg(oid, feats, ramp))
         self._materials[object] = label
         ints = getattr(res, "intensities", None)
         r = Retarget(object=object, targets=dict(targets), features=feats, source=source,
@@ -1004,7 +1422,7 @@ class Session:
             self._check()
             raise SessionError("the servo's state is being written and never settled")
         (t, px, py, pz, vx, vy, vz, f, obj, pen, ticks, ovr, skipped, rerr, clamps, tick_us, tick_max,
-         missed, pub, near, paused, switches, _) = vals
+         missed, pub, near, paused, switches, switched_at) = vals
         names = self._names
         return SessionState(t=t, position_mm=(px, py, pz), velocity_mm_s=(vx, vy, vz), force_n=f,
                             object=names.get(int(obj)) if obj >= 0 else None,
@@ -1012,7 +1430,7 @@ class Session:
                             ticks=int(ticks), overruns=int(ovr), skipped_ticks=int(skipped),
                             missed_ticks=int(missed), renderer_errors=int(rerr), clamps=int(clamps),
                             material_switches=int(switches), tick_us=tick_us, tick_max_us=tick_max,
-                            age_s=time.monotonic() - pub, paused=paused != 0.0)
+                            age_s=time.monotonic() - pub, paused=paused != 0.0, switched_at=switched_at)
 
     def events(self) -> list[SessionEvent]:
         """Events since the last call, oldest first (never blocks). When more than 1024

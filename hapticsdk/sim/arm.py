@@ -12,7 +12,8 @@ pushing towards its scripted reference ``r(t)``, which is linear within a period
 system is linear within each period, so with the augmented state
 ``z = [y, v, r, r', F]`` the exact step is ``z(t+T) = expm(A T) z(t)``: no integration
 error beyond float rounding, and unconditionally stable for any stiffness (checked
-against scipy's Radau in the tests). The arm reports its position through an encoder
+against scipy's Radau in the tests; ``expm`` is :func:`hapticsdk.linalg.expm`, numpy
+only, so importing the simulator does not import scipy). The arm reports its position through an encoder
 of resolution ``encoder_resolution_mm`` (quantised) and a backward-difference
 velocity.
 
@@ -28,9 +29,9 @@ from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
-from scipy.linalg import expm
 
 from ..errors import ValidationError
+from ..linalg import expm
 from .finger import FingerParams
 
 #: Where the simulated Omni's figures come from.

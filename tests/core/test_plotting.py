@@ -53,9 +53,9 @@ def test_force_penetration_summary_recovers_the_slope():
 
 
 def test_render_figure_with_a_dropped_dimension(figures):
-    # S7's intensities: GS below the arm's 2.3 N/mm (the voice coil stays idle) and
-    # roughness left out by the importance model
-    its = {k: round(v, 2) for k, v in hs.load_library().get("S7").intensities.items()}
+    # S13's intensities (fabric on sponge): GS below the arm's 2.3 N/mm (the voice coil
+    # stays idle) and roughness left out by the importance model
+    its = {k: round(v, 2) for k, v in hs.load_library().get("S13").intensities.items()}
     rep = hs.render(its, seconds=1.0, seed=1)
     assert [d["dimension"] for d in rep.dropped] == ["roughness"]
     plotting.plot_render(rep, "unused.png")
@@ -81,13 +81,14 @@ def test_render_figure_with_a_dropped_dimension(figures):
 
 
 def test_render_figure_units_and_legends(figures):
-    rep = hs.render("S12", seconds=1.5, seed=0)
+    # S8 (leather on rubber): both dimensions kept, GS above the arm's 2.3 N/mm (coil used)
+    rep = hs.render("S8", seconds=1.5, seed=0)
     assert set(rep.dimensions) == {"hardness", "roughness"}
     plotting.plot_render(rep, "unused.png")
     fig = figures[-1]
     fig.canvas.draw()
     titles = _axes_by_title(fig)
-    assert fig._suptitle.get_text().startswith('hapticsdk render of material S12 "')
+    assert fig._suptitle.get_text().startswith('hapticsdk render of material S8 "')
     assert "GENERATED" in fig._suptitle.get_text()
     coil = titles["coil channel (voicecoil-virtual)"]
     piezo = titles["vibration channel (piezo-virtual)"]

@@ -61,7 +61,7 @@ def test_live_session_prints_events_and_writes_a_figure(tmp_path):
     pytest.importorskip("matplotlib")
     out_png = tmp_path / "live.png"
     out = run("live_session.py", str(out_png))
-    for name in ("foam", "rubber", "leather"):
+    for name in ("sponge", "rubber", "eva"):   # named after the materials' substrates
         assert f"contact_enter {name}" in out
     assert "rubber retargeted" in out and "material_switched rubber" in out
     assert "stopped: " in out and "(generated data)" in out

@@ -30,6 +30,27 @@ def test_stability_controller_on_never_gives_energy(quick_matrix):
     assert all(c["outcome"] == "stable and transparent" for c in damped)
 
 
+def test_stability_summary_counts_each_goal():
+    """The per-goal counts of the summary, on hand-made cells: energy <= 0.1 mJ, delivered
+    >= 90 % of min(K, K_pass) x pen, felt floor met / missed / never that deep (NaN)."""
+    from hapticsdk.benchmarks.stability import summarise
+    nan = float("nan")
+
+    def cell(e, d, felt, on=True):
+        return {"controller": on, "energy_to_user_j": e, "delivered_vs_passive_ratio": d,
+                "delivered_vs_wall_ratio": d, "felt_force_ratio_min": felt, "outcome": "x", "peak_force_n": 1.0,
+                "peak_commanded_force_n": 1.0, "max_force_step_n": 0.1, "margin_ns_per_m": 0.0}
+    cells = [cell(0.0, 1.0, 1.2), cell(2e-4, 1.0, 1.0), cell(5e-5, 0.5, nan), cell(1e-4, 0.95, 0.7),
+             cell(0.0, nan, nan), cell(1.0, 0.1, 0.1, on=False)]
+    s = summarise(cells)
+    assert s["controller_on_cells"] == 5
+    assert s["controller_on_energy_within_tolerance"] == 4
+    assert s["controller_on_delivered_within_tolerance"] == 4  # no contact (NaN) delivers nothing owed
+    assert (s["controller_on_felt_force_met"], s["controller_on_felt_force_missed"],
+            s["controller_on_felt_force_not_applicable"]) == (2, 1, 2)
+    assert s["controller_on_all_three_met"] == 2
+
+
 def test_stability_predicted_active_cells_do_go_unstable_without_controller(quick_matrix):
     """Cells far on the active side of b > K T / 2 (margin < -1 N*s/m, K >= 1 N/mm) are
     unstable with the controller off; passive-predicted cells stay stable."""

@@ -171,7 +171,8 @@ def test_controller_has_no_force_spikes_up_to_four_times_critical_stiffness(K):
 
 #: the controller before the generation observer and the half-count play (energy
 #: observer, bounded damper and energy bound only; no stiffness cap, 1 mJ bound tolerance)
-OLD = {"generation_observer": False, "count_play_ratio": 0.0, "stiffness_cap": False, "bound_tolerance_j": 1e-3}
+OLD = {"generation_observer": False, "count_play_ratio": 0.0, "stiffness_cap": False, "bound_tolerance_j": 1e-3,
+       "felt_floor_fraction": None, "prepay_factor": 0.0}
 
 
 def test_spike_criterion_fails_without_the_slew_limit():
@@ -236,16 +237,21 @@ def test_generation_observer_books_the_hold_at_once():
     """One tick of motion dx into a spring K with exact positions: the generation
     observer falls by K dx^2 / 2 - b dx^2 / dt (the hold's excess over the credited
     damping) in that very tick, while the energy observer still holds the spring's
-    stored energy (positive)."""
+    stored energy (positive). Moving in, the pre-payment books ``prepay_factor`` times
+    that excess more as debt and the same amount as reserve (their sum is the excess)."""
     K, b, dt = 2000.0, 0.5, 1e-3  # N/m
-    pc = PassivityController(ControllerSettings(device_damping_ns_per_m=b, generation_budget_j=1.0))
+    p = 1.5
+    pc = PassivityController(ControllerSettings(device_damping_ns_per_m=b, generation_budget_j=1.0,
+                                                prepay_factor=p))
     x0, x1, x2 = -0.5, -0.6, -0.65  # mm, moving into the wall
     pc.step(x0, dt, K * 1e-3 * -x0)
     pc.commit(K * 1e-3 * -x0)
     pc.step(x1, dt, K * 1e-3 * -x1)
     g1 = pc.generation_j
     dx = (x1 - x0) * 1e-3
-    assert g1 == pytest.approx(-(0.5 * K * dx * dx - b * dx * dx / dt), rel=1e-9)
+    excess = 0.5 * K * dx * dx - b * dx * dx / dt
+    assert g1 == pytest.approx(-(1.0 + p) * excess, rel=1e-9)
+    assert pc.reserve_j == pytest.approx(p * excess, rel=1e-9)
     assert pc.energy_j > 0
     # the next command carries the damper (opposes the inward motion: pushes outward more)
     out = pc.step(x2, dt, K * 1e-3 * -x2)

@@ -152,7 +152,10 @@ def test_public_call_reuses_the_setup_but_not_the_targets(monkeypatch):
     fresh = problems.get_solver("amortised", polish_steps=0).solve(
         problems.build_problem({"hardness": 0.7, "roughness": 0.2}), seed=0)
     assert np.array_equal(fresh.x, b.x) and fresh.error == b.error
-    assert np.array_equal(c.x, b.x)
+    # the other column order is another setup (its own table): equal to its own fresh solve
+    fresh_c = problems.get_solver("amortised", polish_steps=0).solve(
+        problems.build_problem({"roughness": 0.2, "hardness": 0.7}), seed=0)
+    assert np.array_equal(fresh_c.x, c.x) and fresh_c.error == c.error
     with pytest.raises(ValidationError):
         problems.solve({"hardness": 1.5, "roughness": 0.2}, method="amortised")
 

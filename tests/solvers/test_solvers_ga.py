@@ -216,3 +216,25 @@ def test_elites_not_reevaluated(problem):
     m = problem.n_targets
     assert nfev[0] == m * 100
     assert np.all(np.diff(nfev) == m * 95)
+
+
+def test_mutation_law_rate_and_uniform_redraw(fx):
+    """Mutation children: each gene changes with probability ``mutation_rate`` and then
+    takes a value uniform within its bounds (binomial and histogram checks, 4 sigma)."""
+    from hapticsdk_ga.ga import ga_generation
+    rng = np.random.default_rng(9)
+    r, p, d, rate = 40, 200, 5, 0.3
+    lower, span = fx.LOWER, fx.UPPER - fx.LOWER
+    pop = np.broadcast_to(lower + 0.123456 * span, (r, p, d)).copy()   # every parent equal
+    new, _ = ga_generation(pop, rng.random((r, p)), lower, span, elite=0, n_cross=0, tournament=2,
+                           mutation_rate=rate, rng=rng)
+    changed = new != pop
+    n = changed.size
+    assert abs(changed.mean() - rate) < 4 * np.sqrt(rate * (1 - rate) / n)
+    u = ((new - lower) / span)[changed]                 # the redrawn genes in unit coordinates
+    assert u.min() >= 0 and u.max() < 1
+    counts = np.histogram(u, bins=10, range=(0, 1))[0]
+    k = u.size
+    assert np.all(np.abs(counts - k / 10) < 4 * np.sqrt(k / 10 * 0.9))
+    for j in range(d):                                  # every gene mutates, each at the rate
+        assert abs(changed[..., j].mean() - rate) < 4 * np.sqrt(rate * (1 - rate) / (n / d))

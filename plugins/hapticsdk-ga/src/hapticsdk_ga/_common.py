@@ -25,14 +25,16 @@ class Evaluator:
     one, ``de-scipy``) that returns ``(fitness, error, violation)`` and counts ``nfev``.
     """
 
-    def __init__(self, problem: SolveProblem) -> None:
+    def __init__(self, problem: SolveProblem, *, finite: bool = False) -> None:
         self.problem = problem
         self.nfev = 0
+        #: the candidates are generated inside the bounds (finite): the model's NaN check is skipped
+        self.finite = finite
 
     def __call__(self, X: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(fitness, error, violation)`` for ``X`` ``(r, p, d)`` (or ``(r, d)``),
         where ``r`` targets are ``problem.targets[rows]`` (all targets when ``rows`` is None)."""
-        d = self.problem.evaluate(X, details=True, rows=rows)
+        d = self.problem.evaluate(X, details=True, rows=rows, finite=self.finite)
         self.nfev += d["fitness"].size
         return d["fitness"], d["error"], d["violation"]
 

@@ -17,8 +17,9 @@ Building (once per model/problem setup, then cached):
 3. The table (``(grid, grid, d)`` features, per-node error and violation) is cached in
    memory and on disk (``.npz`` under ``cache_dir`` / ``$HAPTICSDK_CACHE_DIR`` /
    ``$XDG_CACHE_HOME/hapticsdk`` / ``~/.cache/hapticsdk``, subfolder ``amortised``), keyed
-   by a SHA-256 of the model's outputs on a fixed probe set, the dimensions, bounds, fixed
-   values, the constraints' values on the probe set, and the table options.
+   by a SHA-256 of the model file's SHA-256 (models loaded from a file), the model's
+   outputs on a fixed probe set, the dimensions, bounds, fixed values, the constraints'
+   values on the probe set, and the table options.
 
 Answering: bilinear interpolation of the node features at the targets
 (:meth:`AmortisedTable.lookup`, microseconds, for live retargeting), then optionally
@@ -190,7 +191,11 @@ def problem_key(problem: SolveProblem, options: dict[str, Any]) -> str:
                          "model_outputs": list(problem.model.dimension_names),
                          "constraints": [type(c).__qualname__ + ":" + c.name for c in problem.constraints],
                          "grid": options["grid"], "samples": options["build_samples"],
-                         "iter": options["build_iter"]}, sort_keys=True).encode())
+                         "iter": options["build_iter"],
+                         # the model file's identity where it has one (a replaced file
+                         # invalidates the table even if the probe outputs below agreed)
+                         "model_file_sha256": getattr(problem.model, "file_sha256", None)},
+                        sort_keys=True).encode())
     rng = np.random.default_rng(20240611)
     X = problem.space.random(64, rng)
     G = problem.full_inputs(X)
@@ -285,16 +290,36 @@ class AmortisedSolver(Solver):
         "cache": True, "cache_dir": None,
     }
 
-    def table(self, problem: SolveProblem) -> AmortisedTable:
-        """The table for ``problem`` (memory cache, then disk cache, else built and stored)."""
+    def _table_options(self) -> tuple[dict[str, Any], tuple]:
+        """The validated table options and the per-setup memo key (memoised per option
+        values: a one-target call then checks nothing twice)."""
         o = self.options
+        raw = (o["grid"], o["build_samples"], o["build_iter"], o["cache"], o["cache_dir"])
+        key: tuple | None = (raw, tuple(map(type, raw)))     # 101.0 == 101, but only the int is valid
+        try:
+            found = self._checked.get(key)  # type: ignore[arg-type]
+        except TypeError:   # an unhashable value: check_int raises below
+            key, found = None, None
+        if found is not None:
+            return found
         opts = {"grid": check_int(o, "grid", 2, 2001),
                 "build_samples": check_int(o, "build_samples", 16, 10_000_000),
                 "build_iter": check_int(o, "build_iter", 1, 10_000)}
-        memo = getattr(problem, "_setup_cache", None)
         mkey = ("amortised", tuple(sorted(opts.items())), bool(o["cache"]), o["cache_dir"])
-        if memo is not None and mkey in memo:
-            return memo[mkey]
+        hit: tuple[dict[str, Any], tuple] = (opts, mkey)
+        if key is not None:
+            self._checked[key] = hit
+        return hit
+
+    def table(self, problem: SolveProblem) -> AmortisedTable:
+        """The table for ``problem`` (memory cache, then disk cache, else built and stored)."""
+        o = self.options
+        opts, mkey = self._table_options()
+        memo = getattr(problem, "_setup_cache", None)
+        if memo is not None:
+            tab = memo.get(mkey)
+            if tab is not None:
+                return tab
         t_start = time.perf_counter()
         key = problem_key(problem, opts)
         tab = _MEMO.get(key)
@@ -331,12 +356,19 @@ class AmortisedSolver(Solver):
             memo[mkey] = tab
         return tab
 
+    def __init__(self, **options: Any) -> None:
+        super().__init__(**options)
+        self._checked: dict[tuple, tuple[dict[str, Any], tuple]] = {}
+
     def _solve(self, problem: SolveProblem, rng: np.random.Generator, trace: Trace) -> SolverOutput:
-        steps = check_int(self.options, "polish_steps", 0, 10_000)
+        steps = self.options["polish_steps"]
+        if type(steps) is not int or not 0 <= steps <= 10_000:
+            steps = check_int(self.options, "polish_steps", 0, 10_000)
         tab = self.table(problem)
-        X = problem.clip(tab.lookup(problem.targets))
-        if steps == 0:   # the lookup alone: the core evaluates the answer
+        X = tab.lookup(problem.targets)
+        if steps == 0:   # the lookup alone (node features interpolated: in bounds); the core evaluates it
             return SolverOutput(x=X, nfev=0, nit=0, message=f"table {tab.shape} lookup")
+        X = problem.clip(X)
         rows = np.arange(problem.n_targets)
         Xp, err, viol, it, nfev = levenberg_marquardt(
             problem, X, rows, max_iter=steps, goal=0.0, on_iter=lambda n, e, v: trace.record(n, e, v))

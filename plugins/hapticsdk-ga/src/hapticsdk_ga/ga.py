@@ -38,8 +38,8 @@ import numpy as np
 
 from hapticsdk.solvers import SolveProblem, Solver, SolverOutput, Trace
 
-from ._common import (Clock, Evaluator, check_budget, check_fraction, check_int, sample_cloud, solved_mask,
-                      target_error)
+from ._common import (CONSTRAINT_TOL, Clock, Evaluator, check_budget, check_fraction, check_int, sample_cloud,
+                      solved_mask, target_error)
 
 #: upper limits of the size options (a run of the paper's size is 100 x 50; these bound a
 #: mistyped value, e.g. ``generations: 1e9``, instead of running for days)
@@ -70,8 +70,9 @@ def _rank_select(order_flat: np.ndarray, u: np.ndarray, size: int) -> np.ndarray
     u += p                                    # p * (1 - V^(1/size)) in [0, p]
     k = u.astype(np.intp)
     np.minimum(k, p - 1, out=k)
-    k += _offsets(r, p)
-    return np.take(order_flat, k)
+    if r > 1:   # row offsets (0 for one row)
+        k += _offsets(r, p)
+    return order_flat.take(k)
 
 
 _CACHE: dict[tuple, np.ndarray] = {}
@@ -85,6 +86,17 @@ def _offsets(r: int, p: int) -> np.ndarray:
         if len(_CACHE) > 256:
             _CACHE.clear()
         o = _CACHE[key] = (np.arange(r) * p)[:, None]
+    return o
+
+
+def _arange(r: int) -> np.ndarray:
+    """``np.arange(r)`` (cached; read-only use)."""
+    key = ("ar", r)
+    o = _CACHE.get(key)
+    if o is None:
+        if len(_CACHE) > 256:
+            _CACHE.clear()
+        o = _CACHE[key] = np.arange(r)
     return o
 
 
@@ -117,8 +129,9 @@ class GAWorkspace:
 
     def next_pop(self, r: int, current: np.ndarray) -> np.ndarray:
         """The buffer not holding ``current``, first ``r`` rows."""
+        owner = current if current.base is None else current.base
         for buf in self.pops:
-            if not np.may_share_memory(buf, current):
+            if buf is not owner:
                 return buf[:r]
         return np.empty((r,) + self.pops[0].shape[1:])  # pragma: no cover - defensive
 
@@ -143,8 +156,8 @@ def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.
     """
     r, p, d = pop.shape
     if order is None:
-        order = np.argsort(fit, axis=1)
-    order_flat = order + _offsets(r, p)
+        order = fit.argsort(axis=1)
+    order_flat = order if r == 1 else order + _offsets(r, p)
     flat_pop = pop.reshape(r * p, d)
     n_mut = p - elite - n_cross
     n_sel = 2 * n_cross + n_mut
@@ -159,20 +172,20 @@ def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.
         u = rng.random((r, n_u))
         bufs = (None, None, None)
     if elite:
-        np.take(flat_pop, order_flat[:, :elite], axis=0, out=out[:, :elite], mode="clip")
+        flat_pop.take(order_flat[:, :elite], axis=0, out=out[:, :elite], mode="clip")
     winners = _rank_select(order_flat, u[:, :n_sel], tournament)
     if n_cross:
-        a = np.take(flat_pop, winners[:, :n_cross], axis=0, out=bufs[0], mode="clip")       # (r, n_cross, d)
+        a = flat_pop.take(winners[:, :n_cross], axis=0, out=bufs[0], mode="clip")       # (r, n_cross, d)
         if d > 1:
-            b = np.take(flat_pop, winners[:, n_cross:2 * n_cross], axis=0, out=bufs[1], mode="clip")
+            b = flat_pop.take(winners[:, n_cross:2 * n_cross], axis=0, out=bufs[1], mode="clip")
             uc = u[:, n_sel:n_sel + n_cut]
             uc *= d - 1
-            np.copyto(b, a, where=np.take(_cut_masks(d), uc.astype(np.intp), axis=0))  # genes [:cut] from a
-            a = b
+            # genes [:cut] from a, the rest from b (np.where: half the time of a masked copy)
+            a = np.where(_cut_masks(d).take(uc.astype(np.intp), axis=0), a, b)
         out[:, elite:elite + n_cross] = a
     if n_mut:
-        child = np.take(flat_pop, winners[:, 2 * n_cross:], axis=0, out=bufs[2], mode="clip")  # (r, n_mut, d)
-        hit = np.flatnonzero(u[:, n_sel + n_cut:] < mutation_rate)    # row-major = child's order
+        child = flat_pop.take(winners[:, 2 * n_cross:], axis=0, out=bufs[2], mode="clip")  # (r, n_mut, d)
+        hit = (u[:, n_sel + n_cut:] < mutation_rate).ravel().nonzero()[0]    # row-major = child's order
         if hit.size:
             g = hit % d
             child.reshape(-1)[hit] = lower[g] + rng.random(hit.size) * span[g]
@@ -226,7 +239,7 @@ class GASolver(Solver):
         s = self._settings()
         goal = target_error(self.options, problem)
         clock = Clock(s["time_budget_s"])
-        ev = Evaluator(problem)
+        ev = Evaluator(problem, finite=True)    # every individual is drawn inside the bounds
         m, d, p = problem.n_targets, problem.n_features, s["population"]
         elite = s["elite_count"]
         n_cross = int(round(s["crossover_fraction"] * (p - elite)))
@@ -289,32 +302,45 @@ class GASolver(Solver):
             # the elites are copied unchanged: their fitness is reused, only the children are
             # evaluated. An elite never beats best_f (elite 0 is the previous best), so the
             # best-so-far update only looks at the children.
-            fc, ec, vc = ev(pop[:, elite:], rows)
+            fc, ec, vc = ev(pop[:, elite:], rows if r < m else None)   # rows: sorted, all when r == m
             nf = np.empty((r, p))
             if elite:
-                nf[:, :elite] = np.take(fit, esrc)
+                fit.take(esrc, out=nf[:, :elite])
             nf[:, elite:] = fc
             fit = nf
             gen += 1
-            k = fc.argmin(axis=1)
-            ra = np.arange(r)
-            fk = fc[ra, k]
-            better = fk < best_f[rows]
-            if better.any():
-                upd, kb, rb = rows[better], k[better], ra[better]
-                best_x[upd] = pop[rb, kb + elite]
-                best_f[upd] = fk[better]
-                best_e[upd] = ec[rb, kb]
-                best_v[upd] = vc[rb, kb]
-                trace.record(ev.nfev, best_e, best_v)
-                still = ~solved_mask(best_e[rows], best_v[rows], goal)
-                if not still.all():
-                    rows = rows[still]
-                    k = rows.size
-                    pop[:k] = pop[still]          # compact in place (leading rows of the buffer)
-                    pop, fit = pop[:k], fit[still]
+            if r == 1:   # one active target: the same bookkeeping on scalars (fewer numpy calls)
+                kk = int(fc[0].argmin())
+                i0 = int(rows[0])
+                if fc[0, kk] < best_f[i0]:
+                    best_x[i0] = pop[0, kk + elite]
+                    best_f[i0], best_e[i0], best_v[i0] = fc[0, kk], ec[0, kk], vc[0, kk]
+                    trace.record(ev.nfev, best_e, best_v)
+                    if best_e[i0] <= goal and best_v[i0] <= CONSTRAINT_TOL:    # solved_mask
+                        rows = rows[:0]
+                        pop, fit = pop[:0], fit[:0]
+                else:
+                    trace.record(ev.nfev, best_e, best_v)
             else:
-                trace.record(ev.nfev, best_e, best_v)
+                k = fc.argmin(axis=1)
+                ra = _arange(r)
+                fk = fc[ra, k]
+                better = fk < (best_f if r == m else best_f[rows])
+                if better.any():
+                    upd, kb, rb = rows[better], k[better], ra[better]
+                    best_x[upd] = pop[rb, kb + elite]
+                    best_f[upd] = fk[better]
+                    best_e[upd] = ec[rb, kb]
+                    best_v[upd] = vc[rb, kb]
+                    trace.record(ev.nfev, best_e, best_v)
+                    still = ~solved_mask(best_e[rows], best_v[rows], goal)
+                    if not still.all():
+                        rows = rows[still]
+                        k = rows.size
+                        pop[:k] = pop[still]          # compact in place (leading rows of the buffer)
+                        pop, fit = pop[:k], fit[still]
+                else:
+                    trace.record(ev.nfev, best_e, best_v)
             if stall_n is not None and rows.size:
                 fell = best_f[rows] < ref_f[rows] - 1e-3 * np.abs(ref_f[rows])
                 ref_f[rows[fell]] = best_f[rows[fell]]

@@ -173,13 +173,29 @@ class DeviceAmplitudeConstraint(Constraint):
         self.max_drive, self.actuator = float(max_drive), actuator
         t_lo, t_hi = table.frequency_range_hz
         self._f = np.linspace(lo, hi, 512)
-        inside = (t_lo <= self._f) & (self._f <= t_hi)
-        self._a = np.zeros(self._f.size)
         many = getattr(table, "accelerations_at", None)  # a PiezoTable: vectorised over frequency
-        if many is not None:
-            self._a[inside] = many(self._f[inside], self.max_drive)
-        else:
-            self._a[inside] = [table.acceleration_at(f, self.max_drive) for f in self._f[inside]]
+
+        def reach(f: np.ndarray) -> np.ndarray:
+            out = np.zeros(f.size)
+            inside = (t_lo <= f) & (f <= t_hi)
+            if many is not None:
+                out[inside] = many(f[inside], self.max_drive)
+            else:
+                out[inside] = [table.acceleration_at(x, self.max_drive) for x in f[inside]]
+            return out
+
+        self._a = reach(self._f)
+        # Linear interpolation between the grid points must not promise more than the
+        # table: where the curve sags below a chord, both ends of that interval are lowered
+        # by the sag at its midpoint (the largest gap for a locally quadratic curve).
+        # Intervals reaching past the table's range keep their chord down to 0.
+        sag = np.clip(0.5 * (self._a[:-1] + self._a[1:]) - reach(0.5 * (self._f[:-1] + self._f[1:])),
+                      0.0, None)
+        sag[(self._f[:-1] < t_lo) | (self._f[1:] > t_hi)] = 0.0
+        drop = np.zeros(self._a.size)
+        drop[:-1] = sag
+        drop[1:] = np.maximum(drop[1:], sag)
+        self._a = np.maximum(self._a - drop, 0.0)
         self.table_source = getattr(table, "source", "")
 
     def max_acceleration(self, f_hz: Any) -> np.ndarray:
