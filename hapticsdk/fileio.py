@@ -33,8 +33,19 @@ from typing import IO, Any, Iterator
 
 from .errors import FileWriteError
 
-__all__ = ["atomic_writer", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_savez",
+__all__ = ["cache_dir", "atomic_writer", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_savez",
            "check_output_path", "FileWriteError"]
+
+
+def cache_dir() -> Path:
+    """The SDK's cache folder (amortised tables, model descriptions, validation memo):
+    ``$HAPTICSDK_CACHE_DIR``, else ``$XDG_CACHE_HOME/hapticsdk``, else
+    ``~/.cache/hapticsdk``. Not created here; writers create their sub-folder."""
+    env = os.environ.get("HAPTICSDK_CACHE_DIR")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
 
 
 def check_output_path(path: str | os.PathLike[str], *, field: str = "output", overwrite: bool = True) -> Path:

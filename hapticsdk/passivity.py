@@ -44,7 +44,11 @@ Two tools:
   ``min(0.6 N, 0.95 x the wall's own force)`` whenever the floor's work over one tick is
   affordable, and a **pre-paid budget** makes the damper pay, while the probe moves into
   the wall (extra resistance, not less force), for the withdrawal where the floor limits
-  it (see :class:`ControllerSettings`).
+  it; where the floor's one-tick work is not affordable by itself (long periods, no
+  device damping, fast taps) an **entry boost** lets that damper exceed its bound and the
+  slew limit while the probe moves in, up to the device's saturation, until the reserve
+  covers the floor's cost of the withdrawal, and the floor's gate counts the reserve
+  (see :class:`ControllerSettings`).
 
 Sign conventions: ``x`` is the probe position along the surface normal (mm, y axis,
 inside the material at x < 0); ``F`` is the force on the probe along +x (N, "pushing the
@@ -420,10 +424,11 @@ class ControllerSettings:
         felt_tick_energy_j: the floor holds on a tick only while its work over one tick
             of the current motion, ``F_floor (|dx| + Delta)`` (J), is at most this plus
             ``felt_damping_multiple x b dx^2 / dt`` (the device damping's dissipation over
-            that tick, at the cap's Colgate multiple). Passivity comes first: at long
-            periods on a device without damping a fast tap moves 1-1.5 mm per tick (4 ms),
-            a 0.6 N floor would hand the finger 0.6-0.9 mJ in the tick it leaves, and the
-            floor yields (0.4 mJ).
+            that tick, at the cap's Colgate multiple), plus the pre-paid reserve when
+            ``felt_uses_reserve``. Passivity comes first: at long periods on a device
+            without damping a fast tap moves 1-1.5 mm per tick (4 ms), a 0.6 N floor would
+            hand the finger 0.6-0.9 mJ in the tick it leaves; unless the entry boost has
+            pre-paid that (``entry_force_limit_n``), the floor yields (0.4 mJ).
         felt_damping_multiple: see ``felt_tick_energy_j`` (4).
         prepay_factor: **pre-paid energy budget** for the withdrawal. While the probe
             moves into the wall (reading moving in, wall force > 0) the generation
@@ -438,7 +443,27 @@ class ControllerSettings:
             still acts on the withdrawal above the floor and shallower than
             ``felt_depth_mm`` (in the stability matrix 0.5 meets the floor and the
             energy goal in every cell 1 does, and leaves less energy in the damped cells).
-        prepay_budget_j: largest reserve (J; 1 mJ, the generation observer's floor).
+        prepay_budget_j: largest reserve (J; 2 mJ: at T = 4 ms without device damping a
+            tap's withdrawal draws about 1.5 mJ from it; with 1 mJ the floor still yielded
+            in 6 of the stability matrix's 4 ms cells).
+        entry_force_limit_n: **entry boost** (None: off). While the probe moves into the
+            wall at a speed where the felt floor's one-tick work is not affordable by
+            itself (``F_floor (|dx| + Delta)`` above ``felt_tick_energy_j`` plus the
+            damping term), and the reserve is short of the floor's cost of the
+            withdrawal, estimated as ``F_floor x (penetration + |dx| + Delta)``, the
+            pre-payment books that shortfall at once (up to ``prepay_budget_j``) and its
+            damper may exceed ``max_damping_ns_per_m`` and the slew limit, up to this
+            force (N; 3.3 N, the Omni's saturation). Moving in, the extra force is
+            resistance, not a loss of felt force, so it is added after the energy bound.
+            Without it, at T = 4 ms with b = 0 a tap is in contact for about 8 ticks and
+            the damper, held to 5 N*s/m and 0.8 N per tick, cannot pre-pay the 0.5-0.75 mJ
+            a 0.5 N floor hands the finger in the tick it leaves.
+        entry_force_step_n: largest rise of the output per tick during the entry boost
+            (N; 1.2 N). None: up to ``entry_force_limit_n`` at once (the stability
+            matrix's largest force step was then 2.35 N).
+        felt_uses_reserve: the felt floor's affordability also counts the pre-paid
+            reserve (``F_floor (|dx| + Delta) <= felt_tick_energy_j + damping term +
+            reserve``), so the floor holds through a withdrawal the entry has paid for.
     """
 
     max_damping_ns_per_m: float = 5.0
@@ -467,7 +492,10 @@ class ControllerSettings:
     felt_tick_energy_j: float = 4.0e-4
     felt_damping_multiple: float = 4.0
     prepay_factor: float = 0.5
-    prepay_budget_j: float = 1.0e-3
+    prepay_budget_j: float = 2.0e-3
+    entry_force_limit_n: float | None = 3.3
+    entry_force_step_n: float | None = 1.2
+    felt_uses_reserve: bool = True
 
 
 def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float,
@@ -537,7 +565,8 @@ class PassivityController:
     those, the generation observer ``G`` (see :class:`ControllerSettings`) adds a damper
     on the raw velocity as soon as the hold makes more energy than the device damping
     dissipates, so a wall above 2b/T is damped while it still renders its full spring;
-    moving in, it also pre-pays the withdrawal. Last, the felt floor
+    moving in, it also pre-pays the withdrawal (with the entry boost beyond its bound
+    and the slew limit, see ``entry_force_limit_n``). Last, the felt floor
     (``felt_floor_fraction``) keeps the output deeper than ``felt_depth_mm`` at or above
     ``min(felt_force_n, felt_floor_fraction x wall force)`` while affordable.
     """
@@ -628,6 +657,9 @@ class PassivityController:
         budget = self.energy_j + s.bound_tolerance_j
         f = f_wall
         active = False
+        boost = False  # entry boost this tick (see ControllerSettings.entry_force_limit_n)
+        need = 0.0
+        f_entry = 0.0
         if s.generation_observer:
             # the hold's generation relative to the wall's own law (held-force work minus
             # the trapezoid of the wall's force), plus the credited device damping
@@ -639,10 +671,23 @@ class PassivityController:
                 cg = bd * dx * dx / dt
             delta = -work + 0.5 * (self._fw_prev + f_wall) * dx + cg
             g = self.generation_j + delta
+            if s.entry_force_limit_n is not None and s.prepay_factor > 0.0 and s.felt_floor_fraction \
+                    and dx < 0.0 and f_wall > 0.0:
+                # entry boost (see ControllerSettings.entry_force_limit_n): moving in at a
+                # speed where the floor is not affordable by itself, while the reserve is
+                # short of the floor's cost of the withdrawal
+                fl_e = s.felt_floor_fraction * f_raw
+                if s.felt_force_n is not None and fl_e > s.felt_force_n:
+                    fl_e = s.felt_force_n
+                need = fl_e * ((-x_mm if x_mm < 0.0 else 0.0) * 1e-3 + adx + q)
+                own = s.felt_tick_energy_j + s.felt_damping_multiple * (bd if bd > 0.0 else 0.0) * adx * adx / dt
+                boost = self.reserve_j < need and fl_e * (adx + q) > own
             if s.prepay_factor > 0.0:
                 # pre-paid budget (see ControllerSettings.prepay_factor)
                 if dx < 0.0 and f_wall > 0.0:
                     extra = s.prepay_factor * -delta if delta < 0.0 else 0.0
+                    if boost and need - self.reserve_j > extra:
+                        extra = need - self.reserve_j
                     room = s.prepay_budget_j - self.reserve_j
                     extra = min(extra, room) if room > 0.0 else 0.0
                     g -= extra
@@ -668,10 +713,20 @@ class PassivityController:
                     g = -floor
             self.generation_j = g
             if g < 0.0 and f_wall != 0.0 and abs(v_raw) * 1e3 > s.velocity_deadband_mm_s:
+                amax = s.max_damping_ns_per_m
+                if boost:
+                    a_e = (s.entry_force_limit_n - f) / abs(v_raw)
+                    if a_e > amax:
+                        amax = a_e
                 alpha = -g / (dt * v_raw * v_raw)
-                if alpha > s.max_damping_ns_per_m:
-                    alpha = s.max_damping_ns_per_m
-                f -= alpha * v_raw
+                if alpha > amax:
+                    alpha = amax
+                if boost:
+                    # the entry boost's resistance is not an outward push the energy
+                    # bound must ramp down (the probe moves in): added after the bound
+                    f_entry = -alpha * v_raw
+                else:
+                    f -= alpha * v_raw
                 active = True
         step = s.max_force_step_n
         hard = math.inf
@@ -685,6 +740,7 @@ class PassivityController:
                 self.bounded_j += f - cap
                 f = cap
                 active = True
+        f += f_entry
         f_pc = 0.0
         if avail < 0.0 and abs(v) * 1e3 > s.velocity_deadband_mm_s:
             alpha = -avail / (dt * v * v)
@@ -699,6 +755,12 @@ class PassivityController:
             # slew limit while the controller acts and until the output has caught up
             # with the wall again; a cut below the one-tick cap is never delayed
             lo, hi = self._out_prev - step, self._out_prev + step
+            if boost and s.entry_force_limit_n is not None:
+                he = s.entry_force_limit_n
+                if s.entry_force_step_n is not None and self._out_prev + s.entry_force_step_n < he:
+                    he = self._out_prev + s.entry_force_step_n
+                if hi < he:
+                    hi = he
             if lo > hard:
                 lo = hard
             out = lo if out < lo else (hi if out > hi else out)
@@ -708,7 +770,10 @@ class PassivityController:
             if s.felt_force_n is not None and fl > s.felt_force_n:
                 fl = s.felt_force_n
             bp = bd if bd > 0.0 else 0.0
-            if out < fl and fl * (adx + q) <= s.felt_tick_energy_j + s.felt_damping_multiple * bp * adx * adx / dt:
+            allow = s.felt_tick_energy_j + s.felt_damping_multiple * bp * adx * adx / dt
+            if s.felt_uses_reserve and s.generation_observer:
+                allow += self.reserve_j
+            if out < fl and fl * (adx + q) <= allow:
                 out = fl
         self._f_pc_prev = out - f_wall
         self._out_prev = out
@@ -793,12 +858,25 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
     avail = state["energy"] + s.energy_tolerance_j
     budget = state["energy"] + s.bound_tolerance_j
     gen_damp = np.zeros(f.shape, bool)
+    boost = np.zeros(f.shape, bool)
     if s.generation_observer:
         whole = count_level & (dx != 0) & (dfw <= 2.0 * bb * adx)
         cg = np.where(whole, bb * dx * dx / dt, credit)
         delta = -work + 0.5 * (state["fw_prev"] + f) * dx + cg
         g = state["generation"] + delta
         res_j = state["reserve"] if "reserve" in state else np.zeros_like(g)
+        need = np.zeros_like(g)
+        if s.entry_force_limit_n is not None and s.prepay_factor > 0.0 and s.felt_floor_fraction:
+            # entry boost (see ControllerSettings.entry_force_limit_n): moving in at a speed
+            # where the floor is not affordable by itself, while the reserve is short of
+            # the floor's cost of the withdrawal
+            fl_e = s.felt_floor_fraction * f_raw
+            if s.felt_force_n is not None:
+                fl_e = np.minimum(fl_e, s.felt_force_n)
+            pen_m = np.maximum(-np.asarray(x_mm, float), 0.0) * 1e-3
+            need = fl_e * (pen_m + adx + qm)
+            own = s.felt_tick_energy_j + s.felt_damping_multiple * np.maximum(bb, 0.0) * adx * adx / dt
+            boost = started & (dx < 0.0) & (f > 0.0) & (res_j < need) & (fl_e * (adx + qm) > own)
         if s.prepay_factor > 0.0:
             # pre-paid budget: while the probe moves into the wall the damper also pays
             # prepay_factor x the hold's generation in advance (kept as a reserve), so the
@@ -806,6 +884,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
             # dissipated
             entering = (dx < 0.0) & (f > 0.0)
             extra = np.where(entering, s.prepay_factor * np.maximum(-delta, 0.0), 0.0)
+            extra = np.where(boost, np.maximum(extra, need - res_j), extra)
             extra = np.minimum(extra, np.maximum(s.prepay_budget_j - res_j, 0.0))
             g = g - extra
             res_j = res_j + extra
@@ -818,10 +897,20 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         g = np.clip(np.where(out_of_contact, 0.0, g), -floor, s.generation_budget_j)
         state["reserve"] = np.where(out_of_contact, 0.0, res_j)
         state["generation"] = g
+        amax = np.full(f.shape, s.max_damping_ns_per_m)
+        if s.entry_force_limit_n is not None and s.prepay_factor > 0.0 and s.felt_floor_fraction:
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                amax = np.where(boost, np.maximum(amax, (s.entry_force_limit_n - f) / np.abs(v_raw)), amax)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             gen_damp = started & (g < 0.0) & (f != 0.0) & (np.abs(v_raw) * 1e3 > s.velocity_deadband_mm_s)
-            alpha_g = np.where(gen_damp, np.minimum(-g / (dt * v_raw * v_raw), s.max_damping_ns_per_m), 0.0)
-        f = f - alpha_g * np.where(gen_damp, v_raw, 0.0)
+            alpha_g = np.where(gen_damp, np.minimum(-g / (dt * v_raw * v_raw), amax), 0.0)
+        push = -alpha_g * np.where(gen_damp, v_raw, 0.0)
+        # the entry boost's resistance is not an outward push the energy bound must
+        # ramp down (the probe moves in): it is added after the bound
+        f_entry = np.where(boost, push, 0.0)
+        f = f + np.where(boost, 0.0, push)
+    else:
+        f_entry = np.zeros(f.shape)
     step = s.max_force_step_n
     hard = np.full(f.shape, np.inf)
     if s.energy_bound:
@@ -845,6 +934,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         hard = np.where(pos, hard, np.inf)
     else:
         capped = np.zeros(f.shape, bool)
+    f = f + f_entry
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         damp = (avail < 0) & (np.abs(v) * 1e3 > s.velocity_deadband_mm_s)
         alpha = np.where(damp, np.minimum(-avail / (dt * v * v), s.max_damping_ns_per_m), 0.0)
@@ -855,7 +945,13 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         prev = state["out_prev"]
         limit = started & (active | (state["f_pc_prev"] != 0.0))
         lo = np.minimum(prev - step, hard)  # a cut below the one-tick cap is never delayed
-        out = np.where(limit, np.clip(out, lo, prev + step), out)
+        hi = prev + step
+        if s.entry_force_limit_n is not None:
+            he = s.entry_force_limit_n
+            if s.entry_force_step_n is not None:
+                he = np.minimum(he, prev + s.entry_force_step_n)
+            hi = np.where(boost, np.maximum(hi, he), hi)
+        out = np.where(limit, np.clip(out, lo, hi), out)
     if s.felt_floor_fraction:
         # felt floor (see ControllerSettings.felt_floor_fraction): deeper than
         # felt_depth_mm no correction takes the output below min(felt_force_n,
@@ -864,7 +960,10 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         if s.felt_force_n is not None:
             fl = np.minimum(fl, s.felt_force_n)
         # ... as long as its work over one tick of the current motion is affordable
-        afford = fl * (adx + qm) <= s.felt_tick_energy_j + s.felt_damping_multiple * np.maximum(bb, 0.0) * adx * adx / dt
+        allow = s.felt_tick_energy_j + s.felt_damping_multiple * np.maximum(bb, 0.0) * adx * adx / dt
+        if s.felt_uses_reserve and s.generation_observer:
+            allow = allow + state["reserve"]
+        afford = fl * (adx + qm) <= allow
         deep = (f_raw > 0.0) & (-np.asarray(x_mm, float) >= s.felt_depth_mm) & afford
         out = np.where(deep, np.maximum(out, fl), out)
     out = np.where(started, out, f_wall)

@@ -213,14 +213,8 @@ def load_json(path: str | Path, schema: str) -> Any:
 
 
 def _cache_dir() -> Path:
-    """``$HAPTICSDK_CACHE_DIR`` or ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk``."""
-    import os
-
-    env = os.environ.get("HAPTICSDK_CACHE_DIR")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
+    from .fileio import cache_dir
+    return cache_dir()
 
 
 def _validated_marker(data: Any, schema: str) -> Path | None:

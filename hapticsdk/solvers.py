@@ -607,12 +607,7 @@ class Solver(ABC):
         for a in range(0, m, int(chunk)):
             sub = problem if m <= chunk else problem.target_chunk(a, min(m, a + int(chunk)))
             trace = Trace(sub.n_targets)
-            try:
-                out = self._solve(sub, rng, trace)
-            except (ValidationError, SolverError):
-                raise
-            except Exception as exc:
-                raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
+            out = self._call_backend(sub, rng, trace)
             x = np.asarray(out.x, float)
             if x.shape != (sub.n_targets, sub.n_features) or not np.isfinite(x).all():
                 raise SolverError(f"solver {self.name!r} returned x of shape {x.shape} "
@@ -624,18 +619,23 @@ class Solver(ABC):
         return BatchSolveResult(data=data, time_s=data.elapsed, nfev=data.nfev, nit=data.nit,
                                 trace=data.batch_trace, method=self.name)
 
+    def _call_backend(self, problem: SolveProblem, rng: np.random.Generator, trace: "Trace") -> Any:
+        """The backend's :meth:`_solve`; an exception other than the SDK's own becomes a
+        :class:`~hapticsdk.errors.SolverError` naming the solver."""
+        try:
+            return self._solve(problem, rng, trace)
+        except (ValidationError, SolverError):
+            raise
+        except Exception as exc:
+            raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
+
     def _solve_single(self, problem: SolveProblem, rng: np.random.Generator) -> SolveResult:
         """One target (``problem.single``): the same search and the same result as a batch of
         one, with the answer re-evaluated on plain floats (:meth:`SolveProblem.evaluate_one`)
         instead of through the batch arrays."""
         t0 = time.perf_counter()
         trace = Trace(1)
-        try:
-            out = self._solve(problem, rng, trace)
-        except (ValidationError, SolverError):
-            raise
-        except Exception as exc:
-            raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
+        out = self._call_backend(problem, rng, trace)
         x = np.asarray(out.x, float)
         d = problem.n_features
         row = x[0].tolist() if x.shape == (1, d) else None

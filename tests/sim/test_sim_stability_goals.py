@@ -10,15 +10,17 @@ controller's constants:
   (each target capped at the arm's 3.3 N), K_pass = the stiffest wall the same cell keeps
   stable with the controller off (measured here with the benchmark's search);
 * on every tick deeper than 1 mm, applied force >= min(0.5 N, 0.9 K x penetration) (the
-  felt floor). The cells marked for it (all b = 0 cells here, and the 4 ms cells with
-  b = 0.25 / 0.5 that missed it before the felt floor) must actually go deeper than 1 mm,
-  so the check cannot pass by not applying.
+  felt floor). The cells marked for it (all b = 0 cells here, including three at 4 ms
+  that missed it before the entry boost, and the 4 ms cells with b = 0.25 / 0.5 that
+  missed it before the felt floor) must actually go deeper than 1 mm, so the check cannot
+  pass by not applying.
 
 Each cell is a 3 s press/slide/tap run of the benchmark's simulation (exact ZOH arm,
 0.055 mm encoder, 3.3 N saturation), and one 10 s run at 2 ms (the cell that needs the
 pre-paid budget). Each mutation of the controller below must fail at least one goal in
 at least one cell, so the goals can fail. At T = 4 ms with no device damping the felt
-floor yields to passivity (``test_floor_yields_to_passivity_at_4ms_without_damping``).
+floor is paid for on the way in (the entry boost,
+``test_entry_boost_pays_for_the_floor_at_4ms_without_damping``).
 """
 
 import numpy as np
@@ -42,7 +44,11 @@ CELLS = {
     (4e-3, DURATION_S): [(100.0, 0.5, "medium", False), (10000.0, 0.5, "stiff", False),
                          # K_pass x 1 mm < 0.5 N here; the damper took the force to 0.02-0.37 N
                          (2.3, 0.25, "stiff", True), (10.0, 0.25, "medium", True), (0.7, 0.25, "medium", True),
-                         (0.7, 0.5, "medium", True)],
+                         (0.7, 0.5, "medium", True),
+                         # no device damping: a tap moves 1-1.5 mm per tick; before the entry
+                         # boost the floor yielded there (down to 0 N / 0.34 / 0.69 of the floor)
+                         (10.0, 0.0, "medium", True), (10.0, 0.0, "stiff", True), (0.7, 0.0, "medium", True),
+                         (0.1, 0.0, "stiff", True)],
     (0.25e-3, DURATION_S): [(10000.0, 0.25, "medium", False), (10000.0, 0.5, "soft", False)],
     # 10 s (five press/slide/tap cycles): without the pre-paid budget 0.41 N on withdrawal
     (2e-3, 10.0): [(0.7, 0.0, "medium", True)],
@@ -127,17 +133,53 @@ def test_felt_floor_on_every_deep_tick():
     assert np.all(deep_ticks > 100) and np.all(out_ticks > 10)
 
 
-def test_floor_yields_to_passivity_at_4ms_without_damping():
+def test_entry_boost_pays_for_the_floor_at_4ms_without_damping():
     """T = 4 ms, b = 0: a tap leaves the wall at 1-1.5 mm per tick, so a 0.5 N floor held
-    through the tick it leaves hands the finger 0.5-0.75 mJ, 5-7 x the energy goal. The
-    controller keeps the energy goal (the floor yields when its one-tick work is not
-    affordable); held regardless (no affordability gate), the floor misses it."""
+    through the tick it leaves hands the finger 0.5-0.75 mJ, 5-7 x the energy goal. With
+    the entry boost (the damper pays that on the way in, beyond its 5 N*s/m bound and the
+    0.8 N slew limit) the floor holds and the finger gets no energy; without the boost
+    the floor either yields (felt goal missed) or, held regardless, hands the finger more
+    than the energy goal."""
     key = (4e-3, DURATION_S)
     cells = [(10.0, 0.0, "medium", True), (10.0, 0.0, "stiff", True)]
     r = _run(key, None, cells)
     assert np.all(r["energy_to_user_j"] <= ENERGY_J)
-    r = _run(key, ControllerSettings(felt_tick_energy_j=np.inf), cells)
+    assert np.all(r["felt_force_ratio_min"] >= 1.0)
+    before = dict(entry_force_limit_n=None, felt_uses_reserve=False, prepay_budget_j=1e-3)
+    r = _run(key, ControllerSettings(**before), cells)
+    assert np.all(r["energy_to_user_j"] <= ENERGY_J) and np.any(r["felt_force_ratio_min"] < 1.0)
+    r = _run(key, ControllerSettings(felt_tick_energy_j=np.inf, **before), cells)
     assert np.any(r["energy_to_user_j"] > ENERGY_J)
+
+
+def test_scalar_controller_equals_batch_through_the_entry_boost():
+    """The scalar and the batch controller give the same force on every tick of fast taps
+    at 4 ms without device damping (where the entry boost acts: the boost changes the
+    output, so this comparison goes through it)."""
+    from hapticsdk.passivity import (PassivityController, controller_commit_batch, controller_state_batch,
+                                     controller_step_batch)
+    t = np.arange(1500)
+    rng = np.random.default_rng(1)
+    x = np.round((2.0 - 6.0 * np.abs(np.sin(t * 2 * np.pi / 16.0)) + rng.normal(0, 0.1, t.size)) / 0.055) * 0.055
+    fw = np.maximum(-x, 0.0) * 10.0
+
+    def run(s):
+        pc, st, outs = PassivityController(s), controller_state_batch(1), []
+        for k in range(x.size):
+            a = pc.step(float(x[k]), 4e-3, float(fw[k]))
+            b = controller_step_batch(st, x[k:k + 1], 4e-3, fw[k:k + 1], np.array([True]), s)[0]
+            assert a == pytest.approx(b, rel=1e-12, abs=1e-12), k
+            fa = float(np.clip(a, -3.3, 3.3))
+            pc.commit(fa)
+            controller_commit_batch(st, np.array([fa]))
+            outs.append(a)
+        assert pc.reserve_j == pytest.approx(st["reserve"][0], rel=1e-9, abs=1e-15)
+        return np.array(outs)
+
+    kw = dict(device_damping_ns_per_m=0.0, position_resolution_mm=0.055)
+    with_boost = run(ControllerSettings(**kw))
+    without = run(ControllerSettings(entry_force_limit_n=None, **kw))
+    assert np.any(np.abs(with_boost - without) > 0.1)
 
 
 def test_kpass_is_the_stability_boundary_without_the_controller():
@@ -182,11 +224,26 @@ MUTATIONS = {
     # floor not capped at 0.6 N (95 % of a stiff wall): the damper cannot work and the
     # finger gets 2 mJ (4 ms, b = 0.25)
     "floor without its cap": (ControllerSettings(felt_force_n=None), _4MS),
-    # affordability without the device damping's share: at 4 ms, b = 0.25 the floor
-    # yields on fast withdrawals it could afford (0.38 N)
-    "floor gate without damping": (ControllerSettings(felt_damping_multiple=0.0), _4MS),
+    # affordability without the device damping's share (on the controller before the
+    # entry boost, which otherwise pays for those withdrawals too): at 4 ms, b = 0.25
+    # the floor yields on fast withdrawals it could afford (0.38 N)
+    "floor gate without damping": (ControllerSettings(felt_damping_multiple=0.0, entry_force_limit_n=None,
+                                                      felt_uses_reserve=False, prepay_budget_j=1e-3), _4MS),
     # no pre-paid budget: the 10 s, 2 ms, b = 0 cell gets 0.41 N on a withdrawal
     "no pre-payment": (ControllerSettings(prepay_factor=0.0), _2MS10),
+    # the controller before the entry boost (damper held to 5 N*s/m and 0.8 N per tick,
+    # floor gate without the reserve, 1 mJ reserve): at 4 ms, b = 0 the floor yields (0 N)
+    "controller before the entry boost": (ControllerSettings(entry_force_limit_n=None, felt_uses_reserve=False,
+                                                             prepay_budget_j=1e-3), _4MS),
+    # no entry boost, the gate still counting the reserve: the reserve is booked but not
+    # paid and the floor hands the finger 0.25-0.31 mJ
+    "no entry boost": (ControllerSettings(entry_force_limit_n=None), _4MS),
+    # the floor's gate without the reserve: at 4 ms, b = 0 it yields on a withdrawal (0.79)
+    "floor gate without the reserve": (ControllerSettings(felt_uses_reserve=False), _4MS),
+    # a 1 mJ reserve: the withdrawal outruns it (0.9 of the floor at 4 ms, b = 0)
+    "reserve of 1 mJ": (ControllerSettings(prepay_budget_j=1e-3), _4MS),
+    # the boost held to the ordinary slew limit: it cannot pay what it books (0.45 mJ)
+    "entry boost at the slew limit": (ControllerSettings(entry_force_step_n=0.8), _4MS),
 }
 
 

@@ -34,7 +34,6 @@ import dataclasses
 import hashlib
 import json
 import logging
-import os
 import time
 from pathlib import Path
 from typing import Any, ClassVar
@@ -55,12 +54,10 @@ _MEMO: dict[str, "AmortisedTable"] = {}
 
 
 def default_cache_dir() -> Path:
-    """``$HAPTICSDK_CACHE_DIR`` or ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk``."""
-    env = os.environ.get("HAPTICSDK_CACHE_DIR")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
+    """``$HAPTICSDK_CACHE_DIR`` or ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk``
+    (:func:`hapticsdk.fileio.cache_dir`)."""
+    from hapticsdk.fileio import cache_dir
+    return cache_dir()
 
 
 class AmortisedTable:

@@ -7,7 +7,7 @@ outputs, and ``df_hz``, ``feature_defaults``, ``metrics`` ... land in
 :attr:`metadata`. For ``architecture == "mlp-tanh"`` the Jacobian is the analytic one
 of a :class:`hapticsdk.models.MLPModel` rebuilt from the file's initializers. A graph
 that is a plain chain of dense layers is evaluated with numpy instead of onnxruntime
-(:mod:`hapticsdk_onnx.chain`, 1.5-1.7x faster; ``OnnxModel(path, runtime="onnxruntime")``
+(:mod:`hapticsdk_onnx.chain`, 1.4-1.7x faster; ``OnnxModel(path, runtime="onnxruntime")``
 keeps onnxruntime).
 
 :func:`load_default` returns the shipped default model (trained on the GENERATED data
@@ -113,10 +113,8 @@ class _Description:
 def _description_path(sha256: str) -> Path:
     """``$HAPTICSDK_CACHE_DIR`` or ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk``,
     then ``onnx-desc/<sha256 of the model file>.npz``."""
-    import os
-    env, xdg = os.environ.get("HAPTICSDK_CACHE_DIR"), os.environ.get("XDG_CACHE_HOME")
-    base = Path(env) if env else (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
-    return base / "onnx-desc" / f"{sha256}.npz"
+    from hapticsdk.fileio import cache_dir
+    return cache_dir() / "onnx-desc" / f"{sha256}.npz"
 
 
 def _description(data: bytes, where: str) -> _Description:

@@ -1,8 +1,8 @@
 """A numpy evaluation of ONNX graphs that are a plain chain of dense layers.
 
 Small perception models (the paper's 5-20-2 tanh MLP) cost onnxruntime more in per-call
-work than in arithmetic, and numpy runs the same float32 network 1.2-2x faster at every
-batch size measured (1 to 10000 rows; docs/solvers.md). :func:`compile_chain` recognises
+work than in arithmetic, and numpy runs the same float32 network 1.4-1.7x faster at every
+batch size measured (1 to 3000 rows; docs/solvers.md). :func:`compile_chain` recognises
 a graph whose nodes form ONE chain from input ``G`` to output ``I``, each node taking the
 previous node's output and constant float32 initializers:
 
@@ -262,9 +262,8 @@ def chain_cache_path(sha256: str, cache_dir: str | os.PathLike[str] | None = Non
     ``$HAPTICSDK_CACHE_DIR`` or ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk``
     (the folder the amortised solver's tables use)."""
     if cache_dir is None:
-        env = os.environ.get("HAPTICSDK_CACHE_DIR")
-        xdg = os.environ.get("XDG_CACHE_HOME")
-        base = Path(env) if env else (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
+        from hapticsdk.fileio import cache_dir as sdk_cache_dir
+        base = sdk_cache_dir()
     else:
         base = Path(cache_dir)
     return base / "onnx-chain" / f"{sha256}.npz"
