@@ -46,6 +46,7 @@ import numpy as np
 from .actuators import ActuatorLimits, DeviceState, HapticDevice
 from .dimensions import ChannelCommand
 from .errors import DeviceError, RecordingError, ValidationError
+from .quantiles import median
 
 FORMAT = "hapticsdk-run"
 VERSION = 1
@@ -126,7 +127,7 @@ class RunRecorder:
         """The run recorded so far, as a :class:`RunLog`."""
         n = len(self._t)
         t = np.asarray(self._t, float)
-        period = float(np.median(np.diff(t))) if n > 1 else None
+        period = median(np.diff(t)) if n > 1 else None
         header = {"format": FORMAT, "version": VERSION,
                   "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
                   "n_ticks": n, "period_s": period, "roles": sorted(self._cmd),

@@ -29,6 +29,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 import numpy as np
 
 from ..errors import ValidationError
+from ..quantiles import median, percentile
 
 
 class ImportanceModel(ABC):
@@ -286,8 +287,8 @@ def estimate_losses(model: ImportanceModel, dimensions: Sequence[str], sets: Seq
             raw = model.predict_loss(d, cols, dims)
             loss = np.maximum(raw, 0.0)
             thr = float(thresholds.get(d, default_threshold))
-            med = float(np.median(loss))
-            lo, hi = (float(v) for v in np.percentile(loss, [10.0, 90.0]))
+            med = median(loss)
+            lo, hi = percentile(loss, [10.0, 90.0])
             est[d] = LossEstimate(dimension=d, median_percent=round(med, 6), low_percent=round(lo, 6),
                                   high_percent=round(hi, 6), threshold_percent=thr,
                                   p_below=round(float(np.mean(loss < thr)), 6), n_solutions=len(sset),

@@ -86,6 +86,7 @@ from ..actuators import Actuator, DeviceState, HapticDevice
 from ..dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
+from ..quantiles import median
 from .clock import MonotonicClock, RealtimeSettings, apply_realtime, thread_cpu_clock_cost_s
 from .stats import PREEMPT_THRESHOLD_S, jitter_stats, preemption_stats, tick_stats
 
@@ -626,16 +627,20 @@ class ServoLoop:
         self._pc_obj = -2
         self.contact = -1
         self._gc_was_enabled = gc.isenabled()
-        gc.collect()
+        # paced on the machine clock, a collection now spares the loop one later; in
+        # simulated time a pause costs nothing but the run's length (10-35 ms saved)
+        collected = "collected, " if self.realtime else ""
+        if self.realtime:
+            gc.collect()
         self._froze = False
         if self.rt.gc_freeze and hasattr(gc, "freeze"):
             gc.freeze()
             self._froze = True
         gc.disable()
         rt_status, self._rt_restore = apply_realtime(self.rt)
-        rt_status["gc"] = ("applied: collected, frozen and disabled" if self._froze else
-                           "applied: collected and disabled (freeze off)" if not self.rt.gc_freeze else
-                           "applied: collected and disabled (gc.freeze unavailable)")
+        rt_status["gc"] = (f"applied: {collected}frozen and disabled" if self._froze else
+                           f"applied: {collected}disabled (freeze off)" if not self.rt.gc_freeze else
+                           f"applied: {collected}disabled (gc.freeze unavailable)")
         rt_status["applied"] = sorted(k for k, v in rt_status.items() if v.startswith("applied"))
         self._rt_status = rt_status
         self._k = 0
@@ -1141,7 +1146,7 @@ class ServoLoop:
             log[f"{s.role}.frequency_hz"] = W(s.log_f, n)
             log[f"{s.role}.amplitude"] = W(s.log_a, n)
         sim_w = W(L["sim"], n)
-        sim_us = float(np.median(sim_w) * 1e6) if n else float("nan")
+        sim_us = median(sim_w) * 1e6 if n else float("nan")
         return LoopReport(ticks=n, period_s=T, realtime=self.realtime, tick_median_us=comp["median_us"],
                           tick_p99_us=comp["p99_us"], tick_max_us=comp["max_us"], tick_p999_us=comp["p999_us"],
                           overruns=events["overrun"], jitter=jit, events=events, passivity=pas,
