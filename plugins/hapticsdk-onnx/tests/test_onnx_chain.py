@@ -173,3 +173,24 @@ def test_chain_round_trips_through_arrays():
     arr[f"s{i}_a"] = arr[f"s{i}_a"][:, :3]          # a dense layer of the wrong width
     with pytest.raises(ValueError):
         ch.NumpyChain.from_arrays(arr)
+
+
+def test_a_cached_chain_needs_no_onnxruntime_session(tmp_path):
+    """Once a file's chain is cached (written after onnxruntime loaded those bytes), a
+    later load of the same mlp-tanh file checks the chain against the float64 numpy twin
+    and creates no onnxruntime session (start-up); its answers still match onnxruntime.
+    An altered cached chain is refused by that check, and onnxruntime is then used."""
+    path = default_model_path()
+    first = OnnxModel(path)
+    assert first.runtime == "numpy" and first._session is not None
+    again = OnnxModel(path)
+    X = _rows(first, 200, 11, widen=0.2)
+    assert _close(again.predict(X), _ort(first, X))
+    assert again.runtime == "numpy" and again._session is None
+    chain = again._chain
+    bad = ch.NumpyChain([(k, a, b * np.float32(1.001)) if k == "dense" else (k, a, b)
+                         for k, a, b in chain.stages], chain.n_in, chain.n_out)
+    ch.save_chain(bad, ch.chain_cache_path(again._sha256))
+    third = OnnxModel(path)
+    assert third.runtime == "onnxruntime"
+    np.testing.assert_array_equal(third.predict(X), _ort(third, X))

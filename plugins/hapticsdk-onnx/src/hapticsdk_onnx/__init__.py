@@ -236,21 +236,53 @@ class OnnxModel(PerceptionModel):
                 raise ModelError(f"{where}: architecture mlp-tanh but initializers {missing} are missing")
             w = {n: desc.arrays[n].astype(np.float64) for n in MLP_INITIALIZERS}
             self._mlp = MLPModel(w, space.names, dims, name=self.name)  # raises ModelError on bad shapes
-        import onnxruntime as ort
-
-        so = ort.SessionOptions()
-        so.intra_op_num_threads = 1
-        so.inter_op_num_threads = 1
-        so.log_severity_level = 3
-        try:
-            self._session = ort.InferenceSession(data, sess_options=so, providers=["CPUExecutionProvider"])
-        except Exception as exc:
-            raise ModelError(f"{where}: onnxruntime cannot load the model ({exc})") from None
         # numpy evaluation of a plain dense chain (hapticsdk_onnx.chain), found on first use
         self._runtime = runtime
         self._sha256 = hashlib.sha256(data).hexdigest()
         self._bytes = data if runtime == "auto" and len(data) <= MAX_CHAIN_BYTES else None
         self._chain: Any = _UNSET if self._bytes is not None else None
+        self._where = where
+        self._session: Any = None
+        # onnxruntime loads the model now, unless an mlp-tanh file already has a cached
+        # numpy chain (written only after onnxruntime loaded these very bytes, keyed by
+        # their SHA-256): then it is imported only if something needs it (~30 ms of start-up)
+        if not (self._chain is _UNSET and self._mlp is not None and self._chain_cached()):
+            self._session = self._make_session(data)
+
+    def _make_session(self, data: bytes | None = None) -> Any:
+        """An onnxruntime session on the model's bytes (one thread); raises
+        :class:`ModelError` when onnxruntime cannot load them."""
+        import onnxruntime as ort
+
+        if data is None:
+            if self._bytes is None:
+                from hapticsdk.errors import ValidationError
+                from hapticsdk.schemas_io import read_bytes
+                try:
+                    data = read_bytes(self._where, field="model", max_bytes=MAX_MODEL_BYTES)
+                except ValidationError as exc:
+                    raise ModelError(str(exc)) from None
+            else:
+                data = self._bytes
+            if hashlib.sha256(data).hexdigest() != self._sha256:
+                raise ModelError(f"{self._where}: the model file changed since it was loaded")
+        so = ort.SessionOptions()
+        so.intra_op_num_threads = 1
+        so.inter_op_num_threads = 1
+        so.log_severity_level = 3
+        try:
+            return ort.InferenceSession(data, sess_options=so, providers=["CPUExecutionProvider"])
+        except Exception as exc:
+            raise ModelError(f"{self._where}: onnxruntime cannot load the model ({exc})") from None
+
+    def _sess(self) -> Any:
+        if self._session is None:
+            self._session = self._make_session()
+        return self._session
+
+    def _chain_cached(self) -> bool:
+        from . import chain as ch
+        return ch.chain_cache_path(self._sha256).is_file()
 
     def _predict(self, X: np.ndarray) -> np.ndarray:
         chain = self._chain
@@ -258,7 +290,7 @@ class OnnxModel(PerceptionModel):
             chain = self._find_chain()
         if chain is not None:   # one row as a vector: 2-D products of one row cost more
             return chain(X[0])[None] if X.shape[0] == 1 else chain(X)
-        out = self._session.run(["I"], {"G": np.ascontiguousarray(X, dtype=np.float32)})[0]
+        out = self._sess().run(["I"], {"G": np.ascontiguousarray(X, dtype=np.float32)})[0]
         return out.astype(np.float64)
 
     @property
@@ -293,11 +325,19 @@ class OnnxModel(PerceptionModel):
             except Exception as exc:   # a read-only cache folder: the chain still works
                 import logging
                 logging.getLogger(__name__).info("could not cache the numpy chain at %s: %s", path, exc)
-        if chain is not None and not _agrees(chain, self._session, self.feature_space, self.n_features):
-            chain = None
+        if chain is not None:
+            # checked against onnxruntime, or, when onnxruntime was not needed (a cached
+            # chain of an mlp-tanh file), against the float64 numpy twin of its weights
+            ref = self._mlp.predict if self._session is None and self._mlp is not None else self._onnxruntime_rows
+            if not _agrees(chain, ref, self.feature_space, self.n_features):
+                chain = None
         self._chain = chain
-        self._bytes = None
+        if chain is not None:
+            self._bytes = None
         return chain
+
+    def _onnxruntime_rows(self, X: np.ndarray) -> np.ndarray:
+        return np.asarray(self._sess().run(["I"], {"G": X.astype(np.float32)})[0], np.float64)
 
     def jacobian(self, G: np.ndarray, **kw: Any) -> np.ndarray:
         """Analytic Jacobian for mlp-tanh models, central differences otherwise; ``(n, k, d)``."""
@@ -311,8 +351,9 @@ class OnnxModel(PerceptionModel):
         return self._mlp
 
 
-def _agrees(chain: Any, session: Any, space: FeatureSpace | None, d: int) -> bool:
-    """True when ``chain`` reproduces onnxruntime on 16 probe rows (inside the declared
+def _agrees(chain: Any, reference: Any, space: FeatureSpace | None, d: int) -> bool:
+    """True when ``chain`` reproduces ``reference`` (onnxruntime's rows, or the float64
+    numpy twin of an mlp-tanh model's float32 weights) on 16 probe rows (inside the declared
     feature bounds, fixed seed) to float32 rounding (a guard against a stale or altered
     cache file, a graph read wrongly and weights that lose accuracy when folded: agreement
     within 32 float32 units of max(1, |y|), where the shipped model differs by 1-2)."""
@@ -322,7 +363,7 @@ def _agrees(chain: Any, session: Any, space: FeatureSpace | None, d: int) -> boo
     else:
         X = rng.standard_normal((16, d))
     try:
-        ref = session.run(["I"], {"G": X.astype(np.float32)})[0].astype(np.float64)
+        ref = np.asarray(reference(X), np.float64)
         got = chain(X)
     except Exception:
         return False
