@@ -221,7 +221,8 @@ def _validated_marker(data: Any, schema: str) -> Path | None:
     """Where the "passed" marker of ``data`` (as parsed by :func:`read_json`) against schema
     ``schema`` lives: ``<cache>/validated/<sha256>``, the hash taken over the instance's
     canonical JSON (sorted keys; ints and floats stay distinct), the schema file's bytes,
-    the schema name and the installed ``jsonschema`` version. ``None`` (always validate)
+    the schema name and the installed ``jsonschema`` and ``hapticsdk`` versions (the
+    SDK's own checks in :func:`validate` may change with it). ``None`` (always validate)
     when any of them cannot be read."""
     import hashlib
     from importlib import metadata
@@ -229,7 +230,7 @@ def _validated_marker(data: Any, schema: str) -> Path | None:
     try:
         blob = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
         schema_bytes = (schema_dir() / f"{schema}.schema.json").read_bytes()
-        version = metadata.version("jsonschema")
+        version = metadata.version("jsonschema") + "/" + metadata.version("hapticsdk")
     except Exception:
         return None
     h = hashlib.sha256()
