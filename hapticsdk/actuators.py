@@ -41,11 +41,23 @@ _STOPS: "deque[tuple[str, float, bool]]" = deque(maxlen=256)
 
 
 def stop_all() -> list[str]:
-    """Put every open actuator of this process in its safe state; return their labels."""
+    """Put every open actuator of this process in its safe state; return their labels.
+
+    Every actuator is stopped even when one backend breaks the never-raise contract of
+    :meth:`Actuator.stop` with a ``BaseException`` (e.g. a second Ctrl-C inside its
+    ``_stop``): the others are stopped first, then the first such exception is raised."""
     labels = []
+    first: BaseException | None = None
     for act in list(_OPEN_ACTUATORS):
-        act.stop()
-        labels.append(act.label)
+        try:
+            act.stop()
+            labels.append(act.label)
+        except BaseException as exc:  # noqa: BLE001 - stop the others first
+            log.error("stopping %s raised %s: %s", act.label, type(exc).__name__, exc)
+            if first is None:
+                first = exc
+    if first is not None:
+        raise first
     return labels
 
 

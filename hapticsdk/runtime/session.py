@@ -17,7 +17,9 @@ and closes them. The application side never blocks on the servo:
   :meth:`move_object` send a message on a pipe. :meth:`Session.set_material` builds
   the new renderers in the application (as the servo would: same settings, actuator
   options, capabilities and calibrations) and sends them pickled, so the servo only
-  unpickles them; renderers that cannot be pickled here go as features, and the servo
+  unpickles them (a calibration table they hold, such as the piezo's 300 kB drive
+  table, crosses the pipe once per session and is referred to afterwards, so a
+  switch unpickles about a kilobyte); renderers that cannot be pickled here go as features, and the servo
   builds them. The servo process has one thread of its own: it reads the pipe without
   blocking, before each sleep of its clock and after each tick, and does a command's
   work in the slack left before the next deadline (see :class:`_Servo`); the new
@@ -70,10 +72,12 @@ the servo.
 
 from __future__ import annotations
 
+import io
 import logging
 import math
 import multiprocessing as mp
 import os
+import pickle
 import sys
 import threading
 import time
@@ -231,8 +235,8 @@ class _Buffer:
 
 def _grow_pipe(conn: Any) -> None:
     """Linux: give the command pipe 1 MiB (the default limit for an unprivileged
-    process), so that a message of pickled renderers (about 300 kB for S7) is written
-    at once instead of as the servo drains 64 kB at a time. Elsewhere, or when refused,
+    process), so that a message of pickled renderers or tables (the piezo's table is
+    about 300 kB) is written at once instead of as the servo drains 64 kB at a time. Elsewhere, or when refused,
     the servo's reader takes a message in as many ticks as it needs."""
     try:
         import fcntl
@@ -385,6 +389,34 @@ _SLACK_MARGIN_S = 100e-6
 _UNKNOWN_BUILD_S = 1e-3
 #: estimated cost of a command with nothing to build (s)
 _SMALL_S = 30e-6
+#: persistent-id tag of a calibration table the servo keeps (see Session._prebuilt)
+_TABLE_PID = "hapticsdk-table"
+
+
+class _RendererUnpickler(pickle.Unpickler):
+    """Unpickles renderers whose calibration tables were sent before (references
+    ``(_TABLE_PID, key)`` into ``tables``)."""
+
+    def __init__(self, data: bytes, tables: dict[int, Any]) -> None:
+        super().__init__(io.BytesIO(data))
+        self.tables = tables
+
+    def persistent_load(self, pid: Any) -> Any:
+        if isinstance(pid, tuple) and len(pid) == 2 and pid[0] == _TABLE_PID and pid[1] in self.tables:
+            return self.tables[pid[1]]
+        raise pickle.UnpicklingError(f"unknown table reference {pid!r} (its table was never received)")
+
+
+def _load_renderers(payload: bytes, tables: dict[int, Any]) -> Any:
+    """Renderers pickled by :meth:`Session._prebuilt`, their tables taken from ``tables``."""
+    return _RendererUnpickler(payload, tables).load()
+
+
+def _shared_table_types() -> tuple:
+    """Types pickled once per session and then referred to (material independent,
+    large): the piezo drive table."""
+    from ..calibration.piezo import PiezoTable
+    return (PiezoTable,)
 
 
 class _ServingClock:
@@ -469,6 +501,9 @@ class _Servo:
         self._job_waited = 0
         self._job_msg: tuple = ()
         self._build_s: dict[str, float] = {}
+        #: calibration tables the application sent (key -> table), referred to by later
+        #: pickled renderers
+        self._tables: dict[int, Any] = {}
         self._job_t0 = 0.0
         self._wait_tick: Any = None
         #: commands received / done / failed; build slices run, forced (did not fit) and
@@ -634,11 +669,10 @@ class _Servo:
                 self.event("material_switched", oid, ramp)
         elif kind == "renderers":
             # renderers the application built and pickled: only unpickling is left
-            import pickle
             _, oid, payload, ramp = msg
             yield self._build_s.get("<unpickle>", _SMALL_S)
             t0 = time.thread_time()
-            built = pickle.loads(payload)
+            built = _load_renderers(payload, self._tables)
             took = time.thread_time() - t0
             old = self._build_s.get("<unpickle>")
             self._build_s["<unpickle>"] = took if old is None else max(took, 0.5 * (old + took))
@@ -646,6 +680,16 @@ class _Servo:
             if i >= 0:
                 loop.set_renderers(self.names[i], built, ramp)
                 self.event("material_switched", oid, ramp)
+        elif kind == "tables":
+            # calibration tables later renderers refer to: one slice per table
+            for key, blob in msg[1].items():
+                # never measured: 1 ns per byte (a 300 kB table took ~0.1 ms, cold)
+                yield self._build_s.get("<table>", len(blob) * 1e-9)
+                t0 = time.thread_time()
+                self._tables[key] = pickle.loads(blob)
+                took = time.thread_time() - t0
+                old = self._build_s.get("<table>")
+                self._build_s["<table>"] = took if old is None else max(took, 0.5 * (old + took))
         elif kind == "add":
             from ..scene.geometry import shape_from_dict
             _, oid, name, feats, geom, pose = msg
@@ -1083,6 +1127,9 @@ class Session:
         self._spec = spec
         self._builder: _Servo | None = None
         self._build_lock = threading.Lock()
+        #: tables sent to the servo: id -> (the table, its key); see _prebuilt
+        self._tables_sent: dict[int, tuple[Any, int]] = {}
+        self._tables_pending: dict[int, tuple[Any, int]] = {}
         self._buf = _Buffer(shared=isolation == "process")
         self._mv = self._buf.mv
         self._mv[_HEARTBEAT] = time.monotonic()
@@ -1206,30 +1253,70 @@ class Session:
                 self._check()
                 raise SessionError(f"the servo does not take commands: {exc}") from None
 
-    def _prebuilt(self, feats: Mapping[str, Mapping[str, float]]) -> bytes | None:
+    def _prebuilt(self, feats: Mapping[str, Mapping[str, float]]) -> "tuple[bytes, dict[int, bytes]] | None":
         """The renderers of ``feats``, built here exactly as the servo would build them
-        (same settings, actuator options and capabilities, calibrations) and pickled;
-        None when they cannot be built or pickled here (the servo then builds them from
-        the features). Building here keeps the build (about 1.4 ms of CPU for S7, more
-        with cold caches, longer than a servo period's slack) out of the servo: it only
-        unpickles (tens of microseconds)."""
-        import pickle
+        (same settings, actuator options and capabilities, calibrations) and pickled,
+        with the calibration tables they hold (:func:`_shared_table_types`, e.g. the
+        piezo's 300 kB drive table, the same for every material) pickled as references
+        ``(_TABLE_PID, key)``; and the tables the servo has not been sent yet, ``{key:
+        pickled table}``. None when they cannot be built or pickled here (the servo then
+        builds them from the features). Building here keeps the build (about 1.4 ms of
+        CPU for S7, more with cold caches, longer than a servo period's slack) out of the
+        servo, and the references keep a switch's unpickling there to about a kilobyte
+        (the table alone took ~0.2 ms of the servo's CPU, cold, on every switch). Call with
+        ``_build_lock`` held, and mark the new keys sent (``_tables_sent``) only once sent."""
         try:
-            with self._build_lock:
-                if self._builder is None:
-                    b = _Servo(self._spec, memoryview(bytearray(8)).cast("d"), None, True)
-                    b.prepare()
-                    self._builder = b
-                rs = self._builder.renderers_for(feats)
-                return pickle.dumps(rs, protocol=pickle.HIGHEST_PROTOCOL)
+            if self._builder is None:
+                b = _Servo(self._spec, memoryview(bytearray(8)).cast("d"), None, True)
+                b.prepare()
+                self._builder = b
+            rs = self._builder.renderers_for(feats)
+            new: dict[int, bytes] = {}
+            known = self._tables_sent
+            kinds = _shared_table_types()
+
+            class _Pickler(pickle.Pickler):
+                def persistent_id(self, obj: Any) -> Any:
+                    if type(obj) not in kinds:
+                        return None
+                    hit = known.get(id(obj))
+                    if hit is not None and hit[0] is obj:
+                        return (_TABLE_PID, hit[1])
+                    for k, (o, _) in pending.items():
+                        if o is obj:
+                            return (_TABLE_PID, k)
+                    key = len(known) + len(new) + 1
+                    new[key] = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+                    pending[key] = (obj, key)
+                    return (_TABLE_PID, key)
+
+            pending: dict[int, tuple[Any, int]] = {}
+            out = io.BytesIO()
+            _Pickler(out, protocol=pickle.HIGHEST_PROTOCOL).dump(rs)
+            self._tables_pending = pending
+            return out.getvalue(), new
         except Exception as exc:  # noqa: BLE001 - the servo builds them instead
             _log.debug("building renderers in the application failed (%s: %s); the servo builds them",
                        type(exc).__name__, exc)
             return None
 
-    def _material_msg(self, oid: int, feats: Mapping[str, Mapping[str, float]], ramp: float) -> tuple:
-        payload = self._prebuilt(feats)
-        return ("renderers", oid, payload, ramp) if payload is not None else ("material", oid, feats, ramp)
+    def _send_material(self, oid: int, feats: Mapping[str, Mapping[str, float]], ramp: float) -> None:
+        """Send a material switch: the tables the servo has not got yet (their own
+        command, unpickled in its own slice, kept by the servo), then the renderers
+        (pickled with references to them), or the features when the renderers could not
+        be built here. Under ``_build_lock``, so that another thread's switch never
+        refers to a table before the command carrying it is sent."""
+        with self._build_lock:
+            built = self._prebuilt(feats)
+            if built is None:
+                self._send(("material", oid, feats, ramp))
+                return
+            payload, new = built
+            if new:
+                self._send(("tables", new))
+                for obj, key in self._tables_pending.values():
+                    self._tables_sent[id(obj)] = (obj, key)
+            self._send(("renderers", oid, payload, ramp))
 
     def _object_id(self, name: str) -> int:
         if name not in self._ids:
@@ -1253,7 +1340,8 @@ class Session:
             except HapticSDKError:
                 pass
         for m in self.plan.materials.values():
-            self._prebuilt({d: dict(m.features) for d in m.dimensions})
+            with self._build_lock:
+                self._prebuilt({d: dict(m.features) for d in m.dimensions})
 
     def _amortised(self, targets: Mapping[str, float]) -> Any:
         """The table's interpolated answer alone (``polish_steps`` 0): the background
@@ -1325,7 +1413,7 @@ class Session:
             feats = self._features_by_dim(list(r.targets), res.x_dict)
             r.refined_features = feats
             if res.success and feats != r.features and not self._closed:
-                self._send(self._material_msg(oid, feats, self.ramp_s))
+                self._send_material(oid, feats, self.ramp_s)
                 r.refined_sent = True
                 self._local_events.append(SessionEvent(self._mv[_T], "material_refined", r.object,
                                                        float(res.error)))
@@ -1348,7 +1436,7 @@ class Session:
         ramp = self.ramp_s if ramp_s is None else float(ramp_s)
         if not (math.isfinite(ramp) and 0 <= ramp <= 5):
             raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
-        self._send(self._material_msg(oid, feats, ramp))
+        self._send_material(oid, feats, ramp)
         self._materials[object] = label
         ints = getattr(res, "intensities", None)
         r = Retarget(object=object, targets=dict(targets), features=feats, source=source,

@@ -487,3 +487,43 @@ def test_renderers_that_cannot_be_pickled_are_built_by_the_servo():
         assert _wait(lambda: s.state().material_switches == 1, 5.0)
         servo = s._servo_holder[0]
         assert "<unpickle>" not in servo._build_s and servo.cmd_stats["failed"] == 0
+
+
+def test_calibration_tables_cross_the_pipe_once():
+    """set_material sends the renderers pickled with references to the calibration
+    tables they hold (the piezo's drive table, the same for every material): the first
+    switch sends each table in a "tables" command before the renderers that refer to
+    it; later switches send only the renderers (kilobytes, not the table's ~300 kB),
+    and the servo's new renderers use the table it kept."""
+    import pickle
+
+    from hapticsdk.calibration.piezo import PiezoTable
+    from hapticsdk.runtime import session as sm
+    scene = {"schema_version": 1, "name": "s7", "objects": [{"name": "pad", "material": "S7"}],
+             "settings": {"importance": {"enabled": False}, "solver": {"seed": 0}}}
+    with Session(scene, isolation="thread", trajectory=SLIDE_AND_HOLD, realtime=False, refine=False) as s:
+        sent = []
+        send = s._send
+        s._send = lambda msg: (sent.append(msg), send(msg))[1]
+        assert _wait(lambda: s.state().ticks > 10)
+        s.set_material("pad", "S12")
+        assert _wait(lambda: s.state().material_switches == 1, 10.0)
+        assert [m[0] for m in sent] == ["tables", "renderers"]
+        (key, blob), = sent[0][1].items()
+        table = pickle.loads(blob)
+        assert isinstance(table, PiezoTable)
+        # the table alone is most of a plain pickle of the renderers
+        servo = s._servo_holder[0]
+        assert len(blob) > 0.5 * len(pickle.dumps(servo.loop._objs[0].renderers))
+        s.set_material("pad", "S3")
+        assert _wait(lambda: s.state().material_switches == 2, 10.0)
+        assert [m[0] for m in sent] == ["tables", "renderers", "renderers"]
+        # the second switch carries no table: under a tenth of the table's size
+        assert len(sent[2][2]) < 0.1 * len(blob)
+        assert servo.cmd_stats["failed"] == 0 and set(servo._tables) == {key}
+        kept = servo._tables[key]
+        with_table = [r for r in servo.loop._objs[0].renderers if isinstance(getattr(r, "table", None), PiezoTable)]
+        assert with_table and all(r.table is kept for r in with_table)
+        # a reference to a table the servo never received is refused, not guessed
+        with pytest.raises(pickle.UnpicklingError):
+            sm._load_renderers(sent[2][2], {})

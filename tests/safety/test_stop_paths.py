@@ -244,12 +244,47 @@ def test_one_actuator_whose_stop_raises_does_not_keep_the_others_running():
         force.stops += 1
         raise KeyboardInterrupt("second Ctrl-C during stop")
 
+    good_stop = force._stop
     force._stop = bad_stop
     r.exc = SystemExit(4)
-    with pytest.raises(SystemExit) as info:
-        loop.run(2.0)
-    assert info.value.code == 4
-    assert vib.stops >= 1 and vib.output == 0.0 and probe.stops >= 1
+    try:
+        with pytest.raises(SystemExit) as info:
+            loop.run(2.0)
+        assert info.value.code == 4
+        assert vib.stops >= 1 and vib.output == 0.0 and probe.stops >= 1
+    finally:  # leave no actuator whose stop raises in the process-wide open registry
+        force._stop = good_stop
+        for a in (probe, force, vib):
+            a.close()
+
+
+def test_stop_all_stops_every_actuator_when_one_stop_raises(monkeypatch):
+    """The process-wide stop (signals, interpreter exit) reaches every open actuator even
+    when one backend's stop raises a BaseException; that exception comes out afterwards."""
+    from hapticsdk import actuators as A
+
+    bad, good = Out("vib-a"), Out("vib-b")
+    for a in (bad, good):
+        a.open()
+        a.command(ChannelCommand("vib", frequency_hz=100.0, amplitude=0.5), now=0.0)
+        a.output = 0.7
+    plain = bad._stop
+
+    def raising():
+        plain()
+        raise KeyboardInterrupt("second Ctrl-C during stop")
+
+    bad._stop = raising
+    try:
+        monkeypatch.setattr(A, "_OPEN_ACTUATORS", [bad, good])  # the raising one first
+        with pytest.raises(KeyboardInterrupt):
+            A.stop_all()
+        assert good.output == 0.0 and good.stops >= 1
+    finally:
+        bad._stop = plain
+        monkeypatch.undo()
+        for a in (bad, good):
+            a.close()
 
 
 def test_actuator_stop_never_raises_even_when_the_safety_layer_fails():

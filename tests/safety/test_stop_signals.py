@@ -202,7 +202,10 @@ def test_cli_stops_an_actuator_the_command_left_open(monkeypatch, capsys):
 
 
 def test_cli_with_nothing_open_says_so(monkeypatch, capsys):
+    import gc
+
     from hapticsdk.cli import main
+    gc.collect()  # earlier tests' unreferenced rigs (reference cycles) leave the open registry
 
     def body():
         raise SafeStop(signal.SIGINT)
