@@ -171,6 +171,15 @@ def test_stop_signals_to_the_servo_stop_safely(sig):
         assert set(summary["stopped"]) >= {"omni-virtual", "voicecoil-virtual"}
 
 
+def _default_signals() -> None:
+    """In the application under test: the default actions of SIGHUP, SIGINT and SIGTERM,
+    whatever the test runner inherited (``nohup`` ignores SIGHUP, a background job of a
+    non-interactive shell may ignore SIGINT; an ignored signal is inherited and would let
+    the application survive the very signal the test sends)."""
+    for s in (signal.SIGHUP, signal.SIGINT, signal.SIGTERM):
+        signal.signal(s, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
 def test_application_death_stops_the_servo(sig):
     """The application dies without closing its session (SIGKILL; SIGTERM and SIGHUP
@@ -179,7 +188,7 @@ def test_application_death_stops_the_servo(sig):
     SIGINT raises KeyboardInterrupt in the application, whose ``with`` exit closes the
     session: every actuator stopped, the servo reaped, the memory unlinked."""
     p = subprocess.Popen([sys.executable, str(HERE / "_session_app.py")], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
+                         stderr=subprocess.PIPE, text=True, preexec_fn=_default_signals)
     try:
         line = p.stdout.readline()
         assert line.startswith("servo"), p.stderr.read()
