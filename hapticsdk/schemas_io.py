@@ -217,6 +217,20 @@ def _cache_dir() -> Path:
     return cache_dir()
 
 
+@lru_cache(maxsize=None)
+def _marker_salt(schema: str) -> tuple[bytes, bytes, bytes] | None:
+    """The parts of a validation marker that depend on the schema and the installed
+    versions, read once per process (the two version lookups scan the installed
+    distributions, ~0.5 ms per file loaded)."""
+    from importlib import metadata
+    try:
+        schema_bytes = (schema_dir() / f"{schema}.schema.json").read_bytes()
+        version = metadata.version("jsonschema") + "/" + metadata.version("hapticsdk")
+    except Exception:
+        return None
+    return schema.encode(), schema_bytes, version.encode()
+
+
 def _validated_marker(data: Any, schema: str) -> Path | None:
     """Where the "passed" marker of ``data`` (as parsed by :func:`read_json`) against schema
     ``schema`` lives: ``<cache>/validated/<sha256>``, the hash taken over the instance's
@@ -225,16 +239,16 @@ def _validated_marker(data: Any, schema: str) -> Path | None:
     SDK's own checks in :func:`validate` may change with it). ``None`` (always validate)
     when any of them cannot be read."""
     import hashlib
-    from importlib import metadata
 
+    salt = _marker_salt(schema)
     try:
         blob = json.dumps(data, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
-        schema_bytes = (schema_dir() / f"{schema}.schema.json").read_bytes()
-        version = metadata.version("jsonschema") + "/" + metadata.version("hapticsdk")
     except Exception:
         return None
+    if salt is None:
+        return None
     h = hashlib.sha256()
-    for part in (schema.encode(), schema_bytes, version.encode(), blob):
+    for part in (*salt, blob):
         h.update(len(part).to_bytes(8, "little"))
         h.update(part)
     return _cache_dir() / "validated" / h.hexdigest()

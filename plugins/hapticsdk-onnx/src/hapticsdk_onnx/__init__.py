@@ -95,15 +95,13 @@ class _Description:
         spec = {"version": DESCRIPTION_VERSION, "meta": self.meta, "inputs": self.inputs,
                 "outputs": self.outputs, "initializers": self.initializers,
                 "shapes": {k: list(v) for k, v in self.shapes.items()}, "arrays": sorted(self.arrays)}
-        out = {f"a{i}": a for i, (_, a) in enumerate(sorted(self.arrays.items()))}
-        out["spec"] = np.array(json.dumps(spec))
-        return out
+        from .chain import with_spec
+        return with_spec(spec, {f"a{i}": a for i, (_, a) in enumerate(sorted(self.arrays.items()))})
 
     @classmethod
     def from_npz(cls, z: Any) -> "_Description":
-        spec = json.loads(str(z["spec"]))
-        if not isinstance(spec, dict) or spec.get("version") != DESCRIPTION_VERSION:
-            raise ValueError("other version")
+        from .chain import read_spec
+        spec = read_spec(z, DESCRIPTION_VERSION)
         arrays = {name: np.asarray(z[f"a{i}"]) for i, name in enumerate(spec["arrays"])}
         shapes = {k: (int(v[0]), None if v[1] is None else int(v[1])) for k, v in spec["shapes"].items()}
         return cls({str(k): str(v) for k, v in spec["meta"].items()}, list(spec["inputs"]),

@@ -95,15 +95,12 @@ class NumpyChain:
             spec["stages"].append([kind, a] if kind == "act" else [kind])
             if kind != "act":
                 arrays[f"s{i}_a"], arrays[f"s{i}_b"] = a, b
-        arrays["spec"] = np.array(json.dumps(spec))
-        return arrays
+        return with_spec(spec, arrays)
 
     @classmethod
     def from_arrays(cls, z: Any) -> "NumpyChain":
         """Inverse of :meth:`to_arrays`; raises ``ValueError`` on anything inconsistent."""
-        spec = json.loads(str(z["spec"]))
-        if not isinstance(spec, dict) or spec.get("version") != CHAIN_VERSION:
-            raise ValueError("unknown chain format")
+        spec = read_spec(z, CHAIN_VERSION)
         n_in, n_out = int(spec["n_in"]), int(spec["n_out"])
         w = n_in
         stages: list[tuple[str, Any, Any]] = []
@@ -256,6 +253,20 @@ def _fold(raw: list[tuple[str, Any, Any]], n_in: int, n_out: int) -> NumpyChain:
 
 # ---------------------------------------------------------------------------
 # disk cache, keyed by the model file's SHA-256
+
+def with_spec(spec: dict[str, Any], arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """``arrays`` plus ``spec`` as a JSON string array under ``"spec"``: the layout of the
+    plugin's cache archives (numpy ``.npz``, no pickles)."""
+    return {**arrays, "spec": np.array(json.dumps(spec))}
+
+
+def read_spec(z: Any, version: int) -> dict[str, Any]:
+    """The JSON ``spec`` of a cache archive written by :func:`with_spec`; ``ValueError``
+    unless it is a dict of layout ``version``."""
+    spec = json.loads(str(z["spec"]))
+    if not isinstance(spec, dict) or spec.get("version") != version:
+        raise ValueError(f"cache layout is not version {version}")
+    return spec
 
 def chain_cache_path(sha256: str, cache_dir: str | os.PathLike[str] | None = None) -> Path:
     """``<cache>/onnx-chain/<sha256>.npz``; ``<cache>`` is ``cache_dir`` or
