@@ -194,3 +194,21 @@ def test_a_cached_chain_needs_no_onnxruntime_session(tmp_path):
     third = OnnxModel(path)
     assert third.runtime == "onnxruntime"
     np.testing.assert_array_equal(third.predict(X), _ort(third, X))
+
+
+def test_cache_archives_of_another_layout_version_are_not_read(tmp_path):
+    """A chain or description archive written under another layout version is treated
+    as missing (rebuilt), never read with the wrong layout."""
+    import hapticsdk_onnx as ho
+
+    m = OnnxModel(default_model_path())
+    assert m.runtime == "numpy"
+    arrays = m._chain.to_arrays()
+    spec = __import__("json").loads(str(arrays["spec"]))
+    spec["version"] = ch.CHAIN_VERSION + 1
+    odd = tmp_path / "odd.npz"
+    np.savez(odd, **ch.with_spec(spec, {k: v for k, v in arrays.items() if k != "spec"}))
+    assert ch.load_chain(odd) == (False, None)
+    with np.load(odd) as z:
+        with pytest.raises(ValueError):
+            ho._Description.from_npz(z)
