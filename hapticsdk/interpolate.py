@@ -74,6 +74,28 @@ class _Piecewise:
             out[outside] = np.nan
         return out.reshape(q.shape + self._shape)
 
+    def piece(self, k: int) -> Callable[[float], float]:
+        """The cubic of interval ``k`` (``[x_k, x_{k+1}]``) of a 1-D interpolant as a
+        function of one plain float, evaluated in the same order as :meth:`__call__`
+        (so bit for bit the same value inside that interval, with no numpy per call: a
+        root search calls it tens of times). No NaN outside the interval."""
+        if self._shape not in ((), (1,)):
+            raise ValueError("piece() needs a 1-D interpolant")
+        if not 0 <= k < self.x.size - 1:
+            raise ValueError(f"interval {k} outside 0..{self.x.size - 2}")
+        x0 = float(self.x[k])
+        c0, c1, c2, c3 = (float(v) for v in self._c[:, k].ravel())
+
+        def cubic(v: float) -> float:
+            s = v - x0
+            out = c3 + c2 * s
+            z = s * s
+            out = out + c1 * z
+            z = z * s
+            return out + c0 * z
+
+        return cubic
+
 
 def _prepare(x: Any, y: Any, least: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray,
                                                    tuple[int, ...]]:

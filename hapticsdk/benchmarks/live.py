@@ -12,9 +12,13 @@ What it measures, per run:
   on the version-1 plane, the finger pressing and sliding repeatedly.
 * ``reference`` (``run_live(reference=True)``, the default): right after each session
   run, the same statistics of a paced loop doing nothing else (the servo's own clock
-  and deadline grid) in a process started the same way, under the same application
-  load for the same time: what this machine gives a 1 kHz loop in that minute. On a
-  shared machine the session's jitter means something only next to it.
+  and deadline grid) in a process started the same way, with the same OS options
+  (``rt``: scheduling policy, CPU; ``reference.rt`` their outcome), under the same
+  application load for the same time: what this machine gives a 1 kHz loop in that
+  minute. On a shared machine the session's jitter means something only next to it.
+* ``servo.rt``: what the OS granted the servo (``rt_priority``: ``applied: SCHED_FIFO
+  40 (auto)`` or ``refused: ...``, ``cpu_affinity``, ``mlockall``); ``rt`` the options
+  asked for (``{}``: the session's defaults, ``fifo_priority="auto"`` for a process).
 * ``app_call_us``: wall time of the application's calls during that run: ``state`` (its
   p99; ``state_stats`` p50 / p99 / max and count) and ``set_material`` (its max;
   ``set_material_stats``; library materials, the amortised answer, refinement off so
@@ -23,7 +27,9 @@ What it measures, per run:
   ``state_cpu_stats`` / ``set_material_cpu_stats`` give the calling thread's CPU time
   (``time.thread_time``) of the same calls, and ``state_cpu_back_to_back_stats`` the CPU
   time of 2000 calls made back to back at the end (warm caches: a call made every 2 ms
-  on a busy machine finds its code and data evicted, and costs several times more).
+  on a busy machine finds its code and data evicted, and costs several times more);
+  ``trivial_cpu_after_sleep_stats`` the CPU time of a function that only builds a pair,
+  called after the same 2 ms sleep 500 times at the end: what any call costs cold here.
 * ``switch.latency_ms``: from ``set_material`` returning (``time.monotonic()`` in the
   application right after the call) to the servo publishing the first tick that renders
   the new material (``state().switched_at``, the servo's own ``time.monotonic()`` at the
@@ -90,12 +96,19 @@ def _load(kind: str, stop: threading.Event) -> None:
             a /= np.abs(a).max()
 
 
-def _reference_loop(seconds: float, period_s: float, conn: Any) -> None:
+def _trivial() -> tuple[float, float]:
+    """The reference call of ``trivial_cpu_after_sleep``: a function that builds a pair."""
+    return (1.0, 2.0)
+
+
+def _reference_loop(seconds: float, period_s: float, conn: Any, rt: dict[str, Any] | None = None) -> None:
     """The reference: a paced loop doing nothing else, in a spawned process. It waits on
     the servo's own clock (:class:`~hapticsdk.runtime.clock.MonotonicClock`: sleep,
-    then spin the last 200 us) against the same deadline grid and re-anchors after the
-    same 5 ticks behind; it sends its start-to-start periods (s)."""
-    from ..runtime.clock import MonotonicClock
+    then spin the last 200 us) against the same deadline grid, with the servo's OS
+    options ``rt`` (scheduling policy, CPU), and re-anchors after the same 5 ticks
+    behind; it sends its start-to-start periods (s) and the options' outcome."""
+    from ..runtime.clock import MonotonicClock, RealtimeSettings, apply_realtime
+    status, restore = apply_realtime(RealtimeSettings.coerce(rt))
     clock = MonotonicClock()
     n = max(2, int(seconds / period_s))
     starts = []
@@ -107,15 +120,18 @@ def _reference_loop(seconds: float, period_s: float, conn: Any) -> None:
         behind = (clock.now() - deadline) / period_s
         if behind > 5:
             deadline += int(behind) * period_s
-    conn.send([b - a for a, b in itertools.pairwise(starts)])
+    restore()
+    conn.send(([b - a for a, b in itertools.pairwise(starts)], status))
     conn.close()
 
 
-def run_reference(app_load: str = "python-thread", seconds: float = 5.0, period_s: float = 1e-3) -> dict[str, Any]:
+def run_reference(app_load: str = "python-thread", seconds: float = 5.0, period_s: float = 1e-3,
+                  rt: dict[str, Any] | None = None) -> dict[str, Any]:
     """What this machine gives a 1 kHz loop right now, under the same application load:
-    :func:`_reference_loop` in a process started like a session's servo (``spawn``)
-    while this process runs the ``app_load`` thread and its main thread wakes every
-    2 ms, as :func:`run_session`'s does. Same statistics as the session's ``jitter``."""
+    :func:`_reference_loop` in a process started like a session's servo (``spawn``,
+    the same OS options ``rt``) while this process runs the ``app_load`` thread and its
+    main thread wakes every 2 ms, as :func:`run_session`'s does. Same statistics as the
+    session's ``jitter``, and ``rt``: the options' outcome."""
     import multiprocessing as mp
 
     from ..runtime.stats import jitter_stats
@@ -123,8 +139,10 @@ def run_reference(app_load: str = "python-thread", seconds: float = 5.0, period_
     rx, tx = ctx.Pipe(duplex=False)
     stop = threading.Event()
     th = threading.Thread(target=_load, args=(app_load, stop), daemon=True)
-    proc = ctx.Process(target=_reference_loop, args=(seconds, period_s, tx), name="hapticsdk-reference", daemon=True)
+    proc = ctx.Process(target=_reference_loop, args=(seconds, period_s, tx, rt), name="hapticsdk-reference",
+                       daemon=True)
     periods: list[float] = []
+    status: dict[str, Any] = {}
     with _stopping(stop, th):
         th.start()
         proc.start()
@@ -134,14 +152,14 @@ def run_reference(app_load: str = "python-thread", seconds: float = 5.0, period_
             while not rx.poll(0) and proc.is_alive() and time.monotonic() < deadline:
                 time.sleep(0.002)
             if rx.poll(0.5):
-                periods = rx.recv()
+                periods, status = rx.recv()
         finally:
             proc.join(5.0)
             if proc.is_alive():
                 proc.kill()
                 proc.join(2.0)
             rx.close()
-    return jitter_stats(np.asarray(periods), period_s)
+    return {**jitter_stats(np.asarray(periods), period_s), "rt": status}
 
 
 def _pcts(us: list[float]) -> dict[str, float]:
@@ -208,6 +226,12 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
             c = time.thread_time()
             s.state()
             burst.append((time.thread_time() - c) * 1e6)
+        cold: list[float] = []
+        for _ in range(500):  # any call after the same 2 ms sleep: what cold caches cost here
+            time.sleep(0.002)
+            c = time.thread_time()
+            _trivial()
+            cold.append((time.thread_time() - c) * 1e6)
         stop.set()
         th.join(2.0)
         summary = s.close()
@@ -220,10 +244,11 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
                        "skipped_ticks": ev.get("skipped_ticks"), "periods": jit.get("periods")},
             "app_call_us": {"state": _pcts(state_us), "set_material": _pcts(set_us),
                             "state_cpu": _pcts(state_cpu_us), "set_material_cpu": _pcts(set_cpu_us),
-                            "state_cpu_back_to_back": _pcts(burst)},
+                            "state_cpu_back_to_back": _pcts(burst), "trivial_cpu_after_sleep": _pcts(cold)},
             "switch_latency_ms": _pcts(latency_ms), "switches_not_seen_within_1s": lost_switches,
             "servo": {"tick_median_us": rep.get("tick_median_us"), "tick_max_us": rep.get("tick_max_us"),
                       "overruns": rep.get("overruns"), "renderer_errors": ev.get("renderer_error"),
+                      "rt": rep.get("rt"),
                       "commands": summary.get("commands"), "thread_pools": summary.get("thread_pools")}}
 
 
@@ -332,12 +357,13 @@ def run_live(isolation: str = "process", app_loads: tuple[str, ...] = ("python-t
     ``reference``: after each session run, :func:`run_reference` under the same load
     for the same time (key ``reference``): the session's jitter next to what a loop
     doing nothing else gets from this machine in the same minute."""
+    from ..runtime.session import _default_rt
     sw = switch_figures()
     rows = []
     for load in app_loads:
         r = run_session(isolation, load, seconds, rt=rt)
         if reference:
-            r["reference"] = run_reference(load, seconds)
+            r["reference"] = run_reference(load, seconds, rt=_default_rt(rt, isolation))
         r["rt"] = dict(rt or {})
         lat = r.pop("switch_latency_ms")
         r["switch"] = {"latency_ms": lat["max"], "latency_ms_p50": lat["p50"], "switches": lat["n"],
@@ -352,7 +378,8 @@ def run_live(isolation: str = "process", app_loads: tuple[str, ...] = ("python-t
         r["app_call_us"] = {"set_material": calls["set_material"]["max"], "state": calls["state"]["p99"],
                             "set_material_stats": calls["set_material"], "state_stats": calls["state"],
                             "state_cpu_stats": calls["state_cpu"], "set_material_cpu_stats": calls["set_material_cpu"],
-                            "state_cpu_back_to_back_stats": calls["state_cpu_back_to_back"]}
+                            "state_cpu_back_to_back_stats": calls["state_cpu_back_to_back"],
+                            "trivial_cpu_after_sleep_stats": calls["trivial_cpu_after_sleep"]}
         rows.append(r)
     return rows[0] if len(rows) == 1 else rows
 
@@ -363,18 +390,31 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
     application call times in us).
     """
     head = ("isolation  app_load        jitter p50/p99/max us   missed    switch ms (max)  step N   "
-            "energy mJ  state us p99 (cpu, b2b p50)   set_material us max (cpu)")
+            "energy mJ  state us p50/p99 (cpu p50, b2b p50)   set_material us max (cpu)")
     out = [head]
     for r in rows:
         j, s, c = r["jitter"], r["switch"], r["app_call_us"]
         out.append(f"{r['isolation']:<10} {r['app_load']:<15} {j['p50_us']:7.1f}/{j['p99_us']:7.1f}/{j['max_us']:8.1f}"
                    f"  {j['missed_tick_rate'] * 100:6.2f} %  {s['latency_ms']:8.2f}        {s['max_force_step_n']:.3f}"
-                   f"    {s['energy_j'] * 1e3:6.3f}    {c['state']:8.1f} ({c['state_cpu_stats']['p99']:5.1f}, "
-                   f"{c['state_cpu_back_to_back_stats']['p50']:4.1f})"
+                   f"    {s['energy_j'] * 1e3:6.3f}    {c['state_stats']['p50']:5.1f}/{c['state']:6.1f} "
+                   f"({c['state_cpu_stats']['p50']:5.1f}, {c['state_cpu_back_to_back_stats']['p50']:4.1f})"
                    f"   {c['set_material']:9.0f} ({c['set_material_cpu_stats']['max']:6.0f})")
         ref = r.get("reference")
         if ref:
             out.append(f"{'reference':<10} {r['app_load']:<15} {ref['p50_us']:7.1f}/{ref['p99_us']:7.1f}/"
                        f"{ref['max_us']:8.1f}  {ref['missed_tick_rate'] * 100:6.2f} %  (a loop doing nothing else, "
                        f"same load, right after)")
+    seen = []
+    for r in rows:
+        st = (r.get("servo") or {}).get("rt") or {}
+        line = ", ".join(f"{k.replace('_', ' ')} {v}" for k, v in st.items()
+                         if k in ("rt_priority", "cpu_affinity") and v != "off")
+        if line and line not in seen:
+            seen.append(line)
+    out.extend(f"servo process: {line}" for line in seen)
+    cold = [r["app_call_us"].get("trivial_cpu_after_sleep_stats", {}).get("p50") for r in rows]
+    cold = [c for c in cold if c is not None and math.isfinite(c)]
+    if cold:
+        out.append(f"a trivial Python call after the same 2 ms sleep costs {min(cold):.1f}-{max(cold):.1f} us "
+                   f"of CPU (p50) on this machine: the cold-cache part of the state() figures")
     return "\n".join(out)

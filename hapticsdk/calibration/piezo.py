@@ -187,8 +187,10 @@ class PiezoTable:
         v0, v1 = float(self.voltages_v[j - 1]), float(self.voltages_v[j])
         if accel_m_s2 == row[j]:
             return v1, ok
-        curve = self._curve(f_hz, row)
-        v = bisect_increasing(lambda x: float(curve(x)), v0, v1, accel_m_s2, xtol=1e-12, rtol=1e-12)
+        # every point the bisection tries lies strictly inside (v0, v1): the curve's
+        # interval j - 1, evaluated on plain floats (the same value as curve(x), bit for bit)
+        cubic = self._curve(f_hz, row).piece(j - 1)
+        v = bisect_increasing(cubic, v0, v1, accel_m_s2, xtol=1e-12, rtol=1e-12)
         return float(v), ok
 
     def voltages_for(self, f_hz: Any, accel_m_s2: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -33,6 +33,9 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--seconds", type=positive_float, default=10.0, help="run length per load (default 10 s)")
     p.add_argument("--pin-cpu", type=int, default=None, metavar="N",
                    help="pin the servo thread to CPU N (reported if refused)")
+    p.add_argument("--fifo-priority", type=_fifo_priority, default="default", metavar="P",
+                   help="the servo's SCHED_FIFO priority: 1..99, 'auto' (where the OS allows it; the default of "
+                        "a servo process) or 'off' (the default of a servo thread); the outcome is printed")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_live)
 
@@ -57,11 +60,22 @@ def register_bench(bench_sub: Any) -> None:
     p.set_defaults(func=_timing)
 
 
+def _fifo_priority(text: str) -> int | str | None:
+    """``--fifo-priority``: 'auto', 'off' or an integer 1..99 ('default': not given)."""
+    from .argtypes import bounded_int
+    if text in ("auto", "off", "default"):
+        return None if text == "off" else text
+    return bounded_int(1, 99)(text)
+
+
 def _live(args: argparse.Namespace) -> int:
     from ..benchmarks.live import APP_LOADS, format_rows, run_live
     from . import emit
     loads = APP_LOADS if args.app_load == "all" else (args.app_load,)
-    rt = {"cpu": args.pin_cpu} if args.pin_cpu is not None else None
+    rt: dict[str, Any] | None = {} if args.fifo_priority == "default" else {"fifo_priority": args.fifo_priority}
+    if args.pin_cpu is not None:
+        rt = {**(rt or {}), "cpu": args.pin_cpu}
+    rt = rt or None  # None: the session's defaults
     res = run_live(args.isolation, loads, args.seconds, rt=rt)
     rows = res if isinstance(res, list) else [res]
     emit(res, args.json, format_rows(rows) + "\n(shared machines: other processes' load is in these figures)")

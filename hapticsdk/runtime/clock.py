@@ -139,7 +139,10 @@ class RealtimeSettings:
             ``os.sched_setscheduler``); None = off. Needs ``CAP_SYS_NICE`` or an
             ``RLIMIT_RTPRIO`` at least this high. A FIFO thread that never sleeps holds
             its CPU (the kernel leaves others 5 % by default): use it with paced
-            (``realtime=True``) loops.
+            (``realtime=True``) loops. ``"auto"``: priority :data:`AUTO_FIFO_PRIORITY`
+            where the process may (root, ``CAP_SYS_NICE``), else the highest its
+            ``RLIMIT_RTPRIO`` allows, else normal scheduling; reported like the others
+            (the default of a process-isolated :class:`~hapticsdk.runtime.session.Session`).
         gc_freeze: ``gc.freeze()`` the surviving objects before the loop (default on;
             GC is disabled in the loop regardless).
         mlockall: lock the process's current and future pages in RAM (``mlockall``
@@ -147,7 +150,7 @@ class RealtimeSettings:
     """
 
     cpu: int | None = None
-    fifo_priority: int | None = None
+    fifo_priority: int | str | None = None
     gc_freeze: bool = True
     mlockall: bool = False
 
@@ -155,10 +158,10 @@ class RealtimeSettings:
         if self.cpu is not None and not (isinstance(self.cpu, int) and not isinstance(self.cpu, bool)
                                          and self.cpu >= 0):
             raise ValidationError(f"cpu must be a CPU index >= 0 or None, got {self.cpu!r}", field="cpu")
-        if self.fifo_priority is not None and not (
+        if self.fifo_priority is not None and self.fifo_priority != "auto" and not (
                 isinstance(self.fifo_priority, int) and not isinstance(self.fifo_priority, bool)
                 and 1 <= self.fifo_priority <= 99):
-            raise ValidationError(f"fifo_priority must be in 1..99 or None, got {self.fifo_priority!r}",
+            raise ValidationError(f"fifo_priority must be in 1..99, 'auto' or None, got {self.fifo_priority!r}",
                                   field="fifo_priority")
 
     @classmethod
@@ -181,6 +184,22 @@ class RealtimeSettings:
     def requested(self) -> bool:
         """True when any OS option beyond the default GC handling is asked for."""
         return self.cpu is not None or self.fifo_priority is not None or self.mlockall
+
+
+#: ``SCHED_FIFO`` priority of ``fifo_priority="auto"``: above every normal task and the
+#: default priority of user real-time threads (JACK, PipeWire ask for 20-88), below the
+#: kernel's threaded interrupt handlers (50) so a device's interrupts still run first.
+AUTO_FIFO_PRIORITY = 40
+
+
+def _rtprio_limit() -> int | None:
+    """The soft ``RLIMIT_RTPRIO`` of this process (None where unknown)."""
+    try:
+        import resource
+        soft = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
+    except (ImportError, AttributeError, OSError, ValueError):
+        return None
+    return 99 if soft == getattr(resource, "RLIM_INFINITY", -1) else int(soft)
 
 
 def _os_error(exc: BaseException) -> str:
@@ -241,22 +260,35 @@ def apply_realtime(settings: RealtimeSettings) -> tuple[dict[str, str], Callable
         if not (hasattr(os, "sched_setscheduler") and hasattr(os, "SCHED_FIFO")):
             status["rt_priority"] = "unavailable: os.sched_setscheduler / SCHED_FIFO is not on this platform"
         else:
+            auto = settings.fifo_priority == "auto"
+            prio = AUTO_FIFO_PRIORITY if auto else int(settings.fifo_priority)  # type: ignore[arg-type]
             try:
                 pol0 = os.sched_getscheduler(0)
                 par0 = os.sched_getparam(0)
                 lo = os.sched_get_priority_min(os.SCHED_FIFO)
                 hi = os.sched_get_priority_max(os.SCHED_FIFO)
-                if not lo <= settings.fifo_priority <= hi:
-                    status["rt_priority"] = (f"refused: priority {settings.fifo_priority} outside this "
+                if auto:
+                    prio = max(lo, min(prio, hi))
+                if not lo <= prio <= hi:
+                    status["rt_priority"] = (f"refused: priority {prio} outside this "
                                              f"system's SCHED_FIFO range {lo}..{hi}")
                 else:
-                    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(settings.fifo_priority))
+                    try:
+                        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+                    except PermissionError:
+                        # auto: an unprivileged process may still go as high as its limit
+                        limit = _rtprio_limit() if auto else None
+                        if not (limit is not None and lo <= limit < prio):
+                            raise
+                        prio = limit
+                        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
                     undo.append(lambda p=pol0, q=par0: os.sched_setscheduler(0, p, q))
-                    status["rt_priority"] = f"applied: SCHED_FIFO {settings.fifo_priority}"
+                    status["rt_priority"] = f"applied: SCHED_FIFO {prio}" + (" (auto)" if auto else "")
             except Exception as exc:
                 hint = (" (needs CAP_SYS_NICE or RLIMIT_RTPRIO >= the priority)"
                         if isinstance(exc, PermissionError) else "")
-                status["rt_priority"] = f"refused: {_os_error(exc)}{hint}"
+                then = "; the servo runs at normal priority" if auto else ""
+                status["rt_priority"] = f"refused: {_os_error(exc)}{hint}{then}"
 
     # (d) lock memory
     if settings.mlockall:

@@ -78,6 +78,7 @@ import math
 import multiprocessing as mp
 import os
 import pickle
+import struct
 import sys
 import threading
 import time
@@ -95,6 +96,9 @@ ISOLATIONS = ("process", "thread")
 # -- shared-memory layout (float64 slots) ----------------------------------------------
 _SEQ = 0
 _STATE = slice(1, 24)
+#: reads slots 0..23 (the sequence number and the state) from the buffer's bytes
+_read_state = struct.Struct(f"={_STATE.stop}d").unpack_from
+_new_tuple = tuple.__new__
 (_T, _PX, _PY, _PZ, _VX, _VY, _VZ, _F, _OBJ, _PEN, _TICKS, _OVERRUNS, _SKIPPED, _RERR, _CLAMPS,
  _TICK_US, _TICK_MAX_US, _MISSED, _PUB, _NEAR, _PAUSED_S, _SWITCHES, _SWITCHED_AT) = range(1, 24)
 _HEARTBEAT, _STOP, _PAUSE, _STATUS, _PID, _REASON, _READY = range(32, 39)
@@ -200,6 +204,19 @@ class Retarget:
     refined_sent: bool = False
 
 
+def _state_from(vals: Sequence[float], names: Mapping[int, str]) -> SessionState:
+    """A :class:`SessionState` from slots 0..23 of the buffer (the sequence number
+    first) and the object names by id; ``age_s`` against ``time.monotonic()`` now."""
+    (_, t, px, py, pz, vx, vy, vz, f, obj, pen, ticks, ovr, skipped, rerr, clamps, tick_us, tick_max,
+     missed, pub, near, paused, switches, switched_at) = vals
+    # positional, in SessionState's field order (a keyword call costs a cold call more)
+    return _new_tuple(SessionState, (
+        t, (px, py, pz), (vx, vy, vz), f, names.get(int(obj)) if obj >= 0 else None,
+        names.get(int(near)) if near >= 0 else None, pen, int(ticks), int(ovr), int(skipped), int(missed),
+        int(rerr), int(clamps), int(switches), tick_us, tick_max, time.monotonic() - pub, paused != 0.0,
+        switched_at))
+
+
 class _Buffer:
     """The state/event/control slots: a shared-memory segment (process) or a local
     buffer (thread), viewed as float64."""
@@ -211,17 +228,22 @@ class _Buffer:
             self.shm = shared_memory.SharedMemory(create=True, size=size)
             self.name = self.shm.name
             self.mv = self.shm.buf.cast("d")
+            #: the same slots as bytes (``struct`` reads the state in one call)
+            self.bytes: memoryview = self.shm.buf
         else:
             self.shm = None
             self.name = None
             self._raw = bytearray(size)
             self.mv = memoryview(self._raw).cast("d")
+            self.bytes = memoryview(self._raw)
 
     def release(self) -> None:
-        try:
-            self.mv.release()
-        except Exception:  # noqa: BLE001 - a view still exported elsewhere
-            pass
+        for v in (self.mv, self.bytes if self.shm is None else None):
+            try:
+                if v is not None:
+                    v.release()
+            except Exception:  # noqa: BLE001 - a view still exported elsewhere
+                pass
         if self.shm is not None:
             try:
                 self.shm.close()
@@ -925,7 +947,7 @@ class _Servo:
                     rep = loop.finish()
                     out["report"] = {k: v for k, v in rep.to_dict().items()
                                      if k in ("ticks", "tick_median_us", "tick_p99_us", "tick_max_us", "overruns",
-                                              "jitter", "events", "fault")}
+                                              "jitter", "events", "fault", "rt")}
                     path = self.spec.get("log_path")
                     if path:
                         import numpy as np
@@ -1015,6 +1037,21 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
 # =====================================================================================
 # application side
 # =====================================================================================
+def _default_rt(rt: Any, isolation: str) -> dict[str, Any] | None:
+    """The servo's OS options (a mapping for the servo's spec, or None): a servo process
+    asks for ``SCHED_FIFO`` (``"auto"``) unless the caller's options say otherwise."""
+    from dataclasses import asdict
+
+    from .clock import RealtimeSettings
+    if isinstance(rt, RealtimeSettings):
+        return asdict(rt)
+    out = dict(rt) if rt is not None else None
+    if isolation == "process":
+        out = out if out is not None else {}
+        out.setdefault("fifo_priority", "auto")
+    return out
+
+
 class Session:
     """A live haptic session on a scene; see the module docstring.
 
@@ -1042,7 +1079,15 @@ class Session:
             :attr:`object_ids`.
         rt: OS options for the servo thread, as ``ServoLoop(rt=...)``: ``{"cpu": 1,
             "fifo_priority": 50, "mlockall": True}`` (each reported, never raised, when
-            the OS refuses); e.g. pin the servo to a CPU the application does not use.
+            the OS refuses; the outcome is in ``close()``'s ``report["rt"]``); e.g. pin
+            the servo to a CPU the application does not use. With
+            ``isolation="process"``, a mapping without ``fifo_priority`` (and None, the
+            default) asks for ``fifo_priority="auto"``: the servo process runs under
+            ``SCHED_FIFO`` where the OS lets it (root, ``CAP_SYS_NICE`` or an
+            ``RLIMIT_RTPRIO``), else at normal priority; ``{"fifo_priority": None}``
+            turns it off. Thread isolation asks for nothing by default (a real-time
+            thread in the application's interpreter would wait on the interpreter
+            lock held by normal-priority threads).
         start_timeout_s: how long to wait for the servo to be running (s).
     """
 
@@ -1065,6 +1110,7 @@ class Session:
         if rt is not None:
             from .clock import RealtimeSettings
             RealtimeSettings.coerce(rt)  # unknown option names fail here, not in the servo
+        rt = _default_rt(rt, isolation)
         if isinstance(scene, (str, Path)):
             scene = Scene.load(scene)
         elif isinstance(scene, Mapping):
@@ -1123,7 +1169,7 @@ class Session:
                 "period_s": period, "realtime": bool(realtime), "passivity": bool(servo.get("passivity", True)),
                 "ramp_s": self.ramp_s, "heartbeat_timeout_s": heartbeat_timeout_s, "log_seconds": float(log_seconds),
                 "log_path": str(check_output_path(log_path, field="log_path")) if log_path is not None else None,
-                "ppid": os.getpid(), "rt": dict(rt) if rt is not None else None}
+                "ppid": os.getpid(), "rt": rt}
         self._spec = spec
         self._builder: _Servo | None = None
         self._build_lock = threading.Lock()
@@ -1132,6 +1178,7 @@ class Session:
         self._tables_pending: dict[int, tuple[Any, int]] = {}
         self._buf = _Buffer(shared=isolation == "process")
         self._mv = self._buf.mv
+        self._bytes = self._buf.bytes
         self._mv[_HEARTBEAT] = time.monotonic()
         self._process: Any = None
         self._thread: threading.Thread | None = None
@@ -1498,27 +1545,20 @@ class Session:
         """The servo's latest state (never blocks; a few microseconds)."""
         self._check()
         mv = self._mv
+        buf = self._bytes
         for i in range(10000):
-            s1 = mv[_SEQ]
-            if s1 % 2.0 == 0.0:
-                vals = mv[1:24].tolist()
-                if mv[_SEQ] == s1:
-                    break
+            # one struct read of the sequence number and the 23 state slots, then the
+            # sequence number again: equal and even = a consistent copy
+            vals = _read_state(buf)
+            s1 = vals[0]
+            if s1 % 2.0 == 0.0 and mv[_SEQ] == s1:
+                break
             if i >= 2:
                 time.sleep(0)  # let a writer in this process (thread isolation) finish
         else:  # a servo that died mid-write
             self._check()
             raise SessionError("the servo's state is being written and never settled")
-        (t, px, py, pz, vx, vy, vz, f, obj, pen, ticks, ovr, skipped, rerr, clamps, tick_us, tick_max,
-         missed, pub, near, paused, switches, switched_at) = vals
-        names = self._names
-        return SessionState(t=t, position_mm=(px, py, pz), velocity_mm_s=(vx, vy, vz), force_n=f,
-                            object=names.get(int(obj)) if obj >= 0 else None,
-                            near=names.get(int(near)) if near >= 0 else None, penetration_mm=pen,
-                            ticks=int(ticks), overruns=int(ovr), skipped_ticks=int(skipped),
-                            missed_ticks=int(missed), renderer_errors=int(rerr), clamps=int(clamps),
-                            material_switches=int(switches), tick_us=tick_us, tick_max_us=tick_max,
-                            age_s=time.monotonic() - pub, paused=paused != 0.0, switched_at=switched_at)
+        return _state_from(vals, self._names)
 
     def events(self) -> list[SessionEvent]:
         """Events since the last call, oldest first (never blocks). When more than 1024

@@ -212,6 +212,8 @@ CASES = [
     ("bench-solvers-seeds-zero", ["bench", "solvers", "--seeds", "0"], "--seeds"),
     ("bench-timing-fifo-500", ["bench", "timing", "--fifo-priority", "500"], "--fifo-priority"),
     ("bench-timing-seconds-negative", ["bench", "timing", "--seconds", "-1"], "--seconds"),
+    ("bench-live-fifo-word", ["bench", "live", "--fifo-priority", "high"], "--fifo-priority"),
+    ("bench-live-fifo-zero", ["bench", "live", "--fifo-priority", "0"], "--fifo-priority"),
     ("bench-timing-pin-cpu-negative", ["bench", "timing", "--pin-cpu", "-1"], "--pin-cpu"),
     ("bench-fidelity-period-zero", ["bench", "fidelity", "--periods", "0"], "--periods"),
     ("unknown-command", ["nosuch"], "COMMAND"),

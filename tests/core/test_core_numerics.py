@@ -223,3 +223,26 @@ def test_bisect_increasing_finds_the_root_to_the_tolerance():
     for target in (-1.7, 0.0, 0.3, 2.0):
         x = bisect_increasing(lambda v: float(f(v)), -10.0, 10.0, target, xtol=1e-12, rtol=1e-12)
         assert abs(x - target ** 3) <= 1e-12 + 1e-12 * abs(target ** 3)
+
+
+def test_piece_is_the_interpolant_on_plain_floats_to_the_last_bit():
+    """piece(k) evaluates interval k's cubic on Python floats in the order of
+    __call__: IEEE double operations in the same order give the same bits, for PCHIP
+    and the spline, 1-D and one-column data; strictly inside and at the left knot."""
+    rng = np.random.default_rng(5)
+    for trial in range(40):
+        n = int(rng.integers(4, 20))
+        x = _random_knots(rng, n)
+        y = rng.standard_normal(n) * 10.0 ** rng.integers(-3, 4)
+        for interp in (Pchip(x, y), CubicSpline(x, y), Pchip(x, y[:, None])):
+            for k in range(n - 1):
+                cubic = interp.piece(k)
+                pts = np.concatenate([[x[k]], rng.uniform(x[k], x[k + 1], 7)])
+                pts = pts[pts < x[k + 1]]
+                want = np.asarray(interp(pts)).reshape(-1)
+                got = np.array([cubic(float(p)) for p in pts])
+                assert np.array_equal(got, want), (trial, k)
+    with pytest.raises(ValueError):
+        Pchip(x, np.c_[y, y]).piece(0)      # two columns: no single cubic
+    with pytest.raises(ValueError):
+        Pchip(x, y).piece(n - 1)            # one past the last interval

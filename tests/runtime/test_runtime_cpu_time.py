@@ -216,3 +216,84 @@ def test_timing_benchmark_judges_goal13_on_cpu_time_and_prints_both_tables():
     assert d["rt"]["cpu_affinity"].startswith("refused") and d["goal14_pass"] is None
     text = format_table([d])
     assert "CPU compute" in text and "wall compute" in text and "refused" in text
+
+
+class _Calls(list):
+    attempts: list
+
+
+def _record_scheduler(monkeypatch, refuse_above=None):
+    """Replace os.sched_setscheduler by a recorder that refuses FIFO priorities above
+    ``refuse_above`` (None: refuse nothing) as an unprivileged process is refused."""
+    calls = _Calls()
+
+    def fake(pid, pol, par):
+        calls.attempts.append(par.sched_priority)
+        if pol == os.SCHED_FIFO and refuse_above is not None and par.sched_priority > refuse_above:
+            raise PermissionError(errno.EPERM, "Operation not permitted")
+        calls.append((pol, par.sched_priority))
+
+    monkeypatch.setattr(os, "sched_setscheduler", fake)
+    calls.attempts = []  # every priority asked for, refused or not
+    return calls
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_FIFO"), reason="no SCHED_FIFO on this platform")
+def test_auto_fifo_priority_takes_the_auto_priority_where_allowed(monkeypatch):
+    calls = _record_scheduler(monkeypatch)
+    status, restore = rclock.apply_realtime(RealtimeSettings(fifo_priority="auto"))
+    assert calls[0] == (os.SCHED_FIFO, rclock.AUTO_FIFO_PRIORITY)
+    assert status["rt_priority"] == f"applied: SCHED_FIFO {rclock.AUTO_FIFO_PRIORITY} (auto)"
+    restore()
+    assert calls[-1][0] == os.sched_getscheduler(0)  # put back
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_FIFO"), reason="no SCHED_FIFO on this platform")
+def test_auto_fifo_priority_falls_back_to_the_rtprio_limit(monkeypatch):
+    # an unprivileged user whose RLIMIT_RTPRIO is 7: auto asks for 40, is refused, takes 7
+    calls = _record_scheduler(monkeypatch, refuse_above=7)
+    monkeypatch.setattr(rclock, "_rtprio_limit", lambda: 7)
+    status, restore = rclock.apply_realtime(RealtimeSettings(fifo_priority="auto"))
+    assert calls[0] == (os.SCHED_FIFO, 7)
+    assert status["rt_priority"] == "applied: SCHED_FIFO 7 (auto)"
+    restore()
+    # an explicit priority above the limit is refused, not lowered
+    calls.clear()
+    status, restore = rclock.apply_realtime(RealtimeSettings(fifo_priority=30))
+    assert calls == [] and status["rt_priority"].startswith("refused: EPERM")
+    restore()
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_FIFO"), reason="no SCHED_FIFO on this platform")
+def test_auto_fifo_priority_without_a_limit_runs_at_normal_priority(monkeypatch):
+    calls = _record_scheduler(monkeypatch, refuse_above=0)
+    monkeypatch.setattr(rclock, "_rtprio_limit", lambda: 0)
+    rep = ServoLoop(VirtualProbe(), [Spring()], rt={"fifo_priority": "auto"}).run(0.02)
+    assert rep.ticks == 20 and rep.fault is None and calls == []
+    assert rep.rt["rt_priority"].startswith("refused: EPERM") and "normal priority" in rep.rt["rt_priority"]
+    assert "rt_priority" not in rep.rt["applied"]
+    # refused for another reason (a container's zero real-time budget refuses even
+    # root): a limit above the auto priority must not be tried instead
+    calls = _record_scheduler(monkeypatch, refuse_above=0)
+    monkeypatch.setattr(rclock, "_rtprio_limit", lambda: 99)
+    status, restore = rclock.apply_realtime(RealtimeSettings(fifo_priority="auto"))
+    restore()
+    assert calls == [] and max(calls.attempts) == rclock.AUTO_FIFO_PRIORITY
+    assert status["rt_priority"].startswith("refused: EPERM")
+
+
+def test_auto_is_the_only_word_fifo_priority_takes():
+    assert RealtimeSettings(fifo_priority="auto").requested
+    with pytest.raises(ValidationError):
+        RealtimeSettings(fifo_priority="high")
+
+
+def test_a_servo_process_asks_for_auto_fifo_unless_told_otherwise():
+    from hapticsdk.runtime.session import _default_rt
+    assert _default_rt(None, "process") == {"fifo_priority": "auto"}
+    assert _default_rt({"cpu": 1}, "process") == {"cpu": 1, "fifo_priority": "auto"}
+    assert _default_rt({"fifo_priority": None}, "process") == {"fifo_priority": None}
+    assert _default_rt({"fifo_priority": 20}, "process") == {"fifo_priority": 20}
+    assert _default_rt(None, "thread") is None  # not in the application's interpreter
+    assert _default_rt({"cpu": 0}, "thread") == {"cpu": 0}
+    assert RealtimeSettings.coerce(_default_rt(RealtimeSettings(cpu=0), "process")) == RealtimeSettings(cpu=0)

@@ -536,3 +536,53 @@ def test_calibration_tables_cross_the_pipe_once():
         # a reference to a table the servo never received is refused, not guessed
         with pytest.raises(pickle.UnpicklingError):
             sm._load_renderers(sent[2][2], {})
+
+
+def test_state_fields_come_from_the_slots_the_servo_writes():
+    """state() reads the slots with one struct call and builds the tuple by position:
+    every field must come from the slot the servo publishes it in (distinct values in
+    every slot, each field checked against its named slot)."""
+    import hapticsdk.runtime.session as ss
+    slots = [0.0] + [float(100 + i) for i in range(1, 24)]  # slot i holds 100 + i
+    slots[ss._OBJ], slots[ss._NEAR] = 3.0, 7.0
+    slots[ss._PAUSED_S] = 1.0
+    names = {3: "cube", 7: "ball"}
+    buf = bytearray(ss._NSLOTS * 8)
+    memoryview(buf).cast("d")[:24] = memoryview(bytearray(__import__("struct").pack("24d", *slots))).cast("d")
+    before = time.monotonic()
+    st = ss._state_from(ss._read_state(buf), names)
+    v = lambda k: float(100 + k)  # noqa: E731
+    assert st.t == v(ss._T) and st.force_n == v(ss._F) and st.penetration_mm == v(ss._PEN)
+    assert st.position_mm == (v(ss._PX), v(ss._PY), v(ss._PZ))
+    assert st.velocity_mm_s == (v(ss._VX), v(ss._VY), v(ss._VZ))
+    assert (st.object, st.near, st.paused) == ("cube", "ball", True)
+    assert (st.ticks, st.overruns, st.skipped_ticks, st.renderer_errors, st.clamps, st.missed_ticks,
+            st.material_switches) == tuple(int(v(k)) for k in (ss._TICKS, ss._OVERRUNS, ss._SKIPPED, ss._RERR,
+                                                                ss._CLAMPS, ss._MISSED, ss._SWITCHES))
+    assert (st.tick_us, st.tick_max_us, st.switched_at) == (v(ss._TICK_US), v(ss._TICK_MAX_US), v(ss._SWITCHED_AT))
+    assert before - v(ss._PUB) <= st.age_s <= time.monotonic() - v(ss._PUB)
+    assert all(isinstance(getattr(st, f), int) for f in ("ticks", "overruns", "clamps"))
+    slots[ss._OBJ] = slots[ss._NEAR] = -1.0  # nothing in contact, nothing near
+    st = ss._state_from(slots, names)
+    assert st.object is None and st.near is None
+
+
+def test_live_benchmark_rows_say_what_scheduling_the_servo_got():
+    """The text table names the scheduling the servo was granted (or refused) and the
+    cold-call reference next to the state() figures; the CLI's option reaches the run."""
+    from hapticsdk.benchmarks.live import format_rows
+    from hapticsdk.cli.bench_runtime import _fifo_priority
+    pct = {"p50": 1.0, "p99": 2.0, "max": 3.0, "n": 5}
+    row = {"isolation": "process", "app_load": "none",
+           "jitter": {"p50_us": 0.1, "p99_us": 1.0, "max_us": 5.0, "missed_tick_rate": 0.0},
+           "switch": {"latency_ms": 1.2, "max_force_step_n": 0.08, "energy_j": 0.0},
+           "app_call_us": {"state": 2.0, "set_material": 900.0, "state_stats": pct, "state_cpu_stats": pct,
+                           "state_cpu_back_to_back_stats": pct, "set_material_cpu_stats": pct,
+                           "trivial_cpu_after_sleep_stats": {**pct, "p50": 1.7}},
+           "servo": {"rt": {"rt_priority": "refused: EPERM (x); the servo runs at normal priority",
+                            "cpu_affinity": "off", "mlockall": "off"}}}
+    text = format_rows([row, {**row, "app_load": "python-thread"}])
+    assert text.count("servo process: rt priority refused: EPERM") == 1  # once for equal rows
+    assert "cpu affinity" not in text  # "off" is not news
+    assert "costs 1.7-1.7 us" in text
+    assert (_fifo_priority("auto"), _fifo_priority("off"), _fifo_priority("7")) == ("auto", None, 7)
