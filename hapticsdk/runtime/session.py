@@ -1111,6 +1111,10 @@ class Session:
             from .clock import RealtimeSettings
             RealtimeSettings.coerce(rt)  # unknown option names fail here, not in the servo
         rt = _default_rt(rt, isolation)
+        if isolation == "thread" and rt and rt.get("fifo_priority") is not None:
+            _log.warning("a SCHED_FIFO servo thread shares the application's interpreter lock with "
+                         "normal-priority threads, which then hold it up (set_material took up to 0.85 s in "
+                         "hapticsdk bench live): real-time scheduling is meant for isolation='process'")
         if isinstance(scene, (str, Path)):
             scene = Scene.load(scene)
         elif isinstance(scene, Mapping):

@@ -297,3 +297,19 @@ def test_a_servo_process_asks_for_auto_fifo_unless_told_otherwise():
     assert _default_rt(None, "thread") is None  # not in the application's interpreter
     assert _default_rt({"cpu": 0}, "thread") == {"cpu": 0}
     assert RealtimeSettings.coerce(_default_rt(RealtimeSettings(cpu=0), "process")) == RealtimeSettings(cpu=0)
+
+
+def test_a_fifo_servo_thread_in_the_application_is_warned_about(caplog, monkeypatch):
+    import logging
+    _record_scheduler(monkeypatch)  # never really run this process's thread at SCHED_FIFO
+
+    import hapticsdk as hs
+    scene = {"schema_version": 1, "name": "w", "devices": {"force": "probe-virtual"},
+             "objects": [{"name": "pad", "material": {"intensities": {"hardness": 0.5}}}]}
+    with caplog.at_level(logging.WARNING, logger="hapticsdk.runtime.session"):
+        with hs.Session(scene, isolation="thread", realtime=False, rt={"fifo_priority": None}) as s:
+            s.state()
+        assert not [r for r in caplog.records if "SCHED_FIFO" in r.getMessage()]
+        with hs.Session(scene, isolation="thread", realtime=False, rt={"fifo_priority": "auto"}) as s:
+            s.state()
+    assert [r for r in caplog.records if "SCHED_FIFO servo thread" in r.getMessage()]
