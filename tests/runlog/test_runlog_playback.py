@@ -161,6 +161,39 @@ def test_roles_appearing_late_are_padded(tmp_path):
     assert run.command("coil", 0).frequency_hz is None
 
 
+def test_runs_longer_than_a_block_keep_every_tick_in_order(tmp_path, monkeypatch):
+    """The recorder stores rows in fixed-size blocks: with blocks of 3 ticks, 20 ticks
+    (roles starting late, missing on some ticks, states missing, short vectors) come
+    back value for value, as an independently kept list of what was recorded says."""
+    import hapticsdk.runlog as rl
+    monkeypatch.setattr(rl._Rows, "BLOCK", 3)
+    rec = RunRecorder(tmp_path / "long.npz")
+    want_pos, want_coil, want_force, want_buttons = [], [], [], []
+    for k in range(20):
+        st = None if k % 7 == 6 else DeviceState(t=k * 1e-3 + 1e-5, position_mm=np.array([k, -k, 2.0 * k]),
+                                                 velocity_mm_s=(1.0, 2.0) if k == 4 else np.ones(3),
+                                                 buttons=k % 4)
+        sent = {}
+        if k % 5 != 2:
+            sent["force"] = ChannelCommand("force", force_n=0.1 * k)
+        if k >= 8 and k % 3:
+            sent["coil"] = ChannelCommand("coil", frequency_hz=50.0 + k, amplitude=0.5)
+        rec.record(k * 1e-3, st, sent)
+        want_pos.append([np.nan] * 3 if st is None else [k, -k, 2.0 * k])
+        want_force.append(0.1 * k if "force" in sent else np.nan)
+        want_coil.append(50.0 + k if "coil" in sent else np.nan)
+        want_buttons.append(0 if st is None else k % 4)
+    run = load_run(rec.close())
+    assert len(run) == 20 and np.array_equal(run.t, np.arange(20) * 1e-3)
+    assert np.array_equal(run.position_mm, np.array(want_pos), equal_nan=True)
+    assert np.array_equal(run.commands["force"]["force_n"], np.array(want_force), equal_nan=True)
+    assert np.array_equal(run.commands["coil"]["frequency_hz"], np.array(want_coil), equal_nan=True)
+    assert run.buttons.tolist() == want_buttons and run.buttons.dtype == np.int64
+    assert run.velocity_mm_s[4, :2].tolist() == [1.0, 2.0] and np.isnan(run.velocity_mm_s[4, 2])
+    assert np.array_equal(run.state_t[[0, 6]], [1e-5, np.nan], equal_nan=True)
+    assert run.header["roles"] == ["coil", "force"] and run.header["n_ticks"] == 20
+
+
 def test_broken_run_files_are_named(tmp_path):
     with pytest.raises(RecordingError, match="not found"):
         load_run(tmp_path / "missing.npz")
