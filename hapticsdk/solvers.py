@@ -13,6 +13,7 @@ returned ``x``: a solver cannot report an error it did not reach.
 
 from __future__ import annotations
 
+import math
 import operator
 import time
 from abc import ABC, abstractmethod
@@ -188,6 +189,9 @@ def _row_medians(a: np.ndarray) -> np.ndarray:
     return 0.5 * (p[:, k - 1] + p[:, k])
 
 
+_F64 = np.dtype(np.float64)
+
+
 class Trace:
     """Per-iteration record of (wall time, evaluations, best error, violation) for a batch."""
 
@@ -208,10 +212,21 @@ class Trace:
         n = self.n_targets
         # a copy (the solver keeps updating its arrays); float (n,) arrays copy directly
         self.best_error.append(best_error.copy() if type(best_error) is np.ndarray and best_error.shape == (n,)
-                               and best_error.dtype == np.float64 else np.array(best_error, float).reshape(n))
+                               and best_error.dtype is _F64 else np.array(best_error, float).reshape(n))
         self.violation.append(np.zeros(n) if violation is None else
                               violation.copy() if type(violation) is np.ndarray and violation.shape == (n,)
-                              and violation.dtype == np.float64 else np.array(violation, float).reshape(n))
+                              and violation.dtype is _F64 else np.array(violation, float).reshape(n))
+
+    def repeat(self, nfev: int) -> None:
+        """Record one iteration that changed neither the best errors nor the violations
+        since the last :meth:`record` (the time is taken now; the previous row's arrays are
+        shared, not copied: the stored arrays are read, never written)."""
+        if not self.best_error:
+            raise ValueError("Trace.repeat before any record")
+        self.times.append(time.perf_counter() - self.t0)
+        self.nfev.append(int(nfev))
+        self.best_error.append(self.best_error[-1])
+        self.violation.append(self.violation[-1])
 
     def rows(self, i: int | None = None) -> list[dict[str, Any]]:
         """Rows for target ``i`` (scalars), or for the batch (max over targets)."""
@@ -319,6 +334,7 @@ class SolveProblem:
                 raise ValidationError(f"constraint {c.name!r} reads features {absent} that the model "
                                       f"does not take", field="constraints")
         self._out_idx = np.array([self.model.dimension_names.index(d) for d in self.dimensions], dtype=int)
+        self._n_feat = len(self.space)
         self._all_out = np.array_equal(self._out_idx, np.arange(self.model.n_outputs))
         self._identity = tuple(self.space.names) == tuple(model_in)   # X rows are model inputs
         self._base_formulas = all(type(c).uses_base_formulas() for c in self.constraints)
@@ -406,9 +422,14 @@ class SolveProblem:
         return {n: G[..., i] for i, n in enumerate(self.model.feature_names)}
 
     # -- evaluation --------------------------------------------------------
+    def eval_buffers(self, shape: tuple[int, ...], penalty: str | None = None) -> "EvalBuffers":
+        """Buffers for :meth:`evaluate` of candidates of leading shape ``shape`` (``X.shape[:-1]``)
+        that a solver reuses across the iterations of one run (see :class:`EvalBuffers`)."""
+        return EvalBuffers(self, shape, penalty or self.penalty)
+
     def evaluate(self, X: np.ndarray, *, penalty: str | None = None, details: bool = False,
                  rows: np.ndarray | None = None, per_constraint: bool = False,
-                 finite: bool = False) -> Any:
+                 finite: bool = False, work: "EvalBuffers | None" = None) -> Any:
         """Fitness of formula (6) for ``X`` of shape ``(m, p, d)`` (p candidates per target)
         or ``(m, d)``; ONE model call for all rows. ``rows`` (optional index array) scores
         ``X`` against ``targets[rows]`` instead of all ``m`` targets (solvers that drop solved
@@ -416,20 +437,58 @@ class SolveProblem:
         with ``fitness``, ``error``, ``violation``, ``intensities`` and, with
         ``per_constraint``, ``violations`` (each constraint's, last axis in the order of
         ``constraints``). ``finite=True`` (solvers, for candidates they generated inside the
-        bounds) skips the model's input check for NaN/inf rows."""
+        bounds) skips the model's input check for NaN/inf rows.
+
+        ``work`` (optional, from :meth:`eval_buffers` for this ``X.shape[:-1]`` and penalty
+        form; ignored otherwise): the arithmetic writes into its buffers instead of fresh
+        arrays, so the returned fitness, error and violation are views of them, valid until
+        the next call with the same ``work`` (a solver's loop copies what it keeps). The
+        numbers are the same with or without it: it is the same code."""
         X = np.asarray(X, float)
         lead = X.shape[:-1]
         T = self.targets if rows is None else self.targets[rows]
-        if X.shape[-1] != self.n_features or not lead or lead[0] != T.shape[0]:
+        d = self._n_feat
+        if X.shape[-1] != d or not lead or lead[0] != T.shape[0]:
             raise ValidationError(f"candidates must have shape (m={T.shape[0]}, [p,] "
-                                  f"{self.n_features}), got {X.shape}", field="X")
+                                  f"{d}), got {X.shape}", field="X")
         form = penalty or self.penalty
-        X2 = X.reshape(-1, self.n_features)
+        if work is not None and (work.lead != lead or work.form != form or work.problem_id != id(self._setup_cache)):
+            work = None
+        fitness, err, viol, I, per_c = self._formula6(X.reshape(-1, d), T, lead, form, finite, per_constraint, work)
+        if not details:
+            return fitness
+        out = {"fitness": fitness, "error": err, "violation": viol, "intensities": I.reshape(lead + (I.shape[-1],))}
+        if per_constraint:
+            out["violations"] = (np.zeros(lead + (0,)) if per_c is None
+                                 else np.moveaxis(per_c, 0, -1).reshape(lead + (len(self.constraints),)))
+        return out
+
+    def evaluate_into(self, work: "EvalBuffers", X: np.ndarray, rows: np.ndarray | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``(fitness, error, violation)`` of :meth:`evaluate` (``details``, ``finite=True``)
+        into ``work``'s buffers, for a solver's inner loop: ``X`` must be a float array of
+        shape ``work.lead + (d,)`` of finite candidates (the solver drew them inside the
+        bounds); nothing else is checked. The same code as :meth:`evaluate`; the arrays
+        returned are views of ``work`` valid until its next use (``violation`` is None with
+        ``work.lazy``: see :meth:`EvalBuffers.violation_at`)."""
+        if X.shape[:-1] != work.lead or work.problem_id != id(self._setup_cache):
+            raise ValidationError(f"candidates of shape {X.shape} do not fit buffers for {work.lead}", field="X")
+        T = self.targets if rows is None else self.targets[rows]
+        fitness, err, viol, _, _ = self._formula6(X.reshape(-1, self._n_feat), T, work.lead, work.form, True,
+                                                  False, work)
+        return fitness, err, viol
+
+    def _formula6(self, X2: np.ndarray, T: np.ndarray, lead: tuple[int, ...], form: str, finite: bool,
+                  per_constraint: bool, work: "EvalBuffers | None"
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray, np.ndarray | None]:
+        """Formula (6) for candidate rows ``X2`` ``(n, d)`` (leading shape ``lead``) against
+        targets ``T``: ``(fitness, error, violation, intensities, per-constraint violations)``
+        (the one implementation behind :meth:`evaluate` and :meth:`evaluate_into`)."""
         G = X2 if self._identity else self.full_inputs(X2)
         model = self.model
-        if finite and _plain_predict(model):
+        if finite and (work.plain if work is not None else _plain_predict(model)):
             I = np.asarray(model._predict(G), dtype=float)
-            if I.shape != (G.shape[0], model.n_outputs):
+            if I.shape != (work.I_shape if work is not None else (G.shape[0], model.n_outputs)):
                 raise ModelError(f"model {model.name!r} returned shape {I.shape}, "
                                  f"expected {(G.shape[0], model.n_outputs)}")
         else:
@@ -440,27 +499,43 @@ class SolveProblem:
         I3 = I.reshape(T.shape[0], -1, I.shape[-1])
         if not self._all_out:
             I3 = I3[:, :, self._out_idx]
-        D = np.subtract(I3, T[:, None, :])
+        if work is None or work.T3 is None or work.T_src is not T:
+            # the targets' (r, 1, k) view (buffers keep it until the targets change)
+            T3 = T[:, None, :] if work is None else work.set_targets(T)
+        else:
+            T3 = work.T3
+        D = np.subtract(I3, T3, out=None if work is None else work.D)
         np.abs(D, out=D)
-        err = (np.add(D[..., 0], D[..., 1]) if D.shape[-1] == 2 else D.sum(axis=-1)).reshape(lead)
+        if D.shape[-1] == 2:
+            err = (np.add(D[..., 0], D[..., 1]) if work is None
+                   else np.add(work.D0, work.D1, out=work.err)).reshape(lead)
+        else:   # = D.sum(axis=-1) (its reduction), into work's error buffer when given
+            err = np.add.reduce(D, axis=-1, out=None if work is None else work.err).reshape(lead)
         per_c = None
+        viol: np.ndarray | None
         if not self.constraints:
             fitness, viol = err, np.zeros(lead)
         else:
-            pen, viol, per_c = self._penalty_violation(self.columns(G), form, n, per=per_constraint)
+            if work is not None and work.GT is not None:
+                np.copyto(work.GT, G.T)      # the contiguous columns of :meth:`columns`
+                cols = work.cols
+            else:
+                cols = self.columns(G)
+            pen, viol, per_c = self._penalty_violation(cols, form, n, per=per_constraint, work=work)
             if self.penalty_weight == 1.0:
-                pen += err.reshape(-1)
-                fitness = pen.reshape(lead)
+                if work is not None and pen is work.pen:   # (views made once)
+                    np.add(pen, work.err_flat, out=pen)
+                    fitness = work.pen_lead
+                else:
+                    np.add(pen, err.reshape(-1), out=pen)
+                    fitness = pen.reshape(lead)
             else:
                 fitness = err + self.penalty_weight * pen.reshape(lead)
-            viol = viol.reshape(lead)
-        if not details:
-            return fitness
-        out = {"fitness": fitness, "error": err, "violation": viol, "intensities": I.reshape(lead + (I.shape[-1],))}
-        if per_constraint:
-            out["violations"] = (np.zeros(lead + (0,)) if per_c is None
-                                 else np.moveaxis(per_c, 0, -1).reshape(lead + (len(self.constraints),)))
-        return out
+            if viol is not None:
+                viol = viol.reshape(lead)
+        if work is not None:
+            work.last_viol = viol
+        return fitness, err, viol, I, per_c
 
     def evaluate_one(self, x: np.ndarray) -> tuple[float, float, float, list[float], list[float]]:
         """Formula (6) at one answer ``x`` ``(d,)`` of the first target, on plain floats:
@@ -508,10 +583,12 @@ class SolveProblem:
         fit = err + pen if self.penalty_weight == 1.0 else err + self.penalty_weight * pen
         return fit, err, viol, I, pc
 
-    def _penalty_violation(self, cols: dict[str, np.ndarray], form: str, n: int, per: bool = False
-                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    def _penalty_violation(self, cols: dict[str, np.ndarray], form: str, n: int, per: bool = False,
+                           work: "EvalBuffers | None" = None
+                           ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
         """Summed penalty (``form``) and max violation of all constraints, ``(n,)`` each,
-        and (with ``per``) each constraint's violation ``(c, n)``."""
+        and (with ``per``) each constraint's violation ``(c, n)``; into ``work``'s buffers
+        when given (the same operations either way; no violation with ``work.lazy``)."""
         if form not in PENALTY_FORMS:   # the message of Constraint.penalty
             raise ValidationError(f"unknown penalty form {form!r}; valid: {list(PENALTY_FORMS)}",
                                   field="penalty")
@@ -526,26 +603,117 @@ class SolveProblem:
             return pen, viol, (P if per else None)
         # the values of Constraint.penalty (paper: b^2 - v^2; normalised: (b - v)/|b|,
         # where v < b) from one bound_and_value call per constraint, all constraints
-        # stacked so that each operation runs once
+        # stacked so that each operation runs once; into work's arrays when given
         nc = len(self.constraints)
-        B = np.empty((nc, n))
-        V = np.empty((nc, n))
+        w = work
+        B = np.empty((nc, n)) if w is None else w.B
+        V = np.empty((nc, n)) if w is None else w.V
         for j, c in enumerate(self.constraints):
             B[j], V[j] = c.bound_and_value(cols)
-        short = V < B                  # not met (a NaN row counts as met, as it always did)
-        nvs = np.subtract(B, V)
-        scale = np.abs(B)
-        np.divide(nvs, scale, out=nvs, where=scale != 0)     # |b| = 0: divided by 1
-        nvs = np.where(short, nvs, 0.0)
-        # ufunc reductions directly (ndarray.max/sum go through a Python wrapper: ~1 us each)
-        viol = np.maximum.reduce(nvs, axis=0) if nc > 1 else nvs[0].copy()
+        short = np.less(V, B, out=None if w is None else w.short)   # not met (a NaN row counts as met)
+        # work.lazy: the violation is left to EvalBuffers.violation_at (a solver that reads
+        # it only at a few rows); B and V stay as they are for it
+        lazy = w is not None and w.lazy and form == "paper" and not per
+        nvs: np.ndarray | None = None
+        vmax: np.ndarray | None = None
+        if not lazy:
+            nvs, vmax = _violations(B, V, short, w)
         if form == "normalised":
-            return (np.add.reduce(nvs, axis=0) if nc > 1 else nvs[0].copy()), viol, (nvs if per else None)
-        B *= B
-        V *= V
-        B -= V
-        P = np.where(short, B, 0.0)
-        return (np.add.reduce(P, axis=0) if nc > 1 else P[0]), viol, (nvs if per else None)
+            assert nvs is not None
+            pen = np.add.reduce(nvs, axis=0, out=None if w is None else w.pen) if nc > 1 else nvs[0].copy()
+            return pen, vmax, (nvs if per else None)
+        B2 = np.multiply(B, B, out=w.B2 if w is not None and lazy else B)
+        V2 = np.multiply(V, V, out=w.V2 if w is not None and lazy else V)
+        np.subtract(B2, V2, out=B2)
+        P = np.where(short, B2, 0.0)
+        if nc == 2:    # = np.add.reduce(P, axis=0)
+            pen = np.add(P[0], P[1], out=None if w is None else w.pen)
+        else:
+            pen = np.add.reduce(P, axis=0, out=None if w is None else w.pen) if nc > 1 else P[0]
+        return pen, vmax, (nvs if per else None)
+
+
+def _violations(B: np.ndarray, V: np.ndarray, short: np.ndarray, w: "_PenaltyBuffers | None" = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Each constraint's relative violation ``(c, k)`` (the ``normalised`` penalty: ``(b -
+    v) / |b|`` where ``v < b``, ``|b| = 0`` read as 1) and their max ``(k,)``, from stacked
+    bounds ``B`` and values ``V`` ``(c, k)`` and ``short = V < B`` (into ``w``'s arrays
+    when given)."""
+    nvs = np.subtract(B, V, out=None if w is None else w.nvs)
+    scale = np.abs(B, out=None if w is None else w.scale)
+    np.divide(nvs, scale, out=nvs, where=np.not_equal(scale, 0.0, out=None if w is None else w.nz))
+    nvs = np.where(short, nvs, 0.0)
+    # ufunc calls directly (ndarray.max goes through a Python wrapper: ~1 us)
+    if nvs.shape[0] == 2:   # = np.maximum.reduce(nvs, axis=0)
+        viol = np.maximum(nvs[0], nvs[1], out=None if w is None else w.viol)
+    else:
+        viol = np.maximum.reduce(nvs, axis=0, out=None if w is None else w.viol) if nvs.shape[0] > 1 \
+            else nvs[0].copy()
+    return nvs, viol
+
+
+class _PenaltyBuffers:
+    """The ``(c, n)`` and ``(n,)`` arrays of :meth:`SolveProblem._penalty_violation`."""
+
+    def __init__(self, nc: int, n: int) -> None:
+        self.B, self.V, self.nvs, self.scale, self.B2, self.V2 = np.empty((6, nc, n))   # (one allocation each)
+        self.short, self.nz = np.empty((2, nc, n), bool)
+        self.viol, self.pen = np.empty((2, n))
+
+
+class EvalBuffers(_PenaltyBuffers):
+    """Work arrays of :meth:`SolveProblem.evaluate` for candidates of one leading shape
+    ``lead`` (``X.shape[:-1]``) and penalty form, reused by a solver across the iterations
+    of one run (:meth:`SolveProblem.eval_buffers`): the same arithmetic then writes into
+    memory that is already there instead of ~20 fresh arrays per call, and the per-setup
+    facts it needs (whether the model's ``predict`` is the base one, the contiguous column
+    views for the constraints) are looked up once. Not thread-safe; one run at a time.
+
+    ``lazy`` (set it to True; paper penalty form, base-formula constraints): ``evaluate``
+    then returns ``violation=None`` and the violation of the rows a solver needs comes from
+    :meth:`violation_at` (after the same call, before the next): a GA reads it only where
+    a child beats the best so far, a few times per run."""
+
+    lazy = False
+    last_viol: "np.ndarray | None" = None
+
+    def __init__(self, problem: "SolveProblem", lead: tuple[int, ...], form: str) -> None:
+        lead = tuple(map(int, lead))
+        n = math.prod(lead)
+        super().__init__(len(problem.constraints), n)
+        self.lead, self.form = lead, form
+        self.problem_id = id(problem._setup_cache)      # problems of one setup share it
+        self.plain = _plain_predict(problem.model)
+        k = len(problem.dimensions)
+        self.D = np.empty((lead[0], n // lead[0] if lead[0] else 0, k))
+        self.err = np.empty(self.D.shape[:2])
+        self.D0, self.D1 = (self.D[..., 0], self.D[..., 1]) if k == 2 else (self.D, self.D)
+        self.err_flat = self.err.reshape(-1)
+        self.pen_lead = self.pen.reshape(lead)
+        self.T_src: np.ndarray | None = None
+        self.T3: np.ndarray | None = None
+        self.I_shape = (n, problem.model.n_outputs)
+        # the columns of SolveProblem.columns for more than 64 rows: rows of one contiguous
+        # (inputs, n) copy, whose views are made once here
+        self.GT: np.ndarray | None = None
+        self.cols: dict[str, np.ndarray] = {}
+        if n > 64:
+            names = problem.model.feature_names
+            self.GT = np.empty((len(names), n))
+            self.cols = {nm: self.GT[i] for i, nm in enumerate(names)}
+
+    def set_targets(self, T: np.ndarray) -> np.ndarray:
+        """Remember ``T``'s ``(r, 1, k)`` view for the next calls with the same targets."""
+        self.T_src, self.T3 = T, T[:, None, :]
+        return self.T3
+
+    def violation_at(self, idx: Any) -> Any:
+        """Max relative violation of rows ``idx`` (flat indices into ``X.reshape(-1, d)``
+        of the last :meth:`SolveProblem.evaluate` call with these buffers): the same
+        numbers as its ``violation`` array (:func:`_violations` on those rows)."""
+        if self.last_viol is not None:
+            return self.last_viol.reshape(-1)[idx]
+        return _violations(self.B[:, idx], self.V[:, idx], self.short[:, idx])[1]
 
 
 def _first(a: Any) -> float:
@@ -661,8 +829,10 @@ class Solver(ABC):
         elapsed = time.perf_counter() - t0
         rows: list[dict[str, Any]] = []
         if trace.times:   # as a batch's per-target trace: times from the solver's start
-            rows = [{"time_s": t, "nfev": n, "best_error": float(e[0]), "constraint_violation": float(v[0])}
-                    for t, n, e, v in zip(trace.times, trace.nfev, trace.best_error, trace.violation)]
+            E = np.concatenate(trace.best_error).tolist()     # one conversion, not one per row
+            V = np.concatenate(trace.violation).tolist()
+            rows = [{"time_s": t, "nfev": n, "best_error": e, "constraint_violation": v}
+                    for t, n, e, v in zip(trace.times, trace.nfev, E, V)]
         return _make_result(problem, 0, x, I, error, fun, viol, pc, out.message, rows,
                             int(out.nfev), int(out.nit), elapsed, self.name)
 

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from hapticsdk.errors import ValidationError
-from hapticsdk.solvers import CONSTRAINT_TOL, SolveProblem
+from hapticsdk.solvers import CONSTRAINT_TOL, EvalBuffers, SolveProblem
 
 __all__ = ["Evaluator", "check_int", "check_fraction", "check_budget", "Clock", "CONSTRAINT_TOL"]
 
@@ -30,13 +30,56 @@ class Evaluator:
         self.nfev = 0
         #: the candidates are generated inside the bounds (finite): the model's NaN check is skipped
         self.finite = finite
+        self._work: EvalBuffers | None = None
 
-    def __call__(self, X: np.ndarray, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def __call__(self, X: np.ndarray, rows: np.ndarray | None = None, *,
+                 reuse: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return ``(fitness, error, violation)`` for ``X`` ``(r, p, d)`` (or ``(r, d)``),
-        where ``r`` targets are ``problem.targets[rows]`` (all targets when ``rows`` is None)."""
+        where ``r`` targets are ``problem.targets[rows]`` (all targets when ``rows`` is None).
+
+        ``reuse=True`` (a solver's loop): the arithmetic runs in buffers kept from the
+        previous call of the same shape (:class:`~hapticsdk.solvers.EvalBuffers`), so the
+        three arrays returned are only valid until the next ``reuse`` call: copy what you keep."""
+        if reuse:
+            f, e, v = self._into(X, rows, False)
+            assert v is not None
+            return f, e, v
         d = self.problem.evaluate(X, details=True, rows=rows, finite=self.finite)
         self.nfev += d["fitness"].size
         return d["fitness"], d["error"], d["violation"]
+
+    def lazy(self, X: np.ndarray, rows: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """As ``self(X, rows, reuse=True)``, but the violation may be left out (None; paper
+        penalty form): :meth:`violation_at` then gives it for the rows the caller needs,
+        before the next call (a GA reads it only where a child becomes the best)."""
+        work = self._work
+        if work is None or work.lead != X.shape[:-1] or not self.finite:
+            return self._into(X, rows, True)
+        work.lazy = True
+        f, e, v = self.problem.evaluate_into(work, X, rows)
+        self.nfev += f.size
+        return f, e, v
+
+    def _into(self, X: np.ndarray, rows: np.ndarray | None, lazy: bool
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        work = self._work
+        if work is None or work.lead != X.shape[:-1]:
+            work = self._work = self.problem.eval_buffers(X.shape[:-1])
+        work.lazy = lazy
+        if self.finite:
+            f, e, v = self.problem.evaluate_into(work, X, rows)
+        else:
+            d = self.problem.evaluate(X, details=True, rows=rows, work=work)
+            f, e, v = d["fitness"], d["error"], d["violation"]
+        self.nfev += f.size
+        return f, e, v
+
+    def violation_at(self, idx: Any) -> Any:
+        """Violation of rows ``idx`` (flat indices into ``X.reshape(-1, d)``) of the last
+        ``reuse`` call (:meth:`~hapticsdk.solvers.EvalBuffers.violation_at`)."""
+        assert self._work is not None
+        return self._work.violation_at(idx)
 
 
 def constraint_shortfalls(problem: SolveProblem, G: np.ndarray) -> np.ndarray:

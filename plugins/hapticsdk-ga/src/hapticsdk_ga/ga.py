@@ -110,6 +110,16 @@ def _cut_masks(d: int) -> np.ndarray:
     return t
 
 
+def _cut_masks_inv(d: int) -> np.ndarray:
+    """``~_cut_masks(d)``: row ``j`` = the genes ``[j + 1:]`` a crossover child takes from
+    its second parent (cached)."""
+    key = ("cutinv", d)
+    t = _CACHE.get(key)
+    if t is None:
+        t = _CACHE[key] = ~_cut_masks(d)
+    return t
+
+
 class GAWorkspace:
     """Preallocated buffers for :func:`ga_generation` (population double buffer, uniforms,
     crossover parents, mutation children), sized for ``m`` rows: a generation then writes
@@ -126,6 +136,29 @@ class GAWorkspace:
         self.a = np.empty((m, n_cross, d))
         self.b = np.empty((m, n_cross, d))
         self.child = np.empty((m, n_mut, d))
+        #: ``(lower, span, lower tiled, span tiled)`` over the ``n_mut * d`` genes of one
+        #: row's mutation children (:func:`ga_generation` with one row; set on first use)
+        self.tiles: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._one: dict[tuple, tuple[Any, ...]] = {}
+
+    def one_views(self, k: int, elite: int, n_cross: int, n_sel: int) -> tuple[Any, ...]:
+        """Views for a one-row generation written into population buffer ``k`` (cached):
+        that buffer's first row ``(1, p, d)``, its elite, crossover and mutation slices
+        (and the latter flat), the uniforms' row and its selection, cut and mutation parts,
+        and the second crossover parents; then the children ``out[:, elite:]`` and the
+        crossover's second-parent masks (:func:`_cut_masks_inv`)."""
+        key = (k, elite, n_cross, n_sel)
+        v = self._one.get(key)
+        if v is None:
+            out = self.pops[k][:1]
+            row = out[0]
+            u = self.u[0]
+            n_cut = self.n_u - n_sel - (row.shape[0] - elite - n_cross) * row.shape[1]
+            child = row[elite + n_cross:]
+            v = self._one[key] = (out, row[:elite], row[elite:elite + n_cross], child, child.reshape(-1),
+                                  self.u[:1], u[:n_sel], u[n_sel:n_sel + n_cut], u[n_sel + n_cut:], self.b[0],
+                                  out[:, elite:], _cut_masks_inv(row.shape[1]))
+        return v
 
     def next_pop(self, r: int, current: np.ndarray) -> np.ndarray:
         """The buffer not holding ``current``, first ``r`` rows."""
@@ -157,6 +190,8 @@ def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.
     r, p, d = pop.shape
     if order is None:
         order = fit.argsort(axis=1)
+    if r == 1 and work is not None:
+        return _generation_one(pop, order, lower, span, elite, n_cross, tournament, mutation_rate, rng, work)[:2]
     order_flat = order if r == 1 else order + _offsets(r, p)
     flat_pop = pop.reshape(r * p, d)
     n_mut = p - elite - n_cross
@@ -191,6 +226,55 @@ def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.
             child.reshape(-1)[hit] = lower[g] + rng.random(hit.size) * span[g]
         out[:, elite + n_cross:] = child
     return out, order_flat[:, :elite]
+
+
+def _generation_one(pop: np.ndarray, order: np.ndarray, lower: np.ndarray, span: np.ndarray, elite: int,
+                    n_cross: int, tournament: int, mutation_rate: float, rng: np.random.Generator,
+                    work: GAWorkspace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`ga_generation` for one row (a one-target solve), with the same random draws
+    and the same individuals: the row's slices of the new population are contiguous, so
+    the parents are gathered straight into them and the crossover copies the second
+    parent's genes in place (no temporaries), and the mutated genes' bounds come from
+    tables tiled once per run instead of ``gene % d`` gathers. A test compares it with
+    the general path. Returns ``ga_generation``'s pair and the children ``new_pop[:, elite:]``."""
+    _, p, d = pop.shape
+    flat_pop = pop[0]
+    n_mut = p - elite - n_cross
+    n_sel = 2 * n_cross + n_mut
+    owner = pop if pop.base is None else pop.base
+    k = 1 if owner is work.pops[0] else 0       # the buffer not holding pop (as next_pop)
+    out, row_e, a, child, child_flat, u1, us, uc, um, b, children, inv = work.one_views(k, elite, n_cross, n_sel)
+    rng.random((1, work.n_u), out=u1)
+    o = order[0]
+    if elite:
+        flat_pop.take(o[:elite], axis=0, out=row_e, mode="clip")
+    # _rank_select on one row; take's mode="clip" is its np.minimum(k, p - 1)
+    if tournament == 2:
+        np.sqrt(us, out=us)
+    elif tournament != 1:
+        np.power(us, 1.0 / tournament, out=us)
+    np.multiply(us, -p, out=us)      # (ufunc calls: the in-place operators cost ~0.25 us more each)
+    np.add(us, p, out=us)
+    winners = o.take(us.astype(np.intp), mode="clip")
+    if n_cross:
+        flat_pop.take(winners[:n_cross], axis=0, out=a, mode="clip")
+        if d > 1:
+            flat_pop.take(winners[n_cross:2 * n_cross], axis=0, out=b, mode="clip")
+            np.multiply(uc, d - 1, out=uc)
+            # genes [cut:] from b (the general path's np.where(mask, a, b), in place)
+            np.copyto(a, b, where=inv.take(uc.astype(np.intp), axis=0))
+    if n_mut:
+        flat_pop.take(winners[2 * n_cross:], axis=0, out=child, mode="clip")
+        hit = np.less(um, mutation_rate).nonzero()[0]    # row-major = child's order
+        if hit.size:
+            t = work.tiles
+            if t is None or t[0] is not lower or t[1] is not span:
+                lt, st = np.empty((n_mut, d)), np.empty((n_mut, d))
+                lt[:] = lower
+                st[:] = span
+                t = work.tiles = (lower, span, lt.reshape(-1), st.reshape(-1))
+            child_flat.put(hit, t[2].take(hit) + rng.random(hit.size) * t[3].take(hit))
+    return out, order[:, :elite], children
 
 
 class GASolver(Solver):
@@ -283,44 +367,63 @@ class GASolver(Solver):
             pop, fit = pop[:k], fit[active]
         gen = 0
         reason = "generations exhausted"
-        kw = dict(elite=elite, n_cross=n_cross, tournament=s["tournament"], mutation_rate=s["mutation_rate"])
+        tour, mrate = s["tournament"], s["mutation_rate"]
+        kw = dict(elite=elite, n_cross=n_cross, tournament=tour, mutation_rate=mrate)
         rows = np.flatnonzero(active)
         stall_n = s["stall_generations"]
         if stall_n is not None:
             ref_f = best_f.copy()           # best fitness when it last fell by > 0.1 %
             since = np.zeros(m, int)        # generations since then
         n_stalled = 0
-        while gen < s["generations"]:
+        fbufs: tuple[np.ndarray, np.ndarray] | None = None    # fitness double buffer (as the population's)
+        n_gen, budget = s["generations"], s["time_budget_s"] is not None
+        fi = 0
+        while gen < n_gen:
             if not rows.size:
                 reason = f"all targets within target_error {goal:g}"
                 break
-            if clock.expired():
+            if budget and clock.expired():
                 reason = f"time budget {s['time_budget_s']:g} s spent"
                 break
             r = rows.size
-            pop, esrc = ga_generation(pop, fit, lower, span, rng=rng, work=work, **kw)
+            if fbufs is None:
+                fbufs = (np.empty((m, p)), np.empty((m, p)))
+                f_one = [(f[:1], f[:1, :elite], f[:1, elite:]) for f in fbufs]    # their views for one row
+            if r == 1:   # one row: its own path (same draws, same individuals)
+                pop, esrc, children = _generation_one(pop, fit.argsort(axis=1), lower, span, elite, n_cross,
+                                                      tour, mrate, rng, work)
+                nf, nf_e, nf_c = f_one[fi]
+            else:
+                pop, esrc = ga_generation(pop, fit, lower, span, rng=rng, work=work, **kw)
+                children = pop[:, elite:]
+                nf = fbufs[fi][:r]
+                nf_e, nf_c = nf[:, :elite], nf[:, elite:]
+            fi ^= 1      # nf is not fit's buffer: fit is the other one or a fresh array
             # the elites are copied unchanged: their fitness is reused, only the children are
             # evaluated. An elite never beats best_f (elite 0 is the previous best), so the
             # best-so-far update only looks at the children.
-            fc, ec, vc = ev(pop[:, elite:], rows if r < m else None)   # rows: sorted, all when r == m
-            nf = np.empty((r, p))
+            # (fc, ec, vc: views of buffers reused every generation; read or copied below)
+            # (vc None: the violation only where a child becomes the best, from ev.violation_at)
+            fc, ec, vc = ev.lazy(children, rows if r < m else None)   # rows: sorted, all when r == m
             if elite:
-                fit.take(esrc, out=nf[:, :elite])
-            nf[:, elite:] = fc
+                fit.take(esrc, out=nf_e)
+            np.copyto(nf_c, fc)
             fit = nf
             gen += 1
             if r == 1:   # one active target: the same bookkeeping on scalars (fewer numpy calls)
-                kk = int(fc[0].argmin())
+                kk = int(fc.argmin())     # fc is (1, c)
                 i0 = int(rows[0])
-                if fc[0, kk] < best_f[i0]:
+                fk0 = fc[0, kk]
+                if fk0 < best_f[i0]:
                     best_x[i0] = pop[0, kk + elite]
-                    best_f[i0], best_e[i0], best_v[i0] = fc[0, kk], ec[0, kk], vc[0, kk]
+                    best_f[i0], best_e[i0] = fk0, ec[0, kk]
+                    best_v[i0] = ev.violation_at(kk) if vc is None else vc[0, kk]
                     trace.record(ev.nfev, best_e, best_v)
                     if best_e[i0] <= goal and best_v[i0] <= CONSTRAINT_TOL:    # solved_mask
                         rows = rows[:0]
                         pop, fit = pop[:0], fit[:0]
                 else:
-                    trace.record(ev.nfev, best_e, best_v)
+                    trace.repeat(ev.nfev)      # best_e, best_v unchanged since the last record
             else:
                 k = fc.argmin(axis=1)
                 ra = _arange(r)
@@ -331,7 +434,7 @@ class GASolver(Solver):
                     best_x[upd] = pop[rb, kb + elite]
                     best_f[upd] = fk[better]
                     best_e[upd] = ec[rb, kb]
-                    best_v[upd] = vc[rb, kb]
+                    best_v[upd] = ev.violation_at(rb * (p - elite) + kb) if vc is None else vc[rb, kb]
                     trace.record(ev.nfev, best_e, best_v)
                     still = ~solved_mask(best_e[rows], best_v[rows], goal)
                     if not still.all():
@@ -340,7 +443,7 @@ class GASolver(Solver):
                         pop[:k] = pop[still]          # compact in place (leading rows of the buffer)
                         pop, fit = pop[:k], fit[still]
                 else:
-                    trace.record(ev.nfev, best_e, best_v)
+                    trace.repeat(ev.nfev)
             if stall_n is not None and rows.size:
                 fell = best_f[rows] < ref_f[rows] - 1e-3 * np.abs(ref_f[rows])
                 ref_f[rows[fell]] = best_f[rows[fell]]

@@ -43,8 +43,12 @@ class WorkConstraint(Constraint):
     def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         gs = np.asarray(cols["GS"], float)
         w = np.asarray(cols["W"], float)
-        # MF^2 / (2 GS) where GS > 0, +inf elsewhere (NaN included): one division, no masking
-        wv = np.divide(self.mf_n ** 2, 2.0 * gs, out=np.full(gs.shape, np.inf), where=gs > 0)
+        q = np.multiply(gs, 2.0)
+        if q.ndim and q.size and np.minimum.reduce(q, axis=None) > 0:
+            # every GS > 0 (a NaN fails the test): MF^2 / (2 GS) in one plain division
+            return np.divide(self.mf_n ** 2, q, out=q), w
+        # MF^2 / (2 GS) where GS > 0, +inf elsewhere (NaN included)
+        wv = np.divide(self.mf_n ** 2, q, out=np.full(gs.shape, np.inf), where=gs > 0)
         return wv, w
 
 

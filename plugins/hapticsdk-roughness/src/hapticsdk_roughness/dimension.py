@@ -51,7 +51,8 @@ class PowerConstraint(Constraint):
 
     def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         a = np.asarray(cols["AFpeak"], float)
-        return a * a * self.df_hz, np.asarray(cols["P"], float)
+        pf = np.multiply(a, a)     # (a * a) * df, as ufunc calls (no operator dispatch)
+        return np.multiply(pf, self.df_hz, out=pf if type(pf) is np.ndarray else None), np.asarray(cols["P"], float)
 
     def describe(self) -> dict:
         d = super().describe()
