@@ -823,8 +823,10 @@ class ServoLoop:
             f0 = self._vf0 = self._vf0 + a * (float(vin[0]) - self._vf0)
             f1 = self._vf1 = self._vf1 + a * (float(vin[1]) - self._vf1)
             f2 = self._vf2 = self._vf2 + a * (float(vin[2]) - self._vf2)
-            inp = TickInput(t=t, dt=dt, penetration_mm=pen, velocity_mm_s=vin, in_contact=in_contact,
-                            normal=normal, object=o.name, velocity_filtered_mm_s=(f0, f1, f2))
+            # positional, in TickInput's field order (t, dt, penetration_mm, velocity_mm_s,
+            # in_contact, normal, object, velocity_filtered_mm_s): a keyword call costs
+            # ~0.3 us more at 1 kHz
+            inp = TickInput(t, dt, pen, vin, in_contact, normal, o.name, (f0, f1, f2))
             if o.sw is None:
                 self._render(o.renderers, inp, forces, vib, events)
             elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):
@@ -855,8 +857,9 @@ class ServoLoop:
                     f = s.pending.popleft()
                 if s.pc is not None:
                     f = s.pc.step(x_n, dt, f)
-                cmd = ChannelCommand(s.role, force_n=f) if direction is None else ChannelCommand(
-                    s.role, force_n=f, direction=direction)
+                # positional (role, force_n, frequency_hz, amplitude, direction)
+                cmd = ChannelCommand(s.role, f) if direction is None else ChannelCommand(
+                    s.role, f, None, None, direction)
             else:
                 cmd = vib.get(s.role)
                 if cmd is None:
