@@ -314,18 +314,14 @@ def switch_figures(ramp_s: float = 0.05) -> dict[str, Any]:
         lp = ServoLoop(dev, [HardnessRenderer(k1)], {"force": dev, "coil": VoiceCoilVirtual()},
                        passivity=passivity, switch_ramp_s=ramp_s, switch_rule=rule)
         lp.start(3.5)
-        b, m = dev.arm.damping_ns_per_m, dev.arm.mass_kg
-        damper = worst = 0.0
+        worst = 0.0
         at_switch = after = -math.inf
         try:
             while True:
                 if lp.ticks == 1000:
                     lp.set_renderers(0, [HardnessRenderer(k2)])
-                v0 = dev.sim.v
                 more = lp.tick()
-                v1 = dev.sim.v
-                damper += b * 0.5 * (v0 * v0 + v1 * v1) * lp.period_s
-                e = dev.motor_work_j - 0.5 * m * v1 * v1 - damper
+                e = dev.energy_to_user_j()
                 worst = max(worst, e)
                 if lp.ticks == 1000:
                     at_switch = e

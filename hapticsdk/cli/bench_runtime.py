@@ -33,7 +33,7 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--seconds", type=positive_float, default=10.0, help="run length per load (default 10 s)")
     p.add_argument("--pin-cpu", type=int, default=None, metavar="N",
                    help="pin the servo thread to CPU N (reported if refused)")
-    p.add_argument("--fifo-priority", type=_fifo_priority, default="default", metavar="P",
+    p.add_argument("--fifo-priority", type=_fifo_priority, default=argparse.SUPPRESS, metavar="P",
                    help="the servo's SCHED_FIFO priority: 1..99, 'auto' (where the OS allows it; the default of "
                         "a servo process) or 'off' (the default of a servo thread); the outcome is printed")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -61,9 +61,9 @@ def register_bench(bench_sub: Any) -> None:
 
 
 def _fifo_priority(text: str) -> int | str | None:
-    """``--fifo-priority``: 'auto', 'off' or an integer 1..99 ('default': not given)."""
+    """``--fifo-priority``: 'auto', 'off' (None) or an integer 1..99."""
     from .argtypes import bounded_int
-    if text in ("auto", "off", "default"):
+    if text in ("auto", "off"):
         return None if text == "off" else text
     return bounded_int(1, 99)(text)
 
@@ -72,11 +72,12 @@ def _live(args: argparse.Namespace) -> int:
     from ..benchmarks.live import APP_LOADS, format_rows, run_live
     from . import emit
     loads = APP_LOADS if args.app_load == "all" else (args.app_load,)
-    rt: dict[str, Any] | None = {} if args.fifo_priority == "default" else {"fifo_priority": args.fifo_priority}
+    rt: dict[str, Any] = {}   # options not given: the session's defaults
+    if hasattr(args, "fifo_priority"):
+        rt["fifo_priority"] = args.fifo_priority
     if args.pin_cpu is not None:
-        rt = {**(rt or {}), "cpu": args.pin_cpu}
-    rt = rt or None  # None: the session's defaults
-    res = run_live(args.isolation, loads, args.seconds, rt=rt)
+        rt["cpu"] = args.pin_cpu
+    res = run_live(args.isolation, loads, args.seconds, rt=rt or None)
     rows = res if isinstance(res, list) else [res]
     emit(res, args.json, format_rows(rows) + "\n(shared machines: other processes' load is in these figures)")
     return 0

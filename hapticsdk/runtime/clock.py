@@ -30,28 +30,42 @@ _log = logging.getLogger(__name__)
 
 class MonotonicClock:
     """``time.perf_counter`` with a hybrid wait: sleep while more than ``spin_s`` remains
-    (sleeping half the remaining time each round), then busy-wait to the deadline."""
+    (sleeping half the remaining time each round), then busy-wait to the deadline.
+
+    ``serve`` (optional): called before each sleep, to do work in time that would
+    otherwise be slept (a live session's servo reads its command pipe there, so a
+    command is taken up within one sleep of arriving); the wait then goes on from
+    wherever ``serve`` left the clock, and returns at once if it used up the time.
+    """
 
     simulated = False
 
-    def __init__(self, spin_s: float = 200e-6) -> None:
+    def __init__(self, spin_s: float = 200e-6, serve: Callable[[], None] | None = None) -> None:
         self.spin_s = float(spin_s)
+        self.serve = serve
 
     def now(self) -> float:
         """Current time (s) of :func:`time.perf_counter`."""
         return time.perf_counter()
 
     def wait_until(self, deadline: float) -> None:
-        """Return at ``deadline`` (s, on :meth:`now`'s clock): sleep while far from it, then
-        spin the last ``spin_s``; returns at once when already past.
+        """Return at ``deadline`` (s, on :meth:`now`'s clock): sleep while far from it
+        (calling ``serve`` before each sleep), then spin the last ``spin_s``; returns at
+        once when already past.
         """
         pc = time.perf_counter
+        spin = self.spin_s
+        serve = self.serve
         while True:
             remaining = deadline - pc()
-            if remaining <= self.spin_s:
+            if remaining <= spin:
                 break
-            time.sleep(max(remaining - self.spin_s, 0.0) * 0.5 if remaining > 2 * self.spin_s
-                       else remaining - self.spin_s)
+            if serve is not None:
+                serve()
+                remaining = deadline - pc()
+                if remaining <= spin:
+                    break
+            time.sleep((remaining - spin) * 0.5 if remaining > 2 * spin else remaining - spin)
         while pc() < deadline:
             pass
 

@@ -288,6 +288,12 @@ _POOL_SETTERS = ("openblas_set_num_threads", "openblas_set_num_threads64_", "sci
 _POOL_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
 
 
+def _pool_env_one_thread() -> None:
+    """BLAS / OpenMP libraries loaded from now on start one thread (environment)."""
+    for k in _POOL_ENV:
+        os.environ[k] = "1"
+
+
 def _one_pool_thread() -> str:
     """Limit the BLAS / OpenMP thread pools of this process (the servo process) to one
     thread; returns what was done (for the servo's summary).
@@ -302,8 +308,7 @@ def _one_pool_thread() -> str:
     imports the application's main module, and with it numpy, before the servo runs)
     get their ``*_set_num_threads(1)``. Only libraries already in the process are
     touched (``RTLD_NOLOAD``): no native code is loaded by this."""
-    for k in _POOL_ENV:
-        os.environ[k] = "1"
+    _pool_env_one_thread()
     if not sys.platform.startswith("linux"):
         return f"environment only ({', '.join(_POOL_ENV)} = 1; loaded libraries not inspected on {sys.platform})"
     import ctypes
@@ -388,7 +393,6 @@ class _CommandReader:
             if len(chunk) < 65536:
                 break
         msgs = []
-        import pickle
         while len(buf) >= 4:
             n = int.from_bytes(buf[:4], "big", signed=True)
             head = 4
@@ -442,55 +446,16 @@ def _shared_table_types() -> tuple:
     return (PiezoTable,)
 
 
-class _ServingClock:
-    """The servo's clock in a process or thread session: the wait of
-    :class:`~hapticsdk.runtime.clock.MonotonicClock` (sleep while more than ``spin_s``
-    remains, then spin), and before each sleep a call of ``serve``, which reads the
-    command pipe and does what fits of a command's work in the time that would
-    otherwise be slept. A command is then taken up within one sleep (at most half
-    the time left) of arriving, instead of after the next tick."""
-
-    simulated = False
-
-    def __init__(self, serve: Any, spin_s: float = 200e-6) -> None:
-        from .clock import MonotonicClock
-        self._base = MonotonicClock(spin_s)
-        self.spin_s = self._base.spin_s
-        self._serve = serve
-
-    def now(self) -> float:
-        """Current time (s) of :func:`time.perf_counter`."""
-        return time.perf_counter()
-
-    def wait_until(self, deadline: float) -> None:
-        """Serve commands in the slack, then wait as ``MonotonicClock.wait_until``."""
-        pc = time.perf_counter
-        spin = self.spin_s
-        while True:
-            remaining = deadline - pc()
-            if remaining <= spin:
-                break
-            self._serve()
-            remaining = deadline - pc()
-            if remaining <= spin:
-                break
-            time.sleep((remaining - spin) * 0.5 if remaining > 2 * spin else remaining - spin)
-        while pc() < deadline:
-            pass
-
-    def work(self, tick: int, seconds: float) -> None:
-        """Real time already passed while the tick computed."""
-
-
 class _Servo:
     """The servo side: devices, the loop, publishing, and the commands.
 
     One thread (the servo's) does everything: before each sleep of its clock
-    (:class:`_ServingClock`) and after each tick has published, it reads the command
-    pipe without blocking and does a command's work in the slack left before the next
-    deadline: unpickling renderers the application built, or building them from
-    features (one dimension at a time) when the application could not. The estimated cost of a slice is the CPU time the last build of that
-    dimension took (rising at once, falling by half per build). A slice that does not
+    (:class:`~hapticsdk.runtime.clock.MonotonicClock` with ``serve``) and after each
+    tick has published, it reads the command pipe without blocking and does a command's
+    work in the slack left before the next deadline: unpickling renderers the
+    application built, or building them from features (one dimension at a time) when
+    the application could not. The estimated cost of a slice is the CPU time the last
+    build of that dimension took (rising at once, falling by half per build). A slice that does not
     fit in what is left waits for a later period, at most ``_MAX_WAIT_TICKS`` ticks, then
     runs anyway; a slice longer than any period's slack runs at once (both counted as
     ``forced_slices``: the next tick starts late by the excess; at most one forced slice
@@ -549,14 +514,18 @@ class _Servo:
             cal = self._cal[d] = _calibrations(mp, self._settings, self._role_options)[0]
         return build_renderers(mp, self._settings, calibrations=cal, capabilities=self._caps)
 
+    def _note_cost(self, key: str, took: float) -> None:
+        """Update the estimate of the next slice of kind ``key`` (a dimension, or
+        ``<unpickle>`` / ``<table>``) with the CPU time ``took`` (s) this one took: it
+        rises at once and falls by half per slice. CPU time, because time the servo was
+        descheduled is not the work's cost."""
+        old = self._build_s.get(key)
+        self._build_s[key] = took if old is None else max(took, 0.5 * (old + took))
+
     def _timed_dim(self, features: Mapping[str, Mapping[str, float]], d: str) -> list:
-        # the estimate is CPU time: time the servo was descheduled is not the build's cost
         t0 = time.thread_time()
         rs = self._renderers_dim(features, d)
-        took = time.thread_time() - t0
-        old = self._build_s.get(d)
-        # rises at once, falls slowly: the estimate of the next build of this dimension
-        self._build_s[d] = took if old is None else max(took, 0.5 * (old + took))
+        self._note_cost(d, time.thread_time() - t0)
         return rs
 
     def renderers_for(self, features: Mapping[str, Mapping[str, float]]) -> list:
@@ -588,6 +557,7 @@ class _Servo:
         from ..plan import FALLBACK_SENSOR, RenderPlan
         from ..plugins import registry
         from ..scene.geometry import HitTester, shape_from_dict
+        from .clock import MonotonicClock
         from .loop import ServoLoop
         from .render import _calibrations, build_renderers
 
@@ -640,7 +610,7 @@ class _Servo:
             cls = registry("actuator").load(FALLBACK_SENSOR)
             device = cls(**({"trajectory": traj} if traj is not None else {}))
             self._stack.enter_context(device)
-        clock = _ServingClock(self._serve_if_ready) if spec["realtime"] else None
+        clock = MonotonicClock(serve=self._serve_if_ready) if spec["realtime"] else None
         self.loop = ServoLoop(device, (), acts, period_s=spec["period_s"], realtime=spec["realtime"],
                               clock=clock, passivity=spec["passivity"], raise_on_fault=False, objects=objects,
                               hit_tester=HitTester(shapes), log_seconds=spec["log_seconds"],
@@ -696,9 +666,7 @@ class _Servo:
             yield self._build_s.get("<unpickle>", _SMALL_S)
             t0 = time.thread_time()
             built = _load_renderers(payload, self._tables)
-            took = time.thread_time() - t0
-            old = self._build_s.get("<unpickle>")
-            self._build_s["<unpickle>"] = took if old is None else max(took, 0.5 * (old + took))
+            self._note_cost("<unpickle>", time.thread_time() - t0)
             i = self._index(oid)
             if i >= 0:
                 loop.set_renderers(self.names[i], built, ramp)
@@ -710,9 +678,7 @@ class _Servo:
                 yield self._build_s.get("<table>", len(blob) * 1e-9)
                 t0 = time.thread_time()
                 self._tables[key] = pickle.loads(blob)
-                took = time.thread_time() - t0
-                old = self._build_s.get("<table>")
-                self._build_s["<table>"] = took if old is None else max(took, 0.5 * (old + took))
+                self._note_cost("<table>", time.thread_time() - t0)
         elif kind == "add":
             from ..scene.geometry import shape_from_dict
             _, oid, name, feats, geom, pose = msg
@@ -981,8 +947,7 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
         # the servo process runs one Python thread of its own; a plugin's thread (a
         # transport reader) hands the interpreter lock back within 50 us
         sys.setswitchinterval(5e-5)
-        for k in _POOL_ENV:  # BLAS / OpenMP pools loaded from now on: one thread
-            os.environ[k] = "1"
+        _pool_env_one_thread()  # pools loaded while building: one thread from the start
     servo = _Servo(spec, mv, cmd_conn, thread_mode)
     if holder is not None:
         holder.append(servo)  # thread isolation: the application may inspect its servo
@@ -1180,7 +1145,6 @@ class Session:
         self._build_lock = threading.Lock()
         #: tables sent to the servo: id -> (the table, its key); see _prebuilt
         self._tables_sent: dict[int, tuple[Any, int]] = {}
-        self._tables_pending: dict[int, tuple[Any, int]] = {}
         self._buf = _Buffer(shared=isolation == "process")
         self._mv = self._buf.mv
         self._bytes = self._buf.bytes
@@ -1305,13 +1269,14 @@ class Session:
                 self._check()
                 raise SessionError(f"the servo does not take commands: {exc}") from None
 
-    def _prebuilt(self, feats: Mapping[str, Mapping[str, float]]) -> "tuple[bytes, dict[int, bytes]] | None":
+    def _prebuilt(self, feats: Mapping[str, Mapping[str, float]]
+                  ) -> "tuple[bytes, dict[int, bytes], dict[int, Any]] | None":
         """The renderers of ``feats``, built here exactly as the servo would build them
         (same settings, actuator options and capabilities, calibrations) and pickled,
         with the calibration tables they hold (:func:`_shared_table_types`, e.g. the
         piezo's 300 kB drive table, the same for every material) pickled as references
-        ``(_TABLE_PID, key)``; and the tables the servo has not been sent yet, ``{key:
-        pickled table}``. None when they cannot be built or pickled here (the servo then
+        ``(_TABLE_PID, key)``; the tables the servo has not been sent yet, ``{key:
+        pickled table}``; and those tables themselves, ``{key: table}``. None when they cannot be built or pickled here (the servo then
         builds them from the features). Building here keeps the build (about 1.4 ms of
         CPU for S7, more with cold caches, longer than a servo period's slack) out of the
         servo, and the references keep a switch's unpickling there to about a kilobyte
@@ -1334,19 +1299,18 @@ class Session:
                     hit = known.get(id(obj))
                     if hit is not None and hit[0] is obj:
                         return (_TABLE_PID, hit[1])
-                    for k, (o, _) in pending.items():
+                    for k, o in pending.items():
                         if o is obj:
                             return (_TABLE_PID, k)
                     key = len(known) + len(new) + 1
                     new[key] = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-                    pending[key] = (obj, key)
+                    pending[key] = obj
                     return (_TABLE_PID, key)
 
-            pending: dict[int, tuple[Any, int]] = {}
+            pending: dict[int, Any] = {}
             out = io.BytesIO()
             _Pickler(out, protocol=pickle.HIGHEST_PROTOCOL).dump(rs)
-            self._tables_pending = pending
-            return out.getvalue(), new
+            return out.getvalue(), new, pending
         except Exception as exc:  # noqa: BLE001 - the servo builds them instead
             _log.debug("building renderers in the application failed (%s: %s); the servo builds them",
                        type(exc).__name__, exc)
@@ -1363,10 +1327,10 @@ class Session:
             if built is None:
                 self._send(("material", oid, feats, ramp))
                 return
-            payload, new = built
+            payload, new, tables = built
             if new:
                 self._send(("tables", new))
-                for obj, key in self._tables_pending.values():
+                for key, obj in tables.items():
                     self._tables_sent[id(obj)] = (obj, key)
             self._send(("renderers", oid, payload, ramp))
 

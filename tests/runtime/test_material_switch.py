@@ -194,7 +194,8 @@ ENERGY_TOL_J = 1.0e-4
 def _omni_energy(k1, k2, *, passivity, rule="passive", finger="stiff"):
     """A finger holds the simulated Omni 5 mm (reference) into a k1 wall; at 1 s the
     material becomes k2; release at 2 s. Returns the largest energy the arm + wall gave
-    the finger over the run (J): motor work - kinetic energy - arm damping loss."""
+    the finger over the run (J): motor work - kinetic energy - arm damping loss
+    (``OmniVirtual.energy_to_user_j``)."""
     from hapticsdk_hardness.dimension import HardnessRenderer
     from hapticsdk_hardness.omni import OmniVirtual
     from hapticsdk_hardness.voicecoil import VoiceCoilVirtual
@@ -203,17 +204,12 @@ def _omni_energy(k1, k2, *, passivity, rule="passive", finger="stiff"):
     loop = ServoLoop(dev, [HardnessRenderer(k1)], {"force": dev, "coil": VoiceCoilVirtual()},
                      passivity=passivity, switch_ramp_s=0.05, switch_rule=rule)
     loop.start(3.5)
-    b, m = dev.arm.damping_ns_per_m, dev.arm.mass_kg
-    damper = 0.0
     worst = -np.inf
     while True:
         if loop.ticks == 1000:
             loop.set_renderers(0, [HardnessRenderer(k2)])
-        v0 = dev.sim.v
         more = loop.tick()
-        v1 = dev.sim.v
-        damper += b * 0.5 * (v0 * v0 + v1 * v1) * T
-        worst = max(worst, dev.motor_work_j - 0.5 * m * v1 * v1 - damper)
+        worst = max(worst, dev.energy_to_user_j())
         if not more:
             break
     loop.finish()

@@ -459,9 +459,9 @@ def test_serving_clock_serves_commands_in_the_sleep_and_keeps_the_deadline():
     """The servo's clock calls serve() before it sleeps (so a command is taken up
     while the servo would otherwise sleep), never returns before the deadline, and
     returns at once when serve() used up the time."""
-    from hapticsdk.runtime.session import _ServingClock
+    from hapticsdk.runtime.clock import MonotonicClock
     calls = []
-    clock = _ServingClock(lambda: calls.append(time.perf_counter()))
+    clock = MonotonicClock(serve=lambda: calls.append(time.perf_counter()))
     deadline = time.perf_counter() + 5e-3
     clock.wait_until(deadline)
     assert time.perf_counter() >= deadline
@@ -471,7 +471,7 @@ def test_serving_clock_serves_commands_in_the_sleep_and_keeps_the_deadline():
         calls.append(time.perf_counter())
         while time.perf_counter() < deadline2 + 1e-3:
             pass
-    clock = _ServingClock(slow)
+    clock = MonotonicClock(serve=slow)
     calls.clear()
     deadline2 = time.perf_counter() + 3e-3
     clock.wait_until(deadline2)

@@ -83,6 +83,8 @@ class OmniVirtual(HapticDevice):
         self._ref: tuple = (None, None, None)  # (trajectory, t, trajectory.at(t)) of the last lookup
         #: work done by the motor force on the stylus (J), exact under the hold
         self.motor_work_j = 0.0
+        #: energy the arm's own damping dissipated (J; trapezoid of b v^2 over each step)
+        self.damper_j = 0.0
 
     # -- actuator backend ------------------------------------------------
     def _open(self) -> None:
@@ -141,10 +143,19 @@ class OmniVirtual(HapticDevice):
     def _advance(self, dt: float, f: float) -> None:
         _, r0, _, _ = self._at(self.t)
         _, r1, _, _ = self._at(self.t + dt)
-        y_old = self.sim.y
+        y_old, v_old = self.sim.y, self.sim.v
         self._f_applied = self.sim.step(dt, f, r0, (r1 - r0) / dt)
         self.motor_work_j += self._f_applied * (self.sim.y - y_old)
+        v = self.sim.v
+        self.damper_j += self.arm.damping_ns_per_m * 0.5 * (v_old * v_old + v * v) * dt
         self.t += dt
+
+    def energy_to_user_j(self) -> float:
+        """Energy the arm + wall have given the finger so far (J): motor work minus the
+        arm's kinetic energy minus what its damping dissipated (as
+        :meth:`hapticsdk.sim.arm.ArmBatch.energy_to_user_j`; <= 0 for a passive display)."""
+        v = self.sim.v
+        return self.motor_work_j - 0.5 * self.arm.mass_kg * v * v - self.damper_j
 
     def _step(self, dt: float) -> None:
         """Hold the current command (sent at the start of the interval) while the safety
