@@ -89,12 +89,15 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(12, 6))
     ax1.plot(t, log["force_n"], color="k", lw=1.0, label="force along the normal (N)")
     ax1.set_ylabel("force (N)")
-    for role, color in (("coil", "tab:orange"), ("vibration", "tab:blue")):
+    # the piezo's amplitude in V on the left, the voice coil's (0..1) on its own axis
+    ax2c = ax2.twinx()
+    for role, color, ax, unit in (("vibration", "tab:blue", ax2, "V"), ("coil", "tab:orange", ax2c, "0..1")):
         key = f"{role}.amplitude"
         if key in log:
-            ax2.plot(t, log[key], color=color, lw=1.0, label=f"{role} amplitude"
-                     + (" (V)" if role == "vibration" else " (0..1)"))
-    ax2.set_ylabel("vibration amplitude")
+            ax.plot(t, log[key], color=color, lw=1.0, label=f"{role} amplitude ({unit})")
+    ax2.set_ylabel("piezo amplitude (V)", color="tab:blue")
+    ax2c.set_ylabel("voice-coil amplitude (0..1)", color="tab:orange")
+    ax2c.set_ylim(0.0, 1.05)
     ax2.set_xlabel("servo time (s)")
     colors = ["tab:green", "tab:red", "tab:purple", "tab:brown"]
     # shade each stretch of contact with one object; contact that flickers at an edge
@@ -118,15 +121,20 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
             ax.axvspan(ta, tb, color=colors[oid % len(colors)], alpha=0.15,
                        label=name if (ax is ax1 and name not in labelled) else None)
         labelled.add(name)
-        ax1.text(0.5 * (ta + tb), 0.93, name, ha="center", fontsize=9, transform=ax1.get_xaxis_transform())
+        # above the panel: the force trace may fill it to the top
+        ax1.text(0.5 * (ta + tb), 1.01, name, ha="center", va="bottom", fontsize=9,
+                 transform=ax1.get_xaxis_transform())
     if retarget_t is not None:
         for ax in (ax1, ax2):
             ax.axvline(retarget_t, color="k", ls="--", lw=1.0)
-        ax1.annotate(f"{RETARGET[0]} retargeted", (retarget_t, 0.8), xycoords=ax1.get_xaxis_transform(),
-                     fontsize=9, xytext=(5, 0), textcoords="offset points")
-    ax1.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    ax1.set_title("live session on simulated devices: objects under the finger (shaded), generated data")
+        ax2.annotate(f"{RETARGET[0]} retargeted", (retarget_t, 0.85), xycoords=ax2.get_xaxis_transform(),
+                     fontsize=9, xytext=(5, 0), textcoords="offset points",
+                     bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.8})
+    ax1.legend(loc="upper left", bbox_to_anchor=(1.07, 1.0), fontsize=8)
+    h2, l2 = ax2.get_legend_handles_labels()
+    hc, lc = ax2c.get_legend_handles_labels()
+    ax2.legend(h2 + hc, l2 + lc, loc="upper left", bbox_to_anchor=(1.07, 1.0), fontsize=8)
+    ax1.set_title("live session on simulated devices: objects under the finger (shaded), generated data", pad=16)
     fig.tight_layout()
     with atomic_writer(out_png, "wb") as fh:
         fig.savefig(fh, format="png", dpi=110)
