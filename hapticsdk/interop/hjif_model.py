@@ -41,6 +41,7 @@ Reading is bounded: files above :data:`MAX_FILE_BYTES` and JSON nested deeper th
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -50,6 +51,7 @@ from typing import Any, Mapping
 
 from ..errors import FormatError
 from ..schemas_io import json_depth
+from .hjif_versions import VersionReport, normalise
 
 #: largest ``.hjif`` accepted (bytes). Real vibrotactile files are kilobytes to a few
 #: megabytes (wavelet streams included); 32 MiB leaves room and bounds memory.
@@ -322,6 +324,9 @@ class HapticFile:
     avatars: list[Avatar] = field(default_factory=list)
     syncs: list[Sync] = field(default_factory=list)
     timescale: int | None = DEFAULT_TIMESCALE
+    #: what :func:`~hapticsdk.interop.hjif_versions.normalise` recognised and changed
+    #: (``None`` for a document built in code)
+    format_version: VersionReport | None = None
 
     @property
     def ticks_per_second(self) -> int:
@@ -414,7 +419,7 @@ def parse_hjif_text(text: str, *, source: str = "hjif") -> HapticFile:
                           field=source) from None
     except (ValueError, RecursionError) as exc:
         raise FormatError(f"invalid JSON: {exc}", field=source) from None
-    return parse_hjif(doc)
+    return _parse_any(doc)
 
 
 # -- typed field access -------------------------------------------------------------------
@@ -490,7 +495,23 @@ def _obj(v: Any, path: str) -> Mapping[str, Any]:
 def parse_hjif(doc: Any) -> HapticFile:
     """Build a :class:`HapticFile` from decoded JSON, checking every field (types,
     enumerations, ranges, keyframe order, effect references). Raises :class:`FormatError`
-    naming the JSON path."""
+    naming the JSON path.
+
+    Documents of every published shape are read: they are first normalised (on a copy) by
+    :func:`~hapticsdk.interop.hjif_versions.normalise`, whose report becomes
+    :attr:`HapticFile.format_version`."""
+    return _parse_any(copy.deepcopy(doc))
+
+
+def _parse_any(doc: Any) -> HapticFile:
+    """Normalise ``doc`` (in place) and parse it."""
+    doc, report = normalise(doc)
+    hfile = _parse_current(doc)
+    hfile.format_version = report
+    return hfile
+
+
+def _parse_current(doc: Any) -> HapticFile:
     root = _obj(doc, "$")
     version = _get(root, "version", "", "str")
     profile = _get(root, "profile", "", "str")

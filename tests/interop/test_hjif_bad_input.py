@@ -64,11 +64,13 @@ CASES = [
     ("unknown modality", _set(P0 + ["perception_modality"], "Smell"), "perceptions[0].perception_modality", "Smell"),
     ("unknown base signal", _set(B0 + ["effects", 0, "base_signal"], "Noise"),
      f"{CH0}.bands[0].effects[0].base_signal", "Noise"),
-    ("unknown band type", _set(B0 + ["band_type"], "Wave"), f"{CH0}.bands[0].band_type", "Wave"),
+    ("unknown band type", _set(B0 + ["band_type"], "Wavy"), f"{CH0}.bands[0].band_type", "Wavy"),
     ("unresolved effect id", _set(B0 + ["effects", 1, "id"], 9), f"{CH0}.bands[0].effects[1].id", "9"),
     ("reference without id", _del(B0 + ["effects", 1, "id"]), f"{CH0}.bands[0].effects[1]", "'id'"),
-    ("keyframes out of order", _set(B1 + ["effects", 0, "keyframes", 2, "relative_position"], 50),
-     f"{CH0}.bands[1].effects[0].keyframes[2]", "out of order"),
+    ("negative keyframe position", _set(B1 + ["effects", 0, "keyframes", 2, "relative_position"], -5),
+     f"{CH0}.bands[1].effects[0].keyframes[2].relative_position", "outside"),
+    ("'Wave' band without an encoding", _set(B0 + ["band_type"], "Wave"), f"{CH0}.bands[0].band_type",
+     "encoding_modality"),
     ("amplitude above 1", _set(B1 + ["effects", 0, "keyframes", 1, "amplitude_modulation"], 1.5),
      f"{CH0}.bands[1].effects[0].keyframes[1].amplitude_modulation", "outside"),
     ("upper below lower", _set(B1 + ["lower_frequency_limit"], 400),
@@ -155,11 +157,11 @@ def test_cli_prints_the_path_exits_2_and_opens_no_actuator(tmp_path, capsys, mon
     opened = []
     real = acts.create_actuator
     monkeypatch.setattr(acts, "create_actuator", lambda name, **kw: opened.append(name) or real(name, **kw))
-    bad = write(tmp_path / "bad.hjif", mutated(_set(B1 + ["effects", 0, "keyframes", 2, "relative_position"], 50)))
+    bad = write(tmp_path / "bad.hjif", mutated(_set(B1 + ["effects", 0, "keyframes", 2, "relative_position"], -5)))
     code = main([command, str(bad)])
     err = capsys.readouterr().err
     assert code == 2
-    assert err.startswith(f"hapticsdk: error: {CH0}.bands[1].effects[0].keyframes[2]: keyframes out of order")
+    assert err.startswith(f"hapticsdk: error: {CH0}.bands[1].effects[0].keyframes[2].relative_position: -5 outside")
     assert opened == []
 
 
