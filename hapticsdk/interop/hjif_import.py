@@ -151,7 +151,9 @@ def _perception_summary(hfile: HapticFile, p: Perception) -> dict[str, Any]:
 def import_summary(hfile: HapticFile, *, source: str | None = None) -> dict[str, Any]:
     """What a file holds, what the SDK plays of it, and SDK metadata if present."""
     out: dict[str, Any] = {
-        "file": source, "version": hfile.version, "profile": hfile.profile, "level": hfile.level,
+        "file": source, "version": hfile.version,
+        "format_version": hfile.format_version.to_dict() if hfile.format_version else None,
+        "profile": hfile.profile, "level": hfile.level,
         "date": hfile.date, "timescale": hfile.ticks_per_second, "timescale_in_file": hfile.timescale is not None,
         "description": split_description(hfile.description)[0][:200],
         "avatars": len(hfile.avatars), "syncs": len(hfile.syncs),
@@ -169,6 +171,13 @@ def format_summary(s: dict[str, Any]) -> str:
     lines = [f"{s.get('file') or 'hjif'}: MPEG-I haptics {s['version']} profile {s['profile']} level {s['level']}, "
              f"timescale {s['timescale']} ticks/s{'' if s['timescale_in_file'] else ' (default)'}, "
              f"{len(s['perceptions'])} perception(s), {s['duration_s']:.3f} s"]
+    fv = s.get("format_version")
+    if fv:
+        lines.append(f"  read as the reference reader of {fv['recognised']} reads it"
+                     + (f"; {fv['changes']} normalisation(s):" if fv["changes"] else ""))
+        lines += [f"    {c['path']}: {c['change']}" for c in fv["normalised"][:50]]
+        if fv["changes"] > 50:
+            lines.append(f"    ... {fv['changes'] - 50} more (--json lists them all)")
     for p in s["perceptions"]:
         fr = ", ".join(f"{f:g}" if not isinstance(f, str) else f for f in p["keyframe_frequencies_hz"])
         lines.append(f"  {p['path']} id {p['id']} {p['modality']}"

@@ -218,10 +218,9 @@ def _effect(e: dict[str, Any], path: str, band_type: Any, rep: VersionReport) ->
             del e["keyframes"]
             e["wavelet_stream"] = ""
         return
+    if not all(_valid_keyframe(k) for k in kfs):
+        return  # the parser names the bad value at its path as written
     positions = [k.get("relative_position") for k in kfs]
-    ints = [p for p in positions if isinstance(p, int) and not isinstance(p, bool)]
-    if len(ints) != len([p for p in positions if p is not None]):
-        return  # a wrong type: the parser names it
     seq = [0 if p is None else p for p in positions]
     first_bad = next((i for i in range(1, len(seq)) if seq[i] < max(seq[:i])), None)
     if first_bad is None:
@@ -237,6 +236,16 @@ def _effect(e: dict[str, Any], path: str, band_type: Any, rep: VersionReport) ->
     rep.add(f"{path}.keyframes[{first_bad}]",
             f"keyframes out of order ({why}): rewritten as the reference reader reads them "
             f"(first keyframe at or after t in file order); {len(kfs)} -> {len(e['keyframes'])} keyframes")
+
+
+def _valid_keyframe(k: dict[str, Any]) -> bool:
+    """Whether every field of a keyframe is of a type and range the parser accepts (only
+    such keyframes are reordered, so an error still names the path as written)."""
+    p, a, f = k.get("relative_position"), k.get("amplitude_modulation"), k.get("frequency_modulation")
+    ok_p = p is None or (isinstance(p, int) and not isinstance(p, bool) and 0 <= p <= 2 ** 31 - 1)
+    ok_a = a is None or (_num(a) is not None and -1.0 <= a <= 1.0)
+    ok_f = f is None or (_num(f) is not None and 0.0 <= f <= 65535.0)
+    return ok_p and ok_a and ok_f
 
 
 # ---------------------------------------------------------------- the reference's reading

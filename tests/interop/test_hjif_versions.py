@@ -1,0 +1,225 @@
+"""Files of every published shape of the .hjif format read and play, and say what was
+normalised by JSON path. The documents are written here from each release's structure
+(field names and required fields of the reference reader at that release); no external
+content is used."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import numpy as np
+import pytest
+from hjif_docs import band, basis, channel, doc, kf, perception, single, tone, write
+
+from hapticsdk.cli import main
+from hapticsdk.errors import FormatError
+from hapticsdk.interop.hjif_model import parse_hjif
+from hapticsdk.interop.hjif_synth import synthesize
+from hapticsdk.interop.hjif_versions import RELEASES
+
+FS = 8000.0
+KFS = [kf(0, 0.2, 90), kf(250, 0.9, 160), kf(500, 0.4, 120)]
+
+
+def current() -> dict:
+    return doc([perception([channel([band([basis(0, copy.deepcopy(KFS)), tone(200, 100, position=600)])])],
+                           modality="Vibrotactile")])
+
+
+def crm0() -> dict:
+    """CRM0/CRM1 shape: tracks, 'Wave' bands with encoding_modality and window_length, no
+    effect_type / effect_library / profile / level / timescale / syncs."""
+    eff = [{"position": 0, "phase": 0.0, "base_signal": "Sine", "keyframes": copy.deepcopy(KFS)},
+           {"position": 600, "phase": 0.0, "base_signal": "Sine", "keyframes": [kf(0, 1.0, 200), kf(100, 1.0, 200)]}]
+    return {"version": "1.0", "date": "2022-03-01", "description": "crm0", "avatars": [],
+            "perceptions": [{"id": 0, "avatar_id": 0, "description": "p", "perception_modality": "Vibration",
+                             "reference_devices": [],
+                             "tracks": [{"id": 0, "description": "t", "gain": 1.0, "mixing_weight": 1.0,
+                                         "body_part_mask": 0,
+                                         "bands": [{"band_type": "Wave", "curve_type": "Unknown",
+                                                    "encoding_modality": "Vectorial", "window_length": 0,
+                                                    "lower_frequency_limit": 0, "upper_frequency_limit": 1000,
+                                                    "effects": eff}]}]}]}
+
+
+def crm2() -> dict:
+    """CRM2 shape: tracks and window_length still, VectorialWave bands, effect_library,
+    effect_type."""
+    d = crm0()
+    d["version"] = "2022"
+    p = d["perceptions"][0]
+    p["effect_library"] = []
+    b = p["tracks"][0]["bands"][0]
+    del b["encoding_modality"]
+    b["band_type"] = "VectorialWave"
+    for e in b["effects"]:
+        e["effect_type"] = "Basis"
+    return d
+
+
+def crm3() -> dict:
+    """CRM3 shape: channels with mixing_weight, curve_type and block_length 0.0 on every
+    band, effect 'semantic'; no profile / level / timescale / syncs."""
+    d = crm2()
+    d["version"] = "2023"
+    p = d["perceptions"][0]
+    p["channels"] = p.pop("tracks")
+    b = p["channels"][0]["bands"][0]
+    b["block_length"] = 0.0
+    del b["window_length"]
+    b["effects"][0]["semantic"] = "ramp"
+    return d
+
+
+def crm32() -> dict:
+    """CRM3.1/CRM3.2 shape (October 2023): CRM3 plus profile, level, timescale, syncs."""
+    d = crm3()
+    d.update({"profile": "Main", "level": 1, "timescale": 1000, "syncs": []})
+    return d
+
+
+SHAPES = [(crm0, RELEASES[0][0]), (crm2, RELEASES[1][0]), (crm3, RELEASES[2][0]), (crm32, RELEASES[2][0]),
+          (current, RELEASES[3][0])]
+
+
+@pytest.mark.parametrize("build,label", SHAPES, ids=["CRM0-1", "CRM2", "CRM3", "CRM3.2", "CRM4"])
+def test_every_release_shape_reads_and_synthesises_like_the_current_one(build, label):
+    h = parse_hjif(build())
+    assert h.format_version.recognised == label
+    x = synthesize(h, fs=FS).channels[0].samples
+    ref = synthesize(parse_hjif(current()), fs=FS).channels[0].samples
+    np.testing.assert_array_equal(x, ref)
+    assert np.max(np.abs(x)) > 0.5
+
+
+def test_normalisations_are_reported_by_json_path():
+    h = parse_hjif(crm3())
+    ch = {c["path"]: c["change"] for c in h.format_version.changes}
+    b = "perceptions[0].channels[0].bands[0]"
+    assert "mixing_weight -> mixing_coefficient" in ch["perceptions[0].channels[0].mixing_weight"]
+    assert "dropped 0.0" in ch[f"{b}.block_length"]
+    assert "semantic -> semantic_keywords" in ch[f"{b}.effects[0].semantic"]
+    assert "profile" in ch and "syncs" in ch
+    h0 = parse_hjif(crm0())
+    ch0 = {c["path"]: c["change"] for c in h0.format_version.changes}
+    assert "tracks -> channels" in ch0["perceptions[0].tracks"]
+    assert "'VectorialWave'" in ch0[f"{b}.band_type"]
+    assert "window_length -> block_length" in ch0[f"{b}.window_length"]
+    assert parse_hjif(current()).format_version.changes == []
+
+
+def test_a_wavelet_band_keeps_an_integral_real_block_length_as_an_integer():
+    d = crm32()
+    d["perceptions"][0]["channels"][0]["bands"].append(
+        {"band_type": "WaveletWave", "curve_type": "Unknown", "block_length": 32.0, "lower_frequency_limit": 72,
+         "upper_frequency_limit": 1000,
+         "effects": [{"effect_type": "Basis", "position": 0, "phase": 0.0, "base_signal": "Sine",
+                      "keyframes": [kf(None, 0.1), kf(None, 0.2)]}]})
+    h = parse_hjif(d)
+    wb = h.perceptions[0].channels[0].bands[1]
+    assert wb.block_length == 32 and isinstance(wb.block_length, int)
+    assert h.format_version.legacy_wavelet_samples == ["perceptions[0].channels[0].bands[1].effects[0]"]
+
+
+def test_both_old_and_new_names_is_a_named_error():
+    d = crm3()
+    d["perceptions"][0]["channels"][0]["mixing_coefficient"] = 1.0
+    with pytest.raises(FormatError) as ei:
+        parse_hjif(d)
+    assert ei.value.field == "perceptions[0].channels[0].mixing_weight"
+
+
+def test_a_shape_no_release_reads_is_a_named_error():
+    d = crm3()
+    del d["perceptions"][0]["channels"][0]["mixing_weight"]
+    with pytest.raises(FormatError) as ei:
+        parse_hjif(d)
+    assert ei.value.field == "perceptions[0].channels[0]" and "mixing_coefficient" in str(ei.value)
+
+
+# ---------------------------------------------------------------- out-of-order keyframes
+def reference_reading(kfs, key, x, default):
+    """The reference synthesiser's reading of a file-ordered keyframe list, written from
+    its definition: the first keyframe (in file order) with a value at or after x, joined
+    by a straight line to the keyframe with a value just before it in file order (the
+    line held outside its two ends)."""
+    vals = [(k.get("relative_position"), k.get(key)) for k in kfs]
+    idx = [i for i, (_, v) in enumerate(vals) if v is not None]
+    if not idx:
+        return default
+    after = [i for i in idx if vals[i][0] is not None and vals[i][0] >= x]
+    if not after:
+        return vals[idx[-1]][1]
+    a = after[0]
+    before = [i for i in idx if i < a]
+    if not before:
+        return vals[a][1]
+    (t0, v0), (t1, v1) = vals[before[-1]], vals[a]
+    t0 = 0 if t0 is None else t0
+    if x < t0:
+        return v0
+    if x > t1:
+        return v1
+    (t0, v0), (t1, v1) = sorted([(t0, v0), (t1, v1)])
+    return v1 if t1 == t0 else v0 + (v1 - v0) * (x - t0) / (t1 - t0)
+
+
+def test_a_sentinel_keyframe_first_shadows_the_amplitude_as_the_reference_reads_it():
+    # 65535 then 0: the reference's first amplitude keyframe at or after any t is the
+    # sentinel, so the amplitude is its 0.3 over the whole span (0..800, the last keyframe
+    # in file order); the frequency keyframes are in order (150 Hz)
+    kfs = [kf(65535, 0.3), kf(0, None, 150), kf(400, None, 150), kf(800, None, 150)]
+    h = parse_hjif(single(basis(0, kfs)))
+    changes = h.format_version.changes
+    assert changes[0]["path"] == "perceptions[0].channels[0].bands[0].effects[0].keyframes[1]"
+    assert "0 after 65535" in changes[0]["change"] and "sentinel" in changes[0]["change"]
+    x = synthesize(h, fs=FS).channels[0].samples
+    t = np.arange(x.size) / FS
+    np.testing.assert_allclose(x[t <= 0.8], 0.3 * np.sin(2 * np.pi * 150 * t[t <= 0.8]), atol=1e-9)
+    assert np.all(x[t > 0.8] == 0)
+
+
+def test_a_shadowed_keyframe_gives_the_step_the_reference_reads():
+    kfs = [kf(0, 0.2, 100), kf(600, 0.6), kf(300, 1.0), kf(900, 0.4)]
+    h = parse_hjif(single(basis(0, kfs)))
+    x = synthesize(h, fs=FS).channels[0].samples
+    t_ms = np.arange(x.size) / FS * 1000.0
+    env = np.array([reference_reading(kfs, "amplitude_modulation", u, 1.0) for u in t_ms])
+    inside = t_ms <= 900
+    expect = env[inside] * np.sin(2 * np.pi * 100 * t_ms[inside] / 1000.0)
+    # the step at 600 ms: the reading is left-continuous; the sample exactly at 600 ms is
+    # the one place where SDK keyframes (left value, then right value) may differ
+    away = np.abs(t_ms[inside] - 600.0) > 1e-9
+    np.testing.assert_allclose(x[inside][away], expect[away], atol=1e-9)
+    assert abs(reference_reading(kfs, "amplitude_modulation", 600.5, 1.0) - 0.6995) < 1e-9  # the step is there
+
+
+@pytest.mark.parametrize("band_type", ["Transient", "Curve"])
+def test_transient_and_curve_keyframes_out_of_order_are_sorted(band_type):
+    kfs = [kf(300, 0.5), kf(0, 1.0), kf(600, 0.2)]
+    extra = {"curve_type": "Linear"} if band_type == "Curve" else {}
+    h = parse_hjif(single(basis(0, kfs), band_type=band_type, lo=0, hi=1000, **extra))
+    got = [k.relative_position for k in h.perceptions[0].channels[0].bands[0].effects[0].keyframes]
+    assert got == [0, 300, 600]
+    assert "sorted" in h.format_version.changes[0]["change"]
+
+
+def test_import_json_says_which_version_and_what_was_normalised(tmp_path, capsys):
+    p = write(tmp_path / "old.hjif", crm3())
+    assert main(["import", str(p), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    fv = out["format_version"]
+    assert fv["recognised"] == RELEASES[2][0] and fv["version_field"] == "2023"
+    assert {"path": "perceptions[0].channels[0].mixing_weight",
+            "change": "renamed mixing_weight -> mixing_coefficient"} in fv["normalised"]
+
+
+@pytest.mark.parametrize("build", [crm0, crm2, crm3, crm32])
+def test_play_plays_every_release_shape(tmp_path, capsys, build):
+    p = write(tmp_path / "old.hjif", build())
+    assert main(["play", str(p), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    piezo = rep["actuators"]["piezo-virtual"]
+    assert piezo["active_ticks"] > 500 and piezo["output_max_v"] > 0
+    assert {90.0, 200.0} <= set(piezo["frequency_hz"])
