@@ -97,7 +97,10 @@ def cmd_export(args: argparse.Namespace) -> int:
     plan = _plan_from_arg(args.source, no_importance=args.no_importance, seed=args.seed)
     hfile = export_plan(plan, effect_seconds=args.effect_seconds)
     path = write_hjif(hfile, args.output)
-    out = {"saved": str(path), "format": args.format, "scene": plan.scene,
+    from ..interop.hjif_export import FORMAT_SHAPE, FORMAT_VERSION
+
+    out = {"saved": str(path), "format": args.format, "format_version": FORMAT_VERSION, "format_shape": FORMAT_SHAPE,
+           "scene": plan.scene,
            "perceptions": [{"id": p.id, "modality": p.perception_modality,
                             "description": p.description.split(" hapticsdk-meta:")[0]} for p in hfile.perceptions],
            "materials": {k: {"features": v.get("features"), "targets": v.get("targets"), "parts": sorted(v["parts"])}
@@ -106,7 +109,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         from . import emit
         emit(out, True)
     else:
-        lines = [f"wrote {path} (MPEG-I haptics JSON, {len(hfile.perceptions)} perception(s))"]
+        lines = [f"wrote {path} (MPEG-I haptics JSON version {FORMAT_VERSION}, shape {FORMAT_SHAPE}; "
+                 f"{len(hfile.perceptions)} perception(s))"]
         lines += [f"  perception {p['id']} {p['modality']}: {p['description']}" for p in out["perceptions"]]
         print("\n".join(lines))
     return 0

@@ -4,7 +4,8 @@
 Per material:
 
 - **hardness** -> a ``Stiffness`` perception: one channel, one ``Curve`` band (Linear),
-  one Basis effect of constant amplitude 1.0; the channel ``gain`` is the solved ``GS``, so
+  one Basis effect of constant amplitude 1.0 written as three keyframes (the reference
+  synthesiser outputs nothing for a Curve effect of exactly two); the channel ``gain`` is the solved ``GS``, so
   the value the reference synthesiser computes (amplitude x gain x 10^perception_unit_exponent,
   exponent 0) is GS, in N/mm (``unit_exponent`` -3: lengths in mm). When GS exceeds the
   force arm's limit (2.3 N/mm, formula (8)), a ``Vibrotactile`` perception follows: the
@@ -54,6 +55,10 @@ META_FORMAT = "hapticsdk-hjif"
 META_VERSION = 1
 #: timescale the SDK writes (ticks per second), as MPEG's reference encoder does
 TIMESCALE = 1000
+#: the format version the SDK writes: the ``version`` string and the shape (the FDIS
+#: shape of ISO/IEC 23090-31, read by MPEG's reference software from release CRM4 on)
+FORMAT_VERSION = "2023"
+FORMAT_SHAPE = "CRM4 / FDIS 2023 (2024-03)"
 #: Curve bands of the SDK's stiffness perceptions: frequency limits (Hz), like the
 #: reference encoder's curve bands (72.5 Hz cut-off, written as an integer)
 CURVE_BAND_HZ = (0, 72)
@@ -77,7 +82,11 @@ def _renderer_describe(dimension: str, features: Mapping[str, float], options: M
 
 def _constant_effect(length_ticks: int, amplitude: float, frequency_hz: int | None, *, effect_id: int | None = None
                      ) -> Effect:
-    kfs = [Keyframe(0, amplitude, frequency_hz), Keyframe(length_ticks, amplitude, frequency_hz)]
+    # three keyframes: MPEG's reference synthesiser adds nothing for a Curve effect of
+    # exactly two keyframes (it interpolates them, then skips the copy into the band)
+    mid = length_ticks // 2
+    kfs = [Keyframe(0, amplitude, frequency_hz), Keyframe(mid, amplitude, frequency_hz),
+           Keyframe(length_ticks, amplitude, frequency_hz)]
     if frequency_hz is None:
         return Effect("Basis", 0, id=effect_id, keyframes=kfs)
     return Effect("Basis", 0, id=effect_id, phase=0.0, base_signal="Sine", keyframes=kfs)
@@ -209,7 +218,7 @@ def export_plan(plan: Any, *, effect_seconds: float = 1.0, date: str | None = No
     note = " Values come from GENERATED data (the reference paper published none)." if any_generated else ""
     text = (f"hapticsdk export of scene {plan.scene!r}: {len(plan.materials)} material(s), "
             f"{len(perceptions)} perception(s).{note}")
-    return HapticFile(version="2023", profile="Main", level=1,
+    return HapticFile(version=FORMAT_VERSION, profile="Main", level=1,
                       date=date or _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat(),
                       description=describe(text, top), perceptions=perceptions, avatars=[], syncs=[],
                       timescale=TIMESCALE)

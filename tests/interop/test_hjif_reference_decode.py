@@ -1,0 +1,99 @@
+"""What a reference decoder reproduces of an SDK export, per perception.
+
+The decoder here is written from the reference synthesiser's definition (MPEG's
+HapticReferenceSoftware, Curve and VectorialWave bands), reading the exported JSON
+directly (not through the SDK's parser):
+
+- a Curve effect's keyframes are taken relative to its first keyframe and interpolated
+  (Linear); an effect of exactly two keyframes adds nothing (the reference interpolates
+  it but skips the copy into the band);
+- a Reference effect plays its library effect; a Vectorial effect is its amplitude times
+  the sine of its (integer) keyframe frequency;
+- a channel's value is the clipped band sum times its gain times 10^perception_unit_exponent.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from hapticsdk.interop.hjif_export import FORMAT_VERSION, export_plan, write_hjif
+
+FS = 8000.0
+
+
+def _plan(material: str):
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.scene import Scene
+    from hapticsdk.scene.model import _merge
+
+    s = Scene.for_material(material)
+    s = Scene(objects=s.objects, devices=s.devices, settings=_merge(s.settings, {"importance": {"enabled": False}}),
+              name=s.name)
+    return compile_scene(s)
+
+
+def reference_decode(perception: dict, ticks: np.ndarray, timescale: int) -> np.ndarray:
+    """Samples of channel 0 of ``perception`` at ``ticks``, as the reference synthesises."""
+    ch = perception["channels"][0]
+    lib = {e["id"]: e for e in perception["effect_library"]}
+    acc = np.zeros_like(ticks)
+    for b in ch["bands"]:
+        for e in b["effects"]:
+            eff = lib[e["id"]] if e["effect_type"] == "Reference" else e
+            k = eff["keyframes"]
+            pos = np.array([x["relative_position"] for x in k], float)
+            amp = np.array([x["amplitude_modulation"] for x in k], float)
+            rel = ticks - e["position"]
+            inside = (rel >= 0) & (rel <= pos[-1])
+            if b["band_type"] == "Curve":
+                if len(k) == 2:
+                    continue
+                acc[inside] += np.interp(rel[inside], pos - pos[0], amp)
+            else:
+                f = k[0]["frequency_modulation"]
+                assert isinstance(f, int)  # the reference reader keeps only integer frequencies
+                acc[inside] += np.interp(rel[inside], pos, amp) * np.sin(2 * np.pi * f * rel[inside] / timescale)
+    return np.clip(acc, -1, 1) * ch["gain"] * 10.0 ** perception.get("perception_unit_exponent", 0)
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    plan = _plan("S20")
+    path = write_hjif(export_plan(plan), tmp_path_factory.mktemp("x") / "s20.hjif")
+    return plan.material("S20"), json.loads(path.read_text(encoding="utf-8"))
+
+
+def test_the_export_states_its_version(exported):
+    _, d = exported
+    assert d["version"] == FORMAT_VERSION == "2023"
+
+
+def test_stiffness_survives_a_reference_decode(exported):
+    mp, d = exported
+    p = next(p for p in d["perceptions"] if p["perception_modality"] == "Stiffness")
+    ts = d["timescale"]
+    ticks = np.arange(0, 1000) * 1.0
+    x = reference_decode(p, ticks, ts)
+    assert np.all(x == pytest.approx(mp.features["GS"], rel=1e-12))
+
+
+def test_vibrotactile_parts_survive_a_reference_decode(exported):
+    mp, d = exported
+    ts = d["timescale"]
+    n = 8000
+    ticks = np.arange(n) / FS * ts
+    for p in d["perceptions"]:
+        if p["perception_modality"] == "Stiffness":
+            continue
+        x = reference_decode(p, ticks, ts)
+        f = p["effect_library"][0]["keyframes"][0]["frequency_modulation"]
+        mag = np.abs(np.fft.rfft(x * np.hanning(n)))
+        assert abs(np.argmax(mag) * FS / n - f) <= FS / n
+        amp = p["effect_library"][0]["keyframes"][0]["amplitude_modulation"] * p["channels"][0]["gain"]
+        assert np.max(np.abs(x)) == pytest.approx(abs(amp), rel=1e-3)
+        if p["perception_modality"] == "Vibrotactile Texture":
+            assert f == round(mp.features["Fpeak"])
+            assert np.max(np.abs(x)) == pytest.approx(mp.features["AFpeak"], rel=1e-3)
