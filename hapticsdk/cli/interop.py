@@ -40,15 +40,15 @@ def register(sub: Any) -> None:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("import", help="read an MPEG-I haptics .hjif file: perceptions, what plays, SDK metadata")
-    p.add_argument("file", metavar="FILE.hjif", help="MPEG-I haptics file to read")
+    p = sub.add_parser("import", help="read an MPEG-I haptics .hjif or Apple .ahap file: what it holds and what plays")
+    p.add_argument("file", metavar="FILE.hjif|FILE.ahap", help="MPEG-I haptics (.hjif) or Apple AHAP (.ahap) file")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("--synth", action="store_true",
                    help="also synthesise the vibrotactile channels and report their peak frequency and envelope")
     p.set_defaults(func=cmd_import)
 
-    p = sub.add_parser("play", help="play the vibrotactile content of an .hjif file on the vibration actuators")
-    p.add_argument("file", metavar="FILE.hjif", help="MPEG-I haptics file whose vibrotactile content to play")
+    p = sub.add_parser("play", help="play the vibrotactile content of an .hjif or .ahap file on the vibration actuators")
+    p.add_argument("file", metavar="FILE.hjif|FILE.ahap", help="MPEG-I haptics (.hjif) or Apple AHAP (.ahap) file")
     p.add_argument("--seconds", type=positive_float, help="duration (s, default: the file's length)")
     p.add_argument("--actuators", default="piezo-virtual,voicecoil-virtual",
                    help="comma-separated actuator names (default piezo-virtual,voicecoil-virtual)")
@@ -83,6 +83,11 @@ def _plan_from_arg(text: str, *, no_importance: bool, seed: int | None) -> Any:
         scene = Scene(objects=scene.objects, devices=scene.devices, settings=_merge(scene.settings, over),
                       name=scene.name)
     return compile_scene(scene)
+
+
+def _is_ahap(path: str) -> bool:
+    """Apple AHAP content is told by its ``.ahap`` suffix (any case)."""
+    return Path(path).suffix.lower() == ".ahap"
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -122,8 +127,17 @@ def cmd_import(args: argparse.Namespace) -> int:
     """
     from ..interop.hjif_import import format_summary, import_summary, load
 
-    hfile = load(args.file)
-    s = import_summary(hfile, source=str(args.file))
+    if _is_ahap(args.file):
+        from ..interop import ahap
+
+        pat = ahap.read_ahap(args.file)
+        s = ahap.summary(pat, source=str(args.file))
+        hfile = ahap.to_haptic_file(pat, source=str(args.file))
+        fmt = ahap.format_summary
+    else:
+        hfile = load(args.file)
+        s = import_summary(hfile, source=str(args.file))
+        fmt = format_summary
     if args.synth:
         from ..interop.hjif_synth import describe_channel, file_duration_s, synthesize
         full = file_duration_s(hfile)
@@ -134,7 +148,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         from . import emit
         emit(s, True)
     else:
-        text = format_summary(s)
+        text = fmt(s)
         for c in (s.get("synthesis") or {}).get("channels", []):
             text += (f"\n  synthesised {c['path']}: peak {c['peak_frequency_hz']:g} Hz, max |x| {c['max_abs']:.4g}, "
                      f"rms {c['rms']:.4g}")
@@ -153,9 +167,18 @@ def cmd_play(args: argparse.Namespace) -> int:
     acts = [a.strip() for a in args.actuators.split(",") if a.strip()]
     if not acts:
         raise ValidationError("no actuator named", field="actuators")
-    hfile = load(args.file)  # checked whole before anything is opened
+    is_ahap = _is_ahap(args.file)
+    if is_ahap:
+        from ..interop import ahap
+
+        pat = ahap.read_ahap(args.file)  # checked whole before anything is opened
+        hfile = ahap.to_haptic_file(pat, source=str(args.file))
+    else:
+        hfile = load(args.file)  # checked whole before anything is opened
     rep = play(hfile, seconds=args.seconds, actuators=acts, tick_s=args.tick, realtime=args.realtime,
-               piezo_table=args.piezo_table)
+               piezo_table=args.piezo_table, piezo_full_scale=is_ahap)
+    if is_ahap:
+        rep.not_played = pat.not_played + rep.not_played
     if args.json:
         print(json.dumps(rep.to_dict(), indent=2, default=str))
     else:

@@ -104,9 +104,30 @@ def _piezo_table(table: Any) -> Any:
     return resolve_table(table)
 
 
+def _band_limits(hfile: HapticFile) -> tuple[float, float]:
+    """Lowest lower and highest upper frequency limit of the vibrotactile bands (Hz)."""
+    lims = [(b.lower_frequency_limit, b.upper_frequency_limit) for p in hfile.perceptions if is_vibrotactile(p)
+            for c in p.channels for b in c.bands]
+    if not lims:
+        return (0.0, 0.0)
+    return float(min(x for x, _ in lims)), float(max(y for _, y in lims))
+
+
+def piezo_full_scale_m_s2(table: Any, band_hz: tuple[float, float]) -> float:
+    """Largest acceleration (m/s^2) the piezo ``table`` reaches at its highest voltage at
+    every frequency of ``band_hz`` (clamped to the table): a normalised amplitude of 1.0
+    then means the same acceleration at any frequency of the band."""
+    lo_t, hi_t = table.frequency_range_hz
+    lo, hi = max(band_hz[0], lo_t), min(band_hz[1], hi_t)
+    if hi < lo:
+        lo = hi = min(max(band_hz[0], lo_t), hi_t)
+    grid = np.linspace(lo, hi, 64)
+    return float(np.min(table.accelerations_at(grid, float(table.voltages_v[-1]))))
+
+
 def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence[str] = DEFAULT_ACTUATORS,
          tick_s: float = 0.001, realtime: bool = False, piezo_table: Any = None,
-         actuator_options: dict[str, dict[str, Any]] | None = None) -> PlayReport:
+         actuator_options: dict[str, dict[str, Any]] | None = None, piezo_full_scale: bool = False) -> PlayReport:
     """Play ``hfile``'s vibrotactile channels for ``seconds`` (default: its length).
 
     Args:
@@ -117,6 +138,9 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
         realtime: pace ticks to the wall clock (default: simulated time).
         piezo_table: the piezo's ``Tab`` (path, dict or table; default the generated one).
         actuator_options: name -> keyword options for :func:`~hapticsdk.actuators.create_actuator`.
+        piezo_full_scale: amplitudes are fractions of the piezo's full scale (AHAP content):
+            1.0 is the largest acceleration its table reaches at every frequency of the
+            content's bands (see :func:`piezo_full_scale_m_s2`), instead of m/s^2.
     """
     from ..actuators import create_actuator
 
@@ -168,6 +192,11 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
             freq = np.where(take, tr.frequency_hz, freq)
         if a.startswith("piezo"):
             table = table or _piezo_table(piezo_table)
+            if piezo_full_scale:
+                fs_acc = piezo_full_scale_m_s2(table, _band_limits(hfile))
+                amp_u = amp_n * fs_acc
+                report.notes.append(f"{a}: amplitude 1.0 = {fs_acc:.4g} m/s^2 (the largest acceleration its table "
+                                    "reaches at every frequency of the content)")
             out = np.zeros(n)
             cache: dict[tuple[float, float], float] = {}
             for j in np.flatnonzero(amp_u > 0):

@@ -1,0 +1,369 @@
+"""Apple Haptic and Audio Pattern (``.ahap``) files: read, check, and convert to the SDK's
+MPEG-I haptics model so that ``import`` and ``play`` treat them like ``.hjif`` content.
+
+The structure (Apple, "Representing haptic patterns in AHAP files", Core Haptics docs):
+
+- root: ``Version`` (number), optional ``Metadata`` (object), ``Pattern`` (array);
+- each ``Pattern`` entry holds one of ``Event``, ``ParameterCurve`` or ``Parameter`` (a
+  dynamic parameter);
+- ``Event``: ``Time`` (s), ``EventType`` (``HapticTransient``, ``HapticContinuous``,
+  ``AudioContinuous``, ``AudioCustom``), ``EventDuration`` (s, continuous events; Apple caps
+  it at 30 s), ``EventParameters`` (``ParameterID`` / ``ParameterValue``: ``HapticIntensity``
+  and ``HapticSharpness``, 0..1; other IDs such as ``AttackTime`` are kept out and listed),
+  ``EventWaveformPath`` (audio);
+- ``ParameterCurve``: ``ParameterID`` (``HapticIntensityControl``,
+  ``HapticSharpnessControl``), ``Time``, ``ParameterCurveControlPoints`` (``Time`` relative
+  to the curve, ``ParameterValue``), interpolated linearly between points and held after the
+  last;
+- ``Parameter``: ``ParameterID``, ``Time``, ``ParameterValue``: a step to the value at
+  ``Time``.
+
+Apple's loader sets missing entries to defaults, clamps out-of-range values and ignores
+unknown keys. The SDK does the same for values (every clamp is reported by JSON path) and
+keys, and refuses wrong types and missing required fields with a
+:class:`~hapticsdk.errors.FormatError` naming the path (``Pattern[3].Event.Time``).
+
+Control parameters: the intensity control multiplies event intensities (0..1); the
+sharpness control is added to event sharpness (-1..1). The latest curve or dynamic parameter
+that has started sets a control's value.
+
+Mapping (see ``docs/interop.md``):
+
+- intensity -> amplitude as a fraction of the actuator's full scale;
+- sharpness -> frequency ``f = 65 Hz + s x (300 - 65) Hz``. Apple publishes no physical
+  mapping for sharpness (it is "the feel" of an event); this is the linear map MPEG's
+  reference AHAP encoder uses (its band of 65..300 Hz);
+- a continuous event is a VectorialWave effect (sine) with keyframes at its start, end and
+  every control change; a transient is a VectorialWave effect of two periods of its
+  frequency (the shape of MPEG's transient: two sine periods), so its sharpness is kept.
+- audio events (``AudioContinuous``, ``AudioCustom``) are reported by name, not played.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from ..errors import FormatError
+from .hjif_model import MAX_DEPTH, MAX_FILE_BYTES, Band, Channel, Effect, HapticFile, Keyframe, Perception
+
+#: sharpness 0 and 1 map to these frequencies (Hz): MPEG reference AHAP encoder's band
+SHARPNESS_HZ = (65.0, 300.0)
+#: Apple's cap on a continuous event's duration (s)
+MAX_CONTINUOUS_S = 30.0
+#: values assumed when an event gives none (Apple's article names no defaults; these are
+#: the SDK's: full intensity, mid sharpness)
+DEFAULT_INTENSITY = 1.0
+DEFAULT_SHARPNESS = 0.5
+#: time base of the converted content (ticks per second): 0.1 ms
+TIMESCALE = 10000
+#: most Pattern entries read: the ``.hjif`` synthesis budget (see docs/safety.md) is what
+#: bounds the work; this caps the conversion's own lists
+MAX_PATTERN_ENTRIES = 100_000
+
+HAPTIC_EVENTS = ("HapticTransient", "HapticContinuous")
+AUDIO_EVENTS = ("AudioContinuous", "AudioCustom")
+CONTROLS = {"HapticIntensityControl": (0.0, 1.0, 1.0), "HapticSharpnessControl": (-1.0, 1.0, 0.0)}
+
+
+def sharpness_to_hz(s: float) -> float:
+    """Frequency (Hz) for sharpness ``s`` (clamped to 0..1)."""
+    s = min(1.0, max(0.0, float(s)))
+    lo, hi = SHARPNESS_HZ
+    return lo + s * (hi - lo)
+
+
+@dataclass
+class AhapEvent:
+    path: str
+    kind: str
+    time_s: float
+    duration_s: float = 0.0
+    intensity: float = DEFAULT_INTENSITY
+    sharpness: float = DEFAULT_SHARPNESS
+
+
+@dataclass
+class AhapControl:
+    """A control change: a curve (points ``(t, value)``, absolute s) or a step (one point)."""
+
+    path: str
+    parameter: str
+    start_s: float
+    points: list[tuple[float, float]]
+
+    def value(self, t: float) -> float:
+        """Value at ``t`` >= start (linear between points, held after the last)."""
+        pts = self.points
+        if t <= pts[0][0]:
+            return pts[0][1]
+        for (t0, v0), (t1, v1) in zip(pts, pts[1:]):
+            if t <= t1:
+                return v1 if t1 == t0 else v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+        return pts[-1][1]
+
+
+@dataclass
+class AhapPattern:
+    """A checked AHAP pattern: haptic events, control changes, and what is not played."""
+
+    version: float
+    events: list[AhapEvent]
+    controls: list[AhapControl]
+    not_played: list[dict[str, str]] = field(default_factory=list)
+    clamped: list[dict[str, str]] = field(default_factory=list)
+
+    def control(self, parameter: str, t: float, *, before: bool = False) -> float:
+        """Value of control ``parameter`` at ``t`` (``before``: just before ``t``)."""
+        live = [c for c in self.controls if c.parameter == parameter
+                and (c.start_s < t if before else c.start_s <= t)]
+        if not live:
+            return CONTROLS[parameter][2]
+        cur = max(live, key=lambda c: c.start_s)
+        return min(CONTROLS[parameter][1], max(CONTROLS[parameter][0], cur.value(t)))
+
+
+# ------------------------------------------------------------------------ reading
+def read_ahap(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) -> AhapPattern:
+    """Read and check an ``.ahap`` file (same size and depth caps as ``.hjif``)."""
+    p = Path(os.fspath(path))
+    name = str(p)
+    try:
+        if not p.is_file():
+            raise FormatError("not a regular file", field=name)
+        if p.stat().st_size > max_bytes:
+            raise FormatError(f"file is above the {max_bytes}-byte cap", field=name)
+        data = p.read_bytes()[: max_bytes + 1]
+    except OSError as exc:
+        raise FormatError(f"cannot read: {exc.strerror or exc}", field=name) from None
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise FormatError(f"not UTF-8 text (byte {exc.start})", field=name) from None
+    return parse_ahap_text(text, source=name)
+
+
+def parse_ahap_text(text: str, *, source: str = "ahap") -> AhapPattern:
+    """Parse AHAP JSON text."""
+    from ..schemas_io import json_depth
+
+    if json_depth(text) > MAX_DEPTH:
+        raise FormatError(f"JSON nested deeper than {MAX_DEPTH} levels", field=source)
+    try:
+        doc = json.loads(text, parse_constant=_no_constant)
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", field=source) from None
+    except (ValueError, RecursionError) as exc:
+        raise FormatError(f"invalid JSON: {exc}", field=source) from None
+    return parse_ahap(doc)
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not valid JSON")
+
+
+def _num(obj: Mapping[str, Any], key: str, path: str, *, required: bool = True, default: float = 0.0) -> float:
+    where = f"{path}.{key}" if path else key
+    if key not in obj:
+        if required:
+            raise FormatError(f"missing required field {key!r}", field=path or "$")
+        return default
+    v = obj[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise FormatError(f"must be a number, got {type(v).__name__}", field=where)
+    if not math.isfinite(v):
+        raise FormatError("must be finite", field=where)
+    return float(v)
+
+
+def _str(obj: Mapping[str, Any], key: str, path: str) -> str:
+    if key not in obj:
+        raise FormatError(f"missing required field {key!r}", field=path)
+    v = obj[key]
+    if not isinstance(v, str):
+        raise FormatError(f"must be a string, got {type(v).__name__}", field=f"{path}.{key}")
+    return v
+
+
+def _obj(v: Any, path: str) -> Mapping[str, Any]:
+    if not isinstance(v, dict):
+        raise FormatError(f"must be an object, got {type(v).__name__}", field=path)
+    return v
+
+
+def _list(obj: Mapping[str, Any], key: str, path: str, *, required: bool = True) -> list[Any]:
+    if key not in obj:
+        if required:
+            raise FormatError(f"missing required field {key!r}", field=path or "$")
+        return []
+    v = obj[key]
+    if not isinstance(v, list):
+        raise FormatError(f"must be an array, got {type(v).__name__}", field=f"{path}.{key}" if path else key)
+    return v
+
+
+def parse_ahap(doc: Any) -> AhapPattern:
+    """Check a decoded AHAP document and return its :class:`AhapPattern`."""
+    root = _obj(doc, "$")
+    version = _num(root, "Version", "", required=False, default=1.0)
+    if "Metadata" in root:
+        _obj(root["Metadata"], "Metadata")
+    entries = _list(root, "Pattern", "")
+    if len(entries) > MAX_PATTERN_ENTRIES:
+        raise FormatError(f"{len(entries)} entries, above the {MAX_PATTERN_ENTRIES} read", field="Pattern")
+    pat = AhapPattern(version=version, events=[], controls=[])
+
+    def clamp(v: float, lo: float, hi: float, where: str) -> float:
+        if v < lo or v > hi:
+            c = min(hi, max(lo, v))
+            pat.clamped.append({"path": where, "change": f"{v!r} clamped to {c!r} (range {lo:g}..{hi:g})"})
+            return c
+        return v
+
+    for i, e in enumerate(entries):
+        path = f"Pattern[{i}]"
+        e = _obj(e, path)
+        kinds = [k for k in ("Event", "ParameterCurve", "Parameter") if k in e]
+        if len(kinds) != 1:
+            raise FormatError("an entry holds exactly one of Event, ParameterCurve, Parameter"
+                              + (f" (has {', '.join(kinds)})" if kinds else ""), field=path)
+        kind = kinds[0]
+        path = f"{path}.{kind}"
+        body = _obj(e[kind], path)
+        t = clamp(_num(body, "Time", path), 0.0, math.inf, f"{path}.Time")
+        if kind == "Event":
+            etype = _str(body, "EventType", path)
+            if etype in AUDIO_EVENTS:
+                wave = body.get("EventWaveformPath")
+                pat.not_played.append({"path": path, "what": f"{etype} event"
+                                       + (f" ({wave})" if isinstance(wave, str) else ""),
+                                       "reason": "audio events are not played (the SDK drives haptic actuators)"})
+                continue
+            if etype not in HAPTIC_EVENTS:
+                raise FormatError(f"unknown EventType {etype!r}; expected one of "
+                                  f"{', '.join(HAPTIC_EVENTS + AUDIO_EVENTS)}", field=f"{path}.EventType")
+            ev = AhapEvent(path=path, kind=etype, time_s=t)
+            if etype == "HapticContinuous":
+                ev.duration_s = clamp(_num(body, "EventDuration", path), 0.0, MAX_CONTINUOUS_S, f"{path}.EventDuration")
+            for j, prm in enumerate(_list(body, "EventParameters", path, required=False)):
+                ppath = f"{path}.EventParameters[{j}]"
+                prm = _obj(prm, ppath)
+                pid = _str(prm, "ParameterID", ppath)
+                val = _num(prm, "ParameterValue", ppath)
+                if pid == "HapticIntensity":
+                    ev.intensity = clamp(val, 0.0, 1.0, f"{ppath}.ParameterValue")
+                elif pid == "HapticSharpness":
+                    ev.sharpness = clamp(val, 0.0, 1.0, f"{ppath}.ParameterValue")
+                else:
+                    pat.not_played.append({"path": ppath, "what": f"event parameter {pid}",
+                                           "reason": "not rendered (the SDK renders intensity and sharpness)"})
+            pat.events.append(ev)
+            continue
+        pid = _str(body, "ParameterID", path)
+        if pid not in CONTROLS:
+            pat.not_played.append({"path": path, "what": f"{kind} {pid}",
+                                   "reason": "not rendered (the SDK renders the intensity and sharpness controls)"})
+            continue
+        lo, hi, _ = CONTROLS[pid]
+        if kind == "Parameter":
+            v = clamp(_num(body, "ParameterValue", path), lo, hi, f"{path}.ParameterValue")
+            pat.controls.append(AhapControl(path, pid, t, [(t, v)]))
+            continue
+        pts: list[tuple[float, float]] = []
+        for j, cp in enumerate(_list(body, "ParameterCurveControlPoints", path)):
+            cpath = f"{path}.ParameterCurveControlPoints[{j}]"
+            cp = _obj(cp, cpath)
+            ct = t + clamp(_num(cp, "Time", cpath), 0.0, math.inf, f"{cpath}.Time")
+            if pts and ct < pts[-1][0]:
+                raise FormatError(f"control points out of time order ({ct - t:g} s after {pts[-1][0] - t:g} s)",
+                                  field=f"{cpath}.Time")
+            pts.append((ct, clamp(_num(cp, "ParameterValue", cpath), lo, hi, f"{cpath}.ParameterValue")))
+        if not pts:
+            raise FormatError("a parameter curve needs at least one control point",
+                              field=f"{path}.ParameterCurveControlPoints")
+        pat.controls.append(AhapControl(path, pid, t, pts))
+    return pat
+
+
+# ------------------------------------------------------------------------ conversion
+def _ticks(t_s: float) -> int:
+    return int(round(t_s * TIMESCALE))
+
+
+def _continuous(pat: AhapPattern, ev: AhapEvent) -> Effect:
+    t0, t1 = ev.time_s, ev.time_s + ev.duration_s
+    cuts = {t0, t1}
+    steps: set[float] = set()
+    for c in pat.controls:
+        for (t, _) in [(c.start_s, None)] + list(c.points):
+            if t0 < t < t1:
+                cuts.add(t)
+                if len(c.points) == 1 or t == c.start_s:
+                    steps.add(t)
+
+    def kf(t: float, before: bool) -> Keyframe:
+        a = ev.intensity * pat.control("HapticIntensityControl", t, before=before)
+        s = ev.sharpness + pat.control("HapticSharpnessControl", t, before=before)
+        return Keyframe(_ticks(t - t0), min(1.0, max(0.0, a)), sharpness_to_hz(s))
+
+    kfs: list[Keyframe] = []
+    for t in sorted(cuts):
+        if t in steps:
+            kfs.append(kf(t, True))
+        kfs.append(kf(t, False))
+    return Effect("Basis", _ticks(t0), phase=0.0, base_signal="Sine", keyframes=kfs, path=ev.path)
+
+
+def _transient(pat: AhapPattern, ev: AhapEvent) -> Effect:
+    t = ev.time_s
+    f = sharpness_to_hz(ev.sharpness + pat.control("HapticSharpnessControl", t))
+    a = min(1.0, max(0.0, ev.intensity * pat.control("HapticIntensityControl", t)))
+    length = max(1, _ticks(2.0 / f))  # two periods
+    return Effect("Basis", _ticks(t), phase=0.0, base_signal="Sine",
+                  keyframes=[Keyframe(0, a, f), Keyframe(length, a, f)], path=ev.path)
+
+
+def to_haptic_file(pat: AhapPattern, *, source: str = "ahap") -> HapticFile:
+    """The pattern as one Vibrotactile perception: a channel with a band of continuous
+    events and a band of transients (bands add up, as MPEG's synthesiser adds them).
+    Amplitudes are fractions of the actuator's full scale."""
+    lo, hi = int(math.floor(SHARPNESS_HZ[0])), int(math.ceil(SHARPNESS_HZ[1]))
+    cont = sorted((_continuous(pat, e) for e in pat.events if e.kind == "HapticContinuous"), key=lambda x: x.position)
+    tran = sorted((_transient(pat, e) for e in pat.events if e.kind == "HapticTransient"), key=lambda x: x.position)
+    bands = []
+    if cont:
+        bands.append(Band("VectorialWave", lo, hi, effects=cont, path="perceptions[0].channels[0].bands[0]"))
+    if tran:
+        bands.append(Band("VectorialWave", lo, hi, effects=tran, path=f"perceptions[0].channels[0].bands[{len(bands)}]"))
+    ch = Channel(0, "AHAP haptic events (amplitude: fraction of full scale)", 1.0, 1.0, 0, bands=bands,
+                 path="perceptions[0].channels[0]")
+    per = Perception(0, 0, f"converted from Apple AHAP {source}", "Vibrotactile", channels=[ch],
+                     unit_exponent=0, perception_unit_exponent=0, modality_as_written="AHAP", path="perceptions[0]")
+    return HapticFile(version="AHAP", profile="Main", level=1, date="", description=f"AHAP {pat.version:g}",
+                      perceptions=[per], timescale=TIMESCALE)
+
+
+def summary(pat: AhapPattern, *, source: str | None = None) -> dict[str, Any]:
+    """What an AHAP file holds and what the SDK plays of it (``import --json``)."""
+    end = 0.0
+    for e in pat.events:
+        end = max(end, e.time_s + (e.duration_s if e.kind == "HapticContinuous" else 2.0 / sharpness_to_hz(e.sharpness)))
+    return {"file": source, "format": "AHAP", "version": pat.version,
+            "events": {k: sum(e.kind == k for e in pat.events) for k in HAPTIC_EVENTS},
+            "controls": {k: sum(c.parameter == k for c in pat.controls) for k in CONTROLS},
+            "duration_s": end, "sharpness_to_frequency_hz": list(SHARPNESS_HZ),
+            "clamped": list(pat.clamped), "not_played": list(pat.not_played)}
+
+
+def format_summary(s: dict[str, Any]) -> str:
+    """Human-readable form of :func:`summary`."""
+    ev = ", ".join(f"{v} {k}" for k, v in s["events"].items())
+    lines = [f"{s.get('file') or 'ahap'}: Apple AHAP version {s['version']:g}, {ev}, {s['duration_s']:.3f} s; "
+             f"sharpness 0..1 -> {s['sharpness_to_frequency_hz'][0]:g}..{s['sharpness_to_frequency_hz'][1]:g} Hz"]
+    lines += [f"  clamped: {c['path']}: {c['change']}" for c in s["clamped"]]
+    lines += [f"  not played: {u['path']}: {u['what']}: {u['reason']}" for u in s["not_played"]]
+    return "\n".join(lines)

@@ -1,0 +1,157 @@
+"""Apple AHAP import and play: events, parameters, curves and dynamic parameters become
+the amplitude and frequency the format defines; bad AHAP is a named error with its JSON
+path; audio events are reported by name, not played. Every file is written here from the
+format's structure."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from hapticsdk.cli import main
+from hapticsdk.errors import FormatError
+from hapticsdk.interop.ahap import SHARPNESS_HZ, parse_ahap, sharpness_to_hz, to_haptic_file
+from hapticsdk.interop.hjif_synth import synthesize
+
+FS = 8000.0
+
+
+def event(t, kind="HapticContinuous", dur=None, intensity=None, sharpness=None, **extra):
+    e = {"Time": t, "EventType": kind, **extra}
+    if dur is not None:
+        e["EventDuration"] = dur
+    prm = []
+    if intensity is not None:
+        prm.append({"ParameterID": "HapticIntensity", "ParameterValue": intensity})
+    if sharpness is not None:
+        prm.append({"ParameterID": "HapticSharpness", "ParameterValue": sharpness})
+    e["EventParameters"] = prm
+    return {"Event": e}
+
+
+def curve(pid, t, points):
+    return {"ParameterCurve": {"ParameterID": pid, "Time": t,
+                               "ParameterCurveControlPoints": [{"Time": a, "ParameterValue": v} for a, v in points]}}
+
+
+def ahap(*entries):
+    return {"Version": 1.0, "Metadata": {"Project": "test"}, "Pattern": list(entries)}
+
+
+def synth(doc):
+    return synthesize(to_haptic_file(parse_ahap(doc)), fs=FS).channels[0].samples
+
+
+def test_sharpness_maps_linearly_onto_the_documented_band():
+    assert sharpness_to_hz(0.0) == SHARPNESS_HZ[0] == 65.0
+    assert sharpness_to_hz(1.0) == SHARPNESS_HZ[1] == 300.0
+    assert sharpness_to_hz(0.5) == pytest.approx(182.5)
+
+
+def test_a_continuous_event_is_a_sine_at_its_sharpness_and_intensity():
+    x = synth(ahap(event(0.1, dur=0.5, intensity=0.6, sharpness=0.4)))
+    t = np.arange(x.size) / FS
+    f = 65.0 + 0.4 * 235.0
+    inside = (t >= 0.1) & (t <= 0.6)
+    np.testing.assert_allclose(x[inside], 0.6 * np.sin(2 * np.pi * f * (t[inside] - 0.1)), atol=1e-9)
+    assert np.all(x[t < 0.1] == 0)
+
+
+def test_an_intensity_curve_multiplies_and_a_sharpness_curve_adds():
+    doc = ahap(event(0.0, dur=1.0, intensity=0.8, sharpness=0.2),
+               curve("HapticIntensityControl", 0.0, [(0.0, 1.0), (1.0, 0.0)]),
+               curve("HapticSharpnessControl", 0.0, [(0.0, 0.0), (1.0, 0.5)]))
+    h = to_haptic_file(parse_ahap(doc))
+    kfs = h.perceptions[0].channels[0].bands[0].effects[0].keyframes
+    # the envelope is intensity x control; frequency follows sharpness + control
+    assert kfs[0].amplitude_modulation == pytest.approx(0.8) and kfs[-1].amplitude_modulation == pytest.approx(0.0)
+    assert kfs[0].frequency_modulation == pytest.approx(sharpness_to_hz(0.2))
+    assert kfs[-1].frequency_modulation == pytest.approx(sharpness_to_hz(0.7))
+    x = synth(doc)
+    t = np.arange(x.size) / FS
+    # envelope at mid-time: 0.8 x 0.5
+    mid = (t > 0.49) & (t < 0.51)
+    assert np.max(np.abs(x[mid])) == pytest.approx(0.4, abs=0.01)
+
+
+def test_a_dynamic_parameter_is_a_step():
+    doc = ahap(event(0.0, dur=1.0, intensity=1.0, sharpness=0.5),
+               {"Parameter": {"ParameterID": "HapticIntensityControl", "Time": 0.5, "ParameterValue": 0.25}})
+    x = synth(doc)
+    t = np.arange(x.size) / FS
+    assert np.max(np.abs(x[(t > 0.3) & (t < 0.49)])) == pytest.approx(1.0, abs=1e-3)
+    assert np.max(np.abs(x[(t > 0.51) & (t < 0.9)])) == pytest.approx(0.25, abs=1e-3)
+
+
+def test_a_transient_is_two_periods_at_its_sharpness():
+    x = synth(ahap(event(0.2, kind="HapticTransient", intensity=0.7, sharpness=1.0)))
+    nz = np.flatnonzero(np.abs(x) > 1e-12)
+    length_s = (nz[-1] - nz[0] + 1) / FS
+    assert length_s == pytest.approx(2.0 / 300.0, abs=2.0 / FS)
+    assert np.max(np.abs(x)) == pytest.approx(0.7, abs=0.01)
+    assert nz[0] / FS == pytest.approx(0.2, abs=1.0 / FS)
+
+
+def test_out_of_range_values_are_clamped_and_reported():
+    pat = parse_ahap(ahap(event(0.0, dur=45.0, intensity=1.7, sharpness=-0.2)))
+    paths = {c["path"] for c in pat.clamped}
+    assert paths == {"Pattern[0].Event.EventDuration", "Pattern[0].Event.EventParameters[0].ParameterValue",
+                     "Pattern[0].Event.EventParameters[1].ParameterValue"}
+    assert pat.events[0].duration_s == 30.0 and pat.events[0].intensity == 1.0 and pat.events[0].sharpness == 0.0
+
+
+def test_audio_events_are_reported_by_name_not_played():
+    pat = parse_ahap(ahap({"Event": {"Time": 0, "EventType": "AudioCustom", "EventWaveformPath": "click.wav"}},
+                          event(0.0, dur=0.1, intensity=0.5, sharpness=0.5)))
+    assert len(pat.events) == 1
+    assert pat.not_played[0]["path"] == "Pattern[0].Event" and "AudioCustom" in pat.not_played[0]["what"]
+    assert "click.wav" in pat.not_played[0]["what"]
+
+
+@pytest.mark.parametrize("doc,path,words", [
+    ({"Version": 1}, "$", "'Pattern'"),
+    (ahap({"Event": {"EventType": "HapticTransient"}}), "Pattern[0].Event", "'Time'"),
+    (ahap({"Event": {"Time": "0", "EventType": "HapticTransient"}}), "Pattern[0].Event.Time", "number"),
+    (ahap({"Event": {"Time": 0, "EventType": "HapticBuzz"}}), "Pattern[0].Event.EventType", "HapticBuzz"),
+    (ahap({"Event": {"Time": 0, "EventType": "HapticContinuous"}}), "Pattern[0].Event", "'EventDuration'"),
+    (ahap(event(0, dur=0.1), {"Event": {}, "Parameter": {}}), "Pattern[1]", "exactly one"),
+    (ahap(curve("HapticIntensityControl", 0, [(0.5, 1), (0.2, 0)])),
+     "Pattern[0].ParameterCurve.ParameterCurveControlPoints[1].Time", "order"),
+    (ahap({"Event": {"Time": 0, "EventType": "HapticTransient",
+                     "EventParameters": [{"ParameterID": "HapticIntensity", "ParameterValue": None}]}}),
+     "Pattern[0].Event.EventParameters[0].ParameterValue", "number"),
+    ([], "$", "object"),
+])
+def test_bad_ahap_is_a_named_error_with_its_path(doc, path, words):
+    with pytest.raises(FormatError) as ei:
+        parse_ahap(doc)
+    assert ei.value.field == path and words in str(ei.value)
+
+
+def test_cli_import_and_play(tmp_path, capsys):
+    p = tmp_path / "boing.ahap"
+    p.write_text(json.dumps(ahap(event(0.0, kind="HapticTransient", intensity=0.8, sharpness=0.4),
+                                 event(0.015, dur=0.25, intensity=0.8, sharpness=0.4),
+                                 curve("HapticIntensityControl", 0.015, [(0, 1), (0.1, 0.5), (0.25, 0.0)]),
+                                 {"Event": {"Time": 0, "EventType": "AudioContinuous"}})), encoding="utf-8")
+    assert main(["import", str(p), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["format"] == "AHAP" and s["events"] == {"HapticTransient": 1, "HapticContinuous": 1}
+    assert s["not_played"][0]["what"] == "AudioContinuous event"
+    assert main(["play", str(p), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    piezo, coil = rep["actuators"]["piezo-virtual"], rep["actuators"]["voicecoil-virtual"]
+    assert piezo["active_ticks"] > 200 and piezo["output_max_v"] > 0
+    assert coil["active_ticks"] > 200
+    assert any(u["what"] == "AudioContinuous event" for u in rep["not_played"])
+
+
+def test_cli_bad_ahap_exits_2_naming_the_path(tmp_path, capsys):
+    p = tmp_path / "bad.ahap"
+    p.write_text(json.dumps(ahap({"Event": {"Time": -1, "EventType": "HapticTransient",
+                                            "EventParameters": [{"ParameterID": "HapticSharpness",
+                                                                 "ParameterValue": "high"}]}})), encoding="utf-8")
+    assert main(["play", str(p)]) == 2
+    assert "Pattern[0].Event.EventParameters[0].ParameterValue" in capsys.readouterr().err
