@@ -41,6 +41,7 @@ Mapping (see ``docs/interop.md``):
 
 from __future__ import annotations
 
+import bisect
 import json
 import math
 import os
@@ -49,6 +50,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import FormatError
+from .budget import ContentBudgetError
 from .hjif_model import MAX_DEPTH, MAX_FILE_BYTES, Band, Channel, Effect, HapticFile, Keyframe, Perception
 
 #: sharpness 0 and 1 map to these frequencies (Hz): MPEG reference AHAP encoder's band
@@ -61,9 +63,15 @@ DEFAULT_INTENSITY = 1.0
 DEFAULT_SHARPNESS = 0.5
 #: time base of the converted content (ticks per second): 0.1 ms
 TIMESCALE = 10000
-#: most Pattern entries read: the ``.hjif`` synthesis budget (see docs/safety.md) is what
-#: bounds the work; this caps the conversion's own lists
+#: most Pattern entries read (each costs O(log n) to convert; the synthesis budgets of
+#: :mod:`hapticsdk.interop.budget` bound what they cost to play)
 MAX_PATTERN_ENTRIES = 100_000
+#: most control changes converted into the keyframes of one continuous event: the
+#: keyframes per effect the .hjif reader rewrites at most (the same budget)
+MAX_EVENT_KEYFRAMES = 4096
+#: most keyframes one conversion writes (overlapping events each copy the control changes
+#: inside them): 2^18 keyframes are some 50 MiB of Python objects
+MAX_TOTAL_KEYFRAMES = 2 ** 18
 
 HAPTIC_EVENTS = ("HapticTransient", "HapticContinuous")
 AUDIO_EVENTS = ("AudioContinuous", "AudioCustom")
@@ -97,14 +105,22 @@ class AhapControl:
     points: list[tuple[float, float]]
 
     def value(self, t: float) -> float:
-        """Value at ``t`` >= start (linear between points, held after the last)."""
+        """Value at ``t`` >= start (linear between points, held after the last); O(log n)."""
         pts = self.points
         if t <= pts[0][0]:
             return pts[0][1]
-        for (t0, v0), (t1, v1) in zip(pts, pts[1:]):
-            if t <= t1:
-                return v1 if t1 == t0 else v0 + (v1 - v0) * (t - t0) / (t1 - t0)
-        return pts[-1][1]
+        if t >= pts[-1][0]:
+            return pts[-1][1]
+        j = bisect.bisect_left(self._times(), t)
+        (t0, v0), (t1, v1) = pts[j - 1], pts[j]
+        return v1 if t1 == t0 else v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+
+    def _times(self) -> list[float]:
+        cached = self.__dict__.get("_t")
+        if cached is None or len(cached) != len(self.points):
+            cached = [p[0] for p in self.points]
+            self.__dict__["_t"] = cached
+        return cached
 
 
 @dataclass
@@ -118,13 +134,37 @@ class AhapPattern:
     clamped: list[dict[str, str]] = field(default_factory=list)
 
     def control(self, parameter: str, t: float, *, before: bool = False) -> float:
-        """Value of control ``parameter`` at ``t`` (``before``: just before ``t``)."""
-        live = [c for c in self.controls if c.parameter == parameter
-                and (c.start_s < t if before else c.start_s <= t)]
-        if not live:
+        """Value of control ``parameter`` at ``t`` (``before``: just before ``t``): the
+        latest control of that parameter started by then (the later one in the file when
+        two start together); O(log n)."""
+        starts, ctrls = self._index(parameter)
+        j = (bisect.bisect_left if before else bisect.bisect_right)(starts, t)
+        if j == 0:
             return CONTROLS[parameter][2]
-        cur = max(live, key=lambda c: c.start_s)
-        return min(CONTROLS[parameter][1], max(CONTROLS[parameter][0], cur.value(t)))
+        return min(CONTROLS[parameter][1], max(CONTROLS[parameter][0], ctrls[j - 1].value(t)))
+
+    def _index(self, parameter: str) -> tuple[list[float], list[AhapControl]]:
+        key = ("_idx", parameter)
+        cached = self.__dict__.get(key)
+        if cached is None:
+            ctrls = sorted((c for c in self.controls if c.parameter == parameter), key=lambda c: c.start_s)
+            cached = ([c.start_s for c in ctrls], ctrls)
+            self.__dict__[key] = cached
+        return cached
+
+    def change_times(self) -> tuple[list[float], set[float]]:
+        """Sorted times at which any control changes slope or steps, and the step times."""
+        cached = self.__dict__.get("_changes")
+        if cached is None:
+            times: set[float] = set()
+            steps: set[float] = set()
+            for c in self.controls:
+                times.add(c.start_s)
+                steps.add(c.start_s)
+                times.update(p[0] for p in c.points)
+            cached = (sorted(times), steps)
+            self.__dict__["_changes"] = cached
+        return cached
 
 
 # ------------------------------------------------------------------------ reading
@@ -296,14 +336,12 @@ def _ticks(t_s: float) -> int:
 
 def _continuous(pat: AhapPattern, ev: AhapEvent) -> Effect:
     t0, t1 = ev.time_s, ev.time_s + ev.duration_s
-    cuts = {t0, t1}
-    steps: set[float] = set()
-    for c in pat.controls:
-        for (t, _) in [(c.start_s, None)] + list(c.points):
-            if t0 < t < t1:
-                cuts.add(t)
-                if len(c.points) == 1 or t == c.start_s:
-                    steps.add(t)
+    times, steps = pat.change_times()
+    inner = times[bisect.bisect_right(times, t0):bisect.bisect_left(times, t1)]
+    if len(inner) > MAX_EVENT_KEYFRAMES:
+        raise ContentBudgetError(f"{len(inner)} control changes inside one continuous event, above the "
+                                 f"{MAX_EVENT_KEYFRAMES} converted (docs/safety.md)", field=ev.path)
+    cuts = {t0, t1, *inner}
 
     def kf(t: float, before: bool) -> Keyframe:
         a = ev.intensity * pat.control("HapticIntensityControl", t, before=before)
@@ -332,7 +370,17 @@ def to_haptic_file(pat: AhapPattern, *, source: str = "ahap") -> HapticFile:
     events and a band of transients (bands add up, as MPEG's synthesiser adds them).
     Amplitudes are fractions of the actuator's full scale."""
     lo, hi = int(math.floor(SHARPNESS_HZ[0])), int(math.ceil(SHARPNESS_HZ[1]))
-    cont = sorted((_continuous(pat, e) for e in pat.events if e.kind == "HapticContinuous"), key=lambda x: x.position)
+    cont = []
+    total = 0
+    for e in pat.events:
+        if e.kind != "HapticContinuous":
+            continue
+        cont.append(_continuous(pat, e))
+        total += len(cont[-1].keyframes)
+        if total > MAX_TOTAL_KEYFRAMES:
+            raise ContentBudgetError(f"continuous events would need more than {MAX_TOTAL_KEYFRAMES} keyframes "
+                                     "(overlapping events under many control changes; docs/safety.md)", field=e.path)
+    cont.sort(key=lambda x: x.position)
     tran = sorted((_transient(pat, e) for e in pat.events if e.kind == "HapticTransient"), key=lambda x: x.position)
     bands = []
     if cont:

@@ -251,11 +251,17 @@ class Perception:
                 else self.perception_unit_exponent)
 
     def library_effect(self, effect_id: int) -> Effect | None:
-        """The effect library entry with ``effect_id``, or ``None``."""
-        for e in self.effect_library:
-            if e.id == effect_id:
-                return e
-        return None
+        """The effect library entry with ``effect_id``, or ``None`` (an index built on
+        first use and rebuilt when the library's length changes: one lookup costs O(1),
+        not O(library), so references cost linear time in the file's size)."""
+        idx = self.__dict__.get("_library_index")
+        if idx is None or idx[0] != len(self.effect_library):
+            table: dict[int | None, Effect] = {}
+            for e in self.effect_library:
+                table.setdefault(e.id, e)
+            idx = (len(self.effect_library), table)
+            self.__dict__["_library_index"] = idx
+        return idx[1].get(effect_id)
 
     def reference_device(self, device_id: int | None) -> ReferenceDevice | None:
         """The reference device with ``device_id``, or ``None``."""

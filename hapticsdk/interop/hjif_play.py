@@ -36,8 +36,10 @@ import numpy as np
 
 from ..errors import ValidationError
 from .hjif_model import HapticFile
+from .budget import check_output, check_work
 from .hjif_synth import (
     MAX_SYNTH_SECONDS,
+    effect_work,
     control_track,
     file_duration_s,
     is_vibrotactile,
@@ -154,6 +156,9 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
     n = int(math.ceil(dur / tick_s - 1e-9))
     times = np.arange(n) * tick_s
     plan, routing, skipped = _route(hfile, list(actuators))
+    # budgets (docs/safety.md) before any track is computed
+    check_output(len(plan), n, field="perceptions")
+    check_work(*effect_work(hfile, [(pi, ci) for pi, ci, _ in plan], dur, 1.0 / tick_s), len(plan), n)
     report = PlayReport(seconds=n * tick_s, tick_s=tick_s, realtime=realtime, routing=routing,
                         not_played=unsupported_parts(hfile) + skipped)
 

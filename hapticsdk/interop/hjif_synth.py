@@ -33,11 +33,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
 from ..errors import FormatError, ValidationError
+from .budget import check_output, check_rate, check_work
 from .hjif_model import Band, Effect, HapticFile, Keyframe, Perception
 
 #: modalities synthesised as vibration
@@ -309,6 +310,17 @@ def unsupported_parts(hfile: HapticFile) -> list[dict[str, str]]:
     return out
 
 
+def played_effects(p: Perception, ch: Any) -> Iterator[tuple[Band, Effect]]:
+    """``(band, resolved effect)`` of every effect of channel ``ch`` that is synthesised."""
+    for b in ch.bands:
+        if b.band_type not in SYNTH_BAND_TYPES:
+            continue
+        for e in b.effects:
+            r = resolve_effect(p, e)
+            if r.effect_type != "Composite":
+                yield b, r
+
+
 def file_duration_s(hfile: HapticFile) -> float:
     """End of the last synthesised effect of any vibrotactile channel (s)."""
     ts = hfile.ticks_per_second
@@ -317,22 +329,45 @@ def file_duration_s(hfile: HapticFile) -> float:
         if not is_vibrotactile(p):
             continue
         for ch in p.channels:
-            for b in ch.bands:
-                if b.band_type not in SYNTH_BAND_TYPES:
-                    continue
-                for e in b.effects:
-                    r = resolve_effect(p, e)
-                    if r.effect_type == "Composite":
-                        continue
-                    end = max(end, r.position + effect_length_ticks(r, b.band_type, ts))
+            for b, r in played_effects(p, ch):
+                end = max(end, r.position + effect_length_ticks(r, b.band_type, ts))
     return end / ts
+
+
+def effect_work(hfile: HapticFile, channels: list[tuple[int, int]], end_s: float, rate_hz: float
+                ) -> tuple[float, str]:
+    """Effect samples that synthesising ``channels`` ((perception, channel) indices) up to
+    ``end_s`` at ``rate_hz`` evaluates, and the path of the channel that costs most: each
+    effect costs the samples of its own window (linear in the number of effects; nothing
+    is evaluated)."""
+    ts = hfile.ticks_per_second
+    end = end_s * ts
+    work = 0.0
+    heaviest, most = "perceptions", -1.0
+    for pi, ci in channels:
+        p = hfile.perceptions[pi]
+        before = work
+        for b, r in played_effects(p, p.channels[ci]):
+            lo = max(0.0, float(r.position))
+            hi = min(end, r.position + effect_length_ticks(r, b.band_type, ts))
+            if hi >= lo:
+                work += (hi - lo) / ts * rate_hz + 1.0
+        if work - before > most:
+            heaviest, most = p.channels[ci].path, work - before
+    return work, heaviest
 
 
 def synthesize(hfile: HapticFile, *, fs: float = 8000.0, seconds: float | None = None) -> Synthesis:
     """Synthesise every vibrotactile channel of ``hfile`` at ``fs`` (Hz) for ``seconds``
-    (default: to the end of the last effect, at most :data:`MAX_SYNTH_SECONDS`)."""
+    (default: to the end of the last effect, at most :data:`MAX_SYNTH_SECONDS`).
+
+    Raises:
+        ContentBudgetError: the output or the work of overlapping effects is above the
+            budgets of :mod:`hapticsdk.interop.budget` (checked before anything is allocated).
+    """
     if not (math.isfinite(fs) and fs > 0):
         raise ValidationError(f"sample rate must be > 0 Hz, got {fs!r}", field="fs")
+    check_rate(fs, field="fs")
     ts = hfile.ticks_per_second
     unsupported = unsupported_parts(hfile)
     dur = file_duration_s(hfile) if seconds is None else float(seconds)
@@ -342,6 +377,9 @@ def synthesize(hfile: HapticFile, *, fs: float = 8000.0, seconds: float | None =
         raise ValidationError(f"content lasts {dur:.1f} s, above the {MAX_SYNTH_SECONDS:g} s synthesised at once; "
                               "pass a shorter duration (--seconds)", field="seconds")
     n = int(round(dur * fs)) + 1
+    chans = [(pi, ci) for pi, p in enumerate(hfile.perceptions) if is_vibrotactile(p) for ci in range(len(p.channels))]
+    check_output(len(chans), n, field="perceptions")
+    check_work(*effect_work(hfile, chans, dur, fs), len(chans), n)
     t_ticks = np.arange(n) / fs * ts
     channels: list[ChannelSignal] = []
     for pi, p in enumerate(hfile.perceptions):

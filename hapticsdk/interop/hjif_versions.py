@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import FormatError
+from .budget import MAX_REORDER_KEYFRAMES, ContentBudgetError
 
 #: the shapes recognised, oldest first: (label, what identifies it)
 RELEASES = (
@@ -232,6 +233,9 @@ def _effect(e: dict[str, Any], path: str, band_type: Any, rep: VersionReport) ->
         e["keyframes"] = [kfs[i] for i in sorted(range(len(kfs)), key=lambda i: seq[i])]
         rep.add(f"{path}.keyframes[{first_bad}]", f"keyframes out of order ({why}): sorted by position")
         return
+    if len(kfs) > MAX_REORDER_KEYFRAMES:
+        raise ContentBudgetError(f"{len(kfs)} keyframes out of order ({why}); at most {MAX_REORDER_KEYFRAMES} are "
+                                 "rewritten as the reference reads them (docs/safety.md)", field=f"{path}.keyframes")
     e["keyframes"] = _reference_reading(kfs)
     rep.add(f"{path}.keyframes[{first_bad}]",
             f"keyframes out of order ({why}): rewritten as the reference reader reads them "
