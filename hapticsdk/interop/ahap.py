@@ -87,6 +87,9 @@ def sharpness_to_hz(s: float) -> float:
 
 @dataclass
 class AhapEvent:
+    """A haptic event: its JSON path, type, start (s), duration (s, continuous events),
+    intensity and sharpness (0..1, clamped)."""
+
     path: str
     kind: str
     time_s: float

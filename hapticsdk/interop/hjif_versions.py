@@ -40,8 +40,9 @@ What is normalised, and how the reference reads it:
   becomes two keyframes at the same position. Transient and Curve bands are sorted (stable):
   each transient keyframe is its own pulse, and the reference's curve synthesis offsets every
   keyframe by the first one;
-- wavelet effects that carry keyframes and no ``wavelet_stream`` (before CRM4 the decoded
-  samples were keyframes): kept out of the wavelet check and reported; not played.
+- wavelet effects that carry keyframes and no ``wavelet_stream`` (before CRM4 the encoded
+  wavelet coefficients were keyframes, which the reference synthesiser decodes first):
+  reported and not played, as wavelet content of every version.
 
 A document no release reads still fails in :func:`~hapticsdk.interop.hjif_model.parse_hjif`
 with a :class:`~hapticsdk.errors.FormatError` naming the JSON path.
@@ -79,7 +80,7 @@ class VersionReport:
         recognised: label of the reference release whose reader reads this shape.
         version_field: the document's ``version`` string as written (``None`` when absent).
         changes: one ``{"path", "change"}`` per normalisation, by JSON path.
-        legacy_wavelet_samples: paths of wavelet effects that carry pre-2024 sample keyframes.
+        legacy_wavelet_samples: paths of wavelet effects that carry pre-2024 coefficient keyframes.
     """
 
     recognised: str
@@ -215,7 +216,7 @@ def _effect(e: dict[str, Any], path: str, band_type: Any, rep: VersionReport) ->
     if band_type == "WaveletWave":
         if "wavelet_stream" not in e and e.get("effect_type", "Basis") == "Basis":
             rep.legacy_wavelet_samples.append(path)
-            rep.add(f"{path}.keyframes", f"{len(kfs)} decoded wavelet samples as keyframes (before CRM4); not played")
+            rep.add(f"{path}.keyframes", f"{len(kfs)} wavelet coefficients as keyframes (before CRM4): not decoded, not played")
             del e["keyframes"]
             e["wavelet_stream"] = ""
         return

@@ -87,3 +87,15 @@ def mutated(fn: Any) -> dict[str, Any]:
     d = copy.deepcopy(valid_doc())
     fn(d)
     return d
+
+
+def plan_for(material: str) -> Any:
+    """The compiled plan of a library material with every dimension kept."""
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.scene import Scene
+    from hapticsdk.scene.model import _merge
+
+    s = Scene.for_material(material)
+    s = Scene(objects=s.objects, devices=s.devices, settings=_merge(s.settings, {"importance": {"enabled": False}}),
+              name=s.name)
+    return compile_scene(s)

@@ -18,6 +18,7 @@ import json
 
 import numpy as np
 import pytest
+from hjif_docs import plan_for
 
 from hapticsdk.interop.hjif_export import FORMAT_VERSION, export_plan, write_hjif
 
@@ -25,14 +26,7 @@ FS = 8000.0
 
 
 def _plan(material: str):
-    from hapticsdk.compiler import compile_scene
-    from hapticsdk.scene import Scene
-    from hapticsdk.scene.model import _merge
-
-    s = Scene.for_material(material)
-    s = Scene(objects=s.objects, devices=s.devices, settings=_merge(s.settings, {"importance": {"enabled": False}}),
-              name=s.name)
-    return compile_scene(s)
+    return plan_for(material)
 
 
 def reference_decode(perception: dict, ticks: np.ndarray, timescale: int) -> np.ndarray:

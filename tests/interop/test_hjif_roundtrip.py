@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
+from hjif_docs import plan_for
 
 from hapticsdk.cli import main
 from hapticsdk.interop.hjif_export import export_plan, write_hjif
@@ -15,14 +16,7 @@ from hapticsdk.schemas_io import validate
 
 
 def _plan(material: str):
-    from hapticsdk.compiler import compile_scene
-    from hapticsdk.scene import Scene
-    from hapticsdk.scene.model import _merge
-
-    s = Scene.for_material(material)
-    s = Scene(objects=s.objects, devices=s.devices, settings=_merge(s.settings, {"importance": {"enabled": False}}),
-              name=s.name)
-    return compile_scene(s)
+    return plan_for(material)
 
 
 @pytest.fixture(scope="module")
