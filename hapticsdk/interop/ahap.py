@@ -63,6 +63,9 @@ DEFAULT_INTENSITY = 1.0
 DEFAULT_SHARPNESS = 0.5
 #: time base of the converted content (ticks per second): 0.1 ms
 TIMESCALE = 10000
+#: latest time a pattern may name (s): the largest effect position of the converted
+#: content (2^31 - 1 ticks, as in .hjif)
+MAX_TIME_S = (2 ** 31 - 1 - int((MAX_CONTINUOUS_S + 1) * TIMESCALE)) / TIMESCALE
 #: most Pattern entries read (each costs O(log n) to convert; the synthesis budgets of
 #: :mod:`hapticsdk.interop.budget` bound what they cost to play)
 MAX_PATTERN_ENTRIES = 100_000
@@ -278,6 +281,8 @@ def parse_ahap(doc: Any) -> AhapPattern:
         path = f"{path}.{kind}"
         body = _obj(e[kind], path)
         t = clamp(_num(body, "Time", path), 0.0, math.inf, f"{path}.Time")
+        if t > MAX_TIME_S:
+            raise FormatError(f"{t:g} s is beyond the latest time read ({MAX_TIME_S:.0f} s)", field=f"{path}.Time")
         if kind == "Event":
             etype = _str(body, "EventType", path)
             if etype in AUDIO_EVENTS:
@@ -321,6 +326,9 @@ def parse_ahap(doc: Any) -> AhapPattern:
             cpath = f"{path}.ParameterCurveControlPoints[{j}]"
             cp = _obj(cp, cpath)
             ct = t + clamp(_num(cp, "Time", cpath), 0.0, math.inf, f"{cpath}.Time")
+            if ct > MAX_TIME_S:
+                raise FormatError(f"{ct:g} s is beyond the latest time read ({MAX_TIME_S:.0f} s)",
+                                  field=f"{cpath}.Time")
             if pts and ct < pts[-1][0]:
                 raise FormatError(f"control points out of time order ({ct - t:g} s after {pts[-1][0] - t:g} s)",
                                   field=f"{cpath}.Time")

@@ -123,6 +123,9 @@ def test_audio_events_are_reported_by_name_not_played():
                      "EventParameters": [{"ParameterID": "HapticIntensity", "ParameterValue": None}]}}),
      "Pattern[0].Event.EventParameters[0].ParameterValue", "number"),
     ([], "$", "object"),
+    (ahap({"Event": {"Time": 1e308, "EventType": "HapticTransient"}}), "Pattern[0].Event.Time", "beyond"),
+    (ahap(curve("HapticIntensityControl", 1.0, [(0.0, 1), (1e300, 0)])),
+     "Pattern[0].ParameterCurve.ParameterCurveControlPoints[1].Time", "beyond"),
 ])
 def test_bad_ahap_is_a_named_error_with_its_path(doc, path, words):
     with pytest.raises(FormatError) as ei:
