@@ -1,6 +1,6 @@
 """Random damage to documents of every .hjif release shape and to AHAP patterns: the
 readers either accept the document or raise a FormatError naming a field, never another
-exception (seeded random cells; the shapes come from test_hjif_versions and test_ahap)."""
+exception, and what they accept synthesises (seeded random cells; the shapes come from test_hjif_versions and test_ahap)."""
 
 from __future__ import annotations
 
@@ -11,9 +11,10 @@ import pytest
 import test_ahap as ta
 import test_hjif_versions as tv
 
-from hapticsdk.errors import FormatError
+from hapticsdk.errors import ValidationError
 from hapticsdk.interop.ahap import parse_ahap, to_haptic_file
 from hapticsdk.interop.hjif_model import parse_hjif
+from hapticsdk.interop.hjif_synth import file_duration_s, synthesize
 
 JUNK = [None, True, -1, 65535, 0.0, 1e308, "", "Wave", [], {}, [{}], {"x": 1}]
 
@@ -49,8 +50,9 @@ def test_damaged_hjif_of_any_release_is_read_or_named(seed):
     rng = np.random.default_rng(seed)
     doc = _damage(BUILDERS[seed % len(BUILDERS)](), rng)
     try:
-        parse_hjif(doc)
-    except FormatError as exc:
+        h = parse_hjif(doc)
+        synthesize(h, fs=2000.0, seconds=min(2.0, file_duration_s(h)))
+    except ValidationError as exc:  # FormatError and ContentBudgetError are ValidationErrors
         assert exc.field
 
 
@@ -64,6 +66,7 @@ AHAP = ta.ahap(ta.event(0.0, kind="HapticTransient", intensity=0.8, sharpness=0.
 def test_damaged_ahap_is_read_or_named(seed):
     doc = _damage(AHAP, np.random.default_rng(seed))
     try:
-        to_haptic_file(parse_ahap(doc))
-    except FormatError as exc:
+        h = to_haptic_file(parse_ahap(doc))
+        synthesize(h, fs=2000.0, seconds=min(2.0, file_duration_s(h)))
+    except ValidationError as exc:
         assert exc.field
