@@ -61,7 +61,7 @@ def test_a_continuous_event_is_a_sine_at_its_sharpness_and_intensity():
 
 def test_an_intensity_curve_multiplies_and_a_sharpness_curve_adds():
     doc = ahap(event(0.0, dur=1.0, intensity=0.8, sharpness=0.2),
-               curve("HapticIntensityControl", 0.0, [(0.0, 1.0), (1.0, 0.0)]),
+               curve("HapticIntensityControl", 0.0, [(0.0, 1.0), (0.5, 0.5), (1.0, 0.0)]),
                curve("HapticSharpnessControl", 0.0, [(0.0, 0.0), (1.0, 0.5)]))
     h = to_haptic_file(parse_ahap(doc))
     kfs = h.perceptions[0].channels[0].bands[0].effects[0].keyframes
@@ -71,9 +71,10 @@ def test_an_intensity_curve_multiplies_and_a_sharpness_curve_adds():
     assert kfs[-1].frequency_modulation == pytest.approx(sharpness_to_hz(0.7))
     x = synth(doc)
     t = np.arange(x.size) / FS
-    # envelope at mid-time: 0.8 x 0.5
+    # envelope at mid-time: 0.8 x 0.5 (a multiplier, not an offset: 0.8 + 0.5 - 1 would be 0.3)
     mid = (t > 0.49) & (t < 0.51)
     assert np.max(np.abs(x[mid])) == pytest.approx(0.4, abs=0.01)
+    assert kfs[1].amplitude_modulation == pytest.approx(0.4)
 
 
 def test_a_dynamic_parameter_is_a_step():
