@@ -361,7 +361,10 @@ def _continuous(pat: AhapPattern, ev: AhapEvent) -> Effect:
 
     kfs: list[Keyframe] = []
     for t in sorted(cuts):
-        if t in steps:
+        if t == t1 and t1 > t0:  # a change exactly at the end does not play
+            kfs.append(kf(t, True))
+            continue
+        if t in steps and t != t0:  # a step inside: the value before it, then after
             kfs.append(kf(t, True))
         kfs.append(kf(t, False))
     return Effect("Basis", _ticks(t0), phase=0.0, base_signal="Sine", keyframes=kfs, path=ev.path)
