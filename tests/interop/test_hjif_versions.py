@@ -223,3 +223,34 @@ def test_play_plays_every_release_shape(tmp_path, capsys, build):
     piezo = rep["actuators"]["piezo-virtual"]
     assert piezo["active_ticks"] > 500 and piezo["output_max_v"] > 0
     assert {90.0, 200.0} <= set(piezo["frequency_hz"])
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_random_file_orders_read_as_the_reference_reads_them(seed):
+    # random keyframe lists in random order (sentinel positions among them): the SDK's
+    # amplitude and frequency over the effect's span equal the reference's reading,
+    # written from its definition above, everywhere but at the steps of that reading
+    from hapticsdk.interop.hjif_synth import amplitude_track, frequency_breakpoints, frequency_track
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 9))
+    pos = [int(p) for p in rng.choice([0, 10, 50, 120, 300, 450, 700, 65534, 65535], size=n)]
+    kfs = []
+    for p in pos:
+        amp = float(np.round(rng.uniform(0, 1), 3)) if rng.random() < 0.8 else None
+        freq = int(rng.integers(60, 400)) if rng.random() < 0.6 else None
+        kfs.append(kf(p, amp, freq))
+    h = parse_hjif(single(basis(0, copy.deepcopy(kfs)), lo=0, hi=1000))
+    eff = h.perceptions[0].channels[0].bands[0].effects[0]
+    span = max(k.relative_position for k in eff.keyframes) if eff.keyframes else 0
+    positioned = [k["relative_position"] for k in kfs]
+    assert span == positioned[-1]  # the reference's length: the last keyframe in file order
+    t = np.linspace(0, span, 997)
+    a_ref = np.array([reference_reading(kfs, "amplitude_modulation", x, 1.0) for x in t])
+    f_ref = np.array([reference_reading(kfs, "frequency_modulation", x, 0.0) for x in t])
+    a_sdk = amplitude_track(eff, t)
+    xs, fs = frequency_breakpoints(eff, 0, 1000)
+    f_sdk = frequency_track(xs, fs, t)
+    at_step = np.isin(t, [float(p) for p in positioned])
+    np.testing.assert_allclose(a_sdk[~at_step], a_ref[~at_step], atol=1e-9)
+    np.testing.assert_allclose(f_sdk[~at_step], f_ref[~at_step], atol=1e-6)
