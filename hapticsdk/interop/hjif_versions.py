@@ -273,10 +273,13 @@ def _ref_line(t0: float, a0: float, t1: float, a1: float, x: float) -> float:
 
 def _reading(kfs: list[dict[str, Any]], key: str, x: float, default: float | None) -> float | None:
     """Value of ``key`` at ``x`` as the reference synthesiser reads a file-ordered list:
-    the first keyframe with the value (and a position) at or after ``x`` in file order,
+    the first keyframe with the value (and a position; for frequencies a keyframe without
+    one counts as position 0) at or after ``x`` in file order,
     interpolated with the keyframe before it in file order; after the last, the last
     keyframe's value; ``default`` without any."""
     have = [(k.get("relative_position"), _num(k.get(key))) for k in kfs]
+    if key == "frequency_modulation":  # the reference's frequency search takes no position as 0
+        have = [(0 if p is None else p, v) for p, v in have]
     idx = [i for i, (_, v) in enumerate(have) if v is not None]
     if not idx:
         return default
