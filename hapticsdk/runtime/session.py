@@ -96,8 +96,12 @@ ISOLATIONS = ("process", "thread")
 # -- shared-memory layout (float64 slots) ----------------------------------------------
 _SEQ = 0
 _STATE = slice(1, 24)
-#: reads slots 0..23 (the sequence number and the state) from the buffer's bytes
-_read_state = struct.Struct(f"={_STATE.stop}d").unpack_from
+#: a copy of the sequence number after the state: the servo sets it odd *before* it
+#: writes the state and even after, slot 0 even after the state (see ``_Servo.run``), so
+#: one ascending read of slots 0..24 is consistent when slots 0 and 24 are equal and even
+_SEQ_END = 24
+#: reads slots 0..24 (sequence number, state, sequence copy) from the buffer's bytes in one call
+_read_state = struct.Struct(f"={_SEQ_END + 1}d").unpack_from
 _new_tuple = tuple.__new__
 (_T, _PX, _PY, _PZ, _VX, _VY, _VZ, _F, _OBJ, _PEN, _TICKS, _OVERRUNS, _SKIPPED, _RERR, _CLAMPS,
  _TICK_US, _TICK_MAX_US, _MISSED, _PUB, _NEAR, _PAUSED_S, _SWITCHES, _SWITCHED_AT) = range(1, 24)
@@ -105,8 +109,13 @@ _HEARTBEAT, _STOP, _PAUSE, _STATUS, _PID, _REASON, _READY = range(32, 39)
 _EV_W = 64
 _EV0 = 65
 _EV_CAP = 1024
-_EV_REC = 4  # t, kind, object id, value
-_NSLOTS = _EV0 + _EV_CAP * _EV_REC
+_EV_REC = 6  # t, kind, object id, value, detail (clamps: actuator and field), count
+#: acknowledgements of material switches: a ring of (sequence number, tick, servo time,
+#: monotonic time of the tick's publication); entry ``seq % _ACK_CAP``
+_ACK0 = _EV0 + _EV_CAP * _EV_REC
+_ACK_CAP = 256
+_ACK_REC = 4
+_NSLOTS = _ACK0 + _ACK_CAP * _ACK_REC
 
 # servo status
 _STARTING, _RUNNING, _STOPPED, _FAILED = 0.0, 1.0, 2.0, 3.0
@@ -114,7 +123,7 @@ _STARTING, _RUNNING, _STOPPED, _FAILED = 0.0, 1.0, 2.0, 3.0
 #: event kinds (the ``kind`` of a :class:`SessionEvent`)
 EVENT_KINDS = ("contact_enter", "contact_leave", "renderer_error", "clamp", "overrun", "skipped_ticks",
                "fault", "material_switched", "app_lost", "signal", "stopped", "paused", "resumed",
-               "material_refined")
+               "material_refined", "servo_died")
 _KIND = {k: i for i, k in enumerate(EVENT_KINDS)}
 
 _STOP_REASONS = ("", "close", "app_lost", "heartbeat", "signal", "fault", "error")
@@ -165,16 +174,37 @@ class SessionState(NamedTuple):
     switched_at: float
 
 
+#: limits of an actuator's safety layer a ``clamp`` event can name (``SessionEvent.field``),
+#: with the command field each one bounds; other names are reported as ``"other"``
+CLAMP_FIELDS = (("max_force_n", "force_n"), ("max_velocity_mm_s", "force_n"),
+                ("max_stiffness_n_per_mm", "force_n"), ("max_force_rate_n_per_tick", "force_n"),
+                ("negative_amplitude", "amplitude"), ("max_amplitude", "amplitude"),
+                ("min_amplitude", "amplitude"), ("frequency_range_hz", "frequency_hz"), ("other", ""))
+_CLAMP_INDEX = {k: i for i, (k, _) in enumerate(CLAMP_FIELDS)}
+
+
 @dataclass(frozen=True)
 class SessionEvent:
     """One event: ``kind`` (one of :data:`EVENT_KINDS`), servo time ``t`` (s), the
     ``object`` it concerns (name, or None) and a ``value`` (a count for counters, the
-    signal number for ``signal``, ...)."""
+    signal number for ``signal``, ...).
+
+    ``clamp`` events name the ``actuator`` (its role, e.g. ``"force"``), the safety
+    limit that bit (``field``, one of :data:`CLAMP_FIELDS`' names, e.g.
+    ``"max_force_n"``), the ``value`` of the bounded command field actually sent on the
+    last tick (N, Hz or the actuator's amplitude unit) and how many ticks it bit since
+    the last such event (``count``; the servo reports every 10 ticks). ``servo_died``
+    (delivered to callbacks, :meth:`Session.on_event`) carries the reason in
+    ``message`` and the exit status in ``value`` (NaN when unknown)."""
 
     t: float
     kind: str
     object: str | None
     value: float
+    actuator: str | None = None
+    field: str | None = None
+    count: int = 0
+    message: str | None = None
 
 
 @dataclass
@@ -190,6 +220,10 @@ class Retarget:
         intensities: the perception model's intensities for the features sent (0..1).
         refined: set when the background solve has finished; ``refined_features`` its
             answer (None before, or when it failed), ``refined_sent`` whether it was sent.
+        switch: the acknowledgement of the switch sent now
+            (:class:`~hapticsdk.runtime.callbacks.SwitchHandle`): :meth:`wait` for it,
+            then :attr:`tick` and :attr:`t` say where it took effect;
+            ``refined_switch`` the same for the refined answer, when one was sent.
     """
 
     object: str
@@ -202,14 +236,32 @@ class Retarget:
     refined: threading.Event = field(default_factory=threading.Event, repr=False)
     refined_features: dict[str, dict[str, float]] | None = None
     refined_sent: bool = False
+    switch: Any = field(default=None, repr=False)
+    refined_switch: Any = field(default=None, repr=False)
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait until the servo rendered the switch (True), or ``timeout`` s passed
+        (False); raises :class:`~hapticsdk.errors.ServoProcessDied` when the servo died
+        first. See :class:`~hapticsdk.runtime.callbacks.SwitchHandle`."""
+        return self.switch.wait(timeout)
+
+    @property
+    def tick(self) -> int | None:
+        """Index of the first servo tick that rendered this switch (None until then)."""
+        return self.switch.tick if self.switch is not None and self.switch.done() else None
+
+    @property
+    def t(self) -> float | None:
+        """Servo time (s) of that tick (None until then)."""
+        return self.switch.t if self.switch is not None and self.switch.done() else None
 
 
 def _state_from(vals: Sequence[float], names: Mapping[int, str], now: float | None = None) -> SessionState:
-    """A :class:`SessionState` from slots 0..23 of the buffer (the sequence number
-    first) and the object names by id; ``age_s`` against ``now`` (``time.monotonic()``,
-    read here when None)."""
+    """A :class:`SessionState` from slots 0..24 of the buffer (the sequence number
+    first and last) and the object names by id; ``age_s`` against ``now``
+    (``time.monotonic()``, read here when None)."""
     (_, t, px, py, pz, vx, vy, vz, f, obj, pen, ticks, ovr, skipped, rerr, clamps, tick_us, tick_max,
-     missed, pub, near, paused, switches, switched_at) = vals
+     missed, pub, near, paused, switches, switched_at, _) = vals
     # positional, in SessionState's field order (a keyword call costs a cold call more)
     return _new_tuple(SessionState, (
         t, (px, py, pz), (vx, vy, vz), f, names.get(int(obj)) if obj >= 0 else None,
@@ -494,6 +546,11 @@ class _Servo:
         self._tables: dict[int, Any] = {}
         self._job_t0 = 0.0
         self._wait_tick: Any = None
+        #: sequence numbers of switches installed, acknowledged after the next tick
+        self._acks: list[int] = []
+        self._clamp_src: list = []
+        self._clamps_seen: dict[tuple[int, str], int] = {}
+        self.recorder: Any = None
         #: commands received / done / failed; build slices run, forced (did not fit) and
         #: longer than the slack they had, the longest (us); from receipt to done (ms)
         self.cmd_stats = {"received": 0, "done": 0, "failed": 0, "slices": 0, "forced_slices": 0,
@@ -650,8 +707,9 @@ class _Servo:
         work up to the next ``yield``; the first one comes before any work."""
         kind = msg[0]
         loop = self.loop
+        seq = msg[4] if kind in ("material", "renderers") and len(msg) > 4 else -1
         if kind == "material":
-            _, oid, feats, ramp = msg
+            _, oid, feats, ramp = msg[:4]
             built: list = []
             for d in feats:
                 yield self._est(d)
@@ -660,9 +718,11 @@ class _Servo:
             if i >= 0:
                 loop.set_renderers(self.names[i], built, ramp)  # applied at the start of the next tick
                 self.event("material_switched", oid, ramp)
+                if seq >= 0:
+                    self._acks.append(seq)
         elif kind == "renderers":
             # renderers the application built and pickled: only unpickling is left
-            _, oid, payload, ramp = msg
+            _, oid, payload, ramp = msg[:4]
             yield self._build_s.get("<unpickle>", _SMALL_S)
             t0 = time.thread_time()
             built = _load_renderers(payload, self._tables)
@@ -671,6 +731,8 @@ class _Servo:
             if i >= 0:
                 loop.set_renderers(self.names[i], built, ramp)
                 self.event("material_switched", oid, ramp)
+                if seq >= 0:
+                    self._acks.append(seq)
         elif kind == "tables":
             # calibration tables later renderers refer to: one slice per table
             for key, blob in msg[1].items():
@@ -778,7 +840,7 @@ class _Servo:
         self.event("fault", -1.0, 0.0)
 
     # -- publishing ---------------------------------------------------------------------
-    def event(self, kind: str, oid: float, value: float) -> None:
+    def event(self, kind: str, oid: float, value: float, detail: float = -1.0, count: float = 0.0) -> None:
         mv = self.mv
         w = int(mv[_EV_W])
         j = _EV0 + (w % _EV_CAP) * _EV_REC
@@ -786,7 +848,59 @@ class _Servo:
         mv[j + 1] = _KIND[kind]
         mv[j + 2] = oid
         mv[j + 3] = value
+        mv[j + 4] = detail
+        mv[j + 5] = count
         mv[_EV_W] = w + 1
+
+    def _ack(self, tick: int, t: float, now: float) -> None:
+        """Acknowledge the material switches that took effect on ``tick`` (their
+        renderers were installed at its start): one ring entry each, the sequence number
+        written last, so an entry whose sequence number matches is complete."""
+        mv = self.mv
+        for seq in self._acks:
+            j = _ACK0 + (seq % _ACK_CAP) * _ACK_REC
+            mv[j + 1] = tick
+            mv[j + 2] = t
+            mv[j + 3] = now
+            mv[j] = seq
+        self._acks.clear()
+
+    def _clamp_sources(self) -> list:
+        """(role index, actuator) of every distinct actuator whose safety layer counts
+        limit hits: the roles in the order of the spec's devices (the application
+        decodes a clamp event's role from the same order); the sensing device alone,
+        when it is not one of them, gets the index after the last role."""
+        loop = self.loop
+        out: list = []
+        seen: set[int] = set()
+        roles = list(self.spec["devices"])
+        for i, role in enumerate(roles):
+            a = loop.actuators.get(role)
+            if a is not None and id(a) not in seen and hasattr(getattr(a, "safety", None), "hits"):
+                seen.add(id(a))
+                out.append((i, a))
+        dev = loop.device
+        if id(dev) not in seen and hasattr(getattr(dev, "safety", None), "hits"):
+            out.append((len(roles), dev))
+        return out
+
+    def _clamp_events(self) -> None:
+        """One ``clamp`` event per (actuator, limit) that bit since the last call, with
+        the value of the bounded field on the actuator's last command."""
+        nf = len(CLAMP_FIELDS)
+        last = self._clamps_seen
+        for ri, act in self._clamp_src:
+            for key, n in list(act.safety.hits.items()):
+                k = (ri, key)
+                d = n - last.get(k, 0)
+                if d <= 0:
+                    continue
+                last[k] = n
+                fi = _CLAMP_INDEX.get(key, nf - 1)
+                attr = CLAMP_FIELDS[fi][1]
+                cmd = getattr(act, "last_command", None)
+                v = getattr(cmd, attr, None) if (cmd is not None and attr) else None
+                self.event("clamp", -1.0, float(v) if v is not None else math.nan, ri * nf + fi, d)
 
     def run(self) -> None:
         """The servo thread: tick, publish, watch the application, serve its commands,
@@ -806,6 +920,9 @@ class _Servo:
         switches_seen = 0
         clamps_seen = 0
         paused = False
+        acks = self._acks
+        self._clamp_src = self._clamp_sources()
+        rec = self.recorder
         mv[_PID] = os.getpid()
         mv[_STATUS] = _RUNNING
         mv[_READY] = mono()
@@ -816,7 +933,7 @@ class _Servo:
             st = loop.last_state
             # ---- publish (seqlock) ----
             seq = mv[_SEQ]
-            mv[_SEQ] = seq + 1.0
+            mv[_SEQ_END] = seq + 1.0  # odd before the state changes (readers read 0..24 ascending)
             if st is not None:
                 p, v = st.position_mm, st.velocity_mm_s
                 mv[_PX] = p[0]
@@ -847,6 +964,9 @@ class _Servo:
             mv[_SWITCHES] = sw
             mv[_PUB] = now
             mv[_SEQ] = seq + 2.0
+            mv[_SEQ_END] = seq + 2.0
+            if acks:
+                self._ack(loop.ticks - 1, loop.last_t or 0.0, now)
             # ---- events ----
             if c != last_contact:
                 if last_contact >= 0 and last_contact < len(tags):
@@ -876,7 +996,7 @@ class _Servo:
                 cl = loop.clamp_count()
                 mv[_CLAMPS] = cl
                 if cl != clamps_seen:
-                    self.event("clamp", -1.0, cl - clamps_seen)
+                    self._clamp_events()
                     clamps_seen = cl
                 if watch and hb_timeout is not None:
                     age = mono() - mv[_HEARTBEAT]
@@ -1099,6 +1219,10 @@ class Session:
         self._local_events: list[SessionEvent] = []
         self._summary: dict[str, Any] | None = None
         self._threads: list[threading.Thread] = []
+        self._seq = 0
+        from .callbacks import EventDispatcher
+        self._dispatcher = EventDispatcher(self)
+        self._reaper: threading.Thread | None = None
         plan = compile_scene(scene)
         self.plan = plan
         settings = plan.settings
@@ -1122,6 +1246,7 @@ class Session:
                                           field=f"scene.devices.{role}")
                 devices.setdefault(role, (name, opts))
         self.devices = {r: n for r, (n, _) in devices.items()}
+        self._roles = list(devices)  # the servo numbers a clamp's actuator by this order
         self._names: dict[int, str] = {}
         self._ids: dict[str, int] = {}
         self._next_id = 0
@@ -1159,6 +1284,9 @@ class Session:
                 self._process = ctx.Process(target=_servo_main, args=(spec, cmd_r, self._buf.name, done_w),
                                             name="hapticsdk-servo", daemon=True)
                 self._process.start()
+                self._reaper = threading.Thread(target=self._reap, args=(self._process,), name="hapticsdk-reaper",
+                                                daemon=True)
+                self._reaper.start()
                 cmd_r.close()
                 done_w.close()
                 _grow_pipe(self._cmd)
@@ -1203,8 +1331,22 @@ class Session:
             except (ValueError, TypeError):  # released
                 return
 
+    def _reap(self, proc: Any) -> None:
+        """The reaper thread: waits for the servo process to end and reaps it at once
+        (``waitpid``), so a servo that died or was killed never stays a zombie while the
+        application runs on; then wakes the callback dispatcher."""
+        from multiprocessing.connection import wait
+        try:
+            wait([proc.sentinel])
+            proc.join()
+        except (ValueError, OSError, AssertionError):
+            return
+        self._dispatcher.wake()
+
     def _servo_alive(self) -> bool:
         if self._process is not None:
+            if self._reaper is not None:
+                return self._reaper.is_alive()  # it ends once it has reaped the servo
             return self._process.is_alive()
         return self._thread is not None and self._thread.is_alive()
 
@@ -1240,7 +1382,11 @@ class Session:
         s = self._summary or {}
         code = None
         if self._process is not None:
-            self._process.join(1.0)  # the servo has finished its stop: reap it
+            reaper = self._reaper
+            if reaper is not None and reaper is not threading.current_thread():
+                reaper.join(1.0)  # the reaper reaps the servo (two waitpid calls would race)
+            else:
+                self._process.join(1.0)
             code = self._process.exitcode
         if s.get("message"):
             reason = s["message"]
@@ -1316,23 +1462,27 @@ class Session:
                        type(exc).__name__, exc)
             return None
 
-    def _send_material(self, oid: int, feats: Mapping[str, Mapping[str, float]], ramp: float) -> None:
+    def _send_material(self, oid: int, feats: Mapping[str, Mapping[str, float]], ramp: float) -> Any:
         """Send a material switch: the tables the servo has not got yet (their own
         command, unpickled in its own slice, kept by the servo), then the renderers
         (pickled with references to them), or the features when the renderers could not
         be built here. Under ``_build_lock``, so that another thread's switch never
         refers to a table before the command carrying it is sent."""
+        from .callbacks import SwitchHandle
         with self._build_lock:
             built = self._prebuilt(feats)
+            self._seq += 1
+            seq = self._seq
             if built is None:
-                self._send(("material", oid, feats, ramp))
-                return
+                self._send(("material", oid, feats, ramp, seq))
+                return SwitchHandle(self, seq, time.monotonic())
             payload, new, tables = built
             if new:
                 self._send(("tables", new))
                 for key, obj in tables.items():
                     self._tables_sent[id(obj)] = (obj, key)
-            self._send(("renderers", oid, payload, ramp))
+            self._send(("renderers", oid, payload, ramp, seq))
+            return SwitchHandle(self, seq, time.monotonic())
 
     def _object_id(self, name: str) -> int:
         if name not in self._ids:
@@ -1429,7 +1579,7 @@ class Session:
             feats = self._features_by_dim(list(r.targets), res.x_dict)
             r.refined_features = feats
             if res.success and feats != r.features and not self._closed:
-                self._send_material(oid, feats, self.ramp_s)
+                r.refined_switch = self._send_material(oid, feats, self.ramp_s)
                 r.refined_sent = True
                 self._local_events.append(SessionEvent(self._mv[_T], "material_refined", r.object,
                                                        float(res.error)))
@@ -1452,14 +1602,14 @@ class Session:
         ramp = self.ramp_s if ramp_s is None else float(ramp_s)
         if not (math.isfinite(ramp) and 0 <= ramp <= 5):
             raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
-        self._send_material(oid, feats, ramp)
+        handle = self._send_material(oid, feats, ramp)
         self._materials[object] = label
         ints = getattr(res, "intensities", None)
         r = Retarget(object=object, targets=dict(targets), features=feats, source=source,
                      success=bool(res.success), error=float(res.error),
                      intensities=({str(k): float(v) for k, v in ints.items()} if isinstance(ints, Mapping)
                                   else {d: float(v) for d, v in zip(targets, list(ints))} if ints is not None
-                                  else {}))
+                                  else {}), switch=handle)
         if (self.refine if refine is None else refine) and source == "amortised":
             th = threading.Thread(target=self._refine, args=(r, oid), name="hapticsdk-refine", daemon=True)
             self._threads.append(th)
@@ -1517,11 +1667,11 @@ class Session:
         mv = self._mv
         buf = self._bytes
         for i in range(10000):
-            # one struct read of the sequence number and the 23 state slots, then the
-            # sequence number again: equal and even = a consistent copy
+            # one struct read of the sequence number, the 23 state slots and the
+            # sequence copy: equal and even = a consistent copy (see _Servo.run)
             vals = _read_state(buf)
             s1 = vals[0]
-            if s1 % 2.0 == 0.0 and mv[_SEQ] == s1:
+            if s1 == vals[24] and s1 % 2.0 == 0.0:
                 break
             if i >= 2:
                 time.sleep(0)  # let a writer in this process (thread isolation) finish
@@ -1535,24 +1685,82 @@ class Session:
             self._check()
         return _state_from(vals, self._names, now)
 
+    # -- events, acknowledgements, callbacks ----------------------------------------------
+    def _event_write_index(self) -> int:
+        return int(self._mv[_EV_W])
+
+    def _last_t(self) -> float:
+        try:
+            return float(self._mv[_T])
+        except (ValueError, TypeError):
+            return math.nan
+
+    def _events_since(self, r: int) -> tuple[list[SessionEvent], int]:
+        """The servo's events from ring position ``r`` on (at most the last 1024) and the
+        next position. Clamp events get their actuator and field decoded."""
+        mv = self._mv
+        w = int(mv[_EV_W])
+        r = max(r, w - _EV_CAP)
+        names = self._names
+        out: list[SessionEvent] = []
+        nf = len(CLAMP_FIELDS)
+        while r < w:
+            j = _EV0 + (r % _EV_CAP) * _EV_REC
+            t, kind, oid, val, detail, count = mv[j], mv[j + 1], mv[j + 2], mv[j + 3], mv[j + 4], mv[j + 5]
+            k = EVENT_KINDS[int(kind)]
+            obj = names.get(int(oid)) if oid >= 0 else None
+            if k == "clamp" and detail >= 0:
+                ri, fi = divmod(int(detail), nf)
+                roles = self._roles
+                out.append(SessionEvent(t, k, obj, val, roles[ri] if ri < len(roles) else "device",
+                                        CLAMP_FIELDS[fi][0], int(count)))
+            else:
+                out.append(SessionEvent(t, k, obj, val))
+            r += 1
+        return out, w
+
+    def _ack_of(self, seq: int) -> tuple[float, float, float] | None:
+        """(tick, servo time, monotonic time) of switch ``seq`` once acknowledged, else None."""
+        mv = self._mv
+        j = _ACK0 + (seq % _ACK_CAP) * _ACK_REC
+        if mv[j] != seq:
+            return None
+        tick, t, mono = mv[j + 1], mv[j + 2], mv[j + 3]
+        if mv[j] != seq:  # overwritten while read (256 later switches): gone
+            return None
+        return tick, t, mono
+
+    def on_event(self, kind: str, callback: Any) -> None:
+        """Call ``callback(event)`` for every event of ``kind`` (one of
+        :data:`EVENT_KINDS`, or ``"*"`` for all) from now on, on the SDK's own
+        application thread ``hapticsdk-events`` (within about 2 ms of the servo
+        publishing it; never in the servo). ``"servo_died"`` is delivered once when the
+        servo process ends without :meth:`close` (``message`` says why). Callbacks run
+        one at a time, in the order given; one that raises is logged and skipped."""
+        if kind != "*" and kind not in EVENT_KINDS:
+            raise ValidationError(f"kind must be one of {list(EVENT_KINDS)} or '*', got {kind!r}", field="kind")
+        if not callable(callback):
+            raise ValidationError(f"callback must be callable, got {callback!r}", field="callback")
+        self._check()
+        self._dispatcher.add(kind, callback)
+
+    def off_event(self, kind: str, callback: Any) -> bool:
+        """Remove a callback given to :meth:`on_event`; True when it was registered."""
+        return self._dispatcher.remove(kind, callback)
+
     def events(self) -> list[SessionEvent]:
         """Events since the last call, oldest first (never blocks). When more than 1024
-        arrived in between, the oldest are lost and a ``"lost"`` count is not kept."""
-        mv = self._mv
+        arrived in between, the oldest are lost and a ``"lost"`` count is not kept.
+        Raises :class:`~hapticsdk.errors.ServoProcessDied` once the servo is gone (as
+        every call does); after :meth:`close`, returns what was left."""
         out: list[SessionEvent] = []
-        if not self._closed or self._buf is not None:
-            try:
-                w = int(mv[_EV_W])
-            except (ValueError, TypeError):
-                w = self._events_r
-            r = max(self._events_r, w - _EV_CAP)
-            names = self._names
-            while r < w:
-                j = _EV0 + (r % _EV_CAP) * _EV_REC
-                t, kind, oid, val = mv[j], mv[j + 1], mv[j + 2], mv[j + 3]
-                out.append(SessionEvent(t, EVENT_KINDS[int(kind)], names.get(int(oid)) if oid >= 0 else None, val))
-                r += 1
-            self._events_r = w
+        if not self._closed:
+            mv = self._mv
+            now = time.monotonic()
+            # as state(): the fast path on a servo that published within 20 ms
+            if not (mv[_STATUS] == _RUNNING and (now - mv[_PUB] < 0.02 or now - self._alive_checked < 0.02)):
+                self._check()
+            out, self._events_r = self._events_since(self._events_r)
         if self._local_events:
             loc, self._local_events = self._local_events, []
             out.extend(loc)
@@ -1576,6 +1784,9 @@ class Session:
         if self._closed:
             return self._summary or {}
         self._closed = True
+        disp = getattr(self, "_dispatcher", None)
+        if disp is not None:
+            disp.stop()
         buf = getattr(self, "_buf", None)
         try:
             if buf is not None:
@@ -1586,13 +1797,18 @@ class Session:
             if self._thread is not None:
                 self._thread.join(timeout_s)
             if self._process is not None and getattr(self._process, "_popen", None) is not None:
-                self._process.join(timeout_s)
-                if self._process.is_alive():
+                # the reaper thread waits on the process (one waitpid caller: a second
+                # one could see "no such child" and take a reaped servo for alive)
+                reaper = self._reaper
+                wait = reaper.join if reaper is not None else self._process.join
+                alive = reaper.is_alive if reaper is not None else self._process.is_alive
+                wait(timeout_s)
+                if alive():
                     self._process.terminate()  # SIGTERM: the servo's safe stop
-                    self._process.join(2.0)
-                if self._process.is_alive():
+                    wait(2.0)
+                if alive():
                     self._process.kill()
-                    self._process.join(2.0)
+                    wait(2.0)
             self._fetch_summary(0.1)
         finally:
             hb = getattr(self, "_hb_stop", None)

@@ -543,12 +543,12 @@ def test_state_fields_come_from_the_slots_the_servo_writes():
     every field must come from the slot the servo publishes it in (distinct values in
     every slot, each field checked against its named slot)."""
     import hapticsdk.runtime.session as ss
-    slots = [0.0] + [float(100 + i) for i in range(1, 24)]  # slot i holds 100 + i
+    slots = [0.0] + [float(100 + i) for i in range(1, 24)] + [0.0]  # slot i holds 100 + i
     slots[ss._OBJ], slots[ss._NEAR] = 3.0, 7.0
     slots[ss._PAUSED_S] = 1.0
     names = {3: "cube", 7: "ball"}
     buf = bytearray(ss._NSLOTS * 8)
-    memoryview(buf).cast("d")[:24] = memoryview(bytearray(__import__("struct").pack("24d", *slots))).cast("d")
+    memoryview(buf).cast("d")[:25] = memoryview(bytearray(__import__("struct").pack("25d", *slots))).cast("d")
     before = time.monotonic()
     st = ss._state_from(ss._read_state(buf), names)
     v = lambda k: float(100 + k)  # noqa: E731
