@@ -74,6 +74,9 @@ def declared_api(obj: Any) -> tuple[str | None, str]:
     if spec is not None:
         return str(spec), "object"
     modname = getattr(obj, "__module__", None) or getattr(obj, "__name__", None)
+    if isinstance(modname, str) and modname.split(".", 1)[0] == __name__.split(".", 1)[0]:
+        # the core's own entry points (probe-virtual, playback-virtual): this very API
+        return f"=={PLUGIN_API_VERSION}", "core"
     if isinstance(modname, str) and modname:
         top = modname.split(".", 1)[0]
         pkg = sys.modules.get(top)
