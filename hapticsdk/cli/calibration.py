@@ -228,9 +228,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """
     import numpy as np
 
-    from ..runlog import PlaybackDevice, load_run
+    from ..runlog import PlaybackDevice
+    from ..runtime.recorder import load_recording
 
-    run = load_run(args.runfile)
+    run = load_recording(args.runfile)  # a run file, or the stream a cut-short live recording left
     dev = PlaybackDevice(run=run)
     # play every recorded state back through the device and check it returns them
     mismatches = 0

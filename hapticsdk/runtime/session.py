@@ -675,6 +675,15 @@ class _Servo:
         from collections import deque
         self._queue = deque()
         self._reader = _CommandReader(self.cmd_conn)
+        self._all_names = dict(zip(self.tags, self.names))
+
+    def start_recording(self) -> None:
+        """After the loop started (its channels are known): the recorder, when asked."""
+        path = self.spec.get("record_path")
+        if path:
+            from .recorder import LiveRecorder
+            self.recorder = LiveRecorder(path, [sl.role for sl in self.loop._slots],  # noqa: SLF001
+                                         self.spec["period_s"], objects=self._all_names)
 
     # -- commands (in the servo thread, in the slack of a period) ------------------------
     def _slack(self) -> float:
@@ -751,6 +760,7 @@ class _Servo:
             loop.add_object(name, built, shape_from_dict(geom, pose))
             self.tags.append(oid)
             self.names.append(name)
+            self._all_names[oid] = name
         elif kind == "remove":
             yield _SMALL_S
             i = self._index(msg[1])
@@ -967,6 +977,8 @@ class _Servo:
             mv[_SEQ_END] = seq + 2.0
             if acks:
                 self._ack(loop.ticks - 1, loop.last_t or 0.0, now)
+            if rec is not None:
+                rec.add(loop, mv[_OBJ])
             # ---- events ----
             if c != last_contact:
                 if last_contact >= 0 and last_contact < len(tags):
@@ -1049,6 +1061,11 @@ class _Servo:
                 out["finish_error"] = f"{type(exc).__name__}: {exc}"
         if self._stack is not None:
             self._stack.close()  # closes every actuator (stop, then release)
+        if self.recorder is not None:
+            try:
+                out["record_path"] = str(self.recorder.close(self._all_names))
+            except Exception as exc:  # noqa: BLE001 - reported; the stream stays for recover()
+                out["record_error"] = f"{type(exc).__name__}: {exc}"
         out["stopped"] = sorted({lab for lab, _, ok in stops_since(t0) if ok})
         out["stop_s"] = time.monotonic() - t0
         return out
@@ -1080,6 +1097,7 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
                 if not thread_mode:
                     servo.pools = _one_pool_thread()  # after build(): scipy.linalg is loaded by now
                 servo.loop.start(None)
+                servo.start_recording()
                 servo.run()
             except SafeStop as exc:
                 servo.reason = "signal"
@@ -1175,13 +1193,18 @@ class Session:
             thread in the application's interpreter would wait on the interpreter
             lock held by normal-priority threads).
         start_timeout_s: how long to wait for the servo to be running (s).
+        record: a ``.npz`` path: the servo streams every tick to ``<record>.part`` with
+            bounded memory and turns it into ``record`` (a ``hapticsdk-run`` file that
+            ``hapticsdk replay`` plays back) when the session ends; see
+            :mod:`hapticsdk.runtime.recorder` (what a session cut short leaves).
     """
 
     def __init__(self, scene: Any, *, isolation: str = "process", trajectory: Any = None,
                  actuator_options: Mapping[str, Mapping[str, Any]] | None = None, realtime: bool = True,
                  period_s: float | None = None, ramp_s: float = 0.05, heartbeat_timeout_s: float | None = 0.25,
                  refine: bool = True, log_seconds: float = 60.0, log_path: "str | Path | None" = None,
-                 rt: Mapping[str, Any] | None = None, start_timeout_s: float = 120.0) -> None:
+                 rt: Mapping[str, Any] | None = None, start_timeout_s: float = 120.0,
+                 record: "str | Path | None" = None) -> None:
         from ..compiler import compile_scene
         from ..scene import Scene
         if isolation not in ISOLATIONS:
@@ -1193,6 +1216,7 @@ class Session:
                 isinstance(heartbeat_timeout_s, (int, float)) and 2 * HEARTBEAT_PERIOD_S <= heartbeat_timeout_s):
             raise ValidationError(f"heartbeat_timeout_s must be >= {2 * HEARTBEAT_PERIOD_S} s or None",
                                   field="heartbeat_timeout_s")
+        from .recorder import check_record_path
         if rt is not None:
             from .clock import RealtimeSettings
             RealtimeSettings.coerce(rt)  # unknown option names fail here, not in the servo
@@ -1264,7 +1288,8 @@ class Session:
                 "period_s": period, "realtime": bool(realtime), "passivity": bool(servo.get("passivity", True)),
                 "ramp_s": self.ramp_s, "heartbeat_timeout_s": heartbeat_timeout_s, "log_seconds": float(log_seconds),
                 "log_path": str(check_output_path(log_path, field="log_path")) if log_path is not None else None,
-                "ppid": os.getpid(), "rt": rt}
+                "ppid": os.getpid(), "rt": rt,
+                "record_path": str(check_record_path(record)) if record is not None else None}
         self._spec = spec
         self._builder: _Servo | None = None
         self._build_lock = threading.Lock()
