@@ -411,6 +411,11 @@ class ServoLoop:
                 device_damping_ns_per_m=float(getattr(device, "damping_ns_per_m", 0.0) or 0.0),
                 position_resolution_mm=float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0))
         self.passivity_settings = passivity_settings
+        #: contact gate hysteresis (mm): contact begins at penetration > 0 and ends at
+        #: penetration <= -one encoder count of the device (0 for an exact position), so a
+        #: probe resting at a surface, whose reading flips between two adjacent counts,
+        #: never toggles contact (docs/runtime.md, "Gates with hysteresis")
+        self.contact_hysteresis_mm = float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0)
         self.cpu_time = bool(cpu_time)
         self.rt = RealtimeSettings.coerce(rt)
         #: operations handed in from other threads, applied at the start of a tick
@@ -792,6 +797,10 @@ class ServoLoop:
             if not (nx == 0.0 and nz == 0.0 and ny == 1.0):
                 direction = (nx, ny, nz)
         in_contact = pen > 0.0
+        pen_in = pen
+        if not in_contact and idx >= 0 and idx == self.contact and pen > -self.contact_hysteresis_mm:
+            in_contact = True  # within the gate's hysteresis: held, rendered at the surface
+            pen_in = 0.0
         contact = idx if in_contact else -1
         if contact != self.contact:
             events["contact_changes"] += 1
@@ -826,7 +835,7 @@ class ServoLoop:
             # positional, in TickInput's field order (t, dt, penetration_mm, velocity_mm_s,
             # in_contact, normal, object, velocity_filtered_mm_s): a keyword call costs
             # ~0.3 us more at 1 kHz
-            inp = TickInput(t, dt, pen, vin, in_contact, normal, o.name, (f0, f1, f2))
+            inp = TickInput(t, dt, pen_in, vin, in_contact, normal, o.name, (f0, f1, f2))
             if o.sw is None:
                 self._render(o.renderers, inp, forces, vib, events)
             elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):
