@@ -31,13 +31,16 @@ Live retargeting: :meth:`Session.set_material` answers new intensities at once w
 amortised inverse (the ``amortised`` solver of ``hapticsdk-ga``, a table lookup of about
 a millisecond) and sends those features; a background thread of the application then
 solves again with the scene's solver (``settings.solver.method``) and, when the answer
-differs, sends the refined features. The servo cross-fades each switch: for
-``ramp_s`` (default 50 ms) the old and new renderers both run and their commands are
-mixed linearly, force ``(1 - a) F_old + a F_new`` with ``a`` rising 0 -> 1 (so a force
-step ``dF`` becomes ``dF * T / ramp_s`` per tick), vibration amplitude likewise at the
-new frequency. The passivity controller of the force channel runs across the switch
-unchanged, so a switch from a soft to a stiff material while pressed cannot give the
-user more energy than the controller's budget.
+differs, sends the refined features. The servo switches by the loop's rule
+(:meth:`~hapticsdk.runtime.loop.ServoLoop.set_renderers`, docs/runtime.md, "Material
+switch"): a force the new material raises keeps its value and takes the new slope (no
+step), one it lowers is ramped over ``ramp_s`` (default 50 ms, at most 0.1 N per tick),
+vibration amplitudes are ramped too, and the passivity controller of the force channel
+runs across the switch unchanged. Each switch is acknowledged: the returned
+:class:`Retarget` waits (:meth:`Retarget.wait`) for the tick that rendered it first
+(:class:`~hapticsdk.runtime.callbacks.SwitchHandle`). :meth:`Session.on_event` runs
+callbacks on an application thread the SDK owns; ``Session(record=...)`` streams every
+tick to disk (:mod:`hapticsdk.runtime.recorder`).
 
 Failure semantics (each one tested in ``tests/runtime/test_session.py``):
 
