@@ -6,7 +6,8 @@ boundaries marked (needs matplotlib).
     python examples/live_session.py live_session.png
 
 The servo runs in its own process (``isolation="process"``); this script only asks for
-state and events and never blocks it. Everything runs on simulated devices (generated
+state, gets events through callbacks (on the SDK's own thread) and never blocks it;
+the servo records every tick to a file (``record=``), which the figure is drawn from. Everything runs on simulated devices (generated
 data: no real device, finger or material was measured).
 
 Reading the figure: on the rubber (S12, the library's hardest sample: the arm's full
@@ -51,29 +52,38 @@ def main() -> None:
     out_png = Path(sys.argv[1] if len(sys.argv) > 1 else "live_session.png")
     scene = Scene.from_dict(SCENE)
     finger = walk_over(scene, press_depth_mm=1.5, speed_mm_s=40.0)
-    log_path = Path(tempfile.mkdtemp()) / "servo_log.npz"
-    retarget_t = None
-    with hs.Session(scene, trajectory=finger, log_path=log_path) as s:
+    record = Path(tempfile.mkdtemp()) / "live_run.npz"
+    retarget: list = []
+
+    def show(e) -> None:  # runs on the SDK's event thread, never in the servo
+        where = f" {e.object}" if e.object else ""
+        detail = f" {e.actuator}.{e.field} sent {e.value:.3g} ({e.count} ticks)" if e.kind == "clamp" else (
+            f"  ({e.value:g})" if e.value else "")
+        print(f"  t={e.t:6.3f} s  {e.kind}{where}{detail}")
+
+    def on_contact(e) -> None:
+        if e.object == RETARGET[0] and not retarget:
+            r = s.set_material(*RETARGET)
+            retarget.append(r)
+            feats = ", ".join(f"{k}={v:.3g}" for f in r.features.values() for k, v in f.items())
+            ok = r.wait(0.1)
+            print(f"  -> {RETARGET[0]} retargeted to {RETARGET[1]} during contact: {r.source} answer "
+                  f"({feats}), error {r.error:.3g}; "
+                  + (f"rendered from tick {r.tick} (t={r.t:.3f} s)" if ok else "not acknowledged within 0.1 s"))
+
+    with hs.Session(scene, trajectory=finger, record=record) as s:
         print(f"servo running in process {s.servo_pid}; objects: {s.objects}")
-        t_end = time.monotonic() + finger.duration_s + 0.3
-        while time.monotonic() < t_end:
-            for e in s.events():
-                where = f" {e.object}" if e.object else ""
-                print(f"  t={e.t:6.3f} s  {e.kind}{where}" + (f"  ({e.value:g})" if e.value else ""))
-                if e.kind == "contact_enter" and e.object == RETARGET[0] and retarget_t is None:
-                    r = s.set_material(*RETARGET)
-                    retarget_t = s.state().t
-                    feats = ", ".join(f"{k}={v:.3g}" for f in r.features.values() for k, v in f.items())
-                    print(f"  -> {RETARGET[0]} retargeted to {RETARGET[1]} during contact: {r.source} answer "
-                          f"({feats}), error {r.error:.3g}")
-            time.sleep(0.005)
+        s.on_event("*", show)
+        s.on_event("contact_enter", on_contact)
+        time.sleep(finger.duration_s + 0.3)
         st = s.state()
         print(f"servo: {st.ticks} ticks, {st.overruns} overruns, {st.skipped_ticks} skipped, "
               f"{st.renderer_errors} renderer errors, {st.clamps} clamps, {st.material_switches} switches")
         names = s.object_ids
         summary = s.close()
     print("stopped:", ", ".join(summary["stopped"]))
-    log = np.load(log_path)
+    retarget_t = retarget[0].t if retarget and retarget[0].switch.done() else None
+    log = np.load(record)  # every tick, streamed by the servo (hapticsdk replay reads it too)
     plot(log, names, retarget_t, out_png)
     print("saved", out_png, "(generated data)")
 
