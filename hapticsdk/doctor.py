@@ -147,9 +147,10 @@ def collect() -> dict[str, Any]:
     """The full doctor report (see module docstring)."""
     backends, classes = check_backends()
     from .plugins import missing_first_party
+    from .runtime.rtkit import machine_report
     return {"backends": backends, "devices": discover_devices(classes, backends),
             "calibrations": list_calibrations(classes), "libraries": check_libraries(),
-            "missing_plugins": missing_first_party()}
+            "missing_plugins": missing_first_party(), "realtime": machine_report()}
 
 
 def format_report(rep: dict[str, Any]) -> str:
@@ -178,4 +179,14 @@ def format_report(rep: dict[str, Any]) -> str:
         where = c.get("backend") or c.get("scope") or c.get("path", "")
         what = c.get("source") or (f"skipped {c.get('path') or ''}: {c['error']}" if c.get("error") else "")
         lines.append(f"  {c.get('kind') or 'unreadable'} [{where}]{tag}: {what}")
+    rt = rep.get("realtime")
+    if rt:
+        rk = rt["realtimekit"]
+        lines.append("real-time scheduling for the live servo:")
+        lines.append(f"  SCHED_FIFO set directly: {rt['sched_fifo_directly']}; RLIMIT_RTPRIO {rt['rlimit_rtprio']}")
+        lines.append("  RealtimeKit: " + (rk["error"] if "error" in rk else
+                                          f"available, up to priority {rk['MaxRealtimePriority']} "
+                                          f"(RLIMIT_RTTIME {rk['RTTimeUSecMax']} us)"))
+        lines.append(f"  CPUs {rt['cpus']}; servo pinned to: {rt['servo_cpu']}")
+        lines.extend(f"  to get more: {h}" for h in rt["how_to_get_more"])
     return "\n".join(lines)

@@ -303,6 +303,17 @@ def apply_realtime(settings: RealtimeSettings) -> tuple[dict[str, str], Callable
                         if isinstance(exc, PermissionError) else "")
                 then = "; the servo runs at normal priority" if auto else ""
                 status["rt_priority"] = f"refused: {_os_error(exc)}{hint}{then}"
+                if auto and isinstance(exc, PermissionError):
+                    # a normal user: ask RealtimeKit over D-Bus (hapticsdk.runtime.rtkit)
+                    from .rtkit import make_thread_realtime
+                    pol0, par0 = os.sched_getscheduler(0), os.sched_getparam(0)
+                    got, how = make_thread_realtime(prio)
+                    if got is not None:
+                        undo.append(lambda p=pol0, q=par0: os.sched_setscheduler(0, p, q))
+                        status["rt_priority"] = f"applied: {how} (auto; the OS refused SCHED_FIFO directly)"
+                    else:
+                        status["rt_priority"] = (f"refused: {_os_error(exc)}{hint}; {how}; the servo runs at "
+                                                 f"normal priority")
 
     # (d) lock memory
     if settings.mlockall:

@@ -1156,6 +1156,11 @@ def _default_rt(rt: Any, isolation: str) -> dict[str, Any] | None:
     if isolation == "process":
         out = out if out is not None else {}
         out.setdefault("fifo_priority", "auto")
+        if "cpu" not in out:
+            from .rtkit import spare_cpu
+            cpu = spare_cpu()  # pinned only where a CPU is spare (3 or more)
+            if cpu is not None:
+                out["cpu"] = cpu
     return out
 
 
