@@ -109,6 +109,9 @@ _new_tuple = tuple.__new__
 (_T, _PX, _PY, _PZ, _VX, _VY, _VZ, _F, _OBJ, _PEN, _TICKS, _OVERRUNS, _SKIPPED, _RERR, _CLAMPS,
  _TICK_US, _TICK_MAX_US, _MISSED, _PUB, _NEAR, _PAUSED_S, _SWITCHES, _SWITCHED_AT) = range(1, 24)
 _HEARTBEAT, _STOP, _PAUSE, _STATUS, _PID, _REASON, _READY = range(32, 39)
+#: vibration channels for the live view (outside the seqlock: a view frame may mix two
+#: ticks): up to two (role index, frequency Hz, amplitude) triples, role index -1 unused
+_VIB0, _VIB_N = 25, 2
 _EV_W = 64
 _EV0 = 65
 _EV_CAP = 1024
@@ -936,6 +939,14 @@ class _Servo:
         acks = self._acks
         self._clamp_src = self._clamp_sources()
         rec = self.recorder
+        roles = list(self.spec["devices"])
+        vib = [(_VIB0 + 3 * k, sl) for k, sl in
+               enumerate([sl for sl in loop._slots if not sl.is_force][:_VIB_N])]  # noqa: SLF001
+        for k in range(_VIB_N):
+            mv[_VIB0 + 3 * k] = -1.0
+        for j, sl in vib:
+            mv[j] = roles.index(sl.role) if sl.role in roles else -1.0
+        cap = loop._cap  # noqa: SLF001
         mv[_PID] = os.getpid()
         mv[_STATUS] = _RUNNING
         mv[_READY] = mono()
@@ -982,6 +993,11 @@ class _Servo:
                 self._ack(loop.ticks - 1, loop.last_t or 0.0, now)
             if rec is not None:
                 rec.add(loop, mv[_OBJ])
+            if vib:
+                i = (loop.ticks - 1) % cap
+                for j, sl in vib:
+                    mv[j + 1] = sl.log_f[i]
+                    mv[j + 2] = sl.log_a[i]
             # ---- events ----
             if c != last_contact:
                 if last_contact >= 0 and last_contact < len(tags):
@@ -1205,6 +1221,9 @@ class Session:
             bounded memory and turns it into ``record`` (a ``hapticsdk-run`` file that
             ``hapticsdk replay`` plays back) when the session ends; see
             :mod:`hapticsdk.runtime.recorder` (what a session cut short leaves).
+        view: True (or a port number) serves the live view in the browser
+            (:meth:`open_view`, :mod:`hapticsdk.runtime.view`) on 127.0.0.1; its
+            address is logged and in ``session.view.url``.
     """
 
     def __init__(self, scene: Any, *, isolation: str = "process", trajectory: Any = None,
@@ -1212,7 +1231,7 @@ class Session:
                  period_s: float | None = None, ramp_s: float = 0.05, heartbeat_timeout_s: float | None = 0.25,
                  refine: bool = True, log_seconds: float = 60.0, log_path: "str | Path | None" = None,
                  rt: Mapping[str, Any] | None = None, start_timeout_s: float = 120.0,
-                 record: "str | Path | None" = None) -> None:
+                 record: "str | Path | None" = None, view: "bool | int" = False) -> None:
         from ..compiler import compile_scene
         from ..scene import Scene
         if isolation not in ISOLATIONS:
@@ -1255,6 +1274,8 @@ class Session:
         from .callbacks import EventDispatcher
         self._dispatcher = EventDispatcher(self)
         self._reaper: threading.Thread | None = None
+        #: the live view's server (:meth:`open_view`), None until opened
+        self.view: Any = None
         plan = compile_scene(scene)
         self.plan = plan
         settings = plan.settings
@@ -1344,6 +1365,9 @@ class Session:
                     raise SessionError(f"the servo did not start within {start_timeout_s} s")
                 time.sleep(0.002)
             self._check()
+            if view is not False and view is not None:
+                url = self.open_view(0 if view is True else int(view))
+                _log.warning("hapticsdk live view: %s", url)
         except BaseException:
             self.close()
             raise
@@ -1752,6 +1776,28 @@ class Session:
             r += 1
         return out, w
 
+    def _vibration(self) -> dict[str, list[float | None]]:
+        """Role -> [frequency Hz, amplitude] of the vibration channels on the last tick
+        (for the live view; not under the seqlock)."""
+        mv = self._mv
+        out: dict[str, list[float | None]] = {}
+        for k in range(_VIB_N):
+            j = _VIB0 + 3 * k
+            ri = int(mv[j])
+            if 0 <= ri < len(self._roles):
+                f, a = mv[j + 1], mv[j + 2]
+                out[self._roles[ri]] = [f if math.isfinite(f) else None, a if math.isfinite(a) else None]
+        return out
+
+    def open_view(self, port: int = 0) -> str:
+        """Serve the live view (:mod:`hapticsdk.runtime.view`) on 127.0.0.1 and return
+        its address; once per session (later calls return the same address)."""
+        self._check()
+        if self.view is None:
+            from .view import ViewServer
+            self.view = ViewServer(self, port)
+        return self.view.url
+
     def _ack_of(self, seq: int) -> tuple[float, float, float] | None:
         """(tick, servo time, monotonic time) of switch ``seq`` once acknowledged, else None."""
         mv = self._mv
@@ -1820,6 +1866,11 @@ class Session:
         disp = getattr(self, "_dispatcher", None)
         if disp is not None:
             disp.stop()
+        if getattr(self, "view", None) is not None:
+            try:
+                self.view.close()
+            except Exception:  # noqa: BLE001
+                pass
         buf = getattr(self, "_buf", None)
         try:
             if buf is not None:
