@@ -19,7 +19,7 @@ from ..errors import HapticSDKError
 
 #: command modules, in help order
 COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_solvers", "bench_runtime",
-                   "interop")
+                   "interop", "live")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -81,6 +81,7 @@ EXAMPLES: dict[str, str] = {
     "calibrate answers": "hapticsdk calibrate answers answers.csv --people 10 --seed 0",
     "calibrate list": "hapticsdk calibrate list --json",
     "replay": "hapticsdk replay run.npz",
+    "view": "hapticsdk view scene.json --seconds 30",
     "doctor": "hapticsdk doctor --json",
     "export": "hapticsdk export plan.json -o materials.hjif",
     "import": "hapticsdk import materials.hjif",

@@ -250,6 +250,7 @@ CASES = [
     ("replay-truncated", ["replay", "{run_trunc}"], "runlog"),
     ("replay-not-npz", ["replay", "{bad_utf8}"], "runlog"),
     ("replay-string-arrays", ["replay", "{run_strings}"], "runlog.t"),
+    ("view-seconds-negative", ["view", "{dir}/scene.json", "--seconds", "-1"], "--seconds"),
     # --- output paths, checked before the work ------------------------------------------
     ("render-plot-missing-dir", ["render", "S7", "--plot", "{missing_dir}/r.png"], "--plot"),
     ("render-plot-directory", ["render", "S7", "--plot", "{dir}"], "--plot"),
