@@ -62,6 +62,21 @@ What it measures, per run:
   the wall handed back after it; ``tolerance_j`` the benchmark's own 0.1 mJ
   (:data:`SWITCH_ENERGY_TOLERANCE_J`, argued there).
 
+* ``switch_handle_ms``: from sending the switch to the servo's publication of the tick
+  that rendered it, as the handle ``set_material`` returns says (its ``latency_s``);
+  ``switch_handle_wait_ms``: from ``set_material`` returning to ``Retarget.wait()``
+  returning True (what an application waiting on the handle sees; ``wait`` polls every
+  0.2 ms).
+* ``recording``: the run records every tick (``Session(record=...)``, a temporary file
+  removed afterwards); ``servo_rss_kb_first`` / ``_last`` and the slope of a straight
+  line through about 20 samples of the servo process's resident set size (kB per
+  minute, ``/proc/<pid>/status``), and the file's size. A slope measured over seconds
+  says little about an hour: run ``--seconds 600`` for that.
+* ``view_frames_per_s``: the live view is served (``Session(view=True)``) and a client
+  thread in this process reads its stream during the run: frames received per second.
+  The view's cost lands on the application (one ``state()`` per frame), never on the
+  servo.
+
 What it does not measure: a real device's transport, the first ``set_material`` of a
 dimension set (which loads the amortised table), or anything on a machine quieter than
 the one it ran on: the figures of a shared machine include the other processes.
@@ -171,9 +186,40 @@ def _pcts(us: list[float]) -> dict[str, float]:
             "n": int(a.size)}
 
 
+def _rss_kb(pid: int | None) -> int | None:
+    """Resident set size of process ``pid`` (kB, Linux), None elsewhere."""
+    try:
+        with open(f"/proc/{pid}/status", encoding="ascii") as fh:
+            for ln in fh:
+                if ln.startswith("VmRSS:"):
+                    return int(ln.split()[1])
+    except (OSError, ValueError, TypeError):
+        pass
+    return None
+
+
+def _count_frames(url: str, stop: threading.Event, out: list[float]) -> None:
+    """A client of the live view's stream in this process: the monotonic time of every
+    frame it receives, until ``stop``."""
+    import urllib.request
+    try:
+        with urllib.request.urlopen(url + "stream", timeout=5.0) as r:
+            while not stop.is_set():
+                ln = r.readline()
+                if not ln:
+                    return
+                if ln.startswith(b"data: "):
+                    out.append(time.monotonic())
+    except OSError:
+        return
+
+
 def run_session(isolation: str = "process", app_load: str = "python-thread", seconds: float = 10.0,
-                switches: int = 8, rt: dict[str, Any] | None = None) -> dict[str, Any]:
+                switches: int = 8, rt: dict[str, Any] | None = None, record: bool = True,
+                view: bool = True) -> dict[str, Any]:
     """One live run; see the module docstring."""
+    import tempfile
+    from pathlib import Path
     from ..runtime.session import Session
     from ..sim.finger import press_slide
     cycle = press_slide(depth_mm=2.0, press_s=0.2, hold_s=0.1, slide_s=1.5, release_s=0.2, rest_s=0.1)
@@ -187,13 +233,27 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     state_cpu_us: list[float] = []
     set_cpu_us: list[float] = []
     latency_ms: list[float] = []
+    handle_ms: list[float] = []
+    handle_wait_ms: list[float] = []
     lost_switches = 0
-    with Session(SCENE, isolation=isolation, trajectory=tr, refine=False, rt=rt) as s, _stopping(stop, th):
+    tmp = Path(tempfile.mkdtemp(prefix="hapticsdk-bench-live-"))
+    rec_path = tmp / "run.npz" if record else None
+    frames: list[float] = []
+    stop_view = threading.Event()
+    rss: list[tuple[float, int | None]] = []
+    with Session(SCENE, isolation=isolation, trajectory=tr, refine=False, rt=rt, record=rec_path,
+                 view=bool(view)) as s, _stopping(stop, th):
         s.set_material("pad", "S7")  # warm the amortised table of these dimensions
         time.sleep(0.5)
         s.events()
+        viewer = None
+        if view:
+            viewer = threading.Thread(target=_count_frames, args=(s.view.url, stop_view, frames), daemon=True)
+            viewer.start()
         th.start()
         t0 = time.monotonic()
+        next_rss = t0
+        pid = s.servo_pid
         next_switch = t0 + 1.0
         k = 0
         while time.monotonic() - t0 < seconds:
@@ -206,11 +266,14 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
                 n0 = st.material_switches
                 c = time.thread_time()
                 a = time.perf_counter()
-                s.set_material("pad", MATERIALS[k % len(MATERIALS)])
+                r = s.set_material("pad", MATERIALS[k % len(MATERIALS)])
                 returned = time.monotonic()
                 b = time.perf_counter()
                 set_us.append((b - a) * 1e6)
                 set_cpu_us.append((time.thread_time() - c) * 1e6)
+                if r.wait(1.0):
+                    handle_wait_ms.append((time.monotonic() - returned) * 1e3)
+                    handle_ms.append(r.switch.latency_s * 1e3)
                 st = s.state()
                 while st.material_switches == n0 and time.perf_counter() - b < 1.0:
                     time.sleep(0.0005)
@@ -221,7 +284,13 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
                     lost_switches += 1
                 k += 1
                 next_switch = time.monotonic() + (seconds - 1.5) / max(switches, 1)
+            if pid is not None and time.monotonic() >= next_rss:
+                rss.append((time.monotonic() - t0, _rss_kb(pid)))
+                next_rss += max(seconds / 20.0, 0.5)
             time.sleep(0.002)
+        stop_view.set()
+        if viewer is not None:
+            viewer.join(2.0)
         burst: list[float] = []
         for _ in range(2000):  # back to back: the call's cost with warm caches
             c = time.thread_time()
@@ -239,6 +308,20 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     rep = summary.get("report") or {}
     jit = rep.get("jitter") or {}
     ev = rep.get("events") or {}
+    recording: dict[str, Any] = {"on": bool(record)}
+    pts = [(t, kb) for t, kb in rss if kb is not None]
+    if len(pts) >= 3:
+        tt, kk = np.array(pts, float).T
+        recording.update({"servo_rss_kb_first": int(kk[0]), "servo_rss_kb_last": int(kk[-1]),
+                          "servo_rss_slope_kb_per_min": float(np.polyfit(tt, kk, 1)[0] * 60.0),
+                          "rss_samples": len(pts)})
+    if rec_path is not None and rec_path.exists():
+        recording["file_bytes"] = rec_path.stat().st_size
+    import shutil
+    shutil.rmtree(tmp, ignore_errors=True)
+    view_rate = None
+    if len(frames) >= 2:
+        view_rate = (len(frames) - 1) / (frames[-1] - frames[0])
     return {"isolation": isolation, "app_load": app_load, "seconds": seconds,
             "jitter": {"p50_us": jit.get("p50_us"), "p99_us": jit.get("p99_us"), "max_us": jit.get("max_us"),
                        "missed_tick_rate": jit.get("missed_tick_rate"), "missed_ticks": jit.get("missed_ticks_total"),
@@ -247,6 +330,8 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
                             "state_cpu": _pcts(state_cpu_us), "set_material_cpu": _pcts(set_cpu_us),
                             "state_cpu_back_to_back": _pcts(burst), "trivial_cpu_after_sleep": _pcts(cold)},
             "switch_latency_ms": _pcts(latency_ms), "switches_not_seen_within_1s": lost_switches,
+            "switch_handle_ms": _pcts(handle_ms), "switch_handle_wait_ms": _pcts(handle_wait_ms),
+            "recording": recording, "view_frames_per_s": view_rate,
             "servo": {"tick_median_us": rep.get("tick_median_us"), "tick_max_us": rep.get("tick_max_us"),
                       "overruns": rep.get("overruns"), "renderer_errors": ev.get("renderer_error"),
                       "rt": rep.get("rt"),
@@ -402,6 +487,19 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
             out.append(f"{'reference':<10} {r['app_load']:<15} {ref['p50_us']:7.1f}/{ref['p99_us']:7.1f}/"
                        f"{ref['max_us']:8.1f}  {ref['missed_tick_rate'] * 100:6.2f} %  (a loop doing nothing else, "
                        f"same load, right after)")
+    for r in rows:
+        h, w, rec = r.get("switch_handle_ms"), r.get("switch_handle_wait_ms"), r.get("recording") or {}
+        parts = []
+        if h and h.get("n"):
+            parts.append(f"switch handle {h['p50']:.2f}/{h['max']:.2f} ms p50/max (wait returns after "
+                         f"{w['p50']:.2f}/{w['max']:.2f} ms)")
+        if "servo_rss_slope_kb_per_min" in rec:
+            parts.append(f"recording: servo RSS {rec['servo_rss_kb_first']}->{rec['servo_rss_kb_last']} kB "
+                         f"({rec['servo_rss_slope_kb_per_min']:+.0f} kB/min)")
+        if r.get("view_frames_per_s"):
+            parts.append(f"view {r['view_frames_per_s']:.1f} frames/s")
+        if parts:
+            out.append(f"{r['isolation']:<10} {r['app_load']:<15} " + "; ".join(parts))
     seen = []
     for r in rows:
         st = (r.get("servo") or {}).get("rt") or {}

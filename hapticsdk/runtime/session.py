@@ -1367,7 +1367,7 @@ class Session:
             self._check()
             if view is not False and view is not None:
                 url = self.open_view(0 if view is True else int(view))
-                _log.warning("hapticsdk live view: %s", url)
+                _log.info("hapticsdk live view: %s", url)
         except BaseException:
             self.close()
             raise
@@ -1531,15 +1531,17 @@ class Session:
             self._seq += 1
             seq = self._seq
             if built is None:
+                sent_at = time.monotonic()
                 self._send(("material", oid, feats, ramp, seq))
-                return SwitchHandle(self, seq, time.monotonic())
+                return SwitchHandle(self, seq, sent_at)
             payload, new, tables = built
             if new:
                 self._send(("tables", new))
                 for key, obj in tables.items():
                     self._tables_sent[id(obj)] = (obj, key)
+            sent_at = time.monotonic()  # before the send: the servo may render it before we return
             self._send(("renderers", oid, payload, ramp, seq))
-            return SwitchHandle(self, seq, time.monotonic())
+            return SwitchHandle(self, seq, sent_at)
 
     def _object_id(self, name: str) -> int:
         if name not in self._ids:
