@@ -105,6 +105,11 @@ class TickInput:
             ``(v0, v1, v2)`` (mm/s): for renderers that must not follow the +-50 mm/s
             count-level chatter a quantised encoder gives a backward difference; None when
             the loop gives none.
+        speed_step_mm_s: the largest change of the filtered velocity one encoder count
+            can make in one tick, ``a q / dt`` (``a`` the filter's per-tick coefficient,
+            ``q`` the device's declared ``encoder_resolution_mm``); 0 for a device that
+            declares none. A speed gate uses it as its hysteresis width (docs/runtime.md,
+            "Gates with hysteresis").
     """
 
     t: float
@@ -115,6 +120,7 @@ class TickInput:
     normal: tuple[float, float, float] = (0.0, 1.0, 0.0)
     object: str | None = None
     velocity_filtered_mm_s: tuple[float, float, float] | None = None
+    speed_step_mm_s: float = 0.0
 
 
 @dataclass

@@ -402,6 +402,7 @@ class ServoLoop:
         self._vf0 = self._vf1 = self._vf2 = 0.0
         self._vf_dt = -1.0
         self._vf_a = 1.0
+        self._v_step = 0.0  # speed step of one encoder count through the filter (mm/s)
         self.switch_ramp_s = float(switch_ramp_s)
         if passivity_settings is None:
             # the device's apparent mass (if it declares one) bounds the in-period push
@@ -828,6 +829,7 @@ class ServoLoop:
             if dt != self._vf_dt:   # the coefficient changes only with dt (realtime mode)
                 self._vf_dt = dt
                 self._vf_a = 1.0 - math.exp(-6.283185307179586 * self.velocity_filter_hz * dt)
+                self._v_step = self._vf_a * self.contact_hysteresis_mm / dt if dt > 0 else 0.0
             a = self._vf_a
             f0 = self._vf0 = self._vf0 + a * (float(vin[0]) - self._vf0)
             f1 = self._vf1 = self._vf1 + a * (float(vin[1]) - self._vf1)
@@ -835,7 +837,7 @@ class ServoLoop:
             # positional, in TickInput's field order (t, dt, penetration_mm, velocity_mm_s,
             # in_contact, normal, object, velocity_filtered_mm_s): a keyword call costs
             # ~0.3 us more at 1 kHz
-            inp = TickInput(t, dt, pen_in, vin, in_contact, normal, o.name, (f0, f1, f2))
+            inp = TickInput(t, dt, pen_in, vin, in_contact, normal, o.name, (f0, f1, f2), self._v_step)
             if o.sw is None:
                 self._render(o.renderers, inp, forces, vib, events)
             elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):

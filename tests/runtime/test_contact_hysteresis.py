@@ -66,3 +66,43 @@ def test_force_away_from_the_surface_is_unchanged():
     away = (pen > 0) | (pen <= -Q)
     assert away.sum() > 900
     assert np.array_equal(logs[0]["force_n"][away], logs[1]["force_n"][away])
+
+
+def _piezo():
+    from hapticsdk_roughness.dimension import RoughnessRenderer
+    return RoughnessRenderer(200.0, 2.0)
+
+
+def _inp(v_raw, v_filt, step, t=0.0):
+    from hapticsdk.dimensions import TickInput
+    return TickInput(t, 1e-3, 1.0, np.array([v_raw, 0.0, 0.0]), True, (0.0, 1.0, 0.0), "o", (v_filt, 0.0, 0.0), step)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_piezo_speed_gate_holds_through_count_level_chatter(seed):
+    """A quantised probe sliding just above the 20 mm/s gate: the raw backward
+    difference jumps by whole counts per tick, the filtered speed dithers by less than
+    one count's step below the gate: the piezo opens once and stays on."""
+    rng = np.random.default_rng(seed)
+    r = _piezo()
+    step = 0.17 * Q / 1e-3  # a 30 Hz first-order filter at 1 kHz, one 0.055 mm count
+    on = []
+    for k in range(2000):
+        vf = r.v_gate_mm_s + 0.5 - rng.uniform(0.0, 0.95 * step)
+        raw = rng.choice([0.0, Q / 1e-3])
+        on.append(r.tick(_inp(raw, vf, step, k * 1e-3))[0].amplitude > 0)
+    on = np.array(on)
+    assert np.count_nonzero(np.diff(on.astype(int))) <= 1
+    # and the same chatter without the hysteresis (an exact position's gate) toggles
+    r0 = _piezo()
+    on0 = [r0.tick(_inp(rng.choice([0.0, Q / 1e-3]), 0.0, 0.0))[0].amplitude > 0 for _ in range(200)]
+    assert np.count_nonzero(np.diff(np.array(on0, int))) > 20
+
+
+def test_piezo_commands_away_from_the_gate_are_unchanged():
+    """Well above the gate (and with no quantisation), the hysteresis changes nothing:
+    frequency follows the raw speed (formula 9) and the amplitude is V_out."""
+    for v in (30.0, 55.0, 120.0):
+        a = _piezo().tick(_inp(v, v, 9.0))[0]
+        b = _piezo().tick(_inp(v, v, 0.0))[0]
+        assert (a.frequency_hz, a.amplitude) == (b.frequency_hz, b.amplitude) and a.amplitude > 0

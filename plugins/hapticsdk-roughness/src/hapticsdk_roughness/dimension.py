@@ -106,6 +106,7 @@ class RoughnessRenderer(DimensionRenderer):
         self.ticks = 0
         self.active_ticks = 0
         self._last_f = min(max(self.fpeak_hz, self.f_lo), self.f_hi)
+        self._gate_open = False
 
     def frequency_for(self, v_x_mm_s: float) -> float:
         """Formula (9): ``f_p = Fpeak * |v_x / v_ref|`` (Hz), unclamped."""
@@ -114,8 +115,16 @@ class RoughnessRenderer(DimensionRenderer):
     def tick(self, inp: TickInput) -> list[ChannelCommand]:
         self.ticks += 1
         avx = abs(float(inp.velocity_mm_s[0]))
+        # the speed gate: on a quantised position (speed_step_mm_s > 0) it looks at the
+        # filtered speed with a hysteresis of one count's speed step, so count-level
+        # chatter never toggles the piezo; on an exact position, the speed itself
+        step = getattr(inp, "speed_step_mm_s", 0.0)
+        vf = inp.velocity_filtered_mm_s
+        gate_v = abs(float(vf[0])) if (step > 0.0 and vf is not None) else avx
+        thr = self.v_gate_mm_s - step if self._gate_open else self.v_gate_mm_s
         # written as "not (... >= ...)" so a NaN speed stays silent
-        if not (avx >= self.v_gate_mm_s and (inp.in_contact or not self.require_contact)):
+        self._gate_open = gate_v >= thr and (inp.in_contact or not self.require_contact)
+        if not self._gate_open:
             # positional fields (role, force_n, frequency_hz, amplitude)
             return [ChannelCommand("vibration", None, self._last_f, 0.0)]
         f = self.fpeak_hz * avx / self.v_ref_mm_s  # formula (9), same operation order as frequency_for
