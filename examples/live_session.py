@@ -4,13 +4,16 @@ printed as they come, and a figure of force and vibration over time with the obj
 boundaries marked (needs matplotlib).
 
     python examples/live_session.py live_session.png
+    python examples/live_session.py live_session.png --view 30   # also open the live view
+                                                                  # in the browser, 30 s more
 
 The servo runs in its own process (``isolation="process"``); this script only asks for
 state, gets events through callbacks (on the SDK's own thread) and never blocks it;
 the servo records every tick to a file (``record=``), which the figure is drawn from. Everything runs on simulated devices (generated
 data: no real device, finger or material was measured).
 
-Reading the figure: on the rubber (S12, the library's hardest sample: the arm's full
+Reading the figure: the force panel draws every tick in grey and its 20 ms running mean
+in black. On the rubber (S12, the library's hardest sample: the arm's full
 2.3 N/mm plus the voice coil) the simulated finger rests only 0.17-0.22 mm deep, a few
 of the simulated Omni's 0.055 mm encoder counts. The force then steps between count
 levels (2.3 N/mm x 0.055 mm = 0.13 N), and at each count change the passivity
@@ -49,7 +52,13 @@ RETARGET = ("rubber", {"hardness": 0.95, "roughness": 0.7})
 
 
 def main() -> None:
-    out_png = Path(sys.argv[1] if len(sys.argv) > 1 else "live_session.png")
+    import argparse
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("png", nargs="?", default="live_session.png")
+    ap.add_argument("--view", type=float, default=None, metavar="SECONDS",
+                    help="serve the live view on 127.0.0.1 and keep the session open this long after the walk")
+    args = ap.parse_args()
+    out_png = Path(args.png)
     scene = Scene.from_dict(SCENE)
     finger = walk_over(scene, press_depth_mm=1.5, speed_mm_s=40.0)
     record = Path(tempfile.mkdtemp()) / "live_run.npz"
@@ -71,11 +80,13 @@ def main() -> None:
                   f"({feats}), error {r.error:.3g}; "
                   + (f"rendered from tick {r.tick} (t={r.t:.3f} s)" if ok else "not acknowledged within 0.1 s"))
 
-    with hs.Session(scene, trajectory=finger, record=record) as s:
+    with hs.Session(scene, trajectory=finger, record=record, view=args.view is not None) as s:
         print(f"servo running in process {s.servo_pid}; objects: {s.objects}")
+        if s.view is not None:
+            print(f"live view: {s.view.url}  (open it in a browser)")
         s.on_event("*", show)
         s.on_event("contact_enter", on_contact)
-        time.sleep(finger.duration_s + 0.3)
+        time.sleep(finger.duration_s + 0.3 + (args.view or 0.0))
         st = s.state()
         print(f"servo: {st.ticks} ticks, {st.overruns} overruns, {st.skipped_ticks} skipped, "
               f"{st.renderer_errors} renderer errors, {st.clamps} clamps, {st.material_switches} switches")
@@ -97,7 +108,12 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
     t = log["t"]
     obj = log["object_id"]
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(12, 6))
-    ax1.plot(t, log["force_n"], color="k", lw=1.0, label="force along the normal (N)")
+    f = log["force_n"]
+    ax1.plot(t, f, color="0.65", lw=0.5, label="force along the normal, every tick (N)")
+    # what a finger feels of the count-level cycle: its running mean over 20 ms (20 ticks)
+    w = 20
+    mean = np.convolve(f, np.ones(w) / w, mode="same")
+    ax1.plot(t, mean, color="k", lw=1.2, label="force, 20 ms running mean (N)")
     ax1.set_ylabel("force (N)")
     # the piezo's amplitude in V on the left, the voice coil's (0..1) on its own axis
     ax2c = ax2.twinx()
@@ -134,6 +150,13 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
         # above the panel: the force trace may fill it to the top
         ax1.text(0.5 * (ta + tb), 1.01, name, ha="center", va="bottom", fontsize=9,
                  transform=ax1.get_xaxis_transform())
+    stiff = [sp for sp in spans if names.get(sp[0]) == "rubber"]
+    if stiff:
+        _, ta, tb = stiff[0]
+        ax1.annotate("grey band: count-level cycle of a quantised stiff wall\n(finger 3-4 encoder counts deep; "
+                     "0.13 N per count)", (0.5 * (ta + tb), 0.02), xycoords=ax1.get_xaxis_transform(),
+                     ha="center", va="bottom", fontsize=8,
+                     bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85})
     if retarget_t is not None:
         for ax in (ax1, ax2):
             ax.axvline(retarget_t, color="k", ls="--", lw=1.0)
