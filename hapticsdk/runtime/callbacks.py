@@ -118,6 +118,7 @@ class EventDispatcher:
         self.delivered = 0
 
     def add(self, kind: str, callback: Callable[["SessionEvent"], Any]) -> None:
+        """Register ``callback`` for ``kind`` (starts the thread on the first call)."""
         with self._lock:
             self._callbacks.setdefault(kind, []).append(callback)
             if self._thread is None:
@@ -126,6 +127,7 @@ class EventDispatcher:
                 self._thread.start()
 
     def remove(self, kind: str, callback: Callable[["SessionEvent"], Any]) -> bool:
+        """Unregister ``callback`` for ``kind``; True when it was registered."""
         with self._lock:
             cbs = self._callbacks.get(kind, [])
             if callback in cbs:
@@ -138,6 +140,8 @@ class EventDispatcher:
         self._stop.set()
 
     def stop(self, timeout: float = 1.0) -> None:
+        """End the thread (the session's ``close()``); no callback runs after it returns,
+        unless it is called from a callback."""
         self._closing = True
         self._stop.set()
         th = self._thread

@@ -156,6 +156,7 @@ class ViewServer:
         return int(self.httpd.frames)  # type: ignore[attr-defined]
 
     def close(self) -> None:
+        """Stop serving: end every page's stream and close the socket."""
         self.httpd.stopping.set()  # type: ignore[attr-defined]
         self.httpd.shutdown()
         self.httpd.server_close()
