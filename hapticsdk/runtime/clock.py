@@ -309,7 +309,10 @@ def apply_realtime(settings: RealtimeSettings) -> tuple[dict[str, str], Callable
                     pol0, par0 = os.sched_getscheduler(0), os.sched_getparam(0)
                     got, how = make_thread_realtime(prio)
                     if got is not None:
-                        undo.append(lambda p=pol0, q=par0: os.sched_setscheduler(0, p, q))
+                        # RealtimeKit sets SCHED_RESET_ON_FORK, which an unprivileged thread
+                        # may not clear: keep it when going back
+                        keep = getattr(os, "SCHED_RESET_ON_FORK", 0)
+                        undo.append(lambda p=pol0, q=par0, f=keep: os.sched_setscheduler(0, p | f, q))
                         status["rt_priority"] = f"applied: {how} (auto; the OS refused SCHED_FIFO directly)"
                     else:
                         status["rt_priority"] = (f"refused: {_os_error(exc)}{hint}; {how}; the servo runs at "
