@@ -93,9 +93,16 @@ class ActuatorLimits:
         min_amplitude: smallest amplitude it can produce, for actuators whose amplitude
             is a set-point rather than an on/off level (a Peltier's coolest surface
             temperature, ``amplitude_unit``); ``None``: 0.
+        settle_time_s: longest time the output takes to reach a new command within its
+            resolution, from rest to full scale or back (its own ramps, slew and lag; s).
+            ``None``: within one servo tick. (Plugin API 1.2.)
+        force_resolution_n: step of the forces it can produce or measure (N); ``None``:
+            continuous. (Plugin API 1.2.)
 
     The conformance kit compares what an actuator reports it outputs
-    (:meth:`Actuator.read_back`) with what it was commanded to within half these steps.
+    (:meth:`Actuator.read_back`) with the command in force once ``settle_time_s`` has
+    passed: a drive record (:attr:`Actuator.readback_source` ``"drive"``) within half
+    these steps, a measured or modelled output (``"output"``) within one step.
     """
 
     max_force_n: float | None = None
@@ -108,6 +115,8 @@ class ActuatorLimits:
     frequency_resolution_hz: float | None = None
     amplitude_resolution: float | None = None
     min_amplitude: float | None = None
+    settle_time_s: float | None = None
+    force_resolution_n: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The limits as a JSON-ready dict (tuples as lists; ``None`` where a limit does not
@@ -205,6 +214,12 @@ class Actuator(ABC):
     #: amplitude the output rests at in its safe state (``stop()``): 0 for vibration and
     #: friction; a thermal actuator rests at a neutral temperature (its ``amplitude_unit``)
     rest_amplitude: ClassVar[float] = 0.0
+    #: what :meth:`read_back` reports (plugin API 1.2): ``"drive"``, the backend's own
+    #: record of what it last wrote to the hardware; ``"output"``, the physical output,
+    #: measured (a sensor, a status register) or modelled (a simulated plant). The
+    #: conformance kit checks the output itself only for ``"output"`` and says so in its
+    #: report for ``"drive"``.
+    readback_source: ClassVar[str] = "drive"
 
     @classmethod
     def capability_for(cls, options: Mapping[str, Any] | None = None) -> DriveCapability | None:
@@ -235,6 +250,8 @@ class Actuator(ABC):
         self.label = label or self.name or type(self).__name__
         self._is_open = False
         self.fault: BaseException | None = None
+        #: the backend error of the last :meth:`close` (its ``_stop`` or ``_close``), or None
+        self.close_error: BaseException | None = None
         self.last_command: ChannelCommand | None = None
         from .safety import SafetyLayer
         if safety is None:
@@ -270,14 +287,20 @@ class Actuator(ABC):
         return self
 
     def close(self) -> None:
-        """Stop (safe state) and release the device. Never raises."""
+        """Stop (safe state) and release the device. Never raises an :class:`Exception`
+        (it may run while another error propagates): ``_close`` runs even when the stop
+        failed, and a backend error of either is logged and kept in :attr:`close_error`
+        (None after a clean close), where callers and the conformance kit see it."""
         if not self._is_open:
             return
-        self.stop()
+        self.close_error = None
+        if not self.stop():
+            self.close_error = self.fault or DeviceError("stop failed during close()", device=self.label)
         try:
             self._close()
         except Exception as exc:  # closing must not mask the caller's error
-            log.warning("%s: close failed: %s", self.label, exc)
+            log.error("%s: close failed: %s: %s", self.label, type(exc).__name__, exc)
+            self.close_error = self.close_error or exc
         self._is_open = False
         _OPEN_ACTUATORS.discard(self)
 
@@ -382,6 +405,34 @@ class Actuator(ABC):
 
     def _read_back(self) -> ChannelCommand | None:
         """Backend: the output now (see :meth:`read_back`); default: not available."""
+        return None
+
+    @property
+    def settle_time_s(self) -> float:
+        """How long the output takes to reach a command (s): ``limits.settle_time_s``, 0
+        when undeclared. Backends whose ramp is an option override it."""
+        v = getattr(self.limits, "settle_time_s", None)
+        return float(v) if v is not None else 0.0
+
+    def still_driving(self) -> str | None:
+        """What this actuator still outputs when it should rest, per :meth:`read_back`
+        (``"amplitude 148 V"``), or None at rest (within half its declared resolution) or
+        when it cannot tell (no read-back). For the render report after the final stop."""
+        try:
+            rb = self.read_back()
+        except Exception as exc:  # noqa: BLE001 - a failing read is reported, not raised
+            return f"read-back failed after stop ({type(exc).__name__}: {exc})"
+        if rb is None:
+            return None
+        lim = self.limits
+        f = rb.force_n or 0.0
+        ftol = 0.5 * (getattr(lim, "force_resolution_n", None) or 0.0) + 1e-9 * float(lim.max_force_n or 1.0)
+        if abs(f) > ftol:
+            return f"force {f:g} N"
+        if rb.amplitude is not None:
+            atol = 0.5 * (lim.amplitude_resolution or 0.0) + 1e-9 * float(lim.max_amplitude or 1.0)
+            if abs(rb.amplitude - float(self.rest_amplitude)) > atol:
+                return f"amplitude {rb.amplitude:g} {lim.amplitude_unit} (rest {float(self.rest_amplitude):g})"
         return None
 
     # -- discovery (used by `hapticsdk doctor`) -----------------------------

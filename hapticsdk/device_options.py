@@ -60,13 +60,17 @@ class PrivilegedOptionError(ValidationError):
 
 def privileged_options(cls: Any) -> dict[str, str]:
     """Privileged options of an actuator class (or instance), merged over its bases:
-    option name -> what it names (``"native library"``, ``"output file"``)."""
+    option name -> what it names (``"native library"``, ``"output file"``). A class may
+    declare a dict or any collection of names
+    (:func:`hapticsdk.plugin_api.normalise_privileged_options`); a declaration that cannot
+    be read raises :class:`~hapticsdk.errors.PluginError` (fail closed)."""
+    from .plugin_api import normalise_privileged_options
     klass = cls if isinstance(cls, type) else type(cls)
     out: dict[str, str] = {}
     for base in reversed(klass.__mro__):
-        decl = base.__dict__.get("privileged_options")
-        if isinstance(decl, Mapping):
-            out.update({str(k): str(v) for k, v in decl.items()})
+        if "privileged_options" in base.__dict__:   # dict, tuple, list, set or frozenset of names
+            out.update(normalise_privileged_options(base.__dict__["privileged_options"],
+                                                    owner=getattr(klass, "name", "") or klass.__name__))
     return out
 
 

@@ -272,6 +272,35 @@ class PerceptionDimension(ABC):
                 "roles": {r: spec.to_dict() for r, spec in self.roles.items()}}
 
 
+def declared_roles(dim: Any) -> dict[str, RoleSpec]:
+    """The typed roles of a dimension (class or instance): its ``roles`` where it declares
+    them (plugin API 1.1); otherwise, for a 1.0-style dimension, one per default actuator,
+    typed from that actuator's channel and the fields it accepts with their units
+    (:meth:`hapticsdk.actuators.Actuator.accepted_fields`), so that mapping the role to an
+    actuator of another kind or unit is refused as for a declared role. A role whose
+    default actuator is not installed is left out."""
+    declared = dict(getattr(dim, "roles", {}) or {})
+    if declared:
+        return declared
+    from .plugins import registry
+    out: dict[str, RoleSpec] = {}
+    for role, name in dict(getattr(dim, "default_actuators", {}) or {}).items():
+        if name not in registry("actuator"):
+            continue
+        cls = registry("actuator").load(name)
+        fields = cls.accepted_fields() if hasattr(cls, "accepted_fields") else {}
+        channel = getattr(cls, "channel", "other")
+        if fields and channel:
+            out[role] = RoleSpec(channel, fields, f"typed from the default actuator {name!r} (undeclared role)")
+    return out
+
+
+def undeclared_fields(cmd: ChannelCommand, spec: RoleSpec) -> list[str]:
+    """The fields ``cmd`` sets that ``spec`` does not declare (``[]``: within its
+    contract)."""
+    return [f for f in COMMAND_FIELDS if getattr(cmd, f) is not None and f not in spec.fields]
+
+
 def check_intensity(value: object, field: str) -> float:
     """Return ``value`` as a float in [0, 1] or raise :class:`ValidationError` naming ``field``.
 

@@ -116,14 +116,14 @@ def format_plan(out: dict[str, Any]) -> str:
                              f"({c['actuator_channel']}; accepts {acc})")
         dev = m.get("device") or {}
         for dim, res in (dev.get("residual") or {}).items():
-            caps = ", ".join(f"{role}: {c['frequency_range_hz'][0]:g}-{c['frequency_range_hz'][1]:g} Hz, "
-                             f"max {c['max_drive']:g} {c['drive_unit']}"
-                             for role, c in (dev.get("capabilities", {}).get(dim) or {}).items()
-                             if c.get("frequency_range_hz") and c.get("max_drive") is not None)
+            caps = ", ".join(f"{role}: {_limits_text(c)}"
+                             for role, c in (dev.get("capabilities", {}).get(dim) or {}).items() if _limits_text(c))
             if caps or abs(res) > 0 or dev.get("binding"):
+                tol = dev.get("binding_rtol")
+                within = f" (within {100 * tol:g} % of their bound)" if tol is not None else ""
                 lines.append(f"  on the mapped device{'s' if ',' in caps else ''} ({caps or 'no limits published'}): "
                              f"{dim} predicted {dev['predicted'][dim]:.4f} for target {dev['predicted'][dim] + res:.4f}, "
-                             f"residual {res:+.4f}; binding device constraints: "
+                             f"residual {res:+.4f}; binding device constraints{within}: "
                              f"{', '.join(dev.get('binding') or []) or 'none'}")
         for d in m["dropped"]:
             lines.append(f"  dropped {d['dimension']}: {d['reason']}")
@@ -143,3 +143,15 @@ def format_plan(out: dict[str, Any]) -> str:
     if out.get("plot"):
         lines.append(f"figure saved to {out['plot']}")
     return "\n".join(lines)
+
+
+def _limits_text(c: dict) -> str:
+    """A mapped actuator's published limits as text (its band and/or its largest drive);
+    "" when it publishes none."""
+    parts = []
+    if c.get("frequency_range_hz"):
+        lo, hi = c["frequency_range_hz"]
+        parts.append(f"{lo:g}-{hi:g} Hz")
+    if c.get("max_drive") is not None:
+        parts.append(f"max {c['max_drive']:g} {c.get('drive_unit') or ''}".rstrip())
+    return ", ".join(parts)

@@ -142,7 +142,7 @@ def _capabilities(scene: Scene, dim: Any) -> tuple[dict[str, Any], dict[str, str
     """What the actuators on ``dim``'s roles can produce (role -> DriveCapability), asked
     of their classes with the scene's (non-privileged) options: nothing is created,
     opened or loaded; and role -> why none is known."""
-    from ..device_options import trusted_options
+    from ..device_options import privileged_options, trusted_options
     from ..plugins import registry
     caps: dict[str, Any] = {}
     notes: dict[str, str] = {}
@@ -153,7 +153,7 @@ def _capabilities(scene: Scene, dim: Any) -> tuple[dict[str, Any], dict[str, str
         if not name or name not in registry("actuator"):
             continue
         cls = registry("actuator").load(name)
-        priv = set(getattr(cls, "privileged_options", {}) or {})
+        priv = set(privileged_options(cls))
         opts = {k: v for k, v in {**trusted_options(name), **(dict(spec.options) if spec is not None else {})}.items()
                 if k not in priv}
         try:
@@ -294,31 +294,66 @@ def _check_satisfiable(dims: Sequence[str], settings: Mapping[str, Any]) -> None
 
 
 def _device_summary(r: Any, targets: Mapping[str, float], kept: Sequence[str], caps: Mapping[str, Any],
-                    notes: Mapping[str, Mapping[str, str]], device: Mapping[str, Sequence[Any]]) -> dict[str, Any]:
+                    notes: Mapping[str, Mapping[str, str]], device: Mapping[str, Sequence[Any]],
+                    tolerance: float = 0.01) -> dict[str, Any]:
     """What the mapped actuators can produce and what remains of the target because of it:
     per kept dimension the predicted intensity of the features that will be rendered
     (solved within the device constraints) against the target, and which device
-    constraints bind at the answer (within 0.1 % of their bound)."""
+    constraints bind at the answer: a constraint binds when the answer lies within
+    ``binding_rtol`` of its bound (relative to the bound; the solver's intensity tolerance,
+    the accuracy it stops at), or when the target is missed by more than that tolerance
+    and it is the dimension's device constraint with the least relative slack (what held
+    the answer back). Both figures are in the result."""
     cols = {k: np.array([float(v)]) for k, v in r.x_dict.items()}
+    pred = dict(r.intensities)
+    rtol = float(tolerance)
     active: list[str] = []
     described: list[dict[str, Any]] = []
     for d in kept:
+        nearest: tuple[float, str] | None = None
         for c in device.get(d, ()):
             desc = c.describe()
             try:
                 b, v = (float(np.asarray(a)[0]) for a in c.bound_and_value(cols))
-                desc.update(bound=b, value=v)
-                if v - b <= 1e-3 * max(abs(b), 1e-9):
+                slack = (v - b) / max(abs(b), 1e-12)
+                desc.update(bound=b, value=v, relative_slack=slack)
+                if slack <= rtol and c.name not in active:
                     active.append(c.name)
+                if nearest is None or slack < nearest[0]:
+                    nearest = (slack, c.name)
             except Exception:   # a feature of the constraint is not in this solve
                 pass
             described.append(desc)
-    pred = dict(r.intensities)
+        missed = d in pred and abs(float(targets[d]) - float(pred[d])) > rtol
+        if missed and nearest is not None and nearest[1] not in active:
+            active.append(nearest[1])
     return {"capabilities": {d: {role: cap.summary() for role, cap in caps.get(d, {}).items()} for d in kept},
             "notes": {d: dict(notes.get(d, {})) for d in kept if notes.get(d)},
-            "constraints": described, "binding": active,
+            "constraints": described, "binding": active, "binding_rtol": rtol,
             "predicted": {d: float(pred[d]) for d in kept if d in pred},
             "residual": {d: float(targets[d] - pred[d]) for d in kept if d in pred}}
+
+
+def _check_commands(d: str, rend: Any, dim: Any) -> None:
+    """One tick of the new renderer in contact (1 mm, sliding at 20 mm/s): every command
+    must be on a role it lists and set only the fields that role declares (typed roles of
+    :func:`hapticsdk.dimensions.declared_roles`). Cheap: the renderer is built anyway."""
+    from ..dimensions import TickInput, declared_roles, undeclared_fields
+    specs = declared_roles(dim)
+    if not specs:
+        return
+    inp = TickInput(t=0.0, dt=1e-3, penetration_mm=1.0, velocity_mm_s=np.array([20.0, 0.0, 0.0]), in_contact=True)
+    try:
+        cmds = rend.tick(inp)
+    except Exception:   # noqa: BLE001 - the render path reports a failing tick, naming it
+        return
+    for c in cmds or ():
+        spec = specs.get(getattr(c, "role", None))
+        extra = undeclared_fields(c, spec) if spec is not None else []
+        if extra:
+            raise PluginError(f"dimension {d!r}: its renderer sets {extra} on role {c.role!r}, which is declared "
+                              f"as {spec.describe()}: the actuator on that role would receive a field it does "
+                              f"not act on", plugin=d, kind="dimension")
 
 
 def _role_spec(owner: str, dname: str, role: str, dim_objs: Mapping[str, Any], imp_model: Any) -> RoleSpec | None:
@@ -326,7 +361,8 @@ def _role_spec(owner: str, dname: str, role: str, dim_objs: Mapping[str, Any], i
     if owner.startswith("replacement:"):
         rep = imp_model.replacement(dname) if imp_model is not None else None
         return _REPLACEMENT_ROLES.get(rep["renderer"]) if rep else None
-    return (getattr(dim_objs[dname], "roles", {}) or {}).get(role)
+    from ..dimensions import declared_roles
+    return declared_roles(dim_objs[dname]).get(role)
 
 
 def _check_role(owner: str, role: str, rspec: RoleSpec | None, actuator: str,
@@ -472,6 +508,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                 raise PluginError(f"dimension {d!r}: its renderer commands role(s) {undeclared} that the "
                                   f"dimension does not declare in `roles` (declared: {sorted(declared)})",
                                   plugin=d, kind="dimension")
+            _check_commands(d, rend, dim_objs[d])
             roles[d] = list(rend.roles)
         dropped: list[DroppedDimension] = []
         for e in drops[m.name]:
@@ -537,7 +574,8 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
             actuators=actuators, actuator_options=options, roles=roles,
             dimension_distributions=dists,
             solve=_solve_summary(r, kept, models, settings["solver"]["seed"]),
-            device=_device_summary(r, m.targets, kept, caps, cap_notes, device),
+            device=_device_summary(r, m.targets, kept, caps, cap_notes, device,
+                                   tolerance=float(settings["solver"].get("tolerance", 0.01))),
             source=m.source, objects=list(m.objects))
 
     # plugins used / never imported

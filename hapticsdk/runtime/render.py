@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import inspect
 import json
+import logging
+import math
 import time
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -28,6 +30,8 @@ from ..plan import FALLBACK_SENSOR, MaterialPlan, RenderPlan
 from ..plugin_api import check_plugin_api
 from .limits import check_period, check_seconds
 from .replacements import make_replacement
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -273,9 +277,13 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
             pm.call_safely("hapticsdk_device_fault", device=str(lr.fault.get("device", "")),
                            error=DeviceError(str(lr.fault.get("message", "")), device=lr.fault.get("device")))
         everyone = list(instances.values()) + ([device] if device not in instances.values() else [])
+        left = _left_driving(everyone, period)
         safety = {a.label: a.safety.report() for a in everyone}
         devices = {a.label: a.describe() for a in everyone}
     fault = getattr(lr, "fault", None)
+    if fault is None and left:
+        label, what = next(iter(left.items()))
+        fault = {"device": label, "message": f"left driving after stop(): {what}", "left_driving": left}
     report = RenderReport(
         material=mp.name, scene=plan.scene, dimensions=list(mp.dimensions),
         replacements=[{"dimension": d.dimension, **(d.replacement or {})} for d in mp.replacements],
@@ -293,6 +301,30 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     if pm is not None:
         pm.call_safely("hapticsdk_render_finished", plan=one, report=report)
     return report
+
+
+def _left_driving(actuators: list[Actuator], period_s: float) -> dict[str, str]:
+    """Stop every actuator, then name those still driving (label -> what, from
+    :meth:`Actuator.still_driving`). One whose read-back is its physical output gets its declared
+    settle time to come to rest (simulated ones are stepped through it, real ones waited
+    for) before it counts."""
+    out: dict[str, str] = {}
+    for a in actuators:
+        a.stop()   # the run is over: every actuator to its safe state now (idempotent, never raises)
+        what = a.still_driving()
+        wait = a.settle_time_s if getattr(a, "readback_source", "drive") == "output" else 0.0
+        for _ in range(int(math.ceil(wait / period_s)) if what and wait > 0 else 0):
+            if getattr(a, "simulated", False) and callable(getattr(a, "step", None)):
+                a.step(period_s)
+            else:
+                time.sleep(period_s)
+            what = a.still_driving()
+            if what is None:
+                break
+        if what is not None:
+            log.error("%s: left driving after stop(): %s", a.label, what)
+            out[a.label] = what
+    return out
 
 
 def _calibrations(mp: MaterialPlan, settings: Mapping[str, Any], role_options: Mapping[str, Mapping[str, Any]]

@@ -9,7 +9,8 @@ from importlib import metadata
 import pytest
 
 from hapticsdk.errors import PluginError
-from hapticsdk.plugin_api import PLUGIN_API_VERSION, check_plugin_api, declared_api
+from hapticsdk.plugin_api import (API_HISTORY, PLUGIN_API_VERSION, PluginAPIError, admitted_versions, api_compatible,
+                                  check_plugin_api, declared_api, rules_new_since)
 from hapticsdk.plugins import Registry, list_plugins
 
 
@@ -70,9 +71,51 @@ def test_an_undeclared_plugin_loads_with_a_warning_naming_it(fake_plugin, caplog
 
 
 def test_an_unreadable_range_is_an_error(fake_plugin):
-    reg, name = fake_plugin("odd_plugin", package_api="~=1.0")
-    with pytest.raises(PluginError, match="unreadable"):
+    reg, name = fake_plugin("odd_plugin", package_api="~1.0")      # not PEP 440 (~= is)
+    with pytest.raises(PluginAPIError, match="unreadable"):
         reg.load(name)
+
+
+@pytest.mark.parametrize("spec, ok", [
+    (">=1.0,<2", True), ("~=1.1", True), ("~=1.0", True), ("==1.*", True), ("==1.2.*", True),
+    ("==1.0", False), (">=2.0", False), ("==1.0.*", False), ("~=1.3", False), ("<1.2", False), ("!=1.2", False),
+])
+def test_ranges_are_pep440_specifiers(spec, ok):
+    """~= (compatible release) and wildcards are read as packaging reads them, against
+    this core's 1.2."""
+    assert PLUGIN_API_VERSION == "1.2"
+    assert api_compatible(spec) is ok
+
+
+def test_the_rules_new_since_a_declared_version():
+    assert set(rules_new_since("~=1.2")) == set()
+    new11 = rules_new_since(">=1.1,<2")
+    assert "plugin-api-declared" in new11 and "read-back" not in new11
+    assert "read-back" in rules_new_since(">=1.0,<2") and rules_new_since(None) == rules_new_since(">=1.0")
+    assert admitted_versions("==1.*") == list(API_HISTORY)
+
+
+@pytest.mark.parametrize("decl, names", [
+    ({"library": "native library"}, {"library"}), (("library", "sink"), {"library", "sink"}),
+    (["library"], {"library"}), ({"library"}, {"library"}), (frozenset({"sink"}), {"sink"}), ((), set()),
+])
+def test_privileged_options_any_collection_of_names(decl, names):
+    """One reading of privileged_options: a dict or any collection of names; the scene
+    check refuses each of them."""
+    from hapticsdk.device_options import PrivilegedOptionError, check_data_options, privileged_options
+    Cls = type("Cls", (), {"privileged_options": decl, "name": "x"})
+    assert set(privileged_options(Cls)) == names
+    for n in names:
+        with pytest.raises(PrivilegedOptionError):
+            check_data_options(Cls, "x", "role", {n: 1}, field="scene.devices.role.options")
+
+
+@pytest.mark.parametrize("decl", ["library", 3, ("library", 3), ("",)])
+def test_an_unreadable_privileged_declaration_fails_closed(decl):
+    from hapticsdk.device_options import check_data_options
+    Cls = type("Cls", (), {"privileged_options": decl, "name": "x"})
+    with pytest.raises(PluginError, match="privileged_options"):
+        check_data_options(Cls, "x", "role", {"library": "/tmp/x.so"}, field="f")
 
 
 def test_every_installed_plugin_declares_a_compatible_range():

@@ -176,6 +176,7 @@ def test_plugin_api_versions():
         check_plugin_api(Old)
     with pytest.raises(ValidationError):
         api_compatible("~1.0")
+    assert api_compatible("~=1.0") and not api_compatible("==1.0")
 
 
 # -- library materials (hardness + roughness) --------------------------------------
