@@ -22,6 +22,10 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 __version__ = "0.1.0"
 
+#: the plugin API range of the core's own plugins (probe-virtual, playback-virtual, the MLP
+#: model): this core's (hapticsdk.plugin_api.PLUGIN_API_VERSION)
+hapticsdk_api = ">=1.2,<2"
+
 if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load lazily
     from .actuators import Actuator, HapticDevice, create_actuator
     from .compiler import compile_scene

@@ -28,9 +28,10 @@ from .errors import FeatureConflictError, ValidationError
 
 
 def same_unit(a: str, b: str) -> bool:
-    """Whether two unit strings name the same unit (white space and case of the
-    spelling ``N/mm`` vs ``N / mm`` aside; ``N/mm`` and ``N/m`` differ)."""
-    return "".join(str(a).split()) == "".join(str(b).split())
+    """Whether two unit strings name the same unit, parsed (:mod:`hapticsdk.units`:
+    ``newton`` = ``N``, ``N / mm`` = ``N/mm``, ``N/mm`` and ``N/m`` differ)."""
+    from .units import same_unit as _same
+    return _same(a, b)
 
 
 @dataclass(frozen=True)

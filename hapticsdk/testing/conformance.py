@@ -62,17 +62,57 @@ class Violation:
         return f"[{self.kind} {self.plugin!r}] rule {self.rule!r}: {self.message}"
 
 
+class KitResult(list):
+    """The violations of one :func:`check` run (a ``list`` of :class:`Violation`, as
+    before), plus what the run could not judge and the plugin's declared API:
+
+    * ``notes``: rule -> a sentence, e.g. ``read-back``: the actuator reports its drive
+      record, so the rules compared the record, not the physical output;
+    * ``api``: ``{"declared": range or None, "where": ..., "provided": PLUGIN_API_VERSION,
+      "new_rules": {rule: version}}`` — the kit's rules new since the oldest API version the
+      plugin declares (a violation of one of them says so).
+    """
+
+    notes: dict[str, str]
+    api: dict[str, Any]
+
+    def __init__(self, items: Sequence[Violation] = ()) -> None:
+        super().__init__(items)
+        self.notes = {}
+        self.api = {}
+
+
+def format_report(result: Sequence[Violation]) -> str:
+    """The violations, then the notes and the API line of a :class:`KitResult`."""
+    lines = [str(v) for v in result]
+    for rule, note in (getattr(result, "notes", None) or {}).items():
+        lines.append(f"note ({rule}): {note}")
+    api = getattr(result, "api", None) or {}
+    if api:
+        new = ", ".join(f"{r} ({v})" for r, v in api.get("new_rules", {}).items()) or "none"
+        lines.append(f"plugin API: declares {api.get('declared')!r} ({api.get('where')}); this core provides "
+                     f"{api.get('provided')}; kit rules new since the declared version: {new}")
+    return "\n".join(lines)
+
+
 class _Ctx:
     """What the rules of one plugin share: its name, how to make it, found violations."""
 
     def __init__(self, kind: str, name: str, factory: Callable[[], Any] | None, obj: Any = None) -> None:
         self.kind, self.name, self.factory, self.obj = kind, name, factory, obj
-        self.violations: list[Violation] = []
+        self.violations: KitResult = KitResult()
         self.by_name = False
         self.only: set[str] = set()
+        self.new_rules: dict[str, str] = {}
 
     def fail(self, rule: str, message: str) -> None:
+        if rule in self.new_rules:
+            message += (f" [rule new in plugin API {self.new_rules[rule]}: see the migration table in "
+                        f"docs/plugin-authors.md]")
         self.violations.append(Violation(self.kind, self.name, rule, message))
+
+    def note(self, rule: str, message: str) -> None:
+        self.violations.notes[rule] = message
 
     def make(self) -> Any:
         if self.factory is None:
@@ -92,7 +132,8 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None) -> tuple
         try:
             obj = _load(kind, target)
         except PluginError as exc:
-            return target, None, None, str(exc)
+            from ..plugin_api import PluginAPIError
+            return target, None, None, (("api", str(exc)) if isinstance(exc, PluginAPIError) else str(exc))  # type: ignore[return-value]
         if isinstance(obj, type) and hasattr(obj, "conformance_options"):
             opts = {**obj.conformance_options(), **opts}
         return target, (lambda: obj(**opts)), obj, None
@@ -123,11 +164,12 @@ def _run_rules(ctx: _Ctx, rules: Sequence[tuple[str, Callable[[], None]]], *,
                always: tuple[str, ...] = (), stop_after: tuple[str, ...] = ()) -> None:
     """Run ``rules`` in order (only those of ``ctx.only`` when set, plus ``always``);
     stop after a rule of ``stop_after`` when anything failed so far."""
+    before = len(ctx.violations)   # plugin-api-declared runs first and never stops the rest
     for rule, fn in rules:
         if ctx.only and rule not in ctx.only and rule not in always:
             continue
         _guard(ctx, rule, fn)
-        if rule in stop_after and ctx.violations:
+        if rule in stop_after and len(ctx.violations) > before:
             break
 
 
@@ -258,15 +300,58 @@ def _full_scale(act: Actuator) -> tuple[float, float, float]:
             float(lim.max_amplitude or 1.0))
 
 
+def _reports_output(act: Any) -> bool:
+    return getattr(act, "readback_source", "drive") == "output"
+
+
+def _tol(act: Actuator, step: float | None, full_scale: float) -> float:
+    """Read-back tolerance of one field: half the declared step for a drive record (the
+    quantisation of a write), one step for a measured or modelled output (that of the
+    write plus that of the reading); :data:`READBACK_RTOL` of full scale where no step is
+    declared."""
+    share = 1.0 if _reports_output(act) else 0.5
+    return max(READBACK_RTOL * full_scale, share * (step or 0.0)) + 1e-9
+
+
+def _settle_ticks(act: Actuator, *, ramp: bool = False) -> int:
+    """Kit ticks to hold a command before its read-back is judged: the actuator's declared
+    settle time (its own ramps and lag), plus the safety layer's start ramp when
+    ``ramp``, plus two ticks (the command of the tick and the one that observes it)."""
+    t = float(getattr(act, "settle_time_s", 0.0) or 0.0)
+    if ramp:
+        t += float(getattr(act.safety.settings, "ramp_time_s", 0.0) or 0.0)
+    return int(math.ceil(t / KIT_PERIOD_S - 1e-9)) + 2
+
+
+def _advance(act: Actuator, dt: float = KIT_PERIOD_S) -> None:
+    """One kit tick of simulated time for an actuator that models it (``step(dt)``: a
+    HapticDevice, a simulated plate or Peltier)."""
+    step = getattr(act, "step", None)
+    if callable(step):
+        step(dt)
+
+
+def _rest_after(act: Actuator, when: str) -> None:
+    """Hold no command for the declared settle time (advancing simulated time), then the
+    read-back must show rest."""
+    n = _settle_ticks(act) if _reports_output(act) else 0
+    for _ in range(n):
+        if act.is_open:
+            _advance(act)
+    _assert_rest(act, act.read_back(), when + (f" and {n} ms (its declared settle time)" if n else ""))
+
+
 def _assert_rest(act: Actuator, rb: ChannelCommand | None, when: str) -> None:
     if rb is None:
         return
+    lim = act.limits
     fs_f, _, fs_a = _full_scale(act)
     if rb.force_n is not None:
-        assert abs(rb.force_n) <= READBACK_RTOL * fs_f + 1e-9, f"output {rb.force_n:g} N {when}, expected 0 N"
+        tol = _tol(act, getattr(lim, "force_resolution_n", None), fs_f)
+        assert abs(rb.force_n) <= tol, f"output {rb.force_n:g} N {when}, expected 0 N"
     if rb.amplitude is not None:
         rest = float(getattr(act, "rest_amplitude", 0.0))
-        tol = max(READBACK_RTOL * fs_a, 0.5 * (act.limits.amplitude_resolution or 0.0)) + 1e-9
+        tol = _tol(act, lim.amplitude_resolution, fs_a)
         assert abs(rb.amplitude - rest) <= tol, \
             f"output amplitude {rb.amplitude:g} {act.limits.amplitude_unit} {when}, expected {rest:g} (rest)"
 
@@ -279,17 +364,19 @@ def _assert_matches(act: Actuator, sent: ChannelCommand | None, rb: ChannelComma
     fs_f, fs_hz, fs_a = _full_scale(act)
     if sent.force_n is not None and not (isinstance(act, HapticDevice) and lim.max_force_n is None):
         got = rb.force_n if rb.force_n is not None else 0.0
-        assert abs(got - sent.force_n) <= READBACK_RTOL * fs_f + 1e-9, \
-            f"commanded {sent.force_n:g} N (within its declared limits), the device outputs {got:g} N"
+        tolf = _tol(act, getattr(lim, "force_resolution_n", None), fs_f)
+        assert abs(got - sent.force_n) <= tolf, \
+            (f"commanded {sent.force_n:g} N (within its declared limits), the device outputs {got:g} N "
+             f"(tolerance {tolf:.3g} N)")
     if sent.amplitude is not None:
         got = rb.amplitude if rb.amplitude is not None else 0.0
-        tol = max(READBACK_RTOL * fs_a, 0.5 * (lim.amplitude_resolution or 0.0)) + 1e-9
+        tol = _tol(act, lim.amplitude_resolution, fs_a)
         assert abs(got - sent.amplitude) <= tol, \
             (f"commanded amplitude {sent.amplitude:g} {lim.amplitude_unit}, the device outputs {got:g} "
              f"(tolerance {tol:.3g})")
         if sent.frequency_hz is not None and sent.amplitude > 0:
             gf = rb.frequency_hz if rb.frequency_hz is not None else float("nan")
-            tolf = max(READBACK_RTOL * fs_hz, 0.5 * (lim.frequency_resolution_hz or 0.0)) + 1e-9
+            tolf = _tol(act, lim.frequency_resolution_hz, fs_hz)
             assert abs(gf - sent.frequency_hz) <= tolf, \
                 f"commanded {sent.frequency_hz:g} Hz, the device outputs {gf:g} Hz (tolerance {tolf:.3g} Hz)"
 
@@ -427,6 +514,18 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                 f = float(np.linalg.norm(np.asarray(a.read_state().force_n, float)))
                 assert f <= 1e-6, f"force {f:g} N still applied after stop()"
         n = spy.stops
+        # the output itself: full drive held until settled, then stop(): at rest within the declared time
+        c = ctx.make()
+        with c:
+            top = _normal_commands(c)
+            big = max(top, key=lambda k: abs(k.force_n or 0.0) + abs(k.amplitude or 0.0))
+            t = 0.0
+            for _ in range(_settle_ticks(c, ramp=True)):
+                t += KIT_PERIOD_S
+                c.command(big, now=t)
+                _advance(c)
+            assert c.stop() is True, "stop() returned False (backend stop failed)"
+            _rest_after(c, "after stop()")
         assert n >= 2, "close() did not stop the backend"
         # a failing backend is stopped by the core and reported as DeviceError
         b = ctx.make()
@@ -487,8 +586,12 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         except Exception as exc:
             raise AssertionError(f"close() raised {type(exc).__name__}: {exc} (it must never raise)") from None
         assert not a.is_open, "close() left the actuator open"
+        err = getattr(a, "close_error", None)
+        assert err is None, (f"the backend failed while closing: {type(err).__name__}: {err} (kept in "
+                             f"close_error; close() stopped and released what it could)")
         b = ctx.make()
         b.open()
+        stops = _Spy(b)
 
         def broken() -> None:
             raise OSError("simulated close failure")
@@ -497,6 +600,29 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             b.close()
         except Exception as exc:
             raise AssertionError(f"close() raised {type(exc).__name__} when the backend's _close failed") from None
+        assert stops.stops >= 1, "close() did not stop the backend before releasing it"
+        assert isinstance(getattr(b, "close_error", None), OSError), \
+            "a failing backend _close was not reported (close_error is not set): nobody can see it"
+
+    def r_privileged() -> None:
+        from ..device_options import privileged_options
+        try:
+            priv = privileged_options(cls)
+        except PluginError as exc:
+            raise AssertionError(f"the core cannot read its privileged_options: {exc}") from None
+        import inspect
+        try:
+            params = inspect.signature(cls.__init__).parameters
+        except (TypeError, ValueError):
+            return
+        if any(p.kind is p.VAR_KEYWORD for n, p in params.items() if n != "options"):
+            return
+        named = {n for n, p in params.items() if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
+        if "options" in params and params["options"].kind is params["options"].VAR_KEYWORD:
+            named |= {"label", "safety"}
+        unknown = sorted(k for k in priv if k not in named)
+        assert not unknown, (f"privileged_options names {unknown}, which the constructor does not take "
+                             f"(options: {sorted(named - {'self'})}): a misspelt name protects nothing")
 
     def r_read_back() -> None:
         a = ctx.make()
@@ -512,17 +638,22 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
 
     def r_follows() -> None:
         a = ctx.make()
+        if not _reports_output(a):
+            ctx.note("output-follows-command", "the actuator reports its drive record (readback_source 'drive'): "
+                     "the kit compared what the backend wrote, not the physical output; declare "
+                     "readback_source = 'output' where read_back measures or models the output")
         with a:
             if a.read_back() is None:
                 return   # reported by read-back
             t = 0.0
-            for c in _normal_commands(a):
+            for i, c in enumerate(_normal_commands(a)):
                 sent = None
-                for _ in range(30):   # held: backends that slew (a DRV2667 ramp) settle
+                # held until settled: the safety layer's start ramp (first command) and the
+                # actuator's declared settle time; simulated time advances each tick
+                for _ in range(_settle_ticks(a, ramp=i == 0)):
                     t += KIT_PERIOD_S
                     sent = a.command(c, now=t)
-                    if isinstance(a, HapticDevice):
-                        a.step(KIT_PERIOD_S)
+                    _advance(a)
                 _assert_matches(a, sent, a.read_back())
 
     def r_reopen() -> None:
@@ -532,7 +663,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         a.close()
         a.open()
         try:
-            _assert_rest(a, a.read_back(), "after close() and open() again (stale output)")
+            _rest_after(a, "after close() and open() again (stale output)")
         finally:
             a.close()
 
@@ -553,6 +684,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
 
     rules: list[tuple[str, Callable[[], None]]] = [
         ("class", r_class), ("template", r_template), ("limits-declared", r_limits), ("options", r_options),
+        ("privileged-options", r_privileged),
         ("lifecycle", r_lifecycle), ("close", r_close), ("bad-input", r_bad_input),
         ("limits-enforced", r_limits_enforced), ("safe-stop", r_safe_stop), ("read-back", r_read_back),
         ("output-follows-command", r_follows), ("reopen", r_reopen), ("determinism", r_determinism),
@@ -560,6 +692,71 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
     if device:
         rules.append(("state", r_state))
     _run_rules(ctx, rules, stop_after=("class",))
+
+
+def _force_limit(d: Any, role: str, spec: Any) -> tuple[str | None, float | None]:
+    """``(field, N)``: the command field that carries force on ``role`` (``force_n``, or a
+    field whose declared unit is a force: a friction plate's amplitude in N) and the largest
+    force the role's default actuator declares (``max_force_n``, or ``max_amplitude`` when
+    its amplitude is a force); ``(None, None)`` when the role carries no force."""
+    from ..plugins import registry
+    from ..units import is_force_unit
+    fields = dict(getattr(spec, "fields", {}) or {})
+    field = "force_n" if ("force_n" in fields or not fields) else \
+        next((f for f, u in fields.items() if is_force_unit(u)), None)
+    if field is None:
+        return None, None
+    name = d.default_actuators.get(role)
+    if name is None or name not in registry("actuator"):
+        return field, None
+    lim = getattr(registry("actuator").load(name), "limits", ActuatorLimits())
+    if field == "force_n":
+        return field, lim.max_force_n if lim.max_force_n is not None else \
+            (lim.max_amplitude if is_force_unit(lim.amplitude_unit) else None)
+    return field, lim.max_amplitude if is_force_unit(lim.amplitude_unit) else lim.max_force_n
+
+
+#: rows of the constraint-cost rule's batch, and how many times a vectorised reference on
+#: them a constraint may take. A Python loop costs >= ~1 us per row (interpreter dispatch,
+#: several us with numpy scalars), a vectorised column operation ~1-10 ns per element, so
+#: a per-row constraint at 10^4 rows is 100-1000 x the reference and a vectorised one with
+#: tens of array operations is ~1-10 x: 20 x lies between the two classes by a factor of
+#: >= 2 on each side, and both are measured in the same process (a loaded machine slows
+#: both).
+COST_ROWS = 10_000
+COST_FACTOR = 20.0
+#: repeats of the cost rule's timing (the fastest counts, interleaved with the reference)
+COST_REPEATS = 5
+
+
+def _cost_ratio(c: Constraint, cols: Mapping[str, np.ndarray]) -> tuple[float, float, float]:
+    """(ratio, constraint s, reference s): fastest-of-:data:`COST_REPEATS` time of one
+    ``penalty`` batch over that of a vectorised reference doing the base class's penalty
+    arithmetic on columns it reads (interleaved). Stops early when a first timing is
+    clearly within the limit."""
+    import time
+    names = [f for f in c.features if f in cols] or list(cols)[:1]
+    arrs = [np.asarray(cols[n], float) for n in names]
+
+    def reference() -> np.ndarray:
+        value = arrs[0] * 1.0
+        for a in arrs[1:]:
+            value = value + a
+        bound = 0.5 * value + 0.1
+        short = value < bound
+        return np.where(short, bound ** 2 - value ** 2, 0.0)
+
+    best_c, best_r = math.inf, math.inf
+    for i in range(COST_REPEATS):
+        t0 = time.perf_counter()
+        reference()
+        t1 = time.perf_counter()
+        c.penalty(cols, "paper")
+        t2 = time.perf_counter()
+        best_r, best_c = min(best_r, t1 - t0), min(best_c, t2 - t1)
+        if i >= 1 and best_c <= 0.5 * COST_FACTOR * best_r:
+            break
+    return best_c / max(best_r, 1e-9), best_c, best_r
 
 
 def _commands_force(cls: type) -> bool:
@@ -750,22 +947,27 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_commands() -> None:
         d = holder["d"]
-        from ..plugins import registry
+        from ..dimensions import declared_roles, undeclared_fields
         r = d.renderer(mid())
         seen: set[str] = set()
-        fmax = None
-        act = d.default_actuators.get("force")
-        if act is not None and act in registry("actuator"):
-            fmax = getattr(registry("actuator").load(act).limits, "max_force_n", None)
+        specs = declared_roles(d)
+        forces = {role: _force_limit(d, role, specs.get(role)) for role in r.roles}
         for inp in _tick_inputs():
             if not inp.in_contact:
                 continue
             for c in r.tick(inp):
                 seen.add(c.role)
-                if c.force_n is not None and fmax is not None and inp.penetration_mm <= 3.0:
-                    assert abs(c.force_n) <= FORCE_PLAUSIBILITY_FACTOR * fmax, \
-                        (f"commands {c.force_n:g} N at {inp.penetration_mm:g} mm, more than "
-                         f"{FORCE_PLAUSIBILITY_FACTOR:g} x the {fmax:g} N its force actuator declares")
+                spec = specs.get(c.role)
+                if spec is not None:
+                    extra = undeclared_fields(c, spec)
+                    assert not extra, (f"sends {extra} on role {c.role!r}, declared as {spec.describe()}: its "
+                                       f"actuator does not act on {extra[0]}")
+                field, fmax = forces.get(c.role) or (None, None)
+                v = getattr(c, field) if field else None
+                if v is not None and fmax is not None and inp.penetration_mm <= 3.0:
+                    assert abs(v) <= FORCE_PLAUSIBILITY_FACTOR * fmax, \
+                        (f"commands {v:g} N on role {c.role!r} ({field}) at {inp.penetration_mm:g} mm, more than "
+                         f"{FORCE_PLAUSIBILITY_FACTOR:g} x the {fmax:g} N its actuator declares")
         silent = [ro for ro in r.roles if ro not in seen]
         assert not silent, f"the renderer sends nothing on role(s) {silent} while in contact"
 
@@ -783,8 +985,21 @@ def _dimension_rules(ctx: _Ctx) -> None:
             (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS}); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per renderer")
 
+    def r_cost() -> None:
+        d = holder["d"]
+        space = d.feature_space()
+        X = space.random(COST_ROWS, np.random.default_rng(5))
+        cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        for c in d.constraints():
+            ratio, t_c, t_ref = _cost_ratio(c, cols)
+            assert ratio <= COST_FACTOR, \
+                (f"constraint {c.name!r}: one batch of {COST_ROWS} rows takes {t_c * 1e3:.3g} ms, {ratio:.0f} x a "
+                 f"vectorised reference on the same rows ({t_ref * 1e3:.3g} ms, same process; limit "
+                 f"{COST_FACTOR:g} x): evaluate whole columns with array operations, not row by row")
+
     _run_rules(ctx, [("class", r_class), ("features", r_features), ("roles-declared", r_roles),
-                     ("constraints-vectorised", r_constraints), ("constraints-feasible", r_feasible),
+                     ("constraints-vectorised", r_constraints), ("constraints-cost", r_cost),
+                     ("constraints-feasible", r_feasible),
                      ("model-match", r_model_match), ("renderer", r_renderer), ("renderer-commands", r_commands),
                      ("renderer-bad-input", r_renderer_bad), ("determinism", r_determinism), ("timing", r_timing)],
                always=("class",), stop_after=("class", "features"))
@@ -882,8 +1097,32 @@ def _model_rules(ctx: _Ctx) -> None:
                 f = m.feature_space[k]
                 assert f.lower - 1e-9 <= float(v) <= f.upper + 1e-9, f"default {k}={v} outside [{f.lower}, {f.upper}]"
 
-    _run_rules(ctx, [("shapes", r_shapes), ("vectorised", r_vectorised), ("determinism", r_determinism),
-                     ("bad-input", r_bad_input), ("jacobian", r_jacobian), ("metadata", r_metadata)],
+    def r_dimensions() -> None:
+        m = holder["m"]
+        from ..features import same_unit
+        from ..plugins import registry
+        reg = registry("dimension")
+        missing = [n for n in m.dimension_names if n not in reg]
+        assert not missing, (f"predicts dimension(s) {missing} that no installed plugin provides (installed: "
+                             f"{reg.names()})")
+        offered: dict[str, Feature] = {}
+        for n in m.dimension_names:
+            obj = reg.load(n)
+            dim = obj() if isinstance(obj, type) else obj
+            for f in getattr(dim, "features", ()):
+                offered.setdefault(f.name, f)
+        stray = [n for n in m.feature_names if n not in offered]
+        assert not stray, (f"reads feature(s) {stray} that none of the dimensions it predicts "
+                           f"({list(m.dimension_names)}) contributes (they offer {sorted(offered)})")
+        if m.feature_space is not None:
+            for n in m.feature_names:
+                mine, theirs = m.feature_space[n].unit, offered[n].unit
+                assert same_unit(mine, theirs), \
+                    f"reads {n} in {mine!r}; the dimension that contributes it declares {theirs!r}"
+
+    _run_rules(ctx, [("shapes", r_shapes), ("model-dimensions", r_dimensions), ("vectorised", r_vectorised),
+                     ("determinism", r_determinism), ("bad-input", r_bad_input), ("jacobian", r_jacobian),
+                     ("metadata", r_metadata)],
                always=("shapes",), stop_after=("shapes",))
 
 
@@ -986,18 +1225,52 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
 # ---------------------------------------------------------------------------
 
 RULES: dict[str, tuple[str, ...]] = {
-    "actuator": ("import", "class", "template", "limits-declared", "options", "lifecycle", "close", "bad-input",
-                 "limits-enforced", "safe-stop", "read-back", "output-follows-command", "reopen", "determinism",
-                 "timing"),
-    "device": ("import", "class", "template", "limits-declared", "options", "lifecycle", "close", "bad-input",
-               "limits-enforced", "safe-stop", "read-back", "output-follows-command", "reopen", "determinism",
-               "timing", "state"),
-    "dimension": ("import", "class", "features", "roles-declared", "constraints-vectorised",
-                  "constraints-feasible", "model-match", "renderer", "renderer-commands", "renderer-bad-input",
-                  "determinism", "timing"),
-    "model": ("import", "shapes", "vectorised", "determinism", "bad-input", "jacobian", "metadata"),
-    "solver": ("import", "class", "options", "solves", "determinism", "batch", "bad-input"),
+    "actuator": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
+                 "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
+                 "output-follows-command", "reopen", "determinism", "timing"),
+    "device": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
+               "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
+               "output-follows-command", "reopen", "determinism", "timing", "state"),
+    "dimension": ("import", "plugin-api-declared", "class", "features", "roles-declared", "constraints-vectorised",
+                  "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
+                  "renderer-bad-input", "determinism", "timing"),
+    "model": ("import", "plugin-api-declared", "shapes", "model-dimensions", "vectorised", "determinism",
+              "bad-input", "jacobian", "metadata"),
+    "solver": ("import", "plugin-api-declared", "class", "options", "solves", "determinism", "batch", "bad-input"),
 }
+
+
+def _api_rule(ctx: _Ctx, target: Any) -> None:
+    """``plugin-api-declared``: the plugin (the object its entry point names, the class, or
+    the factory) declares a ``hapticsdk_api`` range, on itself or its top-level package,
+    that this core's plugin API satisfies. Sets the result's ``api`` and the rules new
+    since the declared version."""
+    from ..plugin_api import PLUGIN_API_VERSION, api_compatible, declared_api, rules_new_since
+    spec, where = declared_api(ctx.obj) if ctx.obj is not None else (None, "undeclared")
+    if spec is None and target is not None and not isinstance(target, str):
+        spec, where = declared_api(target)
+    ok: bool | None = None
+    err = ""
+    if spec is not None:
+        try:
+            ok = api_compatible(spec)
+        except ValidationError as exc:
+            err = str(exc)
+    ctx.new_rules = rules_new_since(spec if ok else None)
+    ctx.violations.api = {"declared": spec, "where": where, "provided": PLUGIN_API_VERSION,
+                          "new_rules": dict(ctx.new_rules)}
+    if ctx.only and "plugin-api-declared" not in ctx.only:
+        return
+    major = PLUGIN_API_VERSION.split(".")[0]
+    if spec is None:
+        ctx.fail("plugin-api-declared", f"declares no hapticsdk_api range (on the object or its top-level "
+                                        f"package); this core provides plugin API {PLUGIN_API_VERSION}: declare "
+                                        f"e.g. hapticsdk_api = \">={PLUGIN_API_VERSION},<{int(major) + 1}\"")
+    elif err:
+        ctx.fail("plugin-api-declared", f"hapticsdk_api {spec!r} ({where}) cannot be read: {err}")
+    elif not ok:
+        ctx.fail("plugin-api-declared", f"hapticsdk_api {spec!r} ({where}) excludes this core's plugin API "
+                                        f"{PLUGIN_API_VERSION}: the registry refuses to load it")
 
 
 def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
@@ -1019,8 +1292,11 @@ def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
     ctx.only = set(rules or ())
     ctx.by_name = isinstance(target, str)
     if err is not None:
-        ctx.fail("import", f"could not be loaded: {err}")
+        api_err = isinstance(err, tuple)
+        ctx.fail("plugin-api-declared" if api_err else "import",
+                 f"could not be loaded: {err[1] if api_err else err}")
         return ctx.violations
+    _api_rule(ctx, target)
     if kind in ("actuator", "device"):
         _actuator_rules(ctx, device=kind == "device")
     elif kind == "dimension":
@@ -1093,6 +1369,7 @@ def format_violations(violations: Sequence[Violation]) -> str:
 
 
 def assert_conforms(violations: Sequence[Violation]) -> None:
-    """Raise ``AssertionError`` listing every violation (for tests)."""
+    """Raise ``AssertionError`` listing every violation (for tests), with the result's
+    notes and API line when it is a :class:`KitResult`."""
     if violations:
-        raise AssertionError(f"{len(violations)} conformance violation(s):\n" + format_violations(violations))
+        raise AssertionError(f"{len(violations)} conformance violation(s):\n" + format_report(violations))

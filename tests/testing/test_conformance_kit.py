@@ -23,6 +23,7 @@ def rules_broken(violations) -> set[str]:
 
 
 class GoodCoil(Actuator):
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
     name: ClassVar[str] = "good-coil"
     channel: ClassVar[str] = "vibration"
     limits = ActuatorLimits(frequency_range_hz=(30.0, 120.0), max_amplitude=1.0, amplitude_unit="1")
@@ -119,6 +120,7 @@ class _Const(DimensionRenderer):
 
 class NaNDimension(PerceptionDimension):
     """Broken: its renderer returns NaN and it accepts NaN features."""
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
 
     name = "nan-dim"
     features = (Feature("q", "1", 0.0, 1.0),)
@@ -136,6 +138,7 @@ def test_a_renderer_returning_nan_is_caught():
 
 
 class WrongShapeModel(PerceptionModel):
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
     def __init__(self) -> None:
         super().__init__(("a", "b"), ("x",), name="wrong-shape")
 
@@ -145,6 +148,7 @@ class WrongShapeModel(PerceptionModel):
 
 class NonVectorModel(PerceptionModel):
     """Broken: the batch answer depends on the other rows."""
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
 
     def __init__(self) -> None:
         from hapticsdk.features import FeatureSpace
@@ -168,6 +172,7 @@ def test_the_default_model_conforms():
 
 class GlobalRandomSolver(Solver):
     """Broken: ignores the seed (draws from numpy's global state)."""
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
 
     name = "global-random"
     default_options = {"n": 4000}

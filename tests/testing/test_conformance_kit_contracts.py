@@ -26,6 +26,7 @@ def broken(violations) -> set[str]:
 
 class Coil(Actuator):
     """A correct actuator: reads back what it wrote (frequency Hz, amplitude 0..1)."""
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
     name: ClassVar[str] = "kit-coil"
     channel: ClassVar[str] = "vibration"
     limits = ActuatorLimits(frequency_range_hz=(30.0, 300.0), max_amplitude=1.0, amplitude_unit="1")
@@ -109,6 +110,7 @@ class PlateNoLimits(Coil):
 
 class Arm(HapticDevice):
     """A correct force device: reads back the force its motors are set to."""
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
     name: ClassVar[str] = "kit-arm"
     limits = ActuatorLimits(max_force_n=3.0)
     simulated: ClassVar[bool] = True
@@ -220,6 +222,7 @@ class _Renderer(DimensionRenderer):
 
 class KitDim(PerceptionDimension):
     """A correct dimension: one feature, its own model, a vibration role on the voice coil."""
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
     name = "kit-dim"
     features = (Feature("kit.x", "1", 0.0, 1.0),)
     render_features = ("kit.x",)
@@ -241,6 +244,7 @@ class KitDim(PerceptionDimension):
 
 
 class KitModel(PerceptionModel):
+    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
     def __init__(self, dims=("kit-dim",), feats=(("kit.x", "1"),)) -> None:
         space = FeatureSpace(tuple(Feature(n, u, 0.0, 1.0) for n, u in feats))
         super().__init__(space.names, dims, feature_space=space, name="kit-model")
@@ -349,6 +353,8 @@ def test_a_jacobian_10_percent_off_is_caught():
     W = base.mlp.weights
 
     class OffJacobian(MLPModel):
+        hapticsdk_api = ">=1.2,<2"
+
         def jacobian(self, G, **kw):
             return 1.1 * super().jacobian(G)
 
