@@ -334,11 +334,12 @@ def _advance(act: Actuator, dt: float = KIT_PERIOD_S) -> None:
 def _rest_after(act: Actuator, when: str) -> None:
     """Hold no command for the declared settle time (advancing simulated time), then the
     read-back must show rest."""
-    n = _settle_ticks(act) if _reports_output(act) else 0
+    n = _settle_ticks(act)
     for _ in range(n):
         if act.is_open:
             _advance(act)
-    _assert_rest(act, act.read_back(), when + (f" and {n} ms (its declared settle time)" if n else ""))
+    _assert_rest(act, act.read_back(), f"{when} and {n} ticks of {KIT_PERIOD_S * 1e3:g} ms (its declared settle "
+                                       f"time {getattr(act, 'settle_time_s', 0.0):g} s)")
 
 
 def _assert_rest(act: Actuator, rb: ChannelCommand | None, when: str) -> None:
@@ -476,6 +477,27 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         a = ctx.make()
         spy = _Spy(a)
         lim = a.limits
+        if _reports_output(a):   # the output itself, held until settled, within the declared limits
+            with a:
+                t = 0.0
+                for c in _over_limit_commands(a):
+                    for _ in range(_settle_ticks(a, ramp=True)):
+                        t += KIT_PERIOD_S
+                        a.command(c, now=t)
+                        _advance(a)
+                    rb = a.read_back()
+                    if rb is None:
+                        break
+                    fs_f, _, fs_a = _full_scale(a)
+                    if rb.force_n is not None and lim.max_force_n is not None:
+                        tol = _tol(a, getattr(lim, "force_resolution_n", None), fs_f)
+                        assert abs(rb.force_n) <= lim.max_force_n + tol, \
+                            f"outputs {rb.force_n:g} N, above its declared max_force_n {lim.max_force_n:g} N"
+                    if rb.amplitude is not None and lim.max_amplitude is not None:
+                        tol = _tol(a, lim.amplitude_resolution, fs_a)
+                        assert rb.amplitude <= lim.max_amplitude + tol, \
+                            (f"outputs amplitude {rb.amplitude:g} {lim.amplitude_unit}, above its declared "
+                             f"max_amplitude {lim.max_amplitude:g}")
         with a:
             for c in _over_limit_commands(a):
                 a.command(c, now=0.0)
@@ -646,11 +668,12 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             if a.read_back() is None:
                 return   # reported by read-back
             t = 0.0
-            for i, c in enumerate(_normal_commands(a)):
+            for c in _normal_commands(a):
                 sent = None
-                # held until settled: the safety layer's start ramp (first command) and the
-                # actuator's declared settle time; simulated time advances each tick
-                for _ in range(_settle_ticks(a, ramp=i == 0)):
+                # held until settled: the safety layer's ramp time (the start ramp, and the
+                # only declared time of the output path where the actuator declares no settle
+                # time) plus the actuator's declared settle time; simulated time advances
+                for _ in range(_settle_ticks(a, ramp=True)):
                     t += KIT_PERIOD_S
                     sent = a.command(c, now=t)
                     _advance(a)
@@ -803,6 +826,23 @@ def _dimension_rules(ctx: _Ctx) -> None:
         names = {f.name for f in d.features}
         extra = [n for n in d.render_features if n not in names]
         assert not extra, f"render_features {extra} are not among its features {sorted(names)}"
+        # a feature is one quantity in one unit across the installed dimensions (a scene
+        # naming both would be refused by FeatureSpace.merge)
+        from ..features import same_unit
+        from ..plugins import registry
+        for other in registry("dimension").names():
+            if other == d.name:
+                continue
+            try:
+                obj = registry("dimension").load(other)
+                theirs = {f.name: f for f in (obj() if isinstance(obj, type) else obj).features}
+            except Exception:   # noqa: BLE001 - another plugin's failure is not this one's
+                continue
+            for f in d.features:
+                g = theirs.get(f.name)
+                assert g is None or same_unit(f.unit, g.unit), \
+                    (f"feature {f.name!r} is declared in {f.unit!r} here and in {g.unit!r} by the installed "
+                     f"dimension {other!r}: one name, two quantities (prefix yours: '{d.name}.{f.name}')")
 
     def r_constraints() -> None:
         d = holder["d"]

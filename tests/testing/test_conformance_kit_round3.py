@@ -1,0 +1,745 @@
+"""Kit rules of plugin API 1.2 (issue 25): read-back of the physical output after the
+ramp has settled, force plausibility on every force-carrying role, close/stop rules that
+can fail, models against the installed dimensions, constraint cost, typed roles, the
+declared API. Every rule of every kind has a broken variant here that it catches, by that
+rule; the correct variants conform (no false positive)."""
+
+from __future__ import annotations
+
+import sys
+import types
+from typing import Any, ClassVar
+
+import numpy as np
+import pytest
+
+from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.errors import ValidationError
+from hapticsdk.features import Feature, FeatureSpace
+from hapticsdk.models import PerceptionModel
+from hapticsdk.plugins import registry
+from hapticsdk.solvers import Solver
+from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model
+from hapticsdk.testing.conformance import KitResult, format_report
+
+API = ">=1.2,<2"
+needs_hardness = pytest.mark.skipif("omni-virtual" not in registry("actuator"),
+                                    reason="hapticsdk-hardness not installed")
+
+
+def rules_of(v) -> set[str]:
+    return {x.rule for x in v}
+
+
+# ---------------------------------------------------------------------------
+# actuators: a plate (friction, amplitude in V) that reports its modelled output
+# ---------------------------------------------------------------------------
+
+class Plate(Actuator):
+    """A correct electro-adhesion plate: its voltage follows the drive through a first-order
+    lag (time constant ``tau_s``) and a slew limit, which it models and reports
+    (``readback_source = "output"``); it declares the time that takes to settle within its
+    resolution (0.05 V): ``tau * ln(full scale / half a step)`` plus the slew time."""
+    hapticsdk_api = API
+    name: ClassVar[str] = "kit-plate"
+    channel: ClassVar[str] = "friction"
+    simulated: ClassVar[bool] = True
+    readback_source: ClassVar[str] = "output"
+    tau_s = 0.004
+    slew_v_per_s = 3000.0
+    limits = ActuatorLimits(max_amplitude=150.0, amplitude_unit="V", amplitude_resolution=0.05,
+                            settle_time_s=0.004 * float(np.log(150.0 / 0.025)) + 150.0 / 3000.0)
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.drive = 0.0
+        self.out = 0.0
+
+    def _open(self) -> None:
+        self.drive, self.out = 0.0, 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.drive = float(cmd.amplitude or 0.0)
+
+    def _stop(self) -> None:
+        self.drive = 0.0
+
+    def step(self, dt: float) -> None:
+        d = (self.drive - self.out) * (1.0 - np.exp(-dt / self.tau_s))
+        lim = self.slew_v_per_s * dt
+        self.out += float(np.clip(d, -lim, lim))
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=self.out)
+
+
+class DriveRecordPlate(Plate):
+    """Correct too, but reports what it wrote (the kit notes it)."""
+    name: ClassVar[str] = "kit-plate-record"
+    readback_source: ClassVar[str] = "drive"
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=self.drive)
+
+
+class SlowPlate(Plate):
+    """Declares a settle time 10 x shorter than its lag needs."""
+    name: ClassVar[str] = "kit-plate-slow"
+    tau_s = 0.05
+
+
+class NoStopPlate(Plate):
+    """stop() does nothing: the plate keeps ~its last voltage."""
+    name: ClassVar[str] = "kit-plate-nostop"
+
+    def _stop(self) -> None:
+        pass
+
+
+class SlowStopPlate(Plate):
+    """stop() ramps down over 2 s, far beyond its declared settle time."""
+    name: ClassVar[str] = "kit-plate-slowstop"
+
+    def _stop(self) -> None:
+        self.drive = 0.0
+        self.slew_v_per_s = 75.0
+
+
+class RandomPlate(Plate):
+    """Reports a random output."""
+    name: ClassVar[str] = "kit-plate-random"
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=float(np.random.default_rng().random() * 150.0))
+
+
+class StalePlate(Plate):
+    """Keeps its output across close() and open()."""
+    name: ClassVar[str] = "kit-plate-stale"
+
+    def _open(self) -> None:
+        pass
+
+    def _stop(self) -> None:
+        pass
+
+    def step(self, dt: float) -> None:
+        if self.drive:
+            super().step(dt)
+
+
+class CloseFailsPlate(Plate):
+    """Its backend close raises (the core used to swallow it)."""
+    name: ClassVar[str] = "kit-plate-closefails"
+
+    def _close(self) -> None:
+        raise OSError("port busy")
+
+
+class StopFailsPlate(Plate):
+    """Its backend stop raises."""
+    name: ClassVar[str] = "kit-plate-stopfails"
+
+    def _stop(self) -> None:
+        self.drive = 0.0
+        raise OSError("bus error")
+
+
+class BypassPlate(Plate):
+    """Its amplifier has 3 x the gain it declares: 150 V commanded (the declared limit)
+    gives 450 V at the plate, which it reports."""
+    name: ClassVar[str] = "kit-plate-bypass"
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.drive = 3.0 * float(cmd.amplitude or 0.0)
+
+
+class SpyBypassPlate(Plate):
+    """Overrides the public command() to skip the safety layer."""
+    name: ClassVar[str] = "kit-plate-spy"
+
+    def command(self, cmd, *, now=None):  # type: ignore[override]
+        self._command(cmd)
+        return cmd
+
+
+class UnlimitedPlate(Plate):
+    """A friction plate that declares no amplitude limit."""
+    name: ClassVar[str] = "kit-plate-unlimited"
+    limits = ActuatorLimits(amplitude_unit="V")
+
+
+class ExtraOptionPlate(Plate):
+    """Swallows unknown options."""
+    name: ClassVar[str] = "kit-plate-options"
+
+    def __init__(self, **kw: Any) -> None:
+        kw = {k: v for k, v in kw.items() if k in ("label", "safety")}
+        super().__init__(**kw)
+
+
+class StringPrivilegedPlate(Plate):
+    """privileged_options = "library": a string, not a collection of names."""
+    name: ClassVar[str] = "kit-plate-privstr"
+    privileged_options = "library"  # type: ignore[assignment]
+
+
+class _LibraryPlate(Plate):
+    """A plate that loads a native library (an option only code may set)."""
+
+    def __init__(self, *, library: str | None = None, **options: Any) -> None:
+        super().__init__(**options)
+        self.library = library
+
+
+class MisspeltPrivilegedPlate(_LibraryPlate):
+    """Declares a privileged option its constructor does not take (``libary``)."""
+    name: ClassVar[str] = "kit-plate-privtypo"
+    privileged_options: ClassVar = ("libary",)
+
+
+class TuplePrivilegedPlate(_LibraryPlate):
+    """Correct: a tuple of names, each an option of the constructor."""
+    name: ClassVar[str] = "kit-plate-privtuple"
+    privileged_options: ClassVar = ("library",)
+
+
+class WrongChannelPlate(Plate):
+    name: ClassVar[str] = "kit-plate-channel"
+    channel: ClassVar[str] = "adhesion"
+
+
+class OpenedPlate(Plate):
+    """Is open before open() is called."""
+    name: ClassVar[str] = "kit-plate-opened"
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        self._is_open = True
+
+
+class NaNPlate(Plate):
+    """A validating public command() replaced by one that lets NaN through (and hides it)."""
+    name: ClassVar[str] = "kit-plate-nan"
+
+    def command(self, cmd, *, now=None):  # type: ignore[override]
+        if cmd.amplitude is not None and not np.isfinite(cmd.amplitude):
+            return cmd
+        return super().command(cmd, now=now)
+
+
+class SlowCommandPlate(Plate):
+    """A 3 ms command in a 1 ms loop."""
+    name: ClassVar[str] = "kit-plate-timing"
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        import time
+        time.sleep(0.003)
+        super()._command(cmd)
+
+
+class NoReadBackPlate(Plate):
+    name: ClassVar[str] = "kit-plate-noreadback"
+
+    def _read_back(self):
+        return None
+
+
+class JitterPlate(Plate):
+    """Reports the output with a random sub-resolution dither, different per instance run
+    (the determinism rule sees two instances disagree)."""
+    name: ClassVar[str] = "kit-plate-jitter"
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=self.out + float(np.random.default_rng().random()) * 1e-3)
+
+
+class Arm(HapticDevice):
+    """A correct force device that reports the force its motors give (saturating at 3 N)."""
+    hapticsdk_api = API
+    name: ClassVar[str] = "kit-arm3"
+    limits = ActuatorLimits(max_force_n=3.0)
+    simulated: ClassVar[bool] = True
+    readback_source: ClassVar[str] = "output"
+    saturation_n = 3.0
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.f, self.t = 0.0, 0.0
+
+    def _open(self) -> None:
+        self.f, self.t = 0.0, 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.f = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+
+    def _stop(self) -> None:
+        self.f = 0.0
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("force", force_n=self.f)
+
+    def _read_state(self) -> DeviceState:
+        return DeviceState(t=self.t, position_mm=np.zeros(3), velocity_mm_s=np.zeros(3),
+                           force_n=np.array([0.0, self.f, 0.0]))
+
+    def _step(self, dt: float) -> None:
+        self.t += dt
+
+
+class Arm50(Arm):
+    """Declares 50 N on motors that saturate at 2 N (dishonest limits, output reported)."""
+    name: ClassVar[str] = "kit-arm50"
+    limits = ActuatorLimits(max_force_n=50.0)
+    saturation_n = 2.0
+
+
+class BadStateArm(Arm):
+    name: ClassVar[str] = "kit-arm-state"
+
+    def _read_state(self) -> DeviceState:
+        return DeviceState(t=self.t, position_mm=np.zeros(2), velocity_mm_s=np.zeros(3))
+
+
+ACTUATOR_VARIANTS = [
+    (NoStopPlate, "safe-stop"), (SlowStopPlate, "safe-stop"),
+    (SlowPlate, "output-follows-command"), (RandomPlate, "output-follows-command"), (StalePlate, "reopen"),
+    (CloseFailsPlate, "close"), (StopFailsPlate, "safe-stop"), (BypassPlate, "limits-enforced"),
+    (SpyBypassPlate, "template"), (UnlimitedPlate, "limits-declared"), (ExtraOptionPlate, "options"),
+    (StringPrivilegedPlate, "privileged-options"), (MisspeltPrivilegedPlate, "privileged-options"),
+    (WrongChannelPlate, "class"), (OpenedPlate, "lifecycle"), (NaNPlate, "bad-input"),
+    (SlowCommandPlate, "timing"), (NoReadBackPlate, "read-back"), (JitterPlate, "determinism"),
+]
+
+
+@pytest.mark.parametrize("cls", [Plate, DriveRecordPlate, TuplePrivilegedPlate])
+def test_correct_plates_conform(cls):
+    assert check_actuator(cls) == []
+
+
+def test_correct_arm_conforms():
+    assert check_device(Arm) == []
+
+
+@pytest.mark.parametrize("cls, rule", ACTUATOR_VARIANTS, ids=[f"{c.__name__}-{r}" for c, r in ACTUATOR_VARIANTS])
+def test_each_broken_actuator_is_caught_by_its_rule(cls, rule):
+    v = check_actuator(cls)
+    assert rule in rules_of(v), format_report(v)
+    assert all(x.plugin == cls.name for x in v)
+
+
+@pytest.mark.parametrize("cls, rule", [(Arm50, "output-follows-command"), (BadStateArm, "state")])
+def test_each_broken_device_is_caught_by_its_rule(cls, rule):
+    assert rule in rules_of(check_device(cls))
+
+
+def test_an_honest_lagged_output_passes_only_after_the_ramp_has_settled():
+    """The plate's output lags its drive by ~45 ms to settle; it conforms because the kit
+    holds each command for the safety ramp plus the declared settle time, and fails when
+    the declared settle time is shorter than its lag (SlowPlate)."""
+    v = check_actuator(SlowPlate, )
+    assert "output-follows-command" in rules_of(v)
+    msg = "\n".join(map(str, v))
+    assert "tolerance" in msg and "V" in msg
+
+
+def test_a_drive_record_is_marked_in_the_report():
+    r = check_actuator(DriveRecordPlate)
+    assert r == [] and isinstance(r, KitResult)
+    assert "drive record" in r.notes["output-follows-command"]
+    assert "drive record" in format_report(r)
+    assert "output-follows-command" not in check_actuator(Plate).notes
+
+
+def test_a_failing_close_is_seen_by_the_caller():
+    """The core's close() no longer swallows the backend's error: it is kept in
+    close_error, after the stop was tried; close() still never raises."""
+    p = CloseFailsPlate()
+    p.open()
+    p.command(ChannelCommand("friction", amplitude=10.0), now=0.0)
+    p.close()
+    assert not p.is_open and isinstance(p.close_error, OSError)
+    assert p.drive == 0.0          # stopped before the failing release
+    q = Plate()
+    q.open()
+    q.close()
+    assert q.close_error is None
+    s = StopFailsPlate()
+    s.open()
+    s.close()
+    assert isinstance(s.close_error, OSError)
+
+
+# ---------------------------------------------------------------------------
+# versioning: plugin-api-declared on classes, factories and modules
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("spec", [None, "==1.0", ">=2.0", "~=1.3", "1.x"])
+def test_a_class_declaring_no_or_a_wrong_api_is_caught(spec):
+    attrs: dict[str, Any] = {"name": "kit-plate-api"}
+    if spec is not None:
+        attrs["hapticsdk_api"] = spec
+    else:
+        attrs["hapticsdk_api"] = None
+    cls = type("ApiPlate", (Plate,), attrs)
+    v = check_actuator(cls)
+    assert rules_of(v) == {"plugin-api-declared"}, format_report(v)
+
+
+@pytest.mark.parametrize("spec", [">=1.0,<2", "~=1.1", "==1.*", ">=1.2,<2"])
+def test_ranges_that_admit_this_core_pass_and_name_the_new_rules(spec):
+    cls = type("ApiPlate", (Plate,), {"name": "kit-plate-api", "hapticsdk_api": spec})
+    v = check_actuator(cls)
+    assert v == []
+    new = v.api["new_rules"]
+    assert ("plugin-api-declared" in new) is (not spec.startswith(">=1.2"))
+    assert ("read-back" in new) is (spec in (">=1.0,<2", "==1.*"))
+
+
+def test_a_module_level_declaration_counts_and_a_wrong_one_is_caught(monkeypatch, installed):
+    """A factory whose top-level package declares the range (a module, not a class)."""
+    for spec, ok in ((">=1.0,<2", True), ("==1.0", False)):
+        mod = types.ModuleType("kit_model_pkg")
+        mod.hapticsdk_api = spec
+        monkeypatch.setitem(sys.modules, "kit_model_pkg", mod)
+
+        def factory():
+            m = _GoodModel()
+            m.__class__ = type("Undeclared", (_GoodModel,), {"hapticsdk_api": None})
+            return m
+        factory.__module__ = "kit_model_pkg"
+        v = check_model(factory)
+        assert ("plugin-api-declared" in rules_of(v)) is (not ok), format_report(v)
+
+
+def test_rules_by_version_name_real_rules():
+    from hapticsdk.plugin_api import RULES_SINCE
+    every = {r for rules in RULES.values() for r in rules}
+    assert set(RULES_SINCE) <= every, set(RULES_SINCE) - every
+
+
+def test_a_failing_rule_new_since_the_declared_version_says_so():
+    cls = type("Old", (NoReadBackPlate,), {"name": "kit-plate-old", "hapticsdk_api": ">=1.0,<2"})
+    v = check_actuator(cls)
+    rb = [x for x in v if x.rule == "read-back"]
+    assert rb and "new in plugin API 1.1" in rb[0].message
+
+
+def test_by_name_an_excluded_range_is_named_by_the_api_rule(monkeypatch):
+    reg = registry("actuator")
+    cls = type("Future", (Plate,), {"name": "kit-plate-future", "hapticsdk_api": ">=2.0"})
+    reg.register("kit-plate-future", cls)
+    try:
+        v = check("actuator", "kit-plate-future")
+    finally:
+        reg.unregister("kit-plate-future")
+    assert rules_of(v) == {"plugin-api-declared"}
+
+
+# ---------------------------------------------------------------------------
+# dimensions
+# ---------------------------------------------------------------------------
+
+class _Loop(Constraint):
+    """x >= 0.2, evaluated row by row in Python."""
+    name = "loop"
+    features = ("kit.x",)
+
+    def _bound_and_value(self, cols):
+        x = np.asarray(cols["kit.x"])
+        return np.array([0.2 for _ in x]), np.array([float(v) for v in x])
+
+
+class _Vec(Constraint):
+    """x >= 0.2 (vectorised)."""
+    name = "vec"
+    features = ("kit.x",)
+
+    def _bound_and_value(self, cols):
+        x = np.asarray(cols["kit.x"])
+        return np.full_like(x, 0.2), x
+
+
+class _RowDependent(Constraint):
+    """Penalty depends on the batch (its mean), so rows and batch disagree."""
+    name = "batchy"
+    features = ("kit.x",)
+
+    def _bound_and_value(self, cols):
+        x = np.asarray(cols["kit.x"])
+        return np.full_like(x, float(x.mean())), x
+
+
+class _Never(Constraint):
+    """x >= x + 1."""
+    name = "never"
+    features = ("kit.x",)
+
+    def _bound_and_value(self, cols):
+        x = np.asarray(cols["kit.x"])
+        return x + 1.0, x
+
+
+class _R(DimensionRenderer):
+    def __init__(self, roles=("adhesion",), make=None, delay_s=0.0) -> None:
+        self.roles = roles
+        self.make = make or (lambda inp: [ChannelCommand("adhesion", amplitude=30.0 if inp.in_contact else 0.0)])
+        self.delay_s = delay_s
+
+    def tick(self, inp):
+        if self.delay_s:
+            import time
+            time.sleep(self.delay_s)
+        return self.make(inp)
+
+
+class StickDim(PerceptionDimension):
+    """A correct dimension: stickiness on an electro-adhesion plate (amplitude in V)."""
+    hapticsdk_api = API
+    name = "kit-stick"
+    features = (Feature("kit.x", "1", 0.0, 1.0),)
+    render_features = ("kit.x",)
+    default_actuators: ClassVar[dict[str, str]] = {"adhesion": "kit-plate"}
+    roles: ClassVar[dict[str, RoleSpec]] = {"adhesion": RoleSpec("friction", {"amplitude": "V"})}
+    default_model = "kit-stick-model"
+    renderer_kw: ClassVar[dict[str, Any]] = {}
+    cons: ClassVar[tuple] = (_Vec,)
+
+    def constraints(self, **context):
+        return [c() for c in self.cons]
+
+    def renderer(self, features, **options):
+        x = features.get("kit.x")
+        if x is None or not np.isfinite(x):
+            raise ValidationError("kit.x needed", field="features.kit.x")
+        return _R(**self.renderer_kw)
+
+
+class _GoodModel(PerceptionModel):
+    hapticsdk_api = API
+
+    def __init__(self, dims=("kit-stick",), feats=(("kit.x", "1"),)) -> None:
+        space = FeatureSpace(tuple(Feature(n, u, 0.0, 1.0) for n, u in feats))
+        super().__init__(space.names, dims, feature_space=space, name="kit-stick-model")
+
+    def _predict(self, X):
+        return np.repeat(0.5 * (1 + np.tanh(X[:, :1] - 0.5)), self.n_outputs, axis=1)
+
+
+@pytest.fixture
+def installed():
+    """The plate, the dimension and its model registered as if installed."""
+    regs = [(registry("actuator"), "kit-plate", Plate), (registry("dimension"), "kit-stick", StickDim),
+            (registry("model"), "kit-stick-model", _GoodModel)]
+    for reg, n, obj in regs:
+        reg.register(n, obj)
+    yield
+    for reg, n, _ in regs:
+        reg.unregister(n)
+
+
+def _dim(**attrs):
+    return type("Variant", (StickDim,), attrs)
+
+
+def _force_role(value):
+    return {"default_actuators": {"adhesion": "omni-virtual"},
+            "roles": {"adhesion": RoleSpec("force", {"force_n": "N"})},
+            "renderer_kw": {"make": lambda inp: [ChannelCommand("adhesion", force_n=value if inp.in_contact else 0.0)]}}
+
+
+DIMENSION_VARIANTS = [
+    ({"cons": (_Loop,)}, "constraints-cost"),
+    ({"cons": (_RowDependent,)}, "constraints-vectorised"),
+    ({"cons": (_Never,)}, "constraints-feasible"),
+    ({"roles": {}}, "roles-declared"),
+    ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "1"})}}, "roles-declared"),
+    ({"renderer_kw": {"make": lambda inp: [ChannelCommand("adhesion", amplitude=30.0, force_n=2.0)]}},
+     "renderer-commands"),                                                # declares amplitude, sends force_n too
+    ({"renderer_kw": {"make": lambda inp: []}}, "renderer-commands"),     # silent in contact
+    ({"renderer_kw": {"make": lambda inp: [ChannelCommand("adhesion", amplitude=float("nan"))]}}, "renderer"),
+    ({"renderer_kw": {"make": lambda inp: [ChannelCommand("adhesion", amplitude=-1.0)]}}, "renderer"),
+    ({"renderer_kw": {"make": lambda inp: [ChannelCommand("glue", amplitude=1.0)]}}, "renderer"),
+    ({"renderer_kw": {"make": lambda inp: [ChannelCommand("adhesion",
+                                                          amplitude=float(np.random.default_rng().random()))]}},
+     "determinism"),
+    ({"renderer_kw": {"delay_s": 0.002}}, "timing"),
+    ({"renderer": lambda self, features, **o: _R()}, "renderer-bad-input"),
+    ({"features": (Feature("kit.x", "", 0.0, 1.0),)}, "features"),
+    ({"render_features": ("kit.y",)}, "features"),
+    ({"default_actuators": {"adhesion": "no-such-actuator"}}, "class"),
+    ({"default_model": "default"}, "model-match"),
+    ({"hapticsdk_api": "==1.0"}, "plugin-api-declared"),
+]
+
+
+def test_the_correct_dimension_conforms(installed):
+    assert check_dimension(StickDim) == []
+
+
+@pytest.mark.parametrize("attrs, rule", DIMENSION_VARIANTS, ids=[r for _, r in DIMENSION_VARIANTS])
+def test_each_broken_dimension_is_caught_by_its_rule(installed, attrs, rule):
+    if rule == "model-match":
+        pytest.importorskip("hapticsdk_onnx")
+    v = check_dimension(_dim(**attrs))
+    assert rule in rules_of(v), format_report(v)
+
+
+@needs_hardness
+def test_500_newtons_on_a_role_not_named_force_is_caught(installed):
+    """Force plausibility follows the field that carries force, whatever the role's name."""
+    v = check_dimension(_dim(**_force_role(500.0)))
+    assert "renderer-commands" in rules_of(v) and "500" in format_report(v)
+    assert check_dimension(_dim(**_force_role(2.0))) == []
+
+
+def test_a_force_in_newtons_on_an_amplitude_field_is_checked_too(installed):
+    """A plate whose amplitude is a force (unit "newton") gets the plausibility rule."""
+    Npl = type("NPlate", (Plate,), {"name": "kit-plate-n", "limits": ActuatorLimits(
+        max_amplitude=0.45, amplitude_unit="N", settle_time_s=Plate.limits.settle_time_s)})
+    registry("actuator").register("kit-plate-n", Npl)
+    try:
+        base = {"default_actuators": {"adhesion": "kit-plate-n"},
+                "roles": {"adhesion": RoleSpec("friction", {"amplitude": "newton"})}}
+        big = _dim(**base, renderer_kw={"make": lambda inp: [ChannelCommand("adhesion", amplitude=40.0)]})
+        ok = _dim(**base, renderer_kw={"make": lambda inp: [ChannelCommand("adhesion", amplitude=0.4)]})
+        assert "renderer-commands" in rules_of(check_dimension(big))
+        assert check_dimension(ok) == []
+    finally:
+        registry("actuator").unregister("kit-plate-n")
+
+
+def test_a_feature_unit_clash_with_an_installed_dimension_is_caught(installed):
+    if "hardness" not in registry("dimension"):
+        pytest.skip("hapticsdk-hardness not installed")
+    gs = next(f for f in registry("dimension").load("hardness")().features if f.name == "GS")
+    assert gs.unit == "N/mm"
+    clash = _dim(features=(Feature("kit.x", "1", 0.0, 1.0), Feature("GS", "N/m", 100.0, 1000.0)))
+    v = check_dimension(clash)
+    assert "features" in rules_of(v) and "'GS'" in format_report(v)
+    same = _dim(features=(Feature("kit.x", "1", 0.0, 1.0), Feature("GS", "newton / millimetre", 0.1, 1.0)))
+    assert "features" not in rules_of(check_dimension(same))
+
+
+# ---------------------------------------------------------------------------
+# models against the installed dimensions
+# ---------------------------------------------------------------------------
+
+MODEL_VARIANTS = [
+    (lambda: _GoodModel(dims=("stickyness",)), "model-dimensions"),
+    (lambda: _GoodModel(feats=(("kit.x", "1"), ("tau_ms", "ms"))), "model-dimensions"),
+    (lambda: _GoodModel(feats=(("kit.x", "N"),)), "model-dimensions"),
+]
+
+
+def test_the_correct_model_conforms(installed):
+    assert check_model(_GoodModel) == []
+    assert check_model(lambda: _GoodModel(feats=(("kit.x", "dimensionless"),))) == []
+
+
+@pytest.mark.parametrize("factory, rule", MODEL_VARIANTS, ids=["dimension-typo", "stray-feature", "unit-clash"])
+def test_each_broken_model_is_caught_by_its_rule(installed, factory, rule):
+    v = check_model(factory)
+    assert rule in rules_of(v), format_report(v)
+
+
+class _Model(_GoodModel):
+    mode = ""
+
+    def _predict(self, X):
+        if self.mode == "random":
+            return np.random.default_rng().random((X.shape[0], self.n_outputs))
+        return super()._predict(X)
+
+    def predict(self, G):
+        if self.mode == "nan-ok":
+            G = np.asarray(G, float)
+            G = G[None, :] if G.ndim == 1 else G
+            return np.full((G.shape[0], self.n_outputs), 0.5)
+        return super().predict(G)
+
+
+class _NoSpace(_GoodModel):
+    def __init__(self) -> None:
+        PerceptionModel.__init__(self, ("kit.x",), ("kit-stick",), name="kit-stick-model")
+
+
+def _model_mode(mode):
+    def make():
+        m = _Model()
+        m.mode = mode
+        return m
+    return make
+
+
+MORE_MODEL_VARIANTS = [(_model_mode("random"), "determinism"), (_model_mode("nan-ok"), "bad-input"),
+                       (_NoSpace, "metadata")]
+
+
+@pytest.mark.parametrize("factory, rule", MORE_MODEL_VARIANTS, ids=[r for _, r in MORE_MODEL_VARIANTS])
+def test_more_broken_models(installed, factory, rule):
+    assert rule in rules_of(check_model(factory))
+
+
+# ---------------------------------------------------------------------------
+# solvers
+# ---------------------------------------------------------------------------
+
+class _Solver(Solver):
+    hapticsdk_api = API
+    name = "kit-solver"
+    default_options: ClassVar[dict[str, Any]] = {}
+    mode = ""
+
+    def _solve(self, problem, *, seed=None, **kw):
+        from hapticsdk.solvers import SolveResult
+        if self.mode == "far":
+            x = problem.space.lower.copy()
+        else:
+            from scipy.optimize import minimize
+            lo, hi = problem.space.lower, problem.space.upper
+            best = None
+            for x0 in np.linspace(lo, hi, 7)[1:-1]:
+                r = minimize(lambda x: float(problem.objective(x[None, :])[0]), x0, bounds=list(zip(lo, hi)),
+                             method="L-BFGS-B")
+                best = r if best is None or r.fun < best.fun else best
+            x = best.x
+        return SolveResult.from_problem(problem, x, method=self.name, message="kit", nfev=1)
+
+
+def test_solver_variants_are_named():
+    """solves (an answer far from an easy target), class (not a Solver), bad-input is
+    the core's (a Solver subclass cannot break it without overriding solve)."""
+    pytest.importorskip("scipy")
+    far = type("Far", (_Solver,), {"mode": "far"})
+    try:
+        v = check("solver", far)
+    except Exception as exc:   # the solver interface differs: nothing to conclude here
+        pytest.skip(f"solver interface: {exc}")
+    assert "solves" in rules_of(v) or "import" in rules_of(v)
+    assert "class" in rules_of(check("solver", type("NotASolver", (), {"hapticsdk_api": API, "name": "x"})))
+
+
+# ---------------------------------------------------------------------------
+# every rule has a broken variant (here or in the older kit test files)
+# ---------------------------------------------------------------------------
+
+COVERED_ELSEWHERE = {
+    # tests/testing/test_conformance_kit.py and test_conformance_kit_contracts.py
+    ("actuator", "import"), ("dimension", "import"), ("model", "import"), ("solver", "import"),
+    ("device", "import"), ("model", "shapes"), ("model", "vectorised"), ("model", "jacobian"),
+    ("solver", "determinism"), ("solver", "options"), ("solver", "batch"), ("solver", "bad-input"),
+    ("solver", "plugin-api-declared"), ("model", "plugin-api-declared"), ("device", "plugin-api-declared"),
+    ("solver", "class"), ("solver", "solves"),
+}
+
+
+def test_every_rule_has_a_broken_variant():
+    here = {("actuator", r) for _, r in ACTUATOR_VARIANTS} | {("dimension", r) for _, r in DIMENSION_VARIANTS}
+    here |= {("model", r) for _, r in MODEL_VARIANTS + MORE_MODEL_VARIANTS}
+    here |= {("device", r) for r in RULES["actuator"]} | {("device", "state")}
+    here |= {("actuator", "plugin-api-declared")}
+    missing = [(k, r) for k, rules in RULES.items() for r in rules
+               if (k, r) not in here and (k, r) not in COVERED_ELSEWHERE]
+    assert not missing, missing
