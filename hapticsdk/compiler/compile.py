@@ -315,7 +315,7 @@ def _device_summary(r: Any, targets: Mapping[str, float], kept: Sequence[str], c
             desc = c.describe()
             try:
                 b, v = (float(np.asarray(a)[0]) for a in c.bound_and_value(cols))
-                slack = (v - b) / max(abs(b), 1e-12)
+                slack = (v - b) / max(abs(b), abs(v), 1e-12)   # relative to the larger side
                 desc.update(bound=b, value=v, relative_slack=slack)
                 if slack <= rtol and c.name not in active:
                     active.append(c.name)

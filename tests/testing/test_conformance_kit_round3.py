@@ -631,6 +631,8 @@ MODEL_VARIANTS = [
     (lambda: _GoodModel(feats=(("kit.x", "1"), ("tau_ms", "ms"))), "model-dimensions"),
     (lambda: _GoodModel(feats=(("kit.x", "N"),)), "model-dimensions"),
 ]
+#: what each model variant's message names
+MODEL_WHY = ["no installed plugin provides", "reads feature(s) ['tau_ms']", "reads kit.x in 'N'"]
 
 
 def test_the_correct_model_conforms(installed):
@@ -638,10 +640,12 @@ def test_the_correct_model_conforms(installed):
     assert check_model(lambda: _GoodModel(feats=(("kit.x", "dimensionless"),))) == []
 
 
-@pytest.mark.parametrize("factory, rule", MODEL_VARIANTS, ids=["dimension-typo", "stray-feature", "unit-clash"])
-def test_each_broken_model_is_caught_by_its_rule(installed, factory, rule):
+@pytest.mark.parametrize("factory, rule, why", [(f, r, w) for (f, r), w in zip(MODEL_VARIANTS, MODEL_WHY)],
+                         ids=["dimension-typo", "stray-feature", "unit-clash"])
+def test_each_broken_model_is_caught_by_its_rule(installed, factory, rule, why):
     v = check_model(factory)
     assert rule in rules_of(v), format_report(v)
+    assert why in format_report(v)
 
 
 class _Model(_GoodModel):
