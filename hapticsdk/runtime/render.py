@@ -277,9 +277,9 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
             pm.call_safely("hapticsdk_device_fault", device=str(lr.fault.get("device", "")),
                            error=DeviceError(str(lr.fault.get("message", "")), device=lr.fault.get("device")))
         everyone = list(instances.values()) + ([device] if device not in instances.values() else [])
-        left = _left_driving(everyone, period)
         safety = {a.label: a.safety.report() for a in everyone}
-        devices = {a.label: a.describe() for a in everyone}
+        devices = {a.label: a.describe() for a in everyone}   # as the run left them, before the stop
+        left = _left_driving(everyone, period)
     fault = getattr(lr, "fault", None)
     if fault is None and left:
         label, what = next(iter(left.items()))
