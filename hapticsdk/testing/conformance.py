@@ -1,32 +1,36 @@
 """Conformance kit: checks that a plugin keeps the contract of its kind.
 
-Each ``check_<kind>(name_or_factory)`` runs every rule of that kind and returns a list of
-:class:`Violation` (empty: the plugin conforms). A violation names the plugin, its kind,
+Each ``check_<kind>(name_or_factory)`` runs every rule of that kind and returns a
+:class:`KitResult`, a list of :class:`Violation` (empty: the plugin conforms). A violation names the plugin, its kind,
 the rule and what was wrong, so a failure reads like
 ``[actuator 'piezo-virtual'] rule 'limits-enforced': backend received amplitude 250 V
 above max_amplitude 100 V``.
 
-Kinds and rules (``RULES[kind]``):
+Kinds and rules (``RULES[kind]``; every kind starts with import and
+plugin-api-declared):
 
-* ``actuator``: import, class, template, limits-declared, options, lifecycle, close,
-  bad-input, limits-enforced, safe-stop, read-back, output-follows-command, reopen,
+* ``actuator``: class, template, limits-declared, options, privileged-options, lifecycle,
+  close, bad-input, limits-enforced, safe-stop, read-back, output-follows-command, reopen,
   determinism, timing.
 * ``device`` (an actuator that senses): the actuator rules plus state.
-* ``dimension``: import, class, features, roles-declared, constraints-vectorised,
-  constraints-feasible, model-match, renderer, renderer-commands, renderer-bad-input,
-  determinism, timing.
-* ``model``: import, shapes, vectorised, determinism, bad-input, jacobian, metadata.
+* ``dimension``: class, features, roles-declared, constraints-vectorised,
+  constraints-cost, constraints-feasible, model-match, renderer, renderer-commands,
+  renderer-bad-input, determinism, timing.
+* ``model``: shapes, model-dimensions, vectorised, determinism, bad-input, jacobian,
+  metadata.
+* ``solver``: class, options, solves, determinism, batch, bad-input.
+* ``hooks``: hookimpls.
 
 The rules that judge what an actuator *outputs* read it back
-(:meth:`hapticsdk.actuators.Actuator.read_back`: from the device where it can report
-it, else the backend's own record of its last write) and compare it with the command
-the safety layer let through, within half the declared resolution
-(``limits.frequency_resolution_hz``, ``limits.amplitude_resolution``) or
-:data:`READBACK_RTOL` of full scale. Timing rules take the fastest of
+(:meth:`hapticsdk.actuators.Actuator.read_back`: the physical output where the
+actuator declares ``readback_source = "output"``, else the backend's own record of its
+last write, which the result's ``notes`` say) after holding each command for the safety
+layer's ramp time plus the declared ``limits.settle_time_s``, and compare it with the
+command in force within the declared resolution (one step for an output, half a step
+for a drive record) or :data:`READBACK_RTOL` of full scale. Timing rules take the fastest of
 :data:`TIMING_CALLS` calls (so a preempted call does not count) against a fraction of
 the servo period: :data:`COMMAND_BUDGET` for ``command()``, :data:`TICK_BUDGET` for a
 renderer's ``tick()``.
-* ``solver``: import, class, options, solves, determinism, batch, bad-input.
 
 The pytest side (classes to subclass, fixtures) is in :mod:`hapticsdk.testing.suites`
 and :mod:`hapticsdk.testing.pytest_plugin`.
@@ -1277,7 +1281,32 @@ RULES: dict[str, tuple[str, ...]] = {
     "model": ("import", "plugin-api-declared", "shapes", "model-dimensions", "vectorised", "determinism",
               "bad-input", "jacobian", "metadata"),
     "solver": ("import", "plugin-api-declared", "class", "options", "solves", "determinism", "batch", "bad-input"),
+    "hooks": ("import", "plugin-api-declared", "hookimpls"),
 }
+
+
+def _hooks_rules(ctx: _Ctx) -> None:
+    """A hook module (group ``hapticsdk.hooks``): every ``@hookimpl`` names a hook of
+    :mod:`hapticsdk.hookspecs` and takes only that hook's arguments (pluggy would refuse it
+    at registration, after the render started)."""
+    import inspect
+    from .. import hookspecs
+
+    def r_hookimpls() -> None:
+        mod = ctx.obj
+        marker = f"{hookspecs.PROJECT}_impl"
+        impls = {n: f for n, f in vars(mod).items() if callable(f) and hasattr(f, marker)}
+        specs = {n for n in dir(hookspecs) if n.startswith(f"{hookspecs.PROJECT}_")}
+        unknown = [n for n in impls if n not in specs]
+        assert not unknown, f"@hookimpl function(s) {unknown} name no hook of hapticsdk.hookspecs ({sorted(specs)})"
+        assert impls, "the module has no @hookimpl function"
+        for n, f in impls.items():
+            spec = getattr(hookspecs, n)
+            allowed = set(inspect.signature(spec).parameters) - {"self"}
+            extra = set(inspect.signature(f).parameters) - allowed
+            assert not extra, f"{n} takes {sorted(extra)}, which the hook does not pass (it passes {sorted(allowed)})"
+
+    _run_rules(ctx, [("hookimpls", r_hookimpls)])
 
 
 def _api_rule(ctx: _Ctx, target: Any) -> None:
@@ -1327,6 +1356,12 @@ def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
         if unknown:
             raise ValidationError(f"unknown rules {unknown} for {kind}; valid: {list(RULES[kind])}", field="rules")
     reg_kind = "actuator" if kind == "device" else kind
+    if kind == "hooks" and not isinstance(target, str):   # a module object: nothing to build
+        ctx0 = _Ctx(kind, getattr(target, "__name__", "hooks"), None, target)
+        ctx0.only = set(rules or ())
+        _api_rule(ctx0, target)
+        _hooks_rules(ctx0)
+        return ctx0.violations
     name, factory, obj, err = _resolve(reg_kind, target, options if kind != "solver" else None)
     ctx = _Ctx(kind, name, factory, obj)
     ctx.only = set(rules or ())
@@ -1343,6 +1378,8 @@ def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
         _dimension_rules(ctx)
     elif kind == "model":
         _model_rules(ctx)
+    elif kind == "hooks":
+        _hooks_rules(ctx)
     else:
         _solver_rules(ctx, options or {})
     return ctx.violations
@@ -1396,7 +1433,7 @@ def check_installed(kinds: Sequence[str] = ("actuator", "dimension", "model", "s
                 if isinstance(cls, type) and issubclass(cls, HapticDevice):
                     k = "device"
                 if not getattr(cls, "simulated", False):
-                    rules = ["limits-declared", "options"]
+                    rules = ["plugin-api-declared", "limits-declared", "options", "privileged-options"]
             if kind == "model" and name == "onnx":
                 continue  # a class taking a path, not a zero-argument factory
             out[f"{kind}:{name}"] = check(k, name, rules=rules)

@@ -726,6 +726,54 @@ def test_solver_variants_are_named():
 
 
 # ---------------------------------------------------------------------------
+# hook modules
+# ---------------------------------------------------------------------------
+
+def _hooks_module(api, body):
+    from hapticsdk.hookspecs import hookimpl
+    mod = types.ModuleType("kit_hooks_mod")
+    if api is not None:
+        mod.hapticsdk_api = api
+    exec(body, {"hookimpl": hookimpl, **vars(mod)}, mod.__dict__)
+    sys.modules["kit_hooks_mod"] = mod
+    return mod
+
+
+GOOD_HOOKS = "@hookimpl\ndef hapticsdk_render_started(plan):\n    pass\n"
+HOOK_VARIANTS = [
+    (API, "@hookimpl\ndef hapticsdk_render_begun(plan):\n    pass\n", "hookimpls"),            # no such hook
+    (API, "@hookimpl\ndef hapticsdk_render_started(plan, clock):\n    pass\n", "hookimpls"),   # extra argument
+    (None, GOOD_HOOKS, "plugin-api-declared"),
+    ("==1.0", GOOD_HOOKS, "plugin-api-declared"),
+]
+
+
+def test_a_hook_module_that_is_not_installed_is_an_import_failure():
+    assert rules_of(check("hooks", "no-such-hooks")) == {"import"}
+
+
+def test_installed_hook_modules_conform():
+    for name in registry("hooks").names():
+        assert check("hooks", name) == [], name
+
+
+@pytest.mark.parametrize("api, body, rule", HOOK_VARIANTS, ids=["unknown-hook", "extra-arg", "undeclared", "==1.0"])
+def test_each_broken_hook_module_is_caught(api, body, rule, monkeypatch):
+    monkeypatch.delitem(sys.modules, "kit_hooks_mod", raising=False)
+    mod = _hooks_module(api, body)
+    try:
+        v = check("hooks", mod)
+    finally:
+        sys.modules.pop("kit_hooks_mod", None)
+    assert rules_of(v) == {rule}, format_report(v)
+    sys.modules["kit_hooks_mod"] = _hooks_module(API, GOOD_HOOKS)
+    try:
+        assert check("hooks", sys.modules["kit_hooks_mod"]) == []
+    finally:
+        sys.modules.pop("kit_hooks_mod", None)
+
+
+# ---------------------------------------------------------------------------
 # every rule has a broken variant (here or in the older kit test files)
 # ---------------------------------------------------------------------------
 
@@ -743,7 +791,8 @@ def test_every_rule_has_a_broken_variant():
     here = {("actuator", r) for _, r in ACTUATOR_VARIANTS} | {("dimension", r) for _, r in DIMENSION_VARIANTS}
     here |= {("model", r) for _, r in MODEL_VARIANTS + MORE_MODEL_VARIANTS}
     here |= {("device", r) for r in RULES["actuator"]} | {("device", "state")}
-    here |= {("actuator", "plugin-api-declared")}
+    here |= {("actuator", "plugin-api-declared")} | {("hooks", r) for _, _, r in HOOK_VARIANTS}
+    here |= {("hooks", "import")}    # test_a_hook_module_that_is_not_installed_is_an_import_failure
     missing = [(k, r) for k, rules in RULES.items() for r in rules
                if (k, r) not in here and (k, r) not in COVERED_ELSEWHERE]
     assert not missing, missing
