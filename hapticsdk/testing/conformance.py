@@ -399,6 +399,8 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             assert cls.name == ctx.name, \
                 f"class attribute name {cls.name!r} differs from the entry-point name {ctx.name!r}"
         assert cls.channel in CHANNELS, f"channel {cls.channel!r} not one of {CHANNELS}"
+        src = getattr(cls, "readback_source", "drive")
+        assert src in ("drive", "output"), f"readback_source {src!r} is neither 'drive' nor 'output'"
         assert isinstance(cls.limits, ActuatorLimits), "limits must be an ActuatorLimits"
         ok, why = cls.check_available()
         assert isinstance(ok, bool) and isinstance(why, str), "check_available() must return (bool, str)"
@@ -424,9 +426,22 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             assert lim.max_amplitude is not None and lim.amplitude_unit, \
                 f"a {cls.channel} actuator must declare max_amplitude and amplitude_unit (the safety layer " \
                 f"has nothing else to clamp)"
-        for k in ("frequency_resolution_hz", "amplitude_resolution"):
+        for k in ("frequency_resolution_hz", "amplitude_resolution", "force_resolution_n", "settle_time_s"):
             v = getattr(lim, k, None)
-            assert _finite(v) and (v is None or v > 0), f"limit {k}={v!r} must be a finite number > 0 or None"
+            assert _finite(v) and (v is None or v > 0 or (k == "settle_time_s" and v == 0)), \
+                f"limit {k}={v!r} must be a finite number > 0 or None"
+        # the units it accepts are the units of its limits (a clean unit clash otherwise)
+        from ..features import same_unit
+        acc = cls.accepted_fields()
+        if "force_n" in acc:
+            assert same_unit(acc["force_n"], "N"), f"accepts force_n in {acc['force_n']!r}; force_n is in newtons"
+        if "frequency_hz" in acc:
+            assert same_unit(acc["frequency_hz"], "Hz"), \
+                f"accepts frequency_hz in {acc['frequency_hz']!r}; frequency_hz is in hertz"
+        if "amplitude" in acc and lim.amplitude_unit:
+            assert same_unit(acc["amplitude"], lim.amplitude_unit), \
+                (f"accepts amplitude in {acc['amplitude']!r} but declares its limits in {lim.amplitude_unit!r} "
+                 f"(limits.amplitude_unit): one of them is wrong")
 
     def r_options() -> None:
         base = cls.conformance_options() if hasattr(cls, "conformance_options") else {}
@@ -622,10 +637,16 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         def broken() -> None:
             raise OSError("simulated close failure")
         b._close = broken  # type: ignore[method-assign]
+        import logging
+        quiet = logging.getLogger("hapticsdk.actuators")
+        level = quiet.level
+        quiet.setLevel(logging.CRITICAL)   # the kit's own injected failure: not news in the log
         try:
             b.close()
         except Exception as exc:
             raise AssertionError(f"close() raised {type(exc).__name__} when the backend's _close failed") from None
+        finally:
+            quiet.setLevel(level)
         assert stops.stops >= 1, "close() did not stop the backend before releasing it"
         assert isinstance(getattr(b, "close_error", None), OSError), \
             "a failing backend _close was not reported (close_error is not set): nobody can see it"
@@ -925,8 +946,13 @@ def _dimension_rules(ctx: _Ctx) -> None:
         r = d.renderer(mid())
         assert declared, (f"the dimension declares no `roles` (role -> RoleSpec(channel, fields with units)) "
                           f"for its renderer's roles {list(r.roles)}")
+        from ..features import same_unit
         for role, spec in declared.items():
             assert isinstance(spec, RoleSpec), f"roles[{role!r}] is {spec!r}, not a RoleSpec"
+            for fname, unit in (("force_n", "N"), ("frequency_hz", "Hz")):
+                if fname in spec.fields:
+                    assert same_unit(spec.fields[fname], unit), \
+                        f"roles[{role!r}] declares {fname} in {spec.fields[fname]!r}; {fname} is in {unit}"
         missing = [ro for ro in r.roles if ro not in declared]
         assert not missing, f"the renderer commands role(s) {missing} that `roles` does not declare"
         from ..compiler.compile import _check_role

@@ -255,6 +255,29 @@ class JitterPlate(Plate):
         return ChannelCommand("friction", amplitude=self.out + float(np.random.default_rng().random()) * 1e-3)
 
 
+class UnitClashPlate(Plate):
+    """Accepts amplitude in kV while its limits are in V."""
+    name: ClassVar[str] = "kit-plate-units"
+    accepts: ClassVar[dict[str, str]] = {"amplitude": "kV"}
+
+
+class SpelledUnitPlate(Plate):
+    """Correct: accepts amplitude in "volt", its limits in "V" (the same unit)."""
+    name: ClassVar[str] = "kit-plate-volt"
+    accepts: ClassVar[dict[str, str]] = {"amplitude": "volt"}
+
+
+class NegativeSettlePlate(Plate):
+    name: ClassVar[str] = "kit-plate-settle"
+    limits = ActuatorLimits(max_amplitude=150.0, amplitude_unit="V", settle_time_s=-0.1)
+
+
+class MeasuredPlate(Plate):
+    """readback_source must be "drive" or "output"."""
+    name: ClassVar[str] = "kit-plate-measured"
+    readback_source: ClassVar[str] = "measured"
+
+
 class Arm(HapticDevice):
     """A correct force device that reports the force its motors give (saturating at 3 N)."""
     hapticsdk_api = API
@@ -310,10 +333,11 @@ ACTUATOR_VARIANTS = [
     (StringPrivilegedPlate, "privileged-options"), (MisspeltPrivilegedPlate, "privileged-options"),
     (WrongChannelPlate, "class"), (OpenedPlate, "lifecycle"), (NaNPlate, "bad-input"),
     (SlowCommandPlate, "timing"), (NoReadBackPlate, "read-back"), (JitterPlate, "determinism"),
+    (UnitClashPlate, "limits-declared"), (NegativeSettlePlate, "limits-declared"), (MeasuredPlate, "class"),
 ]
 
 
-@pytest.mark.parametrize("cls", [Plate, DriveRecordPlate, TuplePrivilegedPlate])
+@pytest.mark.parametrize("cls", [Plate, DriveRecordPlate, TuplePrivilegedPlate, SpelledUnitPlate])
 def test_correct_plates_conform(cls):
     assert check_actuator(cls) == []
 
@@ -555,6 +579,9 @@ DIMENSION_VARIANTS = [
     ({"cons": (_Never,)}, "constraints-feasible"),
     ({"roles": {}}, "roles-declared"),
     ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "1"})}}, "roles-declared"),
+    ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "mV"})}}, "roles-declared"),
+    ({"default_actuators": {"adhesion": "omni-virtual"},
+      "roles": {"adhesion": RoleSpec("force", {"force_n": "V"})}}, "roles-declared"),
     ({"renderer_kw": {"make": lambda inp: [ChannelCommand("adhesion", amplitude=30.0, force_n=2.0)]}},
      "renderer-commands"),                                                # declares amplitude, sends force_n too
     ({"renderer_kw": {"make": lambda inp: []}}, "renderer-commands"),     # silent in contact
@@ -576,6 +603,8 @@ DIMENSION_VARIANTS = [
 
 def test_the_correct_dimension_conforms(installed):
     assert check_dimension(StickDim) == []
+    # the same unit spelled out is no clash
+    assert check_dimension(_dim(roles={"adhesion": RoleSpec("friction", {"amplitude": "volt"})})) == []
 
 
 @pytest.mark.parametrize("attrs, rule", DIMENSION_VARIANTS, ids=[r for _, r in DIMENSION_VARIANTS])
