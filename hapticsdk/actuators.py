@@ -409,9 +409,16 @@ class Actuator(ABC):
 
     @property
     def settle_time_s(self) -> float:
-        """How long the output takes to reach a command (s): ``limits.settle_time_s``, 0
-        when undeclared. Backends whose ramp is an option override it."""
+        """How long the output takes to reach a command (s): ``limits.settle_time_s``;
+        where that is undeclared, the backend's amplitude ramp time ``ramp_s`` (the option
+        of the first-party vibration backends and of plugins written after them: full
+        scale per ``ramp_s``); else 0. Backends whose settling depends on options override
+        it."""
         v = getattr(self.limits, "settle_time_s", None)
+        if v is None:
+            r = getattr(self, "ramp_s", None)
+            if isinstance(r, (int, float)) and not isinstance(r, bool) and math.isfinite(r) and r >= 0:
+                return float(r)
         return float(v) if v is not None else 0.0
 
     def still_driving(self) -> str | None:

@@ -368,6 +368,31 @@ def test_an_honest_lagged_output_passes_only_after_the_ramp_has_settled():
     assert "tolerance" in msg and "V" in msg
 
 
+class RampedPlate(Plate):
+    """A 1.1-style plate (no settle_time_s) whose output ramps over its ``ramp_s`` option
+    (200 ms from rest to full scale) and which reports that output: the kit waits its
+    declared ramp time."""
+    name: ClassVar[str] = "kit-plate-ramped"
+    limits = ActuatorLimits(max_amplitude=150.0, amplitude_unit="V", amplitude_resolution=0.05)
+
+    def __init__(self, *, ramp_s: float = 0.2, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.ramp_s = ramp_s
+
+    def step(self, dt: float) -> None:
+        lim = 150.0 * dt / self.ramp_s
+        self.out += float(np.clip(self.drive - self.out, -lim, lim))
+
+
+def test_a_ramp_declared_as_ramp_s_is_waited_for():
+    assert RampedPlate().settle_time_s == 0.2
+    assert check_actuator(RampedPlate) == []
+    # the same plate claiming a 20 ms ramp while taking 200 ms is caught: its output is
+    # still at ~120 V 22 ms after stop() from full drive
+    liar = type("Liar", (RampedPlate,), {"name": "kit-plate-liar", "settle_time_s": property(lambda self: 0.02)})
+    assert "safe-stop" in rules_of(check_actuator(liar))
+
+
 def test_a_drive_record_is_marked_in_the_report():
     r = check_actuator(DriveRecordPlate)
     assert r == [] and isinstance(r, KitResult)
