@@ -16,6 +16,13 @@ and Windows). So:
   is not written through (a link planted in a calibration folder cannot redirect a
   write elsewhere).
 
+- with ``verify=`` (every writer of a file the SDK reads back passes its reader), the
+  finished temporary file is read back by that reader, with the reader's own limits,
+  before the rename: content the SDK would refuse to read (too large, too deep, not
+  valid) raises :class:`UnreadableWriteError` and the old file stays as it was. So
+  neither an error nor a SIGKILL at any point can leave a file the SDK does not read
+  where a good one was.
+
 Failures raise :class:`~hapticsdk.errors.FileWriteError` (a ``ValidationError`` whose
 ``field`` is the path), so the CLI reports them as ``hapticsdk: error: <path>: ...``
 with exit status 2.
@@ -29,12 +36,34 @@ import json
 import os
 import tempfile
 from pathlib import Path
-from typing import IO, Any, Iterator
+from typing import IO, Any, Callable, Iterator
 
 from .errors import FileWriteError
 
-__all__ = ["cache_dir", "atomic_writer", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_savez",
+__all__ = ["UnreadableWriteError", "cache_dir", "atomic_writer", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_savez",
            "check_output_path", "FileWriteError"]
+
+
+class UnreadableWriteError(FileWriteError):
+    """The content was not written: the SDK's own reader of this kind of file refuses it
+    (``reason`` is the reader's message). The file at the target is unchanged."""
+
+    def __init__(self, message: str, *, field: str, reason: str = "") -> None:
+        self.reason = reason
+        super().__init__(message, field=field)
+
+
+def _verify(verify: Callable[[Path], Any], tmp: str, name: str) -> None:
+    """Read the finished temporary file back with the reader ``verify``; any refusal
+    becomes :class:`UnreadableWriteError` (the caller removes the temporary file)."""
+    try:
+        verify(Path(tmp))
+    except Exception as exc:  # the reader's refusal, whatever its type, stops the replace
+        reason = str(exc) or type(exc).__name__
+        reason = reason.replace(tmp, "<new content>")
+        raise UnreadableWriteError(f"not written: the SDK could not read it back ({type(exc).__name__}: "
+                                   f"{reason}); the old file is unchanged", field=name,
+                                   reason=reason) from None
 
 
 def cache_dir() -> Path:
@@ -106,7 +135,8 @@ def _lock(target: Path) -> Iterator[None]:
 
 @contextlib.contextmanager
 def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: str | None = "utf-8",
-                  newline: str | None = None, field: str | None = None) -> Iterator[IO[Any]]:
+                  newline: str | None = None, field: str | None = None,
+                  verify: Callable[[Path], Any] | None = None) -> Iterator[IO[Any]]:
     """Context manager yielding a file object whose content replaces ``path`` on success.
 
     Args:
@@ -114,6 +144,9 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
         mode: ``"wb"`` (bytes) or ``"w"`` (text).
         encoding, newline: for text mode.
         field: names the path in errors (default: the path itself).
+        verify: the SDK's reader of this kind of file, called with the finished
+            temporary file before it replaces ``path``; if it raises, nothing is replaced
+            (:class:`UnreadableWriteError`).
 
     On an exception inside the block, or a failure to write, flush or rename, the
     temporary file is removed and the old content of ``path`` is untouched; OS errors
@@ -149,6 +182,8 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
                 yield fh
                 fh.flush()
                 os.fsync(raw.fileno())
+            if verify is not None:
+                _verify(verify, tmp, name)
             os.replace(tmp, target)
             ok = True
             _fsync_dir(parent)
@@ -182,21 +217,24 @@ def _fsync_dir(d: Path) -> None:
         os.close(dfd)
 
 
-def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, field: str | None = None) -> Path:
-    """Replace ``path`` with ``data`` atomically; returns the path."""
-    with atomic_writer(path, "wb", field=field) as fh:
+def atomic_write_bytes(path: str | os.PathLike[str], data: bytes, *, field: str | None = None,
+                       verify: Callable[[Path], Any] | None = None) -> Path:
+    """Replace ``path`` with ``data`` atomically (read back with ``verify`` first, see
+    :func:`atomic_writer`); returns the path."""
+    with atomic_writer(path, "wb", field=field, verify=verify) as fh:
         fh.write(data)
     return Path(os.fspath(path))
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str, *, encoding: str = "utf-8",
-                      field: str | None = None) -> Path:
+                      field: str | None = None, verify: Callable[[Path], Any] | None = None) -> Path:
     """Replace ``path`` with ``text`` atomically; returns the path."""
-    return atomic_write_bytes(path, text.encode(encoding), field=field)
+    return atomic_write_bytes(path, text.encode(encoding), field=field, verify=verify)
 
 
 def atomic_write_json(path: str | os.PathLike[str], obj: Any, *, indent: int | None = 1,
-                      field: str | None = None, **dumps_kw: Any) -> Path:
+                      field: str | None = None, verify: Callable[[Path], Any] | None = None,
+                      **dumps_kw: Any) -> Path:
     """Serialise ``obj`` to JSON (``allow_nan=False``: NaN is refused, not written) and
     replace ``path`` atomically. The whole document is serialised before the file is
     touched, so a serialisation error leaves the old file as it was."""
@@ -205,15 +243,15 @@ def atomic_write_json(path: str | os.PathLike[str], obj: Any, *, indent: int | N
         text = json.dumps(obj, indent=indent, **dumps_kw) + "\n"
     except ValueError as exc:
         raise FileWriteError(f"not written: {exc}", field=field or str(path)) from exc
-    return atomic_write_text(path, text, field=field)
+    return atomic_write_text(path, text, field=field, verify=verify)
 
 
 def atomic_savez(path: str | os.PathLike[str], *, compressed: bool = True, field: str | None = None,
-                 **arrays: Any) -> Path:
+                 verify: Callable[[Path], Any] | None = None, **arrays: Any) -> Path:
     """``numpy.savez[_compressed]`` to ``path`` atomically (the name is kept as given:
     no ``.npz`` suffix is appended)."""
     import numpy as np
 
-    with atomic_writer(path, "wb", field=field) as fh:
+    with atomic_writer(path, "wb", field=field, verify=verify) as fh:
         (np.savez_compressed if compressed else np.savez)(fh, **arrays)
     return Path(os.fspath(path))

@@ -263,7 +263,8 @@ class RenderPlan:
         :class:`~hapticsdk.errors.FileWriteError`). Returns the path."""
         from .fileio import atomic_write_text
         text = self.to_json() + "\n"  # serialised before the file is touched
-        return atomic_write_text(path, text)
+        # read back by RenderPlan.load (its size, depth and schema checks) before the rename
+        return atomic_write_text(path, text, verify=type(self).load)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], *, validate: bool = True) -> "RenderPlan":

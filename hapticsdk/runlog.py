@@ -269,7 +269,8 @@ class RunLog:
         except OSError as exc:
             from .errors import FileWriteError
             raise FileWriteError(f"cannot create the directory: {exc.strerror or exc}", field=str(p)) from None
-        return atomic_savez(p, **arrays)  # temp file + fsync + rename
+        # temp file + fsync + read back by load_run (its unpacked-size cap) + rename
+        return atomic_savez(p, verify=load_run, **arrays)
 
     def summary(self) -> dict[str, Any]:
         """Ticks, duration, rate, per-role command ranges and the header, JSON-ready."""

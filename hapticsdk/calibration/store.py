@@ -140,9 +140,11 @@ def save_calibration(cal: VoiceCoilCalibration | PiezoTable, directory: str | Pa
         from ..errors import FileWriteError
         raise FileWriteError(f"cannot create the directory {str(p.parent)!r}: {exc.strerror or exc}",
                              field=str(p)) from None
-    # temporary file + fsync + rename: a reader sees the old calibration or the new one,
-    # a failed write leaves the old one, a symbolic link at ``p`` is replaced, not followed
-    atomic_write_json(p, data, indent=1)
+    # temporary file + fsync + read back with the reader's limits (size cap included) +
+    # rename: a reader sees the old calibration or the new one, content the reader would
+    # skip is refused (UnreadableWriteError) and the old file kept; a symbolic link at
+    # ``p`` is replaced, not followed
+    atomic_write_json(p, data, indent=1, verify=_from_file)
     return p
 
 

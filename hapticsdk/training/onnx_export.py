@@ -125,8 +125,25 @@ def save(model: MLPModel, metadata: Mapping[str, str], path: Path | str) -> byte
     except OSError as exc:
         from ..errors import FileWriteError
         raise FileWriteError(f"cannot create the directory: {exc.strerror or exc}", field=str(p)) from None
-    atomic_write_bytes(p, data)  # temp file + fsync + rename: never a truncated model
+    # temp file + fsync + read back by the model reader + rename: never a truncated model
+    atomic_write_bytes(p, data, verify=read_back)
     return data
+
+
+def read_back(path: Path) -> None:
+    """Open ``path`` as the SDK opens a perception model: the ``onnx`` model plugin's
+    reader (its size cap, external-data and graph checks) when it is installed, else the
+    size cap and ``onnxruntime`` (raises what they raise)."""
+    try:
+        from hapticsdk_onnx import OnnxModel
+    except ImportError:
+        import onnxruntime as ort
+
+        from ..schemas_io import read_bytes
+        data = read_bytes(path, field="model", max_bytes=256 * 1024 * 1024)
+        ort.InferenceSession(data, providers=["CPUExecutionProvider"])
+        return
+    OnnxModel(path)
 
 
 def onnx_parity(data: bytes, model: MLPModel, X: np.ndarray) -> float:

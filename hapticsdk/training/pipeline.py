@@ -125,8 +125,14 @@ def write_feature_dataset(out: Path | str, ft: FeatureTable, ratings: Ratings, *
     if truth is not None:
         atomic_write_text(out / "truth.json", json.dumps(truth, indent=1) + "\n")
     # the index last: a data set interrupted before it has no dataset.json
-    atomic_write_text(out / DATASET_NAME, json.dumps(doc, indent=1) + "\n")
+    atomic_write_text(out / DATASET_NAME, json.dumps(doc, indent=1) + "\n", verify=_read_dataset_index)
     return out
+
+
+def _read_dataset_index(path: Path) -> Any:
+    """The data set index as :func:`load_table` reads it (bounded JSON), for the writer's read-back."""
+    from ..schemas_io import read_json
+    return read_json(path, field="dataset")
 
 
 def _mkdir(d: Path) -> None:
@@ -268,7 +274,8 @@ def train_dataset(path: Path | str, out: Path | str | None, cfg=None, *,
         from ..fileio import atomic_write_bytes
         p = Path(out)
         _mkdir(p.parent)
-        atomic_write_bytes(p, data)  # temp file + fsync + rename: never a truncated model
+        # temp file + fsync + read back by the model reader + rename: never a truncated model
+        atomic_write_bytes(p, data, verify=onnx_export.read_back)
     report = {"metrics": res.metrics, "onnx_parity_max_abs": parity, "time_s": time.perf_counter() - t0,
               "data_generated": table.generated, "split": res.split, "df_hz": table.df_hz,
               "training_data_sha256": sha, "epochs": res.fit.epochs, "best_epoch": res.fit.best_epoch,
@@ -304,7 +311,9 @@ def write_materials(table: TrainingTable, path: Path | str) -> Path:
     from ..fileio import atomic_write_text
     p = Path(path)
     _mkdir(p.parent)
-    return atomic_write_text(p, json.dumps(build_materials(table), indent=1) + "\n")
+    from ..materials import load_library
+    # read back by the library reader (its size, depth and schema checks) before the rename
+    return atomic_write_text(p, json.dumps(build_materials(table), indent=1) + "\n", verify=load_library)
 
 
 # --------------------------------------------------------------------------- growth

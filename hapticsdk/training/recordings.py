@@ -109,12 +109,15 @@ def write_trial_file(path: Path, cols: Mapping[str, np.ndarray]) -> None:
     from ..fileio import atomic_savez, atomic_writer
     path = Path(path)
     _mkdir(path.parent)
+    def check(tmp: Path) -> None:  # read back by the reader, as a file of this suffix
+        read_trial_file(tmp, suffix=path.suffix)
+
     if path.suffix == ".npz":
-        atomic_savez(path, **{c: np.asarray(cols[c]) for c in COLUMNS})
+        atomic_savez(path, verify=check, **{c: np.asarray(cols[c]) for c in COLUMNS})
     elif path.suffix == ".csv":
         n = len(cols["time_s"])
         num = np.column_stack([np.asarray(cols[c], float) for c in NUMERIC_COLUMNS])
-        with atomic_writer(path, "w", newline="") as fh:
+        with atomic_writer(path, "w", newline="", verify=check) as fh:
             fh.write(",".join(COLUMNS) + "\n")
             for i in range(n):
                 fh.write(",".join(repr(float(v)) for v in num[i]) + "," + str(cols["phase"][i]) + "\n")
@@ -122,12 +125,15 @@ def write_trial_file(path: Path, cols: Mapping[str, np.ndarray]) -> None:
         raise RecordingError(f"{path}: unsupported trial file type (use .npz or .csv)", field="file")
 
 
-def read_trial_file(path: Path) -> dict[str, np.ndarray]:
-    """Read the columns of one trial file; missing file/columns or bad values raise RecordingError."""
+def read_trial_file(path: Path, *, suffix: str | None = None) -> dict[str, np.ndarray]:
+    """Read the columns of one trial file; missing file/columns or bad values raise RecordingError.
+    ``suffix`` (``".npz"`` / ``".csv"``) overrides the path's own (a writer reading back
+    its temporary file)."""
     path = Path(path)
+    kind = path.suffix if suffix is None else suffix
     if not path.is_file():
         raise RecordingError(f"{path}: trial file not found", field="file")
-    if path.suffix == ".npz":
+    if kind == ".npz":
         import zipfile
         import zlib
         try:
@@ -144,7 +150,7 @@ def read_trial_file(path: Path) -> dict[str, np.ndarray]:
             why = ("pickled data or not an .npz archive; pickles are never loaded" if "pickle" in str(exc)
                    else f"{type(exc).__name__}: {exc}")
             raise RecordingError(f"{path}: unreadable npz ({why})", field="file") from None
-    elif path.suffix == ".csv":
+    elif kind == ".csv":
         from ..schemas_io import read_csv_rows
         _, rows = read_csv_rows(path, field="file", error=RecordingError)  # UTF-8, bounded, well-formed
         if not rows:
@@ -361,7 +367,7 @@ def write_manifest(root: Path, manifest: Mapping[str, Any]) -> Path:
     root = Path(root)
     _mkdir(root)
     validate_json(dict(manifest), "recording.schema.json", source=str(root / MANIFEST_NAME))
-    return atomic_write_text(root / MANIFEST_NAME, json.dumps(manifest, indent=1) + "\n")
+    return atomic_write_text(root / MANIFEST_NAME, json.dumps(manifest, indent=1) + "\n", verify=load_manifest)
 
 
 def _mkdir(d: Path) -> None:
@@ -425,4 +431,4 @@ def write_ratings(path: Path, ratings: Ratings) -> Path:
     doc = ratings.to_json()
     validate_json(doc, "ratings.schema.json", source=str(path))
     from ..fileio import atomic_write_text
-    return atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
+    return atomic_write_text(path, json.dumps(doc, indent=1) + "\n", verify=load_ratings)

@@ -123,7 +123,8 @@ def load_table(path: str | Path) -> PiezoTable:
 def save_table(table: PiezoTable, path: str | Path) -> Path:
     """Write ``table`` as JSON (:meth:`PiezoTable.to_dict` form); returns the path."""
     from hapticsdk.fileio import atomic_write_text
-    return atomic_write_text(path, json.dumps(table.to_dict(), indent=1))
+    # read back by load_table (its size and depth caps, the table checks) before the rename
+    return atomic_write_text(path, json.dumps(table.to_dict(), indent=1), verify=load_table)
 
 
 def resolve_table(table: Any = None) -> PiezoTable:
