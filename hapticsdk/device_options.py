@@ -20,12 +20,28 @@ plugin -- with an error naming the option and where it may be set instead:
 
 Later sources override earlier ones per option: plan < configuration file < environment <
 code / command line. Options that are not privileged may come from every source.
+
+Safety is not data either. Two more kinds of setting are refused in a scene or plan
+(same error class, same four places to set them instead):
+
+* settings that switch a safeguard off (:data:`PRIVILEGED_SETTINGS`): a scene or plan
+  may give ``servo.passivity`` only as ``true`` (switching the passivity controller off
+  is ``render_plan(..., passivity=False)`` or ``ServoLoop(passivity=False)`` in code);
+* options that raise the energy or voltage a device can deliver: an actuator class lists
+  them in ``energy_options`` (option -> what it raises); a scene or plan may give such an
+  option only as a number at or below the class's own default (the constructor's).
+  The DRV2667 backends list ``gain`` (0..3 = 25/50/75/100 V full scale): a scene may
+  lower it, never raise it.
+
+The user device configuration file, and the folder holding it, must be owned by the
+user (or root) and writable by nobody else (no group or other write bit).
 """
 
 from __future__ import annotations
 
 import copy
 import json
+import math
 import os
 import stat
 from pathlib import Path
@@ -39,7 +55,7 @@ ENV_CONFIG = "HAPTICSDK_DEVICE_CONFIG"
 MAX_CONFIG_BYTES = 1 << 20
 
 __all__ = ["ENV_OPTIONS", "ENV_CONFIG", "PrivilegedOptionError", "privileged_options",
-           "check_data_options", "device_config_path", "trusted_options", "parse_device_option",
+           "check_data_options", "check_data_settings", "PRIVILEGED_SETTINGS", "energy_option_ceilings", "device_config_path", "trusted_options", "parse_device_option",
            "WHERE_TO_SET"]
 
 #: the sentence every refusal ends with
@@ -74,10 +90,59 @@ def privileged_options(cls: Any) -> dict[str, str]:
     return out
 
 
+def energy_option_ceilings(cls: Any) -> dict[str, tuple[Any, str]]:
+    """Options of actuator class ``cls`` that raise the energy or voltage it can deliver
+    (its ``energy_options``, merged over the bases): option -> (the largest value a scene
+    or plan may give: the constructor's default, what the option raises)."""
+    import inspect
+
+    klass = cls if isinstance(cls, type) else type(cls)
+    out: dict[str, tuple[Any, str]] = {}
+    for base in reversed(klass.__mro__):
+        decl = base.__dict__.get("energy_options")
+        if isinstance(decl, Mapping):
+            for k, v in decl.items():
+                out[str(k)] = (None, str(v))
+    for key in list(out):
+        default = None
+        for base in klass.__mro__:  # the nearest constructor that declares the option
+            init = base.__dict__.get("__init__")
+            if init is None:
+                continue
+            try:
+                par = inspect.signature(init).parameters.get(key)
+            except (TypeError, ValueError):
+                continue
+            if par is not None and par.default is not inspect.Parameter.empty:
+                default = par.default
+                break
+        out[key] = (default, out[key][1])
+    return out
+
+
+def _refuse(actuator: str, role: str, key: str, field: str, why: str) -> None:
+    where = WHERE_TO_SET.format(role=role, key=key, env=ENV_OPTIONS, actuator=actuator,
+                                config=device_config_path())
+    raise PrivilegedOptionError(f"option {key!r} of actuator {actuator!r} {why}: {where}",
+                                field=f"{field}.{key}", option=key)
+
+
 def check_data_options(cls: Any, actuator: str, role: str, options: Mapping[str, Any], *, field: str) -> None:
     """Raise :class:`PrivilegedOptionError` when ``options`` (read from a scene or plan)
-    contain a privileged option of actuator class ``cls``; ``field`` is the path of the
-    options object in that file (``scene.devices.coil.options``)."""
+    contain a privileged option of actuator class ``cls``, or one of its energy options
+    above the class's default; ``field`` is the path of the options object in that file
+    (``scene.devices.coil.options``)."""
+    from .checks import is_number
+
+    for key, (ceiling, what) in energy_option_ceilings(cls).items():
+        if key not in options:
+            continue
+        v = options[key]
+        ok = (is_number(v) and is_number(ceiling) and math.isfinite(float(v)) and float(v) <= float(ceiling))
+        if not ok:
+            _refuse(actuator, role, key, field,
+                    f"raises the energy or voltage the device can deliver ({what}); a scene or plan file may "
+                    f"give it only as a number up to the default {ceiling!r}, got {v!r}")
     priv = privileged_options(cls)
     for key in sorted(options):
         if key in priv:
@@ -87,6 +152,41 @@ def check_data_options(cls: Any, actuator: str, role: str, options: Mapping[str,
                 f"option {key!r} of actuator {actuator!r} is privileged ({priv[key]}); scene and plan "
                 f"files may not set it (a file you open must not choose native code to load or files "
                 f"to write): {where}", field=f"{field}.{key}", option=key)
+
+
+#: settings a scene or plan may give only with one value, because any other switches a
+#: safeguard off: path under ``settings`` -> (the only value accepted from data, what it guards)
+PRIVILEGED_SETTINGS: dict[tuple[str, ...], tuple[Any, str]] = {
+    ("servo", "passivity"): (True, "the passivity observer/controller, which takes out the energy a sampled "
+                                   "stiff wall would inject"),
+}
+
+
+def check_data_settings(settings: Any, *, field: str) -> None:
+    """Raise :class:`PrivilegedOptionError` when ``settings`` (a scene's or plan's
+    ``settings`` object, read from a file) set one of :data:`PRIVILEGED_SETTINGS` to
+    anything but its safe value (``0``, ``"false"`` and ``null`` included); ``field`` is
+    the path of the settings object (``scene.settings``, ``plan.settings``)."""
+    if not isinstance(settings, Mapping):
+        return
+    for path, (safe, what) in PRIVILEGED_SETTINGS.items():
+        node: Any = settings
+        for part in path:
+            if not isinstance(node, Mapping) or part not in node:
+                node = _ABSENT
+                break
+            node = node[part]
+        if node is _ABSENT or (node is safe):
+            continue
+        dotted = ".".join(path)
+        raise PrivilegedOptionError(
+            f"setting {dotted!r} is privileged ({what}); a scene or plan file may give it only as "
+            f"{json.dumps(safe)}, got {node!r}: switch it off from the application's code "
+            f"(render_plan(..., {path[-1]}=False), ServoLoop({path[-1]}=False))",
+            field=f"{field}.{dotted}", option=dotted)
+
+
+_ABSENT = object()
 
 
 def device_config_path() -> Path:
@@ -121,9 +221,13 @@ def _read_config(path: Path) -> dict[str, dict[str, Any]]:
         raise ValidationError(f"cannot read: {exc.strerror or exc}", field=str(path)) from None
     if not stat.S_ISREG(st.st_mode):
         raise ValidationError("not a regular file", field=str(path))
-    if hasattr(os, "geteuid") and (st.st_uid != os.geteuid() or st.st_mode & stat.S_IWOTH):
-        raise ValidationError("refused: the device configuration file must be owned by you and not "
-                              "writable by others", field=str(path))
+    _check_trusted(path, st, "the device configuration file")
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        pst = os.stat(parent)
+    except OSError as exc:
+        raise ValidationError(f"cannot read its folder: {exc.strerror or exc}", field=str(path)) from None
+    _check_trusted(path, pst, f"its folder {str(parent)!r}")
     if st.st_size > MAX_CONFIG_BYTES:
         raise ValidationError(f"larger than {MAX_CONFIG_BYTES} bytes", field=str(path))
     # read and parsed once per version of the file (a compile asks once per role)
@@ -138,6 +242,20 @@ def _read_config(path: Path) -> dict[str, dict[str, Any]]:
         _CONFIG_CACHE.clear()
         _CONFIG_CACHE.update(key=key, by_actuator=_by_actuator(data, str(path)))
     return copy.deepcopy(_CONFIG_CACHE["by_actuator"])
+
+
+def _check_trusted(path: Path, st: os.stat_result, what: str) -> None:
+    """Refuse a configuration file (or its folder) that someone else could have written:
+    owned by another user than you or root, or with the group or other write bit set."""
+    if not hasattr(os, "geteuid"):  # pragma: no cover - Windows: ACLs, not mode bits
+        return
+    if st.st_uid not in (os.geteuid(), 0):
+        raise ValidationError(f"refused: {what} is owned by uid {st.st_uid}, not by you or root; the device "
+                              "configuration must be owned by you and not writable by others", field=str(path))
+    if st.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+        raise ValidationError(f"refused: {what} is writable by {'others' if st.st_mode & stat.S_IWOTH else 'its group'}"
+                              f" (mode {stat.S_IMODE(st.st_mode):o}); the device configuration must be owned by "
+                              "you and not writable by others (chmod go-w)", field=str(path))
 
 
 def trusted_options(actuator: str) -> dict[str, Any]:

@@ -272,6 +272,9 @@ class RenderPlan:
         against ``schemas/plan.schema.json`` first (errors name the JSON path), and its
         feature values against their ranges (:func:`check_plan_features`)."""
         if validate:
+            if isinstance(d, Mapping):  # safety is not data: named before the schema's message
+                from .device_options import check_data_settings
+                check_data_settings(d.get("settings"), field="plan.settings")
             validate_plan_dict(d)
         api = str(d.get("plugin_api_version", PLUGIN_API_VERSION))
         if _parse_version(api)[0] != _parse_version(PLUGIN_API_VERSION)[0]:

@@ -170,7 +170,8 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
                 trajectory: Any = None, recorder: Any = None, realtime: bool | None = None,
                 period_s: float | None = None, hooks: bool = True,
                 raise_on_fault: bool = True,
-                actuator_options: Mapping[str, Mapping[str, Any]] | None = None) -> RenderReport:
+                actuator_options: Mapping[str, Mapping[str, Any]] | None = None,
+                passivity: bool | None = None) -> RenderReport:
     """Render one material of ``plan`` for ``seconds`` (s) of servo time.
 
     Args:
@@ -189,6 +190,9 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
             ``$HAPTICSDK_DEVICE_OPTIONS``. The only way, with those two, to give an actuator's
             privileged options (a native library, an output file, a port): a plan may not
             (:mod:`hapticsdk.device_options`).
+        passivity: ``False`` switches the passivity controller off (code only: a plan
+            whose ``settings.servo.passivity`` is not ``true`` is refused,
+            :func:`hapticsdk.device_options.check_data_settings`). Default on.
     """
     if isinstance(plan, Mapping):
         plan = RenderPlan.from_dict(plan)
@@ -206,7 +210,11 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     period = check_period(period_s if period_s is not None else servo.get("period_s", 0.001),
                           "period_s" if period_s is not None else "plan.settings.servo.period_s")
     rt = bool(servo.get("realtime", False) if realtime is None else realtime)
-    passivity = bool(servo.get("passivity", True))
+    from ..device_options import check_data_settings
+    check_data_settings(plan.settings, field="plan.settings")  # safety is not data
+    if passivity is not None and not isinstance(passivity, bool):
+        raise ValidationError(f"passivity must be True or False, got {passivity!r}", field="passivity")
+    passivity = True if passivity is None else passivity
 
     from ..plugins import manager, registry
 

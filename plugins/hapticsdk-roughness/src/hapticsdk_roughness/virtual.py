@@ -58,6 +58,9 @@ class PiezoVirtual(Actuator):
     channel: ClassVar[str] = "vibration"
     accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = True
+    #: raise the voltage the piezo gets: a scene or plan may give ``gain`` only up to the
+    #: default (hapticsdk.device_options.check_data_options)
+    energy_options: ClassVar[dict[str, str]] = {"gain": "DRV2667 gain: full scale 25/50/75/100 V peak for 0..3"}
     limits = piezo_limits(1, None, quantised=False)
 
     def __init__(self, *, gain: int = 1, fs: float = 8000.0, period_s: float = 0.001, ramp_s: float = 0.005,
