@@ -23,7 +23,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .errors import HapticSDKError
+from .errors import HapticSDKError, ValidationError
 
 
 def _pyplot() -> Any:
@@ -357,6 +357,11 @@ def save_figure(fig: Any, path: str | Path, *, dpi: int = 100, field: str | None
     from .fileio import atomic_writer
     p = Path(path)
     fmt = p.suffix[1:].lower() or "png"
+    known = fig.canvas.get_supported_filetypes()
+    if fmt not in known:
+        plt.close(fig)
+        raise ValidationError(f"cannot write a figure as {fmt!r}; use one of {', '.join(sorted(known))}",
+                              field=field or str(p))
     try:
         with atomic_writer(p, "wb", field=field) as fh:
             fig.savefig(fh, format=fmt, dpi=dpi)

@@ -73,7 +73,8 @@ def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.n
     if dimensions is None:
         raise ValidationError("array targets need dimensions=[...] naming their columns", field="dimensions")
     dims = tuple(dimensions)
-    T = np.asarray(targets, dtype=float)
+    from .argcheck import number_array
+    T = number_array(targets, "targets", ndim=(1, 2), finite=False)  # a string is named by its index
     return T, dims
 
 

@@ -164,8 +164,56 @@ def _depth_table() -> Any:
 
 
 
-def _refuse_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a JSON number")
+class _Constant:
+    """Stands for a ``NaN`` / ``Infinity`` literal while parsing, so its path can be named."""
+
+    __slots__ = ("name",)
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+
+def _find_constant(data: Any, path: str = "") -> tuple[str, str] | None:
+    """``(path, literal)`` of the first :class:`_Constant` in parsed JSON (iterative:
+    the depth was bounded before parsing, the width is not)."""
+    stack: list[tuple[Any, str]] = [(data, path)]
+    while stack:
+        node, where = stack.pop()
+        if isinstance(node, _Constant):
+            return where, node.name
+        if isinstance(node, dict):
+            stack.extend((v, f"{where}.{k}") for k, v in reversed(list(node.items())))
+        elif isinstance(node, list):
+            stack.extend((v, f"{where}[{i}]") for i, v in reversed(list(enumerate(node))))
+    return None
+
+
+def json_path_at(text: str, pos: int) -> str:
+    """The JSON path (``.objects[0].pose``) of the innermost value open at character
+    ``pos`` of JSON ``text``, from a linear scan of its brackets, commas, colons and
+    strings (no parse: used where parsing is refused, e.g. nesting too deep)."""
+    import re
+
+    stack: list[list[Any]] = []
+    last = ""
+    for m in re.finditer(r'"(?:[^"\\]|\\.)*"|[\[\]{},:]', text[:pos]):
+        t = m.group()
+        if t[0] == '"':
+            last = t
+        elif t in "[{":
+            stack.append([t, 0 if t == "[" else None])
+        elif t in "]}":
+            if stack:
+                stack.pop()
+        elif t == "," and stack and stack[-1][0] == "[":
+            stack[-1][1] += 1
+        elif t == ":" and stack and stack[-1][0] == "{":
+            try:
+                stack[-1][1] = json.loads(last)
+            except ValueError:
+                stack[-1][1] = last
+    parts = [f"[{v}]" if k == "[" else f".{v}" for k, v in stack[:-1] if v is not None]
+    return "".join(parts[:12]) + ("..." if len(parts) > 12 else "")
 
 
 def read_json(path: str | Path, *, field: str, error: type[ValidationError] = ValidationError,
@@ -178,15 +226,45 @@ def read_json(path: str | Path, *, field: str, error: type[ValidationError] = Va
     JSON, and ``NaN`` / ``Infinity`` (not JSON numbers)."""
     p = Path(path)
     text = read_text(p, field=field, error=error, max_bytes=max_bytes)
+    return parse_json(text, p, field=field, error=error, max_depth=max_depth)
+
+
+def parse_json(text: str, p: str | Path, *, field: str, error: type[ValidationError] = ValidationError,
+               max_depth: int = MAX_JSON_DEPTH) -> Any:
+    """Parse JSON ``text`` read from file ``p`` (the checks of :func:`read_json` after the
+    read): nesting, syntax and ``NaN`` / ``Infinity`` refused with ``error`` whose field is
+    ``field`` plus the JSON path where it happens (``scene.objects[0].pose``)."""
     depth = json_depth(text)
     if depth > max_depth:
-        raise error(f"{p}: JSON nested {depth} levels deep, more than the {max_depth} accepted", field=field)
+        where = json_path_at(text, _deep_position(text, max_depth))
+        raise error(f"{p}: JSON nested {depth} levels deep, more than the {max_depth} accepted (from "
+                    f"{field}{where})", field=f"{field}{where}")
     try:
-        return json.loads(text, parse_constant=_refuse_constant)
+        data = json.loads(text, parse_constant=_Constant)
     except json.JSONDecodeError as exc:
-        raise error(f"{p}: not valid JSON: {exc}", field=field) from None
+        where = json_path_at(text, exc.pos)
+        raise error(f"{p}: not valid JSON: {exc}", field=f"{field}{where}") from None
     except (ValueError, RecursionError) as exc:
         raise error(f"{p}: not valid JSON: {exc}", field=field) from None
+    bad = _find_constant(data)
+    if bad is not None:
+        raise error(f"{p}: {bad[1]} is not a JSON number (at {field}{bad[0]})", field=f"{field}{bad[0]}")
+    return data
+
+
+def _deep_position(text: str, max_depth: int) -> int:
+    """Index in ``text`` of the bracket that opens level ``max_depth + 1`` (strings skipped)."""
+    import re
+    depth = 0
+    for m in re.finditer(r'"(?:[^"\\]|\\.)*"|[\[\]{}]', text):
+        t = m.group()
+        if t in "[{":
+            depth += 1
+            if depth > max_depth:
+                return m.start()
+        elif t in "]}":
+            depth -= 1
+    return len(text)
 
 
 def load_json(path: str | Path, schema: str) -> Any:

@@ -300,7 +300,8 @@ class SolveProblem:
 
     def __post_init__(self) -> None:
         self.dimensions = tuple(self.dimensions)
-        T = np.asarray(self.targets, dtype=float)
+        from .argcheck import number_array
+        T = number_array(self.targets, "targets", finite=False)  # a string is named by its index
         #: True when targets were given as one 1-D row: ``Solver.solve`` returns one result.
         self.single = T.ndim == 1
         if T.ndim == 1:
@@ -314,8 +315,8 @@ class SolveProblem:
         if self.penalty not in PENALTY_FORMS:
             raise ValidationError(f"unknown penalty {self.penalty!r}; valid: {list(PENALTY_FORMS)}",
                                   field="penalty")
-        if not (np.isfinite(self.tolerance) and self.tolerance > 0):
-            raise ValidationError("tolerance must be a positive number", field="tolerance")
+        from .argcheck import number
+        self.tolerance = number(self.tolerance, "tolerance", lo=0.0, lo_open=True)
         model_in = list(self.model.feature_names)
         for n in self.space.names:
             if n not in model_in:

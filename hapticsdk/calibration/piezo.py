@@ -212,15 +212,20 @@ class PiezoTable:
         """Inverse of :meth:`to_dict` (unknown keys such as ``schema_version`` ignored)."""
         if not isinstance(data, dict) or data.get("kind", "piezo") != "piezo":
             raise CalibrationError("not a piezo table (kind must be 'piezo')")
-        try:
-            return cls(frequencies_hz=np.asarray(data["frequencies_hz"], float),
-                       voltages_v=np.asarray(data["voltages_v"], float),
-                       acceleration=np.asarray(data["acceleration_m_s2"], float),
-                       generated=bool(data.get("generated", False)), source=str(data.get("source", "")),
-                       serial=data.get("serial"))
-        except KeyError as exc:
-            raise CalibrationError(f"piezo table misses key {exc.args[0]!r} "
-                                   "(needs frequencies_hz, voltages_v, acceleration_m_s2)") from None
+        from ..argcheck import number_array
+        from ..errors import ValidationError
+        missing = [k for k in ("frequencies_hz", "voltages_v", "acceleration_m_s2") if k not in data]
+        if missing:
+            raise CalibrationError(f"piezo table misses key {missing[0]!r} "
+                                   "(needs frequencies_hz, voltages_v, acceleration_m_s2)")
+        try:  # a string, a bool or NaN in a column is named by its index (piezo.frequencies_hz[1])
+            cols = {k: number_array(data[k], f"piezo.{k}", ndim=(2,) if k == "acceleration_m_s2" else (1,))
+                    for k in ("frequencies_hz", "voltages_v", "acceleration_m_s2")}
+        except ValidationError as exc:
+            raise CalibrationError(f"piezo table: {exc}") from None
+        return cls(frequencies_hz=cols["frequencies_hz"], voltages_v=cols["voltages_v"],
+                   acceleration=cols["acceleration_m_s2"], generated=bool(data.get("generated", False)),
+                   source=str(data.get("source", "")), serial=data.get("serial"))
 
 
 def _check_plausible(f: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:

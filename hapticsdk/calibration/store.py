@@ -88,7 +88,7 @@ def _read_file(p: Path) -> tuple[Any, str]:
     shallow. Raises :class:`ValidationError` naming the file."""
     import hashlib
 
-    from ..schemas_io import MAX_JSON_DEPTH, json_depth, read_bytes
+    from ..schemas_io import parse_json, read_bytes
 
     data = read_bytes(p, field="calibration", max_bytes=MAX_CALIBRATION_BYTES)
     digest = hashlib.sha256(data).hexdigest()
@@ -96,12 +96,8 @@ def _read_file(p: Path) -> tuple[Any, str]:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise ValidationError(f"{p}: not UTF-8 text (offset {exc.start})", field="calibration") from None
-    if json_depth(text) > MAX_JSON_DEPTH:
-        raise ValidationError(f"{p}: JSON nested deeper than {MAX_JSON_DEPTH} levels", field="calibration")
-    try:
-        return json.loads(text), digest
-    except (ValueError, RecursionError) as exc:
-        raise ValidationError(f"{p}: not valid JSON: {exc}", field="calibration") from None
+    # depth, syntax, NaN / Infinity: named by their path in the file (calibration.coefficients[1])
+    return parse_json(text, p, field="calibration"), digest
 
 
 def _from_file(p: Path) -> tuple[VoiceCoilCalibration | PiezoTable, str]:
@@ -125,12 +121,15 @@ def save_calibration(cal: VoiceCoilCalibration | PiezoTable, directory: str | Pa
                      path: str | Path | None = None) -> Path:
     """Write ``cal`` to ``path``, or to ``<directory>/<kind>-<serial|any>.json`` (default
     directory: :func:`calibration_dir`). Returns the path written."""
+    from ..argcheck import serial_number
     data = calibration_to_dict(cal)
+    serial_number(data.get("serial"), "calibration.serial")  # it becomes part of a file name
     calibration_from_dict(data)  # never write a file we could not read back
     if path is None:
         d = Path(directory) if directory is not None else calibration_dir()
         serial = data.get("serial") or "any"
-        safe = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in str(serial))
+        # ASCII letters, digits and -_. only: at most 126 bytes, within every file system's name limit
+        safe = "".join(ch if (ch.isascii() and ch.isalnum()) or ch in "-_." else "_" for ch in str(serial))
         path = d / f"{data['kind']}-{safe}.json"
     p = Path(path)
     from ..fileio import atomic_write_json

@@ -13,7 +13,35 @@ import argparse
 import math
 
 __all__ = ["nonneg_int", "positive_int", "finite_float", "positive_float", "nonneg_float", "unit_interval",
-           "open_unit_interval", "int_list", "intensity", "bounded_int"]
+           "open_unit_interval", "int_list", "intensity", "bounded_int", "serial", "figure_file"]
+
+
+def _from_check(check, name: str):
+    """An argparse type from a :mod:`hapticsdk.argcheck` function: the API's rule, with
+    its reason as the parser's message (the parser adds the option's name)."""
+    from ..errors import ValidationError
+
+    def convert(text: str):
+        try:
+            return check(text, "value")
+        except ValidationError as exc:
+            raise argparse.ArgumentTypeError(str(exc).split(": ", 1)[-1]) from None
+
+    convert.__name__ = name
+    return convert
+
+
+def serial(text: str) -> str:
+    """A device serial number (:func:`hapticsdk.argcheck.serial_number`: at most 126
+    characters, no control characters)."""
+    from ..argcheck import serial_number
+    return _from_check(serial_number, "serial")(text)
+
+
+def figure_file(text: str) -> str:
+    """A figure path in a format the plotting backend writes (:func:`hapticsdk.argcheck.figure_path`)."""
+    from ..argcheck import figure_path
+    return _from_check(figure_path, "figure_file")(text)
 
 
 def _int(text: str) -> int:

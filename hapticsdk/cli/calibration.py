@@ -6,7 +6,7 @@ import argparse
 from typing import Any
 
 from . import emit
-from .argtypes import bounded_int, nonneg_int, open_unit_interval, positive_float
+from .argtypes import bounded_int, nonneg_int, open_unit_interval, positive_float, serial
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +22,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("answers", help="CSV with columns person, frequency_hz, spring_n_per_mm, spring_stiffer")
     p.add_argument("--confidence", type=open_unit_interval, default=0.95,
                    help="level of the coefficient intervals, strictly between 0 and 1")
-    p.add_argument("--serial", help="device serial number the calibration belongs to")
+    p.add_argument("--serial", type=serial, help="device serial number the calibration belongs to "
+                                                "(at most 126 characters)")
     p.add_argument("--amplifier-gain", type=positive_float,
                    help="amplifier gain used in the experiment (a finite number > 0)")
     p.add_argument("--mounting", default="", help="how the tactor was mounted")
@@ -33,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = csub.add_parser("piezo", help="build the piezo table Tab from acceleration measurements")
     p.add_argument("measurements", help="CSV with columns frequency_hz, voltage_v, acceleration_m_s2, "
                                         "or a piezo table JSON")
-    p.add_argument("--serial", help="device serial number the calibration belongs to")
+    p.add_argument("--serial", type=serial, help="device serial number the calibration belongs to "
+                                                "(at most 126 characters)")
     _save_args(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_piezo)
@@ -200,12 +202,14 @@ def cmd_list(args: argparse.Namespace) -> int:
     from ..calibration import calibration_dir, calibrations_in_use, list_calibrations
     from ..errors import ValidationError
 
+    from ..argcheck import serial_number
+
     serials: dict[str, str] = {}
     for item in args.serial:
-        kind, sep, serial = item.partition("=")
-        if not sep or not serial:
+        kind, sep, value = item.partition("=")
+        if not sep or not value:
             raise ValidationError(f"expected KIND=SERIAL, got {item!r}", field="--serial")
-        serials[kind] = serial
+        serials[kind] = serial_number(value, "--serial")
     directory = args.dir or calibration_dir()
     out = {"directory": str(directory),
            "files": [e.to_dict() for e in list_calibrations(directory)],

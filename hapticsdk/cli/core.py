@@ -7,7 +7,7 @@ import re
 from typing import Any
 
 from . import emit
-from .argtypes import intensity, nonneg_int, positive_float
+from .argtypes import figure_file, intensity, nonneg_int, positive_float
 
 
 #: the exit-status rule shared by ``solve``, ``render`` and ``plan`` (also in docs/app-developers.md)
@@ -66,7 +66,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="pace the servo loop on the machine clock (wall time = --seconds); by default "
                         "simulated devices run as fast as they compute")
     p.add_argument("--seed", type=nonneg_int, default=0, help="solver seed, a whole number >= 0")
-    p.add_argument("--plot", metavar="PNG", help="save a figure of the render (needs matplotlib)")
+    p.add_argument("--plot", metavar="PNG", type=figure_file,
+                   help="save a figure of the render (needs matplotlib; .png, .pdf, .svg ...)")
     p.add_argument("--device-option", action="append", default=[], metavar="ROLE.KEY=VALUE",
                    help="actuator option for a channel role (repeatable), e.g. force.library=/opt/libHD.so or "
                         "coil.sink=wav:out.wav; the only place, with $HAPTICSDK_DEVICE_OPTIONS and the user "

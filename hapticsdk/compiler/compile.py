@@ -495,7 +495,9 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         for d in kept:
             cal_records.update(render_cal[d])
             try:
-                rend = dim_objs[d].renderer(dict(feats), **render_opts[d])
+                from ..argcheck import call_with_options  # an unknown option is named, not a TypeError
+                rend = call_with_options(dim_objs[d].renderer, dict(feats), options=render_opts[d],
+                                         field=f"scene.settings.renderer_options.{d}")
             except ValidationError:
                 raise
             except Exception as exc:

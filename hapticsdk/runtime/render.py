@@ -138,7 +138,9 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None,
             roles = list(getattr(dim, "roles", {}) or {}) or list(dim.default_actuators)
             own = dim.capability_options({ro: capabilities[ro] for ro in roles if ro in capabilities})
             opts.update({k: v for k, v in own.items() if k not in given})
-        r = dim.renderer(dict(mp.features), **opts)
+        from ..argcheck import call_with_options  # an unknown option is named, not a TypeError
+        r = call_with_options(dim.renderer, dict(mp.features), options=opts,
+                              field=f"plan.settings.renderer_options.{d}")
         missing = [role for role in r.roles if role not in mp.actuators]
         if missing:
             raise ValidationError(f"renderer of {d!r} commands roles {missing} that the plan maps to "

@@ -97,13 +97,17 @@ class HardnessRenderer(DimensionRenderer):
 
     def __init__(self, gs_n_per_mm: float, *, calibration: VoiceCoilCalibration | None = None,
                  gs_max_n_per_mm: float = GS_MAX_N_PER_MM, coil_amplitude: float = 0.5) -> None:
-        gs = float(gs_n_per_mm)
-        if not np.isfinite(gs) or gs < 0:
-            raise ValidationError(f"GS must be a finite stiffness >= 0 N/mm, got {gs_n_per_mm!r}", field="GS")
-        if not np.isfinite(gs_max_n_per_mm) or gs_max_n_per_mm <= 0:
-            raise ValidationError("must be > 0 N/mm", field="gs_max_n_per_mm")
-        if not np.isfinite(coil_amplitude) or not 0 <= coil_amplitude <= 1:
-            raise ValidationError("must be in 0..1", field="coil_amplitude")
+        from hapticsdk.argcheck import number
+        gs = number(gs_n_per_mm, "GS", lo=0.0)
+        gs_max_n_per_mm = number(gs_max_n_per_mm, "gs_max_n_per_mm", lo=0.0, lo_open=True)
+        coil_amplitude = number(coil_amplitude, "coil_amplitude", lo=0.0, hi=1.0)
+        if calibration is not None and not isinstance(calibration, VoiceCoilCalibration):
+            if not isinstance(calibration, dict):
+                raise ValidationError(f"must be a voice-coil calibration (an object in the calibration file "
+                                      f"format), got {type(calibration).__name__} {calibration!r:.60}",
+                                      field="calibration")
+            from hapticsdk.calibration.store import calibration_from_dict
+            calibration = calibration_from_dict({"schema_version": 1, "kind": "voicecoil", **calibration})
         self.calibration = calibration or VoiceCoilCalibration.paper()
         self.gs = gs
         self.omni_stiffness_n_per_mm = min(gs, float(gs_max_n_per_mm))

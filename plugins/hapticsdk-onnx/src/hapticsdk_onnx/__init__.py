@@ -115,6 +115,26 @@ def _description_path(sha256: str) -> Path:
     return cache_dir() / "onnx-desc" / f"{sha256}.npz"
 
 
+def _refuse_external_data(tensors: Any, where: str) -> None:
+    """Raise :class:`ModelError` naming the first initializer whose data lives in another
+    file (ONNX "external data"). A model is read as one file of bounded size: nothing
+    outside it is opened, and a location outside the model's folder (absolute, ``..``) is
+    named as such."""
+    import posixpath
+
+    for t in tensors:
+        if getattr(t, "data_location", 0) != 1:  # TensorProto.EXTERNAL
+            continue
+        loc = next((e.value for e in t.external_data if e.key == "location"), "")
+        norm = posixpath.normpath(str(loc).replace("\\", "/"))
+        outside = (not loc or norm.startswith(("/", "../")) or norm == ".." or Path(str(loc)).is_absolute()
+                   or (len(str(loc)) > 1 and str(loc)[1] == ":"))
+        why = ("outside the model's folder" if outside else "in a separate file")
+        raise ModelError(f"{where}: initializer {t.name!r} keeps its data in external file {str(loc)[:200]!r}, "
+                         f"{why}; refused, nothing was read (save the model with its weights inside: "
+                         f"onnx.save(model, path, save_as_external_data=False))")
+
+
 def _description(data: bytes, where: str) -> _Description:
     """The :class:`_Description` of a model file's bytes. Parsing the protobuf needs the
     ``onnx`` package (20-170 ms to import), so the description is kept in the cache folder
@@ -142,6 +162,7 @@ def _description(data: bytes, where: str) -> _Description:
             dim1 = (dims_[1].dim_value if dims_[1].HasField("dim_value") else None) if len(dims_) >= 2 else None
             shapes[f"{side}:{vi.name}"] = (len(dims_), dim1)
     inits = {t.name: t for t in graph.initializer}
+    _refuse_external_data(inits.values(), where)  # before numpy_helper would open any file
     desc = _Description({e.key: e.value for e in proto.metadata_props}, [i.name for i in graph.input],
                         [o.name for o in graph.output], [t.name for t in graph.initializer], shapes,
                         {n: numpy_helper.to_array(inits[n]) for n in MLP_INITIALIZERS if n in inits})
