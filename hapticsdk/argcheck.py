@@ -64,6 +64,9 @@ def number(value: Any, field: str, *, lo: float | None = None, hi: float | None 
     return v
 
 
+_NUMBER_TYPES = frozenset((int, float, np.float64, np.float32, np.int64, np.int32))
+
+
 def _walk_bad(value: Any, field: str, finite: bool = True) -> None:
     """Name the first element of a nested sequence that is not a (finite) real number."""
     if isinstance(value, np.ndarray):
@@ -95,8 +98,13 @@ def number_array(value: Any, field: str, *, ndim: tuple[int, ...] | None = None,
     them better, e.g. by column name)."""
     if isinstance(value, (str, bytes)) or value is None or isinstance(value, bool):
         raise ValidationError(f"must be an array of numbers, got {type(value).__name__}", field=field)
-    try:  # fast path: already numeric and finite (no per-element Python work)
+    try:  # fast path: already numeric and finite (a type scan in C, no per-element checks)
         raw = np.asarray(value)
+        if not isinstance(value, np.ndarray) and raw.dtype.kind in "fiu":
+            # numpy turns [0.5, True] into floats: the element types decide
+            kinds = set(map(type, np.asarray(value, dtype=object).ravel().tolist()))
+            if not kinds <= _NUMBER_TYPES:
+                raw = None
     except (ValueError, TypeError):
         raw = None
     if raw is None or raw.dtype.kind not in "fiu" or (finite and not np.isfinite(raw).all()):

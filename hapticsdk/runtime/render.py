@@ -251,11 +251,9 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
                 if (trajectory is not None and isinstance(cls, type) and issubclass(cls, HapticDevice)
                         and getattr(cls, "simulated", False) and _accepts(cls, "trajectory")):
                     opts.setdefault("trajectory", trajectory)
-                try:
-                    act = cls(**opts)
-                except TypeError as exc:  # a backend with a fixed signature and a bad option
-                    raise ValidationError(f"actuator {name!r} rejected options {sorted(opts)}: {exc}",
-                                          field=f"plan.materials.{mp.name}.actuator_options.{role}") from None
+                from ..argcheck import call_with_options  # a bad option is named by its path
+                act = call_with_options(cls, options=opts,
+                                        field=f"plan.materials.{mp.name}.actuator_options.{role}")
                 if not isinstance(act, Actuator):
                     raise PluginError(f"actuator plugin {name!r} did not create an Actuator",
                                       plugin=name, kind="actuator")

@@ -94,6 +94,22 @@ def files(tmp_path_factory) -> dict[str, str]:
          "devices": {"force": {"actuator": "omni-virtual", "options": {"safety": "off"}}}}))
     (d / "bad_utf8.csv").write_bytes(b"person,frequency_hz,spring_n_per_mm,spring_stiffer\n0,40,\xff1.5,1\n")
     (d / "quote.csv").write_text('person,frequency_hz,spring_n_per_mm,spring_stiffer\n0,40,"1.5\n')
+    # issue 31: safety settings, renderer options and tables a file may not give
+    scene = {"objects": [{"material": "S7"}]}
+    for name, extra in (("passivity_off", {"settings": {"servo": {"passivity": False}}}),
+                        ("gain_3", {"devices": {"vibration": {"actuator": "piezo-virtual", "options": {"gain": 3}}}}),
+                        ("ropt_sink", {"settings": {"renderer_options": {"hardness": {"sink": "buffer"}}}}),
+                        ("ropt_paper", {"settings": {"renderer_options": {"hardness": {"calibration": "paper"}}}}),
+                        ("coil_1e9", {"objects": [{"material": {"name": "hard", "intensities": {"hardness": 1.0}}}],
+                                      "devices": {"coil": {"actuator": "voicecoil-virtual",
+                                                           "options": {"sample_rate_hz": 1e9}}}})):
+        (d / f"{name}.json").write_text(json.dumps({**scene, **extra}))
+        f[name] = d / f"{name}.json"
+    from hapticsdk.calibration import PiezoTable
+    tab = PiezoTable([100.0, 200.0], [0.0, 10.0], [[0.0, 1.0], [0.0, 2.0]]).to_dict()
+    tab["frequencies_hz"][1] = "200"
+    (d / "piezo_str.json").write_text(json.dumps(tab))
+    f["piezo_str"] = d / "piezo_str.json"
     for name in ("bad_utf8.json", "deep.json", "deep_obj.json", "deep_field.json", "nan.json", "empty.json", "exists.txt",
                  "safety_off.json", "quote.csv"):
         f[name.split(".")[0]] = d / name
@@ -227,7 +243,7 @@ CASES = [
     ("render-scene-deep", ["render", "--scene", "{deep}"], "scene", "nested 5000 levels"),
     ("render-scene-deep-object", ["render", "--scene", "{deep_obj}"], "scene", "nested 5000 levels"),
     ("render-scene-960-deep-field", ["render", "--scene", "{deep_field}"], "scene", "nested 963 levels"),
-    ("render-scene-nan-literal", ["render", "--scene", "{nan}"], "scene", "NaN"),
+    ("render-scene-nan-literal", ["render", "--scene", "{nan}"], "scene.settings.servo.period_s", "NaN"),
     ("render-scene-empty", ["render", "--scene", "{empty}"], "scene"),
     ("render-scene-directory", ["render", "--scene", "{dir}"], "scene", "directory"),
     ("render-scene-fifo", ["render", "--scene", "{fifo}"], "scene", "not a regular file"),
@@ -288,6 +304,22 @@ CASES = [
     ("import-deep", ["import", "{deep}"], "deep.json", "nested"),
     ("play-seconds-nan", ["play", "{deep}", "--seconds", "nan"], "--seconds"),
     ("train-manifest-ratings-outside", ["train", "{ds_ratings_out}", "--out", "{dir}/m.onnx"], "ratings"),
+    # --- issue 31: named errors, safety is not data, budgets ------------------------------
+    ("render-plot-exe", ["render", "S7", "--plot", "{dir}/out.exe"], "--plot", "'exe'"),
+    ("voicecoil-serial-300", ["calibrate", "voicecoil", "{answers_ok}", "--serial", "s" * 300], "--serial", "126"),
+    ("piezo-serial-300", ["calibrate", "piezo", "{piezo_ok}", "--serial", "s" * 300], "--serial", "126"),
+    ("list-serial-300", ["calibrate", "list", "--serial", "voicecoil=" + "s" * 300], "--serial", "126"),
+    ("piezo-table-string-frequency", ["calibrate", "piezo", "{piezo_str}"], "frequencies_hz[1]", "number"),
+    ("render-scene-passivity-off", ["render", "--scene", "{passivity_off}", "--seconds", "0.05"],
+     "scene.settings.servo.passivity", "privileged"),
+    ("render-scene-gain-3", ["render", "--scene", "{gain_3}", "--seconds", "0.05"],
+     "scene.devices.vibration.options.gain", "voltage"),
+    ("render-scene-renderer-option-sink", ["render", "--scene", "{ropt_sink}", "--seconds", "0.05"],
+     "scene.settings.renderer_options.hardness.sink", "unknown option"),
+    ("render-scene-calibration-paper", ["render", "--scene", "{ropt_paper}", "--seconds", "0.05"],
+     "scene.settings.renderer_options.hardness.calibration", "calibration"),
+    ("render-scene-coil-1e9-hz", ["render", "--scene", "{coil_1e9}", "--seconds", "0.05"],
+     "actuator_options.coil.sample_rate_hz", "384000"),
 ]
 
 

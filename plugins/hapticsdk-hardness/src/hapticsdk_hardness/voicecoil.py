@@ -45,9 +45,8 @@ class VoiceCoilVirtual(Actuator):
     def __init__(self, *, sample_rate_hz: float = 5000.0, sink: Any = None, ramp_s: float = 0.005,
                  label: str | None = None, safety: Any = None, **options: Any) -> None:
         super().__init__(label=label, safety=safety, **options)
-        if not (math.isfinite(sample_rate_hz) and sample_rate_hz > 0):
-            raise ValidationError("must be > 0 Hz", field="sample_rate_hz")
-        self.fs = float(sample_rate_hz)
+        from hapticsdk.budgets import check_sample_rate  # finite, > 0, at most 384 kHz (a named ceiling)
+        self.fs = check_sample_rate(sample_rate_hz, "sample_rate_hz")
         self.osc = Oscillator(self.fs, ramp_s=ramp_s, max_amplitude=self.limits.max_amplitude or 1.0)
         self.sink = make_sink(sink, self.fs)
         self._freq = 0.0

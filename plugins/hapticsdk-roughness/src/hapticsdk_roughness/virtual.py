@@ -66,14 +66,15 @@ class PiezoVirtual(Actuator):
     def __init__(self, *, gain: int = 1, fs: float = 8000.0, period_s: float = 0.001, ramp_s: float = 0.005,
                  frequency_range_hz: tuple[float, float] | None = None, quantize: bool = False,
                  keep_s: float = 60.0, **options: Any) -> None:
+        from hapticsdk.argcheck import number
         self.limits = piezo_limits(gain, frequency_range_hz, quantised=bool(quantize))
-        if not (fs > 0 and period_s > 0 and keep_s > 0):
-            raise ValidationError("fs, period_s and keep_s must be positive", field="options")
+        period_s = number(period_s, "period_s", lo=0.0, lo_open=True)
+        keep_s = number(keep_s, "keep_s", lo=0.0, lo_open=True)
+        ramp_s = number(ramp_s, "ramp_s")
         if ramp_s < 0.005:
             raise ValidationError(f"ramp_s {ramp_s} s < 5 ms would click", field="options.ramp_s")
-        if fs < 2 * self.limits.frequency_range_hz[1]:
-            raise ValidationError(f"fs {fs:g} Hz below twice the top frequency {self.limits.frequency_range_hz[1]:g} Hz",
-                                  field="options.fs")
+        from hapticsdk.budgets import check_sample_rate  # at most 384 kHz (a named ceiling)
+        fs = check_sample_rate(fs, "fs", at_least_hz=2 * self.limits.frequency_range_hz[1])
         super().__init__(**options)
         self.gain = int(gain)
         self.fs = float(fs)
