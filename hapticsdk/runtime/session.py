@@ -1601,7 +1601,8 @@ class Session:
                     raise ValidationError(getattr(exc, "reason", str(exc)), field=field) from None
             return m.name, {d: check_intensity(v, f"{field}.{d}") for d, v in m.intensities.items()}
         if isinstance(material, Mapping) and material:
-            return "intensities", {str(d): check_intensity(v, f"{field}.{d}") for d, v in material.items()}
+            from .live_api import intensities  # numbers in 0..1, not '0.5' (issue 31)
+            return "intensities", intensities(material, field)
         raise ValidationError(f"expected a material name or {{dimension: intensity}}, got {material!r}", field=field)
 
     def _answer(self, targets: Mapping[str, float]) -> tuple[dict[str, dict[str, float]], str, Any]:
@@ -1688,6 +1689,8 @@ class Session:
         if not isinstance(name, str) or not name or name in self._ids:
             raise ValidationError(f"object name must be new and non-empty, got {name!r}", field="name")
         shape = shape_from_dict(geometry, pose)
+        from .live_api import check_object, session_workspace  # inside the workspace + margin
+        check_object(shape, f"objects.{name}", session_workspace(self.devices))
         label, targets = self._targets(material, "material")
         feats, _, _ = self._answer(targets)
         self._check_roles(feats, "material")
@@ -1708,6 +1711,9 @@ class Session:
         from ..scene.geometry import Pose
         oid = self._object_id(name)
         p = Pose.from_dict(pose)
+        from .live_api import session_workspace
+        from ..scene.bounds import check_shape  # inside the workspace + margin (issue 31)
+        check_shape({}, p.to_dict(), f"objects.{name}", workspace=session_workspace(self.devices))
         self._send(("pose", oid, p.to_dict()))
 
     @property

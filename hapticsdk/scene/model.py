@@ -188,6 +188,24 @@ class Scene:
                 raise ValidationError(f"expected a SceneObject, got {o!r}", field=f"scene.objects[{i}]")
             if not isinstance(o.geometry, Shape) or not isinstance(o.pose, Pose):
                 o._coerce_geometry(f"scene.objects[{i}]")
+        self._check_bounds()
+
+    def _check_bounds(self) -> None:
+        """Every object's pose and size inside the workspace plus margin
+        (:mod:`hapticsdk.scene.bounds`; the workspace the force device declares, else the
+        default)."""
+        from ..plugins import registry
+        from .bounds import check_shape, workspace_of
+        ws = None
+        spec = self.devices.get("force")
+        if spec is not None and spec.actuator in registry("actuator"):
+            try:
+                ws = workspace_of(registry("actuator").load(spec.actuator))
+            except Exception:  # noqa: BLE001 - the compiler reports a plugin that does not load
+                ws = None
+        for i, o in enumerate(self.objects):
+            shape = o.shape()
+            check_shape(shape.geometry_dict(), shape.pose.to_dict(), f"scene.objects[{i}]", workspace=ws)
 
     # -- construction ------------------------------------------------------
     @classmethod
