@@ -2,8 +2,8 @@
 
 - ``hapticsdk export PLAN_OR_SCENE --format hjif -o FILE``: solved materials to ``.hjif``;
 - ``hapticsdk import FILE.hjif [--json]``: what a file holds and what the SDK plays of it;
-- ``hapticsdk play FILE.hjif [--seconds S] [--json]``: play its vibrotactile content on the
-  simulated (or real) vibration actuators.
+- ``hapticsdk play FILE.hjif [--seconds S] [--device-option ACTUATOR.KEY=VALUE] [--json]``: play its
+  vibrotactile content on the simulated (or real) vibration actuators.
 
 Heavy imports stay inside the handlers. See ``docs/interop.md``.
 """
@@ -55,6 +55,9 @@ def register(sub: Any) -> None:
     p.add_argument("--tick", type=positive_float, default=0.001, metavar="S", help="servo period (s, default 0.001)")
     p.add_argument("--realtime", action="store_true", help="pace ticks to the wall clock")
     p.add_argument("--piezo-table", metavar="PATH", help="piezo Tab file (default: the generated table)")
+    p.add_argument("--device-option", action="append", default=[], metavar="ACTUATOR.KEY=VALUE",
+                   help="option for one of --actuators (repeatable), e.g. piezo-serial.port=/dev/ttyACM0; "
+                        "with $HAPTICSDK_DEVICE_OPTIONS and the user device configuration, as for render")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=cmd_play)
 
@@ -167,6 +170,13 @@ def cmd_play(args: argparse.Namespace) -> int:
     acts = [a.strip() for a in args.actuators.split(",") if a.strip()]
     if not acts:
         raise ValidationError("no actuator named", field="actuators")
+    from ..device_options import parse_device_option
+    dev_opts: dict[str, dict[str, Any]] = {}
+    for item in args.device_option:
+        name, key, value = parse_device_option(item)
+        if name not in acts:
+            raise ValidationError(f"{name!r} is not one of --actuators {acts}", field="--device-option")
+        dev_opts.setdefault(name, {})[key] = value
     is_ahap = _is_ahap(args.file)
     if is_ahap:
         from ..interop import ahap
@@ -176,7 +186,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     else:
         hfile = load(args.file)  # checked whole before anything is opened
     rep = play(hfile, seconds=args.seconds, actuators=acts, tick_s=args.tick, realtime=args.realtime,
-               piezo_table=args.piezo_table, piezo_full_scale=is_ahap)
+               piezo_table=args.piezo_table, piezo_full_scale=is_ahap, actuator_options=dev_opts)
     if is_ahap:
         rep.not_played = pat.not_played + rep.not_played
     if args.json:

@@ -139,7 +139,9 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
         tick_s: servo period (s).
         realtime: pace ticks to the wall clock (default: simulated time).
         piezo_table: the piezo's ``Tab`` (path, dict or table; default the generated one).
-        actuator_options: name -> keyword options for :func:`~hapticsdk.actuators.create_actuator`.
+        actuator_options: name -> keyword options for :func:`~hapticsdk.actuators.create_actuator`,
+            merged over the user device configuration file and ``$HAPTICSDK_DEVICE_OPTIONS``
+            (:func:`hapticsdk.device_options.trusted_options`), as for ``render_plan``.
         piezo_full_scale: amplitudes are fractions of the piezo's full scale (AHAP content):
             1.0 is the largest acceleration its table reaches at every frequency of the
             content's bands (see :func:`piezo_full_scale_m_s2`), instead of m/s^2.
@@ -220,7 +222,8 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
     outputs: dict[str, list[np.ndarray]] = {a: [] for a in commands}
     try:
         for a in commands:
-            act = create_actuator(a, **dict((actuator_options or {}).get(a, {})))
+            from ..device_options import trusted_options  # as render_plan: config < environment < code
+            act = create_actuator(a, **{**trusted_options(a), **dict((actuator_options or {}).get(a, {}))})
             opened[a] = act
             act.open()
             if hasattr(act.safety, "set_period"):
