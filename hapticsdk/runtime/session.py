@@ -1343,6 +1343,9 @@ class Session:
                 self._reaper = threading.Thread(target=self._reap, args=(self._process,), name="hapticsdk-reaper",
                                                 daemon=True)
                 self._reaper.start()
+                # servo death -> the application reopens the devices and writes standby (issue 31)
+                from .supervisor import ServoSupervisor
+                self._supervisor: Any = ServoSupervisor(self._process, devices)
                 cmd_r.close()
                 done_w.close()
                 _grow_pipe(self._cmd)
@@ -1408,6 +1411,13 @@ class Session:
                 return self._reaper.is_alive()  # it ends once it has reaped the servo
             return self._process.is_alive()
         return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def servo_death_report(self) -> Any:
+        """What the application's supervisor did when the servo process died unexpectedly
+        (:class:`~hapticsdk.runtime.supervisor.SupervisorReport`), or ``None``."""
+        sup = getattr(self, "_supervisor", None)
+        return None if sup is None else sup.report
 
     @property
     def servo_pid(self) -> int | None:
@@ -1873,6 +1883,9 @@ class Session:
         if self._closed:
             return self._summary or {}
         self._closed = True
+        sup = getattr(self, "_supervisor", None)
+        if sup is not None:
+            sup.expect_exit()  # the servo stops the devices itself on this path
         disp = getattr(self, "_dispatcher", None)
         if disp is not None:
             disp.stop()
@@ -1903,7 +1916,11 @@ class Session:
                 if alive():
                     self._process.kill()
                     wait(2.0)
+                    if sup is not None:  # killed without its stop path: standby from here
+                        sup.standby_all(time.monotonic())
             self._fetch_summary(0.1)
+            if sup is not None:
+                sup.stop()
         finally:
             hb = getattr(self, "_hb_stop", None)
             if hb is not None:

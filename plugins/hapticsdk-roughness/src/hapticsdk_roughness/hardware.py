@@ -322,6 +322,18 @@ class DRV2667Actuator(Actuator):
             if self._watchdog is not None:
                 self._watchdog.disarm()
 
+    def standby_detached(self) -> None:
+        """Put the chip in standby from a process that does not hold the device open (the
+        application's supervisor after the servo process died,
+        :mod:`hapticsdk.runtime.supervisor`): open the bus, CONTROL2 = STANDBY, close.
+        Nothing else is written: no reset, no gain, no GO. Raises what opening the bus or
+        the write raises."""
+        bus = self._make_bus()
+        try:
+            DRV2667(bus, address=self.address, device=self.label).standby()
+        finally:
+            bus.close()
+
     def _close(self) -> None:
         if self._watchdog is not None:
             self._watchdog.stop()       # kept: describe() still shows its counts

@@ -224,3 +224,86 @@ class MCP2221Backend(usb.backend.IBackend):
         n = min(len(buff), len(resp))
         buff[:n] = array.array("B", resp[:n])
         return n
+
+
+# -- one board shared between processes ------------------------------------------------
+class BoardServer:
+    """Serve one :class:`EmulatedMCP2221` to other processes (a loopback UNIX socket):
+    a servo process and the application then talk to the same emulated board, as two
+    processes of a real machine share one USB device. :meth:`remote` gives the
+    picklable stand-in to put in a :class:`MCP2221Backend`."""
+
+    def __init__(self, board: EmulatedMCP2221) -> None:
+        import threading
+        from multiprocessing.connection import Listener
+
+        self.board = board
+        self._lock = threading.Lock()
+        self._listener = Listener(family="AF_UNIX")
+        self.address = self._listener.address
+        self._closed = False
+        threading.Thread(target=self._accept, name="mcp2221-board-server", daemon=True).start()
+
+    def _accept(self) -> None:
+        import threading
+        while not self._closed:
+            try:
+                conn = self._listener.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(conn,), daemon=True).start()
+
+    def _serve(self, conn: Any) -> None:
+        try:
+            while True:
+                rep = conn.recv_bytes()
+                with self._lock:
+                    if self.board.unplugged:
+                        conn.send_bytes(b"")
+                        continue
+                    out = self.board.handle(rep)
+                conn.send_bytes(out)
+        except (EOFError, OSError):  # the client process ended (or was killed)
+            conn.close()
+
+    def remote(self) -> "RemoteMCP2221":
+        """A picklable board whose reports go to this server."""
+        return RemoteMCP2221(self.address, self.board.serial_number, self.board.address)
+
+    def close(self) -> None:
+        self._closed = True
+        self._listener.close()
+
+
+class RemoteMCP2221:
+    """Stand-in for an :class:`EmulatedMCP2221` served by a :class:`BoardServer`, usable
+    from any process (it connects on first use in each process)."""
+
+    def __init__(self, server_address: str, serial_number: str, address: int) -> None:
+        self.server_address = server_address
+        self.serial_number = serial_number
+        self.address = address
+        self.stalled = False
+        self._resp: list[bytes] = []
+        self._conn: Any = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"server_address": self.server_address, "serial_number": self.serial_number,
+                "address": self.address}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__init__(state["server_address"], state["serial_number"], state["address"])
+
+    @property
+    def unplugged(self) -> bool:
+        return False  # an unplugged served board answers every report with nothing (a timeout)
+
+    def handle(self, rep: bytes) -> bytes:
+        from multiprocessing.connection import Client
+        if self._conn is None:
+            self._conn = Client(self.server_address, family="AF_UNIX")
+        self._conn.send_bytes(bytes(rep))
+        out = self._conn.recv_bytes()
+        if not out:
+            raise usb.core.USBError("No such device (it may have been disconnected)", errno=19)
+        return out
