@@ -61,39 +61,42 @@ def test_sigkill_of_the_servo_serial_bridge(tmp_path, monkeypatch):
         s.close()
 
 
-def test_sigkill_of_the_servo_mcp2221(tmp_path, monkeypatch):
+@pytest.fixture
+def mcp_session(tmp_path, monkeypatch):
+    """A session whose piezo sits behind an emulated MCP2221A served to both processes;
+    yields ``(session factory, board)``."""
     usb_emulation = pytest.importorskip("hapticsdk_roughness.usb_emulation")
     monkeypatch.setenv("HAPTICSDK_CACHE_DIR", str(tmp_path / "cache"))
     board = usb_emulation.EmulatedMCP2221("SUP31")
     server = usb_emulation.BoardServer(board)
-    try:
-        s = Session({**SCENE, "devices": {"vibration": {"actuator": "piezo-mcp2221"}}},
-                    actuator_options={"vibration": {"backend": usb_emulation.MCP2221Backend([server.remote()]),
-                                                    "serial_number": "SUP31"}}, refine=False)
-        try:
-            seen = _kill_while_playing(s, board.drv)
-            rep = s.servo_death_report
-            assert rep is not None and "vibration" in rep.standby and not rep.failed, rep
-            print(f"usb: standby seen {seen * 1e3:.1f} ms after SIGKILL")
-        finally:
-            s.close()
-    finally:
-        server.close()
+    sessions = []
 
-
-def test_a_normal_close_does_not_reopen_the_devices(tmp_path, monkeypatch):
-    usb_emulation = pytest.importorskip("hapticsdk_roughness.usb_emulation")
-    monkeypatch.setenv("HAPTICSDK_CACHE_DIR", str(tmp_path / "cache"))
-    board = usb_emulation.EmulatedMCP2221("SUP32")
-    server = usb_emulation.BoardServer(board)
-    try:
-        s = Session({**SCENE, "devices": {"vibration": {"actuator": "piezo-mcp2221"}}},
-                    actuator_options={"vibration": {"backend": usb_emulation.MCP2221Backend([server.remote()]),
-                                                    "serial_number": "SUP32"}}, refine=False)
+    def start():
+        sessions.append(Session({**SCENE, "devices": {"vibration": {"actuator": "piezo-mcp2221"}}},
+                                actuator_options={"vibration": {
+                                    "backend": usb_emulation.MCP2221Backend([server.remote()]),
+                                    "serial_number": "SUP31"}}, refine=False))
+        return sessions[-1]
+    yield start, board
+    for s in sessions:
         s.close()
-        assert board.drv.standby
-        n = len(board.reports)
-        time.sleep(0.2)
-        assert s.servo_death_report is None and len(board.reports) == n
-    finally:
-        server.close()
+    server.close()
+
+
+def test_sigkill_of_the_servo_mcp2221(mcp_session):
+    start, board = mcp_session
+    s = start()
+    seen = _kill_while_playing(s, board.drv)
+    rep = s.servo_death_report
+    assert rep is not None and "vibration" in rep.standby and not rep.failed, rep
+    print(f"usb: standby seen {seen * 1e3:.1f} ms after SIGKILL")
+
+
+def test_a_normal_close_does_not_reopen_the_devices(mcp_session):
+    start, board = mcp_session
+    s = start()
+    s.close()
+    assert board.drv.standby
+    n = len(board.reports)
+    time.sleep(0.2)
+    assert s.servo_death_report is None and len(board.reports) == n
