@@ -233,12 +233,9 @@ def _read_config(path: Path) -> dict[str, dict[str, Any]]:
     # read and parsed once per version of the file (a compile asks once per role)
     key = (str(path), st.st_ino, st.st_mtime_ns, st.st_size)
     if _CONFIG_CACHE.get("key") != key:
-        try:
-            with open(path, "rb") as fh:
-                text = fh.read(MAX_CONFIG_BYTES + 1).decode("utf-8")
-            data = json.loads(text)
-        except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
-            raise ValidationError(f"not a readable UTF-8 JSON file: {exc}", field=str(path)) from None
+        from .schemas_io import read_json
+        # the SDK's JSON reader: regular file, size cap, depth, NaN named by its path
+        data = read_json(path, field=str(path), max_bytes=MAX_CONFIG_BYTES)
         _CONFIG_CACHE.clear()
         _CONFIG_CACHE.update(key=key, by_actuator=_by_actuator(data, str(path)))
     return copy.deepcopy(_CONFIG_CACHE["by_actuator"])

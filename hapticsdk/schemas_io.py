@@ -95,7 +95,11 @@ def read_bytes(path: str | Path, *, field: str, error: type[ValidationError] = V
         if not stat.S_ISREG(os.fstat(fd).st_mode):
             raise error(f"{p} is not a regular file (FIFO, socket or device)", field=field)
         with os.fdopen(fd, "rb", closefd=False) as fh:
-            data = fh.read(max_bytes + 1)
+            # the file's size (+1 to see growth), not the cap: a 10-byte file must not
+            # reserve a buffer of max_bytes
+            data = fh.read(min(st.st_size, max_bytes) + 1)
+            if len(data) > st.st_size:  # grew since the stat: read on, up to the cap
+                data += fh.read(max_bytes + 1 - len(data))
     except OSError as exc:
         raise error(f"{p}: cannot read: {exc.strerror or exc}", field=field) from None
     finally:
@@ -246,7 +250,8 @@ def parse_json(text: str, p: str | Path, *, field: str, error: type[ValidationEr
         raise error(f"{p}: not valid JSON: {exc}", field=f"{field}{where}") from None
     except (ValueError, RecursionError) as exc:
         raise error(f"{p}: not valid JSON: {exc}", field=field) from None
-    bad = _find_constant(data)
+    # the walk only when a literal may be there ("NaN" inside a string also triggers it)
+    bad = _find_constant(data) if ("NaN" in text or "Infinity" in text) else None
     if bad is not None:
         raise error(f"{p}: {bad[1]} is not a JSON number (at {field}{bad[0]})", field=f"{field}{bad[0]}")
     return data
