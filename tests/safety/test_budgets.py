@@ -32,30 +32,29 @@ SHAPES = {
 }
 
 
+def _peak_reading(p) -> int:
+    """Peak traced memory (bytes) of ``read_json(p)``."""
+    tracemalloc.start()
+    try:
+        read_json(p, field="x")
+        return tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+
+
 @pytest.mark.parametrize("shape", sorted(SHAPES))
 def test_read_json_memory_per_input_byte(tmp_path, shape):
     p = tmp_path / "f.json"
     p.write_text(SHAPES[shape])
     size = p.stat().st_size
-    tracemalloc.start()
-    try:
-        read_json(p, field="x")
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
+    peak = _peak_reading(p)
     assert peak <= BYTES_PER_BYTE * size, f"{shape}: {peak / size:.1f} bytes per input byte"
 
 
 def test_a_small_file_does_not_reserve_the_cap(tmp_path):
     p = tmp_path / "small.json"
     p.write_text('{"a": 1}')
-    tracemalloc.start()
-    try:
-        read_json(p, field="x")
-        peak = tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-    assert peak < MAX_JSON_BYTES // 1000  # the 64 MiB cap is not allocated for 8 bytes
+    assert _peak_reading(p) < MAX_JSON_BYTES // 1000  # the 64 MiB cap is not allocated for 8 bytes
 
 
 def test_device_configuration_is_capped(tmp_path, monkeypatch):
