@@ -271,6 +271,7 @@ class BoardServer:
         return RemoteMCP2221(self.address, self.board.serial_number, self.board.address)
 
     def close(self) -> None:
+        """Stop accepting connections (connected clients are served until they close)."""
         self._closed = True
         self._listener.close()
 
@@ -296,9 +297,11 @@ class RemoteMCP2221:
 
     @property
     def unplugged(self) -> bool:
-        return False  # an unplugged served board answers every report with nothing (a timeout)
+        """Always False here: an unplugged served board answers with ``USBError`` errno 19."""
+        return False
 
     def handle(self, rep: bytes) -> bytes:
+        """Send one HID report to the served board; its answer."""
         from multiprocessing.connection import Client
         if self._conn is None:
             self._conn = Client(self.server_address, family="AF_UNIX")
