@@ -184,3 +184,15 @@ def test_figure_format_is_checked_by_the_api(tmp_path):
     with pytest.raises(ValidationError, match="'exe'"):
         save_figure(fig, tmp_path / "out.exe")
     assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("role,actuator,opts,key", [
+    ("force", "omni-virtual", {"arm": {"max_force_n": 100}}, "arm"),
+    ("coil", "voicecoil-virtual", {"sample_rate_hz": "5000"}, "sample_rate_hz"),
+])
+def test_actuator_options_from_a_plan_are_named(role, actuator, opts, key):
+    scene = {"objects": [{"material": {"name": "h", "intensities": {"hardness": 1.0}}}],
+             "devices": {role: {"actuator": actuator, "options": opts}}}
+    with pytest.raises(ValidationError) as ei:
+        render_plan(compile_scene(scene), seconds=0.01)
+    assert ei.value.field == f"plan.materials.h.actuator_options.{role}.{key}"

@@ -60,6 +60,10 @@ class OmniVirtual(HapticDevice):
         super().__init__(label=label, safety=safety, **options)
         if trajectory is not None and not isinstance(trajectory, Trajectory):
             raise ValidationError("trajectory must be a hapticsdk.sim.finger.Trajectory", field="trajectory")
+        if arm is not None and not isinstance(arm, ArmParams):  # e.g. a dict from a scene file
+            raise ValidationError(f"arm must be a hapticsdk.sim.arm.ArmParams built in code, got "
+                                  f"{type(arm).__name__}; a scene may give damping_ns_per_m, mass_kg, "
+                                  f"encoder_resolution_mm", field="arm")
         arm = arm or ArmParams()
         over = {k: v for k, v in (("damping_ns_per_m", damping_ns_per_m), ("mass_kg", mass_kg),
                                   ("encoder_resolution_mm", encoder_resolution_mm)) if v is not None}
