@@ -97,12 +97,14 @@ def energy_option_ceilings(cls: Any) -> dict[str, tuple[Any, str]]:
     import inspect
 
     klass = cls if isinstance(cls, type) else type(cls)
+    from .plugin_api import normalise_privileged_options
     out: dict[str, tuple[Any, str]] = {}
     for base in reversed(klass.__mro__):
-        decl = base.__dict__.get("energy_options")
-        if isinstance(decl, Mapping):
+        if "energy_options" in base.__dict__:  # read as privileged_options is: any collection, fail closed
+            decl = normalise_privileged_options(base.__dict__["energy_options"],
+                                                owner=getattr(klass, "name", "") or klass.__name__)
             for k, v in decl.items():
-                out[str(k)] = (None, str(v))
+                out[k] = (None, v)
     for key in list(out):
         default = None
         for base in klass.__mro__:  # the nearest constructor that declares the option

@@ -141,3 +141,17 @@ def test_config_owned_by_another_user_is_refused(tmp_path, monkeypatch, target):
     monkeypatch.setenv(ENV_CONFIG, str(cfg))
     with pytest.raises(ValidationError, match="owned by uid 65534"):
         trusted_options("piezo-virtual")
+
+
+def test_energy_options_declared_as_any_collection_are_read():
+    from hapticsdk.errors import PluginError
+
+    class Base:
+        def __init__(self, *, gain=1, boost=0):
+            pass
+
+    for decl in (("gain",), ["gain"], {"gain"}, frozenset({"gain"}), {"gain": "full scale"}):
+        cls = type("A", (Base,), {"energy_options": decl})
+        assert energy_option_ceilings(cls)["gain"][0] == 1, decl
+    with pytest.raises(PluginError):  # unreadable: fail closed, never ignored
+        energy_option_ceilings(type("B", (Base,), {"energy_options": "gain"}))
