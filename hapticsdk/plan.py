@@ -44,12 +44,14 @@ class DroppedDimension:
         importance_model: name of the importance model that decided.
         replacement: what renders in its place (``{"renderer": "constant-force",
             "role": "force", "force_n": 1.0}``), or ``None``.
-        loss_interval_percent: 10-90 % interval of the predicted loss over the feature
-            vectors reaching the target (%); ``None`` when not estimated that way.
-        confidence: share of those feature vectors whose predicted loss is below the
-            threshold (0..1).
-        n_solutions: how many feature vectors the estimate is taken over.
-        extrapolated_fraction: share of them with a negative raw prediction (counted as 0).
+        loss_interval_percent: 80 % interval (10-90 %) of the predicted loss from the
+            importance model's own uncertainty, spanning every feature point judged (%);
+            the dimension is dropped only when all of it lies below the threshold.
+        confidence: share of the importance model's draws in which the loss is below the
+            threshold at every point judged (0..1).
+        n_solutions: how many feature points were judged (the material's recorded
+            features and those solved onto the target, or its solved features).
+        extrapolated_fraction: share of the draws with a negative raw prediction (counted as 0).
     """
 
     dimension: str
@@ -104,8 +106,9 @@ class MaterialPlan:
             defaults during the solve and not rendered.
         importance_features: the solver's features (the solve with every dimension) for
             the features the importance model reads, for reference.
-        importance: dimension -> the importance model's loss estimate over the feature
-            vectors reaching the target (median, 80 % interval, confidence, decision;
+        importance: dimension -> the importance model's loss estimate for the material
+            (median, 80 % interval, confidence, decision, and ``basis``: the feature points
+            judged, each with its own median and interval;
             :meth:`hapticsdk.compiler.importance.LossEstimate.to_dict`), for every
             dimension the model judged, kept or dropped.
         device: device-aware solving: ``capabilities`` (dimension -> role -> what the

@@ -116,12 +116,13 @@ def format_plan(out: dict[str, Any]) -> str:
                              f"({c['actuator_channel']}; accepts {acc})")
         dev = m.get("device") or {}
         for dim, res in (dev.get("residual") or {}).items():
-            caps = ", ".join(f"{role}: {_limits_text(c)}"
-                             for role, c in (dev.get("capabilities", {}).get(dim) or {}).items() if _limits_text(c))
+            listed = [f"{role}: {_limits_text(c)}"
+                      for role, c in (dev.get("capabilities", {}).get(dim) or {}).items() if _limits_text(c)]
+            caps = "; ".join(listed)
             if caps or abs(res) > 0 or dev.get("binding"):
                 tol = dev.get("binding_rtol")
                 within = f" (within {100 * tol:g} % of their bound)" if tol is not None else ""
-                lines.append(f"  on the mapped device{'s' if ',' in caps else ''} ({caps or 'no limits published'}): "
+                lines.append(f"  on the mapped device{'s' if len(listed) > 1 else ''} ({caps or 'no limits published'}): "
                              f"{dim} predicted {dev['predicted'][dim]:.4f} for target {dev['predicted'][dim] + res:.4f}, "
                              f"residual {res:+.4f}; binding device constraints{within}: "
                              f"{', '.join(dev.get('binding') or []) or 'none'}")
@@ -129,10 +130,7 @@ def format_plan(out: dict[str, Any]) -> str:
             lines.append(f"  dropped {d['dimension']}: {d['reason']}")
         for dim, e in (m.get("importance") or {}).items():
             if e.get("decision") == "keep":
-                lo, hi = e["interval_percent"]
-                lines.append(f"  kept {dim}: predicted realism loss if left out {e['median_percent']:.2f} % "
-                             f"(80 % interval {lo:.1f}-{hi:.1f} % over {e['n_solutions']} feature vectors) "
-                             f">= threshold {e['threshold_percent']:g} %")
+                lines.append(f"  kept {dim}: {keep_words(e)}")
         s = m["solve"]
         if s.get("success") is not None:
             lines.append(f"  solve: {'success' if s['success'] else 'NOT REACHED'}, error {s['error']:.3g}")
@@ -153,5 +151,34 @@ def _limits_text(c: dict) -> str:
         lo, hi = c["frequency_range_hz"]
         parts.append(f"{lo:g}-{hi:g} Hz")
     if c.get("max_drive") is not None:
-        parts.append(f"max {c['max_drive']:g} {c.get('drive_unit') or ''}".rstrip())
+        parts.append(_drive_words(c["max_drive"], c.get("drive_unit")))
     return ", ".join(parts)
+
+
+def _drive_words(max_drive: float, unit: str | None) -> str:
+    """``max drive 50 V``; a dimensionless drive (unit ``"1"`` or none) as a fraction of
+    full scale, not ``max 1 1``."""
+    if unit in (None, "", "1"):
+        return f"drive up to {max_drive:g} x full scale"
+    return f"drive up to {max_drive:g} {unit}"
+
+
+def _points_words(e: dict[str, Any]) -> str:
+    from ..compiler.importance import basis_words
+    if e.get("basis"):
+        return basis_words(e["basis"])
+    n = e.get("n_solutions", 0)
+    return f"over {n} feature vector{'s' if n != 1 else ''}"
+
+
+def keep_words(e: dict[str, Any]) -> str:
+    """Why a judged dimension is kept, with its interval: wholly above the threshold, or
+    straddling it (the importance model cannot tell, so the dimension is kept)."""
+    lo, hi = e["interval_percent"]
+    thr = e["threshold_percent"]
+    head = (f"predicted realism loss if left out {e['median_percent']:.1f} % "
+            f"(80 % interval {lo:.1f}-{hi:.1f} % {_points_words(e)})")
+    if lo < thr <= hi:
+        return (f"{head}: the interval straddles the threshold {thr:g} %, so the importance model cannot "
+                f"say the loss is small; kept")
+    return f"{head}: wholly at or above the threshold {thr:g} %"

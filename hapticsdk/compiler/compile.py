@@ -9,9 +9,11 @@ little, map channel roles to actuators.
    batch);
 2. the importance model (``settings.importance.model``, default ``paper``;
    :mod:`hapticsdk.compiler.importance`) predicts the realism loss of leaving each
-   dimension out, from those features; a dimension below the threshold is dropped
-   (and, if the model says so, replaced by something simpler, e.g. a constant 1 N force
-   for hardness);
+   dimension out, judged on the material (its recorded features and those solved onto
+   the target where the library has them, else the solved features;
+   :mod:`hapticsdk.compiler.leave_out`) with the model's own uncertainty; a dimension
+   whose whole loss interval is below the threshold is dropped (and, if the model says
+   so, replaced by something simpler, e.g. a constant 1 N force for hardness);
 3. materials that lost a dimension are solved again with only the kept ones, so that
    features no kept dimension reads are pinned at the model's defaults and left out;
 4. each kept dimension's renderer is built once to learn the channel roles it commands;
@@ -45,6 +47,8 @@ class _Mat:
     targets: dict[str, float]
     source: str
     objects: list[str]
+    #: the library's recorded features of the material (None: none, or intensities changed)
+    recorded: dict[str, float] | None = None
 
 
 def _resolve_materials(scene: Scene) -> list[_Mat]:
@@ -75,6 +79,7 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
                                           field=f"{where}.material") from None
             name, source = m.name, "library"
             targets = {k: float(v) for k, v in m.intensities.items()}
+            recorded = {k: float(v) for k, v in m.features.items()} if m.features else None
         elif isinstance(obj.material, Mapping):
             ints = obj.material.get("intensities")
             if not isinstance(ints, Mapping) or not ints:
@@ -83,11 +88,13 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
             name = str(obj.material.get("name") or obj.name)
             source = "intensities"
             targets = dict(ints)
+            recorded = None
         else:
             raise ValidationError(f"material must be a name or an object, got {obj.material!r}",
                                   field=f"{where}.material")
         targets.update(obj.intensities)
         if obj.intensities and source == "library":
+            recorded = None   # the recorded features describe the library's intensities, not these
             name = f"{name}+" + "+".join(f"{k}={float(v):g}" for k, v in sorted(obj.intensities.items()))
         dims = obj.dimensions if obj.dimensions is not None else restrict
         if dims is not None:
@@ -105,7 +112,7 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
                                       field=f"{where}.material")
             mats[name].objects.append(obj.name)
         else:
-            mats[name] = _Mat(name, targets, source, [obj.name])
+            mats[name] = _Mat(name, targets, source, [obj.name], recorded)
     return list(mats.values())
 
 
@@ -250,6 +257,14 @@ def _pin_at_first_solve(second: dict[str, Any], first: Mapping[str, Any], mats: 
                 r2["model"] = r["model"]
             r2["pinned_from"] = "full solve"
             second[m.name] = r2
+
+
+def _basis_words(e: Any) -> str:
+    """Which feature points a loss estimate judged, in words."""
+    from .importance import basis_words
+    if e.basis:
+        return ("highest median " if len(e.basis) > 1 else "median ") + basis_words(e.basis)
+    return f"median over {e.n_solutions} feature vector{'s' if e.n_solutions != 1 else ''}"
 
 
 def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed: Any) -> dict[str, Any]:
@@ -433,8 +448,9 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         device[d] = list(dobj.device_constraints(caps[d], **render_opts[d])) if caps[d] else []
     first = _solve_groups(groups, settings, device)
 
-    # 2. importance: the predicted loss over every feature vector reaching the target
-    #    (seed-independent; hapticsdk.compiler.solution_set), not over the solver's one
+    # 2. importance: judged on the material (its recorded features, and those solved onto
+    #    the target; else the solved features), with the importance model's own uncertainty
+    #    (hapticsdk.compiler.importance.judge_material): no solver seed or search design enters
     imp_cfg = settings["importance"]
     imp_model = None
     drops: dict[str, list[Any]] = {m.name: [] for m in mats}
@@ -442,8 +458,8 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     imp_features: dict[str, dict[str, float]] = {m.name: {} for m in mats}
     if imp_cfg.get("enabled", True):
         from ..problems import build_problem
-        from .importance import decide_from_estimates, estimate_losses, load_importance
-        from .solution_set import solution_sets
+        from .importance import decide_from_estimates, judge_material, load_importance
+        from .leave_out import material_points
         imp_model = load_importance(imp_cfg.get("model", "paper"))
         check_plugin_api(imp_model, name=imp_model.name)
         s_cfg = settings["solver"]
@@ -459,8 +475,12 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                                     tolerance=s_cfg.get("tolerance", 0.01),
                                     data_support=bool(s_cfg.get("data_support", True)),
                                     extra_constraints=tuple(c for d in dims for c in device.get(d, ())))
-            ests = estimate_losses(imp_model, dims, solution_sets(problem), imp_cfg.get("thresholds") or {},
-                                   float(imp_cfg["threshold_percent"]), fixed=problem.fixed)
+            ests = []
+            for i, m in enumerate(gm):
+                solved = {k: float(v) for k, v in first[m.name].x_dict.items()}
+                pts = material_points(problem, i, m.recorded, solved)
+                ests.append(judge_material(imp_model, dims, pts, imp_cfg.get("thresholds") or {},
+                                           float(imp_cfg["threshold_percent"])))
             for m, est, dl in zip(gm, ests, decide_from_estimates(imp_model, dims, ests)):
                 drops[m.name] = dl
                 estimates[m.name] = {d: e.to_dict() for d, e in est.items()}
@@ -519,19 +539,17 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
             what = "replaced by " + rep["renderer"] if rep else "not rendered"
             flags = ""
             if e.extrapolated_fraction > 0:
-                flags += (f"; {100 * e.extrapolated_fraction:.0f} % of the solutions give a negative loss "
+                flags += (f"; {100 * e.extrapolated_fraction:.0f} % of the draws give a negative loss "
                           f"(regression extrapolating; counted as 0 %)")
-            if not e.reached:
-                flags += "; the target is not reached, estimate over the nearest feasible features"
             dropped.append(DroppedDimension(
                 dimension=d, predicted_loss_percent=e.median_percent, threshold_percent=e.threshold_percent,
                 importance_model=imp_model.name if imp_model else None, replacement=rep,
                 loss_interval_percent=[e.low_percent, e.high_percent], confidence=round(e.confidence, 6),
                 n_solutions=e.n_solutions, extrapolated_fraction=e.extrapolated_fraction,
-                reason=(f"predicted realism loss {e.median_percent:.2f} % (median over {e.n_solutions} "
-                        f"feature vectors reaching the target; 80 % interval {e.low_percent:.1f}-"
-                        f"{e.high_percent:.1f} %) < threshold {e.threshold_percent:g} % (importance model "
-                        f"{imp_model.name!r}, confidence {100 * e.confidence:.0f} %){flags}; {what}")))
+                reason=(f"predicted realism loss {e.median_percent:.2f} % ({_basis_words(e)}; 80 % interval "
+                        f"{e.low_percent:.1f}-{e.high_percent:.1f} %, wholly below the threshold "
+                        f"{e.threshold_percent:g} %; importance model {imp_model.name!r}, {e.method}){flags}; "
+                        f"{what}")))
             if rep:
                 roles[f"replacement:{d}"] = [rep["role"]]
         actuators: dict[str, str] = {}

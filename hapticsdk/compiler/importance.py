@@ -1,29 +1,38 @@
 """Importance models: does rendering a dimension change what a person feels?
 
-An :class:`ImportanceModel` predicts, from a material's solved features, the loss of
-realism (percent of the realism rated with every dimension rendered) that leaving one
-dimension out would cause. A scene drops a dimension whose predicted loss is below its
-threshold (``settings.importance.threshold_percent``). Models are plugins of the
-entry-point group ``hapticsdk.importance``; the core registers ``paper``
-(:class:`PaperRegressionImportance`).
+An :class:`ImportanceModel` predicts, from a material's features, the loss of realism
+(percent of the realism rated with every dimension rendered) that leaving one dimension
+out would cause. Models are plugins of the entry-point group ``hapticsdk.importance``;
+the core registers ``paper`` (:class:`PaperRegressionImportance`).
 
-Predictions are vectorised: :meth:`ImportanceModel.predict_loss` takes feature columns
-(arrays, one entry per material) and returns one loss per material.
+What is judged (:func:`judge_material`): the material itself, not one member of the
+perception model's inverse. The inverse has a whole family of feature vectors for a
+target, spread far wider than any one material (the family places the library's S16 at
+Fpeak 190 Hz where its recorded features say 79 Hz), so a decision on the family, or on
+whichever member a solver returned, judges an accident of the search. The feature points
+judged are
 
-Scenes decide on the distribution of the predicted loss over every feature vector
-that reaches the material's target (:func:`estimate_losses` over the target's
-:class:`~hapticsdk.compiler.solution_set.SolutionSet`), not on the one vector a
-randomised solver returned, so the decision does not change with the solver's seed:
-a dimension is dropped when the median predicted loss is below the threshold, and the
-plan reports the 10-90 % interval and the share of solutions on the decided side
-(the decision's confidence). A negative predicted loss (the regression extrapolating
-outside the materials it was fitted on) counts as 0 % and is flagged.
+* ``recorded``: the material's recorded features, where the library has them (and the
+  scene did not change its intensities);
+* ``recorded, solved onto the target``: those features moved onto the target by the
+  perception model's minimum-norm Gauss-Newton steps (the member of the family nearest to
+  the material's own features; deterministic);
+* ``solved``: for a material without recorded features, the compile's solved features
+  (what is rendered).
+
+The uncertainty is the importance model's own (:meth:`ImportanceModel.loss_draws`):
+for ``paper``, a deterministic parametric bootstrap of the Tables 5-6 regressions
+(:class:`PaperRegressionImportance`). A dimension is left out only when its whole 80 %
+loss interval (10th percentile of the lowest point to 90th percentile of the highest)
+lies below the threshold; when the interval straddles the threshold the dimension is
+kept, and the plan says so with the interval. A negative predicted loss (the regression
+extrapolating) counts as 0 % and is flagged.
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
@@ -91,6 +100,16 @@ class ImportanceModel(ABC):
                       present: Sequence[str]) -> np.ndarray:
         """Backend: loss (%) per row of the validated columns."""
 
+    def loss_draws(self, dimension: str, features: Mapping[str, Any],
+                   present: Sequence[str]) -> np.ndarray:
+        """Draws of the predicted loss (%) from the model's own uncertainty, shape
+        ``(n_draws, m)`` for ``m`` rows of ``features``: what the model's fit allows.
+
+        The default is the point prediction as one draw (a model that states no
+        uncertainty); :class:`PaperRegressionImportance` bootstraps its regressions.
+        Validation as :meth:`predict_loss`."""
+        return self.predict_loss(dimension, features, present)[None, :]
+
     def replacement(self, dimension: str) -> dict[str, Any] | None:
         """What to render instead of a dropped ``dimension`` (``None``: nothing)."""
         return None
@@ -143,10 +162,87 @@ class PaperRegressionImportance(ImportanceModel):
     def judges(self, dimension: str, present: Sequence[str]) -> bool:
         return dimension in self.COEFFICIENTS and all(d in present for d in self.PAIR)
 
+    #: standard errors of the coefficients (Tables 5 and 6, column "SE"), same order
+    STANDARD_ERRORS: ClassVar[dict[str, tuple[float, float, float, float]]] = {
+        "roughness": (8.671, 1.259, 0.064, 5.512),
+        "hardness": (6.873, 0.998, 0.051, 4.369),
+    }
+    #: the regressions' data: 8 evaluated samples, 4 coefficients -> 4 residual degrees of freedom
+    N_SAMPLES: ClassVar[int] = 8
+    N_COEFFICIENTS: ClassVar[int] = 4
+    #: means of the predictors (GS N/mm, Fpeak Hz, AFpeak g) over the paper's 8 evaluated
+    #: samples S1 S2 S7 S12 S13 S14 S16 S20. The paper does not publish them; these are the
+    #: means of the shipped library's recorded features of those samples, which are
+    #: GENERATED data (anchored to the paper's orderings), not measurements
+    #: (``tests/scene/test_leave_out_basis.py`` keeps them equal to the library's).
+    PREDICTOR_MEANS: ClassVar[tuple[float, float, float]] = (1.774675, 109.415, 0.235105)
+    #: bootstrap: number of draws and the fixed seed (deterministic: the same draws in
+    #: every process, so the same decisions)
+    BOOTSTRAP_DRAWS: ClassVar[int] = 4000
+    BOOTSTRAP_SEED: ClassVar[int] = 26
+
     def _predict_loss(self, dimension: str, cols: Mapping[str, np.ndarray],
                       present: Sequence[str]) -> np.ndarray:
         b0, bgs, bf, ba = self.COEFFICIENTS[dimension]
         return b0 + bgs * cols["GS"] + bf * cols["Fpeak"] + ba * self.AFPEAK_PER_UNIT * cols["AFpeak"]
+
+    def coefficient_draws(self, dimension: str) -> np.ndarray:
+        """``(BOOTSTRAP_DRAWS, 4)`` coefficient vectors (intercept, GS, Fpeak, AFpeak): a
+        parametric bootstrap of the regression of ``dimension`` from its table.
+
+        The table gives each coefficient's estimate B and standard error SE, the
+        standardised coefficients beta and R^2 for n = 8 samples. Those imply the variance
+        inflation factor of each predictor, ``VIF_j = (SE_j sqrt(n-1) (beta_j/B_j) /
+        sqrt((1-R^2)(n-1)/(n-p)))^2``, which is 1.00-1.03 for every predictor of both
+        tables: the predictors were (nearly) uncorrelated over the 8 samples, so the slopes'
+        sampling errors are independent with the tabled SEs. The intercept is
+        ``ybar - sum_j b_j xbar_j``: its error is the mean response's (variance
+        ``SE_0^2 - sum_j xbar_j^2 SE_j^2``, independent of the slopes) minus the slopes'
+        errors times the predictor means (:attr:`PREDICTOR_MEANS`). Errors are
+        Student-t with n - p = 4 degrees of freedom (a shared chi-square scale, as the
+        residual variance is estimated once). The draws are cached per class; the seed is
+        fixed (:attr:`BOOTSTRAP_SEED`), so they are the same in every process.
+        """
+        cache = _DRAWS
+        key = (type(self), dimension, self.COEFFICIENTS[dimension], self.STANDARD_ERRORS.get(dimension),
+               self.PREDICTOR_MEANS, self.BOOTSTRAP_DRAWS, self.BOOTSTRAP_SEED)
+        hit = cache.get(key)
+        if hit is not None:
+            return hit
+        B = np.asarray(self.COEFFICIENTS[dimension], dtype=float)
+        se = self.STANDARD_ERRORS.get(dimension)
+        if se is None:   # a subclass with coefficients but no errors: no uncertainty known
+            out = B[None, :].copy()
+            cache[key] = out
+            return out
+        SE = np.asarray(se, dtype=float)
+        xbar = np.asarray(self.PREDICTOR_MEANS, dtype=float)
+        var_mean = SE[0] ** 2 - float(np.sum(xbar ** 2 * SE[1:] ** 2))
+        if var_mean <= 0:
+            raise ValidationError(f"importance model {self.name!r}: the intercept's standard error "
+                                  f"is smaller than the predictor means allow", field="PREDICTOR_MEANS")
+        df = self.N_SAMPLES - self.N_COEFFICIENTS
+        rng = np.random.default_rng(self.BOOTSTRAP_SEED)
+        n = self.BOOTSTRAP_DRAWS
+        z = rng.standard_normal((n, 4))
+        scale = np.sqrt(df / rng.chisquare(df, size=n))[:, None]
+        z = z * scale
+        slopes = B[1:] + z[:, 1:] * SE[1:]
+        b0 = B[0] + z[:, 0] * np.sqrt(var_mean) - (slopes - B[1:]) @ xbar
+        out = np.column_stack([b0, slopes])
+        out.setflags(write=False)
+        cache[key] = out
+        return out
+
+    def loss_draws(self, dimension: str, features: Mapping[str, Any],
+                   present: Sequence[str]) -> np.ndarray:
+        self.predict_loss(dimension, features, present)     # validation
+        C = self.coefficient_draws(dimension)
+        cols = {f: np.atleast_1d(np.asarray(features[f], dtype=float)) for f in ("GS", "Fpeak", "AFpeak")}
+        m = max(len(v) for v in cols.values())
+        X = np.column_stack([np.ones(m)] + [np.broadcast_to(cols[f], (m,)) for f in ("GS", "Fpeak")]
+                            + [np.broadcast_to(cols["AFpeak"], (m,)) * self.AFPEAK_PER_UNIT])
+        return C @ X.T
 
     def replacement(self, dimension: str) -> dict[str, Any] | None:
         if dimension == "hardness":
@@ -155,6 +251,9 @@ class PaperRegressionImportance(ImportanceModel):
                     "note": "the paper's 'No Hardness' condition: constant 1 N normal force in contact"}
         return None
 
+
+#: coefficient draws per (model class, dimension, table, seed): computed once per process
+_DRAWS: dict[Any, np.ndarray] = {}
 
 #: importance models of the core (also published as entry points of the core distribution)
 BUILTIN: dict[str, type[ImportanceModel]] = {"paper": PaperRegressionImportance}
@@ -234,7 +333,17 @@ class LossEstimate:
             (the regression outside the range it was fitted on).
         reached: False when no feature vector reaches the target (the estimate is then
             taken over the nearest feasible ones).
-        drop: the decision: ``median_percent < threshold_percent``.
+        drop: the decision.
+        basis: the feature points judged (:func:`judge_material`), each
+            ``{"source", "features", "median_percent", "interval_percent"}``; empty for
+            an estimate over a solution set (:func:`estimate_losses`).
+        method: how the uncertainty was obtained, in words.
+
+    From :func:`judge_material`: ``median_percent`` is the highest point's median,
+    ``low_percent``/``high_percent`` span every point's 80 % interval, ``p_below`` is the
+    share of the importance model's draws in which every point is below the threshold,
+    ``n_solutions`` is the number of feature points, and ``drop`` is
+    ``high_percent < threshold_percent`` (the whole interval below the threshold).
     """
 
     dimension: str
@@ -247,6 +356,8 @@ class LossEstimate:
     extrapolated_fraction: float
     reached: bool
     drop: bool
+    basis: list[dict[str, Any]] = field(default_factory=list)
+    method: str = ""
 
     @property
     def confidence(self) -> float:
@@ -263,14 +374,27 @@ class LossEstimate:
                 "threshold_percent": self.threshold_percent, "p_below": self.p_below,
                 "confidence": self.confidence, "n_solutions": self.n_solutions,
                 "extrapolated_fraction": self.extrapolated_fraction, "reached": self.reached,
-                "decision": "drop" if self.drop else "keep"}
+                "decision": "drop" if self.drop else "keep",
+                **({"basis": [dict(b) for b in self.basis]} if self.basis else {}),
+                **({"method": self.method} if self.method else {})}
+
+    @property
+    def straddles(self) -> bool:
+        """True when the threshold lies inside the 80 % interval (the dimension is kept
+        because the importance model cannot tell)."""
+        return self.low_percent < self.threshold_percent <= self.high_percent
 
 
 def estimate_losses(model: ImportanceModel, dimensions: Sequence[str], sets: Sequence[Any],
                     thresholds: Mapping[str, float], default_threshold: float,
                     fixed: Mapping[str, float] | None = None) -> list[dict[str, LossEstimate]]:
     """For each material (one :class:`~hapticsdk.compiler.solution_set.SolutionSet` per
-    material) the :class:`LossEstimate` of every dimension the model judges.
+    material) the :class:`LossEstimate` of every dimension the model judges, over the
+    members of the model's inverse (the median decides).
+
+    Not what :func:`~hapticsdk.compiler.compile_scene` decides on any more: the family's
+    spread is the search's, not the material's (see the module docstring and
+    :func:`judge_material`). Kept for callers who want the spread over the family.
 
     ``fixed``: features pinned in the solve (not in the sets' columns)."""
     dims = list(dimensions)
@@ -313,4 +437,72 @@ def decide_from_estimates(model: ImportanceModel, dimensions: Sequence[str],
         if drops and len(drops) == len(dims) and not any(model.replacement(e.dimension) for e in drops):
             drops.remove(max(drops, key=lambda e: e.median_percent))
         out.append(drops)
+    return out
+
+
+#: names of the feature points :func:`judge_material` judges
+RECORDED = "recorded"
+RECORDED_SOLVED = "recorded, solved onto the target"
+SOLVED = "solved"
+
+
+_SOURCE_WORDS = {RECORDED: "its recorded features", RECORDED_SOLVED: "those features solved onto the target",
+                 SOLVED: "its solved features"}
+
+
+def basis_words(basis: Sequence[Mapping[str, Any]]) -> str:
+    """Where a loss estimate was judged, in words: ``at its recorded features and at those
+    features solved onto the target``."""
+    return "at " + " and at ".join(_SOURCE_WORDS.get(b["source"], str(b["source"])) for b in basis)
+
+
+def describe_uncertainty(model: ImportanceModel) -> str:
+    """One line on where ``model``'s loss interval comes from."""
+    if isinstance(model, PaperRegressionImportance):
+        return (f"parametric bootstrap of the paper's Tables 5-6 regressions ({model.BOOTSTRAP_DRAWS} draws, "
+                f"seed {model.BOOTSTRAP_SEED}, t with {model.N_SAMPLES - model.N_COEFFICIENTS} df)")
+    return f"importance model {model.name!r}: its own loss draws"
+
+
+def judge_material(model: ImportanceModel, dimensions: Sequence[str],
+                   points: Sequence[tuple[str, Mapping[str, float]]], thresholds: Mapping[str, float],
+                   default_threshold: float, level: float = 0.8) -> dict[str, LossEstimate]:
+    """The :class:`LossEstimate` of every dimension ``model`` judges, for one material
+    given as feature points ``[(source, {feature: value}), ...]`` (see the module
+    docstring for the sources).
+
+    For each point the model's loss draws (:meth:`ImportanceModel.loss_draws`; negative
+    losses count as 0) give a median and a ``level`` interval; the estimate spans every
+    point. The dimension is dropped only when the whole interval lies below its threshold
+    (``thresholds[dim]``, else ``default_threshold``). Nothing here depends on a solver's
+    seed or on a search design: only on the points and the model.
+    """
+    dims = list(dimensions)
+    if not points:
+        return {}
+    q = [50.0 * (1.0 - level), 50.0 * (1.0 + level)]
+    out: dict[str, LossEstimate] = {}
+    for d in dims:
+        if not model.judges(d, dims):
+            continue
+        need = model.features_needed(d, dims)
+        use = [(src, f) for src, f in points if all(k in f for k in need)]
+        if not use:
+            continue
+        cols = {k: np.array([float(f[k]) for _, f in use]) for k in need}
+        raw = np.asarray(model.loss_draws(d, cols, dims), dtype=float)   # (n_draws, n_points)
+        loss = np.maximum(raw, 0.0)
+        thr = float(thresholds.get(d, default_threshold))
+        med = np.median(loss, axis=0)
+        lo, hi = np.percentile(loss, q, axis=0)
+        basis = [{"source": src, "features": {k: float(f[k]) for k in need},
+                  "median_percent": round(float(med[j]), 6),
+                  "interval_percent": [round(float(lo[j]), 6), round(float(hi[j]), 6)]}
+                 for j, (src, f) in enumerate(use)]
+        low, high = round(float(lo.min()), 6), round(float(hi.max()), 6)
+        out[d] = LossEstimate(dimension=d, median_percent=round(float(med.max()), 6), low_percent=low,
+                              high_percent=high, threshold_percent=thr,
+                              p_below=round(float(np.mean((loss < thr).all(axis=1))), 6),
+                              n_solutions=len(use), extrapolated_fraction=round(float(np.mean(raw < 0.0)), 6),
+                              reached=True, drop=high < thr, basis=basis, method=describe_uncertainty(model))
     return out

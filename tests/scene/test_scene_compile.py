@@ -182,47 +182,44 @@ def test_plugin_api_versions():
 # -- library materials (hardness + roughness) --------------------------------------
 
 @needs_hardness
-def test_library_plan_drops_exactly_below_threshold():
-    from hapticsdk.compiler.solution_set import solution_sets
+def test_library_plan_drops_exactly_when_the_whole_interval_is_below_the_threshold():
     from hapticsdk.materials import load_library
-    from hapticsdk.problems import build_problem
-    names = load_library().names()
+    lib = load_library()
+    names = lib.names()
     thr = 20.0
     scene = {"name": "library", "objects": [{"name": n, "material": n} for n in names],
              "settings": {"importance": {"threshold_percent": thr}}}
     plan = compile_scene(scene)
-    imp = load_importance("paper")
-    both = ["hardness", "roughness"]
-    # the estimate is recomputed here from its definition: the median over the feature
-    # vectors reaching the target of the loss the paper's regression predicts (< 0 -> 0)
-    lib = load_library()
-    # the scene solves within what its default actuators can produce (device-aware)
-    from hapticsdk_roughness.dimension import RoughnessDimension
-    from hapticsdk_roughness.virtual import PiezoVirtual
-    extra = RoughnessDimension().device_constraints({"vibration": PiezoVirtual.capability_for({})})
-    problem = build_problem(np.array([[lib.get(n).intensities[d] for d in both] for n in names]),
-                            dimensions=both, data_support=True, extra_constraints=tuple(extra))
-    sets = solution_sets(problem)
-    n_r = n_h = 0
-    for n, sset in zip(names, sets):
+    n_r = n_h = n_straddle = 0
+    for n in names:
         mp = plan.materials[n]
-        cols = sset.columns()
-        r = float(np.median(np.maximum(imp.predict_loss("roughness", cols, both), 0.0)))
-        h = float(np.median(np.maximum(imp.predict_loss("hardness", cols, both), 0.0)))
-        assert mp.importance["roughness"]["median_percent"] == pytest.approx(r, abs=1e-5)
-        assert mp.importance["hardness"]["median_percent"] == pytest.approx(h, abs=1e-5)
+        rec = lib.get(n).features
+        for dim in ("hardness", "roughness"):
+            e = mp.importance[dim]
+            basis = e["basis"]
+            # judged on the material: its recorded features, and those moved onto its target
+            assert [b["source"] for b in basis] == ["recorded", "recorded, solved onto the target"]
+            assert basis[0]["features"] == {k: pytest.approx(rec[k]) for k in ("GS", "Fpeak", "AFpeak")}
+            # the interval spans every point's interval; the decision is "whole interval below"
+            lo = min(b["interval_percent"][0] for b in basis)
+            hi = max(b["interval_percent"][1] for b in basis)
+            assert e["interval_percent"] == [pytest.approx(lo), pytest.approx(hi)]
+            assert (e["decision"] == "drop") == (hi < thr), (n, dim, hi)
+            n_straddle += lo < thr <= hi
         dropped = {d.dimension: d for d in mp.dropped}
-        if r < thr and h < thr:  # single removals only: the lower predicted loss is dropped
-            assert set(dropped) == {"roughness" if r < h else "hardness"}, (n, r, h)
+        drop_r = mp.importance["roughness"]["decision"] == "drop"
+        drop_h = mp.importance["hardness"]["decision"] == "drop"
+        if drop_r and drop_h:  # single removals only: the lower predicted loss is dropped
+            lower = min(("roughness", "hardness"), key=lambda d: mp.importance[d]["median_percent"])
+            assert set(dropped) == {lower}
         else:
-            assert ("roughness" in dropped) == (r < thr), (n, r)
-            assert ("hardness" in dropped) == (h < thr), (n, h)
+            assert ("roughness" in dropped) == drop_r and ("hardness" in dropped) == drop_h
         assert mp.dimensions, n  # something is always rendered
         if "roughness" in dropped:
             n_r += 1
             d = dropped["roughness"]
-            assert d.predicted_loss_percent == pytest.approx(r, abs=1e-5)
-            assert "threshold" in d.reason and d.replacement is None
+            assert d.loss_interval_percent[1] < thr and "wholly below" in d.reason
+            assert d.replacement is None
             assert "roughness" not in mp.dimensions and "vibration" not in mp.actuators
             assert not {"Fpeak", "AFpeak", "P"} & set(mp.features)
         if "hardness" in dropped:
@@ -230,37 +227,16 @@ def test_library_plan_drops_exactly_below_threshold():
             assert dropped["hardness"].replacement["force_n"] == 1.0
             assert mp.actuators.get("force")
             assert not {"GS", "W"} & set(mp.features)
-        # the importance features are those of the full solve: the model meets both targets there
-        assert set(mp.importance_features) == {"GS", "Fpeak", "AFpeak"}
         # what is kept is solved: the model meets the kept targets
         pred = _predict(mp)
         for d in mp.dimensions:
             assert abs(pred[d] - mp.targets[d]) <= 0.05, (n, d, pred[d], mp.targets[d])
-    # the library spans both cases for this threshold (else the test proves little)
-    assert 0 < n_h < len(names) and n_r < len(names)
+    # the library spans every case at this threshold (else the test proves little)
+    assert 0 < n_h < len(names) and 0 < n_r < len(names) and n_straddle > 0
     summary = plan.summary()
     for n in names:
         for d in summary["materials"][n]["dropped"]:
             assert set(d) >= {"dimension", "reason", "predicted_loss_percent"}
-
-
-@needs_hardness
-def test_library_leave_out_decisions_do_not_depend_on_the_solver_seed():
-    from hapticsdk.materials import load_library
-    names = load_library().names()
-    decisions = []
-    for seed in range(8):
-        plan = compile_scene({"name": "library", "objects": [{"name": n, "material": n} for n in names],
-                              "settings": {"solver": {"seed": seed}}})
-        decisions.append({n: sorted(d.dimension for d in mp.dropped) for n, mp in plan.materials.items()})
-        losses = {n: mp.importance for n, mp in plan.materials.items()}
-        if seed == 0:
-            first_losses = losses
-        else:
-            assert losses == first_losses  # the estimate itself is seed-free, not just the decision
-    assert all(d == decisions[0] for d in decisions)
-    # the rule does something: some materials lose a dimension, some keep both
-    assert 0 < sum(bool(v) for v in decisions[0].values()) < len(names)
 
 
 @needs_hardness
