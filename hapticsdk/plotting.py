@@ -10,6 +10,8 @@
   written in each cell and unstable cells marked.
 * :func:`plot_plan`: a compiled plan's materials in intensity space, with what was left
   out of each and why.
+* :func:`plot_paper_comparison`: leave-out decisions on the paper's 8 evaluated samples
+  against its findings.
 
 Every figure is written atomically (:func:`save_figure`).
 """
@@ -279,11 +281,84 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
     return out
 
 
+def _place_labels(ax: Any, pts: Sequence[tuple[str, float, float]], fontsize: float = 7.0) -> None:
+    """Annotate each point with its name where the label overlaps no other label and no
+    marker: eight offsets tried in turn, then further out with a leader line (greedy;
+    each candidate's extent is measured as drawn)."""
+    from matplotlib.text import Text
+    fig = ax.figure
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    to_px = fig.dpi / 72.0
+    xy = ax.transData.transform(np.array([[x, y] for _, x, y in pts])) if pts else np.zeros((0, 2))
+    marker_r = 3.7 * to_px   # radius of a size-55 marker (sqrt(55) pt across)
+    taken: list[Any] = []
+
+    def hits(bb: Any, own: int) -> bool:
+        if any(bb.overlaps(o) for o in taken):
+            return True
+        near = ((xy[:, 0] > bb.x0 - marker_r) & (xy[:, 0] < bb.x1 + marker_r)
+                & (xy[:, 1] > bb.y0 - marker_r) & (xy[:, 1] < bb.y1 + marker_r))
+        near[own] = False   # the label's own marker: the offset keeps it clear
+        return bool(near.any())
+
+    dirs = [(1, 1), (1, -1), (-1, 1), (-1, -1), (1, 0), (-1, 0), (0, 1), (0, -1)]
+    for k, (name, x, y) in enumerate(pts):
+        placed = None
+        for reach in (4.0, 12.0, 22.0, 34.0, 48.0):
+            for dx, dy in dirs:
+                ha = "left" if dx > 0 else ("right" if dx < 0 else "center")
+                va = "bottom" if dy > 0 else ("top" if dy < 0 else "center")
+                arrow = {"arrowstyle": "-", "lw": 0.5, "color": "0.5"} if reach > 4.0 else None
+                t = ax.annotate(name, (x, y), textcoords="offset points", xytext=(dx * reach, dy * reach),
+                                fontsize=fontsize, ha=ha, va=va, arrowprops=arrow)
+                t.update_positions(r)
+                bb = Text.get_window_extent(t, r)   # the text alone, not its leader line
+                if not hits(bb, k):
+                    placed = bb
+                    break
+                t.remove()
+            if placed is not None:
+                break
+        if placed is None:   # crowded everywhere: at the first offset, drawn anyway
+            t = ax.annotate(name, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=fontsize)
+            t.update_positions(r)
+            placed = Text.get_window_extent(t, r)
+        taken.append(placed)
+
+
+def _plan_line(name: str, m: Mapping[str, Any]) -> list[str]:
+    """Text lines for one material of a plan figure: what it renders or leaves out, with
+    the loss interval against the threshold."""
+    out = []
+    dropped = m.get("dropped", [])
+    if not dropped:
+        out.append(f"{name:<6} renders {', '.join(m.get('dimensions', []))}")
+    for d in dropped:
+        iv, thr = d.get("loss_interval_percent"), d.get("threshold_percent")
+        loss = d.get("predicted_loss_percent")
+        if iv is not None and thr is not None:
+            why = f"loss {iv[0]:.1f}-{iv[1]:.1f} % < {thr:g} %"
+        elif loss is not None and thr is not None:
+            why = f"loss {loss:.1f} % < {thr:g} %"
+        else:
+            why = textwrap.shorten(str(d.get("reason", "")), 40)
+        rep = (d.get("replacement") or {}).get("renderer")
+        out.append(f"{name:<6} left out {d['dimension']}: {why}" + (f", replaced by {rep}" if rep else ""))
+    for dim, e in (m.get("importance") or {}).items():
+        lo, hi = e["interval_percent"]
+        if e.get("decision") == "keep" and lo < e["threshold_percent"] <= hi:
+            out.append(f"{'':<6}   kept {dim}: loss {lo:.1f}-{hi:.1f} % straddles {e['threshold_percent']:g} %")
+    return out
+
+
 def plot_plan(plan: Any, path: str | Path) -> Path:
     """Save a compiled plan (a ``RenderPlan`` or its ``to_dict()``) as a figure: each
-    material at its target intensities (the first two dimensions named), its marker saying
-    which dimensions were left out, and beside the plot one line per material: what was
-    left out, why (predicted realism loss against the threshold) and what replaces it."""
+    material at its target intensities (the first two dimensions named; with one
+    dimension, one row per material), its marker saying which dimensions were left out,
+    and beside the plot one line per material: what was left out, why (the loss interval
+    against the threshold), what replaces it, and what was kept because its interval
+    straddles the threshold."""
     plt = _pyplot()
     if hasattr(plan, "to_dict"):
         plan = plan.to_dict()
@@ -299,38 +374,36 @@ def plot_plan(plan: Any, path: str | Path) -> Path:
     dx = dims[0]
     dy = dims[1] if len(dims) > 1 else None
     groups: dict[tuple[str, ...], list[tuple[str, float, float]]] = {}
-    lines = []
-    for name, m in mats.items():
+    lines: list[str] = []
+    for i, (name, m) in enumerate(mats.items()):
         tg = m.get("targets", {})
-        dropped = m.get("dropped", [])
-        key = tuple(d["dimension"] for d in dropped)
-        groups.setdefault(key, []).append((name, float(tg.get(dx, np.nan)),
-                                           float(tg.get(dy, np.nan)) if dy else 0.0))
-        if not dropped:
-            lines.append(f"{name:<6} renders {', '.join(m.get('dimensions', []))}")
-        for d in dropped:
-            loss, thr = d.get("predicted_loss_percent"), d.get("threshold_percent")
-            why = (f"loss {loss:.1f} % < {thr:g} %" if loss is not None and thr is not None
-                   else textwrap.shorten(str(d.get("reason", "")), 40))
-            rep = (d.get("replacement") or {}).get("renderer")
-            lines.append(f"{name:<6} left out {d['dimension']}: {why}" + (f", replaced by {rep}" if rep else ""))
-    fig_h = max(6.0, 0.19 * len(lines) + 1.8)
+        key = tuple(d["dimension"] for d in m.get("dropped", []))
+        y = float(tg.get(dy, np.nan)) if dy else float(i)
+        groups.setdefault(key, []).append((name, float(tg.get(dx, np.nan)), y))
+        lines += _plan_line(name, m)
+    fig_h = max(6.0, 0.19 * len(lines) + 1.8, (0.3 * len(mats) + 1.8) if not dy else 0.0)
     fig, (a, t) = plt.subplots(1, 2, figsize=(13, fig_h), gridspec_kw={"width_ratios": [1.0, 0.85]})
     style = [("o", "C0", True), ("s", "C1", False), ("D", "C3", False), ("^", "C2", False), ("v", "C4", False)]
+    allpts: list[tuple[str, float, float]] = []
     for gi, (key, pts) in enumerate(sorted(groups.items(), key=lambda kv: (len(kv[0]), kv[0]))):
         marker, color, filled = style[gi % len(style)]
         label = "every dimension rendered" if not key else "left out: " + ", ".join(key)
         a.scatter([p[1] for p in pts], [p[2] for p in pts], s=55, marker=marker, zorder=3,
                   facecolors=color if filled else "white", edgecolors=color, linewidths=1.5,
                   label=f"{label} ({len(pts)})")
-        for name, x, y in pts:
-            a.annotate(name, (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7)
+        allpts += pts
     a.set_xlim(-0.05, 1.05)
-    a.set_ylim(-0.05, 1.05)
     a.set_xlabel(f"target {dx} intensity (0..1)")
-    a.set_ylabel(f"target {dy} intensity (0..1)" if dy else "")
+    if dy:
+        a.set_ylim(-0.05, 1.05)
+        a.set_ylabel(f"target {dy} intensity (0..1)")
+    else:   # one dimension: one row per material, named on the axis (no labels to collide)
+        a.set_ylim(len(mats) - 0.5, -0.5)
+        a.set_yticks(range(len(mats)))
+        a.set_yticklabels(list(mats))
+        a.set_ylabel("material (one row each)")
     a.grid(alpha=0.3)
-    a.legend(fontsize=8, loc="upper left", framealpha=0.9)
+    a.legend(fontsize=8, loc="upper left", bbox_to_anchor=(0.0, -0.1), ncol=2, frameon=False)
     a.set_title("materials at their target intensities", fontsize=10)
     t.axis("off")
     t.text(0.0, 1.0, "\n".join(lines), va="top", ha="left", fontsize=8, family="monospace",
@@ -340,10 +413,54 @@ def plot_plan(plan: Any, path: str | Path) -> Path:
                   if d.get("importance_model")), None)
     gen = any(m.get("source") == "library" for m in mats.values())
     fig.suptitle(f"render plan of scene {plan.get('scene', '')}"
-                 + (f": a dimension is left out when importance model '{model}' predicts a realism loss "
-                    "below the threshold" if model else "")
+                 + (f": a dimension is left out when importance model '{model}' puts its whole 80 % "
+                    "realism-loss interval below the threshold" if model else "")
                  + ("\n(library materials: GENERATED data)" if gen else ""), fontsize=11)
     fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.93))
+    if dy:
+        _place_labels(a, allpts)
+    out = Path(path)
+    save_figure(fig, out, dpi=90)
+    return out
+
+
+def plot_paper_comparison(cmp: Mapping[str, Any], path: str | Path) -> Path:
+    """Save :func:`hapticsdk.compiler.paper_findings.compare_with_paper`'s result as a
+    figure: per evaluated sample and removal, the 80 % loss interval against the
+    threshold, coloured by the paper's finding, the plan's decision as the marker."""
+    plt = _pyplot()
+    rows = list(cmp["rows"])
+    if not rows:
+        raise HapticSDKError("no evaluated sample to plot")
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
+    for ax, dim in zip(axes, ("roughness", "hardness")):
+        rs = [r for r in rows if r["dimension"] == dim]
+        for i, r in enumerate(rs):
+            lo, hi = r["interval_percent"]
+            col = "C3" if r["paper_significant"] else "C0"
+            ax.plot([lo, hi], [i, i], color=col, lw=5, alpha=0.55, solid_capstyle="butt")
+            ax.plot([r["median_percent"]], [i], marker="o" if r["plan"] == "keep" else "X", ms=8,
+                    color="black" if r["agrees"] else "C1", zorder=3)
+        thr = rs[0]["threshold_percent"] if rs else 10.0
+        ax.axvline(thr, color="0.3", ls="--", lw=1)
+        ax.set_yticks(range(len(rs)))
+        ax.set_yticklabels([r["sample"] for r in rs])
+        ax.set_ylim(len(rs) - 0.5, -0.5)
+        ax.set_xlabel(f"predicted realism loss if {dim} is removed (%), 80 % interval")
+        ax.set_title(f"removing {dim}", fontsize=10)
+        ax.grid(axis="x", alpha=0.3)
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], color="C3", lw=5, alpha=0.55, label="paper: significant loss"),
+               Line2D([], [], color="C0", lw=5, alpha=0.55, label="paper: not significant"),
+               Line2D([], [], color="0.3", ls="--", label="threshold"),
+               Line2D([], [], marker="o", color="black", ls="", label="plan keeps (median)"),
+               Line2D([], [], marker="X", color="black", ls="", label="plan drops (median)"),
+               Line2D([], [], marker="o", color="C1", ls="", label="disagrees with the paper")]
+    fig.legend(handles=handles, loc="lower center", ncol=6, fontsize=8, frameon=False)
+    fig.suptitle(f"leave-out decisions against the paper's findings: {cmp['agree']} of {cmp['total']} agree, "
+                 f"{cmp['contradictions']} drop(s) contradicted\n(library samples: GENERATED data anchored to "
+                 f"the paper's orderings, not the paper's samples)", fontsize=10)
+    fig.tight_layout(rect=(0.0, 0.08, 1.0, 0.9))
     out = Path(path)
     save_figure(fig, out, dpi=90)
     return out

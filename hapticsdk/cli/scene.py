@@ -20,7 +20,8 @@ def register(sub: Any) -> None:
 
     p = sub.add_parser("plan", help="compile a scene into a render plan (what is rendered, what is left out)",
                        epilog=UNREACHED_RULE)
-    p.add_argument("scene", metavar="SCENE", help="scene JSON file, or a library material name (S7)")
+    p.add_argument("scene", metavar="SCENE", nargs="?",
+                   help="scene JSON file, or a library material name (S7); not with --compare-paper")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.add_argument("-o", "--output", metavar="PLAN", help="save the full plan (JSON) to this file")
     p.add_argument("--seed", type=nonneg_int, help="solver seed (overrides the scene's), a whole number >= 0")
@@ -29,6 +30,10 @@ def register(sub: Any) -> None:
     p.add_argument("--no-importance", action="store_true", help="keep every dimension")
     p.add_argument("--plot", metavar="PNG", help="write a figure: the materials in intensity space, what "
                                                  "is left out of each and why (needs matplotlib)")
+    p.add_argument("--compare-paper", action="store_true",
+                   help="compile the paper's 8 evaluated samples (library, GENERATED data) and compare the "
+                        "leave-out decisions with the paper's significant removals, explaining each "
+                        "disagreement (--plot: the intervals against the threshold)")
     p.set_defaults(func=cmd_plan)
 
 
@@ -61,7 +66,18 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.plot:
         from ..fileio import check_output_path
         check_output_path(args.plot, field="--plot")
-    scene = _scene_from_arg(args.scene)
+    if args.compare_paper:
+        if args.scene:
+            from ..errors import ValidationError
+            raise ValidationError("--compare-paper compiles the paper's 8 evaluated samples: give no SCENE",
+                                  field="scene")
+        from ..compiler.paper_findings import paper_comparison_scene
+        scene = Scene.from_dict(paper_comparison_scene())
+    elif not args.scene:
+        from ..errors import ValidationError
+        raise ValidationError("give a SCENE (file or library material name), or --compare-paper", field="scene")
+    else:
+        scene = _scene_from_arg(args.scene)
     over: dict[str, Any] = {}
     if args.seed is not None:
         over.setdefault("solver", {})["seed"] = args.seed
@@ -74,6 +90,8 @@ def cmd_plan(args: argparse.Namespace) -> int:
         scene = Scene(objects=scene.objects, devices=scene.devices,
                       settings=_merge(scene.settings, over), name=scene.name)
     plan = compile_scene(scene)
+    if args.compare_paper:
+        return _compare_paper(plan, args)
     if args.output:
         plan.save(args.output)
     out = plan.summary()
@@ -90,6 +108,27 @@ def cmd_plan(args: argparse.Namespace) -> int:
         print(format_plan(out))
     from .core import all_reached
     return 0 if all_reached(out) else 1
+
+
+def _compare_paper(plan: Any, args: argparse.Namespace) -> int:
+    from ..compiler.paper_findings import compare_with_paper, format_comparison
+    cmp = compare_with_paper(plan)
+    if args.output:
+        plan.save(args.output)
+        cmp["saved"] = str(args.output)
+    if args.plot:
+        from ..plotting import plot_paper_comparison
+        plot_paper_comparison(cmp, args.plot)
+        cmp["plot"] = str(args.plot)
+    if args.json:
+        from . import emit
+        emit(cmp, True)
+    else:
+        print(format_comparison(cmp))
+        for k, what in (("saved", "plan saved to"), ("plot", "figure saved to")):
+            if cmp.get(k):
+                print(f"{what} {cmp[k]}")
+    return 0
 
 
 def format_plan(out: dict[str, Any]) -> str:

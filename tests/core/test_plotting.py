@@ -149,8 +149,8 @@ def test_plan_figure_lists_what_was_left_out_and_why(figures):
     d = plan.to_dict()
     (m,) = d["materials"].values()
     (drop,) = m["dropped"]
-    assert (f"left out roughness: loss {drop['predicted_loss_percent']:.1f} % < "
-            f"{drop['threshold_percent']:g} %") in text
+    lo, hi = drop["loss_interval_percent"]
+    assert f"left out roughness: loss {lo:.1f}-{hi:.1f} % < {drop['threshold_percent']:g} %" in text
     scatter = fig.axes[0]
     offsets = np.concatenate([c.get_offsets() for c in scatter.collections if len(c.get_offsets())])
     np.testing.assert_allclose(offsets, [[0.8, 0.3]])
