@@ -1,4 +1,4 @@
-"""Servo-loop timing script (goals 13-15): runs with and without a second CPU-bound
+"""Servo-loop timing script (tick compute time and jitter limits): runs with and without a second CPU-bound
 process, in simulated time (tick compute: wall clock and the servo thread's on-CPU
 time) and realtime (period jitter), optionally with OS real-time options.
 
@@ -29,7 +29,7 @@ def main() -> int:
     ap.add_argument("--fifo-priority", type=int, default=None, metavar="P", help="request SCHED_FIFO priority P")
     ap.add_argument("--mlockall", action="store_true", help="lock the process's memory (Linux)")
     ap.add_argument("--rt-sim", action="store_true", help="apply the OS options to the simulated-time runs too")
-    ap.add_argument("--declared-rt-machine", action="store_true", help="judge goal 14 (pass/fail)")
+    ap.add_argument("--declared-rt-machine", action="store_true", help="judge the jitter limits (pass/fail)")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
     rt = {"cpu": a.pin_cpu, "fifo_priority": a.fifo_priority, "mlockall": a.mlockall}
@@ -44,8 +44,8 @@ def main() -> int:
     if a.json:
         keys = ("realtime", "load", "ticks", "tick_median_us", "tick_p99_us", "tick_p999_us", "tick_max_us",
                 "compute_us", "compute_cpu_us", "preempted_ticks", "preempt_threshold_us", "off_cpu_max_us",
-                "cpu_clock_cost_us", "overruns", "goal13_pass", "goal13_wall_pass", "goal13", "jitter",
-                "goal14", "goal14_pass", "rt", "rt_requested", "dimensions", "machine")
+                "cpu_clock_cost_us", "overruns", "tick_limits_met_cpu", "tick_limits_met_wall", "tick_limits", "jitter",
+                "jitter_limits", "jitter_limits_met", "rt", "rt_requested", "dimensions", "machine")
         print(json.dumps([{k: d.get(k) for k in keys} for d in runs], indent=2))
     else:
         print(format_table(runs))

@@ -7,12 +7,12 @@ and, in realtime mode, the period jitter (|period - T| p50/p99/p99.9/max and the
 missed-tick rate), optionally with a second CPU-bound process running (``load=True``;
 the process is started here and ended by its pid).
 
-Goal 13 (tick compute p99 < 200 us, max < 500 us over >= 60 s, GC disabled in the loop)
-is judged on the servo thread's **on-CPU** compute time (``compute_cpu_us``: what the
+The tick limits (compute p99 < 200 us, max < 500 us over >= 60 s, GC disabled in the
+loop; ``tick_limits``) are judged on the servo thread's **on-CPU** compute time (``compute_cpu_us``: what the
 tick code costs); the wall-clock figures (``compute_us`` / ``tick_*_us``, which include
 preemption by other processes on a shared machine) and their verdict
-(``goal13_wall_pass``) are reported next to it, with ``preempted_ticks``. Goal 14
-(jitter) is reported: pass/fail only on a declared real-time machine
+(``tick_limits_met_wall``) are reported next to it, with ``preempted_ticks``. The jitter
+limits (``jitter_limits``) are reported: pass/fail only on a declared real-time machine
 (``declared_rt_machine=True``). Optional OS options (``rt``: CPU pinning,
 ``SCHED_FIFO``, ``mlockall``) are applied to the servo thread and their outcome is in
 ``rt``.
@@ -31,9 +31,9 @@ from ..plugins import registry
 from ..runtime import ServoLoop
 from ..runtime.clock import MonotonicClock, RealtimeSettings
 
-GOAL_P99_US = 200.0
-GOAL_MAX_US = 500.0
-GOAL14 = {"p99_us_lt": 50.0, "p999_us_lt": 250.0, "missed_tick_rate_lt": 0.001}
+TICK_P99_US_LIMIT = 200.0
+TICK_MAX_US_LIMIT = 500.0
+JITTER_LIMITS = {"p99_us_lt": 50.0, "p999_us_lt": 250.0, "missed_tick_rate_lt": 0.001}
 MATERIAL = {"GS": 3.0, "Fpeak": 150.0, "AFpeak": 5.0}
 
 
@@ -63,7 +63,7 @@ def _cpu_hog() -> subprocess.Popen:
 def run_timing(seconds: float = 60.0, *, realtime: bool = False, load: bool = False,
                period_s: float = 0.001, rt: RealtimeSettings | dict | None = None,
                declared_rt_machine: bool = False) -> dict[str, Any]:
-    """One timing run; returns a JSON-ready dict with the goals' verdicts.
+    """One timing run; returns a JSON-ready dict with the limits' verdicts.
 
     Args:
         seconds: run length (s).
@@ -71,7 +71,7 @@ def run_timing(seconds: float = 60.0, *, realtime: bool = False, load: bool = Fa
         load: run a second CPU-bound process meanwhile.
         period_s: servo period (s).
         rt: OS options of the servo thread (:class:`RealtimeSettings` or its fields).
-        declared_rt_machine: judge goal 14 (otherwise ``goal14_pass`` is None).
+        declared_rt_machine: judge the jitter limits (otherwise ``jitter_limits_met`` is None).
     """
     rt_settings = RealtimeSettings.coerce(rt)
     dev, renderers, actuators = build_scene(seconds, period_s)
@@ -88,16 +88,16 @@ def run_timing(seconds: float = 60.0, *, realtime: bool = False, load: bool = Fa
             a.close()
     d = rep.to_dict()
     j = rep.jitter
-    goal14 = None
+    jitter_met = None
     if declared_rt_machine and j:
-        goal14 = bool(j["p99_us"] < GOAL14["p99_us_lt"] and j["p999_us"] < GOAL14["p999_us_lt"]
-                      and j["missed_tick_rate"] < GOAL14["missed_tick_rate_lt"])
+        jitter_met = bool(j["p99_us"] < JITTER_LIMITS["p99_us_lt"] and j["p999_us"] < JITTER_LIMITS["p999_us_lt"]
+                      and j["missed_tick_rate"] < JITTER_LIMITS["missed_tick_rate_lt"])
     d.update({"seconds": seconds, "load": load, "dimensions": [type(r).__name__ for r in renderers],
-              "goal13_pass": bool(rep.tick_cpu_p99_us < GOAL_P99_US and rep.tick_cpu_max_us < GOAL_MAX_US),
-              "goal13_wall_pass": bool(rep.tick_p99_us < GOAL_P99_US and rep.tick_max_us < GOAL_MAX_US),
-              "goal13": {"p99_us_lt": GOAL_P99_US, "max_us_lt": GOAL_MAX_US, "judged_on": "compute_cpu_us"},
-              "goal14": dict(GOAL14, judged=bool(declared_rt_machine and j)),
-              "goal14_pass": goal14,
+              "tick_limits_met_cpu": bool(rep.tick_cpu_p99_us < TICK_P99_US_LIMIT and rep.tick_cpu_max_us < TICK_MAX_US_LIMIT),
+              "tick_limits_met_wall": bool(rep.tick_p99_us < TICK_P99_US_LIMIT and rep.tick_max_us < TICK_MAX_US_LIMIT),
+              "tick_limits": {"p99_us_lt": TICK_P99_US_LIMIT, "max_us_lt": TICK_MAX_US_LIMIT, "judged_on": "compute_cpu_us"},
+              "jitter_limits": dict(JITTER_LIMITS, judged=bool(declared_rt_machine and j)),
+              "jitter_limits_met": jitter_met,
               "rt_requested": {"cpu": rt_settings.cpu, "fifo_priority": rt_settings.fifo_priority,
                                "gc_freeze": rt_settings.gc_freeze, "mlockall": rt_settings.mlockall},
               "machine": {"python": platform.python_version(), "platform": platform.platform(),
@@ -111,11 +111,11 @@ def _f(x: Any, fmt: str = ".1f") -> str:
 
 def format_table(runs: list[dict[str, Any]]) -> str:
     """Text tables of :func:`run_timing` results: wall and CPU compute time side by side
-    (median / p99 / p99.9 / max, us), preempted ticks, the goal-13 verdicts, the period
+    (median / p99 / p99.9 / max, us), preempted ticks, the tick limits' verdicts, the period
     jitter and the OS options' outcome of each run."""
     head = ("mode        load  ticks  | wall compute med / p99 / p99.9 / max (us)  | "
-            f"CPU compute med / p99 / p99.9 / max (us)   | preempted | p99 < {GOAL_P99_US:.0f} and max < "
-            f"{GOAL_MAX_US:.0f} us: CPU / wall")
+            f"CPU compute med / p99 / p99.9 / max (us)   | preempted | p99 < {TICK_P99_US_LIMIT:.0f} and max < "
+            f"{TICK_MAX_US_LIMIT:.0f} us: CPU / wall")
     lines = [head, "-" * len(head)]
     for d in runs:
         w, c = d["compute_us"], d["compute_cpu_us"]
@@ -125,17 +125,17 @@ def format_table(runs: list[dict[str, Any]]) -> str:
             f"{_f(w['median_us']):>6} / {_f(w['p99_us']):>6} / {_f(w['p999_us']):>6} / {_f(w['max_us']):>7}"
             f"{'':11}| {_f(c['median_us']):>6} / {_f(c['p99_us']):>6} / {_f(c['p999_us']):>6} / "
             f"{_f(c['max_us']):>7}{'':11}| {d['preempted_ticks'] if d['preempted_ticks'] is not None else '-':>9} | "
-            f"{'pass' if d['goal13_pass'] else 'FAIL'} / {'pass' if d['goal13_wall_pass'] else 'FAIL'}")
+            f"{'pass' if d['tick_limits_met_cpu'] else 'FAIL'} / {'pass' if d['tick_limits_met_wall'] else 'FAIL'}")
     jit = [d for d in runs if d.get("jitter")]
     if jit:
         lines.append("")
         lines.append(f"jitter |period - T| (us)   load  p50 / p99 / p99.9 / max            missed ticks  "
-                     f"p99 < {GOAL14['p99_us_lt']:.0f}, p99.9 < {GOAL14['p999_us_lt']:.0f} us, "
-                     f"missed < {GOAL14['missed_tick_rate_lt']:.1%}")
+                     f"p99 < {JITTER_LIMITS['p99_us_lt']:.0f}, p99.9 < {JITTER_LIMITS['p999_us_lt']:.0f} us, "
+                     f"missed < {JITTER_LIMITS['missed_tick_rate_lt']:.1%}")
         for d in jit:
             j = d["jitter"]
-            verdict = ("reported only (no declared RT machine)" if d.get("goal14_pass") is None
-                       else "pass" if d["goal14_pass"] else "FAIL")
+            verdict = ("reported only (no declared RT machine)" if d.get("jitter_limits_met") is None
+                       else "pass" if d["jitter_limits_met"] else "FAIL")
             lines.append(f"realtime                   {'yes' if d['load'] else 'no':4}  {_f(j['p50_us'])} / "
                          f"{_f(j['p99_us'])} / {_f(j['p999_us'])} / {_f(j['max_us'])}"
                          f"{'':8}{j['missed_tick_rate']:.4%}       {verdict}")
@@ -149,6 +149,19 @@ def format_table(runs: list[dict[str, Any]]) -> str:
     if runs:
         lines.append(f"CPU-clock cost per tick: {_f(runs[0].get('cpu_clock_cost_us'), '.2f')} us; preempted = "
                      f"wall - CPU compute > {_f(runs[0].get('preempt_threshold_us'), '.0f')} us. The tick limits are "
-                     f"judged on CPU compute (p99 < {GOAL_P99_US:.0f} us, max < {GOAL_MAX_US:.0f} us); wall max "
+                     f"judged on CPU compute (p99 < {TICK_P99_US_LIMIT:.0f} us, max < {TICK_MAX_US_LIMIT:.0f} us); wall max "
                      f"includes preemption by other processes.")
     return "\n".join(lines)
+
+
+_RENAMED = {"GOAL_P99_US": "TICK_P99_US_LIMIT", "GOAL_MAX_US": "TICK_MAX_US_LIMIT", "GOAL14": "JITTER_LIMITS"}
+
+
+def __getattr__(name: str) -> Any:
+    """The limits' former names, kept for one minor version with a DeprecationWarning."""
+    if name in _RENAMED:
+        import warnings
+        warnings.warn(f"hapticsdk.benchmarks.timing.{name} is now {_RENAMED[name]}", DeprecationWarning,
+                      stacklevel=2)
+        return globals()[_RENAMED[name]]
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

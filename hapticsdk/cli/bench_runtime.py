@@ -55,7 +55,7 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--fifo-priority", type=bounded_int(1, 99), default=None, metavar="P",
                    help="request SCHED_FIFO priority P, 1..99 (reported if refused; prefer with --realtime)")
     p.add_argument("--mlockall", action="store_true", help="lock the process's memory (Linux; reported if refused)")
-    p.add_argument("--declared-rt-machine", action="store_true", help="judge goal 14 jitter (pass/fail)")
+    p.add_argument("--declared-rt-machine", action="store_true", help="judge the jitter limits (pass/fail)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_timing)
 
@@ -111,7 +111,7 @@ def _stability(args: argparse.Namespace) -> int:
             f"{s['controller_on_min_delivered_vs_wall'] * 100:.0f} % of K x penetration in every cell\n"
             f"                force below min({res['felt_force_n']:g} N, {res['felt_fraction']:g} K x penetration) "
             f"on some tick deeper than {res['felt_depth_mm']:g} mm: {s['controller_on_felt_force_missed']} cells\n"
-            f"                cells meeting each goal (of {s['controller_on_cells']}): energy to user <= "
+            f"                cells within each limit (of {s['controller_on_cells']}): energy to user <= "
             f"{res['energy_tolerance_j'] * 1e3:g} mJ: {s['controller_on_energy_within_tolerance']}; delivered >= "
             f"{pct:g} % of min(K, K_pass) x penetration: {s['controller_on_delivered_within_tolerance']}; "
             f"felt force on every tick deeper than {res['felt_depth_mm']:g} mm: "
