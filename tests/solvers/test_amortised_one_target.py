@@ -1,0 +1,67 @@
+"""The one-target amortised call: lookup, then Gauss-Newton steps on plain 1-D arrays,
+kept only when the constraints hold and the error did not grow (else the general LM)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hapticsdk.plugins import registry
+from hapticsdk.solvers import CONSTRAINT_TOL
+
+pytestmark = pytest.mark.skipif("hardness" not in registry("dimension"), reason="hapticsdk-hardness not installed")
+
+
+def _problem():
+    from hapticsdk.problems import build_problem
+    return build_problem({"hardness": 0.5, "roughness": 0.5})
+
+
+def test_folded_network_is_the_models_prediction_and_jacobian():
+    from hapticsdk_ga.amortised import _one_row
+    p = _problem()
+    W1, b1, W2, b2, ys, y_min, W1u, lo, hi, span, k = _one_row(p)
+    model = p.model
+    mlp = getattr(model, "mlp", model)
+    idx = [model.dimension_names.index(d) for d in p.dimensions]
+    cols = [model.feature_names.index(n) for n in p.space.names]
+    rng = np.random.default_rng(0)
+    for x in p.space.random(20, rng):
+        g = p.full_inputs(x[None])[0]
+        h = np.tanh(W1 @ g + b1)
+        y = (np.tanh(W2 @ h + b2) + 1.0) * ys + y_min
+        np.testing.assert_allclose(y, mlp.predict(g[None])[0][idx], rtol=1e-10, atol=1e-12)
+        # the model itself (float32 file) agrees with its float64 twin to float32 rounding
+        np.testing.assert_allclose(y, model.predict(g[None])[0][idx], atol=1e-5)
+        s = 1.0 - np.tanh(W2 @ h + b2) ** 2
+        Ju = ((W2 * (1.0 - h * h)) @ W1u) * (s * ys)[:, None]
+        J = mlp.jacobian(g[None])[0][idx][:, cols] * span
+        np.testing.assert_allclose(Ju, J, rtol=1e-9, atol=1e-12)
+
+
+def test_one_target_calls_meet_the_constraints_and_never_lose_to_the_lookup():
+    import hapticsdk as hs
+    from hapticsdk.benchmarks.solvers import feasible_samples
+    p = _problem()
+    _, Y = feasible_samples(p, 3000, seed=11)        # reachable by construction
+    Y = Y[(Y.min(1) > 0.02) & (Y.max(1) < 0.98)][:80]
+    fast = fell_back = 0
+    gains = []
+    for y in Y:
+        t = {"hardness": float(y[0]), "roughness": float(y[1])}
+        look = hs.solve(t, method="amortised", options={"polish_steps": 0})
+        r = hs.solve(t, method="amortised")
+        assert r.constraint_violation <= CONSTRAINT_TOL, (t, r.message)
+        if "Gauss-Newton" in r.message:
+            fast += 1
+            assert r.error <= look.error, (t, r.error, look.error)
+            gains.append(r.error / max(look.error, 1e-300))
+        else:
+            fell_back += 1
+        # the batched path (a batch of one) solves the same target within the tolerance too
+        b = hs.solve(np.array([y]), dimensions=list(p.dimensions), method="amortised")
+        assert (r.success or not b[0].success), t
+    assert fast > len(Y) // 2
+    # Gauss-Newton from a near point converges quadratically: the error falls by far more
+    # than one order of magnitude on most targets
+    assert np.median(gains) < 0.1
