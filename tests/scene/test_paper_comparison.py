@@ -74,3 +74,14 @@ def test_plan_figure_labels_do_not_overlap():
         for j in range(i + 1, len(boxes)):
             assert not boxes[i].overlaps(boxes[j]), (ax.texts[i].get_text(), ax.texts[j].get_text())
     plt.close(fig)
+
+
+@needs_hardness
+def test_plan_text_says_units_and_counts_in_words(capsys):
+    from hapticsdk.cli import main
+    assert main(["plan", "S7"]) == 0
+    text = capsys.readouterr().out
+    assert "max 1 1" not in text and "drive up to 1 x full scale" in text   # the voice coil's 0..1 drive
+    assert "drive up to 50 V" in text
+    assert "over 1 feature vectors" not in text
+    assert "at its recorded features and at those features solved onto the target" in text
