@@ -433,7 +433,7 @@ def _one_row(problem: SolveProblem) -> tuple | None:
     model has no analytic numpy form (then the general LM runs)."""
     from hapticsdk.models import MLPModel
     memo = getattr(problem, "_setup_cache", None)
-    net = memo.get("amortised-one-row", False) if memo is not None else False
+    net: Any = memo.get("amortised-one-row", False) if memo is not None else False
     if net is False:
         model = problem.model
         mlp = model if isinstance(model, MLPModel) else getattr(model, "mlp", None)
