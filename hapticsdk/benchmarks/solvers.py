@@ -421,18 +421,18 @@ def run_peers(factory: Callable[..., SolveProblem], T: np.ndarray, seeds: list[i
                             "amortised (ours, one target per call)": AmortisedSolver()}
     t_ours: float | None = None
     for label, S in ours.items():
-        S.solve(p.with_targets(T[:1]), seed=0)   # warm-up (the amortised table is built or loaded here)
+        S.solve(p.with_targets(T[0]), seed=0)   # warm-up (the amortised table is built or loaded here)
         times, errs, fails = [], [], 0
         for s in seeds:
             for i in range(len(T)):
                 # the same problem setup, one target (as hapticsdk.problems.solve keeps it per
                 # setup); the peers get that setup too
-                pi = p.with_targets(T[i:i + 1])
+                pi = p.with_targets(T[i])     # a 1-D target: the one-target call of the public API
                 c0 = time.process_time()
                 r = S.solve(pi, seed=s)
                 times.append(time.process_time() - c0)
-                errs.append(float(r.error[0]))
-                fails += int(not r.success[0])
+                errs.append(float(r.error))
+                fails += int(not r.success)
         t = statistics.median(times)
         if t_ours is None:
             t_ours = t
@@ -768,7 +768,11 @@ def plot(report: dict[str, Any], path: str | Path) -> None:
     # one colour per solver in both panels (ours by name, then the peers)
     ours_names = list(report["solvers"])
     peer_names = [k for k, v in report.get("peers", {}).items() if "points" in v and "(ours" not in k]
-    colour = {n: f"C{i % 10}" for i, n in enumerate(ours_names + [n for n in peer_names if n not in ours_names])}
+    names = ours_names + [n for n in peer_names if n not in ours_names]
+    # 20 distinct colours (tab20: the dark shades first, then the light ones): no two solvers share one
+    tab = plt.get_cmap("tab20").colors
+    palette = list(tab[0::2]) + list(tab[1::2])
+    colour = {n: palette[i % len(palette)] for i, n in enumerate(names)}
     for k, (name, s) in enumerate(report["solvers"].items()):
         pts = s["points"]
         t = np.array([p.get("cpu_s", p["time_s"]) for p in pts]) * 1e3
@@ -794,7 +798,7 @@ def plot(report: dict[str, Any], path: str | Path) -> None:
         _wp_point(ax1, [pt.get("cpu_s", pt["time_s"]) * 1e3], [pt], floor, linestyle="none",
                   marker=markers[ours_names.index(base) % len(markers)] if base in ours_names else "s",
                   markerfacecolor=None if ours else "white", label=label,
-                  color=colour.get(base, f"C{k % 10}"))
+                  color=colour.get(base, "0.3"))
     not_run = [k for k, v in report.get("peers", {}).items() if "points" not in v]
     ax1.set_xscale("log")
     ax1.set_yscale("log")
