@@ -196,3 +196,25 @@ class TestDhdConformance(DeviceConformance):
     def device_factory(self, standin):
         sdk, _ = standin
         return lambda: _dev(sdk)
+
+
+def test_bench_live_period_reaches_the_session(monkeypatch):
+    """`hapticsdk bench live --period 0.00025` runs the session's servo at 0.25 ms."""
+    import hapticsdk.runtime.session as session
+    from hapticsdk.benchmarks import live
+    from hapticsdk.cli import main
+
+    class Seen(Exception):
+        pass
+    seen: dict = {}
+
+    def fake_session(*a, **kw):
+        seen.update(kw)
+        raise Seen
+    monkeypatch.setattr(session, "Session", fake_session)
+    monkeypatch.setattr(live, "switch_figures", lambda: {})
+    try:
+        main(["bench", "live", "--period", "0.00025", "--seconds", "1"])
+    except Seen:
+        pass
+    assert seen["period_s"] == 0.00025

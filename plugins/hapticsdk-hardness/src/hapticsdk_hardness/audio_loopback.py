@@ -49,6 +49,7 @@ class JackServer:
         self.proc: subprocess.Popen | None = None
         self._old_env: str | None = None
         self.log = ""
+        self._xruns = 0
 
     @staticmethod
     def available() -> str | None:
@@ -67,10 +68,12 @@ class JackServer:
         args += ["-d", "dummy", "-r", str(self.rate), "-p", str(self.period)]
         env = dict(os.environ, JACK_NO_AUDIO_RESERVATION="1")
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        self._xruns = 0
+        threading.Thread(target=self._read_log, args=(self.proc,), daemon=True).start()
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
             if self.proc.poll() is not None:
-                self.log = self.proc.stdout.read() if self.proc.stdout else ""
+                time.sleep(0.1)   # the log reader drains the output
                 return False
             r = _jack(["jack_wait", "-c"], self.name)
             if r.returncode == 0 and "not running" not in r.stdout and "running" in r.stdout:
@@ -78,6 +81,16 @@ class JackServer:
             time.sleep(0.1)
         self.stop()
         return False
+
+    def _read_log(self, proc: subprocess.Popen) -> None:
+        for line in proc.stdout or ():
+            if "XRun" in line:
+                self._xruns += 1
+            self.log = (self.log + line)[-4000:]
+
+    def xruns(self) -> int:
+        """xruns the server has reported so far (its log)."""
+        return self._xruns
 
     def __enter__(self) -> "JackServer":
         if not (self.realtime and self._start(True)) and not self._start(False):
@@ -96,8 +109,6 @@ class JackServer:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(5)
-        if self.proc is not None and self.proc.stdout:
-            self.proc.stdout.close()
 
     def __exit__(self, *exc: Any) -> None:
         import sounddevice as sd

@@ -22,8 +22,10 @@ surface normal is DHD's z.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import importlib.util
+import io
 import os
 import sys
 from typing import Any, ClassVar
@@ -64,7 +66,8 @@ def import_binding(sdk: str | None = None, *, device: str = "dhd") -> Any:
         raise DeviceNotFoundError(f"the Python package forcedimension-core is not installed. {INSTALL_HINT}",
                                   device=device)
     try:
-        return importlib.import_module("forcedimension_core.dhd")
+        with contextlib.redirect_stderr(io.StringIO()):   # the binding prints its own failure
+            return importlib.import_module("forcedimension_core.dhd")
     except ImportError as exc:
         where = os.environ.get("FDSDK") or os.environ.get("FORCEDIM_SDK")
         raise DeviceNotFoundError(
