@@ -214,10 +214,11 @@ def sine_fit(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return float(f), float(np.sqrt(2.0 * np.mean(seg * seg)))
 
 
-def hold(act: Any, seconds: float, period_s: float = 0.001, **cmd: float) -> None:
+def hold(act: Any, seconds: float, period_s: float = 0.001, *, frequency_hz: float | None = None,
+         amplitude: float | None = None) -> None:
     """Command ``act`` like a servo loop (every ``period_s``) for ``seconds``."""
     end = time.monotonic() + seconds
-    c = ChannelCommand("vibration", **cmd)
+    c = ChannelCommand("vibration", frequency_hz=frequency_hz, amplitude=amplitude)
     while time.monotonic() < end:
         act.command(c)
         time.sleep(period_s)
