@@ -35,6 +35,25 @@ def _binding_symbols() -> set[str]:
     return names
 
 
+def build_standin(sdk: Path, gcc: str) -> Path:
+    """Compile dhd_standin.c (+ a stub for every other symbol the binding binds) into
+    ``sdk/lib/release/lin-x86_64-gcc/libdrd.so.3.17.0`` (the FDSDK layout the binding
+    searches); returns ``sdk``. Also used by bench/bench_dhd_standin.py."""
+    src = (HERE / "dhd_standin.c").read_text()
+    defined = set(re.findall(r"^\S.*?\b(dhd\w+|drd\w+)\(", src, re.M))
+    rest = sorted(_binding_symbols() - defined)
+    src += "\n/* generated: bound by the binding, not used by the backend */\n"
+    src += "".join(f"int {n}(void) {{ return -1; }}\n" for n in rest)
+    libdir = sdk / "lib" / "release" / "lin-x86_64-gcc"
+    libdir.mkdir(parents=True, exist_ok=True)
+    (sdk / "standin.c").write_text(src)
+    out = libdir / "libdrd.so.3.17.0"
+    res = subprocess.run([gcc, "-shared", "-fPIC", "-O1", "-o", str(out), str(sdk / "standin.c"), "-lm"],
+                         capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0, res.stderr[:2000]
+    return sdk
+
+
 @pytest.fixture(scope="module")
 def standin(tmp_path_factory, missing):
     if importlib.util.find_spec("forcedimension_core") is None:
@@ -44,19 +63,8 @@ def standin(tmp_path_factory, missing):
         missing("a C compiler (Debian package gcc)")
     if "forcedimension_core.runtime" in sys.modules:
         pytest.skip("forcedimension_core already imported in this process with another libdrd")
-    src = (HERE / "dhd_standin.c").read_text()
-    defined = set(re.findall(r"^\S.*?\b(dhd\w+|drd\w+)\(", src, re.M))
-    rest = sorted(_binding_symbols() - defined)
-    src += "\n/* generated: bound by the binding, not used by the backend */\n"
-    src += "".join(f"int {n}(void) {{ return -1; }}\n" for n in rest)
-    sdk = tmp_path_factory.mktemp("fdsdk")
-    libdir = sdk / "lib" / "release" / "lin-x86_64-gcc"
-    libdir.mkdir(parents=True)
-    (sdk / "standin.c").write_text(src)
-    out = libdir / "libdrd.so.3.17.0"
-    res = subprocess.run([gcc, "-shared", "-fPIC", "-O1", "-o", str(out), str(sdk / "standin.c"), "-lm"],
-                         capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stderr[:2000]
+    sdk = build_standin(tmp_path_factory.mktemp("fdsdk"), gcc)
+    out = next((sdk / "lib" / "release" / "lin-x86_64-gcc").glob("libdrd.so*"))
     old = os.environ.get("FDSDK")
     lib = ctypes.CDLL(str(out))
     lib.standin_force.argtypes = [ctypes.POINTER(ctypes.c_double)]
