@@ -67,7 +67,8 @@ class JackServer:
         args = ["jackd", "-n", self.name] + (["-R", "-P", "70"] if rt else ["--no-realtime"])
         args += ["-d", "dummy", "-r", str(self.rate), "-p", str(self.period)]
         env = dict(os.environ, JACK_NO_AUDIO_RESERVATION="1")
-        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                                     preexec_fn=_die_with_parent)
         self._xruns = 0
         threading.Thread(target=self._read_log, args=(self.proc,), daemon=True).start()
         deadline = time.monotonic() + 10
@@ -131,6 +132,17 @@ class JackServer:
     def disconnect(self, a: str, b: str) -> None:
         """Disconnect port ``a`` from ``b``."""
         _jack(["jack_disconnect", a, b], self.name)
+
+
+def _die_with_parent() -> None:
+    """In the child before exec (Linux): SIGTERM when the process that started it dies, so
+    a test process that crashes leaves no server behind."""
+    try:
+        import ctypes
+        import signal
+        ctypes.CDLL(None).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
+    except Exception:
+        pass
 
 
 def _reinit_portaudio() -> None:
