@@ -225,3 +225,17 @@ class TestVoiceCoilAudioConformance(ActuatorConformance):
     def actuator_factory(self, jack):
         from hapticsdk_hardness.audio import VoiceCoilAudio
         return lambda: VoiceCoilAudio(device="system")
+
+
+def test_sine_fit_on_silence_gaps_and_exact_zeros():
+    """The estimator of these measurements: exact for a sine with a gap of silence (a
+    dropout) and with samples that are exactly 0 (no division by zero)."""
+    from hapticsdk_hardness.audio_loopback import sine_fit
+    fs, f0 = 48000.0, 109.889
+    t = np.arange(int(fs)) / fs
+    y = 0.5 * np.sin(2 * np.pi * f0 * t)
+    y[20000:20400] = 0.0
+    y[20000:20400:2] = -0.0     # signed zeros, as a float32 silence can carry
+    f, a = sine_fit(t, y)
+    assert f == pytest.approx(f0, abs=0.01) and a == pytest.approx(0.5, rel=0.02)
+    assert np.isnan(sine_fit(t, np.zeros_like(t))[0])

@@ -213,14 +213,16 @@ def sine_fit(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     crossings (linear interpolation between samples): whole cycles over their total time,
     leaving out cycles more than 20 % off the median (a gap of silence: a dropout, the
     end of a contact); amplitude from the RMS over the cycles (x sqrt 2)."""
-    s = np.signbit(y)
+    s = y < 0.0          # strictly negative, then >= 0: the step y[i+1] - y[i] is > 0
     idx = np.nonzero(s[:-1] & ~s[1:])[0]
     if idx.size < 3:
         return float("nan"), float("nan")
     frac = -y[idx] / (y[idx + 1] - y[idx])
     tc = t[idx] + frac * (t[idx + 1] - t[idx])
     per = np.diff(tc)
-    keep = np.abs(per / np.median(per) - 1.0) <= 0.2
+    keep = (per > 0) & (np.abs(per / np.median(per) - 1.0) <= 0.2)
+    if not keep.any():
+        return float("nan"), float("nan")
     f = int(keep.sum()) / float(per[keep].sum())
     seg = y[idx[0] + 1: idx[-1] + 1]
     return float(f), float(np.sqrt(2.0 * np.mean(seg * seg)))
