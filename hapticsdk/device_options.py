@@ -56,7 +56,7 @@ MAX_CONFIG_BYTES = 1 << 20
 
 __all__ = ["ENV_OPTIONS", "ENV_CONFIG", "PrivilegedOptionError", "privileged_options",
            "check_data_options", "check_data_settings", "PRIVILEGED_SETTINGS", "energy_option_ceilings", "device_config_path", "trusted_options", "parse_device_option",
-           "WHERE_TO_SET"]
+           "WHERE_TO_SET", "parse_device"]
 
 #: the sentence every refusal ends with
 WHERE_TO_SET = ("set it from the application's code (render_plan(..., actuator_options={{{role!r}: "
@@ -284,3 +284,17 @@ def parse_device_option(text: str) -> tuple[str, str, Any]:
     except (ValueError, RecursionError):
         value = raw
     return role.strip(), key.strip(), value
+
+
+def parse_device(text: str) -> tuple[str, str]:
+    """``"ROLE=ACTUATOR"`` (``coil=voicecoil-audio``) -> ``(role, actuator)``; the actuator
+    must be an installed actuator plugin."""
+    role, sep, name = str(text).partition("=")
+    role, name = role.strip(), name.strip()
+    if not sep or not role or not name or "." in role:
+        raise ValidationError(f"expected ROLE=ACTUATOR (e.g. coil=voicecoil-audio), got {text!r}", field="device")
+    from .plugins import registry
+    if name not in registry("actuator"):
+        raise ValidationError(f"no actuator plugin {name!r}; installed: {', '.join(registry('actuator').names())}",
+                              field="device")
+    return role, name

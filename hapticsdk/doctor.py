@@ -35,12 +35,23 @@ OPTIONAL_MODULES: dict[str, str] = {
     "onnxruntime": "ONNX perception models",
     "onnx": "model export (training extra)",
     "matplotlib": "plots (plot extra)",
+    "sounddevice": "voicecoil-audio (hapticsdk-hardness[audio])",
+    "forcedimension_core": "dhd (hapticsdk-hardness[dhd], Force Dimension's binding)",
+    "HaplyHardwareAPI": "inverse3 (hapticsdk-hardness[haply], Haply's module)",
 }
+#: what to pip install for a module whose import name differs
+PIP_NAMES: dict[str, str] = {"serial": "pyserial", "usb": "pyusb", "sounddevice": "hapticsdk-hardness[audio]",
+                             "forcedimension_core": "hapticsdk-hardness[dhd]",
+                             "HaplyHardwareAPI": "hapticsdk-hardness[haply]"}
 #: optional shared libraries (ctypes names) -> what needs them
 OPTIONAL_LIBRARIES: dict[str, str] = {
     "HD": "omni-openhaptics (OpenHaptics libHD)",
     "usb-1.0": "piezo-mcp2221 (libusb-1.0 behind pyusb)",
+    "portaudio": "voicecoil-audio (PortAudio behind sounddevice; Debian libportaudio2)",
+    "drd": "dhd (Force Dimension SDK libdrd, DHD API; FDSDK=folder)",
 }
+#: environment variable naming a library's file or folder -> how to find it there
+_LIB_ENV: dict[str, str] = {"HD": "HAPTICSDK_LIBHD", "drd": "FDSDK"}
 
 
 def _error_text(exc: BaseException) -> str:
@@ -105,13 +116,17 @@ def check_libraries() -> dict[str, dict[str, Any]]:
             spec = importlib.util.find_spec(mod)
         except (ImportError, ValueError):
             spec = None
-        pip_name = {"serial": "pyserial", "usb": "pyusb"}.get(mod, mod)
+        pip_name = PIP_NAMES.get(mod, mod)
         out[mod] = {"kind": "python", "found": spec is not None,
                     "detail": spec.origin if spec is not None else f"not installed (pip install {pip_name})",
                     "needed_by": needed}
     for lib, needed in OPTIONAL_LIBRARIES.items():
         path = ctypes.util.find_library(lib)
-        extra = os.environ.get("HAPTICSDK_LIBHD") if lib == "HD" else None
+        env = _LIB_ENV.get(lib)
+        extra = os.environ.get(env) if env else None
+        if extra and lib == "drd":   # the binding's layout: $FDSDK/lib/release/<platform>/libdrd.so*
+            hits = sorted(Path(extra).glob("lib/release/*/libdrd.so*"))
+            extra = str(hits[-1]) if hits else None
         found = bool(path) or bool(extra and Path(extra).exists())
         out[f"lib{lib}"] = {"kind": "shared", "found": found,
                             "detail": path or (extra if found else "not found by ctypes.util.find_library"),

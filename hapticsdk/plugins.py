@@ -45,6 +45,7 @@ FIRST_PARTY: dict[str, dict[str, str]] = {
         "omni-virtual": "hapticsdk-hardness", "voicecoil-virtual": "hapticsdk-hardness",
         "omni-openhaptics": "hapticsdk-hardness", "piezo-virtual": "hapticsdk-roughness",
         "piezo-serial": "hapticsdk-roughness", "piezo-mcp2221": "hapticsdk-roughness",
+        "voicecoil-audio": "hapticsdk-hardness", "dhd": "hapticsdk-hardness", "inverse3": "hapticsdk-hardness",
     },
     "solver": {n: "hapticsdk-ga" for n in ("ga", "de", "de-scipy", "polish", "ga-polish", "amortised")},
     "model": {"default": "hapticsdk-onnx", "onnx": "hapticsdk-onnx"},

@@ -216,7 +216,7 @@ def _count_frames(url: str, stop: threading.Event, out: list[float]) -> None:
 
 def run_session(isolation: str = "process", app_load: str = "python-thread", seconds: float = 10.0,
                 switches: int = 8, rt: dict[str, Any] | None = None, record: bool = True,
-                view: bool = True) -> dict[str, Any]:
+                view: bool = True, period_s: float | None = None) -> dict[str, Any]:
     """One live run; see the module docstring."""
     import tempfile
     from pathlib import Path
@@ -242,7 +242,7 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     stop_view = threading.Event()
     rss: list[tuple[float, int | None]] = []
     with Session(SCENE, isolation=isolation, trajectory=tr, refine=False, rt=rt, record=rec_path,
-                 view=bool(view)) as s, _stopping(stop, th):
+                 view=bool(view), period_s=period_s) as s, _stopping(stop, th):
         s.set_material("pad", "S7")  # warm the amortised table of these dimensions
         time.sleep(0.5)
         s.events()
@@ -434,19 +434,21 @@ def switch_figures(ramp_s: float = 0.05) -> dict[str, Any]:
 
 def run_live(isolation: str = "process", app_loads: tuple[str, ...] = ("python-thread",),
              seconds: float = 10.0, rt: dict[str, Any] | None = None,
-             reference: bool = True) -> dict[str, Any] | list[dict[str, Any]]:
+             reference: bool = True, period_s: float | None = None) -> dict[str, Any] | list[dict[str, Any]]:
     """Runs for each application load; the switch figures are shared (simulated).
     ``reference``: after each session run, :func:`run_reference` under the same load
     for the same time (key ``reference``): the session's jitter next to what a loop
-    doing nothing else gets from this machine in the same minute."""
+    doing nothing else gets from this machine in the same minute. ``period_s``: the
+    servo period (default the scene's, 1 ms); the reference loop runs at the same period."""
     from ..runtime.session import _default_rt
     sw = switch_figures()
     rows = []
     for load in app_loads:
-        r = run_session(isolation, load, seconds, rt=rt)
+        r = run_session(isolation, load, seconds, rt=rt, period_s=period_s)
         if reference:
-            r["reference"] = run_reference(load, seconds, rt=_default_rt(rt, isolation))
+            r["reference"] = run_reference(load, seconds, period_s=period_s or 1e-3, rt=_default_rt(rt, isolation))
         r["rt"] = dict(rt or {})
+        r["period_s"] = float(period_s or 1e-3)
         lat = r.pop("switch_latency_ms")
         r["switch"] = {"latency_ms": lat["max"], "latency_ms_p50": lat["p50"], "switches": lat["n"],
                        "not_seen_within_1s": r.pop("switches_not_seen_within_1s"),
@@ -475,6 +477,8 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
     head = ("isolation  app_load        jitter p50/p99/max us   missed    switch ms (max)  step N   "
             "energy mJ  state us p50/p99 (cpu p50, b2b p50)   set_material us max (cpu)")
     out = [head]
+    periods = sorted({r.get("period_s", 1e-3) for r in rows})
+    out.insert(0, "servo period " + ", ".join(f"{p * 1e3:g} ms ({1e-3 / p:g} kHz)" for p in periods))
     for r in rows:
         j, s, c = r["jitter"], r["switch"], r["app_call_us"]
         out.append(f"{r['isolation']:<10} {r['app_load']:<15} {j['p50_us']:7.1f}/{j['p99_us']:7.1f}/{j['max_us']:8.1f}"

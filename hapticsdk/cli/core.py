@@ -64,10 +64,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seconds", type=positive_float, default=3.0, help="render duration (s)")
     p.add_argument("--realtime", action="store_true",
                    help="pace the servo loop on the machine clock (wall time = --seconds); by default "
-                        "simulated devices run as fast as they compute")
+                        "simulated devices run as fast as they compute (a real device given with --device "
+                        "always runs on the machine clock)")
     p.add_argument("--seed", type=nonneg_int, default=0, help="solver seed, a whole number >= 0")
     p.add_argument("--plot", metavar="PNG", type=figure_file,
                    help="save a figure of the render (needs matplotlib; .png, .pdf, .svg ...)")
+    p.add_argument("--device", action="append", default=[], metavar="ROLE=ACTUATOR",
+                   help="actuator plugin for a channel role (repeatable), e.g. coil=voicecoil-audio or "
+                        "force=dhd (see `hapticsdk plugins --kind actuator`); with --scene it replaces the "
+                        "scene's device for that role")
     p.add_argument("--device-option", action="append", default=[], metavar="ROLE.KEY=VALUE",
                    help="actuator option for a channel role (repeatable), e.g. force.library=/opt/libHD.so or "
                         "coil.sink=wav:out.wav; the only place, with $HAPTICSDK_DEVICE_OPTIONS and the user "
@@ -179,6 +184,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from ..compiler import compile_scene
     from ..runtime.render import render_plan
     from ..scene import Scene, load_scene
+    from ..scene.model import DeviceSpec
 
     from ..runtime.limits import check_seconds
 
@@ -191,18 +197,23 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.plot:  # before the work: a figure that cannot be written fails now, not after the render
         from ..fileio import check_output_path
         check_output_path(args.plot, field="--plot")
+    from ..device_options import parse_device, parse_device_option
+    devices = dict(parse_device(item) for item in args.device)
     if args.scene:
         scene = load_scene(args.scene)
+        for role, actuator in devices.items():
+            scene.devices[role] = DeviceSpec(actuator=actuator)
     else:
-        scene = Scene.for_material(args.material if args.material else targets, seed=args.seed)
-    from ..device_options import parse_device_option
+        scene = Scene.for_material(args.material if args.material else targets, devices, seed=args.seed)
     dev_opts: dict[str, dict[str, Any]] = {}
     for item in args.device_option:
         role, key, value = parse_device_option(item)
         dev_opts.setdefault(role, {})[key] = value
     plan = compile_scene(scene)
+    from ..plugins import registry
+    real = any(not getattr(registry("actuator").load(name), "simulated", True) for name in devices.values())
     report = render_plan(plan, seconds=args.seconds, actuator_options=dev_opts,
-                         realtime=True if args.realtime else None)
+                         realtime=True if args.realtime or real else None)
     out = report.to_dict()
     if args.plot:
         from ..plotting import plot_render

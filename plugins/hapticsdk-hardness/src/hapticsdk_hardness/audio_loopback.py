@@ -1,0 +1,274 @@
+"""Measuring ``voicecoil-audio`` through an audio server's loopback (tests and
+``bench/bench_voicecoil_audio.py``).
+
+:class:`JackServer` starts a private JACK server (Debian ``jackd2``) with its dummy
+driver -- no sound card, a clock at the given rate and period -- under a unique server
+name, and points PortAudio at it (``JACK_DEFAULT_SERVER``, PortAudio re-initialised).
+:class:`LoopbackCapture` opens a PortAudio input stream on it and connects every
+PortAudio output port to that input with ``jack_connect``, so what an output stream of
+this process (or of a child process) plays is captured back, sample for sample, each
+block stamped with the input stream's own clock (``inputBufferAdcTime``).
+
+What the loopback shows: a sample when it leaves the client into the JACK graph. A
+card adds its playback latency on top (the output stream's ``latency``; one period for
+the dummy driver); :func:`measure` reports both.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from hapticsdk.dimensions import ChannelCommand
+
+
+def _jack(cmd: list[str], server: str) -> subprocess.CompletedProcess:
+    return subprocess.run([cmd[0], "-s", server, *cmd[1:]], capture_output=True, text=True, timeout=10)
+
+
+class JackServer:
+    """A private JACK server on the dummy driver (context manager).
+
+    Args:
+        rate: sample rate (Hz).
+        period: frames per period.
+        realtime: ask for real-time scheduling (``jackd -R``; falls back to none when
+            refused).
+    """
+
+    def __init__(self, rate: int = 48000, period: int = 128, realtime: bool = True) -> None:
+        self.rate, self.period, self.realtime = int(rate), int(period), bool(realtime)
+        self.name = f"hapticsdk-{os.getpid()}-{id(self) & 0xffff:x}"
+        self.proc: subprocess.Popen | None = None
+        self._old_env: str | None = None
+        self.log = ""
+        self._xruns = 0
+
+    @staticmethod
+    def available() -> str | None:
+        """What is missing to run one (None: nothing)."""
+        for exe in ("jackd", "jack_connect", "jack_lsp", "jack_wait"):
+            if shutil.which(exe) is None:
+                return f"{exe} (Debian package jackd2)"
+        try:
+            import sounddevice  # noqa: F401
+        except Exception as exc:
+            return f"sounddevice with PortAudio (pip install sounddevice; Debian libportaudio2): {exc}"
+        return None
+
+    def _start(self, rt: bool) -> bool:
+        args = ["jackd", "-n", self.name] + (["-R", "-P", "70"] if rt else ["--no-realtime"])
+        args += ["-d", "dummy", "-r", str(self.rate), "-p", str(self.period)]
+        env = dict(os.environ, JACK_NO_AUDIO_RESERVATION="1")
+        self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                                     preexec_fn=_die_with_parent)
+        self._xruns = 0
+        threading.Thread(target=self._read_log, args=(self.proc,), daemon=True).start()
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                time.sleep(0.1)   # the log reader drains the output
+                return False
+            r = _jack(["jack_wait", "-c"], self.name)
+            if r.returncode == 0 and "not running" not in r.stdout and "running" in r.stdout:
+                return True
+            time.sleep(0.1)
+        self.stop()
+        return False
+
+    def _read_log(self, proc: subprocess.Popen) -> None:
+        for line in proc.stdout or ():
+            if "XRun" in line:
+                self._xruns += 1
+            self.log = (self.log + line)[-4000:]
+
+    def xruns(self) -> int:
+        """xruns the server has reported so far (its log)."""
+        return self._xruns
+
+    def __enter__(self) -> "JackServer":
+        if not (self.realtime and self._start(True)) and not self._start(False):
+            raise RuntimeError(f"jackd did not start: {self.log[-500:]}")
+        self._old_env = os.environ.get("JACK_DEFAULT_SERVER")
+        os.environ["JACK_DEFAULT_SERVER"] = self.name
+        _reinit_portaudio()
+        return self
+
+    def stop(self) -> None:
+        """Stop the server."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
+
+    def __exit__(self, *exc: Any) -> None:
+        import sounddevice as sd
+        sd._terminate()   # PortAudio's JACK client closes while its server still runs
+        self.stop()
+        if self._old_env is None:
+            os.environ.pop("JACK_DEFAULT_SERVER", None)
+        else:
+            os.environ["JACK_DEFAULT_SERVER"] = self._old_env
+        sd._initialize()
+
+    def ports(self) -> list[str]:
+        """Every port name of the server."""
+        return _jack(["jack_lsp"], self.name).stdout.split()
+
+    def connect(self, a: str, b: str) -> None:
+        """Connect port ``a`` to ``b``."""
+        _jack(["jack_connect", a, b], self.name)
+
+    def disconnect(self, a: str, b: str) -> None:
+        """Disconnect port ``a`` from ``b``."""
+        _jack(["jack_disconnect", a, b], self.name)
+
+
+def _die_with_parent() -> None:
+    """In the child before exec (Linux): SIGTERM when the process that started it dies, so
+    a test process that crashes leaves no server behind."""
+    try:
+        import ctypes
+        import signal
+        ctypes.CDLL(None).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
+    except Exception:
+        pass
+
+
+def _reinit_portaudio() -> None:
+    import sounddevice as sd
+    sd._terminate()
+    sd._initialize()
+
+
+class LoopbackCapture:
+    """Capture what this server's PortAudio outputs play (context manager; see module)."""
+
+    def __init__(self, server: JackServer) -> None:
+        import sounddevice as sd
+        self.server = server
+        self.blocks: list[tuple[float, np.ndarray]] = []
+        self._lock = threading.Lock()
+        self.stream = sd.InputStream(samplerate=server.rate, channels=1, dtype="float32", callback=self._cb)
+        self.in_port: str | None = None
+
+    def _cb(self, data: np.ndarray, frames: int, t: Any, status: Any) -> None:
+        with self._lock:
+            self.blocks.append((float(t.inputBufferAdcTime), data[:, 0].copy()))
+
+    def __enter__(self) -> "LoopbackCapture":
+        self.stream.start()
+        ins = [p for p in self.server.ports() if re.match(r"PortAudio[^:]*:in_\d+$", p)]
+        self.in_port = ins[-1]
+        for p in self.server.ports():
+            if p.startswith("system:capture"):
+                self.server.disconnect(p, self.in_port)
+        self.route()
+        return self
+
+    def route(self) -> list[str]:
+        """Connect every PortAudio output port (new ones too) to the capture input."""
+        outs = [p for p in self.server.ports() if re.match(r"PortAudio[^:]*:out_\d+$", p)]
+        for p in outs:
+            self.server.connect(p, self.in_port or "")
+        return outs
+
+    def now(self) -> float:
+        """The capture stream's clock (s), the clock of the captured blocks."""
+        return float(self.stream.time)
+
+    def clear(self) -> None:
+        """Forget what was captured."""
+        with self._lock:
+            self.blocks = []
+
+    def signal(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t, y): every captured sample with its time on the capture clock."""
+        with self._lock:
+            blocks = list(self.blocks)
+        if not blocks:
+            return np.zeros(0), np.zeros(0)
+        fs = self.server.rate
+        t = np.concatenate([t0 + np.arange(b.size) / fs for t0, b in blocks])
+        y = np.concatenate([b for _, b in blocks]).astype(float)
+        return t, y
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stream.stop()
+        self.stream.close()
+
+
+def sine_fit(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """(frequency Hz, amplitude) of a steady sine: frequency from the rising zero
+    crossings (linear interpolation between samples): whole cycles over their total time,
+    leaving out cycles more than 20 % off the median (a gap of silence: a dropout, the
+    end of a contact); amplitude from the RMS over the cycles (x sqrt 2)."""
+    s = y < 0.0          # strictly negative, then >= 0: the step y[i+1] - y[i] is > 0
+    idx = np.nonzero(s[:-1] & ~s[1:])[0]
+    if idx.size < 3:
+        return float("nan"), float("nan")
+    frac = -y[idx] / (y[idx + 1] - y[idx])
+    tc = t[idx] + frac * (t[idx + 1] - t[idx])
+    per = np.diff(tc)
+    keep = (per > 0) & (np.abs(per / np.median(per) - 1.0) <= 0.2)
+    if not keep.any():
+        return float("nan"), float("nan")
+    f = int(keep.sum()) / float(per[keep].sum())
+    seg = y[idx[0] + 1: idx[-1] + 1]
+    return float(f), float(np.sqrt(2.0 * np.mean(seg * seg)))
+
+
+def hold(act: Any, seconds: float, period_s: float = 0.001, *, frequency_hz: float | None = None,
+         amplitude: float | None = None) -> None:
+    """Command ``act`` like a servo loop (every ``period_s``) for ``seconds``."""
+    end = time.monotonic() + seconds
+    c = ChannelCommand("vibration", frequency_hz=frequency_hz, amplitude=amplitude)
+    while time.monotonic() < end:
+        act.command(c)
+        time.sleep(period_s)
+
+
+def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, amplitude: float = 0.5,
+            seconds: float = 1.0) -> dict[str, float]:
+    """One measurement on an open ``voicecoil-audio`` through the loopback: silence,
+    then ``amplitude`` at ``frequency_hz`` for ``seconds``, then ``stop()``.
+
+    Returns the frequency error (Hz), the amplitude against ``amplitude x full_scale``
+    (relative), command-to-sound and stop-to-silence times through the loopback (ms;
+    ``*_dac_ms`` adds the output's reported latency), and underruns counted by the
+    stream over the measurement."""
+    hold(act, 0.05, amplitude=0.0, frequency_hz=frequency_hz)
+    time.sleep(0.05)
+    cap.clear()
+    u0 = act.underruns
+    t_cmd = cap.now()
+    hold(act, seconds, frequency_hz=frequency_hz, amplitude=amplitude)
+    act.stop()
+    t_stop = cap.now()
+    time.sleep(0.1)
+    t, y = cap.signal()
+    loud = np.nonzero(np.abs(y) > 1e-3 * amplitude * act.full_scale)[0]
+    out_lat = float(act.stream.latency) if act.stream is not None else 0.0
+    if loud.size == 0:
+        return {"frequency_error_hz": float("nan"), "amplitude_rel_error": float("nan"),
+                "latency_ms": float("nan"), "stop_ms": float("nan"), "underruns": act.underruns - u0}
+    on, off = t[loud[0]], t[loud[-1]]
+    ramp = act.ramp_s
+    steady = (t > on + ramp + 0.01) & (t < off - 0.01)
+    f, a = sine_fit(t[steady], y[steady])
+    return {"frequency_error_hz": abs(f - frequency_hz), "frequency_hz": f,
+            "amplitude": a, "amplitude_rel_error": abs(a / (amplitude * act.full_scale) - 1.0),
+            "latency_ms": (on - t_cmd) * 1e3, "latency_dac_ms": (on - t_cmd + out_lat) * 1e3,
+            "stop_ms": max(0.0, off - t_stop) * 1e3, "stop_dac_ms": (max(0.0, off - t_stop) + out_lat) * 1e3,
+            "output_latency_ms": out_lat * 1e3, "underruns": act.underruns - u0,
+            "samples_after_stop": int(np.count_nonzero(t[loud] > t_stop + 0.05))}

@@ -1,0 +1,241 @@
+"""``voicecoil-audio`` against a real audio server started here: JACK (Debian jackd2) on
+its dummy driver, 48 kHz, 128-frame periods, the output captured back through a loopback
+port (:mod:`hapticsdk_hardness.audio_loopback`).
+
+Tolerances, from the measurement itself: the frequency comes from ~100 interpolated
+zero crossings of float32 samples (error well under 0.01 Hz when the phase is
+continuous), so the issue's 0.5 Hz goal is the bound; the amplitude is float32
+end to end through JACK (bit-exact), so 2 % (the goal) only leaves room for the RMS
+estimate over whole cycles; command-to-sound through the loopback is at most the
+servo command period (1 ms) + one audio period for the callback to pick the target up
++ one period in the graph (2 x 2.67 ms + 1 ms = 6.3 ms), plus scheduling on a shared
+machine: 10 ms (the goal). Stop-to-silence: one period (the block being rendered) +
+one in the graph: 20 ms (the goal) leaves the rest to scheduling."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.errors import DeviceError, DeviceNotFoundError
+from hapticsdk.testing import ActuatorConformance
+
+
+@pytest.fixture(scope="module")
+def jack(missing):
+    from hapticsdk_hardness.audio_loopback import JackServer
+    why = JackServer.available()
+    if why:
+        missing(why)
+    with JackServer(rate=48000, period=128) as srv:
+        yield srv
+
+
+@pytest.fixture
+def loop(jack):
+    from hapticsdk_hardness.audio_loopback import LoopbackCapture
+    with LoopbackCapture(jack) as cap:
+        yield cap
+
+
+def _coil(**kw):
+    from hapticsdk.safety import SafetyLayer
+    from hapticsdk_hardness.audio import VoiceCoilAudio
+    return VoiceCoilAudio(safety=SafetyLayer(VoiceCoilAudio.limits, ramp_time_s=0.0), **kw)
+
+
+def test_missing_sounddevice_is_named(monkeypatch):
+    from hapticsdk_hardness import audio
+    def fail(name):
+        raise OSError("PortAudio library not found")
+    monkeypatch.setattr(audio.importlib, "import_module", fail)
+    with pytest.raises(DeviceNotFoundError) as ei:
+        audio.VoiceCoilAudio().open()
+    assert "libportaudio2" in str(ei.value) and "hapticsdk-hardness[audio]" in str(ei.value)
+    ok, why = audio.VoiceCoilAudio.check_available()
+    assert not ok and "sounddevice" in why
+
+
+def test_unknown_device_lists_outputs(jack):
+    with pytest.raises(DeviceNotFoundError) as ei:
+        _coil(device="no such card").open()
+    assert "no such card" in str(ei.value) and "system" in str(ei.value)
+
+
+@pytest.mark.parametrize("freq,amp", [(250.0, 0.5), (61.3, 0.8), (997.0, 0.2)])
+def test_frequency_amplitude_latency_stop_through_the_loopback(jack, loop, freq, amp):
+    from hapticsdk_hardness.audio_loopback import measure
+    coil = _coil(device="system", full_scale=0.9)
+    with coil:
+        loop.route()
+        m = measure(coil, loop, frequency_hz=freq, amplitude=amp, seconds=0.6)
+    assert m["frequency_error_hz"] <= 0.5, m
+    assert m["amplitude_rel_error"] <= 0.02, m
+    assert m["latency_dac_ms"] <= 10.0, m
+    assert m["stop_dac_ms"] <= 20.0, m
+    assert m["samples_after_stop"] == 0, m
+
+
+def test_phase_continuous_across_frequency_changes(jack, loop):
+    """A sweep of frequency steps every 20 ms: no sample-to-sample jump beyond what a
+    continuous sine of the highest frequency can do (2 pi f A / fs)."""
+    coil = _coil(device="system")
+    fs, amp = 48000.0, 0.7
+    with coil:
+        loop.route()
+        from hapticsdk_hardness.audio_loopback import hold
+        hold(coil, 0.1, frequency_hz=100.0, amplitude=amp)
+        loop.clear()
+        for f in (100.0, 173.0, 412.0, 90.0, 650.0, 233.0):
+            hold(coil, 0.02, frequency_hz=f, amplitude=amp)
+        coil.stop()
+        time.sleep(0.05)
+    _, y = loop.signal()
+    loud = np.nonzero(np.abs(y) > 1e-4)[0]
+    seg = y[loud[0]:loud[-1]]
+    bound = 2 * np.pi * 650.0 * amp / fs
+    assert np.abs(np.diff(seg)).max() <= bound * 1.01 + 1e-6
+
+
+def test_dead_servo_goes_silent(jack, loop):
+    """No command for longer than command_timeout_s: the callback itself goes silent."""
+    coil = _coil(device="system", command_timeout_s=0.03)
+    with coil:
+        loop.route()
+        from hapticsdk_hardness.audio_loopback import hold
+        hold(coil, 0.2, frequency_hz=200.0, amplitude=0.5)
+        t_last = loop.now()
+        time.sleep(0.2)                                  # the servo stalls, nobody calls stop()
+        assert coil.timeouts >= 1
+        t, y = loop.signal()
+        loud = t[np.abs(y) > 1e-4]
+        assert loud[-1] - t_last <= 0.03 + 2 * 128 / 48000 + 0.01
+        with coil:
+            pass
+
+
+GONE = """
+import os, sys, time
+from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.errors import DeviceError
+from hapticsdk_hardness.audio import VoiceCoilAudio
+from hapticsdk_hardness.audio_loopback import JackServer
+with JackServer(rate=48000, period=256) as srv:
+    coil = VoiceCoilAudio().open()
+    coil.command(ChannelCommand("vibration", frequency_hz=100.0, amplitude=0.1))
+    srv.stop()
+    deadline = time.monotonic() + 5
+    try:
+        while time.monotonic() < deadline:
+            coil.command(ChannelCommand("vibration", frequency_hz=100.0, amplitude=0.1))
+            time.sleep(0.01)
+        print("no error")
+    except DeviceError as exc:
+        coil.close()
+        print("device error;", exc, "; closed", not coil.is_open, coil.abandoned)
+    sys.stdout.flush()
+    os._exit(0)   # PortAudio's exit handler would touch the dead stream (see the module doc)
+"""
+
+
+def test_server_gone_is_a_device_error(missing):
+    """The JACK server dies under a playing stream (in a child process: see GONE)."""
+    from hapticsdk_hardness.audio_loopback import JackServer
+    why = JackServer.available()
+    if why:
+        missing(why)
+    r = subprocess.run([sys.executable, "-c", GONE], capture_output=True, text=True, timeout=60)
+    assert "device error;" in r.stdout and "stream stopped" in r.stdout, r.stdout + r.stderr[-2000:]
+    assert r.stdout.strip().endswith("closed True True")
+
+
+def test_underruns_are_counted(jack):
+    """A callback that overruns its period (here: made to take 3 periods) is reported in
+    ``underruns``; the goal (none in 10 minutes with a busy application thread) is
+    measured by bench/bench_voicecoil_audio.py, not here (a timing figure of a loaded
+    machine is not a unit test)."""
+    from hapticsdk_hardness.audio_loopback import hold
+    coil = _coil(device="system")
+    with coil:
+        hold(coil, 0.2, frequency_hz=150.0, amplitude=0.3)
+        quiet = coil.underruns
+        render = coil.osc.render
+
+        def slow(*a):
+            time.sleep(3 * 128 / 48000)
+            return render(*a)
+        coil.osc.render = slow
+        hold(coil, 0.2, frequency_hz=150.0, amplitude=0.3)
+        assert coil.underruns - quiet >= 5
+        assert coil.describe()["underruns"] == coil.underruns
+
+
+def _render_cli(jack, loop, tmp_path, *args):
+    cfg = tmp_path / "devices.json"
+    cfg.write_text(json.dumps({"voicecoil-audio": {"device": "system"}}))
+    os.chmod(cfg, 0o600)
+    env = dict(os.environ, HAPTICSDK_DEVICE_CONFIG=str(cfg), JACK_DEFAULT_SERVER=jack.name)
+    loop.clear()
+    proc = subprocess.Popen([sys.executable, "-m", "hapticsdk", "render", *args, "--device", "coil=voicecoil-audio",
+                             "--seconds", "2", "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        loop.route()
+        time.sleep(0.02)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode in (0, 1), err[-2000:]
+    rep = json.loads(out)
+    desc = [d for d in rep["devices"].values() if d.get("name") == "voicecoil-audio"]
+    assert desc and desc[0]["device_name"] == "system" and desc[0]["callbacks"] > 0
+    t, y = loop.signal()
+    return rep, t, y
+
+
+def test_render_cli_plays_through_the_server(jack, loop, tmp_path):
+    """`hapticsdk render ... --device coil=voicecoil-audio` in a child process, the card
+    chosen by name in the user device configuration (privileged). S7's hardness (GS
+    0.16 N/mm) is below the arm's 2.3 N/mm, so the hardness renderer leaves the coil
+    silent: the stream runs on the server and the capture is silence. Hardness 1.0 (GS
+    above 2.3 N/mm) drives the coil at the formula (7) frequency the render reports:
+    the capture shows that frequency while the probe is in contact."""
+    from hapticsdk_hardness.audio_loopback import sine_fit
+    rep, t, y = _render_cli(jack, loop, tmp_path, "S7")
+    assert rep["renderers"]["hardness"]["coil_frequency_hz"] is None
+    assert t.size > 48000 and np.abs(y).max() == 0.0
+    rep, t, y = _render_cli(jack, loop, tmp_path, "--hardness", "1.0")
+    f_coil = rep["renderers"]["hardness"]["coil_frequency_hz"]
+    loud = np.nonzero(np.abs(y) > 1e-4)[0]
+    assert loud.size > 0.2 * 48000, "the coil was not heard"
+    f, a = sine_fit(t[loud[0]:loud[-1]], y[loud[0]:loud[-1]])
+    assert f == pytest.approx(f_coil, abs=0.5)
+
+
+class TestVoiceCoilAudioConformance(ActuatorConformance):
+    plugin_name = "voicecoil-audio"
+
+    @pytest.fixture
+    def actuator_factory(self, jack):
+        from hapticsdk_hardness.audio import VoiceCoilAudio
+        return lambda: VoiceCoilAudio(device="system")
+
+
+def test_sine_fit_on_silence_gaps_and_exact_zeros():
+    """The estimator of these measurements: exact for a sine with a gap of silence (a
+    dropout) and with samples that are exactly 0 (no division by zero)."""
+    from hapticsdk_hardness.audio_loopback import sine_fit
+    fs, f0 = 48000.0, 109.889
+    t = np.arange(int(fs)) / fs
+    y = 0.5 * np.sin(2 * np.pi * f0 * t)
+    y[20000:20400] = 0.0
+    y[20000:20400:2] = -0.0     # signed zeros, as a float32 silence can carry
+    f, a = sine_fit(t, y)
+    assert f == pytest.approx(f0, abs=0.01) and a == pytest.approx(0.5, rel=0.02)
+    assert np.isnan(sine_fit(t, np.zeros_like(t))[0])
