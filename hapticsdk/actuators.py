@@ -184,6 +184,119 @@ class DeviceState:
         return float(-self.position_mm[1])
 
 
+def _frozen3(a: float, b: float, c: float) -> np.ndarray:
+    out = np.array((a, b, c))
+    out.flags.writeable = False
+    return out
+
+
+class SensedState(DeviceState):
+    """A :class:`DeviceState` held as plain floats: what a backend's ``_read_state``
+    returns when it reads every servo tick (building three numpy arrays per read costs
+    more than the rest of the read).
+
+    Floats: ``t``, ``px, py, pz`` (mm), ``vx, vy, vz`` (mm/s), ``fx, fy, fz`` (N),
+    ``buttons``. The :class:`DeviceState` fields ``position_mm``, ``velocity_mm_s`` and
+    ``force_n`` are (3,) arrays built on first access and kept (read-only: a state is a
+    reading; assign a whole field to change it, which sets the floats). Code written for
+    :class:`DeviceState` (``st.position_mm[1]``, ``st.penetration_mm``, ``isinstance``)
+    keeps working.
+
+    ``SensedState(t, position_mm, velocity_mm_s, force_n=None, buttons=0)`` takes
+    :class:`DeviceState`'s arguments (sequences or arrays);
+    :meth:`of` takes the floats (the fast path); :meth:`from_state` converts any
+    :class:`DeviceState`.
+    """
+
+    __slots__ = ("t", "buttons", "px", "py", "pz", "vx", "vy", "vz", "fx", "fy", "fz", "_pos", "_vel", "_frc")
+
+    def __init__(self, t: float, position_mm: Any, velocity_mm_s: Any, force_n: Any = None,
+                 buttons: int = 0) -> None:
+        self.t = t
+        self.position_mm = position_mm
+        self.velocity_mm_s = velocity_mm_s
+        self.force_n = (0.0, 0.0, 0.0) if force_n is None else force_n
+        self.buttons = buttons
+
+    @classmethod
+    def of(cls, t: float, px: float, py: float, pz: float, vx: float, vy: float, vz: float,
+           fx: float = 0.0, fy: float = 0.0, fz: float = 0.0, buttons: int = 0) -> "SensedState":
+        """A state from plain floats (no array is built until a field is read)."""
+        st = cls.__new__(cls)
+        st.t = t
+        st.px = px
+        st.py = py
+        st.pz = pz
+        st.vx = vx
+        st.vy = vy
+        st.vz = vz
+        st.fx = fx
+        st.fy = fy
+        st.fz = fz
+        st.buttons = buttons
+        st._pos = st._vel = st._frc = None
+        return st
+
+    @classmethod
+    def from_state(cls, st: Any) -> "SensedState":
+        """``st`` (a :class:`DeviceState` or anything with its fields) as floats; a
+        :class:`SensedState` is returned as it is."""
+        if type(st) is cls:
+            return st
+        return cls(st.t, st.position_mm, st.velocity_mm_s, getattr(st, "force_n", None), getattr(st, "buttons", 0))
+
+    @property  # type: ignore[override]
+    def position_mm(self) -> np.ndarray:
+        a = self._pos
+        if a is None:
+            a = self._pos = _frozen3(self.px, self.py, self.pz)
+        return a
+
+    @position_mm.setter
+    def position_mm(self, v: Any) -> None:
+        self.px, self.py, self.pz = float(v[0]), float(v[1]), float(v[2])
+        self._pos = None
+
+    @property  # type: ignore[override]
+    def velocity_mm_s(self) -> np.ndarray:
+        a = self._vel
+        if a is None:
+            a = self._vel = _frozen3(self.vx, self.vy, self.vz)
+        return a
+
+    @velocity_mm_s.setter
+    def velocity_mm_s(self, v: Any) -> None:
+        self.vx, self.vy, self.vz = float(v[0]), float(v[1]), float(v[2])
+        self._vel = None
+
+    @property  # type: ignore[override]
+    def force_n(self) -> np.ndarray:
+        a = self._frc
+        if a is None:
+            a = self._frc = _frozen3(self.fx, self.fy, self.fz)
+        return a
+
+    @force_n.setter
+    def force_n(self, v: Any) -> None:
+        self.fx, self.fy, self.fz = float(v[0]), float(v[1]), float(v[2])
+        self._frc = None
+
+    @property
+    def penetration_mm(self) -> float:
+        """Depth below the surface y = 0 (mm); negative outside."""
+        return -self.py
+
+    @property
+    def speed_mm_s(self) -> float:
+        """|velocity| (mm/s)."""
+        return math.hypot(self.vx, self.vy, self.vz)
+
+    def __repr__(self) -> str:
+        return (f"SensedState(t={self.t!r}, position_mm=({self.px!r}, {self.py!r}, {self.pz!r}), "
+                f"velocity_mm_s=({self.vx!r}, {self.vy!r}, {self.vz!r}), "
+                f"force_n=({self.fx!r}, {self.fy!r}, {self.fz!r}), buttons={self.buttons!r})")
+
+
 class Actuator(ABC):
     """Base class of every actuator plugin.
 
@@ -494,7 +607,12 @@ class HapticDevice(Actuator):
         if not self._is_open:
             raise DeviceError("read on a closed device; call open() first", device=self.label)
         st = self._read_state()
-        if not (np.isfinite(st.position_mm).all() and np.isfinite(st.velocity_mm_s).all()):
+        if type(st) is SensedState:
+            ok = (_isfinite(st.px) and _isfinite(st.py) and _isfinite(st.pz) and _isfinite(st.vx)
+                  and _isfinite(st.vy) and _isfinite(st.vz))
+        else:
+            ok = np.isfinite(st.position_mm).all() and np.isfinite(st.velocity_mm_s).all()
+        if not ok:
             raise DeviceError("device reported a non-finite position or velocity", device=self.label)
         return st
 

@@ -380,7 +380,11 @@ class SafetyLayer:
 
     # -- helpers -----------------------------------------------------------
     def _speed(self) -> float:
-        return float(np.linalg.norm(np.asarray(self._state.velocity_mm_s, float)))
+        st = self._state
+        speed = getattr(st, "speed_mm_s", None)   # a SensedState: from its floats
+        if speed is not None:
+            return speed
+        return float(np.linalg.norm(np.asarray(st.velocity_mm_s, float)))
 
     def _penetration(self) -> float:
         st = self._state

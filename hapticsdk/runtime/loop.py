@@ -74,6 +74,7 @@ from __future__ import annotations
 import gc
 import logging
 import math
+import struct
 import sys
 import time
 from collections import deque
@@ -82,7 +83,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..actuators import Actuator, DeviceState, HapticDevice
+from ..actuators import Actuator, DeviceState, HapticDevice, SensedState
 from ..dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
@@ -111,6 +112,11 @@ SWITCH_RULES = ("passive", "cross-fade")
 DEFAULT_SWITCH_MAX_STEP_N = 0.1
 
 _UP = (0.0, 1.0, 0.0)
+
+#: the log ring's first columns; three per role follow (force_n, frequency_hz, amplitude),
+#: then compute, cpu, sim (s)
+_COLS = ("t", "dt", "pen", "obj", "f", "px", "py", "pz", "vx", "vy", "vz")
+_NCOL = len(_COLS)
 
 
 @dataclass
@@ -205,7 +211,7 @@ def _distinct(acts: Any) -> list:
 class _Slot:
     """Per-role bookkeeping."""
 
-    __slots__ = ("role", "act", "force", "pc", "log_f", "log_a", "log_n", "is_force", "pending")
+    __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd")
 
     def __init__(self, role: str, act: Actuator, is_force: bool) -> None:
         self.role = role
@@ -213,6 +219,11 @@ class _Slot:
         self.is_force = is_force
         self.pc: PassivityController | None = None
         self.pending: deque | None = None
+        #: first of this role's three log columns (force_n, frequency_hz, amplitude)
+        self.col = 0
+        #: the loop's command record of this role, reused every tick (the actuator keeps
+        #: only what its safety layer returns, a new record)
+        self.cmd = ChannelCommand(role, 0.0 if is_force else None, None, None if is_force else 0.0)
 
 
 class _Switch:
@@ -260,20 +271,18 @@ class _Obj:
         self.sw: _Switch | None = None
 
 
-class _ContactState:
+class _ContactState(SensedState):
     """The device state as the safety layers see it: with the penetration along the
     contact normal of the object under the probe (``DeviceState.penetration_mm`` is the
     version-1 ``-y``)."""
 
-    __slots__ = ("t", "position_mm", "velocity_mm_s", "force_n", "buttons", "penetration_mm")
+    __slots__ = ("penetration_mm",)
 
-    def __init__(self, st: DeviceState, pen: float) -> None:
-        self.t = st.t
-        self.position_mm = st.position_mm
-        self.velocity_mm_s = st.velocity_mm_s
-        self.force_n = st.force_n
-        self.buttons = st.buttons
-        self.penetration_mm = pen
+    @classmethod
+    def at(cls, st: SensedState, pen: float) -> "_ContactState":
+        c = cls.of(st.t, st.px, st.py, st.pz, st.vx, st.vy, st.vz, st.fx, st.fy, st.fz, st.buttons)
+        c.penetration_mm = pen
+        return c
 
 
 def _check_renderers(renderers: Sequence[DimensionRenderer], actuators: Mapping[str, Actuator],
@@ -600,9 +609,7 @@ class ServoLoop:
             if is_force and self.delay_ticks:
                 s.pending = deque([0.0] * self.delay_ticks)
             # every field the role was sent: force (N), frequency (Hz), amplitude
-            s.log_n = np.zeros(cap)
-            s.log_f = np.zeros(cap)
-            s.log_a = np.zeros(cap)
+            s.col = _NCOL + 3 * len(slots)
             slots.append(s)
         self._slots = slots
         self._by_role = {s.role: s for s in slots}
@@ -614,18 +621,25 @@ class ServoLoop:
         self._observers = [a.safety for a in _distinct(self.actuators.values())]
         self._n_max = n_max
         self._cap = cap
-        self._L = {k: np.zeros(cap) for k in ("t", "dt", "pen", "obj", "f", "compute", "cpu", "sim", "start")}
-        self._L_pos = np.zeros((cap, 3))
-        self._L_vel = np.zeros((cap, 3))
+        # the log ring: one row of float64 per tick (columns _COLS, then three per role),
+        # written with one struct.pack_into per tick (a numpy scalar store costs ~50 ns,
+        # and a tick logs ~25 values) plus three stores through a memoryview
+        ncol = _NCOL + 3 * len(slots) + 3
+        self._ncol = ncol
+        self._log = np.zeros((cap, ncol))
+        self._log_mv = memoryview(self._log.reshape(-1))
+        # every column but the last three (compute, cpu, sim: measured after the row is
+        # written), native byte order as numpy's float64
+        self._log_row = struct.Struct(f"={ncol - 3}d").pack_into
+        self._log_bytes = memoryview(self._log.reshape(-1).view(np.uint8))
         self._events = dict.fromkeys(EVENT_KEYS, 0)
         self._fault: dict[str, str] | None = None
         self._fault_exc: BaseException | None = None
-        self._last_pos = [0.0, 0.0, 0.0]
-        self._last_vel = np.zeros(3)
+        self._last_vel = [0.0, 0.0, 0.0]
         self._last_x = 0.0
         self._have_good = False
         self._vf0 = self._vf1 = self._vf2 = 0.0
-        self._good_state: DeviceState | None = None
+        self._good_state: SensedState | None = None
         self._cpu_cost_us = 2e6 * thread_cpu_clock_cost_s() if self.cpu_time else float("nan")
         self._max_compute = 0.0
         self._max_cpu = 0.0
@@ -713,8 +727,10 @@ class ServoLoop:
         T = self.period_s
         device = self.device
         perf = time.perf_counter
-        L = self._L
         i = k % self._cap
+        ncol = self._ncol
+        base = i * ncol
+        lm = self._log_mv
         events = self._events
         realtime = self.realtime
         if realtime:
@@ -733,7 +749,7 @@ class ServoLoop:
                 device.step(dt)
                 for a in self._stepped:
                     a.step(dt)
-                L["sim"][(k - 1) % self._cap] = perf() - s0
+                lm[((k - 1) % self._cap) * ncol + ncol - 1] = perf() - s0
             if k and dt > 1.5 * T:
                 self._missed += 1
         else:
@@ -743,7 +759,6 @@ class ServoLoop:
         cpu_time = self.cpu_time
         if cpu_time:
             q0 = time.thread_time_ns()
-        L["start"][i] = t
         if self._ops:
             self._apply_ops(t)
         # ---- 1. sense -------------------------------------------------
@@ -754,11 +769,12 @@ class ServoLoop:
             self._set_fault(exc if isinstance(exc, DeviceError) else DeviceError(
                 f"read failed: {type(exc).__name__}: {exc}", device=device.label), device.label)
             return False
-        pos = st.position_mm
-        vel = st.velocity_mm_s
+        if type(st) is not SensedState:
+            # a backend's DeviceState: its arrays read once, as floats
+            st = SensedState.from_state(st)
+        p0, p1, p2 = st.px, st.py, st.pz
+        v0, v1, v2 = st.vx, st.vy, st.vz
         bad = False
-        p0, p1, p2 = float(pos[0]), float(pos[1]), float(pos[2])
-        v0, v1, v2 = float(vel[0]), float(vel[1]), float(vel[2])
         max_pos = self.max_position_mm
         last_vel = self._last_vel
         if not (math.isfinite(p0 + p1 + p2) and math.isfinite(v0 + v1 + v2)):
@@ -770,20 +786,22 @@ class ServoLoop:
             bad = True
         elif self._have_good:
             lim = self.max_accel_mm_s2 * dt
-            if (abs(v0 - last_vel[0]) > lim or abs(v1 - last_vel[1]) > lim or abs(v2 - last_vel[2]) > lim):
+            l0, l1, l2 = last_vel
+            if abs(v0 - l0) > lim or abs(v1 - l1) > lim or abs(v2 - l2) > lim:
                 events["velocity_spike"] += 1
-                v0, v1, v2 = float(last_vel[0]), float(last_vel[1]), float(last_vel[2])
-                st = DeviceState(t=st.t, position_mm=pos, velocity_mm_s=last_vel.copy(),
-                                 force_n=st.force_n, buttons=st.buttons)
+                v0, v1, v2 = l0, l1, l2
+                st = SensedState.of(st.t, p0, p1, p2, l0, l1, l2, st.fx, st.fy, st.fz, st.buttons)
         if bad:
-            st = self._good_state if self._good_state is not None else DeviceState(
-                t=t, position_mm=np.array([0.0, max_pos, 0.0]), velocity_mm_s=np.zeros(3))
+            st = self._good_state if self._good_state is not None else SensedState.of(
+                t, 0.0, max_pos, 0.0, 0.0, 0.0, 0.0)
+            p0, p1, p2 = st.px, st.py, st.pz
+            v0, v1, v2 = st.vx, st.vy, st.vz
         else:
             self._have_good = True
             self._good_state = st
-            lp = self._last_pos
-            lp[0], lp[1], lp[2] = p0, p1, p2
-            last_vel[0], last_vel[1], last_vel[2] = v0, v1, v2
+            last_vel[0] = v0
+            last_vel[1] = v1
+            last_vel[2] = v2
         # ---- 2. hit test ------------------------------------------------
         ht = self.hit_tester
         direction = None
@@ -809,7 +827,7 @@ class ServoLoop:
             if 0 <= prev < len(self._objs) and self._objs[prev].sw is not None:
                 self._objs[prev].sw.end_contact()
             self.contact = contact
-        obs_state = st if (direction is None and ht is None) or bad else _ContactState(st, pen)
+        obs_state = st if (direction is None and ht is None) or bad else _ContactState.at(st, pen)
         for obs in self._observers:
             obs.observe(obs_state)
         # ---- 3. render ------------------------------------------------
@@ -820,20 +838,22 @@ class ServoLoop:
             if direction is None:
                 vin = st.velocity_mm_s
                 normal = _UP
+                w0, w1, w2 = v0, v1, v2
             else:
                 nx, ny, nz = direction
                 vn = v0 * nx + v1 * ny + v2 * nz
                 tx, ty, tz = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
-                vin = np.array([math.sqrt(tx * tx + ty * ty + tz * tz), vn, 0.0])
+                w0, w1, w2 = math.sqrt(tx * tx + ty * ty + tz * tz), vn, 0.0
+                vin = np.array((w0, w1, w2))
                 normal = direction
             if dt != self._vf_dt:   # the coefficient changes only with dt (realtime mode)
                 self._vf_dt = dt
                 self._vf_a = 1.0 - math.exp(-6.283185307179586 * self.velocity_filter_hz * dt)
                 self._v_step = self._vf_a * self.contact_hysteresis_mm / dt if dt > 0 else 0.0
             a = self._vf_a
-            f0 = self._vf0 = self._vf0 + a * (float(vin[0]) - self._vf0)
-            f1 = self._vf1 = self._vf1 + a * (float(vin[1]) - self._vf1)
-            f2 = self._vf2 = self._vf2 + a * (float(vin[2]) - self._vf2)
+            f0 = self._vf0 = self._vf0 + a * (w0 - self._vf0)
+            f1 = self._vf1 = self._vf1 + a * (w1 - self._vf1)
+            f2 = self._vf2 = self._vf2 + a * (w2 - self._vf2)
             # positional, in TickInput's field order (t, dt, penetration_mm, velocity_mm_s,
             # in_contact, normal, object, velocity_filtered_mm_s): a keyword call costs
             # ~0.3 us more at 1 kHz
@@ -858,9 +878,12 @@ class ServoLoop:
                     if s.pc is not None:
                         s.pc.reset()
             self._pc_obj = idx
-        sent: dict[str, ChannelCommand] = {}
+        recorder = self.recorder
+        sent: dict[str, ChannelCommand] | None = {} if recorder is not None else None
         f_sent = 0.0
+        row = []
         for s in self._slots:
+            cmd = s.cmd
             if s.is_force:
                 f = forces.get(s.role, 0.0)
                 if s.pending is not None:
@@ -868,14 +891,17 @@ class ServoLoop:
                     f = s.pending.popleft()
                 if s.pc is not None:
                     f = s.pc.step(x_n, dt, f)
-                # positional (role, force_n, frequency_hz, amplitude, direction)
-                cmd = ChannelCommand(s.role, f) if direction is None else ChannelCommand(
-                    s.role, f, None, None, direction)
+                # the role's own record, refilled (the actuator keeps only its safety
+                # layer's output)
+                cmd.force_n = f
+                cmd.direction = direction
             else:
-                cmd = vib.get(s.role)
-                if cmd is None:
+                c = vib.get(s.role)
+                if c is not None:
+                    cmd = c
+                else:
                     last = s.act.last_command
-                    cmd = ChannelCommand(s.role, frequency_hz=last.frequency_hz if last else None, amplitude=0.0)
+                    cmd.frequency_hz = last.frequency_hz if last is not None else None
             try:
                 out = s.act.command(cmd, now=t)
             except DeviceError as exc:
@@ -885,27 +911,22 @@ class ServoLoop:
                 self._set_fault(DeviceError(f"command rejected: {type(exc).__name__}: {exc}",
                                             device=s.act.label), s.act.label)
                 return False
-            sent[s.role] = out
+            fn, fr = out.force_n, out.frequency_hz
+            if sent is not None:
+                sent[s.role] = out
             if s.is_force:
                 if s.pc is not None:
-                    s.pc.commit(out.force_n if out.force_n is not None else 0.0)
-                f_sent = out.force_n or 0.0
-            fn, fr = out.force_n, out.frequency_hz
-            s.log_n[i] = fn if fn is not None else _NAN
-            s.log_f[i] = fr if fr is not None else _NAN
-            s.log_a[i] = out.amplitude or 0.0
-        L["f"][i] = f_sent
-        if self.recorder is not None:
+                    s.pc.commit(fn if fn is not None else 0.0)
+                f_sent = fn or 0.0
+            row.append(fn if fn is not None else _NAN)
+            row.append(fr if fr is not None else _NAN)
+            row.append(out.amplitude or 0.0)
+        if recorder is not None:
             try:
-                self.recorder.record(t, st, sent)
+                recorder.record(t, st, sent)
             except Exception:
                 events["renderer_error"] += 1
-        L["t"][i] = t
-        L["dt"][i] = dt
-        L["pen"][i] = pen
-        L["obj"][i] = idx
-        self._L_pos[i] = st.position_mm
-        self._L_vel[i] = st.velocity_mm_s
+        self._log_row(self._log_bytes, base * 8, t, dt, pen, idx, f_sent, p0, p1, p2, v0, v1, v2, *row)
         self.last_state = st
         self.last_penetration_mm = pen
         self.last_force_n = f_sent
@@ -913,12 +934,12 @@ class ServoLoop:
         self.last_index = idx
         if cpu_time:
             q = (time.thread_time_ns() - q0) * 1e-9
-            L["cpu"][i] = q
+            lm[base + ncol - 2] = q
             if q > self._max_cpu:
                 self._max_cpu = q
         c1 = perf()
         comp = c1 - c0
-        L["compute"][i] = comp
+        lm[base + ncol - 3] = comp
         self.last_compute_s = comp
         if comp > self._max_compute:
             self._max_compute = comp
@@ -945,7 +966,7 @@ class ServoLoop:
                 self._set_fault(exc, device.label)
                 self._k = k + 1
                 return False
-            L["sim"][i] = perf() - s0
+            lm[base + ncol - 1] = perf() - s0
         self._k = k + 1
         return self._k < self._n_max
 
@@ -1077,10 +1098,11 @@ class ServoLoop:
                     vib[c.role] = c
 
     def _window(self, a: np.ndarray, n: int) -> np.ndarray:
-        """The logged ticks of ``a``, oldest first (a copy)."""
+        """The logged ticks of ``a`` (a column or columns of the log ring), oldest first
+        (a contiguous copy)."""
         cap = self._cap
         if n <= cap:
-            return a[:n].copy()
+            return np.ascontiguousarray(a[:n])
         j = n % cap
         return np.concatenate([a[j:], a[:j]])
 
@@ -1131,13 +1153,14 @@ class ServoLoop:
                 events["passivity_active"] += rep["active_ticks"]
                 pas[s.role] = rep
         W = self._window
-        L = self._L
-        comp_w = W(L["compute"], n)
+        L = self._log
+        nc = self._ncol
+        comp_w = W(L[:, nc - 3], n)
         comp = tick_stats(comp_w)
         if n:
             comp["max_us"] = self._max_compute * 1e6
         if self.cpu_time:
-            cpu_w = W(L["cpu"], n)
+            cpu_w = W(L[:, nc - 2], n)
             cpu = tick_stats(cpu_w)
             if n:
                 cpu["max_us"] = self._max_cpu * 1e6
@@ -1147,19 +1170,19 @@ class ServoLoop:
             pre = {"preempted_ticks": None, "off_cpu_max_us": float("nan")}
         jit = None
         if self.realtime and n > 1:
-            jit = jitter_stats(np.diff(W(L["start"], n)), T)
+            jit = jitter_stats(np.diff(W(L[:, 0], n)), T)
             jit["missed_ticks_total"] = self._missed
-        log = {"t": W(L["t"], n), "dt": W(L["dt"], n), "penetration_mm": W(L["pen"], n),
-               "object": W(L["obj"], n).astype(np.int32),
-               "position_mm": W(self._L_pos, n), "velocity_mm_s": W(self._L_vel, n), "force_n": W(L["f"], n),
+        log = {"t": W(L[:, 0], n), "dt": W(L[:, 1], n), "penetration_mm": W(L[:, 2], n),
+               "object": W(L[:, 3], n).astype(np.int32),
+               "position_mm": W(L[:, 5:8], n), "velocity_mm_s": W(L[:, 8:11], n), "force_n": W(L[:, 4], n),
                "compute_s": comp_w}
         if self.cpu_time:
             log["compute_cpu_s"] = cpu_w
         for s in self._slots:   # every commanded field of every role
-            log[f"{s.role}.force_n"] = W(s.log_n, n)
-            log[f"{s.role}.frequency_hz"] = W(s.log_f, n)
-            log[f"{s.role}.amplitude"] = W(s.log_a, n)
-        sim_w = W(L["sim"], n)
+            log[f"{s.role}.force_n"] = W(L[:, s.col], n)
+            log[f"{s.role}.frequency_hz"] = W(L[:, s.col + 1], n)
+            log[f"{s.role}.amplitude"] = W(L[:, s.col + 2], n)
+        sim_w = W(L[:, nc - 1], n)
         sim_us = median(sim_w) * 1e6 if n else float("nan")
         return LoopReport(ticks=n, period_s=T, realtime=self.realtime, tick_median_us=comp["median_us"],
                           tick_p99_us=comp["p99_us"], tick_max_us=comp["max_us"], tick_p999_us=comp["p999_us"],

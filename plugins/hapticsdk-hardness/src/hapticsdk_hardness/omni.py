@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
 from hapticsdk.passivity import classify_wall, critical_stiffness
@@ -129,9 +129,8 @@ class OmniVirtual(HapticDevice):
         t = self.t
         x, _, vx, _ = self._at(t)
         z, vz = self.trajectory.z_at(t)  # (0, 0) for a 2-D trajectory
-        # positional (t, position_mm, velocity_mm_s, force_n): read every servo tick
-        return DeviceState(t, np.array([x, self._y_meas, z]), np.array([vx, self._v_est, vz]),
-                           np.array([0.0, self._f_applied, 0.0]))
+        # plain floats, read every servo tick (arrays are built only when a caller asks)
+        return SensedState.of(t, x, self._y_meas, z, vx, self._v_est, vz, 0.0, self._f_applied, 0.0)
 
     def _force_at(self, now: float) -> float:
         """Force along the simulated axis y (N): the command's force projected on y when
