@@ -30,6 +30,8 @@ from typing import Any
 from ..plugins import registry
 from ..runtime import ServoLoop
 from ..runtime.clock import MonotonicClock, RealtimeSettings
+from .reference import machine as machine_now
+from .reference import reference_lines, with_reference
 
 TICK_P99_US_LIMIT = 200.0
 TICK_MAX_US_LIMIT = 500.0
@@ -74,6 +76,7 @@ def run_timing(seconds: float = 60.0, *, realtime: bool = False, load: bool = Fa
         declared_rt_machine: judge the jitter limits (otherwise ``jitter_limits_met`` is None).
     """
     rt_settings = RealtimeSettings.coerce(rt)
+    before = machine_now()
     dev, renderers, actuators = build_scene(seconds, period_s)
     hog = _cpu_hog() if load else None
     try:
@@ -102,7 +105,7 @@ def run_timing(seconds: float = 60.0, *, realtime: bool = False, load: bool = Fa
                                "gc_freeze": rt_settings.gc_freeze, "mlockall": rt_settings.mlockall},
               "machine": {"python": platform.python_version(), "platform": platform.platform(),
                           "cpus": os.cpu_count()}})
-    return d
+    return with_reference(d, before)
 
 
 def _f(x: Any, fmt: str = ".1f") -> str:
@@ -146,6 +149,7 @@ def format_table(runs: list[dict[str, Any]]) -> str:
         lines.append(f"rt options ({mode}, load={'yes' if d['load'] else 'no'}): "
                      + "; ".join(f"{k} = {rt[k]}" for k in ("cpu_affinity", "rt_priority", "mlockall", "gc")
                                  if k in rt))
+    lines.extend(reference_lines(runs))
     if runs:
         lines.append(f"CPU-clock cost per tick: {_f(runs[0].get('cpu_clock_cost_us'), '.2f')} us; preempted = "
                      f"wall - CPU compute > {_f(runs[0].get('preempt_threshold_us'), '.0f')} us. The tick limits are "

@@ -211,7 +211,7 @@ def _distinct(acts: Any) -> list:
 class _Slot:
     """Per-role bookkeeping."""
 
-    __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd")
+    __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd", "log_n", "log_f", "log_a")
 
     def __init__(self, role: str, act: Actuator, is_force: bool) -> None:
         self.role = role
@@ -632,6 +632,9 @@ class ServoLoop:
         # written), native byte order as numpy's float64
         self._log_row = struct.Struct(f"={ncol - 3}d").pack_into
         self._log_bytes = memoryview(self._log.reshape(-1).view(np.uint8))
+        for s in slots:
+            # each role's columns as (cap,) views of the ring: what it was sent, by tick
+            s.log_n, s.log_f, s.log_a = (self._log[:, s.col + j] for j in range(3))
         self._events = dict.fromkeys(EVENT_KEYS, 0)
         self._fault: dict[str, str] | None = None
         self._fault_exc: BaseException | None = None
