@@ -2,7 +2,7 @@
 
 A sink has ``write(samples: np.ndarray)`` (float samples, full scale 1.0) and
 ``close()``. :func:`make_sink` builds one from a short spec: ``None``/``"buffer"``
-(in memory, the default), ``"wav:PATH"`` (16-bit mono WAV via the stdlib ``wave``
+(in memory, the last 60 s: :data:`BUFFER_KEEP_S`; the default), ``"wav:PATH"`` (16-bit mono WAV via the stdlib ``wave``
 module, written to a temporary file and renamed over PATH on close), a callable (called with each block), ``"sounddevice"`` (an audio output, needs
 the optional ``sounddevice`` package, imported only then), or any object with ``write``.
 """
@@ -18,6 +18,7 @@ from typing import Any, Callable
 import numpy as np
 
 from hapticsdk.errors import DeviceNotFoundError, FileWriteError, ValidationError
+from hapticsdk.sim.samples import SampleWindow
 
 
 def _umask() -> int:
@@ -27,28 +28,28 @@ def _umask() -> int:
 
 
 class BufferSink:
-    """Keeps every sample in memory; :meth:`samples` returns them as one array."""
+    """Keeps the newest samples in memory (at least ``keep_samples`` of them; None: every
+    sample); :meth:`samples` returns them as one array. ``n``: samples written."""
 
-    def __init__(self) -> None:
-        self._chunks: list[np.ndarray] = []
-        self.n = 0
+    def __init__(self, keep_samples: int | None = None) -> None:
+        self._window = SampleWindow(keep_samples)
+
+    @property
+    def n(self) -> int:
+        """Samples written since creation or :meth:`clear`."""
+        return self._window.total
 
     def write(self, samples: np.ndarray) -> None:
         """Keep a block of drive samples (-1..1)."""
-        if samples.size:
-            self._chunks.append(samples)
-            self.n += samples.size
+        self._window.append(samples)
 
     def samples(self) -> np.ndarray:
-        """Every sample kept so far, as one array."""
-        if len(self._chunks) > 1:
-            self._chunks = [np.concatenate(self._chunks)]
-        return self._chunks[0].copy() if self._chunks else np.zeros(0)
+        """The samples kept, oldest first, as one array."""
+        return self._window.samples()
 
     def clear(self) -> None:
         """Forget the samples kept."""
-        self._chunks.clear()
-        self.n = 0
+        self._window.clear()
 
     def close(self) -> None:
         """Nothing to release."""
@@ -182,10 +183,16 @@ class SoundDeviceSink:
         self._stream.close()
 
 
+#: seconds of waveform the default ``"buffer"`` sink keeps (as ``piezo-virtual``'s
+#: ``keep_s``): the memory of a live session does not grow with its length
+BUFFER_KEEP_S = 60.0
+
+
 def make_sink(spec: Any, fs: float) -> Any:
-    """Build a sink from ``spec`` (see the module doc)."""
+    """Build a sink from ``spec`` (see the module doc); ``"buffer"`` keeps the last
+    :data:`BUFFER_KEEP_S` seconds at ``fs``."""
     if spec is None or spec == "buffer":
-        return BufferSink()
+        return BufferSink(max(1, int(BUFFER_KEEP_S * fs)))
     if isinstance(spec, str):
         if spec.startswith("wav:"):
             return WavSink(spec[4:], fs)

@@ -19,6 +19,7 @@ import numpy as np
 from hapticsdk.actuators import Actuator, ActuatorLimits, DriveCapability
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
+from hapticsdk.sim.samples import SampleWindow
 from hapticsdk.synthesis import Oscillator
 
 from .drv2667 import FREQ_STEP_HZ, GAIN_FULL_SCALE_V, SYNTH_FREQ_RANGE_HZ, amplitude_code, frequency_code
@@ -83,13 +84,13 @@ class PiezoVirtual(Actuator):
         self.quantize = bool(quantize)
         self.keep_samples = int(keep_s * fs)
         self.osc = Oscillator(self.fs, ramp_s=self.ramp_s, max_amplitude=self.limits.max_amplitude)
-        self._blocks: list[np.ndarray] = []
+        #: the kept output (the last keep_s of it)
+        self._window = SampleWindow(max(1, self.keep_samples))
         #: (frequency Hz, amplitude V, samples) per command not yet synthesised: the servo
         #: tick only records the command (as a real DRV2667 host only writes registers);
         #: the waveform the chip would play is synthesised in :meth:`step` (the loop's
         #: simulation phase) or when it is read.
         self._pending: list[tuple[float, float, int]] = []
-        self._kept = 0
         self._frac = 0.0
         self._target_amp = 0.0
         self._freq = 0.0
@@ -114,11 +115,8 @@ class PiezoVirtual(Actuator):
     def _emit(self, block: np.ndarray) -> None:
         if block.size == 0:
             return
-        self._blocks.append(block)
-        self._kept += block.size
+        self._window.append(block)
         self.samples_total += block.size
-        while self._kept - self._blocks[0].size >= self.keep_samples and len(self._blocks) > 1:
-            self._kept -= self._blocks.pop(0).size
 
     def _command(self, cmd: ChannelCommand) -> None:
         f = cmd.frequency_hz
@@ -186,15 +184,14 @@ class PiezoVirtual(Actuator):
     def waveform(self) -> tuple[np.ndarray, np.ndarray]:
         """(t in s, drive voltage in V) of the kept samples."""
         self._flush()
-        v = np.concatenate(self._blocks) if self._blocks else np.zeros(0)
+        v = self._window.samples()
         start = self.samples_total - v.size
         return (start + np.arange(v.size)) / self.fs, v
 
     def clear_waveform(self) -> None:
         """Forget the recorded output waveform."""
         self._flush()
-        self._blocks.clear()
-        self._kept = 0
+        self._window.clear()
 
     def describe(self) -> dict[str, Any]:
         d = super().describe()
