@@ -854,6 +854,8 @@ class _BatchData:
         self.problem, self.method, self.keep_traces = problem, method, keep_traces
         self.m = problem.n_targets
         self._parts: list[dict[str, Any]] = []
+        self._cols: dict[str, np.ndarray] = {}
+        self._filled = 0
         self.nfev = 0
         self.nit = 0
         self.batch_trace: list[dict[str, Any]] = []
@@ -862,9 +864,18 @@ class _BatchData:
     def add(self, sub: SolveProblem, x: np.ndarray, out: SolverOutput, trace: Trace, t_offset: float) -> None:
         ev = sub.evaluate(x, details=True, per_constraint=True)
         per_c = ev["violations"]
-        part = {"x": x, "fun": ev["fitness"], "error": ev["error"], "violation": ev["violation"],
-                "intensities": ev["intensities"], "per_c": per_c, "message": out.message,
-                "n": len(x), "traces": None}
+        cols = {"x": x, "fun": ev["fitness"], "error": ev["error"], "violation": ev["violation"],
+                "intensities": ev["intensities"], "per_c": per_c}
+        # the answers go straight into arrays for the whole batch (allocated at the first
+        # chunk): no chunk is kept, and none is copied again at the end, so the memory of
+        # a batch is its answers plus one chunk's working set
+        if not self._parts:
+            self._cols = {k: np.empty((self.m, *np.shape(v)[1:]), np.asarray(v).dtype) for k, v in cols.items()}
+        a = self._filled
+        for k, v in cols.items():
+            self._cols[k][a:a + len(x)] = v
+        self._filled = a + len(x)
+        part = {"message": out.message, "n": len(x), "traces": None}
         if self.keep_traces and trace.times:
             part["traces"] = (np.array(trace.times), np.array(trace.nfev), np.array(trace.best_error).T,
                               np.array(trace.violation).T)
@@ -881,9 +892,9 @@ class _BatchData:
         self.elapsed = float(elapsed)
         parts = self._parts
         one = len(parts) == 1
-        cat = (lambda k: parts[0][k]) if one else (lambda k: np.concatenate([q[k] for q in parts]))
-        self.x, self.fun, self.error = cat("x"), cat("fun"), cat("error")
-        self.constraint_violation, self.intensities, self.per_c = cat("violation"), cat("intensities"), cat("per_c")
+        c = self._cols
+        self.x, self.fun, self.error = c["x"], c["fun"], c["error"]
+        self.constraint_violation, self.intensities, self.per_c = c["violation"], c["intensities"], c["per_c"]
         self.success = (self.error <= self.problem.tolerance) & (self.constraint_violation <= CONSTRAINT_TOL)
         self._part_of = None if one else np.repeat(np.arange(len(parts)), [q["n"] for q in parts])
         self._start = [0] if one else np.cumsum([0] + [q["n"] for q in parts]).tolist()
