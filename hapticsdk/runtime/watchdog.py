@@ -37,6 +37,9 @@ _log = logging.getLogger(__name__)
 
 #: longest wait between two retries of a failing safe-state write (s)
 RETRY_MAX_S = 1.0
+#: longest wait of :meth:`CommandWatchdog.stats` for the backend's lock (s): a holder
+#: longer than the watchdog's own retry bound is a stuck transport, not a write in progress
+STATS_LOCK_WAIT_S = RETRY_MAX_S
 
 
 class CommandWatchdog:
@@ -122,11 +125,20 @@ class CommandWatchdog:
         """Counters as a dict: the deadline (s), trips, stop failures, the last error and
         the ages (s) of the commands that tripped it.
         """
-        ages = self.trip_ages_s
-        return {"deadline_s": self.deadline_s, "trips": self.trips, "failures": self.failures,
-                "last_error": self.last_error,
-                "max_trip_age_s": max(ages) if ages else None,
-                "running": self._thread is not None and self._thread.is_alive()}
+        # read under the backend's lock: a trip (the safe-state write and its count) is one
+        # step for a reader, who never sees the actuator stopped with the trip not counted;
+        # a lock held for longer than a stats call should wait (a stuck transport) gives
+        # the values as they are
+        locked = self._lock.acquire(timeout=STATS_LOCK_WAIT_S)
+        try:
+            ages = list(self.trip_ages_s)
+            return {"deadline_s": self.deadline_s, "trips": self.trips, "failures": self.failures,
+                    "last_error": self.last_error,
+                    "max_trip_age_s": max(ages) if ages else None,
+                    "running": self._thread is not None and self._thread.is_alive()}
+        finally:
+            if locked:
+                self._lock.release()
 
     # ------------------------------------------------------------------------------
     def _run(self) -> None:

@@ -103,8 +103,13 @@ def test_renderer_error_is_counted_not_fatal():
     with Session(PAD, isolation="thread", trajectory=SLIDE_AND_HOLD, realtime=False) as s:
         # thread isolation: the servo's loop is in this process; give it a renderer that raises
         s._servo_holder[0].loop.set_renderers(0, [Raises()], 0.0)
-        assert _wait(lambda: s.state().renderer_errors > 10, 10.0)
-        assert any(e.kind == "renderer_error" for e in s.events())
+        # the servo publishes its events after its state: wait for both, as asserted
+        seen: list = []
+
+        def counted_and_reported():
+            seen.extend(s.events())
+            return s.state().renderer_errors > 10 and any(e.kind == "renderer_error" for e in seen)
+        assert _wait(counted_and_reported, 10.0)
         assert s.state().ticks > 0  # still running
 
 

@@ -146,6 +146,11 @@ def test_render_stops_the_piezo_on_each_signal(tmp_path):
             emu, proc = r["emu"], r["proc"]
             out, err = proc.communicate(timeout=30)
             name = r["signame"]
+            # the emulator reads the pty in its own thread: the last bytes the process
+            # wrote may land after it exited; wait for what is asserted below
+            t_end = time.monotonic() + 10.0
+            while time.monotonic() < t_end and not (not emu.drv.driving and emu.drv.standby):
+                time.sleep(0.005)
             assert not emu.drv.driving and emu.drv.standby, f"piezo still playing after {name}: {err[-500:]}"
             assert proc.returncode == r["code"], err[-800:]
             assert f"stopped by {name}" in err and "piezo-serial" in err and "no actuator" not in err

@@ -164,7 +164,9 @@ def test_stub_servo_loop_limits_state_force(stub_lib):
         sent = _hold(dev, 9.0, 0.02)
         assert sent.force_n == pytest.approx(3.3)                           # safety uses device limits
         assert _force(lib)[1] == pytest.approx(3.3)
-        time.sleep(0.1)                                                     # Python loop stalls:
+        t0 = time.monotonic()                                               # Python loop stalls:
+        while time.monotonic() - t0 < 10.0 and not (_force(lib)[1] == 0.0 and dev.watchdog_zeroed >= 1):
+            time.sleep(0.005)                                               # (waits for what it asserts)
         assert _force(lib)[1] == 0.0 and dev.watchdog_zeroed >= 1          # device-side watchdog
     assert lib.stub_scheduler_running() == 0 and _force(lib) == [0.0, 0.0, 0.0]
 

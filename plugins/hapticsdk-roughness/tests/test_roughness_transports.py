@@ -260,7 +260,9 @@ def test_serial_cable_pulled_mid_render(emus):
         _run_until_error(act)
     assert ei.value.device == act.label and emu.port in str(ei.value)
     assert act.fault is not None and not act.driving
-    time.sleep(0.2)                                               # bridge watchdog -> standby
+    t0 = time.monotonic()                                         # bridge watchdog -> standby
+    while time.monotonic() - t0 < 10.0 and not (not emu.drv.driving and emu.watchdog_trips >= 1):
+        time.sleep(0.005)                                         # (waits for what it asserts)
     assert not emu.drv.driving and emu.watchdog_trips >= 1
     act.close()
 

@@ -389,9 +389,9 @@ class SerialBridgeEmulator:
         if self.watchdog_s and time.monotonic() - self._last_rx > self.watchdog_s:
             for t in self.targets.values():
                 if not t.standby:
-                    with t.lock:
+                    with t.lock:     # counted before the standby is visible to a reader
+                        self.watchdog_trips += 1
                         t.regs[d.REG_CONTROL2] = d.CTRL2_STANDBY
-                    self.watchdog_trips += 1
             self._last_rx = time.monotonic()
 
     # -- firmware loop --------------------------------------------------------------
