@@ -26,7 +26,7 @@ import ctypes.util
 import importlib.util
 import os
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 #: optional Python modules -> what needs them
 OPTIONAL_MODULES: dict[str, str] = {
@@ -205,3 +205,8 @@ def format_report(rep: dict[str, Any]) -> str:
         lines.append(f"  CPUs {rt['cpus']}; servo pinned to: {rt['servo_cpu']}")
         lines.extend(f"  to get more: {h}" for h in rt["how_to_get_more"])
     return "\n".join(lines)
+
+
+if not TYPE_CHECKING:  # moved names, deprecated since 0.2 (a type checker sees only the new places)
+    from ._deprecation import moved_names
+    __getattr__ = moved_names(__name__, {"calibration_dir": "hapticsdk.calibration"})

@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 from .errors import ValidationError
 from .plugin_api import PLUGIN_API_VERSION, _parse_version
@@ -384,3 +384,8 @@ def validate_plan_dict(data: Any) -> None:
     """Validate a plan dict against ``schemas/plan.schema.json`` (errors name the JSON path)."""
     from .schemas_io import validate
     validate(data, "plan")
+
+
+if not TYPE_CHECKING:  # moved names, deprecated since 0.2 (a type checker sees only the new places)
+    from ._deprecation import moved_names
+    __getattr__ = moved_names(__name__, {"compile_scene": "hapticsdk.compiler", "api_compatible": "hapticsdk.plugin_api", "check_plugin_api": "hapticsdk.plugin_api"})

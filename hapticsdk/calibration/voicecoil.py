@@ -13,7 +13,7 @@ The calibration holds only for the amplifier gain and mounting it was measured w
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -171,3 +171,8 @@ class VoiceCoilCalibration:
                        amplifier_gain=data.get("amplifier_gain"), mounting=str(data.get("mounting") or ""))
         except (KeyError, TypeError, ValueError) as exc:
             raise CalibrationError(f"voice-coil calibration: bad or missing field ({exc})") from None
+
+
+if not TYPE_CHECKING:  # moved names, deprecated since 0.2 (a type checker sees only the new places)
+    from .._deprecation import moved_names
+    __getattr__ = moved_names(__name__, {"VoiceCoilFit": "hapticsdk.calibration.voicecoil_fit", "fit_voicecoil": "hapticsdk.calibration.voicecoil_fit"})

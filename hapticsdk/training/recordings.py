@@ -32,7 +32,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
@@ -432,3 +432,8 @@ def write_ratings(path: Path, ratings: Ratings) -> Path:
     validate_json(doc, "ratings.schema.json", source=str(path))
     from ..fileio import atomic_write_text
     return atomic_write_text(path, json.dumps(doc, indent=1) + "\n", verify=load_ratings)
+
+
+if not TYPE_CHECKING:  # moved names, deprecated since 0.2 (a type checker sees only the new places)
+    from .._deprecation import moved_names
+    __getattr__ = moved_names(__name__, {"schema_dir": "hapticsdk.schemas_io"})

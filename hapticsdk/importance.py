@@ -1,0 +1,5 @@
+"""Deprecated since 0.2: moved to :mod:`hapticsdk.compiler.importance` (removed in 0.3)."""
+
+from ._deprecation import moved_module
+
+__getattr__ = moved_module(__name__, "hapticsdk.compiler.importance", globals())

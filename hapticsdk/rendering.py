@@ -1,0 +1,6 @@
+"""Deprecated since 0.2: moved to :mod:`hapticsdk.runtime.render` (removed in 0.3)."""
+
+from ._deprecation import moved_module
+
+__getattr__ = moved_module(__name__, "hapticsdk.runtime.render", globals(),
+                           {"ConstantForceRenderer": "hapticsdk.runtime.replacements"})
