@@ -20,27 +20,43 @@ from __future__ import annotations
 from importlib import import_module
 from typing import TYPE_CHECKING, Any, Mapping
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 #: the plugin API range of the core's own plugins (probe-virtual, playback-virtual, the MLP
 #: model): this core's (hapticsdk.plugin_api.PLUGIN_API_VERSION)
 hapticsdk_api = ">=1.2,<2"
 
 if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load lazily
-    from .actuators import Actuator, HapticDevice, create_actuator
-    from .compiler import compile_scene
-    from .dimensions import PerceptionDimension
-    from .errors import HapticSDKError
-    from .features import Feature, FeatureSpace
-    from .materials import Material, load_library
-    from .models import PerceptionModel
-    from .plugins import list_plugins
-    from .problems import build_problem, get_solver, load_dimension, load_model, solve
-    from .runtime.render import RenderReport, render_plan
-    from .runtime.session import Session, session
-    from .scene import Scene, load_scene
-    from .solvers import BatchSolveResult, SolveProblem, SolveResult, Solver
+    # ``import x as x``: an explicit re-export, so ``mypy --strict`` accepts ``hs.solve``
+    from .actuators import Actuator as Actuator
+    from .actuators import HapticDevice as HapticDevice
+    from .actuators import create_actuator as create_actuator
+    from .compiler import compile_scene as compile_scene
+    from .dimensions import PerceptionDimension as PerceptionDimension
+    from .errors import HapticSDKError as HapticSDKError
+    from .features import Feature as Feature
+    from .features import FeatureSpace as FeatureSpace
+    from .materials import Material as Material
+    from .materials import load_library as load_library
+    from .models import PerceptionModel as PerceptionModel
+    from .plugins import list_plugins as list_plugins
+    from .problems import build_problem as build_problem
+    from .problems import get_solver as get_solver
+    from .problems import load_dimension as load_dimension
+    from .problems import load_model as load_model
+    from .problems import solve as solve
+    from .runtime.render import RenderReport as RenderReport
+    from .runtime.render import render_plan as render_plan
+    from .runtime.session import Session as Session
+    from .runtime.session import session as session
+    from .scene import Scene as Scene
+    from .scene import load_scene as load_scene
+    from .solvers import BatchSolveResult as BatchSolveResult
+    from .solvers import SolveProblem as SolveProblem
+    from .solvers import SolveResult as SolveResult
+    from .solvers import Solver as Solver
 
+#: name -> module it is loaded from on first use
 _LAZY = {
     "solve": "hapticsdk.problems",
     "build_problem": "hapticsdk.problems",
@@ -71,7 +87,39 @@ _LAZY = {
     "HapticSDKError": "hapticsdk.errors",
 }
 
-__all__ = sorted(_LAZY) + ["render", "__version__"]
+# a literal list (tools read it without running this file); a test checks it equals
+# the lazy table plus the names defined here
+__all__ = [
+    "Actuator",
+    "BatchSolveResult",
+    "Feature",
+    "FeatureSpace",
+    "HapticDevice",
+    "HapticSDKError",
+    "Material",
+    "PerceptionDimension",
+    "PerceptionModel",
+    "RenderReport",
+    "Scene",
+    "Session",
+    "SolveProblem",
+    "SolveResult",
+    "Solver",
+    "__version__",
+    "build_problem",
+    "compile_scene",
+    "create_actuator",
+    "get_solver",
+    "list_plugins",
+    "load_dimension",
+    "load_library",
+    "load_model",
+    "load_scene",
+    "render",
+    "render_plan",
+    "session",
+    "solve",
+]
 
 
 def __getattr__(name: str) -> Any:

@@ -15,6 +15,6 @@ Modules are imported lazily by the registry; importing this package imports noth
 """
 
 __all__ = ["__version__", "hapticsdk_api"]
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 #: plugin API range this distribution was built for (checked when a plugin is loaded)
 hapticsdk_api = ">=1.0,<2"

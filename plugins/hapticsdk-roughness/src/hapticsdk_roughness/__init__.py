@@ -12,6 +12,6 @@ never imports ``serial`` or ``usb`` (the hardware transports import them inside 
 ``open``/``check_available``).
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 #: plugin API range this distribution was built for (checked when a plugin is loaded)
 hapticsdk_api = ">=1.0,<2"
