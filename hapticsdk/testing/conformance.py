@@ -191,6 +191,8 @@ COMMAND_BUDGET = 0.25
 TICK_BUDGET = 0.25
 #: calls timed per timing rule (the fastest counts)
 TIMING_CALLS = 25
+#: wall time (s) a timing rule goes on sampling while the fastest call is over budget
+TIMING_WINDOW_S = 1.0
 #: relative tolerance of a read-back against its command, of full scale, where the
 #: actuator declares no resolution (float rounding of a unit conversion, not a drift)
 READBACK_RTOL = 1e-6
@@ -200,14 +202,28 @@ READBACK_RTOL = 1e-6
 FORCE_PLAUSIBILITY_FACTOR = 10.0
 
 
-def _fastest(fn: Callable[[], Any], n: int = TIMING_CALLS) -> float:
+def _fastest(fn: Callable[[], Any], n: int = TIMING_CALLS, budget_s: float | None = None) -> float:
+    """The fastest of ``n`` timed calls; while that is over ``budget_s``, calls go on for
+    up to ``TIMING_WINDOW_S`` of wall time: on a busy machine the fastest call is the
+    one that was not preempted, and a longer sample finds it (a call that is slow
+    every time stays slow)."""
     import time
     best = math.inf
-    for _ in range(n):
+    end = None
+    i = 0
+    while True:
         t0 = time.perf_counter()
         fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
+        t1 = time.perf_counter()
+        best = min(best, t1 - t0)
+        i += 1
+        if i < n:
+            continue
+        if budget_s is None or best <= budget_s:
+            return best
+        end = end if end is not None else t1 + TIMING_WINDOW_S
+        if t1 >= end:
+            return best
 
 
 def _finite(x: Any) -> bool:
@@ -725,9 +741,9 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                 state["t"] += KIT_PERIOD_S
                 a.command(cmds[state["i"] % len(cmds)], now=state["t"])
                 state["i"] += 1
-            best = _fastest(one)
+            best = _fastest(one, budget_s=COMMAND_BUDGET * KIT_PERIOD_S)
         assert best <= COMMAND_BUDGET * KIT_PERIOD_S, \
-            (f"command() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS}); a {KIT_PERIOD_S * 1e3:g} ms "
+            (f"command() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {COMMAND_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per actuator")
 
     rules: list[tuple[str, Callable[[], None]]] = [
@@ -1051,9 +1067,9 @@ def _dimension_rules(ctx: _Ctx) -> None:
         def one() -> None:
             r.tick(inputs[state["i"] % len(inputs)])
             state["i"] += 1
-        best = _fastest(one)
+        best = _fastest(one, budget_s=TICK_BUDGET * KIT_PERIOD_S)
         assert best <= TICK_BUDGET * KIT_PERIOD_S, \
-            (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS}); a {KIT_PERIOD_S * 1e3:g} ms "
+            (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per renderer")
 
     def r_cost() -> None:
