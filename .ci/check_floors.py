@@ -102,7 +102,7 @@ def problems(installed: bool = False) -> list[str]:
             try:
                 have = metadata.version(name)
             except metadata.PackageNotFoundError:
-                continue  # declared by an extra that requirements.txt does not install
+                continue  # declared by an extra that requirements-dev.txt does not install
             if Version(have) != Version(ver):
                 errs.append(f"{name}: installed {have}, floor {ver}")
     return errs

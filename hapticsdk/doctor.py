@@ -182,9 +182,10 @@ def format_report(rep: dict[str, Any]) -> str:
     missing: dict[str, list[str]] = {}
     for m in rep.get("missing_plugins", []):
         missing.setdefault(m["distribution"], []).append(f"{m['kind']} {m['name']}")
+    from .install_hints import pip_hint
     lines.append("first-party plugins:" + ("" if missing else " all installed"))
     for dist, what in sorted(missing.items()):
-        lines.append(f"  -- {dist} not installed (pip install {dist}): provides {', '.join(what)}")
+        lines.append(f"  -- {dist} not installed ({pip_hint(dist)}): provides {', '.join(what)}")
     lines.append("libraries:")
     for name, lib in rep["libraries"].items():
         lines.append(f"  {'ok ' if lib['found'] else '-- '}{name}: {lib['detail']}  [{lib['needed_by']}]")

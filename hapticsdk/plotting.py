@@ -1,4 +1,4 @@
-"""Figures (need the optional ``matplotlib``: ``pip install 'hapticsdk[plot]'``).
+"""Figures (need the optional ``matplotlib``: the ``plot`` extra, ``pip install -e '.[plot]'`` in a checkout).
 
 * :func:`plot_render`: a render's servo log -- normal force against penetration (every
   tick, the mean per penetration bin, the fitted slope and the target slope), the probe's
@@ -32,7 +32,8 @@ def _pyplot() -> Any:
     try:
         import matplotlib
     except ImportError:
-        raise HapticSDKError("plotting needs matplotlib: pip install 'hapticsdk[plot]'") from None
+        from .install_hints import pip_hint
+        raise HapticSDKError(f"plotting needs matplotlib: {pip_hint('hapticsdk', 'plot')}") from None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt

@@ -53,12 +53,14 @@ FIRST_PARTY: dict[str, dict[str, str]] = {
 
 
 def install_hint(kind: str, name: str) -> str:
-    """``"; install the distribution hapticsdk-X (pip install hapticsdk-X)"`` when ``name``
-    is a first-party plugin of ``kind`` that is not installed, else ``""``."""
+    """``"; it is provided by the distribution hapticsdk-X (pip install -e ...)"`` when
+    ``name`` is a first-party plugin of ``kind`` that is not installed, else ``""`` (the
+    command installs from where this SDK was installed: :mod:`hapticsdk.install_hints`)."""
+    from .install_hints import pip_hint
     dist = FIRST_PARTY.get(kind, {}).get(name)
     if dist is None or name in registry(kind):
         return ""
-    return f"; it is provided by the distribution {dist} (pip install {dist})"
+    return f"; it is provided by the distribution {dist} ({pip_hint(dist)})"
 
 
 def missing_first_party() -> list[dict[str, str]]:

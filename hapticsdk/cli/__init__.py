@@ -38,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"hapticsdk {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    bench = sub.add_parser("bench", help="benchmarks (solvers, stability, fidelity, timing)")
+    bench = sub.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCH")
     bench.set_defaults(func=missing_subcommand(bench, "BENCH"))
     parser.set_defaults(func=missing_subcommand(parser, "COMMAND"))
@@ -52,6 +52,12 @@ def build_parser() -> argparse.ArgumentParser:
             mod.register(sub)
         if hasattr(mod, "register_bench"):
             mod.register_bench(bench_sub)
+    # the benchmarks as registered, in both help texts (a list written by hand went stale)
+    benches = ", ".join(bench_sub.choices)
+    for choice in sub._choices_actions:  # noqa: SLF001 - argparse keeps the help lines here
+        if choice.dest == "bench":
+            choice.help = f"benchmarks, run by hand ({benches})"
+    bench.description = f"Benchmarks, run by hand: {benches}."
     _finish_help(parser, ())
     return parser
 
@@ -71,7 +77,8 @@ EXAMPLES: dict[str, str] = {
     "render": "hapticsdk render --hardness 0.8 --roughness 0.3 --seconds 2 --plot render.png",
     "plan": "hapticsdk plan examples/scenes/warm-and-rough.json --plot plan.png",
     "features": "hapticsdk features recordings/",
-    "train": "hapticsdk train hapticsdk/data/dataset --out model.onnx",
+    # {dataset}: the data set shipped in the package, wherever it was installed
+    "train": "hapticsdk train {dataset} --out model.onnx",
     "dataset": "hapticsdk dataset generate data/ --samples 23",
     "dataset generate": "hapticsdk dataset generate data/ --samples 23 --materials data/materials.json",
     "dataset growth": "hapticsdk dataset growth --sizes 23,46",
@@ -117,13 +124,32 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: {shown})"
 
 
+def _shipped_dataset() -> str:
+    """The shipped data set's folder as this installation has it (relative to the working
+    directory when below it), for examples that train on it."""
+    from pathlib import Path
+    folder = Path(__file__).resolve().parent.parent / "data" / "dataset"
+    try:
+        return str(folder.relative_to(Path.cwd().resolve()))
+    except (ValueError, OSError):
+        return str(folder)
+
+
+def example_text(command: str) -> str | None:
+    """The example shown in ``command``'s help (``EXAMPLES`` with its paths filled in)."""
+    example = EXAMPLES.get(command)
+    if example and "{dataset}" in example:
+        example = example.replace("{dataset}", _shipped_dataset())
+    return example
+
+
 def _finish_help(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> None:
     """Formatter, shared flag help and the example of every (sub)command."""
     parser.formatter_class = HelpFormatter
     for action in parser._actions:
         if not action.help and action.option_strings and action.option_strings[-1] in COMMON_HELP:
             action.help = COMMON_HELP[action.option_strings[-1]]
-    example = EXAMPLES.get(" ".join(path))
+    example = example_text(" ".join(path))
     if example and "Example:" not in (parser.epilog or ""):
         parser.epilog = ((parser.epilog + "\n\n") if parser.epilog else "") + f"Example:\n  {example}"
     for action in parser._actions:

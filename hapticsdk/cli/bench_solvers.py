@@ -49,7 +49,8 @@ def cmd_bench_solvers(args: Any) -> int:
         try:
             bench.plot(report, args.plot)
         except ImportError as exc:
-            print(f"hapticsdk: --plot needs matplotlib (pip install 'hapticsdk[plot]'): {exc}", file=sys.stderr)
+            from ..install_hints import pip_hint
+            print(f"hapticsdk: --plot needs matplotlib ({pip_hint('hapticsdk', 'plot')}): {exc}", file=sys.stderr)
             return 2
         report.setdefault("meta", {})["plot"] = args.plot
     if args.json:

@@ -71,7 +71,8 @@ def build_onnx(model: MLPModel, metadata: Mapping[str, str]):
         import onnx
         from onnx import TensorProto, helper, numpy_helper
     except ImportError as exc:  # pragma: no cover - depends on the [train] extra
-        raise ModelError("ONNX export needs the 'onnx' package (pip install hapticsdk[train])") from exc
+        from ..install_hints import pip_hint
+        raise ModelError(f"ONNX export needs the 'onnx' package ({pip_hint('hapticsdk', 'train')})") from exc
     d, k = model.n_features, model.n_outputs
     f32 = lambda a: np.ascontiguousarray(np.asarray(a, np.float32))  # noqa: E731
     span = model.x_max - model.x_min

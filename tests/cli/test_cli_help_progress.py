@@ -10,7 +10,7 @@ import re
 
 import pytest
 
-from hapticsdk.cli import EXAMPLES, build_parser, main
+from hapticsdk.cli import EXAMPLES, build_parser, example_text, main
 from hapticsdk.progress import Progress, shown
 
 
@@ -32,7 +32,7 @@ def test_every_flag_has_help_and_every_command_an_example():
     assert {" ".join(p) for p in commands} == set(EXAMPLES)
     for path, p in commands.items():
         text = p.format_help()
-        example = EXAMPLES[" ".join(path)]
+        example = example_text(" ".join(path))
         assert f"Example:\n  {example}" in text, path
         # the example runs this command (or one of its subcommands) with options it has
         words = example.split()

@@ -87,7 +87,7 @@ def test_render_malformed_scene_names_the_field(tmp_path, capsys):
 
 
 def test_plugin_materials_are_listed_and_rendered_by_name(capsys):
-    pytest.importorskip("hapticsdk_warmth", reason="the example plugin is part of requirements.txt")
+    pytest.importorskip("hapticsdk_warmth", reason="the example plugin is part of requirements-dev.txt")
     code, out = run_json(capsys, "materials", "--with-plugins", "--json")
     names = {m["name"]: m for m in out["materials"]}
     assert "S7" in names and names["warm-felt"]["source"].startswith("plugin")

@@ -69,14 +69,16 @@ def test_first_party_table_matches_the_plugins_entry_points():
 def test_registry_error_names_the_distribution(dist, kind, name):
     out = _run(dist, "load", kind, name)
     assert out.returncode == 0, out.stderr
-    assert f"pip install {dist}" in out.stdout, out.stdout
+    # run in the checkout: the hint is the checkout's own path, never the index name
+    assert f"pip install -e plugins/{dist}" in out.stdout, out.stdout
+    assert f"pip install {dist}" not in out.stdout
 
 
 def test_render_without_the_hardness_plugin_names_it():
     out = _run("hapticsdk-hardness", "cli", "render", "S7", "--seconds", "0.05")
     assert out.returncode == 2, (out.stdout, out.stderr)
     assert out.stderr.startswith("hapticsdk: error: ")
-    assert "pip install hapticsdk-hardness" in out.stderr, out.stderr
+    assert "pip install -e plugins/hapticsdk-hardness" in out.stderr, out.stderr
 
 
 def test_doctor_reports_missing_first_party_plugins():
@@ -85,6 +87,31 @@ def test_doctor_reports_missing_first_party_plugins():
     rep = json.loads(out.stdout)
     assert {m["distribution"] for m in rep["missing"]} == {"hapticsdk-hardness", "hapticsdk-ga"}
     assert {(m["kind"], m["name"]) for m in rep["missing"]} >= {("dimension", "hardness"), ("solver", "ga")}
-    assert "hapticsdk-hardness not installed (pip install hapticsdk-hardness)" in rep["text"]
+    assert "hapticsdk-hardness not installed (pip install -e plugins/hapticsdk-hardness)" in rep["text"]
     everything = _run("", "doctor")
     assert json.loads(everything.stdout)["missing"] == []
+
+
+def test_hints_follow_where_the_sdk_was_installed(monkeypatch, tmp_path):
+    from hapticsdk import install_hints as ih
+    monkeypatch.chdir(tmp_path)                       # outside the checkout: its full path
+    assert ih.pip_hint("hapticsdk-ga") == f"pip install -e {ROOT / 'plugins' / 'hapticsdk-ga'}"
+    assert ih.pip_hint("hapticsdk", "plot") == f"pip install -e '{ROOT}[plot]'"
+    assert ih.pip_hint("pyserial") == "pip install pyserial"   # on the index
+    monkeypatch.setattr(ih, "source_checkout", lambda: None)   # installed from a wheel
+    hint = ih.pip_hint("hapticsdk-roughness", "serial")
+    assert hint.startswith("pip install -e 'plugins/hapticsdk-roughness[serial]' in a hapticsdk source checkout")
+    assert "not on the package index" in hint
+
+
+def test_no_hint_names_a_first_party_distribution_as_an_index_package():
+    """``pip install hapticsdk-X`` (or ``hapticsdk[extra]``) typed as written would ask the
+    package index for a name that is not ours: no message of the SDK says it."""
+    import re
+    pattern = re.compile(r"pip install '?hapticsdk(-[a-z]+)?(\[|\b)(?!\.)")
+    offenders = []
+    for path in [*ROOT.glob("hapticsdk/**/*.py"), *ROOT.glob("plugins/*/src/**/*.py")]:
+        for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            if pattern.search(line):
+                offenders.append(f"{path.relative_to(ROOT)}:{n}: {line.strip()}")
+    assert not offenders, "\n".join(offenders)

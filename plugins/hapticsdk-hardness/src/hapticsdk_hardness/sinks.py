@@ -162,9 +162,11 @@ class SoundDeviceSink:
         try:
             import sounddevice  # noqa: PLC0415  (optional, imported lazily)
         except Exception as exc:  # ImportError or a missing PortAudio library (OSError)
+            from hapticsdk.install_hints import pip_hint
             raise DeviceNotFoundError(
                 f"audio output needs the optional 'sounddevice' package and PortAudio "
-                f"(pip install hapticsdk-hardness[audio]); import failed: {exc}",
+                f"({pip_hint('sounddevice')}, or {pip_hint('hapticsdk-hardness', 'audio')}); "
+                f"import failed: {exc}",
                 device="voicecoil-virtual") from exc
         self._stream = sounddevice.OutputStream(samplerate=fs, channels=1, dtype="float32", device=device)
         self._stream.start()

@@ -84,7 +84,7 @@ class SerialBridgeBus(I2CBus):
         except ImportError:
             raise DeviceNotFoundError(
                 f"pyserial is not installed (needed for port {self.port}); install it with "
-                "`pip install pyserial` or `pip install hapticsdk-roughness[serial]`", device=self.device) from None
+                "`pip install pyserial`", device=self.device) from None
         try:
             if "://" in self.port:
                 self.ser = serial.serial_for_url(self.port, baudrate=self.baudrate, timeout=self._poll_s,
