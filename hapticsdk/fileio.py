@@ -67,14 +67,17 @@ def _verify(verify: Callable[[Path], Any], tmp: str, name: str) -> None:
 
 
 def cache_dir() -> Path:
-    """The SDK's cache folder (amortised tables, model descriptions, validation memo):
-    ``$HAPTICSDK_CACHE_DIR``, else ``$XDG_CACHE_HOME/hapticsdk``, else
-    ``~/.cache/hapticsdk``. Not created here; writers create their sub-folder."""
+    """The SDK's cache folder (amortised tables, model descriptions, validation markers):
+    ``$HAPTICSDK_CACHE_DIR``, else the per-user cache folder of the platform
+    (``platformdirs``: ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk`` on Linux,
+    ``~/Library/Caches/hapticsdk`` on macOS, ``%LOCALAPPDATA%\\hapticsdk\\Cache`` on
+    Windows). Not created here; writers create their sub-folder. Its size is bounded
+    (:mod:`hapticsdk.cache`); ``hapticsdk cache clear`` empties it."""
     env = os.environ.get("HAPTICSDK_CACHE_DIR")
     if env:
         return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".cache") / "hapticsdk"
+    import platformdirs
+    return Path(platformdirs.user_cache_dir("hapticsdk", appauthor=False))
 
 
 def check_output_path(path: str | os.PathLike[str], *, field: str = "output", overwrite: bool = True) -> Path:
@@ -187,6 +190,9 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
             os.replace(tmp, target)
             ok = True
             _fsync_dir(parent)
+            if _in_cache(parent):
+                from .cache import prune
+                prune()
         except OSError as exc:
             raise FileWriteError(f"write failed, the old file is unchanged: {exc.strerror or exc}",
                                  field=name) from exc
@@ -194,6 +200,14 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
             if not ok:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
+
+
+def _in_cache(folder: Path) -> bool:
+    """Whether ``folder`` is in the cache folder (a write there may need a prune)."""
+    try:
+        return folder.resolve().is_relative_to(cache_dir().resolve())
+    except (OSError, ValueError):
+        return False
 
 
 def _umask() -> int:

@@ -19,7 +19,7 @@ from ..errors import HapticSDKError
 
 #: command modules, in help order
 COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_solvers", "bench_runtime",
-                   "interop", "live")
+                   "interop", "live", "cache")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -90,6 +90,9 @@ EXAMPLES: dict[str, str] = {
     "replay": "hapticsdk replay run.npz",
     "view": "hapticsdk view scene.json --seconds 30",
     "doctor": "hapticsdk doctor --json",
+    "cache": "hapticsdk cache info",
+    "cache info": "hapticsdk cache info --json",
+    "cache clear": "hapticsdk cache clear",
     "export": "hapticsdk export plan.json -o materials.hjif",
     "import": "hapticsdk import materials.hjif",
     "play": "hapticsdk play materials.hjif --seconds 2",

@@ -225,6 +225,7 @@ CASES = [
     ("voicecoil-confidence-1.5", ["calibrate", "voicecoil", "{answers_ok}", "--confidence", "1.5"], "--confidence"),
     ("answers-people-zero", ["calibrate", "answers", "{dir}/a.csv", "--people", "0"], "--people"),
     ("answers-seed-negative", ["calibrate", "answers", "{dir}/a.csv", "--seed", "-1"], "--seed"),
+    ("cache-unknown-action", ["cache", "frob"], "ACTION", "invalid choice"),
     ("bench-solvers-seeds-zero", ["bench", "solvers", "--seeds", "0"], "--seeds"),
     ("bench-timing-fifo-500", ["bench", "timing", "--fifo-priority", "500"], "--fifo-priority"),
     ("bench-timing-seconds-negative", ["bench", "timing", "--seconds", "-1"], "--seconds"),
