@@ -20,7 +20,7 @@ from __future__ import annotations
 from importlib import import_module
 from typing import TYPE_CHECKING, Any, Mapping
 
-__version__ = "0.2.0"
+from ._version import __version__
 
 #: the plugin API range of the core's own plugins (probe-virtual, playback-virtual, the MLP
 #: model): this core's (hapticsdk.plugin_api.PLUGIN_API_VERSION)

@@ -33,6 +33,13 @@ def moved_names(module: str, moved: Mapping[str, str]) -> Callable[[str], Any]:
     return __getattr__
 
 
+def moved_function(old: str, module: str, name: str) -> Any:
+    """Warn that ``old`` (a function or method) is replaced by ``module.name`` and return
+    the latter, found by name (a shim never imports a later stage)."""
+    _warn(old, f"{module}.{name}")
+    return getattr(import_module(module), name)
+
+
 def moved_module(old: str, new: str, namespace: dict[str, Any],
                  extra: Mapping[str, str] | None = None) -> Callable[[str], Any]:
     """Fill a shim module's ``namespace`` with the public names of ``new`` (warning once,

@@ -71,7 +71,7 @@ def stops_since(t0: float) -> list[tuple[str, float, bool]]:
 atexit.register(stop_all)
 
 #: Channel kinds an actuator can serve.
-CHANNELS = ("force", "vibration", "thermal", "friction", "other")
+from .channels import CHANNELS  # noqa: E402  (re-exported: hapticsdk.actuators.CHANNELS)
 
 
 @dataclass(frozen=True)

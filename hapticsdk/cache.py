@@ -1,6 +1,6 @@
-"""The cache folder's size bound, its contents and ``hapticsdk cache clear``.
+"""The per-user cache folder, its size bound and ``hapticsdk cache clear``.
 
-Everything in :func:`~hapticsdk.fileio.cache_dir` can be rebuilt: amortised solver tables
+Everything in :func:`cache_dir` (also :func:`hapticsdk.fileio.cache_dir`) can be rebuilt: amortised solver tables
 (``amortised/``, ~0.4-0.6 MB each, one per model and constraint set), model descriptions
 (``onnx-desc/``, ``onnx-chain/``, tens of kB) and validation markers (``validated/``,
 empty files, one per JSON file content that passed its schema).
@@ -21,7 +21,6 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-from .fileio import cache_dir
 
 #: default bound (MB): a few hundred amortised tables, far more than one user's
 #: models x constraint sets; a policy, overridden by ``HAPTICSDK_CACHE_MAX_MB``
@@ -33,6 +32,19 @@ TAG_NAME = "CACHEDIR.TAG"
 TAG_TEXT = ("Signature: 8a477f597d28d172789f06886806bc55\n"
             "# This file is a cache directory tag created by hapticsdk.\n"
             "# Its contents can be rebuilt; `hapticsdk cache clear` empties it.\n")
+
+
+def cache_dir() -> Path:
+    """The SDK's cache folder (amortised tables, model descriptions, validation markers):
+    ``$HAPTICSDK_CACHE_DIR``, else the per-user cache folder of the platform
+    (``platformdirs``: ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk`` on Linux,
+    ``~/Library/Caches/hapticsdk`` on macOS, ``%LOCALAPPDATA%\\hapticsdk\\Cache`` on
+    Windows). Not created here; writers create their sub-folder."""
+    env = os.environ.get("HAPTICSDK_CACHE_DIR")
+    if env:
+        return Path(env)
+    import platformdirs
+    return Path(platformdirs.user_cache_dir("hapticsdk", appauthor=False))
 
 
 def max_bytes() -> int:

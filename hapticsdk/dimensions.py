@@ -169,7 +169,7 @@ class RoleSpec:
     description: str = ""
 
     def __post_init__(self) -> None:
-        from .actuators import CHANNELS
+        from .channels import CHANNELS
         if self.channel not in CHANNELS:
             raise ValidationError(f"unknown channel {self.channel!r}; valid: {list(CHANNELS)}", field="role.channel")
         bad = [f for f in self.fields if f not in COMMAND_FIELDS]

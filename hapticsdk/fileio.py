@@ -38,6 +38,7 @@ import tempfile
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator
 
+from .cache import cache_dir, prune
 from .errors import FileWriteError
 
 __all__ = ["UnreadableWriteError", "cache_dir", "atomic_writer", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_savez",
@@ -64,20 +65,6 @@ def _verify(verify: Callable[[Path], Any], tmp: str, name: str) -> None:
         raise UnreadableWriteError(f"not written: the SDK could not read it back ({type(exc).__name__}: "
                                    f"{reason}); the old file is unchanged", field=name,
                                    reason=reason) from None
-
-
-def cache_dir() -> Path:
-    """The SDK's cache folder (amortised tables, model descriptions, validation markers):
-    ``$HAPTICSDK_CACHE_DIR``, else the per-user cache folder of the platform
-    (``platformdirs``: ``$XDG_CACHE_HOME/hapticsdk`` or ``~/.cache/hapticsdk`` on Linux,
-    ``~/Library/Caches/hapticsdk`` on macOS, ``%LOCALAPPDATA%\\hapticsdk\\Cache`` on
-    Windows). Not created here; writers create their sub-folder. Its size is bounded
-    (:mod:`hapticsdk.cache`); ``hapticsdk cache clear`` empties it."""
-    env = os.environ.get("HAPTICSDK_CACHE_DIR")
-    if env:
-        return Path(env)
-    import platformdirs
-    return Path(platformdirs.user_cache_dir("hapticsdk", appauthor=False))
 
 
 def check_output_path(path: str | os.PathLike[str], *, field: str = "output", overwrite: bool = True) -> Path:
@@ -191,7 +178,6 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
             ok = True
             _fsync_dir(parent)
             if _in_cache(parent):
-                from .cache import prune
                 prune()
         except OSError as exc:
             raise FileWriteError(f"write failed, the old file is unchanged: {exc.strerror or exc}",

@@ -121,7 +121,7 @@ def _plugin_entry(kind: str, name: str, stage: str) -> dict[str, Any]:
     try:
         info = registry(kind).info(name).to_dict()
     except PluginError:
-        from .. import __version__
+        from .._version import __version__
         from .importance import BUILTIN
         core = kind == "importance" and name in BUILTIN
         info = {"kind": kind, "name": name, "distribution": "hapticsdk" if core else None,

@@ -303,9 +303,11 @@ class Scene:
                 "settings": copy.deepcopy(self.settings)}
 
     def compile(self) -> "RenderPlan":
-        """Shortcut for :func:`hapticsdk.compiler.compile_scene`."""
-        from ..compiler import compile_scene
-        return compile_scene(self)
+        """Deprecated since 0.2 (removed in 0.3): use
+        :func:`hapticsdk.compiler.compile_scene` (a scene does not reach up to the
+        compiler, the next stage)."""
+        from .._deprecation import moved_function
+        return moved_function("hapticsdk.scene.Scene.compile", "hapticsdk.compiler", "compile_scene")(self)
 
 
 def load_scene(path: str | Path) -> Scene:

@@ -64,3 +64,12 @@ def test_current_names_do_not_warn():
         from hapticsdk.compiler import compile_scene  # noqa: F401
         from hapticsdk.runtime.render import render_plan  # noqa: F401
         from hapticsdk.scene import Scene  # noqa: F401
+
+
+def test_scene_compile_method_warns_and_compiles():
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.scene import Scene
+    scene = Scene.for_material({"hardness": 0.5}, seed=0)
+    with pytest.warns(DeprecationWarning, match=r"hapticsdk\.compiler\.compile_scene"):
+        plan = scene.compile()
+    assert plan.to_dict()["materials"].keys() == compile_scene(scene).to_dict()["materials"].keys()
