@@ -15,6 +15,7 @@ their outcome instead of raising.
 from __future__ import annotations
 
 import errno
+import functools
 import logging
 import os
 import platform
@@ -264,7 +265,7 @@ def apply_realtime(settings: RealtimeSettings) -> tuple[dict[str, str], Callable
                                               f"set {sorted(before)}")
                 else:
                     os.sched_setaffinity(0, {settings.cpu})
-                    undo.append(lambda b=before: os.sched_setaffinity(0, b))
+                    undo.append(functools.partial(os.sched_setaffinity, 0, before))
                     status["cpu_affinity"] = f"applied: cpu {settings.cpu} (was {sorted(before)})"
             except Exception as exc:  # never raise for an OS refusal
                 status["cpu_affinity"] = f"refused: {_os_error(exc)}"
@@ -296,7 +297,7 @@ def apply_realtime(settings: RealtimeSettings) -> tuple[dict[str, str], Callable
                             raise
                         prio = limit
                         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
-                    undo.append(lambda p=pol0, q=par0: os.sched_setscheduler(0, p, q))
+                    undo.append(functools.partial(os.sched_setscheduler, 0, pol0, par0))
                     status["rt_priority"] = f"applied: SCHED_FIFO {prio}" + (" (auto)" if auto else "")
             except Exception as exc:
                 hint = (" (needs CAP_SYS_NICE or RLIMIT_RTPRIO >= the priority)"

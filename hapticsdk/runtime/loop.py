@@ -396,7 +396,9 @@ class ServoLoop:
         self.recorder = recorder
         self.passivity = bool(passivity)
         self.raise_on_fault = bool(raise_on_fault)
-        self.clock = clock if clock is not None else (MonotonicClock() if realtime else None)
+        #: the pacing clock (now, wait_until, work): set when realtime, read only then
+        self.clock: Any = clock if clock is not None else (MonotonicClock() if realtime else None)
+        self._pc_obj: int = -2   # the object whose passivity controllers are active (-2: none)
         self.delay_ticks = int(delay_ticks)
         self.max_position_mm = float(max_position_mm)
         self.max_speed_mm_s = float(max_speed_mm_s)
@@ -660,7 +662,8 @@ class ServoLoop:
             gc.freeze()
             self._froze = True
         gc.disable()
-        rt_status, self._rt_restore = apply_realtime(self.rt)
+        applied, self._rt_restore = apply_realtime(self.rt)
+        rt_status: dict[str, Any] = dict(applied)
         rt_status["gc"] = (f"applied: {collected}frozen and disabled" if self._froze else
                            f"applied: {collected}disabled (freeze off)" if not self.rt.gc_freeze else
                            f"applied: {collected}disabled (gc.freeze unavailable)")
@@ -827,8 +830,9 @@ class ServoLoop:
         if contact != self.contact:
             events["contact_changes"] += 1
             prev = self.contact
-            if 0 <= prev < len(self._objs) and self._objs[prev].sw is not None:
-                self._objs[prev].sw.end_contact()
+            sw_prev = self._objs[prev].sw if 0 <= prev < len(self._objs) else None
+            if sw_prev is not None:
+                sw_prev.end_contact()
             self.contact = contact
         obs_state = st if (direction is None and ht is None) or bad else _ContactState.at(st, pen)
         for obs in self._observers:
@@ -1153,7 +1157,7 @@ class ServoLoop:
         for s in self._slots:
             if s.pc is not None:
                 rep = s.pc.report()
-                events["passivity_active"] += rep["active_ticks"]
+                events["passivity_active"] += int(rep["active_ticks"])
                 pas[s.role] = rep
         W = self._window
         L = self._log
@@ -1167,7 +1171,7 @@ class ServoLoop:
             cpu = tick_stats(cpu_w)
             if n:
                 cpu["max_us"] = self._max_cpu * 1e6
-            pre = preemption_stats(comp_w, cpu_w)
+            pre: dict[str, Any] = preemption_stats(comp_w, cpu_w)
         else:
             cpu = tick_stats(np.zeros(0))
             pre = {"preempted_ticks": None, "off_cpu_max_us": float("nan")}
@@ -1209,7 +1213,8 @@ class ServoLoop:
         except BaseException:
             # the tick already stopped every actuator; restore GC / OS options / recorder
             try:
-                self._running and self._finish_quietly()
+                if self._running:
+                    self._finish_quietly()
             finally:
                 raise
         return self.finish()

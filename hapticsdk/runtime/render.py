@@ -109,7 +109,7 @@ def _jsonable(o: Any) -> Any:
 
 def _accepts(cls: type, kw: str) -> bool:
     try:
-        params = inspect.signature(cls.__init__).parameters
+        params = inspect.signature(getattr(cls, "__init__")).parameters
     except (TypeError, ValueError):
         return False
     return kw in params or any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()
@@ -281,9 +281,10 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
                 pm.call_safely("hapticsdk_device_fault", device=exc.device or "", error=exc)
             raise
         wall = time.perf_counter() - t0
-        if pm is not None and getattr(lr, "fault", None):
-            pm.call_safely("hapticsdk_device_fault", device=str(lr.fault.get("device", "")),
-                           error=DeviceError(str(lr.fault.get("message", "")), device=lr.fault.get("device")))
+        lr_fault = getattr(lr, "fault", None)
+        if pm is not None and lr_fault:
+            pm.call_safely("hapticsdk_device_fault", device=str(lr_fault.get("device", "")),
+                           error=DeviceError(str(lr_fault.get("message", "")), device=lr_fault.get("device")))
         everyone = list(instances.values()) + ([device] if device not in instances.values() else [])
         safety = {a.label: a.safety.report() for a in everyone}
         devices = {a.label: a.describe() for a in everyone}   # as the run left them, before the stop
@@ -301,7 +302,7 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         tick_p99_us=_num(getattr(lr, "tick_p99_us", None)),
         overruns=int(lr.overruns) if getattr(lr, "overruns", None) is not None else None,
         fault=None if fault is None else (dict(fault) if isinstance(fault, Mapping) else {"message": str(fault)}),
-        renderers={(getattr(r, "replaces", None) and f"replacement:{r.replaces}") or d: r.describe()
+        renderers={(f"replacement:{rep}" if (rep := getattr(r, "replaces", None)) else d): r.describe()
                    for d, r in zip(list(mp.dimensions) + [x.dimension for x in mp.replacements], renderers)},
         safety=safety, devices=devices, hooks=used_dists if hooks else [], loop=lr, ticks=_ticks(lr),
         features=dict(mp.features), dropped=[d.to_dict() for d in mp.dropped], solve=dict(mp.solve),

@@ -94,6 +94,10 @@ from ..fileio import check_output_path
 
 _log = logging.getLogger(__name__)
 
+#: the slots viewed as float64 (``memoryview.cast("d")``; typeshed types a memoryview's
+#: items as int whatever its format, so the view is typed loosely)
+Slots = Any
+
 ISOLATIONS = ("process", "thread")
 
 # -- shared-memory layout (float64 slots) ----------------------------------------------
@@ -282,6 +286,9 @@ class _Buffer:
 
     def __init__(self, shared: bool) -> None:
         size = _NSLOTS * 8
+        self.shm: Any
+        self.name: str | None
+        self.mv: Slots
         if shared:
             from multiprocessing import shared_memory
             self.shm = shared_memory.SharedMemory(create=True, size=size)
@@ -326,14 +333,16 @@ def _grow_pipe(conn: Any) -> None:
         pass
 
 
-def _attach(name: str) -> tuple[Any, memoryview]:
+def _attach(name: str) -> tuple[Any, Slots]:
     """Attach the application's segment. A spawned child shares the application's
     resource tracker, so its registration is the same entry: the application's
     ``close()`` unlinks it, and if the application is killed the tracker unlinks it when
     both processes are gone."""
     from multiprocessing import shared_memory
     shm = shared_memory.SharedMemory(name=name)
-    return shm, shm.buf.cast("d")
+    buf = shm.buf
+    assert buf is not None  # an attached segment has its buffer until close()
+    return shm, buf.cast("d")
 
 
 # =====================================================================================
@@ -522,7 +531,7 @@ class _Servo:
     control thread this replaced woke on every command and built the renderers beside
     the servo thread, competing with it for the lock)."""
 
-    def __init__(self, spec: dict[str, Any], mv: memoryview, cmd_conn: Any, thread_mode: bool) -> None:
+    def __init__(self, spec: dict[str, Any], mv: Slots, cmd_conn: Any, thread_mode: bool) -> None:
         self.spec = spec
         self.mv = mv
         self.cmd_conn = cmd_conn
@@ -540,7 +549,7 @@ class _Servo:
         self.stopped_labels: list[str] = []
         self.pools = "not limited (thread isolation: the application's process)"
         # commands
-        self._reader: _CommandReader | None = None
+        self._reader: _CommandReader = None  # type: ignore[assignment]  # set in start(), before any serve()
         self._queue: Any = None
         self._job: Any = None
         self._job_est = 0.0
@@ -1091,11 +1100,12 @@ class _Servo:
 
 
 def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_conn: Any,
-                local_mv: memoryview | None = None, holder: list | None = None) -> None:
+                local_mv: Slots | None = None, holder: list | None = None) -> None:
     """Entry point of the servo (process or thread)."""
     from .signals import SafeStop, safe_stop_on_signals
     thread_mode = local_mv is not None
     shm = None
+    mv: Slots
     if thread_mode:
         mv = local_mv
     else:
@@ -1326,7 +1336,7 @@ class Session:
         self._build_lock = threading.Lock()
         #: tables sent to the servo: id -> (the table, its key); see _prebuilt
         self._tables_sent: dict[int, tuple[Any, int]] = {}
-        self._buf = _Buffer(shared=isolation == "process")
+        self._buf: _Buffer | None = _Buffer(shared=isolation == "process")
         self._mv = self._buf.mv
         self._bytes = self._buf.bytes
         self._mv[_HEARTBEAT] = time.monotonic()
