@@ -97,7 +97,7 @@ def discover_devices(classes: dict[str, type], backends: dict[str, dict[str, Any
         if not backends[name]["available"]:
             continue
         try:
-            for dev in cls.discover() or []:
+            for dev in getattr(cls, "discover")() or []:
                 item = {"backend": name}
                 item.update(dev)
                 devices.append(item)
@@ -193,8 +193,8 @@ def format_report(rep: dict[str, Any]) -> str:
     for c in rep["calibrations"]:
         tag = " GENERATED" if c.get("generated") else ""
         where = c.get("backend") or c.get("scope") or c.get("path", "")
-        what = c.get("source") or (f"skipped {c.get('path') or ''}: {c['error']}" if c.get("error") else "")
-        lines.append(f"  {c.get('kind') or 'unreadable'} [{where}]{tag}: {what}")
+        detail = c.get("source") or (f"skipped {c.get('path') or ''}: {c['error']}" if c.get("error") else "")
+        lines.append(f"  {c.get('kind') or 'unreadable'} [{where}]{tag}: {detail}")
     rt = rep.get("realtime")
     if rt:
         rk = rt["realtimekit"]

@@ -715,7 +715,7 @@ class PassivityController:
             if g < 0.0 and f_wall != 0.0 and abs(v_raw) * 1e3 > s.velocity_deadband_mm_s:
                 amax = s.max_damping_ns_per_m
                 if boost:
-                    a_e = (s.entry_force_limit_n - f) / abs(v_raw)
+                    a_e = (s.entry_force_limit_n - f) / abs(v_raw)  # type: ignore[operator]  # boost: a limit is set
                     if a_e > amax:
                         amax = a_e
                 alpha = -g / (dt * v_raw * v_raw)
@@ -947,7 +947,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: fl
         lo = np.minimum(prev - step, hard)  # a cut below the one-tick cap is never delayed
         hi = prev + step
         if s.entry_force_limit_n is not None:
-            he = s.entry_force_limit_n
+            he: float | np.ndarray = s.entry_force_limit_n
             if s.entry_force_step_n is not None:
                 he = np.minimum(he, prev + s.entry_force_step_n)
             hi = np.where(boost, np.maximum(hi, he), hi)

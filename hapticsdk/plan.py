@@ -354,7 +354,7 @@ def feature_ranges(mp: "MaterialPlan") -> dict[str, tuple[float, float]]:
                 continue
             try:
                 from .problems import load_model
-                for f in load_model(name).feature_space:
+                for f in load_model(name).feature_space or ():
                     widen(f.name, float(f.lower), float(f.upper))
             except HapticSDKError:
                 continue

@@ -4,20 +4,24 @@ quantile function imports it, about 10 ms of each command's start-up."""
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Sequence, overload
 
 import numpy as np
 
 __all__ = ["percentile", "median"]
 
 
+@overload
+def percentile(a: "np.ndarray | Sequence[float]", q: float) -> float: ...
+@overload
+def percentile(a: "np.ndarray | Sequence[float]", q: Sequence[float]) -> list[float]: ...
 def percentile(a: "np.ndarray | Sequence[float]", q: "float | Sequence[float]") -> "float | list[float]":
     """The ``q``-th percentile(s) (0..100) of the values in ``a`` (flattened), linear
     interpolation between the closest ranks; NaN when ``a`` holds a NaN. A scalar ``q``
     gives a float, a sequence a list. Raises ``ValueError`` for an empty ``a`` or ``q``
     outside [0, 100]."""
     v = np.sort(np.asarray(a, float).ravel())
-    qs = [float(q)] if np.ndim(q) == 0 else [float(x) for x in q]  # type: ignore[union-attr]
+    qs = [float(q)] if np.ndim(q) == 0 else [float(x) for x in q]  # type: ignore[union-attr, arg-type]
     if v.size == 0:
         raise ValueError("percentile of an empty sample")
     if not all(0.0 <= x <= 100.0 for x in qs):

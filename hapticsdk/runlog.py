@@ -39,7 +39,7 @@ import datetime as _dt
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar, Mapping, cast
 
 import numpy as np
 
@@ -248,12 +248,12 @@ class RunLog:
         """The command applied to ``role`` on tick ``i`` (fields ``None`` where not sent)."""
         cols = self.commands[role]
         vals = {f: (None if np.isnan(cols[f][i]) else float(cols[f][i])) for f in _CMD_FIELDS}
-        return ChannelCommand(role, **vals)
+        return ChannelCommand(role, **cast("dict[str, Any]", vals))
 
     def save(self, path: str | Path) -> Path:
         """Write the run as ``.npz`` (arrays + ``header_json``)."""
         p = Path(path)
-        arrays: dict[str, np.ndarray] = {
+        arrays: dict[str, Any] = {
             "t": self.t, "state_t": self.state_t, "position_mm": self.position_mm,
             "velocity_mm_s": self.velocity_mm_s, "device_force_n": self.device_force_n,
             "buttons": self.buttons,

@@ -79,7 +79,7 @@ def run_fidelity(periods: tuple[float, ...] = PERIODS_S, *, progress: Any = None
     dur = traj.duration_s
     hard = dims.load("hardness")()
     have_rough = "roughness" in dims
-    rough = dims.load("roughness")() if have_rough else None
+    rough: Any = dims.load("roughness")() if have_rough else None
     role = "vibration" if have_rough else "coil"
     # reference frequencies on the fine grid: the renderer at 40 kHz with exact kinematics
     fine_t = np.arange(int(dur / FINE_S)) * FINE_S

@@ -382,7 +382,7 @@ def peer_lbfgsb(p: SolveProblem, i: int, seed: int, starts: int = 8, gens: int |
     span = hi - lo
     rng = np.random.default_rng(seed)
     best, best_f = None, np.inf
-    for _ in range(starts):
+    for _start in range(starts):
         u0 = rng.random(len(lo))
         r = minimize(lambda u: float(f((lo + u * span)[None])[0]), u0, method="L-BFGS-B",
                      bounds=[(0.0, 1.0)] * len(lo),

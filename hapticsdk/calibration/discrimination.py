@@ -135,7 +135,8 @@ class DiscriminationAnswers:
                     cols[j].append(float(r[k]))
             except (ValueError, IndexError):
                 raise CalibrationError(f"{p}: line {i}: bad row {r!r}") from None
-        return cls(person=np.asarray(cols[0]).astype(int), frequency_hz=cols[1], spring_n_per_mm=cols[2],
+        return cls(person=np.asarray(cols[0]).astype(int), frequency_hz=np.asarray(cols[1]),
+                   spring_n_per_mm=np.asarray(cols[2]),
                    spring_stiffer=np.asarray(cols[3]).astype(int),
                    generated=any("GENERATED" in c for c in comments), source="; ".join(comments) or str(p))
 

@@ -104,7 +104,7 @@ class PiezoTable:
         w = (f - f0) / (f1 - f0)
         return (1 - w) * self.acceleration[i] + w * self.acceleration[i + 1]
 
-    def _curve(self, f_hz: float, row: np.ndarray | None = None):
+    def _curve(self, f_hz: float, row: np.ndarray | None = None) -> Any:
         """Acceleration over voltage at ``f_hz`` (``row``: its :meth:`_row`, if known): a
         cubic spline when it is strictly increasing between every pair of measured
         voltages (checked exactly on the derivative), else PCHIP (monotone by construction)."""

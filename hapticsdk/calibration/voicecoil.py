@@ -13,7 +13,7 @@ The calibration holds only for the amplifier gain and mounting it was measured w
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
@@ -162,10 +162,11 @@ class VoiceCoilCalibration:
             raise CalibrationError("not a voice-coil calibration (kind must be 'voicecoil')")
         try:
             ci = data.get("confidence_intervals")
-            return cls(coefficients=tuple(float(v) for v in data["coefficients"]),
-                       frequency_range_hz=tuple(float(v) for v in data["frequency_range_hz"]),
+            return cls(coefficients=cast("tuple[float, float, float]", tuple(float(v) for v in data["coefficients"])),
+                       frequency_range_hz=cast("tuple[float, float]",
+                                               tuple(float(v) for v in data["frequency_range_hz"])),
                        source=str(data.get("source", "")),
-                       confidence_intervals=tuple(tuple(float(v) for v in c) for c in ci) if ci else None,
+                       confidence_intervals=cast(Any, tuple(tuple(float(v) for v in c) for c in ci)) if ci else None,
                        extra=dict(data.get("extra") or {}), serial=data.get("serial"),
                        generated=bool(data.get("generated", False)),
                        amplifier_gain=data.get("amplifier_gain"), mounting=str(data.get("mounting") or ""))

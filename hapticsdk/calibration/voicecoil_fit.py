@@ -12,7 +12,7 @@ Imports run one way: ``voicecoil_fit`` -> ``discrimination`` -> ``voicecoil``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -114,11 +114,11 @@ def fit_voicecoil(answers: Any, *, confidence: float = 0.95, frequency_range_hz:
              "chi2_reduced": chi2_red, "n_answers": len(answers), "confidence": confidence}
     cal, ok, msg = None, True, "fitted"
     try:
-        cal = VoiceCoilCalibration(coefficients=tuple(float(c) for c in coef), frequency_range_hz=rng,
+        cal = VoiceCoilCalibration(coefficients=cast(Any, tuple(float(c) for c in coef)), frequency_range_hz=rng,
                                    source=src, confidence_intervals=ci, extra=extra, serial=serial,
                                    generated=answers.generated, amplifier_gain=amplifier_gain, mounting=mounting)
     except CalibrationError as exc:
         ok, msg = False, f"fitted curve unusable: {exc}"
-    return VoiceCoilFit(success=ok, message=msg, coefficients=tuple(float(c) for c in coef),
-                        stderr=tuple(float(s) for s in stderr), confidence_intervals=ci, confidence=confidence,
+    return VoiceCoilFit(success=ok, message=msg, coefficients=cast(Any, tuple(float(c) for c in coef)),
+                        stderr=cast(Any, tuple(float(s) for s in stderr)), confidence_intervals=ci, confidence=confidence,
                         levels=levels, chi2_reduced=chi2_red, calibration=cal, generated=answers.generated)

@@ -13,7 +13,7 @@ import importlib
 import json
 import logging
 import sys
-from typing import NoReturn, Sequence
+from typing import Callable, NoReturn, Sequence
 
 from ..errors import HapticSDKError
 
@@ -161,7 +161,7 @@ def _finish_help(parser: argparse.ArgumentParser, path: tuple[str, ...]) -> None
                 _finish_help(sub, path + (name,))
 
 
-def missing_subcommand(p: argparse.ArgumentParser, what: str):
+def missing_subcommand(p: argparse.ArgumentParser, what: str) -> Callable[[argparse.Namespace], int]:
     """Handler of a command group run without its subcommand: the group's help and
     ``hapticsdk: error: <WHAT>: ...`` on stderr, exit status 2."""
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Callable
 
 __all__ = ["nonneg_int", "positive_int", "finite_float", "positive_float", "nonneg_float", "unit_interval",
            "open_unit_interval", "int_list", "intensity", "bounded_int", "serial", "figure_file"]
@@ -78,7 +79,7 @@ def positive_int(text: str) -> int:
     return v
 
 
-def bounded_int(lo: int, hi: int):
+def bounded_int(lo: int, hi: int) -> Callable[[str], int]:
     """A type accepting whole numbers in ``lo..hi`` (inclusive)."""
 
     def check(text: str) -> int:

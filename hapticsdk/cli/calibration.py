@@ -162,7 +162,7 @@ def cmd_piezo(args: argparse.Namespace) -> int:
             if ok and a > 0:
                 errs.append(abs(table.acceleration_at(f, v) - a) / a)
     saved = _save(args, table)
-    out = {"kind": "piezo", "serial": table.serial, "generated": table.generated, "source": table.source,
+    out: dict[str, Any] = {"kind": "piezo", "serial": table.serial, "generated": table.generated, "source": table.source,
            "frequency_range_hz": list(table.frequency_range_hz),
            "voltage_range_v": [float(table.voltages_v[0]), float(table.voltages_v[-1])],
            "acceleration_range_m_s2": [float(table.acceleration.min()), float(table.acceleration.max())],
@@ -204,14 +204,14 @@ def cmd_list(args: argparse.Namespace) -> int:
 
     from ..argcheck import serial_number
 
-    serials: dict[str, str] = {}
+    serials: dict[str, str | None] = {}
     for item in args.serial:
         kind, sep, value = item.partition("=")
         if not sep or not value:
             raise ValidationError(f"expected KIND=SERIAL, got {item!r}", field="--serial")
         serials[kind] = serial_number(value, "--serial")
     directory = args.dir or calibration_dir()
-    out = {"directory": str(directory),
+    out: dict[str, Any] = {"directory": str(directory),
            "files": [e.to_dict() for e in list_calibrations(directory)],
            "in_use": calibrations_in_use(serials, directory=directory)}
     if args.json:

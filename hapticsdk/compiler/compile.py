@@ -119,7 +119,7 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
 def _plugin_entry(kind: str, name: str, stage: str) -> dict[str, Any]:
     from ..plugins import registry
     try:
-        info = registry(kind).info(name).to_dict()
+        info: dict[str, Any] = registry(kind).info(name).to_dict()
     except PluginError:
         from .._version import __version__
         from .importance import BUILTIN
@@ -452,7 +452,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     #    the target; else the solved features), with the importance model's own uncertainty
     #    (hapticsdk.compiler.importance.judge_material): no solver seed or search design enters
     imp_cfg = settings["importance"]
-    imp_model = None
+    imp_model: Any = None
     drops: dict[str, list[Any]] = {m.name: [] for m in mats}
     estimates: dict[str, dict[str, Any]] = {m.name: {} for m in mats}
     imp_features: dict[str, dict[str, float]] = {m.name: {} for m in mats}
@@ -504,8 +504,8 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     used_actuators: set[str] = set()
     plans: dict[str, MaterialPlan] = {}
     for m in mats:
-        gone = [e.dimension for e in drops[m.name]]
-        kept = [d for d in m.targets if d not in gone]
+        gone_dims = [e.dimension for e in drops[m.name]]
+        kept = [d for d in m.targets if d not in gone_dims]
         r = final[m.name]
         read = {f.name for d in kept for f in dim_objs[d].features}
         feats = {k: float(v) for k, v in r.x_dict.items() if k in read}
@@ -583,9 +583,9 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                 actuators[role] = spec.actuator
                 _check_role(owner, role, rspec, spec.actuator, contracts)
                 options[role] = dict(spec.options)
-        used_dims |= set(kept) | set(gone)
+        used_dims |= set(kept) | set(gone_dims)
         used_actuators |= set(actuators.values())
-        dists = {d: registry("dimension").distribution_of(d) for d in list(kept) + gone}
+        dists = {d: registry("dimension").distribution_of(d) for d in list(kept) + gone_dims}
         models = model_names or sorted({dim_objs[d].default_model for d in (kept or m.targets)})
         plans[m.name] = MaterialPlan(
             name=m.name, targets=dict(m.targets), dimensions=kept, dropped=dropped,

@@ -3,8 +3,6 @@ wall-clock and on-CPU compute time per tick, preempted ticks, period jitter."""
 
 from __future__ import annotations
 
-from typing import cast
-
 import numpy as np
 
 from ..quantiles import percentile
@@ -14,7 +12,7 @@ def _summary(us: np.ndarray) -> tuple[float, float, float, float]:
     """p50, p99, p99.9 and max of ``us`` (NaN when empty)."""
     if us.size == 0:
         return (float("nan"),) * 4
-    p50, p99, p999 = cast("list[float]", percentile(us, [50, 99, 99.9]))
+    p50, p99, p999 = percentile(us, [50, 99, 99.9])
     return float(p50), float(p99), float(p999), float(us.max())
 
 

@@ -41,7 +41,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence, cast
 
 import numpy as np
 
@@ -50,7 +50,7 @@ from ..dimensions import ChannelCommand, Constraint, DimensionRenderer, Percepti
 from ..errors import DeviceError, PluginError, ValidationError
 from ..features import Feature, FeatureSpace
 from ..models import PerceptionModel
-from ..solvers import SolveProblem, Solver
+from ..solvers import SolveProblem, SolveResult, Solver
 
 
 @dataclass(frozen=True)
@@ -289,13 +289,13 @@ class _Spy:
         def _stop() -> None:
             self.stops += 1
             stop()
-        act._command = _command  # type: ignore[method-assign]
+        act._command = _command  # type: ignore[method-assign, assignment]
         act._stop = _stop  # type: ignore[method-assign]
 
 
 def _drive(act: Actuator, cmds: Sequence[ChannelCommand], dt: float = 0.001) -> list[Any]:
     """Send commands 1 ms apart (stepping simulated devices); return states or sent commands."""
-    out = []
+    out: list[Any] = []
     t = 0.0
     for c in cmds:
         t += dt
@@ -496,7 +496,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             for attr in ("force_n", "frequency_hz", "amplitude"):
                 for bad in (float("nan"), float("inf")):
                     try:
-                        a.command(ChannelCommand(a.channel, **{attr: bad}))
+                        a.command(ChannelCommand(a.channel, **cast("dict[str, Any]", {attr: bad})))
                     except ValidationError:
                         continue
                     raise AssertionError(f"{attr}={bad} was accepted")
@@ -735,7 +735,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         a = ctx.make()
         with a:
             cmds = _normal_commands(a)
-            state = {"t": 0.0, "i": 0}
+            state: dict[str, Any] = {"t": 0.0, "i": 0}
 
             def one() -> None:
                 state["t"] += KIT_PERIOD_S
@@ -1251,7 +1251,7 @@ def reference_problem(targets: Any = (0.4, 0.75), *, constrained: bool = True, t
     ``d2 = 0.75`` needs ``b = 3c``, feasible)."""
     m = ReferenceModel()
     return SolveProblem(targets=np.asarray(targets, float), dimensions=("d1", "d2"), model=m,
-                        space=m.feature_space, constraints=(_RefConstraint(),) if constrained else (),
+                        space=cast(FeatureSpace, m.feature_space), constraints=(_RefConstraint(),) if constrained else (),
                         penalty="normalised", tolerance=tolerance)
 
 
@@ -1276,7 +1276,7 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
 
     def r_solves() -> None:
         s = make()
-        res = s.solve(reference_problem(), seed=0)
+        res = cast(SolveResult, s.solve(reference_problem(), seed=0))
         assert np.shape(res.x) == (3,), f"x has shape {np.shape(res.x)}, expected (3,)"
         p = reference_problem()
         assert p.space.contains(res.x).all(), f"x {res.x} outside the feature bounds"

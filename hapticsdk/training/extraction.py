@@ -71,7 +71,7 @@ class TrialFeatures:
 
 
 @lru_cache(maxsize=8)
-def _filters(fs: float):
+def _filters(fs: float) -> tuple[Any, Any]:
     lp = signal.butter(FILTER_ORDER, LP_HZ, btype="lowpass", fs=fs, output="sos")
     hp = signal.butter(FILTER_ORDER, HP_HZ, btype="highpass", fs=fs, output="sos")
     return lp, hp

@@ -83,7 +83,7 @@ def metrics_dict(y: np.ndarray, yhat: np.ndarray, dims: Sequence[str]) -> dict[s
 
 
 # ----------------------------------------------------------------------------- network
-def _unpack(theta: np.ndarray, d: int, H: int, k: int):
+def _unpack(theta: np.ndarray, d: int, H: int, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     i = 0
     W1 = theta[i: i + H * d].reshape(H, d); i += H * d
     b1 = theta[i: i + H]; i += H
@@ -294,7 +294,7 @@ def _rows(groups: np.ndarray, names: Sequence[str]) -> np.ndarray:
     return np.flatnonzero(np.isin(groups, list(names)))
 
 
-def train(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], feature_names: Sequence[str],
+def train(X: np.ndarray, Y: np.ndarray, groups: Sequence[str] | np.ndarray, feature_names: Sequence[str],
           dimension_names: Sequence[str], cfg: TrainConfig = TrainConfig(), *,
           progress: Any = None) -> TrainResult:
     """Train the perception model on trial rows ``X (n, d)`` with targets ``Y (n, k)`` (0..1).
@@ -333,7 +333,7 @@ def train(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], feature_names: Se
     return TrainResult(model, split, metrics, net.fit, net.restart, cfg)
 
 
-def cross_validate(X: np.ndarray, Y: np.ndarray, groups: Sequence[str], dimension_names: Sequence[str],
+def cross_validate(X: np.ndarray, Y: np.ndarray, groups: Sequence[str] | np.ndarray, dimension_names: Sequence[str],
                    cfg: TrainConfig, *, progress: Any = None) -> dict[str, dict[str, float]]:
     """Grouped k-fold CV: each fold of samples is predicted by a model trained without it.
 

@@ -65,7 +65,7 @@ def build_metadata(space: FeatureSpace, dimensions: Sequence[str], *, feature_de
     }
 
 
-def build_onnx(model: MLPModel, metadata: Mapping[str, str]):
+def build_onnx(model: MLPModel, metadata: Mapping[str, str]) -> Any:
     """The ``onnx.ModelProto`` of ``model`` with ``metadata`` attached."""
     try:
         import onnx

@@ -243,7 +243,7 @@ def constraint_context(X: np.ndarray) -> dict[str, float]:
     return {"press_force_min_n": float(f.min()), "press_force_max_n": float(f.max())}
 
 
-def train_dataset(path: Path | str, out: Path | str | None, cfg=None, *,
+def train_dataset(path: Path | str, out: Path | str | None, cfg: Any = None, *,
                   progress: Any = None) -> tuple[dict, Any]:
     """Train on a data set, export ONNX to ``out`` and return (report, TrainResult).
 
@@ -317,7 +317,7 @@ def write_materials(table: TrainingTable, path: Path | str) -> Path:
 
 
 # --------------------------------------------------------------------------- growth
-def data_growth(sizes: Sequence[int] = (23, 46, 92), *, seed: int | None = None, cfg=None) -> list[dict]:
+def data_growth(sizes: Sequence[int] = (23, 46, 92), *, seed: int | None = None, cfg: Any = None) -> list[dict]:
     """Train on generated sets of ``sizes`` samples; test and CV metrics per size."""
     from . import generator as gen, lm
 

@@ -113,7 +113,8 @@ def write_trial_file(path: Path, cols: Mapping[str, np.ndarray]) -> None:
         read_trial_file(tmp, suffix=path.suffix)
 
     if path.suffix == ".npz":
-        atomic_savez(path, verify=check, **{c: np.asarray(cols[c]) for c in COLUMNS})
+        arrays: dict[str, Any] = {c: np.asarray(cols[c]) for c in COLUMNS}
+        atomic_savez(path, verify=check, **arrays)
     elif path.suffix == ".csv":
         n = len(cols["time_s"])
         num = np.column_stack([np.asarray(cols[c], float) for c in NUMERIC_COLUMNS])
