@@ -7,7 +7,7 @@ name says ``u`` (unit coordinates, ``u = (x - lower) / span``, 0 for a degenerat
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -123,6 +123,10 @@ def violation_from(problem: SolveProblem, S: np.ndarray, G: np.ndarray) -> np.nd
     return v
 
 
+@overload
+def check_int(opts: dict, key: str, lo: int, hi: int | None = None, *, allow_none: Literal[False] = False) -> int: ...
+@overload
+def check_int(opts: dict, key: str, lo: int, hi: int | None = None, *, allow_none: bool) -> int | None: ...
 def check_int(opts: dict, key: str, lo: int, hi: int | None = None, *, allow_none: bool = False) -> int | None:
     v = opts[key]
     if v is None and allow_none:

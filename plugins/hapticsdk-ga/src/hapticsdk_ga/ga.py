@@ -205,7 +205,7 @@ def ga_generation(pop: np.ndarray, fit: np.ndarray, lower: np.ndarray, span: np.
     else:
         out = np.empty_like(pop)
         u = rng.random((r, n_u))
-        bufs = (None, None, None)
+        bufs = (None, None, None)  # type: ignore[assignment]  # fresh arrays per call
     if elite:
         flat_pop.take(order_flat[:, :elite], axis=0, out=out[:, :elite], mode="clip")
     winners = _rank_select(order_flat, u[:, :n_sel], tournament)

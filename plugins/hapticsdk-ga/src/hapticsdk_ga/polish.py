@@ -439,7 +439,7 @@ class PolishSolver(Solver):
         uni = rng.random((m, n_starts + rescue, problem.n_features))
         X0, nfev0 = self._starts(problem, rng, trace, n_starts, start, uni[:, :n_starts])
         rows = np.repeat(np.arange(m), n_starts)
-        lm = dict(max_iter=max_iter, goal=goal, damping=damping, margin=margin, weight=weight, clock=clock,
+        lm: dict[str, Any] = dict(max_iter=max_iter, goal=goal, damping=damping, margin=margin, weight=weight, clock=clock,
                   ftol=ftol, patience=check_int(o, "patience", 1, MAX_ITER), per_target=True,
                   settle=float(problem.tolerance))
         X, err, viol, it, nfev = levenberg_marquardt(

@@ -169,7 +169,8 @@ def _description(data: bytes, where: str) -> _Description:
     try:
         from hapticsdk.fileio import atomic_savez
         path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_savez(path, compressed=False, **desc.to_arrays())
+        arrays: dict[str, Any] = desc.to_arrays()
+        atomic_savez(path, compressed=False, **arrays)
     except Exception as exc:   # a read-only cache folder: the model still loads
         import logging
         logging.getLogger(__name__).info("could not cache the model description at %s: %s", path, exc)
