@@ -216,7 +216,8 @@ class OmniVirtual(HapticDevice):
         not change the label.
         """
         K = self.limits.max_stiffness_n_per_mm if stiffness_n_per_mm is None else stiffness_n_per_mm
-        out = classify_wall(K, self.arm.damping_ns_per_m, period_s, delay_ticks, virtual_damping_ns_per_m)
+        out = classify_wall(K, self.arm.damping_ns_per_m,  # type: ignore[arg-type]  # the Omni declares K
+                            period_s, delay_ticks, virtual_damping_ns_per_m)
         out["critical_stiffness_mass_corrected_n_per_mm"] = critical_stiffness(
             self.arm.damping_ns_per_m, period_s, delay_ticks, virtual_damping_ns_per_m, mass_kg=self.arm.mass_kg)
         out["source_damping"] = OMNI_SOURCES["damping_ns_per_m"]

@@ -313,7 +313,7 @@ class OmniOpenHaptics(HapticDevice):
         try:
             lib, h = self.lib, self.handle
             lib.hdBeginFrame(h)
-            vals = {}
+            vals: dict[str, Any] = {}
             for key, enum in (("max_force_n", HD_NOMINAL_MAX_FORCE),
                               ("max_continuous_force_n", HD_NOMINAL_MAX_CONTINUOUS_FORCE),
                               ("max_stiffness_n_per_mm", HD_NOMINAL_MAX_STIFFNESS)):
