@@ -158,7 +158,7 @@ class DeviceBandConstraint(Constraint):
         if side not in ("low", "high"):
             raise ValidationError(f"side must be 'low' or 'high', got {side!r}", field="side")
         self.bound_hz, self.side, self.actuator = float(bound_hz), side, actuator
-        self.name = f"roughness.device-band-{side}"
+        self.name = f"roughness.device-band-{side}"  # type: ignore[misc]  # one name per side
 
     def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         f = np.asarray(cols["Fpeak"], float)

@@ -12,7 +12,7 @@ DRV2667 synthesis codes, like the real backends do.
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 
@@ -75,7 +75,8 @@ class PiezoVirtual(Actuator):
         if ramp_s < 0.005:
             raise ValidationError(f"ramp_s {ramp_s} s < 5 ms would click", field="options.ramp_s")
         from hapticsdk.budgets import check_sample_rate  # at most 384 kHz (a named ceiling)
-        fs = check_sample_rate(fs, "fs", at_least_hz=2 * self.limits.frequency_range_hz[1])
+        top_hz = cast("tuple[float, float]", self.limits.frequency_range_hz)[1]   # piezo_limits sets it
+        fs = check_sample_rate(fs, "fs", at_least_hz=2 * top_hz)
         super().__init__(**options)
         self.gain = int(gain)
         self.fs = float(fs)
