@@ -151,11 +151,12 @@ class AhapPattern:
 
     def _index(self, parameter: str) -> tuple[list[float], list[AhapControl]]:
         key = ("_idx", parameter)
-        cached = self.__dict__.get(key)
+        memo: dict[Any, Any] = self.__dict__   # keyed by tuples, never an attribute name
+        cached = memo.get(key)
         if cached is None:
             ctrls = sorted((c for c in self.controls if c.parameter == parameter), key=lambda c: c.start_s)
             cached = ([c.start_s for c in ctrls], ctrls)
-            self.__dict__[key] = cached
+            memo[key] = cached
         return cached
 
     def change_times(self) -> tuple[list[float], set[float]]:

@@ -277,7 +277,7 @@ def _reading(kfs: list[dict[str, Any]], key: str, x: float, default: float | Non
     one counts as position 0) at or after ``x`` in file order,
     interpolated with the keyframe before it in file order; after the last, the last
     keyframe's value; ``default`` without any."""
-    have = [(k.get("relative_position"), _num(k.get(key))) for k in kfs]
+    have: list[tuple[Any, Any]] = [(k.get("relative_position"), _num(k.get(key))) for k in kfs]
     if key == "frequency_modulation":  # the reference's frequency search takes no position as 0
         have = [(0 if p is None else p, v) for p, v in have]
     idx = [i for i, (_, v) in enumerate(have) if v is not None]
