@@ -492,7 +492,8 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
                        f"{ref['max_us']:8.1f}  {ref['missed_tick_rate'] * 100:6.2f} %  (a loop doing nothing else, "
                        f"same load, right after)")
     for r in rows:
-        h, w, rec = r.get("switch_handle_ms"), r.get("switch_handle_wait_ms"), r.get("recording") or {}
+        h, rec = r.get("switch_handle_ms"), r.get("recording") or {}
+        w: Any = r.get("switch_handle_wait_ms")
         parts = []
         if h and h.get("n"):
             parts.append(f"switch handle {h['p50']:.2f}/{h['max']:.2f} ms p50/max (wait returns after "

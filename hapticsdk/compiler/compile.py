@@ -363,7 +363,7 @@ def _check_commands(d: str, rend: Any, dim: Any) -> None:
     except Exception:   # noqa: BLE001 - the render path reports a failing tick, naming it
         return
     for c in cmds or ():
-        spec = specs.get(getattr(c, "role", None))
+        spec: Any = specs.get(getattr(c, "role", ""))
         extra = undeclared_fields(c, spec) if spec is not None else []
         if extra:
             raise PluginError(f"dimension {d!r}: its renderer sets {extra} on role {c.role!r}, which is declared "

@@ -313,7 +313,7 @@ def apply_realtime(settings: RealtimeSettings) -> tuple[dict[str, str], Callable
                         # RealtimeKit sets SCHED_RESET_ON_FORK, which an unprivileged thread
                         # may not clear: keep it when going back
                         keep = getattr(os, "SCHED_RESET_ON_FORK", 0)
-                        undo.append(lambda p=pol0, q=par0, f=keep: os.sched_setscheduler(0, p | f, q))
+                        undo.append(functools.partial(os.sched_setscheduler, 0, pol0 | keep, par0))
                         status["rt_priority"] = f"applied: {how} (auto; the OS refused SCHED_FIFO directly)"
                     else:
                         status["rt_priority"] = (f"refused: {_os_error(exc)}{hint}; {how}; the servo runs at "

@@ -323,8 +323,9 @@ def _left_driving(actuators: list[Actuator], period_s: float) -> dict[str, str]:
         what = a.still_driving()
         wait = a.settle_time_s if getattr(a, "readback_source", "drive") == "output" else 0.0
         for _ in range(int(math.ceil(wait / period_s)) if what and wait > 0 else 0):
-            if getattr(a, "simulated", False) and callable(getattr(a, "step", None)):
-                a.step(period_s)
+            step = getattr(a, "step", None)
+            if getattr(a, "simulated", False) and callable(step):
+                step(period_s)
             else:
                 time.sleep(period_s)
             what = a.still_driving()

@@ -130,6 +130,12 @@ def _num(o: Any) -> Any:
 class _Server(ThreadingHTTPServer):
     daemon_threads = True
     allow_reuse_address = True
+    # set by ViewServer (declared for type checkers)
+    session: Any
+    static: Any
+    stopping: threading.Event
+    clients: int
+    frames: int
 
 
 class ViewServer:
