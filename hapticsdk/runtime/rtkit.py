@@ -34,6 +34,12 @@ PATH = "/org/freedesktop/RealtimeKit1"
 TIMEOUT_S = 2.0
 
 
+
+def _rt_hint() -> str:
+    """How to install the ``rt`` extra from where this SDK was installed."""
+    from ..install_hints import pip_hint
+    return pip_hint("hapticsdk", "rt")
+
 def _address() -> Any:
     from jeepney import DBusAddress
     return DBusAddress(PATH, bus_name=SERVICE, interface=SERVICE)
@@ -60,7 +66,7 @@ def properties(conn: Any = None) -> dict[str, Any]:
     try:
         from jeepney import Properties
     except ImportError:
-        return {"error": "the D-Bus client jeepney is not installed (pip install 'hapticsdk[rt]')"}
+        return {"error": f"the D-Bus client jeepney is not installed ({_rt_hint()})"}
     try:
         own = conn is None
         conn = _connect() if own else conn
@@ -94,7 +100,7 @@ def make_thread_realtime(priority: int, tid: int | None = None) -> tuple[int | N
     try:
         import jeepney  # noqa: F401
     except ImportError:
-        return None, "RealtimeKit not asked: the D-Bus client jeepney is not installed (pip install 'hapticsdk[rt]')"
+        return None, f"RealtimeKit not asked: the D-Bus client jeepney is not installed ({_rt_hint()})"
     try:
         conn = _connect()
     except Exception as exc:  # noqa: BLE001
@@ -176,7 +182,7 @@ def machine_report() -> dict[str, Any]:
         if "error" in rk:
             how.append("install and start RealtimeKit (Debian/Ubuntu: apt install rtkit; it runs on the system "
                        "D-Bus and grants SCHED_RR up to its --max-realtime-priority to normal users) and "
-                       "pip install 'hapticsdk[rt]'")
+                       + _rt_hint())
         how.append("or raise RLIMIT_RTPRIO for your user (/etc/security/limits.conf: '<user> - rtprio 40', "
                    "needs an administrator), or run the servo with CAP_SYS_NICE")
     if len(cpus) < 3:
