@@ -73,7 +73,7 @@ def _walk_bad(value: Any, field: str, finite: bool = True) -> None:
         if value.dtype.kind in "fiu":
             if not finite:
                 return
-            bad = np.argwhere(~np.isfinite(value.astype(float))) if value.size else []
+            bad: Any = np.argwhere(~np.isfinite(value.astype(float))) if value.size else []
             if len(bad):
                 idx = "".join(f"[{int(i)}]" for i in bad[0])
                 raise ValidationError(f"must be finite numbers, got {value[tuple(bad[0])]!r}", field=field + idx)
@@ -104,7 +104,7 @@ def number_array(value: Any, field: str, *, ndim: tuple[int, ...] | None = None,
             # numpy turns [0.5, True] into floats: the element types decide
             kinds = set(map(type, np.asarray(value, dtype=object).ravel().tolist()))
             if not kinds <= _NUMBER_TYPES:
-                raw = None
+                raw = None  # type: ignore[assignment]  # the element types decide: re-read below
     except (ValueError, TypeError):
         raw = None
     if raw is None or raw.dtype.kind not in "fiu" or (finite and not np.isfinite(raw).all()):

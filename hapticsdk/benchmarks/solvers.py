@@ -770,7 +770,7 @@ def plot(report: dict[str, Any], path: str | Path) -> None:
     peer_names = [k for k, v in report.get("peers", {}).items() if "points" in v and "(ours" not in k]
     names = ours_names + [n for n in peer_names if n not in ours_names]
     # 20 distinct colours (tab20: the dark shades first, then the light ones): no two solvers share one
-    tab = plt.get_cmap("tab20").colors
+    tab = getattr(plt.get_cmap("tab20"), "colors")   # a ListedColormap
     palette = list(tab[0::2]) + list(tab[1::2])
     colour = {n: palette[i % len(palette)] for i, n in enumerate(names)}
     for k, (name, s) in enumerate(report["solvers"].items()):

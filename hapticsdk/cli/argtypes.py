@@ -11,18 +11,18 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Callable
+from typing import Any, Callable
 
 __all__ = ["nonneg_int", "positive_int", "finite_float", "positive_float", "nonneg_float", "unit_interval",
            "open_unit_interval", "int_list", "intensity", "bounded_int", "serial", "figure_file"]
 
 
-def _from_check(check, name: str):
+def _from_check(check: Callable[..., Any], name: str) -> Callable[[str], Any]:
     """An argparse type from a :mod:`hapticsdk.argcheck` function: the API's rule, with
     its reason as the parser's message (the parser adds the option's name)."""
     from ..errors import ValidationError
 
-    def convert(text: str):
+    def convert(text: str) -> Any:
         try:
             return check(text, "value")
         except ValidationError as exc:

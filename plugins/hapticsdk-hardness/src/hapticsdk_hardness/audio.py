@@ -1,5 +1,5 @@
 """``voicecoil-audio``: a voice coil (Haptuator, tactor, the paper's C-2) on a sound card,
-through PortAudio with ``sounddevice`` (``pip install hapticsdk-hardness[audio]``; on
+through PortAudio with ``sounddevice`` (``pip install -e 'plugins/hapticsdk-hardness[audio]'`` from a checkout; on
 Linux also the system PortAudio, Debian ``libportaudio2``).
 
 A callback stream runs at the card's rate (its default sample rate unless
@@ -47,6 +47,7 @@ import numpy as np
 from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
+from hapticsdk.install_hints import pip_hint
 from hapticsdk.synthesis import Oscillator
 
 #: streams whose audio server went away (never touched again; see VoiceCoilAudio._close)
@@ -56,7 +57,7 @@ _ABANDONED: list[Any] = []
 #: close failed; kept here until closed
 _LIVE: set[Any] = set()
 
-INSTALL_HINT = ("pip install hapticsdk-hardness[audio] (sounddevice) and the system PortAudio "
+INSTALL_HINT = (pip_hint("hapticsdk-hardness", "audio") + " (sounddevice) and the system PortAudio "
                 "(Debian/Ubuntu: apt install libportaudio2; JACK needs a JACK-enabled PortAudio, as Debian's)")
 
 

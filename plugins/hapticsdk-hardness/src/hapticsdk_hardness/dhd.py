@@ -1,6 +1,6 @@
 """``dhd``: Force Dimension arms (omega, delta, sigma, lambda) and the Novint Falcon through
 Force Dimension's DHD library, by the vendor's Python binding ``forcedimension-core``
-(``pip install hapticsdk-hardness[dhd]``).
+(``pip install -e 'plugins/hapticsdk-hardness[dhd]'`` from a checkout).
 
 The binding loads ``libdrd`` (which carries the DHD API) when it is imported; it looks in
 ``$FDSDK/lib/release/<platform>-<machine>-<compiler>/`` (``lin-x86_64-gcc`` on Linux),
@@ -30,6 +30,7 @@ import os
 import sys
 from typing import Any, ClassVar
 
+from hapticsdk.install_hints import pip_hint
 from hapticsdk.actuators import ActuatorLimits
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 
@@ -49,8 +50,8 @@ MODELS: dict[str, ArmModel] = {m.name: m for m in (
 )}
 
 INSTALL_HINT = ("install the Force Dimension SDK (3.16 or later; it has libdrd.so and the Falcon driver) and "
-                "set FDSDK to its folder (or copy libdrd.so to /usr/local/lib), and `pip install "
-                "hapticsdk-hardness[dhd]` for the forcedimension-core binding; the simulated `omni-virtual` "
+                "set FDSDK to its folder (or copy libdrd.so to /usr/local/lib), and `"
+                + pip_hint("hapticsdk-hardness", "dhd") + "` for the forcedimension-core binding; the simulated `omni-virtual` "
                 "needs none of this")
 
 

@@ -1,5 +1,5 @@
 """``inverse3``: the Haply Inverse3 (3-DoF arm) through Haply's compiled Python module
-``HaplyHardwareAPI`` (``pip install hapticsdk-hardness[haply]``; the package is
+``HaplyHardwareAPI`` (``pip install -e 'plugins/hapticsdk-hardness[haply]'`` from a checkout; the package is
 ``haplyhardwareapi``, a binary wheel that talks to the device over its USB serial port).
 
 Calls used (``haplyhardwareapi`` 0.1.13): ``detect_inverse3s()`` (serial ports of the
@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 
 from hapticsdk.actuators import ActuatorLimits
 from hapticsdk.errors import DeviceNotFoundError, ValidationError
+from hapticsdk.install_hints import pip_hint
 
 from .arm import ArmModel, ForceArm
 
@@ -32,7 +33,7 @@ MODELS: dict[str, ArmModel] = {
                          source="Haply Inverse3 product page (3.3 N continuous); stiffness and resolution: "
                                 "conservative figures, not published by Haply (check docs/devices.md)"),
 }
-INSTALL_HINT = ("pip install hapticsdk-hardness[haply] (haplyhardwareapi, a binary wheel), plug the Inverse3 in "
+INSTALL_HINT = (pip_hint("hapticsdk-hardness", "haply") + " (haplyhardwareapi, a binary wheel), plug the Inverse3 in "
                 "(USB serial; Linux: add yourself to the dialout group)")
 
 

@@ -293,7 +293,7 @@ class RemoteMCP2221:
                 "address": self.address}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self.__init__(state["server_address"], state["serial_number"], state["address"])
+        self.__init__(state["server_address"], state["serial_number"], state["address"])  # type: ignore[misc]
 
     @property
     def unplugged(self) -> bool:
