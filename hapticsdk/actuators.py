@@ -234,7 +234,7 @@ class SensedState(DeviceState):
         st.fy = fy
         st.fz = fz
         st.buttons = buttons
-        st._pos = st._vel = st._frc = None
+        st._pos = st._vel = st._frc = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
         return st
 
     @classmethod
@@ -247,7 +247,7 @@ class SensedState(DeviceState):
 
     @property  # type: ignore[override]
     def position_mm(self) -> np.ndarray:
-        a = self._pos
+        a = self._pos  # type: ignore[has-type]  # typed loosely, to be annotated (issue 29 note)
         if a is None:
             a = self._pos = _frozen3(self.px, self.py, self.pz)
         return a
@@ -255,11 +255,11 @@ class SensedState(DeviceState):
     @position_mm.setter
     def position_mm(self, v: Any) -> None:
         self.px, self.py, self.pz = float(v[0]), float(v[1]), float(v[2])
-        self._pos = None
+        self._pos = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
 
     @property  # type: ignore[override]
     def velocity_mm_s(self) -> np.ndarray:
-        a = self._vel
+        a = self._vel  # type: ignore[has-type]  # typed loosely, to be annotated (issue 29 note)
         if a is None:
             a = self._vel = _frozen3(self.vx, self.vy, self.vz)
         return a
@@ -267,11 +267,11 @@ class SensedState(DeviceState):
     @velocity_mm_s.setter
     def velocity_mm_s(self, v: Any) -> None:
         self.vx, self.vy, self.vz = float(v[0]), float(v[1]), float(v[2])
-        self._vel = None
+        self._vel = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
 
     @property  # type: ignore[override]
     def force_n(self) -> np.ndarray:
-        a = self._frc
+        a = self._frc  # type: ignore[has-type]  # typed loosely, to be annotated (issue 29 note)
         if a is None:
             a = self._frc = _frozen3(self.fx, self.fy, self.fz)
         return a
@@ -279,7 +279,7 @@ class SensedState(DeviceState):
     @force_n.setter
     def force_n(self, v: Any) -> None:
         self.fx, self.fy, self.fz = float(v[0]), float(v[1]), float(v[2])
-        self._frc = None
+        self._frc = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
 
     @property
     def penetration_mm(self) -> float:

@@ -281,8 +281,8 @@ class _ContactState(SensedState):
     @classmethod
     def at(cls, st: SensedState, pen: float) -> "_ContactState":
         c = cls.of(st.t, st.px, st.py, st.pz, st.vx, st.vy, st.vz, st.fx, st.fy, st.fz, st.buttons)
-        c.penetration_mm = pen
-        return c
+        c.penetration_mm = pen  # type: ignore[misc]  # typed loosely, to be annotated (issue 29 note)
+        return c  # type: ignore[return-value]  # typed loosely, to be annotated (issue 29 note)
 
 
 def _check_renderers(renderers: Sequence[DimensionRenderer], actuators: Mapping[str, Actuator],
@@ -629,14 +629,14 @@ class ServoLoop:
         ncol = _NCOL + 3 * len(slots) + 3
         self._ncol = ncol
         self._log = np.zeros((cap, ncol))
-        self._log_mv = memoryview(self._log.reshape(-1))
+        self._log_mv = memoryview(self._log.reshape(-1))  # type: ignore[arg-type]  # typed loosely, to be annotated (issue 29 note)
         # every column but the last three (compute, cpu, sim: measured after the row is
         # written), native byte order as numpy's float64
         self._log_row = struct.Struct(f"={ncol - 3}d").pack_into
-        self._log_bytes = memoryview(self._log.reshape(-1).view(np.uint8))
+        self._log_bytes = memoryview(self._log.reshape(-1).view(np.uint8))  # type: ignore[arg-type]  # typed loosely, to be annotated (issue 29 note)
         for s in slots:
             # each role's columns as (cap,) views of the ring: what it was sent, by tick
-            s.log_n, s.log_f, s.log_a = (self._log[:, s.col + j] for j in range(3))
+            s.log_n, s.log_f, s.log_a = (self._log[:, s.col + j] for j in range(3))  # type: ignore[attr-defined]  # typed loosely, to be annotated (issue 29 note)
         self._events = dict.fromkeys(EVENT_KEYS, 0)
         self._fault: dict[str, str] | None = None
         self._fault_exc: BaseException | None = None
@@ -755,7 +755,7 @@ class ServoLoop:
                 device.step(dt)
                 for a in self._stepped:
                     a.step(dt)
-                lm[((k - 1) % self._cap) * ncol + ncol - 1] = perf() - s0
+                lm[((k - 1) % self._cap) * ncol + ncol - 1] = perf() - s0  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
             if k and dt > 1.5 * T:
                 self._missed += 1
         else:
@@ -941,12 +941,12 @@ class ServoLoop:
         self.last_index = idx
         if cpu_time:
             q = (time.thread_time_ns() - q0) * 1e-9
-            lm[base + ncol - 2] = q
+            lm[base + ncol - 2] = q  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
             if q > self._max_cpu:
                 self._max_cpu = q
         c1 = perf()
         comp = c1 - c0
-        lm[base + ncol - 3] = comp
+        lm[base + ncol - 3] = comp  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
         self.last_compute_s = comp
         if comp > self._max_compute:
             self._max_compute = comp
@@ -973,7 +973,7 @@ class ServoLoop:
                 self._set_fault(exc, device.label)
                 self._k = k + 1
                 return False
-            lm[base + ncol - 1] = perf() - s0
+            lm[base + ncol - 1] = perf() - s0  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
         self._k = k + 1
         return self._k < self._n_max
 
