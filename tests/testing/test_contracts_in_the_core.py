@@ -121,9 +121,9 @@ def test_a_bound_1_percent_away_binds_and_the_tolerance_is_stated():
 
 def test_plan_text_shows_a_plate_limit_without_a_band():
     from hapticsdk.cli.scene import _limits_text
-    assert _limits_text({"frequency_range_hz": None, "max_drive": 0.45, "drive_unit": "N"}) == "max 0.45 N"
+    assert _limits_text({"frequency_range_hz": None, "max_drive": 0.45, "drive_unit": "N"}) == "drive up to 0.45 N"
     assert _limits_text({"frequency_range_hz": [10.0, 400.0], "max_drive": 50.0, "drive_unit": "V"}) == \
-        "10-400 Hz, max 50 V"
+        "10-400 Hz, drive up to 50 V"
     assert _limits_text({"frequency_range_hz": None, "max_drive": None}) == ""
 
 

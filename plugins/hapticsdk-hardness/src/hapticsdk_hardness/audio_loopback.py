@@ -265,7 +265,12 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     on, off = t[loud[0]], t[loud[-1]]
     ramp = act.ramp_s
     steady = (t > on + ramp + 0.01) & (t < off - 0.01)
-    f, a = sine_fit(t[steady], y[steady])
+    # the frequency per sample at the card's rate: the blocks' capture times carry the
+    # scheduling jitter of the capture callback (on a busy machine a few 0.1 ms), the
+    # sample count does not (a digital loopback drops no sample without an overrun,
+    # and sine_fit leaves out the cycles a dropout lengthens)
+    ys = y[steady]
+    f, a = sine_fit(np.arange(ys.size) / float(cap.server.rate), ys)
     return {"frequency_error_hz": abs(f - frequency_hz), "frequency_hz": f,
             "amplitude": a, "amplitude_rel_error": abs(a / (amplitude * act.full_scale) - 1.0),
             "latency_ms": (on - t_cmd) * 1e3, "latency_dac_ms": (on - t_cmd + out_lat) * 1e3,
