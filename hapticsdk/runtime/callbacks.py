@@ -94,7 +94,8 @@ class SwitchHandle:
 
 class EventDispatcher:
     """Runs callbacks for a session's events on a thread of its own (``hapticsdk-events``),
-    started by the first :meth:`add`.
+    started by the first :meth:`add`, which also gets the events published since the
+    session started (at most the last 1024).
 
     Every :data:`DISPATCH_PERIOD_S` it reads the events that arrived since its last look
     (with its own read position: :meth:`Session.events` still sees every event), and
@@ -122,7 +123,10 @@ class EventDispatcher:
         with self._lock:
             self._callbacks.setdefault(kind, []).append(callback)
             if self._thread is None:
-                self._cursor = self._session._event_write_index()  # noqa: SLF001 - from now on
+                # from the session's start (at most the ring's last 1024 events): the servo
+                # ticks while the application is still setting up (a cold cache can take a
+                # second), and the first contact must not be lost to that
+                self._cursor = 0
                 self._thread = threading.Thread(target=self._run, name="hapticsdk-events", daemon=True)
                 self._thread.start()
 

@@ -1841,9 +1841,11 @@ class Session:
 
     def on_event(self, kind: str, callback: Any) -> None:
         """Call ``callback(event)`` for every event of ``kind`` (one of
-        :data:`EVENT_KINDS`, or ``"*"`` for all) from now on, on the SDK's own
-        application thread ``hapticsdk-events`` (within about 2 ms of the servo
-        publishing it; never in the servo). ``"servo_died"`` is delivered once when the
+        :data:`EVENT_KINDS`, or ``"*"`` for all) on the SDK's own application thread
+        ``hapticsdk-events`` (within about 2 ms of the servo publishing it; never in the
+        servo). The first callback registered also gets the events published since the
+        session started (at most the last 1024), so a contact made while the application
+        was still setting up is not lost; a callback added later gets them from then on. ``"servo_died"`` is delivered once when the
         servo process ends without :meth:`close` (``message`` says why). Callbacks run
         one at a time, in the order given; one that raises is logged and skipped."""
         if kind != "*" and kind not in EVENT_KINDS:

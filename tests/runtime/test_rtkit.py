@@ -127,8 +127,12 @@ class Bus:
         script = self.dir / "app.py"
         script.write_text(textwrap.dedent(code))
         os.chmod(script, 0o644)
-        env = {**self.env, "HOME": str(self.dir), "XDG_CACHE_HOME": str(self.dir / "cache"),
-               "PYTHONPATH": str(ROOT)}
+        # nobody's own per-user folders: the suite's temporary home (0700, root's) is not
+        # readable by nobody, so every XDG folder it names is replaced, not only the cache
+        env = {k: v for k, v in self.env.items() if not k.startswith("XDG_")}
+        env.update({"HOME": str(self.dir), "XDG_CACHE_HOME": str(self.dir / "cache"),
+                    "XDG_CONFIG_HOME": str(self.dir / "config"), "XDG_DATA_HOME": str(self.dir / "data"),
+                    "XDG_STATE_HOME": str(self.dir / "state"), "PYTHONPATH": str(ROOT)})
         (self.dir / "cache").mkdir(exist_ok=True)
         os.chmod(self.dir / "cache", 0o777)  # nobody's cache (amortised tables)
         with _traversable([os.path.realpath(sys.executable), sys.prefix, str(ROOT)]):
