@@ -177,3 +177,23 @@ def call_with_options(fn: Any, *args: Any, options: Any, field: str) -> Any:
             raise
         key = m.group(1)
         raise ValidationError(f"unknown option {key!r} ({exc})", field=f"{field}.{key}") from None
+
+
+def refuse_file_options(dim: Any, options: Any, field: str) -> None:
+    """A scene or plan names no file to read: the calibration options a dimension declares
+    (``PerceptionDimension.calibrations``, e.g. the roughness renderer's piezo ``table``)
+    must be given inline, as an object in the calibration file format. A string there
+    would be read as a path (a file chosen by data), so it raises a
+    :class:`ValidationError` naming the option; code passes a path or a loaded table
+    directly, and saved calibrations come from the per-user calibration store."""
+    from collections.abc import Mapping
+
+    if not isinstance(options, Mapping):
+        return
+    for key in getattr(dim, "calibrations", None) or {}:
+        value = options.get(key)
+        if value is not None and not isinstance(value, Mapping):
+            raise ValidationError(
+                f"a scene or plan cannot name a file or a stored object to read ({type(value).__name__} "
+                f"{value!r:.60}); give the calibration inline as an object, save it in the calibration "
+                f"store ('hapticsdk calibrate ...'), or pass it from code", field=f"{field}.{key}")

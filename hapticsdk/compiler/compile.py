@@ -179,6 +179,8 @@ def _renderer_options(d: str, dim: Any, scene: Scene, ropts: Mapping[str, Any],
     ``renderer_options`` win, then what the mapped actuator itself supplies (its own drive
     table, :meth:`PerceptionDimension.capability_options`), then saved calibrations."""
     given = dict(ropts.get(d, {}))
+    from ..argcheck import refuse_file_options
+    refuse_file_options(dim, given, f"scene.settings.renderer_options.{d}")
     cal_opts, recs = select_calibrations(d, dim, renderer_options=given, role_options=_role_options(scene, dim))
     cap_opts = dim.capability_options(caps) if hasattr(dim, "capability_options") else {}
     merged = {**given, **cal_opts}

@@ -133,6 +133,8 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None,
         check_plugin_api(cls, name=d)
         dim = cls() if isinstance(cls, type) else cls
         given = dict(ropts.get(d, {}))
+        from ..argcheck import refuse_file_options
+        refuse_file_options(dim, given, f"plan.settings.renderer_options.{d}")
         opts = {**given, **dict((calibrations or {}).get(d, {}))}
         if capabilities and hasattr(dim, "capability_options"):
             roles = list(getattr(dim, "roles", {}) or {}) or list(dim.default_actuators)

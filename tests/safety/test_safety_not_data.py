@@ -155,3 +155,27 @@ def test_energy_options_declared_as_any_collection_are_read():
         assert energy_option_ceilings(cls)["gain"][0] == 1, decl
     with pytest.raises(PluginError):  # unreadable: fail closed, never ignored
         energy_option_ceilings(type("B", (Base,), {"energy_options": "gain"}))
+
+
+@pytest.mark.parametrize("value", ["piezo_table.json", "/etc/passwd", "paper", 3])
+def test_scene_or_plan_cannot_name_a_calibration_file_to_read(tmp_path, value):
+    """A calibration option (the roughness renderer's piezo ``table``) given as anything
+    but an inline object is refused by name, from a scene and from a plan: a string would
+    be opened as a path chosen by data. Inline tables and code keep working."""
+    table = tmp_path / "piezo_table.json"
+    from hapticsdk_roughness.table import generated_table
+    table.write_text(json.dumps(generated_table().to_dict()))
+    if value == "piezo_table.json":
+        value = str(table)   # a real, readable table file: still refused from data
+    sc = _scene(settings={"renderer_options": {"roughness": {"table": value}}})
+    with pytest.raises(ValidationError) as ei:
+        compile_scene(copy.deepcopy(sc))
+    assert ei.value.field == "scene.settings.renderer_options.roughness.table"
+    plan = compile_scene(_scene())
+    plan.settings["renderer_options"] = {"roughness": {"table": value}}
+    with pytest.raises(ValidationError) as ei:
+        render_plan(plan, seconds=0.01)
+    assert ei.value.field == "plan.settings.renderer_options.roughness.table"
+    # inline, as an object in the table format, it is data and is used
+    inline = _scene(settings={"renderer_options": {"roughness": {"table": generated_table().to_dict()}}})
+    assert compile_scene(inline).materials
