@@ -306,6 +306,15 @@ def load_run(path: str | Path) -> RunLog:
     p = Path(path)
     if not p.is_file():
         raise RecordingError(f"run file not found: {p}", field="runlog")
+    if p.suffix.lower() in (".h5", ".hdf5"):  # a live recording in HDF5 (hapticsdk[h5])
+        from .runtime.recorder_h5 import read_arrays
+        data = read_arrays(p, max_bytes=MAX_RUN_BYTES)
+    else:
+        data = _load_npz(p)
+    return _runlog_from_arrays(p, data)
+
+
+def _load_npz(p: Path) -> dict[str, np.ndarray]:
     try:
         with np.load(p, allow_pickle=False) as z:
             unpacked = sum(i.file_size for i in z.zip.infolist()) if hasattr(z, "zip") else 0
@@ -319,6 +328,10 @@ def load_run(path: str | Path) -> RunLog:
         why = ("pickled data or not an .npz archive; pickles are never loaded" if "pickle" in str(exc)
                else f"{type(exc).__name__}: {exc}")
         raise RecordingError(f"{p}: not a readable .npz run file ({why})", field="runlog") from None
+    return data
+
+
+def _runlog_from_arrays(p: Path, data: dict[str, np.ndarray]) -> RunLog:
     if "header_json" not in data:
         raise RecordingError(f"{p}: no header_json (not a hapticsdk run file)", field="runlog.header_json")
     from .schemas_io import MAX_JSON_DEPTH, json_depth

@@ -22,8 +22,12 @@ Stream layout (little-endian): 8 bytes ``HSDKREC1``; 8 bytes header length ``h``
 ``h`` bytes of JSON (``columns``, ``roles``, ``period_s``, ``objects``), padded with
 spaces to a multiple of 8; then rows of ``len(columns)`` float64.
 
-HDF5 (``.h5``) is not written: h5py is not a dependency, and ``.npz`` is read by numpy
-alone. Asking for ``.h5`` is a :class:`~hapticsdk.errors.ValidationError`.
+``Session(record="run.h5")`` (or ``.hdf5``) writes the same arrays to an HDF5 file
+instead, through the optional h5py (``pip install hapticsdk[h5]``): the chunks are
+appended to resizable datasets of ``run.h5.part`` as they fill, and a servo killed
+mid-run leaves every flushed chunk readable (:mod:`hapticsdk.runtime.recorder_h5`).
+Without h5py, asking for ``.h5`` is a :class:`~hapticsdk.errors.ValidationError` that
+names the extra.
 """
 
 from __future__ import annotations
@@ -47,15 +51,16 @@ _CMD = ("force_n", "frequency_hz", "amplitude")
 
 
 def check_record_path(path: Any) -> Path:
-    """The ``record=`` path of a session: ``.npz`` (``.h5`` / ``.hdf5`` are refused
-    with the reason)."""
+    """The ``record=`` path of a session: ``.npz``, or ``.h5`` / ``.hdf5`` when h5py is
+    installed (otherwise a :class:`ValidationError` naming the extra)."""
     from ..fileio import check_output_path
+    from .recorder_h5 import h5py_module, is_h5
     p = Path(check_output_path(path, field="record"))
-    if p.suffix.lower() in (".h5", ".hdf5"):
-        raise ValidationError("HDF5 recording is not available (h5py is not a dependency of hapticsdk): "
-                              "record to a .npz file", field="record")
+    if is_h5(p):
+        h5py_module()
+        return p
     if p.suffix.lower() != ".npz":
-        raise ValidationError(f"record must name a .npz file, got {str(p)!r}", field="record")
+        raise ValidationError(f"record must name a .npz, .h5 or .hdf5 file, got {str(p)!r}", field="record")
     return p
 
 
@@ -83,14 +88,18 @@ class LiveRecorder:
         self.rows = 0  # rows written to the stream
         self.part = part_path(self.path)
         self.part.parent.mkdir(parents=True, exist_ok=True)
-        self._fh: Any = open(self.part, "wb", buffering=0)  # noqa: SIM115 - closed by close()
-        self._write_header()
-
-    def _write_header(self) -> None:
-        head = json.dumps({"columns": self.columns, "roles": self.roles, "period_s": self.period_s,
-                           "objects": {str(k): v for k, v in self.objects.items()}}).encode()
-        head += b" " * (-len(head) % 8)
-        self._fh.write(MAGIC + struct.pack("<Q", len(head)) + head)
+        header = {"columns": self.columns, "roles": self.roles, "period_s": self.period_s,
+                  "objects": {str(k): v for k, v in self.objects.items()}}
+        self._h5: Any = None
+        self._fh: Any = None
+        from .recorder_h5 import H5Appender, is_h5
+        if is_h5(self.path):
+            self._h5 = H5Appender(self.part, header, self.chunk_rows)
+        else:
+            self._fh = open(self.part, "wb", buffering=0)  # noqa: SIM115 - closed by close()
+            head = json.dumps(header).encode()
+            head += b" " * (-len(head) % 8)
+            self._fh.write(MAGIC + struct.pack("<Q", len(head)) + head)
 
     def add(self, loop: Any, object_id: float) -> None:
         """Append the tick ``loop`` has just run (its last state, penetration, force and
@@ -126,20 +135,42 @@ class LiveRecorder:
 
     def _flush(self) -> None:
         if self._n:
-            self._fh.write(memoryview(self._chunk)[: self._n * self.width * 8])
+            if self._h5 is not None:
+                self._h5.append(np.frombuffer(self._chunk, dtype="<f8", count=self._n * self.width)
+                                .reshape(self._n, self.width))
+            else:
+                self._fh.write(memoryview(self._chunk)[: self._n * self.width * 8])
             self.rows += self._n
             self._n = 0
 
     def close(self, objects: Mapping[int, str] | None = None) -> Path:
-        """Write the last rows, turn the stream into the ``.npz`` and remove it."""
+        """Write the last rows and turn the stream into the run file (``.npz``: the stream
+        is removed; ``.h5``: the file is completed and renamed)."""
+        if objects:
+            self.objects.update(objects)
+        if self._h5 is not None:
+            self._flush()
+            self._h5.close()
+            self._h5 = None
+            from .recorder_h5 import finish_h5
+            return finish_h5(self.part, self.path, _run_header(self.period_s, self.roles, self.rows,
+                                                               self.objects, recovered=False))
         if self._fh is not None:
             self._flush()
             self._fh.close()
             self._fh = None
-        if objects:
-            self.objects.update(objects)
         out = recover(self.part, self.path, objects=self.objects)
         return out
+
+
+def _run_header(period_s: float, roles: Sequence[str], n: int, names: Mapping[int, str], *,
+                recovered: bool) -> dict[str, Any]:
+    """The ``hapticsdk-run`` header of a live recording of ``n`` ticks."""
+    from ..runlog import FORMAT, VERSION
+    return {"format": FORMAT, "version": VERSION, "n_ticks": n, "period_s": period_s,
+            "roles": sorted(roles), "device": None,
+            "meta": {"source": "hapticsdk live session recording", "objects": {str(k): v for k, v in names.items()},
+                     "recovered_from_part": recovered}}
 
 
 def _read_part(part: Path) -> tuple[dict[str, Any], np.ndarray]:
@@ -168,17 +199,20 @@ def recover(part: "str | Path", path: "str | Path | None" = None, *,
     """Turn the complete rows of a recording stream ``part`` into a run file ``path``
     (default: ``part`` without ``.part``), written atomically; removes ``part``."""
     from ..fileio import atomic_writer
-    from ..runlog import FORMAT, VERSION, _json_default
+    from ..runlog import _json_default
+    from .recorder_h5 import finish_h5, is_h5, read_part_header
     part = Path(part)
     path = Path(path) if path is not None else part.with_name(part.name[: -len(".part")])
+    if is_h5(part):
+        h5_header, rows = read_part_header(part)
+        names = {**{int(k): v for k, v in h5_header.get("objects", {}).items()}, **dict(objects or {})}
+        return finish_h5(part, path, _run_header(h5_header["period_s"], h5_header["roles"], rows, names,
+                                                 recovered=True), rows=rows)
     header, a = _read_part(part)
     cols = {c: k for k, c in enumerate(header["columns"])}
     n = a.shape[0]
     names = {**{int(k): v for k, v in header.get("objects", {}).items()}, **dict(objects or {})}
-    run_header = {"format": FORMAT, "version": VERSION, "n_ticks": n, "period_s": header["period_s"],
-                  "roles": sorted(header["roles"]), "device": None,
-                  "meta": {"source": "hapticsdk live session recording", "objects": {str(k): v for k, v in names.items()},
-                           "recovered_from_part": True}}
+    run_header = _run_header(header["period_s"], header["roles"], n, names, recovered=True)
 
     def put(zf: zipfile.ZipFile, name: str, arr: np.ndarray) -> None:
         with zf.open(name + ".npy", "w", force_zip64=True) as fh:
