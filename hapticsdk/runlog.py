@@ -301,7 +301,8 @@ def _json_default(o: Any) -> Any:
 
 
 def load_run(path: str | Path) -> RunLog:
-    """Read a run file written by :class:`RunRecorder` / :meth:`RunLog.save`.
+    """Read a run file written by :class:`RunRecorder` / :meth:`RunLog.save` (``.npz``),
+    or a live session's HDF5 recording (``.h5`` / ``.hdf5``, needs h5py).
     Raises :class:`RecordingError` naming the file and the missing/broken field."""
     p = Path(path)
     if not p.is_file():

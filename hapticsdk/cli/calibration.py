@@ -57,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_list)
 
     p = sub.add_parser("replay", help="summarise a recorded run file (.npz) and check it plays back")
-    p.add_argument("runfile", help="run file written by a recorder (.npz)")
+    p.add_argument("runfile", help="run file written by a recorder (.npz, or .h5 from a live session)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_replay)
 

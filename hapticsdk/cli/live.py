@@ -17,7 +17,7 @@ def register(sub: Any) -> None:
                    help="stop after this many seconds (default: at Ctrl-C)")
     p.add_argument("--speed", type=nonneg_float, default=40.0, metavar="MM_S",
                    help="speed of the simulated finger walking over the objects (mm/s)")
-    p.add_argument("--record", metavar="RUN.npz", help="also record every tick to this file")
+    p.add_argument("--record", metavar="RUN.npz|RUN.h5", help="also record every tick to this file (.h5 needs hapticsdk[h5])")
     p.set_defaults(func=cmd_view)
 
 

@@ -1227,7 +1227,8 @@ class Session:
             thread in the application's interpreter would wait on the interpreter
             lock held by normal-priority threads).
         start_timeout_s: how long to wait for the servo to be running (s).
-        record: a ``.npz`` path: the servo streams every tick to ``<record>.part`` with
+        record: a ``.npz`` path, or ``.h5`` / ``.hdf5`` with the optional h5py
+            (``hapticsdk[h5]``): the servo streams every tick to ``<record>.part`` with
             bounded memory and turns it into ``record`` (a ``hapticsdk-run`` file that
             ``hapticsdk replay`` plays back) when the session ends; see
             :mod:`hapticsdk.runtime.recorder` (what a session cut short leaves).
