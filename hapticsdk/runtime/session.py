@@ -1435,6 +1435,27 @@ class Session:
         """Process id of the servo (None in thread isolation)."""
         return self._process.pid if self._process is not None else None
 
+    def _finish_recording(self) -> None:
+        """After a process servo ended: when its recording stream is still there (the
+        servo was stopped before it finished turning a long stream into the run file:
+        ``close(timeout_s)`` waits that long, then SIGTERM), the application does it
+        (:func:`~hapticsdk.runtime.recorder.recover`: the stream stays whole until the
+        run file is in place, so a cut-short conversion loses nothing)."""
+        path = self._spec.get("record_path")
+        if not path or self._process is None:
+            return
+        from .recorder import part_path, recover
+        if not part_path(path).exists():
+            return
+        summary = self._summary if self._summary is not None else {}
+        self._summary = summary
+        try:
+            summary["record_path"] = str(recover(part_path(path), path, objects=dict(self._names)))
+            summary["record_finished_by"] = "application"
+            summary.pop("record_error", None)
+        except Exception as exc:  # noqa: BLE001 - reported; the stream stays for recover()
+            summary["record_error"] = f"{type(exc).__name__}: {exc}"
+
     def _fetch_summary(self, timeout: float = 0.0) -> dict[str, Any]:
         if self._summary is None:
             try:
@@ -1934,6 +1955,7 @@ class Session:
             self._fetch_summary(0.1)
             if sup is not None:
                 sup.stop()
+            self._finish_recording()
         finally:
             hb = getattr(self, "_hb_stop", None)
             if hb is not None:

@@ -138,3 +138,20 @@ def test_record_paths_are_checked(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "h5py", None)  # as if h5py were not installed
     with pytest.raises(ValidationError, match=r"hapticsdk\[h5\]"):
         hs.Session(PAD, record=tmp_path / "run.h5")
+
+
+def test_close_leaves_a_run_file_even_when_the_servo_never_finished_it(tmp_path, fmt):
+    """A servo that cannot finish its recording within close()'s timeout (here: stopped
+    with SIGSTOP, then killed by close(); in use: a long .npz conversion) leaves its
+    stream; close() turns it into the run file in the application."""
+    path = tmp_path / f"run.{fmt}"
+    s = hs.Session(PAD, trajectory=SLIDE, record=path)
+    try:
+        assert _wait(lambda: s.state().ticks > 1.5 * rec.CHUNK_ROWS)
+        os.kill(s.servo_pid, signal.SIGSTOP)
+    finally:
+        summary = s.close(timeout_s=0.2)
+    assert summary["record_path"] == str(path) and summary["record_finished_by"] == "application"
+    assert path.exists() and not rec.part_path(path).exists()
+    run = load_run(path)
+    assert len(run) >= rec.CHUNK_ROWS and len(run) % rec.CHUNK_ROWS == 0
