@@ -59,7 +59,7 @@ def main() -> None:
             samples.append((time.monotonic() - t0, s.state().ticks, rss_kb(s.servo_pid)))
             if not a.json:
                 print(f"{samples[-1][0]:7.1f} s  {samples[-1][1]:8d} ticks  {samples[-1][2]:8d} kB", flush=True)
-        s.close()
+        summary = s.close()
     arr = np.array(samples, float)
 
     def slope(m: np.ndarray) -> float | None:
@@ -67,7 +67,9 @@ def main() -> None:
 
     out = {"format": a.format, "seconds": a.seconds, "ticks": int(arr[-1, 1]), "rss_kb_first": int(arr[0, 2]),
            "rss_kb_last": int(arr[-1, 2]), "slope_mb_per_min": slope(np.ones(len(arr), bool)),
-           "slope_mb_per_min_after_60s": slope(arr[:, 0] > 60.0), "generated": True}
+           "slope_mb_per_min_after_60s": slope(arr[:, 0] > 60.0), "generated": True,
+           "record_path": summary.get("record_path"), "record_finished_by": summary.get("record_finished_by", "servo"),
+           "record_error": summary.get("record_error")}
     print(json.dumps(out) if a.json else
           f"servo RSS {out['rss_kb_first']} -> {out['rss_kb_last']} kB, slope {out['slope_mb_per_min']:+.3f} MB/min")
 
