@@ -68,7 +68,7 @@ What it measures, per run:
   returning True (what an application waiting on the handle sees; ``wait`` polls every
   0.2 ms).
 * ``recording``: the run records every tick (``Session(record=...)``, a temporary file
-  removed afterwards); ``servo_rss_kb_first`` / ``_last`` and the slope of a straight
+  removed afterwards; ``--record npz|h5|none``, ``format``); ``servo_rss_kb_first`` / ``_last`` and the slope of a straight
   line through about 20 samples of the servo process's resident set size (kB per
   minute, ``/proc/<pid>/status``), and the file's size. A slope measured over seconds
   says little about an hour: run ``--seconds 600`` for that.
@@ -215,9 +215,10 @@ def _count_frames(url: str, stop: threading.Event, out: list[float]) -> None:
 
 
 def run_session(isolation: str = "process", app_load: str = "python-thread", seconds: float = 10.0,
-                switches: int = 8, rt: dict[str, Any] | None = None, record: bool = True,
+                switches: int = 8, rt: dict[str, Any] | None = None, record: "bool | str" = True,
                 view: bool = True, period_s: float | None = None) -> dict[str, Any]:
-    """One live run; see the module docstring."""
+    """One live run; see the module docstring. ``record``: True or ``"npz"``, ``"h5"``
+    (needs h5py), False or ``"none"``."""
     import tempfile
     from pathlib import Path
     from ..runtime.session import Session
@@ -237,7 +238,8 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     handle_wait_ms: list[float] = []
     lost_switches = 0
     tmp = Path(tempfile.mkdtemp(prefix="hapticsdk-bench-live-"))
-    rec_path = tmp / "run.npz" if record else None
+    fmt = None if record is False or record == "none" else ("npz" if record is True else str(record))
+    rec_path = tmp / f"run.{fmt}" if fmt else None
     frames: list[float] = []
     stop_view = threading.Event()
     rss: list[tuple[float, int | None]] = []
@@ -308,7 +310,7 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     rep = summary.get("report") or {}
     jit = rep.get("jitter") or {}
     ev = rep.get("events") or {}
-    recording: dict[str, Any] = {"on": bool(record)}
+    recording: dict[str, Any] = {"on": rec_path is not None, "format": fmt}
     pts = [(t, kb) for t, kb in rss if kb is not None]
     if len(pts) >= 3:
         tt, kk = np.array(pts, float).T
@@ -434,7 +436,8 @@ def switch_figures(ramp_s: float = 0.05) -> dict[str, Any]:
 
 def run_live(isolation: str = "process", app_loads: tuple[str, ...] = ("python-thread",),
              seconds: float = 10.0, rt: dict[str, Any] | None = None,
-             reference: bool = True, period_s: float | None = None) -> dict[str, Any] | list[dict[str, Any]]:
+             reference: bool = True, period_s: float | None = None,
+             record: "bool | str" = True) -> dict[str, Any] | list[dict[str, Any]]:
     """Runs for each application load; the switch figures are shared (simulated).
     ``reference``: after each session run, :func:`run_reference` under the same load
     for the same time (key ``reference``): the session's jitter next to what a loop
@@ -444,7 +447,7 @@ def run_live(isolation: str = "process", app_loads: tuple[str, ...] = ("python-t
     sw = switch_figures()
     rows = []
     for load in app_loads:
-        r = run_session(isolation, load, seconds, rt=rt, period_s=period_s)
+        r = run_session(isolation, load, seconds, rt=rt, period_s=period_s, record=record)
         if reference:
             r["reference"] = run_reference(load, seconds, period_s=period_s or 1e-3, rt=_default_rt(rt, isolation))
         r["rt"] = dict(rt or {})
@@ -499,7 +502,8 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
             parts.append(f"switch handle {h['p50']:.2f}/{h['max']:.2f} ms p50/max (wait returns after "
                          f"{w['p50']:.2f}/{w['max']:.2f} ms)")
         if "servo_rss_slope_kb_per_min" in rec:
-            parts.append(f"recording: servo RSS {rec['servo_rss_kb_first']}->{rec['servo_rss_kb_last']} kB "
+            parts.append(f"recording ({rec.get('format')}): servo RSS {rec['servo_rss_kb_first']}->"
+                         f"{rec['servo_rss_kb_last']} kB "
                          f"({rec['servo_rss_slope_kb_per_min']:+.0f} kB/min)")
         if r.get("view_frames_per_s"):
             parts.append(f"view {r['view_frames_per_s']:.1f} frames/s")

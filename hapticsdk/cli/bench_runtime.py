@@ -38,6 +38,9 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--fifo-priority", type=_fifo_priority, default=argparse.SUPPRESS, metavar="P",
                    help="the servo's SCHED_FIFO priority: 1..99, 'auto' (where the OS allows it; the default of "
                         "a servo process) or 'off' (the default of a servo thread); the outcome is printed")
+    p.add_argument("--record", choices=("npz", "h5", "none"), default="npz",
+                   help="record every tick to a temporary file of this format meanwhile (default npz; h5 needs "
+                        "hapticsdk[h5]); the servo's RSS slope is reported")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_live)
 
@@ -79,7 +82,10 @@ def _live(args: argparse.Namespace) -> int:
         rt["fifo_priority"] = args.fifo_priority
     if args.pin_cpu is not None:
         rt["cpu"] = args.pin_cpu
-    res = run_live(args.isolation, loads, args.seconds, rt=rt or None, period_s=args.period)
+    if args.record == "h5":
+        from ..runtime.recorder_h5 import h5py_module
+        h5py_module(field="--record")
+    res = run_live(args.isolation, loads, args.seconds, rt=rt or None, period_s=args.period, record=args.record)
     rows = res if isinstance(res, list) else [res]
     emit(res, args.json, format_rows(rows) + "\n(shared machines: other processes' load is in these figures)")
     return 0
