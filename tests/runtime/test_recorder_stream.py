@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import signal
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -38,7 +39,8 @@ class _Loop:
 
     def __init__(self) -> None:
         self.ticks, self._cap = 0, 8
-        self.last_state, self.last_t, self.last_force_n, self.last_penetration_mm = None, 0.0, 0.0, 0.0
+        self.last_t, self.last_force_n, self.last_penetration_mm = 0.0, 0.0, 0.0
+        self.last_state = SimpleNamespace(position_mm=(1.0, 2.0, -0.5), velocity_mm_s=(10.0, 0.0, 0.0))
         self._slots = [_Slot(8)]
 
 
@@ -65,8 +67,7 @@ def test_rows_come_back_in_order(tmp_path, fmt):
     assert run.header["meta"]["objects"] == {"0": "pad"} and not rec.part_path(path).exists()
 
 
-def test_a_killed_writer_leaves_every_complete_chunk(tmp_path, fmt):
-    path = tmp_path / f"run.{fmt}"
+def _killed_writer(path) -> None:
     pid = os.fork()
     if pid == 0:  # the child plays the servo and is killed before close()
         try:
@@ -76,8 +77,22 @@ def test_a_killed_writer_leaves_every_complete_chunk(tmp_path, fmt):
     _, status = os.waitpid(pid, 0)
     assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGKILL
     assert rec.part_path(path).exists() and not path.exists()
+
+
+def test_a_killed_writer_leaves_every_complete_chunk(tmp_path, fmt):
+    path = tmp_path / f"run.{fmt}"
+    _killed_writer(path)
     run = rec.load_recording(path)
     assert len(run) == 1000 // CHUNK * CHUNK  # the partial last chunk is lost, nothing else
     assert np.array_equal(run.t, np.arange(len(run)) * 0.001)
     assert np.array_equal(run.commands["vibration"]["amplitude"], 0.5 * np.arange(len(run)))
     assert path.exists() and not rec.part_path(path).exists()
+
+
+def test_replay_recovers_a_cut_short_stream(tmp_path, fmt):
+    """``hapticsdk replay run.<fmt>`` when only the stream of a killed writer is left."""
+    from hapticsdk.cli import main
+    path = tmp_path / f"run.{fmt}"
+    _killed_writer(path)
+    assert main(["replay", str(path)]) == 0
+    assert len(load_run(path)) == 1000 // CHUNK * CHUNK and not rec.part_path(path).exists()

@@ -93,35 +93,24 @@ def test_every_tick_is_recorded_and_replayable(tmp_path, fmt):
     assert main(["replay", str(path)]) == 0
 
 
-def _record_then_kill(path, ticks):
-    """A process session recording to ``path``, its servo SIGKILLed after ``ticks``."""
+def test_a_killed_servo_leaves_its_complete_chunks(tmp_path, fmt):
+    """SIGKILLed mid-run: the servo's stream keeps every complete chunk, and the
+    application's close() turns it into the run file (the last partial chunk is lost)."""
+    path = tmp_path / f"run.{fmt}"
     with hs.Session(PAD, trajectory=SLIDE, record=path) as s:
-        assert _wait(lambda: s.state().ticks > ticks)
+        assert _wait(lambda: s.state().ticks > 2.5 * rec.CHUNK_ROWS)
         os.kill(s.servo_pid, signal.SIGKILL)
         with pytest.raises(ServoProcessDied):
             assert _wait(lambda: s.state() is None, 10.0)
-
-
-def test_a_killed_servo_leaves_its_complete_chunks(tmp_path, fmt):
-    path = tmp_path / f"run.{fmt}"
-    _record_then_kill(path, 2.5 * rec.CHUNK_ROWS)
-    assert not path.exists() and rec.part_path(path).exists()
-    run = rec.load_recording(path)
+        assert rec.part_path(path).exists() and not path.exists()  # the servo left its stream
+    summary = s.close()  # already closed by the with block: its summary
+    assert summary["record_path"] == str(path) and summary["record_finished_by"] == "application"
+    assert path.exists() and not rec.part_path(path).exists()
+    run = load_run(path)
     n = len(run)
     assert n >= 2 * rec.CHUNK_ROWS and n % rec.CHUNK_ROWS == 0
     assert np.all(np.diff(run.t) > 0)
-    assert path.exists() and not rec.part_path(path).exists()
     assert run.header["meta"]["recovered_from_part"] is True
-    assert load_run(path).t.shape == (n,)  # the recovered file is a run file in its own right
-
-
-def test_a_cut_short_stream_replays_from_the_command_line(tmp_path, fmt):
-    """``hapticsdk replay run.<fmt>`` when only the stream of a killed servo is left."""
-    path = tmp_path / f"run.{fmt}"
-    _record_then_kill(path, 1.5 * rec.CHUNK_ROWS)
-    from hapticsdk.cli import main
-    assert main(["replay", str(path)]) == 0
-    assert len(load_run(path)) >= rec.CHUNK_ROWS
 
 
 def test_a_damaged_stream_is_a_named_error(tmp_path, fmt):
