@@ -23,7 +23,7 @@ Stream layout (little-endian): 8 bytes ``HSDKREC1``; 8 bytes header length ``h``
 spaces to a multiple of 8; then rows of ``len(columns)`` float64.
 
 ``Session(record="run.h5")`` (or ``.hdf5``) writes the same arrays to an HDF5 file
-instead, through the optional h5py (``pip install hapticsdk[h5]``): the chunks are
+instead, through the optional h5py (the ``h5`` extra): the chunks are
 appended to resizable datasets of ``run.h5.part`` as they fill, and a servo killed
 mid-run leaves every flushed chunk readable (:mod:`hapticsdk.runtime.recorder_h5`).
 Without h5py, asking for ``.h5`` is a :class:`~hapticsdk.errors.ValidationError` that

@@ -1,5 +1,5 @@
 """HDF5 live recordings (``Session(record="run.h5")``), through the optional h5py
-(``pip install hapticsdk[h5]``).
+(the ``h5`` extra).
 
 The servo appends every chunk of ticks (:data:`~hapticsdk.runtime.recorder.CHUNK_ROWS`)
 to chunked, resizable datasets of ``run.h5.part`` and flushes the file: memory stays one
@@ -52,7 +52,7 @@ def h5py_module(field: str = "record") -> Any:
     try:
         import h5py  # noqa: PLC0415 - optional
     except ImportError as exc:
-        raise ValidationError(f"HDF5 recording needs the optional h5py package (pip install '{EXTRA}'): {exc}",
+        raise ValidationError(f"HDF5 recording needs the optional h5py package (the {EXTRA} extra): {exc}",
                               field=field) from None
     return h5py
 
@@ -135,10 +135,9 @@ def finish_h5(part: Path, path: Path, run_header: Mapping[str, Any], *, rows: in
     otherwise (``rows`` given: a recovery) the complete rows are copied chunk by chunk
     into a fresh file next to ``path``, which is renamed over it."""
     from ..fileio import check_output_path
-    from ..runlog import _json_default
     h5py = h5py_module()
     path = Path(check_output_path(path, field="record"))
-    text = json.dumps(dict(run_header), default=_json_default)
+    text = json.dumps(dict(run_header), default=lambda o: o.item() if hasattr(o, "item") else str(o))
     if rows is None:
         with h5py.File(part, "r+") as f:
             f.attrs["header_json"] = text
