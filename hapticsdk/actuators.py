@@ -190,6 +190,29 @@ def _frozen3(a: float, b: float, c: float) -> np.ndarray:
     return out
 
 
+def _vec3_field(names: tuple[str, str, str], cache: str, doc: str) -> property:
+    """A :class:`SensedState` array field: three float slots ``names`` shown as a (3,)
+    read-only array, built on first access and kept in slot ``cache``; assigning a
+    sequence sets the floats and drops the kept array."""
+    a, b, c = names
+
+    def get(self: Any) -> np.ndarray:
+        v = getattr(self, cache)
+        if v is None:
+            v = _frozen3(getattr(self, a), getattr(self, b), getattr(self, c))
+            setattr(self, cache, v)
+        return v
+
+    def put(self: Any, v: Any) -> None:
+        setattr(self, a, float(v[0]))
+        setattr(self, b, float(v[1]))
+        setattr(self, c, float(v[2]))
+        setattr(self, cache, None)
+
+    get.__doc__ = doc
+    return property(get, put, doc=doc)
+
+
 class SensedState(DeviceState):
     """A :class:`DeviceState` held as plain floats: what a backend's ``_read_state``
     returns when it reads every servo tick (building three numpy arrays per read costs
@@ -209,6 +232,18 @@ class SensedState(DeviceState):
     """
 
     __slots__ = ("t", "buttons", "px", "py", "pz", "vx", "vy", "vz", "fx", "fy", "fz", "_pos", "_vel", "_frc")
+    px: float
+    py: float
+    pz: float
+    vx: float
+    vy: float
+    vz: float
+    fx: float
+    fy: float
+    fz: float
+    _pos: np.ndarray | None
+    _vel: np.ndarray | None
+    _frc: np.ndarray | None
 
     def __init__(self, t: float, position_mm: Any, velocity_mm_s: Any, force_n: Any = None,
                  buttons: int = 0) -> None:
@@ -234,7 +269,7 @@ class SensedState(DeviceState):
         st.fy = fy
         st.fz = fz
         st.buttons = buttons
-        st._pos = st._vel = st._frc = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
+        st._pos = st._vel = st._frc = None
         return st
 
     @classmethod
@@ -245,41 +280,12 @@ class SensedState(DeviceState):
             return st
         return cls(st.t, st.position_mm, st.velocity_mm_s, getattr(st, "force_n", None), getattr(st, "buttons", 0))
 
-    @property  # type: ignore[override]
-    def position_mm(self) -> np.ndarray:
-        a = self._pos  # type: ignore[has-type]  # typed loosely, to be annotated (issue 29 note)
-        if a is None:
-            a = self._pos = _frozen3(self.px, self.py, self.pz)
-        return a
-
-    @position_mm.setter
-    def position_mm(self, v: Any) -> None:
-        self.px, self.py, self.pz = float(v[0]), float(v[1]), float(v[2])
-        self._pos = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
-
-    @property  # type: ignore[override]
-    def velocity_mm_s(self) -> np.ndarray:
-        a = self._vel  # type: ignore[has-type]  # typed loosely, to be annotated (issue 29 note)
-        if a is None:
-            a = self._vel = _frozen3(self.vx, self.vy, self.vz)
-        return a
-
-    @velocity_mm_s.setter
-    def velocity_mm_s(self, v: Any) -> None:
-        self.vx, self.vy, self.vz = float(v[0]), float(v[1]), float(v[2])
-        self._vel = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
-
-    @property  # type: ignore[override]
-    def force_n(self) -> np.ndarray:
-        a = self._frc  # type: ignore[has-type]  # typed loosely, to be annotated (issue 29 note)
-        if a is None:
-            a = self._frc = _frozen3(self.fx, self.fy, self.fz)
-        return a
-
-    @force_n.setter
-    def force_n(self, v: Any) -> None:
-        self.fx, self.fy, self.fz = float(v[0]), float(v[1]), float(v[2])
-        self._frc = None  # type: ignore[assignment]  # typed loosely, to be annotated (issue 29 note)
+    position_mm = _vec3_field(("px", "py", "pz"), "_pos",  # type: ignore[assignment]
+                              "Probe position (3,) (mm), a read-only array built from ``px, py, pz``.")
+    velocity_mm_s = _vec3_field(("vx", "vy", "vz"), "_vel",  # type: ignore[assignment]
+                                "Probe velocity (3,) (mm/s), a read-only array built from ``vx, vy, vz``.")
+    force_n = _vec3_field(("fx", "fy", "fz"), "_frc",  # type: ignore[assignment]
+                          "Applied force (3,) (N), a read-only array built from ``fx, fy, fz``.")
 
     @property
     def penetration_mm(self) -> float:
