@@ -14,6 +14,11 @@ from typing import Any, Callable, Mapping
 #: the minor version from which the old names are gone
 REMOVED_IN = "0.3"
 
+#: modules that moved as a whole: old name -> new name (each old one is a shim file that
+#: calls :func:`moved_module`; the API reference leaves them out)
+MOVED_MODULES = {"hapticsdk.rendering": "hapticsdk.runtime.render",
+                 "hapticsdk.importance": "hapticsdk.compiler.importance"}
+
 
 def _warn(old: str, new: str) -> None:
     warnings.warn(f"{old} moved to {new}; the old name is deprecated since hapticsdk 0.2 and "
@@ -40,11 +45,13 @@ def moved_function(old: str, module: str, name: str) -> Any:
     return getattr(import_module(module), name)
 
 
-def moved_module(old: str, new: str, namespace: dict[str, Any],
+def moved_module(old: str, namespace: dict[str, Any],
                  extra: Mapping[str, str] | None = None) -> Callable[[str], Any]:
-    """Fill a shim module's ``namespace`` with the public names of ``new`` (warning once,
-    at import) and return its ``__getattr__`` for the rest of ``new``'s names and for
-    ``extra`` (old name -> module that holds it now)."""
+    """Fill the shim module ``old``'s ``namespace`` with the public names of its new
+    module (:data:`MOVED_MODULES`; warning once, at import) and return its
+    ``__getattr__`` for the rest of the new module's names and for ``extra`` (old name ->
+    module that holds it now)."""
+    new = MOVED_MODULES[old]
     _warn(f"module {old}", new)
     target = import_module(new)
     public = getattr(target, "__all__", None) or [n for n in vars(target) if not n.startswith("_")]

@@ -2,4 +2,4 @@
 
 from ._deprecation import moved_module
 
-__getattr__ = moved_module(__name__, "hapticsdk.compiler.importance", globals())
+__getattr__ = moved_module(__name__, globals())

@@ -2,5 +2,5 @@
 
 from ._deprecation import moved_module
 
-__getattr__ = moved_module(__name__, "hapticsdk.runtime.render", globals(),
+__getattr__ = moved_module(__name__, globals(),
                            {"ConstantForceRenderer": "hapticsdk.runtime.replacements"})
