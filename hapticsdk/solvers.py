@@ -270,6 +270,12 @@ def _check_targets(T: np.ndarray, dimensions: tuple[str, ...], given_shape: tupl
             raise ValidationError(f"target {bad:g} outside 0..1", field=f"targets.{dname}")
 
 
+def _answer_key(x: np.ndarray) -> tuple[str, tuple[int, ...], bytes]:
+    """Identity of an answer array for :meth:`SolveProblem.evaluate_one`'s memo: equal
+    keys, equal evaluations."""
+    return x.dtype.char, x.shape, x.tobytes()
+
+
 @dataclass
 class SolveProblem:
     """Targets + model + feature space + constraints.
@@ -347,6 +353,9 @@ class SolveProblem:
         #: per-setup memo (search caches: sample clouds, lookup tables, keys) shared by the
         #: problems :meth:`with_targets` derives, which differ only in their targets
         self._setup_cache: dict[Any, Any] = {}
+        #: ``[self, key, result]`` while a one-target ``Solver.solve`` runs on this very
+        #: problem: the last :meth:`evaluate_one` of the backend (see there); else ``None``
+        self._one_memo: list[Any] | None = None
         self._lo, self._hi = self.space.lower, self.space.upper
         self._fixed_row = np.zeros(len(model_in))
         for n, v in self.fixed.items():
@@ -542,7 +551,25 @@ class SolveProblem:
         """Formula (6) at one answer ``x`` ``(d,)`` of the first target, on plain floats:
         ``(fitness, error, violation, intensities, violations)`` with every model output's
         intensity and each constraint's violation as lists; the same numbers as
-        :meth:`evaluate` with ``details`` and ``per_constraint`` on a batch of one."""
+        :meth:`evaluate` with ``details`` and ``per_constraint`` on a batch of one.
+
+        While a one-target :meth:`Solver.solve` runs on this problem, the last answer its
+        backend evaluated here is remembered: a backend that judges its answer with this
+        method (to keep it or fall back) and the core's evaluation of the same answer for
+        the result then cost one evaluation, not two. Nothing is remembered across calls or
+        for derived problems; the lists returned are the caller's own."""
+        memo = self._one_memo
+        if memo is None or memo[0] is not self or type(x) is not np.ndarray:
+            return self._evaluate_one(x)
+        key = _answer_key(x)
+        if memo[1] != key:
+            memo[1] = None                  # no stale pair if the evaluation raises
+            memo[2] = self._evaluate_one(x)
+            memo[1] = key
+        fit, err, viol, I, pc = memo[2]
+        return fit, err, viol, list(I), list(pc)
+
+    def _evaluate_one(self, x: np.ndarray) -> tuple[float, float, float, list[float], list[float]]:
         G = (x if self._identity else self.full_inputs(x))[None, :]
         model = self.model
         if _plain_predict(model):
@@ -812,12 +839,18 @@ class Solver(ABC):
             raise SolverError(f"solver {self.name!r} failed: {type(exc).__name__}: {exc}") from exc
 
     def _solve_single(self, problem: SolveProblem, rng: np.random.Generator) -> SolveResult:
-        """One target (``problem.single``): the same search and the same result as a batch of
-        one, with the answer re-evaluated on plain floats (:meth:`SolveProblem.evaluate_one`)
+        """One target (``problem.single``): the backend's search (the same as for a batch of
+        one unless the backend has its own one-target path, like ``amortised``'s
+        Gauss-Newton step), with the answer re-evaluated on plain floats (:meth:`SolveProblem.evaluate_one`)
         instead of through the batch arrays."""
         t0 = time.perf_counter()
         trace = Trace(1)
-        out = self._call_backend(problem, rng, trace)
+        memo: list[Any] = [problem, None, None]     # what the backend's evaluate_one computed last
+        problem._one_memo = memo
+        try:
+            out = self._call_backend(problem, rng, trace)
+        finally:
+            problem._one_memo = None
         x = np.asarray(out.x, float)
         d = problem.n_features
         row = x[0].tolist() if x.shape == (1, d) else None
@@ -826,7 +859,10 @@ class Solver(ABC):
                               f"(expected {(1, d)}) or non-finite values")
         lo, hi = problem._bounds_list      # clipped to the bounds as problem.clip does, on floats
         x = np.array([h if v > h else (l if v < l else v) for v, l, h in zip(row, lo, hi)])
-        fun, error, viol, I, pc = problem.evaluate_one(x)
+        if memo[1] is not None and memo[1] == _answer_key(x):   # the backend judged this very answer
+            fun, error, viol, I, pc = memo[2]
+        else:
+            fun, error, viol, I, pc = problem.evaluate_one(x)
         elapsed = time.perf_counter() - t0
         rows: list[dict[str, Any]] = []
         if trace.times:   # as a batch's per-target trace: times from the solver's start
