@@ -238,8 +238,12 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
     map coloured by the delivered force ratio against the stiffest passive spring,
     ``delivered_vs_passive_ratio`` (worst finger; 1 = min(K, K_pass) x penetration
     delivered), with the largest energy given to the user (mJ) written in each cell and
-    unstable cells outlined in red."""
+    unstable cells outlined in red. The colour scale is logarithmic, whole decades from
+    at most 0.1 to at least 10 and wide enough for every cell (an undamped wall without
+    the controller delivers a hundred times the passive spring's force: a 0..1 scale
+    painted every cell alike); a ratio of 0 is drawn at the bottom of the scale."""
     plt = _pyplot()
+    from matplotlib.colors import LogNorm
     from matplotlib.patches import Rectangle
 
     cells = list(result["cells"])
@@ -247,6 +251,12 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
         raise HapticSDKError("the stability result has no cells to plot")
     dampings = sorted({float(c["damping_ns_per_m"]) for c in cells})
     ctrl = sorted({bool(c["controller"]) for c in cells}, reverse=True)
+    grids = {(on, b): _cells_grid(cells, b, on) for on in ctrl for b in dampings}
+    every = np.concatenate([g[2].ravel() for g in grids.values()])
+    pos = every[np.isfinite(every) & (every > 0)]
+    lo_d = np.floor(np.log10(min(0.1, pos.min()))) if pos.size else -1.0
+    hi_d = np.ceil(np.log10(max(10.0, pos.max()))) if pos.size else 1.0
+    norm = LogNorm(vmin=10.0 ** lo_d, vmax=10.0 ** hi_d)
     fig, axes = plt.subplots(len(ctrl), len(dampings), figsize=(4.6 * len(dampings), 3.9 * len(ctrl) + 1.2),
                              squeeze=False)
     tol_mj = float(result.get("energy_tolerance_j", np.nan)) * 1e3
@@ -254,15 +264,16 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
     for r, on in enumerate(ctrl):
         for col, b in enumerate(dampings):
             a = axes[r, col]
-            ks, ts, ratio, energy, stable = _cells_grid(cells, b, on)
-            im = a.imshow(ratio, origin="lower", cmap="viridis", vmin=0.0, vmax=1.0, aspect="auto")
+            ks, ts, ratio, energy, stable = grids[(on, b)]
+            im = a.imshow(np.where(ratio > 0, ratio, norm.vmin), origin="lower", cmap="viridis", norm=norm,
+                          aspect="auto")
             for i in range(len(ts)):
                 for j in range(len(ks)):
                     e = energy[i, j] * 1e3
                     txt = f"{e:.0f}" if e >= 10 else (f"{e:.2g}" if e >= 0.01 else "0")
                     shade = ratio[i, j]
                     a.text(j, i, txt, ha="center", va="center", fontsize=7,
-                           color="black" if np.isfinite(shade) and shade > 0.6 else "white")
+                           color="black" if np.isfinite(shade) and norm(max(shade, norm.vmin)) > 0.6 else "white")
                     if not stable[i, j]:
                         a.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="red", lw=2.0))
             a.set_xticks(range(len(ks)), [f"{k:g}" for k in ks], rotation=45, fontsize=8)
@@ -270,13 +281,14 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
             a.set_xlabel("wall stiffness K (N/mm)")
             a.set_ylabel("servo period T (ms)")
             a.set_title(f"damping b = {b:g} Ns/m, controller {'on' if on else 'off'}", fontsize=10)
-    fig.suptitle("stability matrix of a virtual wall on the simulated Omni: colour = delivered force "
-                 "/ (min(K, K_pass) x penetration), worst finger\nnumber = largest energy given to the user "
-                 f"(mJ); red outline = unstable (energy > {tol_mj:g} mJ or force after release)",
-                 fontsize=10)
-    fig.tight_layout(rect=(0.0, 0.0, 0.92, 0.95))
-    cax = fig.add_axes((0.93, 0.12, 0.015, 0.7))
-    fig.colorbar(im, cax=cax, label="delivered / (min(K, K_pass) x penetration)")
+    fig.suptitle("stability matrix of a virtual wall on the simulated Omni (generated data)\n"
+                 "colour = delivered force / (min(K, K_pass) x penetration), worst finger; "
+                 "number = largest energy given to the user (mJ)\n"
+                 f"red outline = unstable (energy > {tol_mj:g} mJ or force after release)", fontsize=10)
+    fig.tight_layout(rect=(0.0, 0.0, 0.86, 0.93))
+    cax = fig.add_axes((0.875, 0.12, 0.015, 0.7))
+    fig.colorbar(im, cax=cax, label="delivered / (min(K, K_pass) x penetration), log scale\n"
+                 "(1: the passive spring's force)")
     out = Path(path)
     save_figure(fig, out, dpi=90)
     return out
