@@ -382,7 +382,8 @@ class AmortisedSolver(Solver):
         plain 1-D arrays (the network's forward pass and Jacobian with the scaling folded
         into the weights, no batch machinery), in unit-box coordinates and clipped to the
         bounds. The answer is kept when it meets every constraint and its error is within
-        the tolerance and no larger than the lookup's; otherwise ``None`` and the caller
+        the tolerance and no larger than the lookup's (as the float64 network computes it:
+        the float32 model differs by rounding); otherwise ``None`` and the caller
         runs the general batched LM (a target where a constraint binds: about 1 in 10 reachable targets of
         the default model). ``None`` also for a model without a numpy twin."""
         net = _one_row(problem)
