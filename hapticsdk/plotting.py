@@ -256,7 +256,8 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
     pos = every[np.isfinite(every) & (every > 0)]
     lo_d = np.floor(np.log10(min(0.1, pos.min()))) if pos.size else -1.0
     hi_d = np.ceil(np.log10(max(10.0, pos.max()))) if pos.size else 1.0
-    norm = LogNorm(vmin=10.0 ** lo_d, vmax=10.0 ** hi_d)
+    v_lo = float(10.0 ** lo_d)
+    norm = LogNorm(vmin=v_lo, vmax=float(10.0 ** hi_d))
     fig, axes = plt.subplots(len(ctrl), len(dampings), figsize=(4.6 * len(dampings), 3.9 * len(ctrl) + 1.2),
                              squeeze=False)
     tol_mj = float(result.get("energy_tolerance_j", np.nan)) * 1e3
@@ -265,7 +266,7 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
         for col, b in enumerate(dampings):
             a = axes[r, col]
             ks, ts, ratio, energy, stable = grids[(on, b)]
-            im = a.imshow(np.where(ratio > 0, ratio, norm.vmin), origin="lower", cmap="viridis", norm=norm,
+            im = a.imshow(np.where(ratio > 0, ratio, v_lo), origin="lower", cmap="viridis", norm=norm,
                           aspect="auto")
             for i in range(len(ts)):
                 for j in range(len(ks)):
@@ -273,7 +274,7 @@ def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
                     txt = f"{e:.0f}" if e >= 10 else (f"{e:.2g}" if e >= 0.01 else "0")
                     shade = ratio[i, j]
                     a.text(j, i, txt, ha="center", va="center", fontsize=7,
-                           color="black" if np.isfinite(shade) and norm(max(shade, norm.vmin)) > 0.6 else "white")
+                           color="black" if np.isfinite(shade) and norm(max(shade, v_lo)) > 0.6 else "white")
                     if not stable[i, j]:
                         a.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="red", lw=2.0))
             a.set_xticks(range(len(ks)), [f"{k:g}" for k in ks], rotation=45, fontsize=8)
