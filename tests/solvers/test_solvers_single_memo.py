@@ -51,12 +51,18 @@ def _answers(fx, model):
     return X[0], X[1]
 
 
-def test_the_answer_the_backend_judged_is_evaluated_once(fx, model, monkeypatch):
-    xa, _ = _answers(fx, model)
+def _judged_setup(fx, model, monkeypatch):
+    """Two feasible answers, a one-target problem whose target the first meets, the result
+    a batch of one gives for that answer, and the counter of evaluations on the problem."""
+    xa, xb = _answers(fx, model)
     T = model.predict(xa[None])[0]
     p = fx.make_problem(T, model=model)
     ref = Judged(x=xa).solve(fx.make_problem(T[None, :], model=model))[0]
-    calls = _count_model_calls(monkeypatch, p)
+    return xa, xb, p, ref, _count_model_calls(monkeypatch, p)
+
+
+def test_the_answer_the_backend_judged_is_evaluated_once(fx, model, monkeypatch):
+    xa, _, p, ref, calls = _judged_setup(fx, model, monkeypatch)
     r = Judged(x=xa, judge=[xa]).solve(p)
     assert len(calls) == 1
     _same_result(r, ref)          # the backend's changes to its lists did not reach the result
@@ -64,11 +70,7 @@ def test_the_answer_the_backend_judged_is_evaluated_once(fx, model, monkeypatch)
 
 
 def test_another_answer_or_a_later_call_is_evaluated_afresh(fx, model, monkeypatch):
-    xa, xb = _answers(fx, model)
-    T = model.predict(xa[None])[0]
-    p = fx.make_problem(T, model=model)
-    ref = Judged(x=xa).solve(fx.make_problem(T[None, :], model=model))[0]
-    calls = _count_model_calls(monkeypatch, p)
+    xa, xb, p, ref, calls = _judged_setup(fx, model, monkeypatch)
     r = Judged(x=xa, judge=[xa, xb]).solve(p)     # the last one judged is not the answer
     assert len(calls) == 3
     _same_result(r, ref)
