@@ -13,14 +13,15 @@ def register_bench(bench_sub: Any) -> None:
     """Add ``bench stability``, ``bench fidelity``, ``bench timing`` (and the other runtime
     benchmarks) under ``hapticsdk bench``.
     """
-    from .argtypes import bounded_int, nonneg_int, positive_float
+    from .argtypes import bounded_int, figure_file, nonneg_int, positive_float
 
     p = bench_sub.add_parser("stability", help="stability matrix of a virtual wall on the simulated Omni "
                                                "(stiffness x period x damping x finger, controller on/off)")
     p.add_argument("--quick", action="store_true", help="small grid, 3 s runs (for tests)")
     p.add_argument("--duration", type=positive_float, default=None, help="seconds per cell (default 10)")
-    p.add_argument("--plot", metavar="PNG", help="write a figure: stiffness x period map per damping, "
-                                                 "coloured by delivered force ratio, energy marked (needs matplotlib)")
+    p.add_argument("--plot", metavar="PNG", type=figure_file,
+                   help="write a figure: stiffness x period map per damping, coloured by delivered force "
+                        "ratio, energy marked (needs matplotlib)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_stability)
 

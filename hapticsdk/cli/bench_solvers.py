@@ -16,9 +16,11 @@ def register_bench(bench_sub: argparse._SubParsersAction) -> None:
     """Add ``bench solvers`` under ``hapticsdk bench``."""
     p = bench_sub.add_parser("solvers", help="solver work-precision, runtime-to-target, peers (pygad, DEAP, pymoo)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
-    p.add_argument("--plot", metavar="FILE", help="write the work-precision plot (PNG; needs matplotlib)")
+    from .argtypes import bounded_int, figure_file
+    # the figure's format is checked when the arguments are parsed, before minutes of benchmark
+    p.add_argument("--plot", metavar="FILE", type=figure_file,
+                   help="write the work-precision plot (PNG, or another format by its suffix; needs matplotlib)")
     p.add_argument("--quick", action="store_true", help="3 seeds and fewer settings (about a minute)")
-    from .argtypes import bounded_int
     p.add_argument("--seeds", type=bounded_int(1, 1000), default=None,
                    help="seeds per setting, 1..1000 (default 15, --quick 3)")
     p.add_argument("--output", metavar="FILE", help="also write the JSON report to FILE")

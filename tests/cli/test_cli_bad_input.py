@@ -307,6 +307,8 @@ CASES = [
     ("train-manifest-ratings-outside", ["train", "{ds_ratings_out}", "--out", "{dir}/m.onnx"], "ratings"),
     # --- issue 31: named errors, safety is not data, budgets ------------------------------
     ("render-plot-exe", ["render", "S7", "--plot", "{dir}/out.exe"], "--plot", "'exe'"),
+    ("bench-solvers-plot-exe", ["bench", "solvers", "--quick", "--plot", "{dir}/out.exe"], "--plot", "'exe'"),
+    ("bench-stability-plot-exe", ["bench", "stability", "--quick", "--plot", "{dir}/out.exe"], "--plot", "'exe'"),
     ("voicecoil-serial-300", ["calibrate", "voicecoil", "{answers_ok}", "--serial", "s" * 300], "--serial", "126"),
     ("piezo-serial-300", ["calibrate", "piezo", "{piezo_ok}", "--serial", "s" * 300], "--serial", "126"),
     ("list-serial-300", ["calibrate", "list", "--serial", "voicecoil=" + "s" * 300], "--serial", "126"),
