@@ -823,6 +823,8 @@ def plot(report: dict[str, Any], path: str | Path) -> None:
         am = (peers.get("amortised (ours, one target per call)") or {}).get("points", [{}])[0]
         gp = (peers.get("ga-polish (ours, one target per call)") or {}).get("points", [{}])[0]
         note = f"{build:.2f} s CPU\n(table {'x'.join(str(v) for v in a.get('table_shape', []))})"
+        if a.get("table_source", "built") != "built":   # not this process's CPU time: say so
+            note += f"\nmeasured when built;\nthis run read it from\nthe {a['table_source']}"
         if am.get("cpu_s") and gp.get("cpu_s") and gp["cpu_s"] > am["cpu_s"]:
             n_even = build / (gp["cpu_s"] - am["cpu_s"])
             note += f"\npays for itself after\n{n_even:,.0f} one-target calls\n(vs ga-polish)"
