@@ -353,7 +353,7 @@ class SolveProblem:
         #: per-setup memo (search caches: sample clouds, lookup tables, keys) shared by the
         #: problems :meth:`with_targets` derives, which differ only in their targets
         self._setup_cache: dict[Any, Any] = {}
-        #: ``[self, key, result]`` while a one-target ``Solver.solve`` runs on this very
+        #: ``[self, (key, result)]`` while a one-target ``Solver.solve`` runs on this very
         #: problem: the last :meth:`evaluate_one` of the backend (see there); else ``None``
         self._one_memo: list[Any] | None = None
         self._lo, self._hi = self.space.lower, self.space.upper
@@ -562,11 +562,12 @@ class SolveProblem:
         if memo is None or memo[0] is not self or type(x) is not np.ndarray:
             return self._evaluate_one(x)
         key = _answer_key(x)
-        if memo[1] != key:
-            memo[1] = None                  # no stale pair if the evaluation raises
-            memo[2] = self._evaluate_one(x)
-            memo[1] = key
-        fit, err, viol, I, pc = memo[2]
+        pair = memo[1]
+        if pair is None or pair[0] != key:
+            # key and numbers replaced in one assignment: never a mixed pair, whatever the threads
+            pair = (key, self._evaluate_one(x))
+            memo[1] = pair
+        fit, err, viol, I, pc = pair[1]
         return fit, err, viol, list(I), list(pc)
 
     def _evaluate_one(self, x: np.ndarray) -> tuple[float, float, float, list[float], list[float]]:
@@ -845,7 +846,7 @@ class Solver(ABC):
         instead of through the batch arrays."""
         t0 = time.perf_counter()
         trace = Trace(1)
-        memo: list[Any] = [problem, None, None]     # what the backend's evaluate_one computed last
+        memo: list[Any] = [problem, None]     # what the backend's evaluate_one computed last
         problem._one_memo = memo
         try:
             out = self._call_backend(problem, rng, trace)
@@ -859,8 +860,9 @@ class Solver(ABC):
                               f"(expected {(1, d)}) or non-finite values")
         lo, hi = problem._bounds_list      # clipped to the bounds as problem.clip does, on floats
         x = np.array([h if v > h else (l if v < l else v) for v, l, h in zip(row, lo, hi)])
-        if memo[1] is not None and memo[1] == _answer_key(x):   # the backend judged this very answer
-            fun, error, viol, I, pc = memo[2]
+        pair = memo[1]
+        if pair is not None and pair[0] == _answer_key(x):   # the backend judged this very answer
+            fun, error, viol, I, pc = pair[1]
         else:
             fun, error, viol, I, pc = problem.evaluate_one(x)
         elapsed = time.perf_counter() - t0
