@@ -13,8 +13,8 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
-from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
+from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import ValidationError
 from hapticsdk.features import Feature, FeatureSpace
 from hapticsdk.models import PerceptionModel
@@ -22,8 +22,8 @@ from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver
 from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model
 from hapticsdk.testing.conformance import KitResult, format_report
+from kit_variants import API, ForceArm, constraint, dishonest, never
 
-API = ">=1.2,<2"
 needs_hardness = pytest.mark.skipif("omni-virtual" not in registry("actuator"),
                                     reason="hapticsdk-hardness not installed")
 
@@ -278,44 +278,13 @@ class MeasuredPlate(Plate):
     readback_source: ClassVar[str] = "measured"
 
 
-class Arm(HapticDevice):
+class Arm(ForceArm):
     """A correct force device that reports the force its motors give (saturating at 3 N)."""
-    hapticsdk_api = API
     name: ClassVar[str] = "kit-arm3"
-    limits = ActuatorLimits(max_force_n=3.0)
-    simulated: ClassVar[bool] = True
     readback_source: ClassVar[str] = "output"
-    saturation_n = 3.0
-
-    def __init__(self, **kw: Any) -> None:
-        super().__init__(**kw)
-        self.f, self.t = 0.0, 0.0
-
-    def _open(self) -> None:
-        self.f, self.t = 0.0, 0.0
-
-    def _command(self, cmd: ChannelCommand) -> None:
-        self.f = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
-
-    def _stop(self) -> None:
-        self.f = 0.0
-
-    def _read_back(self) -> ChannelCommand:
-        return ChannelCommand("force", force_n=self.f)
-
-    def _read_state(self) -> DeviceState:
-        return DeviceState(t=self.t, position_mm=np.zeros(3), velocity_mm_s=np.zeros(3),
-                           force_n=np.array([0.0, self.f, 0.0]))
-
-    def _step(self, dt: float) -> None:
-        self.t += dt
 
 
-class Arm50(Arm):
-    """Declares 50 N on motors that saturate at 2 N (dishonest limits, output reported)."""
-    name: ClassVar[str] = "kit-arm50"
-    limits = ActuatorLimits(max_force_n=50.0)
-    saturation_n = 2.0
+Arm50 = dishonest(Arm, "kit-arm50")
 
 
 class BadStateArm(Arm):
@@ -490,44 +459,12 @@ def test_by_name_an_excluded_range_is_named_by_the_api_rule(monkeypatch):
 # dimensions
 # ---------------------------------------------------------------------------
 
-class _Loop(Constraint):
-    """x >= 0.2, evaluated row by row in Python."""
-    name = "loop"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return np.array([0.2 for _ in x]), np.array([float(v) for v in x])
-
-
-class _Vec(Constraint):
-    """x >= 0.2 (vectorised)."""
-    name = "vec"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return np.full_like(x, 0.2), x
-
-
-class _RowDependent(Constraint):
-    """Penalty depends on the batch (its mean), so rows and batch disagree."""
-    name = "batchy"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return np.full_like(x, float(x.mean())), x
-
-
-class _Never(Constraint):
-    """x >= x + 1."""
-    name = "never"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return x + 1.0, x
+_Loop = constraint("loop", "kit.x", lambda x: (np.array([0.2 for _ in x]), np.array([float(v) for v in x])),
+                   "x >= 0.2, evaluated row by row in Python.")
+_Vec = constraint("vec", "kit.x", lambda x: (np.full_like(x, 0.2), x), "x >= 0.2 (vectorised).")
+_RowDependent = constraint("batchy", "kit.x", lambda x: (np.full_like(x, float(x.mean())), x),
+                           "Penalty depends on the batch (its mean), so rows and batch disagree.")
+_Never = never()
 
 
 class _R(DimensionRenderer):
