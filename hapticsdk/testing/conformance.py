@@ -780,41 +780,43 @@ def _force_limit(d: Any, role: str, spec: Any) -> tuple[str | None, float | None
     return field, lim.max_amplitude if is_force_unit(lim.amplitude_unit) else lim.max_force_n
 
 
-#: rows of the constraint-cost rule's batch, and how many times a vectorised reference on
-#: them a constraint may take. A Python loop costs >= ~1 us per row (interpreter dispatch,
-#: several us with numpy scalars), a vectorised column operation ~1-10 ns per element, so
-#: a per-row constraint at 10^4 rows is 100-1000 x the reference and a vectorised one with
-#: tens of array operations is ~1-10 x; both are measured in the same process (a loaded
-#: machine slows both). Measured on a loaded 2-core machine (load ~11, 20 runs each):
-#: first-party constraints 0.2-2.2 x, the cheapest possible per-row constraint (two
-#: list comprehensions of Python floats) 33-87 x.
+#: rows of the constraint-cost rule's batch, and the limit: one ``penalty`` batch may take
+#: at most ``COST_FACTOR`` x a per-row reference on the same rows, a Python loop doing one
+#: operation per row (``[v * 0.5 for v in rows]``, rows a list of floats made beforehand),
+#: both timed in the same process (interleaved, fastest of :data:`COST_REPEATS`). Why that
+#: reference and 1: a row-by-row constraint does at least that loop, plus reading its rows
+#: out of the columns and building the result arrays, so it costs more than the reference
+#: whatever the machine and its load (both sides are interpreted loops over the same rows);
+#: a vectorised constraint runs a fixed number of array operations whose cost per element
+#: is that of compiled code, ~5-10 x below an interpreted operation, so one with up to
+#: ~30 array operations stays below it. Measured (2-core machine, load 2-3, 10 runs each):
+#: the first-party constraints 0.08-0.27 x, a vectorised constraint of 160 array operations
+#: 4.1 x; per-row constraints: ``x.tolist()`` read into a list comprehension 2.1 x,
+#: ``np.fromiter`` over a generator 2.3 x, comprehensions over the array's numpy scalars 6 x.
+#: The limit sits near the geometric midpoint of the first party's worst (0.27) and the
+#: cheapest loop (2.1): a margin of ~2 x or more on either side. (It was 20 x a vectorised
+#: reference of the base class's penalty arithmetic: a ratio of a loop to a few array
+#: operations, which moved with the machine's load (33-87 x for the same loop) and let
+#: the cheapest loops, at ~20 x, through.)
 COST_ROWS = 10_000
-COST_FACTOR = 20.0
+COST_FACTOR = 1.0
 #: repeats of the cost rule's timing (the fastest counts, interleaved with the reference)
 COST_REPEATS = 5
 
 
 def _cost_ratio(c: Constraint, cols: Mapping[str, np.ndarray]) -> tuple[float, float, float]:
     """(ratio, constraint s, reference s): fastest-of-:data:`COST_REPEATS` time of one
-    ``penalty`` batch over that of a vectorised reference doing the base class's penalty
-    arithmetic on columns it reads (interleaved). Stops early when a first timing is
-    clearly within the limit."""
+    ``penalty`` batch over that of the per-row reference (one Python operation per row of
+    a column the constraint reads; :data:`COST_FACTOR`), interleaved. Stops early when a
+    timing is clearly within the limit."""
     import time
-    names = [f for f in c.features if f in cols] or list(cols)[:1]
-    arrs = [np.asarray(cols[n], float) for n in names]
-
-    def reference() -> np.ndarray:
-        value = arrs[0] * 1.0
-        for a in arrs[1:]:
-            value = value + a
-        bound = 0.5 * value + 0.1
-        short = value < bound
-        return np.where(short, bound ** 2 - value ** 2, 0.0)
+    name = next((f for f in c.features if f in cols), next(iter(cols)))
+    rows = np.asarray(cols[name], float).tolist()
 
     best_c, best_r = math.inf, math.inf
     for i in range(COST_REPEATS):
         t0 = time.perf_counter()
-        reference()
+        [v * 0.5 for v in rows]
         t1 = time.perf_counter()
         c.penalty(cols, "paper")
         t2 = time.perf_counter()
@@ -1080,9 +1082,9 @@ def _dimension_rules(ctx: _Ctx) -> None:
         for c in d.constraints():
             ratio, t_c, t_ref = _cost_ratio(c, cols)
             assert ratio <= COST_FACTOR, \
-                (f"constraint {c.name!r}: one batch of {COST_ROWS} rows takes {t_c * 1e3:.3g} ms, {ratio:.0f} x a "
-                 f"vectorised reference on the same rows ({t_ref * 1e3:.3g} ms, same process; limit "
-                 f"{COST_FACTOR:g} x): evaluate whole columns with array operations, not row by row")
+                (f"constraint {c.name!r}: one batch of {COST_ROWS} rows takes {t_c * 1e3:.3g} ms, {ratio:.2g} x a "
+                 f"Python loop doing one operation per row on the same rows ({t_ref * 1e3:.3g} ms, same process; "
+                 f"limit {COST_FACTOR:g} x): evaluate whole columns with array operations, not row by row")
 
     _run_rules(ctx, [("class", r_class), ("features", r_features), ("roles-declared", r_roles),
                      ("constraints-vectorised", r_constraints), ("constraints-cost", r_cost),

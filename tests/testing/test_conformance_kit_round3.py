@@ -461,6 +461,8 @@ def test_by_name_an_excluded_range_is_named_by_the_api_rule(monkeypatch):
 
 _Loop = constraint("loop", "kit.x", lambda x: (np.array([0.2 for _ in x]), np.array([float(v) for v in x])),
                    "x >= 0.2, evaluated row by row in Python.")
+_LoopList = constraint("loop-list", "kit.x", lambda x: (np.full(len(x), 0.2), np.array([v for v in x.tolist()])),
+                       "x >= 0.2, row by row over a list of Python floats (the cheapest loop there is).")
 _Vec = constraint("vec", "kit.x", lambda x: (np.full_like(x, 0.2), x), "x >= 0.2 (vectorised).")
 _RowDependent = constraint("batchy", "kit.x", lambda x: (np.full_like(x, float(x.mean())), x),
                            "Penalty depends on the batch (its mean), so rows and batch disagree.")
@@ -537,6 +539,7 @@ def _force_role(value):
 
 DIMENSION_VARIANTS = [
     ({"cons": (_Loop,)}, "constraints-cost"),
+    ({"cons": (_LoopList,)}, "constraints-cost"),
     ({"cons": (_RowDependent,)}, "constraints-vectorised"),
     ({"cons": (_Never,)}, "constraints-feasible"),
     ({"roles": {}}, "roles-declared"),
