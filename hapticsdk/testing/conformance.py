@@ -25,7 +25,8 @@ The rules that judge what an actuator *outputs* read it back
 (:meth:`hapticsdk.actuators.Actuator.read_back`: the physical output where the
 actuator declares ``readback_source = "output"``, else the backend's own record of its
 last write, which the result's ``notes`` say) after holding each command for the safety
-layer's ramp time plus the declared ``limits.settle_time_s``, and compare it with the
+layer's ramp time plus the declared ``limits.settle_time_s``, and on while what the safety
+layer lets through still changes (a declared force-rate limit), and compare it with the
 command in force within the declared resolution (one step for an output, half a step
 for a drive record) or :data:`READBACK_RTOL` of full scale. Timing rules take the fastest of
 :data:`TIMING_CALLS` calls (so a preempted call does not count) against a fraction of
@@ -335,12 +336,37 @@ def _tol(act: Actuator, step: float | None, full_scale: float) -> float:
 
 def _settle_ticks(act: Actuator, *, ramp: bool = False) -> int:
     """Kit ticks to hold a command before its read-back is judged: the actuator's declared
-    settle time (its own ramps and lag), plus the safety layer's start ramp when
+    settle time (its own ramps and lag), plus the safety layer's start ramp time when
     ``ramp``, plus two ticks (the command of the tick and the one that observes it)."""
     t = float(getattr(act, "settle_time_s", 0.0) or 0.0)
     if ramp:
         t += float(getattr(act.safety.settings, "ramp_time_s", 0.0) or 0.0)
     return int(math.ceil(t / KIT_PERIOD_S - 1e-9)) + 2
+
+
+#: kit time (s) a command is held at most while the safety layer's output still changes
+#: (a declared force-rate limit slewing); beyond it the read-back is judged anyway
+HOLD_LIMIT_S = 5.0
+
+
+def _hold(act: Actuator, cmd: ChannelCommand, t: float) -> tuple[ChannelCommand | None, float]:
+    """Send ``cmd`` every kit tick, advancing simulated time, for the safety layer's start
+    ramp plus the declared settle time (:func:`_settle_ticks`), and on while what the layer
+    lets through has changed within the last settle time (a declared
+    ``max_force_rate_n_per_tick`` still slewing; the layer is asked by its output), up to
+    :data:`HOLD_LIMIT_S`. Returns the command in force and the kit time."""
+    least, settle = _settle_ticks(act, ramp=True), _settle_ticks(act)
+    sent: ChannelCommand | None = None
+    steady = 0
+    for i in range(max(least, int(math.ceil(HOLD_LIMIT_S / KIT_PERIOD_S)))):
+        t += KIT_PERIOD_S
+        now = act.command(cmd, now=t)
+        _advance(act)
+        steady = steady + 1 if now == sent else 1
+        sent = now
+        if i + 1 >= least and steady >= settle:
+            break
+    return sent, t
 
 
 def _advance(act: Actuator, dt: float = KIT_PERIOD_S) -> None:
@@ -516,10 +542,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             with a:
                 t = 0.0
                 for c in _over_limit_commands(a):
-                    for _ in range(_settle_ticks(a, ramp=True)):
-                        t += KIT_PERIOD_S
-                        a.command(c, now=t)
-                        _advance(a)
+                    _, t = _hold(a, c, t)
                     rb = a.read_back()
                     if rb is None:
                         break
@@ -576,11 +599,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         with c:
             top = _normal_commands(c)
             big = max(top, key=lambda k: abs(k.force_n or 0.0) + abs(k.amplitude or 0.0))
-            t = 0.0
-            for _ in range(_settle_ticks(c, ramp=True)):
-                t += KIT_PERIOD_S
-                c.command(big, now=t)
-                _advance(c)
+            _hold(c, big, 0.0)
             assert c.stop() is True, "stop() returned False (backend stop failed)"
             _rest_after(c, "after stop()")
         assert n >= 2, "close() did not stop the backend"
@@ -710,14 +729,9 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                 return   # reported by read-back
             t = 0.0
             for c in _normal_commands(a):
-                sent = None
-                # held until settled: the safety layer's ramp time (the start ramp, and the
-                # only declared time of the output path where the actuator declares no settle
-                # time) plus the actuator's declared settle time; simulated time advances
-                for _ in range(_settle_ticks(a, ramp=True)):
-                    t += KIT_PERIOD_S
-                    sent = a.command(c, now=t)
-                    _advance(a)
+                # held until the safety layer's output has been steady for the declared
+                # settle time (simulated time advances)
+                sent, t = _hold(a, c, t)
                 _assert_matches(a, sent, a.read_back())
 
     def r_reopen() -> None:

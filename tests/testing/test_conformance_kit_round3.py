@@ -362,6 +362,44 @@ def test_a_ramp_declared_as_ramp_s_is_waited_for():
     assert "safe-stop" in rules_of(check_actuator(liar))
 
 
+class LagRateArm(Arm):
+    """An honest arm whose motor force follows the drive with a 5 ms lag (reported), which
+    declares the settle time that lag needs within its 1 mN resolution, ``tau ln(3 N / 0.5
+    mN)``, and a force-rate limit the safety layer applies (2 mN per tick: 1.5 s from rest
+    to full scale, far beyond the start ramp)."""
+    name: ClassVar[str] = "kit-arm-rate"
+    tau_s = 0.005
+    limits = ActuatorLimits(max_force_n=3.0, max_force_rate_n_per_tick=0.002, force_resolution_n=0.001,
+                            settle_time_s=0.005 * float(np.log(3.0 / 0.0005)))
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.drive = 0.0
+
+    def _open(self) -> None:
+        super()._open()
+        self.drive = 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.drive = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+
+    def _stop(self) -> None:
+        self.drive, self.f = 0.0, 0.0
+
+    def _step(self, dt: float) -> None:
+        self.t += dt
+        self.f += (self.drive - self.f) * (1.0 - float(np.exp(-dt / self.tau_s)))
+
+
+def test_a_declared_force_rate_limit_is_waited_for():
+    """The kit holds a command while the safety layer's output still slews at the declared
+    rate, then for the settle time: the honest lagged arm conforms (it was flagged while
+    still slewing), and the same arm lagging 10 x longer than it declares is caught."""
+    assert check_device(LagRateArm) == []
+    liar = type("LagRateLiar", (LagRateArm,), {"name": "kit-arm-rate-liar", "tau_s": 0.05})
+    assert "output-follows-command" in rules_of(check_device(liar))
+
+
 def test_a_drive_record_is_marked_in_the_report():
     r = check_actuator(DriveRecordPlate)
     assert r == [] and isinstance(r, KitResult)
