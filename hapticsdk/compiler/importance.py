@@ -454,9 +454,12 @@ _SOURCE_WORDS = {RECORDED: "its recorded features", RECORDED_SOLVED: "those feat
                  SOLVED: "its solved features"}
 
 
-def basis_words(basis: Sequence[Mapping[str, Any]]) -> str:
+def basis_words(basis: Sequence[Mapping[str, Any]], n_solutions: int = 0) -> str:
     """Where a loss estimate was judged, in words: ``at its recorded features and at those
-    features solved onto the target``."""
+    features solved onto the target``; for an estimate without a basis (over a solution
+    set, :func:`estimate_losses`), ``over n feature vectors``."""
+    if not basis:
+        return f"over {n_solutions} feature vector{'s' if n_solutions != 1 else ''}"
     return "at " + " and at ".join(_SOURCE_WORDS.get(b["source"], str(b["source"])) for b in basis)
 
 
