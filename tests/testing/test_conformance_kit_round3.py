@@ -137,6 +137,36 @@ class CloseFailsPlate(Plate):
         raise OSError("port busy")
 
 
+class CloseSkipsStopPlate(Plate):
+    """Its close() releases the device without stopping the backend first."""
+    name: ClassVar[str] = "kit-plate-closeskipsstop"
+
+    def close(self) -> None:
+        self.stop = lambda: True   # type: ignore[method-assign]  # shadows the core's stop()
+        try:
+            super().close()
+        finally:
+            del self.stop
+
+
+class RecordOffPlate(DriveRecordPlate):
+    """Reports a drive record 0.8 of its 0.05 V step off what it wrote: a record has only
+    the write's quantisation (half a step), so this is caught."""
+    name: ClassVar[str] = "kit-plate-recordoff"
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=self.drive + 0.04)
+
+
+class OutputOffPlate(Plate):
+    """The same 0.04 V off, on a reported output: within one step (the write's and the
+    reading's quantisation), so it conforms."""
+    name: ClassVar[str] = "kit-plate-outputoff"
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=self.out + 0.04 if self.drive else self.out)
+
+
 class StopFailsPlate(Plate):
     """Its backend stop raises."""
     name: ClassVar[str] = "kit-plate-stopfails"
@@ -297,7 +327,8 @@ class BadStateArm(Arm):
 ACTUATOR_VARIANTS = [
     (NoStopPlate, "safe-stop"), (SlowStopPlate, "safe-stop"),
     (SlowPlate, "output-follows-command"), (RandomPlate, "output-follows-command"), (StalePlate, "reopen"),
-    (CloseFailsPlate, "close"), (StopFailsPlate, "safe-stop"), (BypassPlate, "limits-enforced"),
+    (CloseFailsPlate, "close"), (CloseSkipsStopPlate, "close"), (RecordOffPlate, "output-follows-command"),
+    (StopFailsPlate, "safe-stop"), (BypassPlate, "limits-enforced"),
     (SpyBypassPlate, "template"), (UnlimitedPlate, "limits-declared"), (ExtraOptionPlate, "options"),
     (StringPrivilegedPlate, "privileged-options"), (MisspeltPrivilegedPlate, "privileged-options"),
     (WrongChannelPlate, "class"), (OpenedPlate, "lifecycle"), (NaNPlate, "bad-input"),
@@ -306,7 +337,7 @@ ACTUATOR_VARIANTS = [
 ]
 
 
-@pytest.mark.parametrize("cls", [Plate, DriveRecordPlate, TuplePrivilegedPlate, SpelledUnitPlate])
+@pytest.mark.parametrize("cls", [Plate, DriveRecordPlate, TuplePrivilegedPlate, SpelledUnitPlate, OutputOffPlate])
 def test_correct_plates_conform(cls):
     assert check_actuator(cls) == []
 
