@@ -130,15 +130,19 @@ def _load(kind: str, name: str) -> Any:
     return registry(kind).load(name)
 
 
-def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None) -> tuple[str, Callable[[], Any] | None, Any, str | None]:
-    """(name, factory, class-or-object, import error)."""
+def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None
+             ) -> tuple[str, Callable[[], Any] | None, Any, tuple[str, str] | None]:
+    """(name, factory, class-or-object, failure): the failure is ``(rule, message)``, the
+    rule ``plugin-api-declared`` when the registry refused the plugin's API range, else
+    ``import``."""
     opts = dict(options or {})
     if isinstance(target, str):
         try:
             obj = _load(kind, target)
         except PluginError as exc:
             from ..plugin_api import PluginAPIError
-            return target, None, None, (("api", str(exc)) if isinstance(exc, PluginAPIError) else str(exc))  # type: ignore[return-value]
+            return target, None, None, ("plugin-api-declared" if isinstance(exc, PluginAPIError) else "import",
+                                        str(exc))
         if isinstance(obj, type) and hasattr(obj, "conformance_options"):
             opts = {**obj.conformance_options(), **opts}
         return target, (lambda: obj(**opts)), obj, None
@@ -147,7 +151,7 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None) -> tuple
         try:
             probe = target()
         except Exception as exc:
-            return name, None, None, f"{type(exc).__name__}: {exc}"
+            return name, None, None, ("import", f"{type(exc).__name__}: {exc}")
         return getattr(probe, "name", name) or name, target, type(probe), None
     if isinstance(target, type):
         if hasattr(target, "conformance_options"):
@@ -1426,9 +1430,7 @@ def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
     ctx.only = set(rules or ())
     ctx.by_name = isinstance(target, str)
     if err is not None:
-        api_err = isinstance(err, tuple)
-        ctx.fail("plugin-api-declared" if api_err else "import",
-                 f"could not be loaded: {err[1] if api_err else err}")
+        ctx.fail(err[0], f"could not be loaded: {err[1]}")
         return ctx.violations
     _api_rule(ctx, target)
     if kind in ("actuator", "device"):
