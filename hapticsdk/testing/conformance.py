@@ -46,7 +46,8 @@ from typing import Any, Callable, Mapping, Sequence, cast
 
 import numpy as np
 
-from ..actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevice
+from ..actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevice, readback_tolerance
+from ..actuators import READBACK_RTOL as READBACK_RTOL  # re-exported: the kit's name since 1.1
 from ..dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
 from ..errors import DeviceError, PluginError, ValidationError
 from ..features import Feature, FeatureSpace
@@ -198,9 +199,6 @@ TICK_BUDGET = 0.25
 TIMING_CALLS = 25
 #: wall time (s) a timing rule goes on sampling while the fastest call is over budget
 TIMING_WINDOW_S = 1.0
-#: relative tolerance of a read-back against its command, of full scale, where the
-#: actuator declares no resolution (float rounding of a unit conversion, not a drift)
-READBACK_RTOL = 1e-6
 #: a renderer's force in contact may exceed its default actuator's max_force_n (which
 #: the safety layer clamps) up to this factor at penetrations <= 3 mm; a multiple of it
 #: is a unit or formula error, not a stiff material
@@ -329,13 +327,9 @@ def _reports_output(act: Any) -> bool:
     return getattr(act, "readback_source", "drive") == "output"
 
 
-def _tol(act: Actuator, step: float | None, full_scale: float) -> float:
-    """Read-back tolerance of one field: half the declared step for a drive record (the
-    quantisation of a write), one step for a measured or modelled output (that of the
-    write plus that of the reading); :data:`READBACK_RTOL` of full scale where no step is
-    declared."""
-    share = 1.0 if _reports_output(act) else 0.5
-    return max(READBACK_RTOL * full_scale, share * (step or 0.0)) + 1e-9
+#: read-back tolerance of one field (:func:`hapticsdk.actuators.readback_tolerance`: the
+#: rule the render's final check uses too)
+_tol = readback_tolerance
 
 
 def _settle_ticks(act: Actuator, *, ramp: bool = False) -> int:

@@ -52,6 +52,42 @@ def test_a_piezo_whose_stop_does_nothing_ends_the_render_with_a_fault(stuck_piez
     assert good.fault is None
 
 
+@needs_roughness
+def test_a_reported_output_within_one_step_of_rest_passes_the_kit_and_ends_the_render_clean():
+    """The kit and the render's final check judge rest by one rule: a measured output may
+    lie one declared step off (the write's and the reading's quantisation). A reading
+    0.7 step above rest conforms, so it must not end every render with a fault."""
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.runtime.render import render_plan
+    from hapticsdk.scene import Scene
+    from hapticsdk.testing import check_actuator
+    from hapticsdk_roughness.virtual import PiezoVirtual, piezo_limits
+
+    class ReadingPiezo(PiezoVirtual):
+        """Reports its measured output, 0.7 of its declared step above its drive."""
+        hapticsdk_api = ">=1.2,<2"
+        name: ClassVar[str] = "kit-reading-piezo"
+        readback_source: ClassVar[str] = "output"
+
+        def __init__(self, **kw):
+            super().__init__(**kw)
+            self.limits = piezo_limits(self.gain, None, quantised=True)
+
+        def _read_back(self):
+            rb = super()._read_back()
+            return ChannelCommand("vibration", frequency_hz=rb.frequency_hz,
+                                  amplitude=rb.amplitude + 0.7 * self.limits.amplitude_resolution)
+    registry("actuator").register("kit-reading-piezo", ReadingPiezo)
+    try:
+        assert check_actuator(ReadingPiezo) == []
+        rep = render_plan(compile_scene(Scene.for_material({"roughness": 0.8},
+                                                           devices={"vibration": "kit-reading-piezo"})),
+                          seconds=0.5)
+        assert rep.fault is None, rep.fault
+    finally:
+        registry("actuator").unregister("kit-reading-piezo")
+
+
 # -- typed roles for every dimension --------------------------------------------------
 
 @needs_roughness
