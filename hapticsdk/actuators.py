@@ -32,6 +32,21 @@ log = logging.getLogger(__name__)
 
 _isfinite = math.isfinite  # bound once: Actuator.command checks three fields every servo tick
 
+#: relative tolerance of a read-back against its command or its rest, of full scale, where
+#: the actuator declares no resolution (float rounding of a unit conversion, not a drift)
+READBACK_RTOL = 1e-6
+
+
+def readback_tolerance(act: Any, step: float | None, full_scale: float) -> float:
+    """How far a read-back of one field may lie from the command in force (or from rest):
+    half the declared ``step`` for a drive record (the quantisation of a write), one step
+    for a measured or modelled output (``readback_source = "output"``: that of the write
+    plus that of the reading); :data:`READBACK_RTOL` of ``full_scale`` where no step is
+    declared. One rule for the conformance kit and :meth:`Actuator.still_driving`."""
+    share = 1.0 if getattr(act, "readback_source", "drive") == "output" else 0.5
+    return max(READBACK_RTOL * full_scale, share * (step or 0.0)) + 1e-9
+
+
 #: every actuator currently open in this process; stopped at interpreter exit
 _OPEN_ACTUATORS: "weakref.WeakSet[Actuator]" = weakref.WeakSet()
 
@@ -542,8 +557,10 @@ class Actuator(ABC):
 
     def still_driving(self) -> str | None:
         """What this actuator still outputs when it should rest, per :meth:`read_back`
-        (``"amplitude 148 V"``), or None at rest (within half its declared resolution) or
-        when it cannot tell (no read-back). For the render report after the final stop."""
+        (``"amplitude 148 V"``), or None at rest (within :func:`readback_tolerance`: half
+        its declared resolution for a drive record, one step for a reported output, as the
+        conformance kit judges it) or when it cannot tell (no read-back). For the render
+        report after the final stop."""
         try:
             rb = self.read_back()
         except Exception as exc:  # noqa: BLE001 - a failing read is reported, not raised
@@ -552,11 +569,11 @@ class Actuator(ABC):
             return None
         lim = self.limits
         f = rb.force_n or 0.0
-        ftol = 0.5 * (getattr(lim, "force_resolution_n", None) or 0.0) + 1e-9 * float(lim.max_force_n or 1.0)
+        ftol = readback_tolerance(self, getattr(lim, "force_resolution_n", None), float(lim.max_force_n or 1.0))
         if abs(f) > ftol:
             return f"force {f:g} N"
         if rb.amplitude is not None:
-            atol = 0.5 * (lim.amplitude_resolution or 0.0) + 1e-9 * float(lim.max_amplitude or 1.0)
+            atol = readback_tolerance(self, lim.amplitude_resolution, float(lim.max_amplitude or 1.0))
             if abs(rb.amplitude - float(self.rest_amplitude)) > atol:
                 return f"amplitude {rb.amplitude:g} {lim.amplitude_unit} (rest {float(self.rest_amplitude):g})"
         return None

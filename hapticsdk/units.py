@@ -65,6 +65,10 @@ for names, unit in [
 OFFSET_UNITS: dict[str, str] = {n: "degC" for n in ("degC", "°C", "℃", "celsius", "degree_Celsius", "deg C")}
 OFFSET_UNITS.update({n: "degF" for n in ("degF", "°F", "fahrenheit")})
 
+#: decades of scale a parsed unit may span (a float spans about +-307); beyond, the string
+#: is compared as text
+_MAX_DECADES = 300
+
 _TOKEN = re.compile(r"^(?P<name>[^\d^*+-]+|1|%|-)(?:(?:\^|\*\*)?(?P<pow>[+-]?\d+))?$")
 
 
@@ -79,7 +83,7 @@ def parse_unit(text: str) -> tuple[float, tuple[int, ...]] | str | None:
         return 1.0, _ONE
     t = re.sub(r"\s+per\s+", "/", t.replace("**", "^"))
     t = re.sub(r"\s*([/*·])\s*", r"\1", t)
-    scale, dims = 1.0, [0, 0, 0, 0, 0]
+    log_scale, dims = 0.0, [0, 0, 0, 0, 0]
     sign = 1
     for i, part in enumerate(re.split(r"(/)", t)):
         if part == "/":
@@ -97,9 +101,11 @@ def parse_unit(text: str) -> tuple[float, tuple[int, ...]] | str | None:
             unit = ALIASES.get(name) or ALIASES.get(name.lower() if len(name) > 2 else name)
             if unit is None:
                 return None
-            scale *= unit[0] ** (sign * p)
+            log_scale += sign * p * math.log10(unit[0])
             dims = [d + sign * p * u for d, u in zip(dims, unit[1])]
-    return scale, tuple(dims)
+    if abs(log_scale) > _MAX_DECADES:   # kN^999: no float holds it (it would overflow or become 0)
+        return None
+    return 10.0 ** log_scale, tuple(dims)
 
 
 def same_unit(a: str, b: str) -> bool:

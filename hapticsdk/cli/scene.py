@@ -202,21 +202,14 @@ def _drive_words(max_drive: float, unit: str | None) -> str:
     return f"drive up to {max_drive:g} {unit}"
 
 
-def _points_words(e: dict[str, Any]) -> str:
-    from ..compiler.importance import basis_words
-    if e.get("basis"):
-        return basis_words(e["basis"])
-    n = e.get("n_solutions", 0)
-    return f"over {n} feature vector{'s' if n != 1 else ''}"
-
-
 def keep_words(e: dict[str, Any]) -> str:
     """Why a judged dimension is kept, with its interval: wholly above the threshold, or
     straddling it (the importance model cannot tell, so the dimension is kept)."""
+    from ..compiler.importance import basis_words
     lo, hi = e["interval_percent"]
     thr = e["threshold_percent"]
     head = (f"predicted realism loss if left out {e['median_percent']:.1f} % "
-            f"(80 % interval {lo:.1f}-{hi:.1f} % {_points_words(e)})")
+            f"(80 % interval {lo:.1f}-{hi:.1f} % {basis_words(e.get('basis') or (), e.get('n_solutions', 0))})")
     if lo < thr <= hi:
         return (f"{head}: the interval straddles the threshold {thr:g} %, so the importance model cannot "
                 f"say the loss is small; kept")

@@ -264,9 +264,7 @@ def _pin_at_first_solve(second: dict[str, Any], first: Mapping[str, Any], mats: 
 def _basis_words(e: Any) -> str:
     """Which feature points a loss estimate judged, in words."""
     from .importance import basis_words
-    if e.basis:
-        return ("highest median " if len(e.basis) > 1 else "median ") + basis_words(e.basis)
-    return f"median over {e.n_solutions} feature vector{'s' if e.n_solutions != 1 else ''}"
+    return ("highest median " if len(e.basis) > 1 else "median ") + basis_words(e.basis, e.n_solutions)
 
 
 def _solve_summary(r: Any, dims: Sequence[str], model_names: Sequence[str], seed: Any) -> dict[str, Any]:

@@ -147,3 +147,16 @@ def test_a_straddling_interval_keeps_the_dimension_and_the_plan_says_so():
     assert "roughness" in plan.materials["S13"].dimensions
     text = format_plan(plan.summary())
     assert f"{lo:.1f}-{hi:.1f} %" in text and "straddles" in text
+
+
+@needs_hardness
+def test_a_library_material_with_changed_intensities_is_judged_at_its_solve_not_its_recording():
+    """The recorded features describe the library's intensities: a scene that changes them
+    judges the solved features (what renders), and the unchanged material its recording."""
+    plan = compile_scene({"name": "s", "objects": [{"name": "a", "material": "S16"},
+                                                   {"name": "b", "material": "S16", "intensities": {"roughness": 0.9}}]})
+    (same,) = [mp for n, mp in plan.materials.items() if n == "S16"]
+    (changed,) = [mp for n, mp in plan.materials.items() if n != "S16"]
+    for mp, sources in ((same, ["recorded", "recorded, solved onto the target"]), (changed, ["solved"])):
+        for e in mp.importance.values():
+            assert [b["source"] for b in e["basis"]] == sources, mp.name

@@ -151,18 +151,9 @@ def test_first_party_dimensions_declare_every_role_their_renderers_use():
 
 
 def test_an_unsatisfiable_constraint_is_a_compile_error(monkeypatch):
-    from hapticsdk.dimensions import Constraint
     from hapticsdk_roughness.dimension import RoughnessDimension
-    import numpy as np
-
-    class Never(Constraint):
-        name = "roughness.never"
-        features = ("P",)
-
-        def _bound_and_value(self, cols):
-            p = np.asarray(cols["P"])
-            return p + 1.0, p
-
+    from kit_variants import never
+    Never = never("roughness.never", "P")
     orig = RoughnessDimension.constraints
     monkeypatch.setattr(RoughnessDimension, "constraints", lambda self, **c: orig(self, **c) + [Never()])
     with pytest.raises(PluginError, match="roughness.never"):

@@ -10,12 +10,13 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, HapticDevice
+from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.features import Feature, FeatureSpace
 from hapticsdk.models import MLPModel, PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check_actuator, check_device, check_dimension, check_model
+from kit_variants import ForceArm, dishonest, never
 
 
 def broken(violations) -> set[str]:
@@ -108,46 +109,11 @@ class PlateNoLimits(Coil):
     limits = ActuatorLimits()
 
 
-class Arm(HapticDevice):
+class Arm(ForceArm):
     """A correct force device: reads back the force its motors are set to."""
-    hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
-    name: ClassVar[str] = "kit-arm"
-    limits = ActuatorLimits(max_force_n=3.0)
-    simulated: ClassVar[bool] = True
-    saturation_n = 3.0
-
-    def __init__(self, **kw: Any) -> None:
-        super().__init__(**kw)
-        self.f = 0.0
-        self.t = 0.0
-
-    def _open(self) -> None:
-        self.f, self.t = 0.0, 0.0
-
-    def _command(self, cmd: ChannelCommand) -> None:
-        f = cmd.force_n or 0.0
-        self.f = max(-self.saturation_n, min(self.saturation_n, f))
-
-    def _stop(self) -> None:
-        self.f = 0.0
-
-    def _read_back(self) -> ChannelCommand:
-        return ChannelCommand("force", force_n=self.f)
-
-    def _read_state(self):
-        from hapticsdk.actuators import DeviceState
-        return DeviceState(t=self.t, position_mm=np.zeros(3), velocity_mm_s=np.zeros(3),
-                           force_n=np.array([0.0, self.f, 0.0]))
-
-    def _step(self, dt: float) -> None:
-        self.t += dt
 
 
-class DishonestArm(Arm):
-    """Declares 50 N on a device whose motors saturate at 2 N."""
-    name: ClassVar[str] = "kit-dishonest-arm"
-    limits = ActuatorLimits(max_force_n=50.0)
-    saturation_n = 2.0
+DishonestArm = dishonest(Arm, "kit-dishonest-arm")
 
 
 def test_correct_actuators_conform():
@@ -185,13 +151,7 @@ def test_every_first_party_actuator_reads_back():
 
 # -- dimensions -----------------------------------------------------------------
 
-class _Never(Constraint):
-    name = "never"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return x + 1.0, x          # x >= x + 1: never
+_Never = never()
 
 
 class _NoDoc(Constraint):

@@ -13,8 +13,8 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
-from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
+from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import ValidationError
 from hapticsdk.features import Feature, FeatureSpace
 from hapticsdk.models import PerceptionModel
@@ -22,8 +22,8 @@ from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver
 from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model
 from hapticsdk.testing.conformance import KitResult, format_report
+from kit_variants import API, ForceArm, constraint, dishonest, never
 
-API = ">=1.2,<2"
 needs_hardness = pytest.mark.skipif("omni-virtual" not in registry("actuator"),
                                     reason="hapticsdk-hardness not installed")
 
@@ -135,6 +135,36 @@ class CloseFailsPlate(Plate):
 
     def _close(self) -> None:
         raise OSError("port busy")
+
+
+class CloseSkipsStopPlate(Plate):
+    """Its close() releases the device without stopping the backend first."""
+    name: ClassVar[str] = "kit-plate-closeskipsstop"
+
+    def close(self) -> None:
+        self.stop = lambda: True   # type: ignore[method-assign]  # shadows the core's stop()
+        try:
+            super().close()
+        finally:
+            del self.stop
+
+
+class RecordOffPlate(DriveRecordPlate):
+    """Reports a drive record 0.8 of its 0.05 V step off what it wrote: a record has only
+    the write's quantisation (half a step), so this is caught."""
+    name: ClassVar[str] = "kit-plate-recordoff"
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=self.drive + 0.04)
+
+
+class OutputOffPlate(Plate):
+    """The same 0.04 V off, on a reported output: within one step (the write's and the
+    reading's quantisation), so it conforms."""
+    name: ClassVar[str] = "kit-plate-outputoff"
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("friction", amplitude=self.out + 0.04 if self.drive else self.out)
 
 
 class StopFailsPlate(Plate):
@@ -278,44 +308,13 @@ class MeasuredPlate(Plate):
     readback_source: ClassVar[str] = "measured"
 
 
-class Arm(HapticDevice):
+class Arm(ForceArm):
     """A correct force device that reports the force its motors give (saturating at 3 N)."""
-    hapticsdk_api = API
     name: ClassVar[str] = "kit-arm3"
-    limits = ActuatorLimits(max_force_n=3.0)
-    simulated: ClassVar[bool] = True
     readback_source: ClassVar[str] = "output"
-    saturation_n = 3.0
-
-    def __init__(self, **kw: Any) -> None:
-        super().__init__(**kw)
-        self.f, self.t = 0.0, 0.0
-
-    def _open(self) -> None:
-        self.f, self.t = 0.0, 0.0
-
-    def _command(self, cmd: ChannelCommand) -> None:
-        self.f = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
-
-    def _stop(self) -> None:
-        self.f = 0.0
-
-    def _read_back(self) -> ChannelCommand:
-        return ChannelCommand("force", force_n=self.f)
-
-    def _read_state(self) -> DeviceState:
-        return DeviceState(t=self.t, position_mm=np.zeros(3), velocity_mm_s=np.zeros(3),
-                           force_n=np.array([0.0, self.f, 0.0]))
-
-    def _step(self, dt: float) -> None:
-        self.t += dt
 
 
-class Arm50(Arm):
-    """Declares 50 N on motors that saturate at 2 N (dishonest limits, output reported)."""
-    name: ClassVar[str] = "kit-arm50"
-    limits = ActuatorLimits(max_force_n=50.0)
-    saturation_n = 2.0
+Arm50 = dishonest(Arm, "kit-arm50")
 
 
 class BadStateArm(Arm):
@@ -328,7 +327,8 @@ class BadStateArm(Arm):
 ACTUATOR_VARIANTS = [
     (NoStopPlate, "safe-stop"), (SlowStopPlate, "safe-stop"),
     (SlowPlate, "output-follows-command"), (RandomPlate, "output-follows-command"), (StalePlate, "reopen"),
-    (CloseFailsPlate, "close"), (StopFailsPlate, "safe-stop"), (BypassPlate, "limits-enforced"),
+    (CloseFailsPlate, "close"), (CloseSkipsStopPlate, "close"), (RecordOffPlate, "output-follows-command"),
+    (StopFailsPlate, "safe-stop"), (BypassPlate, "limits-enforced"),
     (SpyBypassPlate, "template"), (UnlimitedPlate, "limits-declared"), (ExtraOptionPlate, "options"),
     (StringPrivilegedPlate, "privileged-options"), (MisspeltPrivilegedPlate, "privileged-options"),
     (WrongChannelPlate, "class"), (OpenedPlate, "lifecycle"), (NaNPlate, "bad-input"),
@@ -337,7 +337,7 @@ ACTUATOR_VARIANTS = [
 ]
 
 
-@pytest.mark.parametrize("cls", [Plate, DriveRecordPlate, TuplePrivilegedPlate, SpelledUnitPlate])
+@pytest.mark.parametrize("cls", [Plate, DriveRecordPlate, TuplePrivilegedPlate, SpelledUnitPlate, OutputOffPlate])
 def test_correct_plates_conform(cls):
     assert check_actuator(cls) == []
 
@@ -391,6 +391,44 @@ def test_a_ramp_declared_as_ramp_s_is_waited_for():
     # still at ~120 V 22 ms after stop() from full drive
     liar = type("Liar", (RampedPlate,), {"name": "kit-plate-liar", "settle_time_s": property(lambda self: 0.02)})
     assert "safe-stop" in rules_of(check_actuator(liar))
+
+
+class LagRateArm(Arm):
+    """An honest arm whose motor force follows the drive with a 5 ms lag (reported), which
+    declares the settle time that lag needs within its 1 mN resolution, ``tau ln(3 N / 0.5
+    mN)``, and a force-rate limit the safety layer applies (2 mN per tick: 1.5 s from rest
+    to full scale, far beyond the start ramp)."""
+    name: ClassVar[str] = "kit-arm-rate"
+    tau_s = 0.005
+    limits = ActuatorLimits(max_force_n=3.0, max_force_rate_n_per_tick=0.002, force_resolution_n=0.001,
+                            settle_time_s=0.005 * float(np.log(3.0 / 0.0005)))
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.drive = 0.0
+
+    def _open(self) -> None:
+        super()._open()
+        self.drive = 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.drive = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+
+    def _stop(self) -> None:
+        self.drive, self.f = 0.0, 0.0
+
+    def _step(self, dt: float) -> None:
+        self.t += dt
+        self.f += (self.drive - self.f) * (1.0 - float(np.exp(-dt / self.tau_s)))
+
+
+def test_a_declared_force_rate_limit_is_waited_for():
+    """The kit holds a command while the safety layer's output still slews at the declared
+    rate, then for the settle time: the honest lagged arm conforms (it was flagged while
+    still slewing), and the same arm lagging 10 x longer than it declares is caught."""
+    assert check_device(LagRateArm) == []
+    liar = type("LagRateLiar", (LagRateArm,), {"name": "kit-arm-rate-liar", "tau_s": 0.05})
+    assert "output-follows-command" in rules_of(check_device(liar))
 
 
 def test_a_drive_record_is_marked_in_the_report():
@@ -490,44 +528,14 @@ def test_by_name_an_excluded_range_is_named_by_the_api_rule(monkeypatch):
 # dimensions
 # ---------------------------------------------------------------------------
 
-class _Loop(Constraint):
-    """x >= 0.2, evaluated row by row in Python."""
-    name = "loop"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return np.array([0.2 for _ in x]), np.array([float(v) for v in x])
-
-
-class _Vec(Constraint):
-    """x >= 0.2 (vectorised)."""
-    name = "vec"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return np.full_like(x, 0.2), x
-
-
-class _RowDependent(Constraint):
-    """Penalty depends on the batch (its mean), so rows and batch disagree."""
-    name = "batchy"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return np.full_like(x, float(x.mean())), x
-
-
-class _Never(Constraint):
-    """x >= x + 1."""
-    name = "never"
-    features = ("kit.x",)
-
-    def _bound_and_value(self, cols):
-        x = np.asarray(cols["kit.x"])
-        return x + 1.0, x
+_Loop = constraint("loop", "kit.x", lambda x: (np.array([0.2 for _ in x]), np.array([float(v) for v in x])),
+                   "x >= 0.2, evaluated row by row in Python.")
+_LoopList = constraint("loop-list", "kit.x", lambda x: (np.full(len(x), 0.2), np.array([v for v in x.tolist()])),
+                       "x >= 0.2, row by row over a list of Python floats (the cheapest loop there is).")
+_Vec = constraint("vec", "kit.x", lambda x: (np.full_like(x, 0.2), x), "x >= 0.2 (vectorised).")
+_RowDependent = constraint("batchy", "kit.x", lambda x: (np.full_like(x, float(x.mean())), x),
+                           "Penalty depends on the batch (its mean), so rows and batch disagree.")
+_Never = never()
 
 
 class _R(DimensionRenderer):
@@ -600,6 +608,7 @@ def _force_role(value):
 
 DIMENSION_VARIANTS = [
     ({"cons": (_Loop,)}, "constraints-cost"),
+    ({"cons": (_LoopList,)}, "constraints-cost"),
     ({"cons": (_RowDependent,)}, "constraints-vectorised"),
     ({"cons": (_Never,)}, "constraints-feasible"),
     ({"roles": {}}, "roles-declared"),

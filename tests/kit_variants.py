@@ -1,0 +1,74 @@
+"""Builders shared by the conformance-kit tests (``tests/testing``) and the scene tests
+(``tests/scene``): a force device that reports the force its motors give, and one-line
+constraints (``x >= bound``) whose bound and value a test supplies, correct or broken.
+
+Importable as ``kit_variants`` through ``tests/conftest.py`` (the suite runs with
+``--import-mode=importlib``, which puts no test folder on ``sys.path``)."""
+
+from __future__ import annotations
+
+from typing import Any, Callable, ClassVar
+
+import numpy as np
+
+from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.dimensions import ChannelCommand, Constraint
+
+#: the plugin API the test plugins are written for
+API = ">=1.2,<2"
+
+
+class ForceArm(HapticDevice):
+    """A correct force device: its motors saturate at ``saturation_n`` (the declared
+    ``max_force_n``); it reads back the force they give."""
+    hapticsdk_api = API
+    name: ClassVar[str] = "kit-arm"
+    limits = ActuatorLimits(max_force_n=3.0)
+    simulated: ClassVar[bool] = True
+    saturation_n = 3.0
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.f, self.t = 0.0, 0.0
+
+    def _open(self) -> None:
+        self.f, self.t = 0.0, 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.f = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+
+    def _stop(self) -> None:
+        self.f = 0.0
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("force", force_n=self.f)
+
+    def _read_state(self) -> DeviceState:
+        return DeviceState(t=self.t, position_mm=np.zeros(3), velocity_mm_s=np.zeros(3),
+                           force_n=np.array([0.0, self.f, 0.0]))
+
+    def _step(self, dt: float) -> None:
+        self.t += dt
+
+
+def dishonest(arm: type[ForceArm], name: str) -> type[ForceArm]:
+    """``arm`` declaring 50 N on motors that saturate at 2 N (dishonest limits)."""
+    return type(arm.__name__ + "Dishonest", (arm,), {
+        "__doc__": "Declares 50 N on motors that saturate at 2 N.", "name": name,
+        "limits": ActuatorLimits(max_force_n=50.0), "saturation_n": 2.0})
+
+
+def constraint(name: str, feature: str,
+               bound_and_value: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+               doc: str = "") -> type[Constraint]:
+    """A constraint ``value >= bound`` on one feature, ``bound_and_value(column)``
+    giving both (a test's correct or broken variant)."""
+    def _bound_and_value(self: Constraint, cols: Any) -> tuple[np.ndarray, np.ndarray]:
+        return bound_and_value(np.asarray(cols[feature]))
+    return type(f"Constraint_{name}", (Constraint,), {
+        "__doc__": doc or None, "name": name, "features": (feature,), "_bound_and_value": _bound_and_value})
+
+
+def never(name: str = "never", feature: str = "kit.x") -> type[Constraint]:
+    """``x >= x + 1``: no feature vector satisfies it."""
+    return constraint(name, feature, lambda x: (x + 1.0, x), "x >= x + 1: never")
