@@ -21,7 +21,7 @@ import weakref
 from collections import deque
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar, Mapping, TypeVar
 
 import numpy as np
 
@@ -228,6 +228,9 @@ def _vec3_field(names: tuple[str, str, str], cache: str, doc: str) -> property:
     return property(get, put, doc=doc)
 
 
+_SensedT = TypeVar("_SensedT", bound="SensedState")
+
+
 class SensedState(DeviceState):
     """A :class:`DeviceState` held as plain floats: what a backend's ``_read_state``
     returns when it reads every servo tick (building three numpy arrays per read costs
@@ -269,8 +272,8 @@ class SensedState(DeviceState):
         self.buttons = buttons
 
     @classmethod
-    def of(cls, t: float, px: float, py: float, pz: float, vx: float, vy: float, vz: float,
-           fx: float = 0.0, fy: float = 0.0, fz: float = 0.0, buttons: int = 0) -> "SensedState":
+    def of(cls: "type[_SensedT]", t: float, px: float, py: float, pz: float, vx: float, vy: float, vz: float,
+           fx: float = 0.0, fy: float = 0.0, fz: float = 0.0, buttons: int = 0) -> "_SensedT":
         """A state from plain floats (no array is built until a field is read)."""
         st = cls.__new__(cls)
         st.t = t

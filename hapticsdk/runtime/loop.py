@@ -212,6 +212,10 @@ class _Slot:
     """Per-role bookkeeping."""
 
     __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd", "log_n", "log_f", "log_a")
+    #: what the role was sent, by tick: (cap,) views of the loop's log ring (set by start)
+    log_n: np.ndarray
+    log_f: np.ndarray
+    log_a: np.ndarray
 
     def __init__(self, role: str, act: Actuator, is_force: bool) -> None:
         self.role = role
@@ -276,13 +280,19 @@ class _ContactState(SensedState):
     contact normal of the object under the probe (``DeviceState.penetration_mm`` is the
     version-1 ``-y``)."""
 
-    __slots__ = ("penetration_mm",)
+    __slots__ = ("_pen",)
+    _pen: float
+
+    @property
+    def penetration_mm(self) -> float:
+        """Depth along the contact normal of the object under the probe (mm)."""
+        return self._pen
 
     @classmethod
     def at(cls, st: SensedState, pen: float) -> "_ContactState":
         c = cls.of(st.t, st.px, st.py, st.pz, st.vx, st.vy, st.vz, st.fx, st.fy, st.fz, st.buttons)
-        c.penetration_mm = pen  # type: ignore[misc]  # typed loosely, to be annotated (issue 29 note)
-        return c  # type: ignore[return-value]  # typed loosely, to be annotated (issue 29 note)
+        c._pen = pen
+        return c
 
 
 def _check_renderers(renderers: Sequence[DimensionRenderer], actuators: Mapping[str, Actuator],
@@ -629,14 +639,15 @@ class ServoLoop:
         ncol = _NCOL + 3 * len(slots) + 3
         self._ncol = ncol
         self._log = np.zeros((cap, ncol))
-        self._log_mv = memoryview(self._log.reshape(-1))  # type: ignore[arg-type]  # typed loosely, to be annotated (issue 29 note)
+        #: the ring as one flat run of doubles: the row's pack_into (a byte offset) and the
+        #: three late stores (an index) both write through it
+        self._log_mv: memoryview[float] = self._log.data.cast("B").cast("d")
         # every column but the last three (compute, cpu, sim: measured after the row is
         # written), native byte order as numpy's float64
         self._log_row = struct.Struct(f"={ncol - 3}d").pack_into
-        self._log_bytes = memoryview(self._log.reshape(-1).view(np.uint8))  # type: ignore[arg-type]  # typed loosely, to be annotated (issue 29 note)
         for s in slots:
             # each role's columns as (cap,) views of the ring: what it was sent, by tick
-            s.log_n, s.log_f, s.log_a = (self._log[:, s.col + j] for j in range(3))  # type: ignore[attr-defined]  # typed loosely, to be annotated (issue 29 note)
+            s.log_n, s.log_f, s.log_a = (self._log[:, s.col + j] for j in range(3))
         self._events = dict.fromkeys(EVENT_KEYS, 0)
         self._fault: dict[str, str] | None = None
         self._fault_exc: BaseException | None = None
@@ -755,7 +766,7 @@ class ServoLoop:
                 device.step(dt)
                 for a in self._stepped:
                     a.step(dt)
-                lm[((k - 1) % self._cap) * ncol + ncol - 1] = perf() - s0  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
+                lm[((k - 1) % self._cap) * ncol + ncol - 1] = perf() - s0
             if k and dt > 1.5 * T:
                 self._missed += 1
         else:
@@ -933,7 +944,7 @@ class ServoLoop:
                 recorder.record(t, st, sent)
             except Exception:
                 events["renderer_error"] += 1
-        self._log_row(self._log_bytes, base * 8, t, dt, pen, idx, f_sent, p0, p1, p2, v0, v1, v2, *row)
+        self._log_row(lm, base * 8, t, dt, pen, idx, f_sent, p0, p1, p2, v0, v1, v2, *row)
         self.last_state = st
         self.last_penetration_mm = pen
         self.last_force_n = f_sent
@@ -941,12 +952,12 @@ class ServoLoop:
         self.last_index = idx
         if cpu_time:
             q = (time.thread_time_ns() - q0) * 1e-9
-            lm[base + ncol - 2] = q  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
+            lm[base + ncol - 2] = q
             if q > self._max_cpu:
                 self._max_cpu = q
         c1 = perf()
         comp = c1 - c0
-        lm[base + ncol - 3] = comp  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
+        lm[base + ncol - 3] = comp
         self.last_compute_s = comp
         if comp > self._max_compute:
             self._max_compute = comp
@@ -973,7 +984,7 @@ class ServoLoop:
                 self._set_fault(exc, device.label)
                 self._k = k + 1
                 return False
-            lm[base + ncol - 1] = perf() - s0  # type: ignore[call-overload]  # typed loosely, to be annotated (issue 29 note)
+            lm[base + ncol - 1] = perf() - s0
         self._k = k + 1
         return self._k < self._n_max
 
