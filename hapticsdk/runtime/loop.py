@@ -434,9 +434,10 @@ class ServoLoop:
                 position_resolution_mm=float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0))
         self.passivity_settings = passivity_settings
         #: contact gate hysteresis (mm): contact begins at penetration > 0 and ends at
-        #: penetration <= -one encoder count of the device (0 for an exact position), so a
-        #: probe resting at a surface, whose reading flips between two adjacent counts,
-        #: never toggles contact (docs/runtime.md, "Gates with hysteresis")
+        #: penetration <= -one encoder count of the device (0 for an exact position;
+        #: times |nx| + |ny| + |nz| on a surface whose normal n is not +y), so a probe
+        #: resting at a surface, whose reading flips between two adjacent counts, never
+        #: toggles contact (docs/runtime.md, "Gates with hysteresis")
         self.contact_hysteresis_mm = float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0)
         self.cpu_time = bool(cpu_time)
         self.rt = RealtimeSettings.coerce(rt)
@@ -834,9 +835,15 @@ class ServoLoop:
                 direction = (nx, ny, nz)
         in_contact = pen > 0.0
         pen_in = pen
-        if not in_contact and idx >= 0 and idx == self.contact and pen > -self.contact_hysteresis_mm:
-            in_contact = True  # within the gate's hysteresis: held, rendered at the surface
-            pen_in = 0.0
+        if not in_contact and idx >= 0 and idx == self.contact:
+            h = self.contact_hysteresis_mm
+            if direction is not None:
+                # one count on each axis moves the distance along the normal by up to
+                # q (|nx| + |ny| + |nz|) (q alone on the version-1 plane, normal +y)
+                h *= abs(direction[0]) + abs(direction[1]) + abs(direction[2])
+            if pen > -h:
+                in_contact = True  # within the gate's hysteresis: held, rendered at the surface
+                pen_in = 0.0
         contact = idx if in_contact else -1
         if contact != self.contact:
             events["contact_changes"] += 1

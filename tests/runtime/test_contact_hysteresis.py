@@ -106,3 +106,47 @@ def test_piezo_commands_away_from_the_gate_are_unchanged():
         a = _piezo().tick(_inp(v, v, 9.0))[0]
         b = _piezo().tick(_inp(v, v, 0.0))[0]
         assert (a.frequency_hz, a.amplitude) == (b.frequency_hz, b.amplitude) and a.amplitude > 0
+
+
+class _Flicker3(VirtualProbe):
+    """Resting on a surface, every axis reading one of its two adjacent counts (q mm),
+    drawn at random each tick."""
+
+    def __init__(self, q, p0, seed):
+        super().__init__()
+        self.encoder_resolution_mm = q
+        self._lo = np.floor(np.asarray(p0) / q) * q
+        self._q = q
+        self._rng = np.random.default_rng(seed)
+
+    def _read_state(self):
+        from hapticsdk.actuators import DeviceState
+        p = self._lo + self._q * (self._rng.random(3) < 0.5)
+        return DeviceState(t=self.t, position_mm=p, velocity_mm_s=np.zeros(3))
+
+
+class _Plane:
+    """A hit tester: the plane through the origin with outward unit normal n."""
+
+    def __init__(self, n):
+        self.n = np.asarray(n, float) / np.linalg.norm(n)
+
+    def query(self, x, y, z):
+        nx, ny, nz = (float(c) for c in self.n)
+        return 0, -(x * nx + y * ny + z * nz), nx, ny, nz
+
+
+@pytest.mark.parametrize("seed", range(25))
+def test_resting_on_a_tilted_surface_never_toggles(seed):
+    """Any count size, any period, any orientation of the surface against the encoder
+    axes: the readings of a probe resting on it (each axis flipping between two
+    counts) never end a contact once made."""
+    rng = np.random.default_rng(seed)
+    q = float(np.exp(rng.uniform(np.log(0.001), np.log(1.0))))        # count (mm)
+    period_ms = float(np.exp(rng.uniform(np.log(0.25), np.log(10.0))))  # period (ms)
+    plane = _Plane(rng.normal(size=3))
+    p0 = rng.uniform(-1.0, 1.0, 3)
+    p0 -= (p0 @ plane.n) * plane.n  # on the surface
+    rep = ServoLoop(_Flicker3(q, p0, seed), [Gate()], passivity=False, hit_tester=plane,
+                    period_s=period_ms * 1e-3).run(200 * period_ms * 1e-3)
+    assert rep.events["contact_changes"] <= 1
