@@ -21,8 +21,6 @@ limits (``jitter_limits``) are reported: pass/fail only on a declared real-time 
 from __future__ import annotations
 
 import math
-import os
-import platform
 import subprocess
 import sys
 from typing import Any
@@ -103,8 +101,7 @@ def run_timing(seconds: float = 60.0, *, realtime: bool = False, load: bool = Fa
               "jitter_limits_met": jitter_met,
               "rt_requested": {"cpu": rt_settings.cpu, "fifo_priority": rt_settings.fifo_priority,
                                "gc_freeze": rt_settings.gc_freeze, "mlockall": rt_settings.mlockall},
-              "machine": {"python": platform.python_version(), "platform": platform.platform(),
-                          "cpus": os.cpu_count()}})
+              "machine": before})   # reference.machine(): Python, platform, CPUs, model, load
     return with_reference(d, before)
 
 
