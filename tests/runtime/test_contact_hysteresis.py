@@ -150,3 +150,41 @@ def test_resting_on_a_tilted_surface_never_toggles(seed):
     rep = ServoLoop(_Flicker3(q, p0, seed), [Gate()], passivity=False, hit_tester=plane,
                     period_s=period_ms * 1e-3).run(200 * period_ms * 1e-3)
     assert rep.events["contact_changes"] <= 1
+
+
+class _Seen(DimensionRenderer):
+    """Records what the renderers are handed: (in_contact, penetration, speed step)."""
+    roles = ("force",)
+
+    def __init__(self):
+        self.seen = []
+
+    def tick(self, inp):
+        self.seen.append((inp.in_contact, inp.penetration_mm, inp.speed_step_mm_s))
+        return [ChannelCommand("force", 0.0)]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_inside_the_band_renderers_get_the_surface(seed):
+    """Held in contact by the hysteresis, a renderer is handed penetration 0 (the
+    surface's own value), never the negative reading."""
+    r = _Seen()
+    ServoLoop(Encoded(trajectory=_flicker(rng=np.random.default_rng(seed))), [r], passivity=False).run(0.45)
+    held = [p for c, p, _ in r.seen if c]
+    assert held and min(held) >= 0.0
+    assert any(p == 0.0 for p in held)   # the band was entered
+
+
+@pytest.mark.parametrize("q, period_s", [(0.055, 1e-3), (0.01, 2.5e-4), (0.2, 1e-2), (0.03, 4e-3)])
+def test_speed_step_is_one_count_through_the_filter(q, period_s):
+    """TickInput.speed_step_mm_s: a count q in one tick is a backward difference of q/T;
+    a first-order low-pass at f_c passes the fraction 1 - exp(-2 pi f_c T) of a step in
+    one tick."""
+    class Dev(VirtualProbe):
+        encoder_resolution_mm = q
+
+    r = _Seen()
+    ServoLoop(Dev(trajectory=Trajectory([(0.0, 0.0, -1.0), (600.0, 0.0, -1.0)])), [r], passivity=False,
+              period_s=period_s, velocity_filter_hz=30.0).run(5 * period_s)
+    a = 1.0 - np.exp(-2.0 * np.pi * 30.0 * period_s)
+    assert [s for _, _, s in r.seen] == pytest.approx([a * q / period_s] * 5, rel=1e-12)
