@@ -107,6 +107,15 @@ class Shaker(Actuator):
         pass
 
 
+class DriftProbe(FloatProbe):
+    """FloatProbe drifting along z as well, so every axis of position and velocity reads
+    its own value (a column swapped in the log shows)."""
+
+    def _read_state(self):
+        s = super()._read_state()
+        return SensedState.of(s.t, s.px, s.py, 0.1 + 0.3 * s.t, s.vx, s.vy, 0.3, s.fx, s.fy, s.fz, s.buttons)
+
+
 class Recorder:
     def __init__(self):
         self.rows = []
@@ -130,7 +139,7 @@ def test_log_ring_and_sent_commands_match_what_was_read_and_sent():
     sent), across a wrap of the ring; each tick's sent command is its own record (the
     loop refills one record per role, the actuator's safety layer returns a new one)."""
     rec = Recorder()
-    dev = FloatProbe(trajectory=press_slide())
+    dev = DriftProbe(trajectory=press_slide())
     loop = ServoLoop(dev, [Spring(), Buzz()], {"force": dev, "vib": Shaker()}, recorder=rec, log_seconds=0.4)
     rep = loop.run(1.5)
     n = rep.log["t"].size
