@@ -171,3 +171,51 @@ def test_safety_speed_limit_reads_the_floats():
         assert "max_velocity_mm_s" not in s.hits
         s.observe(make((60.0, 0.0, 80.001)))        # just above
         assert s.hits.get("max_velocity_mm_s") == 1 and s.events["faults"] == 1
+
+
+class _Watch(SafetyLayer):
+    """A safety layer that also notes the penetration of every state it observes."""
+
+    def __init__(self, limits):
+        super().__init__(limits)
+        self.seen = []
+
+    def observe(self, state):
+        self.seen.append(state.penetration_mm)
+        super().observe(state)
+
+
+class _Tilted:
+    """A hit tester: the plane through the origin with unit normal (0.6, 0.8, 0)."""
+
+    def query(self, x, y, z):
+        return 0, -(0.6 * x + 0.8 * y), 0.6, 0.8, 0.0
+
+
+def test_safety_layers_observe_the_penetration_along_the_normal():
+    """In a spatial scene the safety layers see the penetration along the contact
+    normal (what the log holds), not the version-1 -y of the state read."""
+    shaker = Shaker(safety=_Watch(Shaker.limits))
+    dev = FloatProbe(trajectory=press_slide())
+    loop = ServoLoop(dev, [Spring(), Buzz()], {"force": dev, "vib": shaker},
+                     hit_tester=_Tilted(), log_seconds=10.0)
+    rep = loop.run(1.0)
+    pen = rep.log["penetration_mm"]
+    np.testing.assert_array_equal(shaker.safety.seen, pen)
+    assert np.ptp(pen + rep.log["position_mm"][:, 1]) > 0.1   # differs from -y
+
+
+def test_a_vibration_role_left_silent_keeps_its_frequency():
+    """A tick on which no renderer commands a vibration role sends amplitude 0 at the
+    frequency it last had (not None: a frequency the safety layer would ramp from)."""
+    class Once(DimensionRenderer):
+        roles = ("vib",)
+
+        def tick(self, inp):
+            return [ChannelCommand("vib", frequency_hz=180.0, amplitude=0.5)] if inp.t < 0.1 else []
+
+    dev = FloatProbe(trajectory=press_slide())
+    rep = ServoLoop(dev, [Spring(), Once()], {"force": dev, "vib": Shaker()}).run(0.3)
+    f, a = rep.log["vib.frequency_hz"], rep.log["vib.amplitude"]
+    late = rep.log["t"] > 0.15
+    assert (f[late] == 180.0).all() and (a[late] == 0.0).all() and late.sum() > 100
