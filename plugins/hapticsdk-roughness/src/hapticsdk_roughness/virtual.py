@@ -84,7 +84,8 @@ class PiezoVirtual(Actuator):
         self.ramp_s = float(ramp_s)
         self.quantize = bool(quantize)
         self.keep_samples = int(keep_s * fs)
-        self.osc = Oscillator(self.fs, ramp_s=self.ramp_s, max_amplitude=self.limits.max_amplitude)  # type: ignore[arg-type]  # typed loosely, to be annotated (issue 29 note)
+        self.osc = Oscillator(self.fs, ramp_s=self.ramp_s,
+                              max_amplitude=cast(float, self.limits.max_amplitude))  # piezo_limits sets it
         #: the kept output (the last keep_s of it)
         self._window = SampleWindow(max(1, self.keep_samples))
         #: (frequency Hz, amplitude V, samples) per command not yet synthesised: the servo
