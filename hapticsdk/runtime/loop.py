@@ -421,9 +421,10 @@ class ServoLoop:
                                   field="velocity_filter_hz")
         self.velocity_filter_hz = float(velocity_filter_hz)
         self._vf0 = self._vf1 = self._vf2 = 0.0
-        self._vf_dt = -1.0
         self._vf_a = 1.0
         self._v_step = 0.0  # speed step of one encoder count through the filter (mm/s)
+        # the device's declared encoder count (mm; 0: an exact position)
+        q = float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0)
         self.switch_ramp_s = float(switch_ramp_s)
         if passivity_settings is None:
             # the device's apparent mass (if it declares one) bounds the in-period push
@@ -431,14 +432,14 @@ class ServoLoop:
             passivity_settings = ControllerSettings(
                 device_mass_kg=getattr(device, "apparent_mass_kg", None),
                 device_damping_ns_per_m=float(getattr(device, "damping_ns_per_m", 0.0) or 0.0),
-                position_resolution_mm=float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0))
+                position_resolution_mm=q)
         self.passivity_settings = passivity_settings
         #: contact gate hysteresis (mm): contact begins at penetration > 0 and ends at
         #: penetration <= -one encoder count of the device (0 for an exact position;
         #: times |nx| + |ny| + |nz| on a surface whose normal n is not +y), so a probe
         #: resting at a surface, whose reading flips between two adjacent counts, never
         #: toggles contact (docs/runtime.md, "Gates with hysteresis")
-        self.contact_hysteresis_mm = float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0)
+        self.contact_hysteresis_mm = q
         self.cpu_time = bool(cpu_time)
         self.rt = RealtimeSettings.coerce(rt)
         #: operations handed in from other threads, applied at the start of a tick
@@ -656,6 +657,7 @@ class ServoLoop:
         self._last_x = 0.0
         self._have_good = False
         self._vf0 = self._vf1 = self._vf2 = 0.0
+        self._vf_dt = -1.0   # the filter's coefficient and speed step: computed on the first tick
         self._good_state: SensedState | None = None
         self._cpu_cost_us = 2e6 * thread_cpu_clock_cost_s() if self.cpu_time else float("nan")
         self._max_compute = 0.0

@@ -188,3 +188,15 @@ def test_speed_step_is_one_count_through_the_filter(q, period_s):
               period_s=period_s, velocity_filter_hz=30.0).run(5 * period_s)
     a = 1.0 - np.exp(-2.0 * np.pi * 30.0 * period_s)
     assert [s for _, _, s in r.seen] == pytest.approx([a * q / period_s] * 5, rel=1e-12)
+
+
+def test_speed_step_follows_the_band_on_the_next_run():
+    """The filter's coefficient and speed step are derived at the start of each run: a
+    band changed between two runs of one loop is the one the second run hands out."""
+    r = _Seen()
+    loop = ServoLoop(Encoded(trajectory=Trajectory([(0.0, 0.0, -1.0), (600.0, 0.0, -1.0)])), [r], passivity=False)
+    loop.run(0.003)
+    loop.contact_hysteresis_mm = 2 * Q
+    loop.run(0.003)
+    steps = [s for _, _, s in r.seen]
+    assert steps[3:] == pytest.approx([2 * steps[0]] * 3, rel=1e-12)
