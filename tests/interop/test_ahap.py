@@ -159,3 +159,51 @@ def test_cli_bad_ahap_exits_2_naming_the_path(tmp_path, capsys):
                                                                  "ParameterValue": "high"}]}})), encoding="utf-8")
     assert main(["play", str(p)]) == 2
     assert "Pattern[0].Event.EventParameters[0].ParameterValue" in capsys.readouterr().err
+
+
+def test_ahap_files_have_the_hjif_size_and_depth_caps(tmp_path, monkeypatch, capsys):
+    import pathlib
+
+    from hapticsdk.interop.ahap import read_ahap
+    from hapticsdk.interop.hjif_model import MAX_DEPTH, MAX_FILE_BYTES
+
+    huge = tmp_path / "huge.ahap"
+    with huge.open("wb") as fh:  # sparse: no 32 MiB written
+        fh.truncate(MAX_FILE_BYTES + 1)
+    real_open = pathlib.Path.open
+    monkeypatch.setattr(pathlib.Path, "open", lambda self, *a, **k: pytest.fail("opened for reading"))
+    with pytest.raises(FormatError, match="cap") as ei:
+        read_ahap(huge)
+    monkeypatch.setattr(pathlib.Path, "open", real_open)
+    assert ei.value.field == str(huge)
+    # a file that grows past the cap after its size was taken is never read whole
+    small = tmp_path / "small.ahap"
+    small.write_text(json.dumps(ahap(event(0.0, dur=0.1))), encoding="utf-8")
+    read_ahap(small)
+    with pytest.raises(FormatError, match="cap"):
+        read_ahap(small, max_bytes=20)
+    reads = []
+
+    class Grown:
+        def __init__(self, path):
+            self.fh = real_open(path, "rb")
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+        def read(self, n=-1):
+            reads.append(n)
+            return b" " * (n if n >= 0 else 10 ** 6)
+
+    monkeypatch.setattr(pathlib.Path, "open", lambda self, *a, **k: Grown(self))
+    with pytest.raises(FormatError, match="cap"):
+        read_ahap(small, max_bytes=small.stat().st_size)
+    monkeypatch.setattr(pathlib.Path, "open", real_open)
+    assert reads == [small.stat().st_size + 1]
+    deep = tmp_path / "deep.ahap"
+    deep.write_text("[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1), encoding="utf-8")
+    assert main(["import", str(deep)]) == 2
+    assert "nested" in capsys.readouterr().err
