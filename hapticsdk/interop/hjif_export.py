@@ -228,8 +228,11 @@ def export_plan(plan: Any, *, effect_seconds: float = 1.0, date: str | None = No
 
 
 def write_hjif(hfile: HapticFile, path: str | os.PathLike[str], *, field: str = "output") -> Path:
-    """Write ``hfile`` to ``path`` atomically (temporary file + rename)."""
+    """Write ``hfile`` to ``path`` atomically (temporary file + rename), read back first
+    with the SDK's own reader (:func:`~hapticsdk.interop.hjif_model.read_hjif`): content
+    it would refuse is not written and the old file stays."""
     from ..fileio import atomic_write_text, check_output_path
+    from .hjif_model import read_hjif
 
     p = check_output_path(path, field=field)
-    return atomic_write_text(p, hfile.to_json(), field=field)
+    return atomic_write_text(p, hfile.to_json(), field=field, verify=read_hjif)
