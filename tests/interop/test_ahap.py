@@ -207,3 +207,38 @@ def test_ahap_files_have_the_hjif_size_and_depth_caps(tmp_path, monkeypatch, cap
     deep.write_text("[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1), encoding="utf-8")
     assert main(["import", str(deep)]) == 2
     assert "nested" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("gain", [0, 1, 3])
+def test_full_intensity_is_one_acceleration_at_every_sharpness_within_the_piezos_declared_maximum(gain):
+    # full scale (AHAP intensity 1.0) is the acceleration the piezo reaches at every
+    # frequency of the content within its own declared maximum voltage: the weakest
+    # frequency is driven at that maximum, no command is clipped by the safety layer, and
+    # every sharpness gives the same acceleration by the piezo's table
+    from hapticsdk.interop.hjif_play import _piezo_table, play
+
+    table = _piezo_table(None)
+    opts = {"piezo-virtual": {"gain": gain}}
+    accs, volts = [], []
+    for s in np.linspace(0.0, 1.0, 6):
+        h = to_haptic_file(parse_ahap(ahap(event(0.0, dur=0.05, intensity=1.0, sharpness=float(s)))))
+        info = play(h, actuators=["piezo-virtual"], piezo_full_scale=True, actuator_options=opts
+                    ).to_dict()["actuators"]["piezo-virtual"]
+        assert "max_amplitude" not in info["safety"]["limit_hits"]
+        volts.append(info["max_amplitude"])
+        accs.append(table.acceleration_at(sharpness_to_hz(float(s)), info["max_amplitude"]))
+    declared = (25.0, 50.0, 75.0, 100.0)[gain]  # DRV2667 full scale per gain (V peak)
+    assert max(volts) == pytest.approx(min(declared, float(table.voltages_v[-1])), rel=1e-9)
+    assert accs == pytest.approx([accs[0]] * len(accs), rel=1e-6)
+
+
+def test_cli_play_gives_ahap_amplitudes_as_fractions_of_the_piezos_full_scale(tmp_path, capsys):
+    p = tmp_path / "full.ahap"
+    p.write_text(json.dumps(ahap(event(0.0, dur=0.05, intensity=1.0, sharpness=0.0))), encoding="utf-8")
+    assert main(["play", str(p), "--actuators", "piezo-virtual", "--device-option", "piezo-virtual.gain=1",
+                 "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)["actuators"]["piezo-virtual"]
+    # sharpness 0 is the weakest frequency of the generated table's band: full intensity
+    # drives it at the declared 50 V peak of DRV2667 gain 1 (not 1 m/s^2, not clipped)
+    assert info["max_amplitude"] == pytest.approx(50.0, rel=1e-9)
+    assert "max_amplitude" not in info["safety"]["limit_hits"]
