@@ -164,18 +164,15 @@ def test_cli_bad_ahap_exits_2_naming_the_path(tmp_path, capsys):
 def test_ahap_files_have_the_hjif_size_and_depth_caps(tmp_path, monkeypatch, capsys):
     import pathlib
 
+    from hjif_docs import refused_unread
+
     from hapticsdk.interop.ahap import read_ahap
     from hapticsdk.interop.hjif_model import MAX_DEPTH, MAX_FILE_BYTES
 
     huge = tmp_path / "huge.ahap"
-    with huge.open("wb") as fh:  # sparse: no 32 MiB written
-        fh.truncate(MAX_FILE_BYTES + 1)
-    real_open = pathlib.Path.open
-    monkeypatch.setattr(pathlib.Path, "open", lambda self, *a, **k: pytest.fail("opened for reading"))
-    with pytest.raises(FormatError, match="cap") as ei:
-        read_ahap(huge)
-    monkeypatch.setattr(pathlib.Path, "open", real_open)
+    ei = refused_unread(read_ahap, huge, monkeypatch, MAX_FILE_BYTES + 1)  # sparse: no 32 MiB written
     assert ei.value.field == str(huge)
+    real_open = pathlib.Path.open
     # a file that grows past the cap after its size was taken is never read whole
     small = tmp_path / "small.ahap"
     small.write_text(json.dumps(ahap(event(0.0, dur=0.1))), encoding="utf-8")
