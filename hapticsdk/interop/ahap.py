@@ -331,9 +331,14 @@ def _continuous(pat: AhapPattern, ev: AhapEvent) -> Effect:
     return Effect("Basis", _ticks(t0), phase=0.0, base_signal="Sine", keyframes=kfs, path=ev.path)
 
 
+def _transient_hz(pat: AhapPattern, ev: AhapEvent) -> float:
+    """Frequency of a transient: its sharpness plus the sharpness control at its time."""
+    return sharpness_to_hz(ev.sharpness + pat.control("HapticSharpnessControl", ev.time_s))
+
+
 def _transient(pat: AhapPattern, ev: AhapEvent) -> Effect:
     t = ev.time_s
-    f = sharpness_to_hz(ev.sharpness + pat.control("HapticSharpnessControl", t))
+    f = _transient_hz(pat, ev)
     a = min(1.0, max(0.0, ev.intensity * pat.control("HapticIntensityControl", t)))
     length = max(1, _ticks(2.0 / f))  # two periods
     return Effect("Basis", _ticks(t), phase=0.0, base_signal="Sine",
@@ -374,7 +379,7 @@ def summary(pat: AhapPattern, *, source: str | None = None) -> dict[str, Any]:
     """What an AHAP file holds and what the SDK plays of it (``import --json``)."""
     end = 0.0
     for e in pat.events:
-        end = max(end, e.time_s + (e.duration_s if e.kind == "HapticContinuous" else 2.0 / sharpness_to_hz(e.sharpness)))
+        end = max(end, e.time_s + (e.duration_s if e.kind == "HapticContinuous" else 2.0 / _transient_hz(pat, e)))
     return {"file": source, "format": "AHAP", "version": pat.version,
             "events": {k: sum(e.kind == k for e in pat.events) for k in HAPTIC_EVENTS},
             "controls": {k: sum(c.parameter == k for c in pat.controls) for k in CONTROLS},

@@ -239,3 +239,15 @@ def test_cli_play_gives_ahap_amplitudes_as_fractions_of_the_piezos_full_scale(tm
     # drives it at the declared 50 V peak of DRV2667 gain 1 (not 1 m/s^2, not clipped)
     assert info["max_amplitude"] == pytest.approx(50.0, rel=1e-9)
     assert "max_amplitude" not in info["safety"]["limit_hits"]
+
+
+def test_the_summary_duration_is_the_end_of_the_content_played():
+    # a transient's length follows the sharpness control at its time, in the summary as in
+    # the converted content
+    from hapticsdk.interop.ahap import summary
+    from hapticsdk.interop.hjif_synth import file_duration_s
+
+    pat = parse_ahap(ahap(event(0.5, kind="HapticTransient", intensity=1.0, sharpness=0.0),
+                          {"Parameter": {"ParameterID": "HapticSharpnessControl", "Time": 0.0, "ParameterValue": 1.0}}))
+    assert summary(pat)["duration_s"] == pytest.approx(0.5 + 2.0 / SHARPNESS_HZ[1], abs=1.0 / 10000)
+    assert summary(pat)["duration_s"] == pytest.approx(file_duration_s(to_haptic_file(pat)), abs=1.0 / 10000)
