@@ -42,16 +42,27 @@ Mapping (see ``docs/interop.md``):
 from __future__ import annotations
 
 import bisect
-import json
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Mapping
 
 from ..errors import FormatError
 from .budget import ContentBudgetError
-from .hjif_model import MAX_DEPTH, MAX_FILE_BYTES, Band, Channel, Effect, HapticFile, Keyframe, Perception
+from .hjif_model import (
+    MAX_FILE_BYTES,
+    Band,
+    Channel,
+    Effect,
+    HapticFile,
+    Keyframe,
+    Perception,
+    load_json,
+    read_bounded,
+    utf8_text,
+)
+# typed field access with JSON-path errors, shared with the .hjif parser
+from .hjif_model import _get, _obj
 
 #: sharpness 0 and 1 map to these frequencies (Hz): MPEG reference AHAP encoder's band
 SHARPNESS_HZ = (65.0, 300.0)
@@ -176,80 +187,29 @@ class AhapPattern:
 
 # ------------------------------------------------------------------------ reading
 def read_ahap(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) -> AhapPattern:
-    """Read and check an ``.ahap`` file (same size and depth caps as ``.hjif``)."""
-    p = Path(os.fspath(path))
-    name = str(p)
-    try:
-        if not p.is_file():
-            raise FormatError("not a regular file", field=name)
-        if p.stat().st_size > max_bytes:
-            raise FormatError(f"file is above the {max_bytes}-byte cap", field=name)
-        data = p.read_bytes()[: max_bytes + 1]
-    except OSError as exc:
-        raise FormatError(f"cannot read: {exc.strerror or exc}", field=name) from None
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"not UTF-8 text (byte {exc.start})", field=name) from None
-    return parse_ahap_text(text, source=name)
+    """Read and check an ``.ahap`` file (the same size and depth caps and the same bounded
+    reader as ``.hjif``: :func:`~hapticsdk.interop.hjif_model.read_bounded`)."""
+    name, data = read_bounded(path, max_bytes=max_bytes, kind=".ahap")
+    return parse_ahap_text(utf8_text(data, source=name), source=name)
 
 
 def parse_ahap_text(text: str, *, source: str = "ahap") -> AhapPattern:
-    """Parse AHAP JSON text."""
-    from ..schemas_io import json_depth
-
-    if json_depth(text) > MAX_DEPTH:
-        raise FormatError(f"JSON nested deeper than {MAX_DEPTH} levels", field=source)
-    try:
-        doc = json.loads(text, parse_constant=_no_constant)
-    except json.JSONDecodeError as exc:
-        raise FormatError(f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}", field=source) from None
-    except (ValueError, RecursionError) as exc:
-        raise FormatError(f"invalid JSON: {exc}", field=source) from None
-    return parse_ahap(doc)
-
-
-def _no_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not valid JSON")
+    """Parse AHAP JSON text (duplicate keys are read as Apple's JSON reader reads them:
+    the last one counts)."""
+    return parse_ahap(load_json(text, source=source, unique_keys=False))
 
 
 def _num(obj: Mapping[str, Any], key: str, path: str, *, required: bool = True, default: float = 0.0) -> float:
-    where = f"{path}.{key}" if path else key
-    if key not in obj:
-        if required:
-            raise FormatError(f"missing required field {key!r}", field=path or "$")
-        return default
-    v = obj[key]
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise FormatError(f"must be a number, got {type(v).__name__}", field=where)
-    if not math.isfinite(v):
-        raise FormatError("must be finite", field=where)
-    return float(v)
+    return float(_get(obj, key, path, "number", required=required, default=default))
 
 
 def _str(obj: Mapping[str, Any], key: str, path: str) -> str:
-    if key not in obj:
-        raise FormatError(f"missing required field {key!r}", field=path)
-    v = obj[key]
-    if not isinstance(v, str):
-        raise FormatError(f"must be a string, got {type(v).__name__}", field=f"{path}.{key}")
-    return v
-
-
-def _obj(v: Any, path: str) -> Mapping[str, Any]:
-    if not isinstance(v, dict):
-        raise FormatError(f"must be an object, got {type(v).__name__}", field=path)
+    v: str = _get(obj, key, path, "str")
     return v
 
 
 def _list(obj: Mapping[str, Any], key: str, path: str, *, required: bool = True) -> list[Any]:
-    if key not in obj:
-        if required:
-            raise FormatError(f"missing required field {key!r}", field=path or "$")
-        return []
-    v = obj[key]
-    if not isinstance(v, list):
-        raise FormatError(f"must be an array, got {type(v).__name__}", field=f"{path}.{key}" if path else key)
+    v: list[Any] = _get(obj, key, path, "list", required=required, default=[])
     return v
 
 
@@ -371,9 +331,14 @@ def _continuous(pat: AhapPattern, ev: AhapEvent) -> Effect:
     return Effect("Basis", _ticks(t0), phase=0.0, base_signal="Sine", keyframes=kfs, path=ev.path)
 
 
+def _transient_hz(pat: AhapPattern, ev: AhapEvent) -> float:
+    """Frequency of a transient: its sharpness plus the sharpness control at its time."""
+    return sharpness_to_hz(ev.sharpness + pat.control("HapticSharpnessControl", ev.time_s))
+
+
 def _transient(pat: AhapPattern, ev: AhapEvent) -> Effect:
     t = ev.time_s
-    f = sharpness_to_hz(ev.sharpness + pat.control("HapticSharpnessControl", t))
+    f = _transient_hz(pat, ev)
     a = min(1.0, max(0.0, ev.intensity * pat.control("HapticIntensityControl", t)))
     length = max(1, _ticks(2.0 / f))  # two periods
     return Effect("Basis", _ticks(t), phase=0.0, base_signal="Sine",
@@ -414,7 +379,7 @@ def summary(pat: AhapPattern, *, source: str | None = None) -> dict[str, Any]:
     """What an AHAP file holds and what the SDK plays of it (``import --json``)."""
     end = 0.0
     for e in pat.events:
-        end = max(end, e.time_s + (e.duration_s if e.kind == "HapticContinuous" else 2.0 / sharpness_to_hz(e.sharpness)))
+        end = max(end, e.time_s + (e.duration_s if e.kind == "HapticContinuous" else 2.0 / _transient_hz(pat, e)))
     return {"file": source, "format": "AHAP", "version": pat.version,
             "events": {k: sum(e.kind == k for e in pat.events) for k in HAPTIC_EVENTS},
             "controls": {k: sum(c.parameter == k for c in pat.controls) for k in CONTROLS},

@@ -112,7 +112,7 @@ def export_plan(plan: Any, *, effect_seconds: float = 1.0, date: str | None = No
 
     Args:
         plan: a :class:`~hapticsdk.plan.RenderPlan` (or its dict form).
-        effect_seconds: nominal length of each effect (s), > 0.
+        effect_seconds: nominal length of each effect (s): at least one tick (0.5 ms rounds to 1 ms), at most 3600.
         date: ISO 8601 date written in the file (default: now, UTC).
     """
     from ..plan import RenderPlan
@@ -122,6 +122,9 @@ def export_plan(plan: Any, *, effect_seconds: float = 1.0, date: str | None = No
     if not (math.isfinite(effect_seconds) and 0 < effect_seconds <= 3600):
         raise ValidationError(f"must be in (0, 3600] s, got {effect_seconds!r}", field="effect_seconds")
     length = int(round(effect_seconds * TIMESCALE))
+    if length < 1:  # would be an effect of no length: every keyframe at 0
+        raise ValidationError(f"{effect_seconds!r} s is shorter than one tick ({1 / TIMESCALE:g} s) of the "
+                              "written timescale", field="effect_seconds")
     ropts = dict(plan.settings.get("renderer_options") or {})
     perceptions: list[Perception] = []
     materials_meta = []
@@ -225,8 +228,11 @@ def export_plan(plan: Any, *, effect_seconds: float = 1.0, date: str | None = No
 
 
 def write_hjif(hfile: HapticFile, path: str | os.PathLike[str], *, field: str = "output") -> Path:
-    """Write ``hfile`` to ``path`` atomically (temporary file + rename)."""
+    """Write ``hfile`` to ``path`` atomically (temporary file + rename), read back first
+    with the SDK's own reader (:func:`~hapticsdk.interop.hjif_model.read_hjif`): content
+    it would refuse is not written and the old file stays."""
     from ..fileio import atomic_write_text, check_output_path
+    from .hjif_model import read_hjif
 
     p = check_output_path(path, field=field)
-    return atomic_write_text(p, hfile.to_json(), field=field)
+    return atomic_write_text(p, hfile.to_json(), field=field, verify=read_hjif)

@@ -363,6 +363,14 @@ def read_hjif(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) 
         FormatError: ``field`` is the file name for size / encoding / JSON syntax
             problems, else the JSON path of the offending value.
     """
+    name, data = read_bounded(path, max_bytes=max_bytes, kind=".hjif")
+    return parse_hjif_bytes(data, source=name)
+
+
+def read_bounded(path: str | os.PathLike[str], *, max_bytes: int, kind: str) -> tuple[str, bytes]:
+    """``(name, bytes)`` of a regular file of at most ``max_bytes`` bytes: refused from its
+    size before reading, and never more than ``max_bytes + 1`` bytes read (a file that
+    grows while being read is refused too). ``kind`` names the format in the message."""
     p = Path(os.fspath(path))
     name = str(p)
     try:
@@ -372,7 +380,7 @@ def read_hjif(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) 
     if not p.is_file():
         raise FormatError("not a regular file", field=name)
     if size > max_bytes:
-        raise FormatError(f"file is {size} bytes, above the {max_bytes}-byte cap for .hjif files",
+        raise FormatError(f"file is {size} bytes, above the {max_bytes}-byte cap for {kind} files",
                           field=name)
     try:
         with p.open("rb") as fh:
@@ -380,18 +388,22 @@ def read_hjif(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) 
     except OSError as exc:
         raise FormatError(f"cannot read: {exc.strerror or exc}", field=name) from None
     if len(data) > max_bytes:  # grew while being read
-        raise FormatError(f"file is above the {max_bytes}-byte cap for .hjif files", field=name)
-    return parse_hjif_bytes(data, source=name)
+        raise FormatError(f"file is above the {max_bytes}-byte cap for {kind} files", field=name)
+    return name, data
 
 
 def parse_hjif_bytes(data: bytes, *, source: str = "hjif") -> HapticFile:
     """Parse the bytes of a ``.hjif`` document (UTF-8, optional BOM)."""
+    return parse_hjif_text(utf8_text(data, source=source), source=source)
+
+
+def utf8_text(data: bytes, *, source: str) -> str:
+    """``data`` decoded as UTF-8 (optional BOM), or a :class:`FormatError` naming the byte."""
     try:
-        text = data.decode("utf-8-sig")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise FormatError(f"not UTF-8 text (byte {exc.start}: {data[exc.start:exc.start + 1]!r})",
                           field=source) from None
-    return parse_hjif_text(text, source=source)
 
 
 def _no_constants(name: str) -> Any:
@@ -413,11 +425,18 @@ def _pairs(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 def parse_hjif_text(text: str, *, source: str = "hjif") -> HapticFile:
     """Parse ``.hjif`` JSON text (nesting checked before the JSON parser runs)."""
+    return _parse_any(load_json(text, source=source))
+
+
+def load_json(text: str, *, source: str, unique_keys: bool = True) -> Any:
+    """Decode JSON ``text`` within :data:`MAX_DEPTH` levels (counted before the parser
+    runs); NaN/Infinity and (with ``unique_keys``) duplicate keys are refused. Every
+    problem is a :class:`FormatError` with ``field=source``."""
     depth = json_depth(text)
     if depth > MAX_DEPTH:
         raise FormatError(f"JSON nested {depth} levels deep, above the limit of {MAX_DEPTH}", field=source)
     try:
-        doc = json.loads(text, parse_constant=_no_constants, object_pairs_hook=_pairs)
+        return json.loads(text, parse_constant=_no_constants, object_pairs_hook=_pairs if unique_keys else None)
     except _DuplicateKey as exc:
         raise FormatError(str(exc), field=source) from None
     except json.JSONDecodeError as exc:
@@ -425,7 +444,6 @@ def parse_hjif_text(text: str, *, source: str = "hjif") -> HapticFile:
                           field=source) from None
     except (ValueError, RecursionError) as exc:
         raise FormatError(f"invalid JSON: {exc}", field=source) from None
-    return _parse_any(doc)
 
 
 # -- typed field access -------------------------------------------------------------------

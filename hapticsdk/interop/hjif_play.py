@@ -115,16 +115,26 @@ def _band_limits(hfile: HapticFile) -> tuple[float, float]:
     return float(min(x for x, _ in lims)), float(max(y for _, y in lims))
 
 
-def piezo_full_scale_m_s2(table: Any, band_hz: tuple[float, float]) -> float:
-    """Largest acceleration (m/s^2) the piezo ``table`` reaches at its highest voltage at
-    every frequency of ``band_hz`` (clamped to the table): a normalised amplitude of 1.0
-    then means the same acceleration at any frequency of the band."""
+def piezo_full_scale_m_s2(table: Any, band_hz: tuple[float, float], max_volts: float | None = None) -> float:
+    """Largest acceleration (m/s^2) the piezo ``table`` reaches at its highest voltage (or at
+    ``max_volts``, the actuator's declared maximum, when lower) at every frequency of
+    ``band_hz`` (clamped to the table): a normalised amplitude of 1.0 then means the same
+    acceleration at any frequency of the band, and never a voltage the actuator clips."""
     lo_t, hi_t = table.frequency_range_hz
     lo, hi = max(band_hz[0], lo_t), min(band_hz[1], hi_t)
     if hi < lo:
         lo = hi = min(max(band_hz[0], lo_t), hi_t)
     grid = np.linspace(lo, hi, 64)
-    return float(np.min(table.accelerations_at(grid, float(table.voltages_v[-1]))))
+    top = float(table.voltages_v[-1])
+    volts = top if max_volts is None else min(top, float(max_volts))
+    return float(np.min(table.accelerations_at(grid, volts)))
+
+
+def _declared_max_volts(act: Any) -> float | None:
+    """The actuator's declared maximum drive (V), or ``None`` when it declares none in V."""
+    lim = getattr(act, "limits", None)
+    vmax = getattr(lim, "max_amplitude", None)
+    return float(vmax) if vmax is not None and getattr(lim, "amplitude_unit", "") == "V" else None
 
 
 def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence[str] = DEFAULT_ACTUATORS,
@@ -181,6 +191,12 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
             report.notes.append(f"{tr.path}: base signal(s) {', '.join(other)} played as their fundamental sine")
     commands: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
     table = None
+    made: dict[str, Any] = {}  # actuators created (never opened) to read their declared limits
+
+    def options(a: str) -> dict[str, Any]:
+        from ..device_options import trusted_options  # as render_plan: config < environment < code
+        return {**trusted_options(a), **dict((actuator_options or {}).get(a, {}))}
+
     for a, tracks in per_act.items():
         if not tracks:
             continue
@@ -200,10 +216,11 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
         if a.startswith("piezo"):
             table = table or _piezo_table(piezo_table)
             if piezo_full_scale:
-                fs_acc = piezo_full_scale_m_s2(table, _band_limits(hfile))
+                made[a] = create_actuator(a, **options(a))  # not opened: its declared limits
+                fs_acc = piezo_full_scale_m_s2(table, _band_limits(hfile), _declared_max_volts(made[a]))
                 amp_u = amp_n * fs_acc
                 report.notes.append(f"{a}: amplitude 1.0 = {fs_acc:.4g} m/s^2 (the largest acceleration its table "
-                                    "reaches at every frequency of the content)")
+                                    "reaches within its declared maximum at every frequency of the content)")
             out = np.zeros(n)
             cache: dict[tuple[float, float], float] = {}
             for j in np.flatnonzero(amp_u > 0):
@@ -222,8 +239,7 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
     outputs: dict[str, list[np.ndarray]] = {a: [] for a in commands}
     try:
         for a in commands:
-            from ..device_options import trusted_options  # as render_plan: config < environment < code
-            act = create_actuator(a, **{**trusted_options(a), **dict((actuator_options or {}).get(a, {}))})
+            act = made.get(a) or create_actuator(a, **options(a))
             opened[a] = act
             act.open()
             if hasattr(act.safety, "set_period"):

@@ -99,3 +99,25 @@ def plan_for(material: str) -> Any:
     s = Scene(objects=s.objects, devices=s.devices, settings=_merge(s.settings, {"importance": {"enabled": False}}),
               name=s.name)
     return compile_scene(s)
+
+
+def refused_unread(read: Any, path: Path, monkeypatch: Any, size: int) -> Any:
+    """Make ``path`` a sparse file of ``size`` bytes (none written), call ``read(path)``
+    with ``Path.open`` forbidden, and return the error it raises (``pytest.raises``
+    info): a file over the size cap is refused from its size, never opened."""
+    import pathlib
+
+    import pytest
+
+    from hapticsdk.errors import FormatError
+
+    with path.open("wb") as fh:
+        fh.truncate(size)
+    real_open = pathlib.Path.open
+    monkeypatch.setattr(pathlib.Path, "open", lambda self, *a, **k: pytest.fail("opened for reading"))
+    try:
+        with pytest.raises(FormatError, match="cap") as ei:
+            read(path)
+    finally:
+        monkeypatch.setattr(pathlib.Path, "open", real_open)
+    return ei

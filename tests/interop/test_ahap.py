@@ -159,3 +159,95 @@ def test_cli_bad_ahap_exits_2_naming_the_path(tmp_path, capsys):
                                                                  "ParameterValue": "high"}]}})), encoding="utf-8")
     assert main(["play", str(p)]) == 2
     assert "Pattern[0].Event.EventParameters[0].ParameterValue" in capsys.readouterr().err
+
+
+def test_ahap_files_have_the_hjif_size_and_depth_caps(tmp_path, monkeypatch, capsys):
+    import pathlib
+
+    from hjif_docs import refused_unread
+
+    from hapticsdk.interop.ahap import read_ahap
+    from hapticsdk.interop.hjif_model import MAX_DEPTH, MAX_FILE_BYTES
+
+    huge = tmp_path / "huge.ahap"
+    ei = refused_unread(read_ahap, huge, monkeypatch, MAX_FILE_BYTES + 1)  # sparse: no 32 MiB written
+    assert ei.value.field == str(huge)
+    real_open = pathlib.Path.open
+    # a file that grows past the cap after its size was taken is never read whole
+    small = tmp_path / "small.ahap"
+    small.write_text(json.dumps(ahap(event(0.0, dur=0.1))), encoding="utf-8")
+    read_ahap(small)
+    with pytest.raises(FormatError, match="cap"):
+        read_ahap(small, max_bytes=20)
+    reads = []
+
+    class Grown:
+        def __init__(self, path):
+            self.fh = real_open(path, "rb")
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.fh.close()
+
+        def read(self, n=-1):
+            reads.append(n)
+            return b" " * (n if n >= 0 else 10 ** 6)
+
+    monkeypatch.setattr(pathlib.Path, "open", lambda self, *a, **k: Grown(self))
+    with pytest.raises(FormatError, match="cap"):
+        read_ahap(small, max_bytes=small.stat().st_size)
+    monkeypatch.setattr(pathlib.Path, "open", real_open)
+    assert reads == [small.stat().st_size + 1]
+    deep = tmp_path / "deep.ahap"
+    deep.write_text("[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1), encoding="utf-8")
+    assert main(["import", str(deep)]) == 2
+    assert "nested" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("gain", [0, 1, 3])
+def test_full_intensity_is_one_acceleration_at_every_sharpness_within_the_piezos_declared_maximum(gain):
+    # full scale (AHAP intensity 1.0) is the acceleration the piezo reaches at every
+    # frequency of the content within its own declared maximum voltage: the weakest
+    # frequency is driven at that maximum, no command is clipped by the safety layer, and
+    # every sharpness gives the same acceleration by the piezo's table
+    from hapticsdk.interop.hjif_play import _piezo_table, play
+
+    table = _piezo_table(None)
+    opts = {"piezo-virtual": {"gain": gain}}
+    accs, volts = [], []
+    for s in np.linspace(0.0, 1.0, 6):
+        h = to_haptic_file(parse_ahap(ahap(event(0.0, dur=0.05, intensity=1.0, sharpness=float(s)))))
+        info = play(h, actuators=["piezo-virtual"], piezo_full_scale=True, actuator_options=opts
+                    ).to_dict()["actuators"]["piezo-virtual"]
+        assert "max_amplitude" not in info["safety"]["limit_hits"]
+        volts.append(info["max_amplitude"])
+        accs.append(table.acceleration_at(sharpness_to_hz(float(s)), info["max_amplitude"]))
+    declared = (25.0, 50.0, 75.0, 100.0)[gain]  # DRV2667 full scale per gain (V peak)
+    assert max(volts) == pytest.approx(min(declared, float(table.voltages_v[-1])), rel=1e-9)
+    assert accs == pytest.approx([accs[0]] * len(accs), rel=1e-6)
+
+
+def test_cli_play_gives_ahap_amplitudes_as_fractions_of_the_piezos_full_scale(tmp_path, capsys):
+    p = tmp_path / "full.ahap"
+    p.write_text(json.dumps(ahap(event(0.0, dur=0.05, intensity=1.0, sharpness=0.0))), encoding="utf-8")
+    assert main(["play", str(p), "--actuators", "piezo-virtual", "--device-option", "piezo-virtual.gain=1",
+                 "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)["actuators"]["piezo-virtual"]
+    # sharpness 0 is the weakest frequency of the generated table's band: full intensity
+    # drives it at the declared 50 V peak of DRV2667 gain 1 (not 1 m/s^2, not clipped)
+    assert info["max_amplitude"] == pytest.approx(50.0, rel=1e-9)
+    assert "max_amplitude" not in info["safety"]["limit_hits"]
+
+
+def test_the_summary_duration_is_the_end_of_the_content_played():
+    # a transient's length follows the sharpness control at its time, in the summary as in
+    # the converted content
+    from hapticsdk.interop.ahap import summary
+    from hapticsdk.interop.hjif_synth import file_duration_s
+
+    pat = parse_ahap(ahap(event(0.5, kind="HapticTransient", intensity=1.0, sharpness=0.0),
+                          {"Parameter": {"ParameterID": "HapticSharpnessControl", "Time": 0.0, "ParameterValue": 1.0}}))
+    assert summary(pat)["duration_s"] == pytest.approx(0.5 + 2.0 / SHARPNESS_HZ[1], abs=1.0 / 10000)
+    assert summary(pat)["duration_s"] == pytest.approx(file_duration_s(to_haptic_file(pat)), abs=1.0 / 10000)

@@ -161,3 +161,20 @@ def test_ahap_overlapping_events_have_a_total_keyframe_budget():
                             "ParameterCurveControlPoints": [{"Time": t, "ParameterValue": v} for t, v in pts]}}]}
     with pytest.raises(ContentBudgetError):
         ahap.to_haptic_file(ahap.parse_ahap(d))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_counted_work_bounds_the_samples_the_synthesiser_evaluates(seed, evaluated):
+    # the budget is checked on effect_work's count: it must never count less than the
+    # synthesiser then evaluates (else overlapping effects pass the check and cost more)
+    from hapticsdk.interop.hjif_synth import effect_work
+
+    rng = np.random.default_rng(100 + seed)
+    effs = [tone(int(rng.integers(50, 400)), int(rng.integers(1, 2000)), amp=0.2,
+                 position=int(rng.integers(0, 3000))) for _ in range(int(rng.integers(1, 40)))]
+    h = parse_hjif(doc([perception([channel([band(effs)])])]))
+    fs = float(rng.choice([1000.0, 2000.0, 8000.0]))
+    out = synthesize(h, fs=fs)
+    end = (out.channels[0].samples.size - 1) / fs
+    work, _ = effect_work(h, [(0, 0)], end, fs)
+    assert evaluated["samples"] <= work

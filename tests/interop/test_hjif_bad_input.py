@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
-from hjif_docs import mutated, valid_doc, write
+from hjif_docs import mutated, refused_unread, valid_doc, write
 
 from hapticsdk.cli import main
 from hapticsdk.errors import FormatError, ValidationError
@@ -105,16 +105,8 @@ def test_nan_literal_and_duplicate_keys_are_refused():
 
 
 def test_huge_file_is_refused_before_reading(tmp_path, monkeypatch):
-    import pathlib
-
     p = tmp_path / "huge.hjif"
-    with p.open("wb") as fh:  # sparse: no 32 MiB written
-        fh.truncate(MAX_FILE_BYTES + 1)
-    real_open = pathlib.Path.open
-    monkeypatch.setattr(pathlib.Path, "open", lambda self, *a, **k: pytest.fail("opened for reading"))
-    with pytest.raises(FormatError, match="cap") as ei:
-        read_hjif(p)
-    monkeypatch.setattr(pathlib.Path, "open", real_open)
+    ei = refused_unread(read_hjif, p, monkeypatch, MAX_FILE_BYTES + 1)  # sparse: no 32 MiB written
     assert ei.value.field == str(p)
     small = write(tmp_path / "small.hjif", valid_doc())
     with pytest.raises(FormatError, match="cap"):

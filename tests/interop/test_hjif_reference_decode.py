@@ -91,3 +91,30 @@ def test_vibrotactile_parts_survive_a_reference_decode(exported):
         if p["perception_modality"] == "Vibrotactile Texture":
             assert f == round(mp.features["Fpeak"])
             assert np.max(np.abs(x)) == pytest.approx(mp.features["AFpeak"], rel=1e-3)
+
+
+@pytest.mark.parametrize("material,seed", [("S1", 0), ("S4", 1), ("S9", 2), ("S13", 3), ("S17", 4)])
+def test_stiffness_of_any_material_and_length_decodes_to_gs_on_every_tick(material, seed, tmp_path):
+    # own inputs: materials other than the fixture's, effect lengths drawn at random from
+    # one tick to 10 s; decoded from the written JSON by the format definition above
+    rng = np.random.default_rng(seed)
+    seconds = float(10 ** rng.uniform(-3, 1))
+    mp = _plan(material).material(material)
+    path = write_hjif(export_plan(_plan(material), effect_seconds=seconds), tmp_path / "x.hjif")
+    d = json.loads(path.read_text(encoding="utf-8"))
+    p = next(p for p in d["perceptions"] if p["perception_modality"] == "Stiffness")
+    (eff,) = p["channels"][0]["bands"][0]["effects"]
+    length = eff["keyframes"][-1]["relative_position"] - eff["keyframes"][0]["relative_position"]
+    assert length == round(seconds * d["timescale"])  # the effect spans the asked length
+    ticks = np.arange(0, length + 3) * 1.0
+    x = reference_decode(p, ticks, d["timescale"])
+    assert np.all(x[: length + 1] == pytest.approx(mp.features["GS"], rel=1e-12))
+    assert np.all(x[length + 1:] == 0.0)  # nothing after the effect ends
+
+
+def test_an_effect_shorter_than_one_tick_is_refused():
+    from hapticsdk.errors import ValidationError
+
+    with pytest.raises(ValidationError) as ei:
+        export_plan(_plan("S1"), effect_seconds=0.4e-3)
+    assert ei.value.field == "effect_seconds"

@@ -107,3 +107,18 @@ def test_cli_export_from_plan_file_import_and_play(hard_plan, tmp_path, capsys):
 def test_cli_export_refuses_a_missing_directory_before_solving(tmp_path, capsys):
     code = main(["export", "S7", "-o", str(tmp_path / "nope" / "x.hjif")])
     assert code == 2 and "does not exist" in capsys.readouterr().err
+
+
+def test_write_reads_the_file_back_and_keeps_the_old_one_when_the_reader_refuses(hard_plan, tmp_path):
+    from hapticsdk.errors import FileWriteError
+
+    out = tmp_path / "x.hjif"
+    hfile = export_plan(hard_plan)
+    write_hjif(hfile, out)
+    old = out.read_bytes()
+    # content the SDK's reader refuses (a keyframe position out of range) is not written
+    hfile.perceptions[0].channels[0].bands[0].effects[0].keyframes[-1].relative_position = -5
+    with pytest.raises(FileWriteError, match="read it back"):
+        write_hjif(hfile, out)
+    assert out.read_bytes() == old
+    assert [f.name for f in tmp_path.iterdir()] == ["x.hjif"]  # no temporary file left

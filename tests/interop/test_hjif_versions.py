@@ -257,3 +257,14 @@ def test_random_file_orders_read_as_the_reference_reads_them(seed):
     at_step = np.isin(t, [0.0] + [float(p) for p in positioned])
     np.testing.assert_allclose(a_sdk[~at_step], a_ref[~at_step], atol=1e-9)
     np.testing.assert_allclose(f_sdk[~at_step], f_ref[~at_step], atol=1e-6)
+
+
+@pytest.mark.parametrize("build", [crm2, crm3, crm32])
+def test_a_timeline_effect_reads_as_composite_and_is_reported(build):
+    d = build()
+    p = d["perceptions"][0]
+    (p.get("tracks") or p["channels"])[0]["bands"][0]["effects"].append({"effect_type": "Timeline", "position": 700})
+    h = parse_hjif(d)
+    path = "perceptions[0].channels[0].bands[0].effects[2]"
+    assert h.perceptions[0].channels[0].bands[0].effects[2].effect_type == "Composite"
+    assert "'Timeline'" in {c["path"]: c["change"] for c in h.format_version.changes}[f"{path}.effect_type"]
