@@ -66,6 +66,12 @@ class ArmModel:
     damping_ns_per_m: float = 0.0
     source: str = ""
 
+    def limits(self, max_force_n: float | None = None) -> ActuatorLimits:
+        """The actuator limits of this model: its continuous force (or ``max_force_n``,
+        a lower limit the device reports) and its stiffness."""
+        return ActuatorLimits(max_force_n=self.max_force_n if max_force_n is None else max_force_n,
+                              max_stiffness_n_per_mm=self.max_stiffness_n_per_mm)
+
 
 def capability_dict(model: ArmModel, limits: ActuatorLimits) -> dict[str, Any]:
     """Force limit, stiffness limit, force bandwidth and resolution of an arm."""
@@ -88,10 +94,21 @@ class ForceArm(HapticDevice):
     channel: ClassVar[str] = "force"
     accepts: ClassVar[dict[str, str]] = {"force_n": "N"}
     simulated: ClassVar[bool] = False
-    #: declared figures per model; the first row is the class default
+    #: declared figures per model; the first row is the class default (and gives the
+    #: class's ``limits``, set when a subclass declares ``MODELS``)
     MODELS: ClassVar[dict[str, ArmModel]] = {}
     #: ``sdk[i] = device[AXES[i]]``: SDK axis i is the device's axis AXES[i]
     AXES: ClassVar[tuple[int, int, int]] = (0, 1, 2)
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "MODELS" in cls.__dict__ and cls.MODELS and "limits" not in cls.__dict__:
+            cls.limits = cls._row(None).limits()
+
+    @classmethod
+    def _row(cls, model: str | None) -> ArmModel:
+        """The declared figures of ``model`` (None: the class default, the first row)."""
+        return cls.MODELS[model] if model else next(iter(cls.MODELS.values()))
 
     def __init__(self, *, surface_mm: float = 0.0, command_timeout_s: float = 0.05, model: str | None = None,
                  label: str | None = None, safety: Any = None, **options: Any) -> None:
@@ -105,7 +122,7 @@ class ForceArm(HapticDevice):
         self.surface_mm = float(surface_mm)
         self.command_timeout_s = float(command_timeout_s)
         self.model_option = model
-        self.model = self.MODELS[model] if model else next(iter(self.MODELS.values()))
+        self.model = self._row(model)
         self.limits = type(self).limits
         self.reported_model: str | None = None
         self._io = threading.RLock()
@@ -134,9 +151,8 @@ class ForceArm(HapticDevice):
     @classmethod
     def capabilities(cls, model: str | None = None) -> dict[str, Any]:
         """Published capabilities of ``model`` (default: the class's first model)."""
-        m = cls.MODELS[model] if model else next(iter(cls.MODELS.values()))
-        return capability_dict(m, ActuatorLimits(max_force_n=m.max_force_n,
-                                                 max_stiffness_n_per_mm=m.max_stiffness_n_per_mm))
+        m = cls._row(model)
+        return capability_dict(m, m.limits())
 
     # -- transport (backend) -------------------------------------------------------------------
     def _io_open(self) -> str | None:
@@ -181,7 +197,7 @@ class ForceArm(HapticDevice):
             dev_max = self._io_max_force_n()
             if dev_max is not None and 0 < dev_max < fmax:
                 fmax = dev_max
-            self.limits = ActuatorLimits(max_force_n=fmax, max_stiffness_n_per_mm=self.model.max_stiffness_n_per_mm)
+            self.limits = self.model.limits(fmax)
             if isinstance(self.safety, SafetyLayer):
                 self.safety.limits = self.limits
             self._watchdog = CommandWatchdog(self._watchdog_zero, deadline_s=self.command_timeout_s, lock=self._io,

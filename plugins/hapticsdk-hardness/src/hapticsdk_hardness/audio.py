@@ -268,14 +268,14 @@ class VoiceCoilAudio(Actuator):
 
     @classmethod
     def discover(cls) -> list[dict[str, Any]]:
-        ok, _ = cls.check_available()
-        if not ok:
+        try:   # one import and one query (check_available would make both again)
+            sd = import_sounddevice()
+            apis, devices = sd.query_hostapis(), sd.query_devices()
+        except Exception:   # not installed (DeviceNotFoundError) or PortAudio not usable
             return []
-        sd = import_sounddevice()
-        apis = sd.query_hostapis()
         return [{"device": i, "name": d["name"], "hostapi": apis[d["hostapi"]]["name"],
                  "channels": d["max_output_channels"], "samplerate": d["default_samplerate"]}
-                for i, d in enumerate(sd.query_devices()) if d["max_output_channels"] > 0]
+                for i, d in enumerate(devices) if d["max_output_channels"] > 0]
 
     def describe(self) -> dict[str, Any]:
         d = super().describe()

@@ -31,7 +31,6 @@ import sys
 from typing import Any, ClassVar
 
 from hapticsdk.install_hints import pip_hint
-from hapticsdk.actuators import ActuatorLimits
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 
 from .arm import ArmModel, ForceArm
@@ -89,8 +88,6 @@ class DhdDevice(ForceArm):
     """
 
     name: ClassVar[str] = "dhd"
-    limits = ActuatorLimits(max_force_n=MODELS["omega.3"].max_force_n,
-                            max_stiffness_n_per_mm=MODELS["omega.3"].max_stiffness_n_per_mm)
     MODELS: ClassVar[dict[str, ArmModel]] = MODELS
     AXES: ClassVar[tuple[int, int, int]] = (1, 2, 0)
     privileged_options: ClassVar[dict[str, str]] = {"sdk": "native library folder"}
@@ -173,10 +170,10 @@ class DhdDevice(ForceArm):
 
     @classmethod
     def discover(cls) -> list[dict[str, Any]]:
-        ok, _ = cls.check_available()
-        if not ok:
+        try:
+            n = import_binding().getDeviceCount()
+        except DeviceNotFoundError:
             return []
-        n = import_binding().getDeviceCount()
         return [{"device_id": i, "note": "open with device_id=N"} for i in range(max(0, int(n)))]
 
     def describe(self) -> dict[str, Any]:
