@@ -35,17 +35,21 @@ from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 
 from .arm import ArmModel, ForceArm
 
-_CHAI = "CHAI3D device specifications (cDeltaDevices.cpp) and the Force Dimension data sheet"
+#: continuous force, closed-loop stiffness and resolution as Force Dimension's data sheets
+#: give them; CHAI3D's device table (CDeltaDevices.cpp) is NOT their source: it declares a
+#: lower stiffness for rendering (5 N/mm omega.x and delta.3, 4 N/mm and 12 N for sigma.7)
+_FD = "Force Dimension data sheet (continuous force, closed-loop stiffness, resolution)"
 #: declared figures per DHD system name (see docs/devices.md)
 MODELS: dict[str, ArmModel] = {m.name: m for m in (
-    ArmModel("omega.3", 12.0, 14.5, 0.01, 4000.0, source=_CHAI),
-    ArmModel("omega.6", 12.0, 14.5, 0.01, 4000.0, source=_CHAI),
-    ArmModel("omega.7", 12.0, 14.5, 0.01, 4000.0, source=_CHAI),
-    ArmModel("delta.3", 20.0, 14.5, 0.03, 4000.0, source=_CHAI),
-    ArmModel("sigma.7", 20.0, 14.5, 0.0015, 4000.0, source=_CHAI),
-    ArmModel("lambda.7", 20.0, 14.5, 0.0015, 4000.0, source=_CHAI),
+    ArmModel("omega.3", 12.0, 14.5, 0.01, 4000.0, source=_FD),
+    ArmModel("omega.6", 12.0, 14.5, 0.01, 4000.0, source=_FD),
+    ArmModel("omega.7", 12.0, 14.5, 0.01, 4000.0, source=_FD),
+    ArmModel("delta.3", 20.0, 14.5, 0.03, 4000.0, source=_FD),
+    ArmModel("sigma.7", 20.0, 14.5, 0.0015, 4000.0, source=_FD),
+    ArmModel("lambda.7", 20.0, 14.5, 0.0015, 4000.0, source=_FD),
     ArmModel("falcon", 8.9, 3.0, 0.06, 1000.0,
-             source="Novint Falcon data sheet (2 lbf = 8.9 N, 400 dpi) and CHAI3D (3 N/mm)"),
+             source="Novint Falcon data sheet (2 lbf = 8.9 N, 400 dpi); stiffness: CHAI3D's table "
+                    "(3 N/mm; it gives 8 N for the force)"),
 )}
 
 INSTALL_HINT = ("install the Force Dimension SDK (3.16 or later; it has libdrd.so and the Falcon driver) and "
