@@ -36,7 +36,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 
@@ -265,13 +265,13 @@ class ForceArm(HapticDevice):
                 self._io_error = exc
                 self.stop()
                 raise DeviceError(f"read failed: {type(exc).__name__}: {exc}", device=self.label) from exc
-        ax = self.AXES
-        p = np.array([pos[ax[0]], pos[ax[1]], pos[ax[2]]]) * 1e3
-        p[1] -= self.surface_mm
-        v = np.array([vel[ax[0]], vel[ax[1]], vel[ax[2]]]) * 1e3
+        a0, a1, a2 = self.AXES
         fd = self._force_dev
-        return DeviceState(t=time.monotonic(), position_mm=p, velocity_mm_s=v,
-                           force_n=np.array([fd[ax[0]], fd[ax[1]], fd[ax[2]]]))
+        # plain floats, read every servo tick (the loop reads floats; arrays are built
+        # only when a caller asks)
+        return SensedState.of(time.monotonic(), float(pos[a0]) * 1e3, float(pos[a1]) * 1e3 - self.surface_mm,
+                              float(pos[a2]) * 1e3, float(vel[a0]) * 1e3, float(vel[a1]) * 1e3,
+                              float(vel[a2]) * 1e3, fd[a0], fd[a1], fd[a2])
 
     def _release_and_close(self) -> None:
         if self._watchdog is not None:
