@@ -86,6 +86,11 @@ class ForceArm(HapticDevice):
     Args:
         surface_mm: height of the material surface along the device's vertical axis (mm).
         command_timeout_s: zero force when the last command is older than this (s).
+            Default (None): the safety layer's ``restart_after_s`` (50 ms by default; at most
+            1 s), the gap after which
+            :class:`~hapticsdk.safety.SafetyLayer` gates and ramps force again, so force
+            the watchdog cut never returns as a step when the servo resumes; a shorter
+            deadline would (a gap between the two resumes at full force at once).
         model: model name to use when the device does not report one it knows
             (``MODELS`` key); default the device's own report.
         label, safety: as for every actuator.
@@ -110,11 +115,15 @@ class ForceArm(HapticDevice):
         """The declared figures of ``model`` (None: the class default, the first row)."""
         return cls.MODELS[model] if model else next(iter(cls.MODELS.values()))
 
-    def __init__(self, *, surface_mm: float = 0.0, command_timeout_s: float = 0.05, model: str | None = None,
+    def __init__(self, *, surface_mm: float = 0.0, command_timeout_s: float | None = None, model: str | None = None,
                  label: str | None = None, safety: Any = None, **options: Any) -> None:
         super().__init__(label=label, safety=safety, **options)
         if not (isinstance(surface_mm, (int, float)) and np.isfinite(surface_mm)):
             raise ValidationError("must be a finite number of mm", field="options.surface_mm")
+        if command_timeout_s is None:   # the safety layer's restart gap (see Args)
+            from hapticsdk.safety import SafetySettings
+            settings = getattr(self.safety, "settings", None)
+            command_timeout_s = min(1.0, float(getattr(settings, "restart_after_s", SafetySettings.restart_after_s)))
         if not (isinstance(command_timeout_s, (int, float)) and 0 < command_timeout_s <= 1.0):
             raise ValidationError("must be in (0, 1] s", field="options.command_timeout_s")
         if model is not None and model not in self.MODELS:
