@@ -78,10 +78,10 @@ def main() -> int:
         print(json.dumps(out, indent=1, default=str))
         return 0
     print(f"servo period {a.period * 1e3:g} ms ({1e-3 / a.period:g} kHz), {a.seconds:g} s, realtime")
-    print("device             ticks   tick median/p99 us   jitter p99 us   missed")
+    print(f"{'device':<22} {'ticks':>6}   tick median/p99 us   jitter p99 us   missed")
     for k in ("dhd_standin", "reference_omni_virtual"):
         r = out[k]
-        print(f"{k:<18} {r['ticks']:6d}   {r['tick_median_us']:7.1f}/{r['tick_p99_us']:7.1f}     "
+        print(f"{k:<22} {r['ticks']:6d}   {r['tick_median_us']:7.1f}/{r['tick_p99_us']:7.1f}     "
               f"{(r['jitter_p99_us'] or float('nan')):9.1f}     {(r['missed_tick_rate'] or 0) * 100:5.2f} %")
     print(f"scheduling: {out['dhd_standin']['rt']}")
     print("(the DHD figures are on a STAND-IN library; shared machines: other processes' load is in these figures)")

@@ -124,6 +124,17 @@ def test_state_force_gravity_and_limits_through_the_binding(standin):
     assert lib.standin_opened() == 0
 
 
+def test_surface_height_moves_the_sdk_origin(standin):
+    """``surface_mm`` is the surface's height along DHD z: the SDK's y (the normal) is the
+    handle's height above it, so a handle below the surface reads y < 0 (inside)."""
+    sdk, lib = standin
+    lib.standin_script(0.002, 0.002, 0.1)
+    for surface_mm, y_mm in ((0.5, 1.5), (3.0, -1.0)):
+        with _dev(sdk, surface_mm=surface_mm) as dev:
+            st = dev.read_state()
+            assert st.position_mm == pytest.approx([-2.0, y_mm, 1.0], abs=0.05)
+
+
 def test_device_force_limit_and_model_read_from_the_device(standin):
     sdk, lib = standin
     lib.standin_max_force(6.0)

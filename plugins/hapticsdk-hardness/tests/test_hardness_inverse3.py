@@ -155,3 +155,25 @@ class TestInverse3Conformance(DeviceConformance):
     @pytest.fixture
     def device_factory(self, fake):
         return lambda: _dev()
+
+
+def test_watchdog_deadline_is_the_safety_layers_restart_gap(fake):
+    """The default ``command_timeout_s`` is the safety layer's ``restart_after_s``: force
+    the watchdog cut comes back gated and ramped from zero, never as a step."""
+    from hapticsdk.safety import SafetySettings
+    from hapticsdk_hardness.inverse3 import Inverse3
+    assert Inverse3().command_timeout_s == SafetySettings().restart_after_s
+    safety = SafetyLayer(Inverse3.limits, settings=SafetySettings(restart_after_s=0.03))
+    dev = Inverse3(safety=safety, surface_mm=2.5)
+    assert dev.command_timeout_s == 0.03
+    with dev:
+        dev.command(ChannelCommand("force", force_n=0.5))
+        t_end = time.monotonic() + 0.3
+        while time.monotonic() < t_end:                  # the ramp reaches full force
+            dev.command(ChannelCommand("force", force_n=2.0))
+            time.sleep(0.001)
+        assert fake.forces[-1] == [0.0, 0.0, 2.0]
+        time.sleep(0.1)                                  # the servo stalls
+        assert fake.forces[-1] == [0.0, 0.0, 0.0] and dev.watchdog_zeroed >= 1
+        sent = dev.command(ChannelCommand("force", force_n=2.0))
+        assert sent.force_n < 0.5 and fake.forces[-1][2] < 0.5     # resumes from zero

@@ -162,3 +162,22 @@ def test_press_force_constraint_bounds_the_implied_press():
     assert names == ["hardness.work"]
     names = [k.name for k in HardnessDimension().constraints(press_force_max_n=6.0)]
     assert names == ["hardness.work", "hardness.press_force"]
+
+
+def test_a_calibration_of_another_kind_is_a_named_error():
+    """A renderer option ``calibration`` holding another calibration kind (a piezo table's
+    dict) is refused naming the field, in the renderer and through a scene (it was an
+    AttributeError of the renderer, reported as a broken plugin)."""
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.errors import ValidationError
+    from hapticsdk_hardness.dimension import HardnessRenderer
+    table = pytest.importorskip("hapticsdk_roughness.table")
+    d = table.resolve_table().to_dict()
+    with pytest.raises(ValidationError) as ei:
+        HardnessRenderer(5.0, calibration=d)
+    assert ei.value.field == "calibration" and "PiezoTable" in str(ei.value)
+    scene = {"objects": [{"material": {"name": "h", "intensities": {"hardness": 1.0}}}],
+             "settings": {"renderer_options": {"hardness": {"calibration": d}}}}
+    with pytest.raises(ValidationError) as ei:
+        compile_scene(scene)
+    assert ei.value.field.startswith("scene.settings.renderer_options.hardness.calibration")

@@ -312,3 +312,27 @@ def test_wake_after_a_trip_never_replays_the_old_amplitude(rig, kind):
     assert before and before[-1][1] == 0, f"GO with a non-zero amplitude byte: {new}"
     assert drv.output()["amplitude_v"] <= 25.0 * act.period_s / act.ramp_s + 0.1   # one ramp step
     act.close()
+
+
+def test_served_board_answers_its_reports_and_an_unplug_as_a_usb_error():
+    """A :class:`BoardServer` board used from a pickled stand-in (as a servo process uses
+    it): reports reach the served board and come back; once it is unplugged, a report
+    raises the ``USBError`` errno 19 a real pulled board raises."""
+    import pickle
+
+    import usb.core
+    from hapticsdk_roughness import mcp2221 as m
+    from hapticsdk_roughness.usb_emulation import BoardServer
+
+    board = EmulatedMCP2221("SRV1")
+    server = BoardServer(board)
+    try:
+        remote = pickle.loads(pickle.dumps(server.remote()))
+        status = bytes([m.CMD_STATUS]) + bytes(63)
+        assert remote.handle(status)[0] == m.CMD_STATUS and board.reports[-1] == status
+        board.unplugged = True
+        with pytest.raises(usb.core.USBError) as ei:
+            remote.handle(status)
+        assert ei.value.errno == 19 and len(board.reports) == 1     # nothing reached the board
+    finally:
+        server.close()

@@ -36,7 +36,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 
@@ -66,6 +66,12 @@ class ArmModel:
     damping_ns_per_m: float = 0.0
     source: str = ""
 
+    def limits(self, max_force_n: float | None = None) -> ActuatorLimits:
+        """The actuator limits of this model: its continuous force (or ``max_force_n``,
+        a lower limit the device reports) and its stiffness."""
+        return ActuatorLimits(max_force_n=self.max_force_n if max_force_n is None else max_force_n,
+                              max_stiffness_n_per_mm=self.max_stiffness_n_per_mm)
+
 
 def capability_dict(model: ArmModel, limits: ActuatorLimits) -> dict[str, Any]:
     """Force limit, stiffness limit, force bandwidth and resolution of an arm."""
@@ -80,6 +86,11 @@ class ForceArm(HapticDevice):
     Args:
         surface_mm: height of the material surface along the device's vertical axis (mm).
         command_timeout_s: zero force when the last command is older than this (s).
+            Default (None): the safety layer's ``restart_after_s`` (50 ms by default; at most
+            1 s), the gap after which
+            :class:`~hapticsdk.safety.SafetyLayer` gates and ramps force again, so force
+            the watchdog cut never returns as a step when the servo resumes; a shorter
+            deadline would (a gap between the two resumes at full force at once).
         model: model name to use when the device does not report one it knows
             (``MODELS`` key); default the device's own report.
         label, safety: as for every actuator.
@@ -88,16 +99,31 @@ class ForceArm(HapticDevice):
     channel: ClassVar[str] = "force"
     accepts: ClassVar[dict[str, str]] = {"force_n": "N"}
     simulated: ClassVar[bool] = False
-    #: declared figures per model; the first row is the class default
+    #: declared figures per model; the first row is the class default (and gives the
+    #: class's ``limits``, set when a subclass declares ``MODELS``)
     MODELS: ClassVar[dict[str, ArmModel]] = {}
     #: ``sdk[i] = device[AXES[i]]``: SDK axis i is the device's axis AXES[i]
     AXES: ClassVar[tuple[int, int, int]] = (0, 1, 2)
 
-    def __init__(self, *, surface_mm: float = 0.0, command_timeout_s: float = 0.05, model: str | None = None,
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        if "MODELS" in cls.__dict__ and cls.MODELS and "limits" not in cls.__dict__:
+            cls.limits = cls._row(None).limits()
+
+    @classmethod
+    def _row(cls, model: str | None) -> ArmModel:
+        """The declared figures of ``model`` (None: the class default, the first row)."""
+        return cls.MODELS[model] if model else next(iter(cls.MODELS.values()))
+
+    def __init__(self, *, surface_mm: float = 0.0, command_timeout_s: float | None = None, model: str | None = None,
                  label: str | None = None, safety: Any = None, **options: Any) -> None:
         super().__init__(label=label, safety=safety, **options)
         if not (isinstance(surface_mm, (int, float)) and np.isfinite(surface_mm)):
             raise ValidationError("must be a finite number of mm", field="options.surface_mm")
+        if command_timeout_s is None:   # the safety layer's restart gap (see Args)
+            from hapticsdk.safety import SafetySettings
+            settings = getattr(self.safety, "settings", None)
+            command_timeout_s = min(1.0, float(getattr(settings, "restart_after_s", SafetySettings.restart_after_s)))
         if not (isinstance(command_timeout_s, (int, float)) and 0 < command_timeout_s <= 1.0):
             raise ValidationError("must be in (0, 1] s", field="options.command_timeout_s")
         if model is not None and model not in self.MODELS:
@@ -105,7 +131,7 @@ class ForceArm(HapticDevice):
         self.surface_mm = float(surface_mm)
         self.command_timeout_s = float(command_timeout_s)
         self.model_option = model
-        self.model = self.MODELS[model] if model else next(iter(self.MODELS.values()))
+        self.model = self._row(model)
         self.limits = type(self).limits
         self.reported_model: str | None = None
         self._io = threading.RLock()
@@ -134,9 +160,8 @@ class ForceArm(HapticDevice):
     @classmethod
     def capabilities(cls, model: str | None = None) -> dict[str, Any]:
         """Published capabilities of ``model`` (default: the class's first model)."""
-        m = cls.MODELS[model] if model else next(iter(cls.MODELS.values()))
-        return capability_dict(m, ActuatorLimits(max_force_n=m.max_force_n,
-                                                 max_stiffness_n_per_mm=m.max_stiffness_n_per_mm))
+        m = cls._row(model)
+        return capability_dict(m, m.limits())
 
     # -- transport (backend) -------------------------------------------------------------------
     def _io_open(self) -> str | None:
@@ -181,7 +206,7 @@ class ForceArm(HapticDevice):
             dev_max = self._io_max_force_n()
             if dev_max is not None and 0 < dev_max < fmax:
                 fmax = dev_max
-            self.limits = ActuatorLimits(max_force_n=fmax, max_stiffness_n_per_mm=self.model.max_stiffness_n_per_mm)
+            self.limits = self.model.limits(fmax)
             if isinstance(self.safety, SafetyLayer):
                 self.safety.limits = self.limits
             self._watchdog = CommandWatchdog(self._watchdog_zero, deadline_s=self.command_timeout_s, lock=self._io,
@@ -249,13 +274,13 @@ class ForceArm(HapticDevice):
                 self._io_error = exc
                 self.stop()
                 raise DeviceError(f"read failed: {type(exc).__name__}: {exc}", device=self.label) from exc
-        ax = self.AXES
-        p = np.array([pos[ax[0]], pos[ax[1]], pos[ax[2]]]) * 1e3
-        p[1] -= self.surface_mm
-        v = np.array([vel[ax[0]], vel[ax[1]], vel[ax[2]]]) * 1e3
+        a0, a1, a2 = self.AXES
         fd = self._force_dev
-        return DeviceState(t=time.monotonic(), position_mm=p, velocity_mm_s=v,
-                           force_n=np.array([fd[ax[0]], fd[ax[1]], fd[ax[2]]]))
+        # plain floats, read every servo tick (the loop reads floats; arrays are built
+        # only when a caller asks)
+        return SensedState.of(time.monotonic(), float(pos[a0]) * 1e3, float(pos[a1]) * 1e3 - self.surface_mm,
+                              float(pos[a2]) * 1e3, float(vel[a0]) * 1e3, float(vel[a1]) * 1e3,
+                              float(vel[a2]) * 1e3, fd[a0], fd[a1], fd[a2])
 
     def _release_and_close(self) -> None:
         if self._watchdog is not None:

@@ -50,11 +50,10 @@ from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 from hapticsdk.install_hints import pip_hint
 from hapticsdk.synthesis import Oscillator
 
-#: streams whose audio server went away (never touched again; see VoiceCoilAudio._close)
-_ABANDONED: list[Any] = []
 #: every stream opened and not yet closed: a sounddevice stream dropped without close()
 #: frees its C callback while PortAudio still calls it (a crash), e.g. when a backend's
-#: close failed; kept here until closed
+#: close failed; kept here until closed, and for good when its audio server went away
+#: (abandoned, never touched again; see VoiceCoilAudio._close)
 _LIVE: set[Any] = set()
 
 INSTALL_HINT = (pip_hint("hapticsdk-hardness", "audio") + " (sounddevice) and the system PortAudio "
@@ -237,7 +236,7 @@ class VoiceCoilAudio(Actuator):
                 # the audio server or device went away under a running stream: PortAudio's
                 # JACK backend hangs or aborts the process when such a stream is stopped or
                 # closed, and there is no output left to silence; the stream is abandoned
-                _ABANDONED.append(s)
+                # (it stays in _LIVE)
                 self.abandoned = True
             elif s is not None:
                 try:
@@ -268,14 +267,14 @@ class VoiceCoilAudio(Actuator):
 
     @classmethod
     def discover(cls) -> list[dict[str, Any]]:
-        ok, _ = cls.check_available()
-        if not ok:
+        try:   # one import and one query (check_available would make both again)
+            sd = import_sounddevice()
+            apis, devices = sd.query_hostapis(), sd.query_devices()
+        except Exception:   # not installed (DeviceNotFoundError) or PortAudio not usable
             return []
-        sd = import_sounddevice()
-        apis = sd.query_hostapis()
         return [{"device": i, "name": d["name"], "hostapi": apis[d["hostapi"]]["name"],
                  "channels": d["max_output_channels"], "samplerate": d["default_samplerate"]}
-                for i, d in enumerate(sd.query_devices()) if d["max_output_channels"] > 0]
+                for i, d in enumerate(devices) if d["max_output_channels"] > 0]
 
     def describe(self) -> dict[str, Any]:
         d = super().describe()

@@ -31,22 +31,25 @@ import sys
 from typing import Any, ClassVar
 
 from hapticsdk.install_hints import pip_hint
-from hapticsdk.actuators import ActuatorLimits
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 
 from .arm import ArmModel, ForceArm
 
-_CHAI = "CHAI3D device specifications (cDeltaDevices.cpp) and the Force Dimension data sheet"
+#: continuous force, closed-loop stiffness and resolution as Force Dimension's data sheets
+#: give them; CHAI3D's device table (CDeltaDevices.cpp) is NOT their source: it declares a
+#: lower stiffness for rendering (5 N/mm omega.x and delta.3, 4 N/mm and 12 N for sigma.7)
+_FD = "Force Dimension data sheet (continuous force, closed-loop stiffness, resolution)"
 #: declared figures per DHD system name (see docs/devices.md)
 MODELS: dict[str, ArmModel] = {m.name: m for m in (
-    ArmModel("omega.3", 12.0, 14.5, 0.01, 4000.0, source=_CHAI),
-    ArmModel("omega.6", 12.0, 14.5, 0.01, 4000.0, source=_CHAI),
-    ArmModel("omega.7", 12.0, 14.5, 0.01, 4000.0, source=_CHAI),
-    ArmModel("delta.3", 20.0, 14.5, 0.03, 4000.0, source=_CHAI),
-    ArmModel("sigma.7", 20.0, 14.5, 0.0015, 4000.0, source=_CHAI),
-    ArmModel("lambda.7", 20.0, 14.5, 0.0015, 4000.0, source=_CHAI),
+    ArmModel("omega.3", 12.0, 14.5, 0.01, 4000.0, source=_FD),
+    ArmModel("omega.6", 12.0, 14.5, 0.01, 4000.0, source=_FD),
+    ArmModel("omega.7", 12.0, 14.5, 0.01, 4000.0, source=_FD),
+    ArmModel("delta.3", 20.0, 14.5, 0.03, 4000.0, source=_FD),
+    ArmModel("sigma.7", 20.0, 14.5, 0.0015, 4000.0, source=_FD),
+    ArmModel("lambda.7", 20.0, 14.5, 0.0015, 4000.0, source=_FD),
     ArmModel("falcon", 8.9, 3.0, 0.06, 1000.0,
-             source="Novint Falcon data sheet (2 lbf = 8.9 N, 400 dpi) and CHAI3D (3 N/mm)"),
+             source="Novint Falcon data sheet (2 lbf = 8.9 N, 400 dpi); stiffness: CHAI3D's table "
+                    "(3 N/mm; it gives 8 N for the force)"),
 )}
 
 INSTALL_HINT = ("install the Force Dimension SDK (3.16 or later; it has libdrd.so and the Falcon driver) and "
@@ -89,8 +92,6 @@ class DhdDevice(ForceArm):
     """
 
     name: ClassVar[str] = "dhd"
-    limits = ActuatorLimits(max_force_n=MODELS["omega.3"].max_force_n,
-                            max_stiffness_n_per_mm=MODELS["omega.3"].max_stiffness_n_per_mm)
     MODELS: ClassVar[dict[str, ArmModel]] = MODELS
     AXES: ClassVar[tuple[int, int, int]] = (1, 2, 0)
     privileged_options: ClassVar[dict[str, str]] = {"sdk": "native library folder"}
@@ -173,10 +174,10 @@ class DhdDevice(ForceArm):
 
     @classmethod
     def discover(cls) -> list[dict[str, Any]]:
-        ok, _ = cls.check_available()
-        if not ok:
+        try:
+            n = import_binding().getDeviceCount()
+        except DeviceNotFoundError:
             return []
-        n = import_binding().getDeviceCount()
         return [{"device_id": i, "note": "open with device_id=N"} for i in range(max(0, int(n)))]
 
     def describe(self) -> dict[str, Any]:

@@ -108,6 +108,9 @@ class HardnessRenderer(DimensionRenderer):
                                       field="calibration")
             from hapticsdk.calibration.store import calibration_from_dict
             calibration = calibration_from_dict({"schema_version": 1, "kind": "voicecoil", **calibration})
+            if not isinstance(calibration, VoiceCoilCalibration):   # e.g. a piezo table's "kind"
+                raise ValidationError(f"must be a voice-coil calibration (kind 'voicecoil'), got a "
+                                      f"{type(calibration).__name__}", field="calibration")
         self.calibration = calibration or VoiceCoilCalibration.paper()
         self.gs = gs
         self.omni_stiffness_n_per_mm = min(gs, float(gs_max_n_per_mm))

@@ -21,7 +21,6 @@ import importlib
 import importlib.util
 from typing import Any, ClassVar
 
-from hapticsdk.actuators import ActuatorLimits
 from hapticsdk.errors import DeviceNotFoundError, ValidationError
 from hapticsdk.install_hints import pip_hint
 
@@ -60,8 +59,6 @@ class Inverse3(ForceArm):
     """
 
     name: ClassVar[str] = "inverse3"
-    limits = ActuatorLimits(max_force_n=MODELS["inverse3"].max_force_n,
-                            max_stiffness_n_per_mm=MODELS["inverse3"].max_stiffness_n_per_mm)
     MODELS: ClassVar[dict[str, ArmModel]] = MODELS
     AXES: ClassVar[tuple[int, int, int]] = (0, 2, 1)
     privileged_options: ClassVar[dict[str, str]] = {"port": "serial port"}
@@ -134,10 +131,11 @@ class Inverse3(ForceArm):
 
     @classmethod
     def discover(cls) -> list[dict[str, Any]]:
-        ok, _ = cls.check_available()
-        if not ok:
+        try:
+            api = import_api()
+        except DeviceNotFoundError:
             return []
-        return [{"port": p, "note": "open with port=PORT"} for p in import_api().detect_inverse3s()]
+        return [{"port": p, "note": "open with port=PORT"} for p in api.detect_inverse3s()]
 
     def describe(self) -> dict[str, Any]:
         d = super().describe()
