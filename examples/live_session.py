@@ -153,10 +153,10 @@ def plot(log, names, retarget_t, out_png: Path) -> None:
     stiff = [sp for sp in spans if names.get(sp[0]) == "rubber"]
     if stiff:
         _, ta, tb = stiff[0]
-        ax1.annotate("grey band: count-level cycle of a quantised stiff wall\n(finger 3-4 encoder counts deep; "
-                     "0.13 N per count)", (0.5 * (ta + tb), 0.02), xycoords=ax1.get_xaxis_transform(),
-                     ha="center", va="bottom", fontsize=8,
-                     bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85})
+        # beside the panel, under its legend: inside it the note would cover the trace
+        ax1.text(1.07, 0.3, "grey band on the rubber: count-level\ncycle of a quantised stiff wall\n"
+                 "(finger 3-4 encoder counts deep;\n0.13 N per count)", transform=ax1.transAxes,
+                 ha="left", va="top", fontsize=8)
     if retarget_t is not None:
         for ax in (ax1, ax2):
             ax.axvline(retarget_t, color="k", ls="--", lw=1.0)

@@ -140,7 +140,7 @@ class EventDispatcher:
             return False
 
     def wake(self) -> None:
-        """Look at the session now (the reaper calls it when the servo process ends)."""
+        """Look at the session now (the session's supervisor calls it when the servo process ends)."""
         self._stop.set()
 
     def stop(self, timeout: float = 1.0) -> None:

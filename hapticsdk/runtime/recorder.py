@@ -109,13 +109,13 @@ class LiveRecorder:
         st = loop.last_state
         mv[j] = loop.last_t or 0.0
         if st is not None:
-            p, v = st.position_mm, st.velocity_mm_s
-            mv[j + 1] = p[0]
-            mv[j + 2] = p[1]
-            mv[j + 3] = p[2]
-            mv[j + 4] = v[0]
-            mv[j + 5] = v[1]
-            mv[j + 6] = v[2]
+            # the loop keeps a SensedState: its floats (its array fields would be built)
+            mv[j + 1] = st.px
+            mv[j + 2] = st.py
+            mv[j + 3] = st.pz
+            mv[j + 4] = st.vx
+            mv[j + 5] = st.vy
+            mv[j + 6] = st.vz
         else:
             for k in range(1, 7):
                 mv[j + k] = np.nan

@@ -968,13 +968,13 @@ class _Servo:
             seq = mv[_SEQ]
             mv[_SEQ_END] = seq + 1.0  # odd before the state changes (readers read 0..24 ascending)
             if st is not None:
-                p, v = st.position_mm, st.velocity_mm_s
-                mv[_PX] = p[0]
-                mv[_PY] = p[1]
-                mv[_PZ] = p[2]
-                mv[_VX] = v[0]
-                mv[_VY] = v[1]
-                mv[_VZ] = v[2]
+                # the loop keeps a SensedState: its floats (its array fields would be built)
+                mv[_PX] = st.px
+                mv[_PY] = st.py
+                mv[_PZ] = st.pz
+                mv[_VX] = st.vx
+                mv[_VY] = st.vy
+                mv[_VZ] = st.vz
             c = loop.contact
             mv[_T] = loop.last_t or 0.0
             mv[_F] = loop.last_force_n
@@ -1284,7 +1284,8 @@ class Session:
         self._seq = 0
         from .callbacks import EventDispatcher
         self._dispatcher = EventDispatcher(self)
-        self._reaper: threading.Thread | None = None
+        #: the one watcher of a process servo (reaps it, standby on its death; issues 27, 31)
+        self._supervisor: Any = None
         #: the live view's server (:meth:`open_view`), None until opened
         self.view: Any = None
         plan = compile_scene(scene)
@@ -1351,12 +1352,10 @@ class Session:
                 self._process = ctx.Process(target=_servo_main, args=(spec, cmd_r, self._buf.name, done_w),
                                             name="hapticsdk-servo", daemon=True)
                 self._process.start()
-                self._reaper = threading.Thread(target=self._reap, args=(self._process,), name="hapticsdk-reaper",
-                                                daemon=True)
-                self._reaper.start()
-                # servo death -> the application reopens the devices and writes standby (issue 31)
+                # reaps the servo the moment it ends; servo death -> the application
+                # reopens the devices and writes standby (issue 31), then callbacks hear of it
                 from .supervisor import ServoSupervisor
-                self._supervisor: Any = ServoSupervisor(self._process, devices)
+                self._supervisor = ServoSupervisor(self._process, devices, on_exit=self._dispatcher.wake)
                 cmd_r.close()
                 done_w.close()
                 _grow_pipe(self._cmd)
@@ -1404,22 +1403,10 @@ class Session:
             except (ValueError, TypeError):  # released
                 return
 
-    def _reap(self, proc: Any) -> None:
-        """The reaper thread: waits for the servo process to end and reaps it at once
-        (``waitpid``), so a servo that died or was killed never stays a zombie while the
-        application runs on; then wakes the callback dispatcher."""
-        from multiprocessing.connection import wait
-        try:
-            wait([proc.sentinel])
-            proc.join()
-        except (ValueError, OSError, AssertionError):
-            return
-        self._dispatcher.wake()
-
     def _servo_alive(self) -> bool:
         if self._process is not None:
-            if self._reaper is not None:
-                return self._reaper.is_alive()  # it ends once it has reaped the servo
+            if self._supervisor is not None:
+                return self._supervisor.servo_alive()  # False once it has reaped the servo
             return self._process.is_alive()
         return self._thread is not None and self._thread.is_alive()
 
@@ -1483,9 +1470,9 @@ class Session:
         s = self._summary or {}
         code = None
         if self._process is not None:
-            reaper = self._reaper
-            if reaper is not None and reaper is not threading.current_thread():
-                reaper.join(1.0)  # the reaper reaps the servo (two waitpid calls would race)
+            sup = self._supervisor
+            if sup is not None and not sup.is_watcher():
+                sup.wait_exit(1.0)  # the supervisor reaps the servo (two waitpid calls would race)
             else:
                 self._process.join(1.0)
             code = self._process.exitcode
@@ -1938,11 +1925,10 @@ class Session:
             if self._thread is not None:
                 self._thread.join(timeout_s)
             if self._process is not None and getattr(self._process, "_popen", None) is not None:
-                # the reaper thread waits on the process (one waitpid caller: a second
+                # the supervisor waits on the process (one waitpid caller: a second
                 # one could see "no such child" and take a reaped servo for alive)
-                reaper = self._reaper
-                wait = reaper.join if reaper is not None else self._process.join
-                alive = reaper.is_alive if reaper is not None else self._process.is_alive
+                wait = sup.wait_exit if sup is not None else self._process.join
+                alive = sup.servo_alive if sup is not None else self._process.is_alive
                 wait(timeout_s)
                 if alive():
                     self._process.terminate()  # SIGTERM: the servo's safe stop

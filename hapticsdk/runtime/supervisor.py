@@ -8,7 +8,11 @@ out, and the serial bridge's firmware watchdog turned the boost off 250 ms later
 
 :class:`ServoSupervisor` is a thread of the application that waits on the servo process's
 sentinel (a file descriptor the kernel makes readable the moment the process is gone:
-no polling period). The kernel closes the dead process's descriptors, releasing the
+no polling period). It is the session's one watcher of the servo process: it reaps the
+process at once (``waitpid``; the session's own liveness checks ask it, so there is one
+``waitpid`` caller and a dead servo never stays a zombie), then does what follows below,
+then calls ``on_exit`` (the session wakes its callback dispatcher). The kernel closes the
+dead process's descriptors, releasing the
 serial port or the USB interface it held; the supervisor then reopens each device's
 transport and writes its safe state, through the actuator class's ``standby_detached``
 hook (``hapticsdk_roughness``'s DRV2667 backends: open the bus, CONTROL2 = STANDBY,
@@ -26,7 +30,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 __all__ = ["ServoSupervisor", "SupervisorReport", "HOOK"]
 
@@ -61,22 +65,27 @@ class SupervisorReport:
 
 
 class ServoSupervisor:
-    """Watch a servo process; on an unexpected exit, put every device in standby.
+    """Watch a servo process: reap it the moment it ends; on an unexpected exit, put every
+    device in standby.
 
     Args:
         process: the servo's :class:`multiprocessing.Process` (started).
         devices: role -> ``(actuator name, options)``, as the servo opened them.
         retry_s: how long to keep trying to reopen a transport the dead process still
             held (the kernel releases it as it reaps the process's files; normally at once).
+        on_exit: called (no arguments) on the supervisor thread after the process was
+            reaped and, when its exit was unexpected, the standby written.
     """
 
     def __init__(self, process: Any, devices: Mapping[str, tuple[str, Mapping[str, Any]]], *,
-                 retry_s: float = 0.25) -> None:
+                 retry_s: float = 0.25, on_exit: Callable[[], Any] | None = None) -> None:
         self._process = process
         self._devices = {r: (n, dict(o)) for r, (n, o) in devices.items()}
         self._retry_s = float(retry_s)
+        self._on_exit = on_exit
         self._expected = threading.Event()
-        self._stop = threading.Event()
+        #: set once the process is reaped (or cannot be waited on): it is not running
+        self._exited = threading.Event()
         self.report: SupervisorReport | None = None
         self.done = threading.Event()
         self._thread = threading.Thread(target=self._run, name="hapticsdk-supervisor", daemon=True)
@@ -86,30 +95,45 @@ class ServoSupervisor:
         """The application is closing the session: the servo's exit is expected."""
         self._expected.set()
 
+    def servo_alive(self) -> bool:
+        """Whether the servo process still runs (False once reaped)."""
+        return not self._exited.is_set()
+
+    def wait_exit(self, timeout: float | None = None) -> bool:
+        """Wait until the process is reaped; True then, False after ``timeout`` s."""
+        return self._exited.wait(timeout)
+
+    def is_watcher(self) -> bool:
+        """Whether the calling thread is the supervisor's own."""
+        return threading.current_thread() is self._thread
+
     def stop(self, timeout: float = 1.0) -> None:
-        """End the supervisor thread (after :meth:`expect_exit`)."""
+        """After :meth:`expect_exit` and the process's end: wait for the thread to finish."""
         self._expected.set()
-        self._stop.set()
-        self._thread.join(timeout)
+        if not self.is_watcher():
+            self._thread.join(timeout)
 
     def _run(self) -> None:
         from multiprocessing.connection import wait
         try:
-            sentinel = self._process.sentinel
-        except (AttributeError, ValueError):
-            return
-        self._prepare()  # classes loaded and instances built now, not after the death
-        while not self._stop.is_set():
-            if wait([sentinel], timeout=0.5):
-                break
-        else:
-            return
-        died = time.monotonic()
-        if self._expected.is_set():
-            self.done.set()
-            return
-        self.report = self.standby_all(died)
+            try:
+                sentinel = self._process.sentinel
+            except (AttributeError, ValueError):
+                return
+            self._prepare()  # classes loaded and instances built now, not after the death
+            try:
+                wait([sentinel])
+                died = time.monotonic()
+                self._process.join()  # reap it now: the one waitpid caller
+            except (ValueError, OSError, AssertionError):
+                return
+        finally:
+            self._exited.set()
+        if not self._expected.is_set():
+            self.report = self.standby_all(died)
         self.done.set()
+        if self._on_exit is not None:
+            self._on_exit()
 
     def _prepare(self) -> None:
         """Per role: the actuator class, and an instance (never opened) when it has the hook."""

@@ -46,23 +46,15 @@ def _shm():
     return set(os.listdir("/dev/shm")) if os.path.isdir("/dev/shm") else set()
 
 
-def _wait(pred, timeout=20.0):
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout:
-        if pred():
-            return True
-        time.sleep(0.01)
-    return False
 
-
-def test_thread_session_contacts_state_events_and_switch():
+def test_thread_session_contacts_state_events_and_switch(wait):
     """Two boxes, the finger slides from one to the other: contact events name the
     objects in order, state() follows the probe, set_material switches the material in
     contact (counted by the servo), close() stops every actuator."""
     # simulated time: a thread servo shares the interpreter lock with this test, and a
     # command gap > 50 ms would (rightly) re-arm the safety layer's start gate
     with hs.session(TWO, isolation="thread", trajectory=SLIDE_AND_HOLD, realtime=False) as s:
-        assert _wait(lambda: s.state().object == "right" and s.state().position_mm[0] > 25.0, 20.0)
+        assert wait(lambda: s.state().object == "right" and s.state().position_mm[0] > 25.0, 20.0)
         st = s.state()
         # pressed 1.5 mm into the right box's top: penetration along +y, a spring force
         assert st.penetration_mm == pytest.approx(1.5) and st.position_mm[1] == pytest.approx(-1.5)
@@ -71,14 +63,14 @@ def test_thread_session_contacts_state_events_and_switch():
         t_call = time.monotonic()
         r = s.set_material("right", {"hardness": 0.95}, refine=False)
         assert r.source == "amortised" and set(r.features) == {"hardness"}
-        assert _wait(lambda: s.state().material_switches >= 1, 5.0)
+        assert wait(lambda: s.state().material_switches >= 1, 5.0)
         assert s.state().switched_at > t_call  # when the servo rendered it first
         # built in the application and only unpickled by the servo
         assert "<unpickle>" in s._servo_holder[0]._build_s
         s.pause()
-        assert _wait(lambda: s.state().paused and s.state().force_n == 0.0, 5.0)
+        assert wait(lambda: s.state().paused and s.state().force_n == 0.0, 5.0)
         s.resume()
-        assert _wait(lambda: not s.state().paused, 5.0)
+        assert wait(lambda: not s.state().paused, 5.0)
         ev = s.events()
         summary = s.close()
     kinds = [(e.kind, e.object) for e in ev if e.kind.startswith("contact")]
@@ -97,7 +89,7 @@ class Raises(DimensionRenderer):
         raise RuntimeError("renderer bug")
 
 
-def test_renderer_error_is_counted_not_fatal():
+def test_renderer_error_is_counted_not_fatal(wait):
     # held pressed: a servo on simulated time runs SLIDE's 3 s of contact in a fraction
     # of a second of wall time, which this thread's set_renderers could arrive after
     with Session(PAD, isolation="thread", trajectory=SLIDE_AND_HOLD, realtime=False) as s:
@@ -109,39 +101,39 @@ def test_renderer_error_is_counted_not_fatal():
         def counted_and_reported():
             seen.extend(s.events())
             return s.state().renderer_errors > 10 and any(e.kind == "renderer_error" for e in seen)
-        assert _wait(counted_and_reported, 10.0)
+        assert wait(counted_and_reported, 10.0)
         assert s.state().ticks > 0  # still running
 
 
-def test_add_move_remove_objects_live():
+def test_add_move_remove_objects_live(wait):
     kinematic = dict(PAD, devices={"force": "probe-virtual"})  # the probe follows the finger exactly
     with Session(kinematic, isolation="thread", trajectory=Trajectory([(0, 100.0, -1.0), (600, 100.0, -1.0)]),
                  realtime=False) as s:
         # the finger rests at x = 100 mm, 1 mm below y = 0: inside the (infinite) pad plane
-        assert _wait(lambda: s.state().object == "pad")
+        assert wait(lambda: s.state().object == "pad")
         s.remove_object("pad")
-        assert _wait(lambda: s.state().object is None)
+        assert wait(lambda: s.state().object is None)
         s.add_object("ball", {"hardness": 0.6}, {"shape": "sphere", "radius_mm": 10.0},
                      {"position_mm": [0.0, 0.0, 0.0]})
         time.sleep(0.05)
         assert s.state().object is None  # the ball is 100 mm away
         s.move_object("ball", {"position_mm": [100.0, 5.0, 0.0]})
-        assert _wait(lambda: s.state().object == "ball")
+        assert wait(lambda: s.state().object == "ball")
         assert s.state().penetration_mm == pytest.approx(4.0, abs=1e-9)
         with pytest.raises(HapticSDKError):
             s.set_material("nothing", "S1")
 
 
 # -- process isolation and failure semantics ----------------------------------------
-def test_process_session_close_reaps_and_unlinks():
+def test_process_session_close_reaps_and_unlinks(wait):
     before = _shm()
     s = Session(PAD, trajectory=SLIDE)
     name = s._buf.name.lstrip("/")
     assert name in _shm() and s.servo_pid != os.getpid()
-    assert _wait(lambda: s.state().ticks > 50)
+    assert wait(lambda: s.state().ticks > 50)
     t_call = time.monotonic()
     s.set_material("pad", {"hardness": 0.9}, refine=False)  # built and switched in the servo's slack
-    assert _wait(lambda: s.state().material_switches == 1, 10.0)
+    assert wait(lambda: s.state().material_switches == 1, 10.0)
     assert s.state().switched_at > t_call
     proc = s._process
     summary = s.close()
@@ -153,23 +145,23 @@ def test_process_session_close_reaps_and_unlinks():
     s.close()  # idempotent
 
 
-def test_servo_killed_next_call_raises():
+def test_servo_killed_next_call_raises(wait):
     with Session(PAD, trajectory=SLIDE) as s:
         name = s._buf.name.lstrip("/")
         os.kill(s.servo_pid, signal.SIGKILL)
         with pytest.raises(ServoProcessDied) as ei:
-            assert _wait(lambda: s.state() is None, 10.0)
+            assert wait(lambda: s.state() is None, 10.0)
         assert "SIGKILL" in str(ei.value) and ei.value.exitcode == -signal.SIGKILL
     assert name not in _shm()
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
-def test_stop_signals_to_the_servo_stop_safely(sig):
+def test_stop_signals_to_the_servo_stop_safely(sig, wait):
     with Session(PAD, trajectory=SLIDE) as s:
-        assert _wait(lambda: s.state().ticks > 20)
+        assert wait(lambda: s.state().ticks > 20)
         os.kill(s.servo_pid, sig)
         with pytest.raises(ServoProcessDied) as ei:
-            assert _wait(lambda: s.state() is None, 10.0)
+            assert wait(lambda: s.state() is None, 10.0)
         assert signal.Signals(sig).name in str(ei.value)
         assert ei.value.exitcode == 128 + sig
         summary = s._summary
@@ -186,7 +178,7 @@ def _default_signals() -> None:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
-def test_application_death_stops_the_servo(sig):
+def test_application_death_stops_the_servo(sig, wait):
     """The application dies without closing its session (SIGKILL; SIGTERM and SIGHUP
     with their default action): the servo notices (parent check every tick, heartbeat),
     stops every actuator and exits; the resource tracker removes the shared memory.
@@ -202,7 +194,7 @@ def test_application_death_stops_the_servo(sig):
         t_kill = time.monotonic()
         os.kill(p.pid, sig)
         p.wait(10)
-        assert _wait(lambda: not os.path.exists(f"/proc/{pid}"), 10.0), "servo still running"
+        assert wait(lambda: not os.path.exists(f"/proc/{pid}"), 10.0), "servo still running"
         if sig == signal.SIGINT:
             out = p.stdout.read()
             assert "closed:" in out and "omni-virtual" in out and "voicecoil-virtual" in out
@@ -215,30 +207,30 @@ def test_application_death_stops_the_servo(sig):
         # docs/runtime.md; here a bound that holds on a busy shared machine
         noticed = float(re.search(r"noticed at monotonic ([0-9.]+) s", err).group(1))
         assert 0.0 <= noticed - t_kill < 1.0
-        assert _wait(lambda: shm not in _shm(), 10.0)
+        assert wait(lambda: shm not in _shm(), 10.0)
     finally:
         if p.poll() is None:
             p.kill()
 
 
-def test_hung_application_heartbeat_timeout_stops_the_servo():
+def test_hung_application_heartbeat_timeout_stops_the_servo(wait):
     """An application that is alive but hung (its heartbeat thread no longer runs):
     after heartbeat_timeout_s the servo stops every actuator and exits; the next call
     says why."""
     with Session(PAD, trajectory=SLIDE, heartbeat_timeout_s=0.1) as s:
-        assert _wait(lambda: s.state().ticks > 20)
+        assert wait(lambda: s.state().ticks > 20)
         s._hb_stop.set()  # the heartbeat thread ends: as if the application hung
         with pytest.raises(ServoProcessDied) as ei:
-            assert _wait(lambda: s.state() is None, 10.0)
+            assert wait(lambda: s.state() is None, 10.0)
         assert "no heartbeat" in str(ei.value)
         assert set(s._summary["stopped"]) >= {"omni-virtual", "voicecoil-virtual"}
 
 
-def test_state_is_never_torn():
+def test_state_is_never_torn(wait):
     """state() returns the fields of one tick: a kinematic probe's x is the finger's x
     at that tick's time, for every read, while the servo process writes in parallel."""
     with Session(TWO, trajectory=SLIDE) as s:
-        assert _wait(lambda: s.state().ticks > 10)
+        assert wait(lambda: s.state().ticks > 10)
         bad = 0
         n = 0
         t_end = time.monotonic() + 2.0
@@ -265,7 +257,7 @@ def _thread_cpu_ticks(pid):
 
 
 @pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="per-thread CPU times from /proc (Linux)")
-def test_servo_process_has_no_busy_helper_thread():
+def test_servo_process_has_no_busy_helper_thread(wait):
     """Only the servo thread may use CPU in the servo process. A BLAS pool's worker
     thread, woken by the simulated arm's matrix exponential every tick, busy-waits for
     the next job and never sleeps: it kept a whole CPU busy, which on a 2-CPU machine
@@ -275,7 +267,7 @@ def test_servo_process_has_no_busy_helper_thread():
     s7 = {"schema_version": 1, "name": "s7", "objects": [{"name": "pad", "material": "S7"}],
           "settings": {"importance": {"enabled": False}, "solver": {"seed": 0}}}  # force + vibration
     with Session(s7, trajectory=SLIDE, refine=False) as s:
-        assert _wait(lambda: s.state().ticks > 200)
+        assert wait(lambda: s.state().ticks > 200)
         pid = s.servo_pid
         hz = os.sysconf("SC_CLK_TCK")
         a = _thread_cpu_ticks(pid)
@@ -340,13 +332,13 @@ def test_one_pool_thread_stops_a_spinning_blas_worker(mode):
         assert helpers > 0.25 * main
 
 
-def test_partly_written_command_never_blocks_the_servo():
+def test_partly_written_command_never_blocks_the_servo(wait):
     """A command the application has only partly written (a message larger than the
     pipe's atomic write, or an application descheduled in the middle of it) leaves the
     servo ticking; the command applies once the rest arrives."""
     import pickle
     with Session(PAD, isolation="thread", trajectory=SLIDE, realtime=False) as s:
-        assert _wait(lambda: s.state().ticks > 10)
+        assert wait(lambda: s.state().ticks > 10)
         feats = s._answer({"hardness": 0.9})[0]
         payload = pickle.dumps(("material", 0, feats, 0.0))
         frame = len(payload).to_bytes(4, "big") + payload
@@ -354,24 +346,24 @@ def test_partly_written_command_never_blocks_the_servo():
         half = len(frame) // 2
         assert os.write(fd, frame[:half]) == half
         n0 = s.state().ticks
-        assert _wait(lambda: s.state().ticks > n0 + 100, 5.0), "the servo stopped ticking"
+        assert wait(lambda: s.state().ticks > n0 + 100, 5.0), "the servo stopped ticking"
         assert s.state().material_switches == 0
         t_sent = time.monotonic()
         assert os.write(fd, frame[half:]) == len(frame) - half
-        assert _wait(lambda: s.state().material_switches == 1, 5.0)
+        assert wait(lambda: s.state().material_switches == 1, 5.0)
         st = s.state()
         assert st.switched_at >= t_sent  # published by the tick that rendered it first
         assert any(e.kind == "material_switched" and e.object == "pad" for e in s.events())
 
 
-def test_closed_command_pipe_means_the_application_is_gone():
+def test_closed_command_pipe_means_the_application_is_gone(wait):
     """Every writer of the command pipe closed (the application exited, however it
     died): the servo stops every actuator and exits; the next call says why."""
     with Session(PAD, trajectory=SLIDE) as s:
-        assert _wait(lambda: s.state().ticks > 20)
+        assert wait(lambda: s.state().ticks > 20)
         s._cmd.close()
         with pytest.raises(ServoProcessDied) as ei:
-            assert _wait(lambda: s.state() is None, 10.0)
+            assert wait(lambda: s.state() is None, 10.0)
         assert "closed its command pipe" in str(ei.value)
         assert set(s._summary["stopped"]) >= {"omni-virtual", "voicecoil-virtual"}
 
@@ -490,20 +482,20 @@ class _Unpicklable:
         return [Local()]
 
 
-def test_renderers_that_cannot_be_pickled_are_built_by_the_servo():
+def test_renderers_that_cannot_be_pickled_are_built_by_the_servo(wait):
     """set_material builds the renderers in the application and sends them pickled;
     when that fails (a plugin's renderer that does not pickle) it sends the features
     and the servo builds them itself."""
     with Session(PAD, isolation="thread", trajectory=SLIDE_AND_HOLD, realtime=False) as s:
-        assert _wait(lambda: s.state().ticks > 10)
+        assert wait(lambda: s.state().ticks > 10)
         s._builder = _Unpicklable()
         s.set_material("pad", {"hardness": 0.9}, refine=False)
-        assert _wait(lambda: s.state().material_switches == 1, 5.0)
+        assert wait(lambda: s.state().material_switches == 1, 5.0)
         servo = s._servo_holder[0]
         assert "<unpickle>" not in servo._build_s and servo.cmd_stats["failed"] == 0
 
 
-def test_calibration_tables_cross_the_pipe_once():
+def test_calibration_tables_cross_the_pipe_once(wait):
     """set_material sends the renderers pickled with references to the calibration
     tables they hold (the piezo's drive table, the same for every material): the first
     switch sends each table in a "tables" command before the renderers that refer to
@@ -519,9 +511,9 @@ def test_calibration_tables_cross_the_pipe_once():
         sent = []
         send = s._send
         s._send = lambda msg: (sent.append(msg), send(msg))[1]
-        assert _wait(lambda: s.state().ticks > 10)
+        assert wait(lambda: s.state().ticks > 10)
         s.set_material("pad", "S12")
-        assert _wait(lambda: s.state().material_switches == 1, 10.0)
+        assert wait(lambda: s.state().material_switches == 1, 10.0)
         assert [m[0] for m in sent] == ["tables", "renderers"]
         (key, blob), = sent[0][1].items()
         table = pickle.loads(blob)
@@ -530,7 +522,7 @@ def test_calibration_tables_cross_the_pipe_once():
         servo = s._servo_holder[0]
         assert len(blob) > 0.5 * len(pickle.dumps(servo.loop._objs[0].renderers))
         s.set_material("pad", "S3")
-        assert _wait(lambda: s.state().material_switches == 2, 10.0)
+        assert wait(lambda: s.state().material_switches == 2, 10.0)
         assert [m[0] for m in sent] == ["tables", "renderers", "renderers"]
         # the second switch carries no table: under a tenth of the table's size
         assert len(sent[2][2]) < 0.1 * len(blob)

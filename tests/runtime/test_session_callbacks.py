@@ -5,7 +5,6 @@ clamp events that name the actuator, the limit and the value."""
 import os
 import signal
 import threading
-import time
 
 import pytest
 
@@ -23,14 +22,6 @@ PAD = {"schema_version": 1, "name": "pad",
 PRESS = Trajectory([(0.0, 0.0, 2.0), (0.3, 0.0, -3.0), (600.0, 0.0, -3.0)])
 
 
-def _wait(pred, timeout=20.0):
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout:
-        if pred():
-            return True
-        time.sleep(0.005)
-    return False
-
 
 def _proc_state(pid):
     """The kernel's state letter of ``pid`` (``Z`` zombie), None when it is gone."""
@@ -41,12 +32,12 @@ def _proc_state(pid):
         return None
 
 
-def test_callbacks_run_on_the_sdk_thread_and_the_switch_is_acknowledged():
+def test_callbacks_run_on_the_sdk_thread_and_the_switch_is_acknowledged(wait):
     got = []
     with hs.Session(PAD, trajectory=PRESS) as s:
         s.on_event("contact_enter", lambda e: got.append((threading.current_thread().name, e)))
         s.on_event("*", lambda e: 1 / 0)  # a raising callback is counted, never fatal
-        assert _wait(lambda: any(e.kind == "contact_enter" for _, e in got))
+        assert wait(lambda: any(e.kind == "contact_enter" for _, e in got))
         name, ev = got[0]
         assert name == "hapticsdk-events" and ev.object == "pad"
         assert s._dispatcher.errors >= 1
@@ -74,16 +65,16 @@ def test_on_event_rejects_unknown_kinds():
             s.on_event("clamp", 3)
 
 
-def test_servo_death_raises_from_events_reaches_callbacks_and_is_reaped_at_once():
+def test_servo_death_raises_from_events_reaches_callbacks_and_is_reaped_at_once(wait):
     died = []
     with hs.Session(PAD, trajectory=PRESS) as s:
         s.on_event("servo_died", died.append)
-        assert _wait(lambda: s.state().ticks > 20)
+        assert wait(lambda: s.state().ticks > 20)
         pid = s.servo_pid
         os.kill(pid, signal.SIGKILL)
-        # no call on the session: the reaper reaps the servo, it never stays a zombie
-        assert _wait(lambda: _proc_state(pid) is None, 5.0), f"servo {pid} state {_proc_state(pid)}"
-        assert _wait(lambda: bool(died), 5.0)
+        # no call on the session: the supervisor reaps the servo, it never stays a zombie
+        assert wait(lambda: _proc_state(pid) is None, 5.0), f"servo {pid} state {_proc_state(pid)}"
+        assert wait(lambda: bool(died), 5.0)
         assert "SIGKILL" in died[0].message and died[0].value == -signal.SIGKILL
         with pytest.raises(ServoProcessDied):
             s.events()
@@ -91,12 +82,12 @@ def test_servo_death_raises_from_events_reaches_callbacks_and_is_reaped_at_once(
             s.set_material("pad", {"hardness": 0.9}, refine=False)
 
 
-def test_clamp_events_name_the_actuator_the_limit_and_the_value():
+def test_clamp_events_name_the_actuator_the_limit_and_the_value(wait):
     limit = 0.5  # N, far below the 3 mm press on this pad (several N)
     opts = {"force": {"safety": SafetyLayer(ActuatorLimits(max_force_n=limit))}}
     with hs.Session(PAD, trajectory=PRESS, actuator_options=opts) as s:
         # past the safety layer's 0.2 s start ramp, which scales the clamped force down
-        assert _wait(lambda: s.state().t > 1.0 and s.state().clamps > 50)
+        assert wait(lambda: s.state().t > 1.0 and s.state().clamps > 50)
         ev = [e for e in s.events() if e.kind == "clamp"]
     assert ev and all((e.actuator, e.field) == ("force", "max_force_n") for e in ev)
     # the value is the force actually sent: never above the limit; the count adds up
@@ -105,18 +96,18 @@ def test_clamp_events_name_the_actuator_the_limit_and_the_value():
     assert max(e.value for e in ev) == pytest.approx(limit)  # once the start ramp is over
 
 
-def test_the_acknowledged_tick_is_the_first_that_renders_the_new_material():
+def test_the_acknowledged_tick_is_the_first_that_renders_the_new_material(wait):
     """Simulated time, a probe held 3 mm deep, a switch without a ramp from a soft pad
     (the arm alone) to a hard one (arm plus voice coil): the voice coil's logged
     amplitude steps exactly at the acknowledged tick (silent on the tick before, driven
     on it), and the acknowledged servo time is that tick's. (The force does not step:
     a switch while pressed keeps the force continuous, docs/runtime.md.)"""
     with hs.Session(PAD, trajectory=PRESS, isolation="thread", realtime=False, ramp_s=0.0) as s:
-        assert _wait(lambda: s.state().t > 1.0)
+        assert wait(lambda: s.state().t > 1.0)
         r = s.set_material("pad", {"hardness": 0.95}, refine=False)
         assert r.wait(10.0)
         loop = s._servo_holder[0].loop
-        assert _wait(lambda: loop.ticks > r.tick + 5)
+        assert wait(lambda: loop.ticks > r.tick + 5)
         coil = next(sl for sl in loop._slots if sl.role == "coil")
         a = coil.log_a
         cap = a.size
@@ -125,9 +116,9 @@ def test_the_acknowledged_tick_is_the_first_that_renders_the_new_material():
         assert a[r.tick % cap] > 0.0 and a[(r.tick + 1) % cap] > 0.0
 
 
-def test_a_killed_servo_is_reaped_without_any_call_or_callback():
+def test_a_killed_servo_is_reaped_without_any_call_or_callback(wait):
     with hs.Session(PAD, trajectory=PRESS) as s:
-        assert _wait(lambda: s.state().ticks > 20)
+        assert wait(lambda: s.state().ticks > 20)
         pid = s.servo_pid
         os.kill(pid, signal.SIGKILL)
-        assert _wait(lambda: _proc_state(pid) is None, 2.0), f"servo {pid} state {_proc_state(pid)}"
+        assert wait(lambda: _proc_state(pid) is None, 2.0), f"servo {pid} state {_proc_state(pid)}"

@@ -4,7 +4,6 @@ stream whose complete chunks are recovered."""
 
 import os
 import signal
-import time
 
 import numpy as np
 import pytest
@@ -57,19 +56,11 @@ def _arrays(path):
     return out
 
 
-def _wait(pred, timeout=20.0):
-    t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout:
-        if pred():
-            return True
-        time.sleep(0.005)
-    return False
 
-
-def test_every_tick_is_recorded_and_replayable(tmp_path, fmt):
+def test_every_tick_is_recorded_and_replayable(tmp_path, fmt, wait):
     path = tmp_path / f"run.{fmt}"
     with hs.Session(PAD, trajectory=SLIDE, isolation="thread", realtime=False, record=path) as s:
-        assert _wait(lambda: s.state().ticks > 2500)
+        assert wait(lambda: s.state().ticks > 2500)
         summary = s.close()
         loop = s._servo_holder[0].loop
         n = loop.ticks
@@ -93,15 +84,15 @@ def test_every_tick_is_recorded_and_replayable(tmp_path, fmt):
     assert main(["replay", str(path)]) == 0
 
 
-def test_a_killed_servo_leaves_its_complete_chunks(tmp_path, fmt):
+def test_a_killed_servo_leaves_its_complete_chunks(tmp_path, fmt, wait):
     """SIGKILLed mid-run: the servo's stream keeps every complete chunk, and the
     application's close() turns it into the run file (the last partial chunk is lost)."""
     path = tmp_path / f"run.{fmt}"
     with hs.Session(PAD, trajectory=SLIDE, record=path) as s:
-        assert _wait(lambda: s.state().ticks > 2.5 * rec.CHUNK_ROWS)
+        assert wait(lambda: s.state().ticks > 2.5 * rec.CHUNK_ROWS)
         os.kill(s.servo_pid, signal.SIGKILL)
         with pytest.raises(ServoProcessDied):
-            assert _wait(lambda: s.state() is None, 10.0)
+            assert wait(lambda: s.state() is None, 10.0)
         assert rec.part_path(path).exists() and not path.exists()  # the servo left its stream
     summary = s.close()  # already closed by the with block: its summary
     assert summary["record_path"] == str(path) and summary["record_finished_by"] == "application"
@@ -129,14 +120,14 @@ def test_record_paths_are_checked(tmp_path, monkeypatch):
         hs.Session(PAD, record=tmp_path / "run.h5")
 
 
-def test_close_leaves_a_run_file_even_when_the_servo_never_finished_it(tmp_path, fmt):
+def test_close_leaves_a_run_file_even_when_the_servo_never_finished_it(tmp_path, fmt, wait):
     """A servo that cannot finish its recording within close()'s timeout (here: stopped
     with SIGSTOP, then killed by close(); in use: a long .npz conversion) leaves its
     stream; close() turns it into the run file in the application."""
     path = tmp_path / f"run.{fmt}"
     s = hs.Session(PAD, trajectory=SLIDE, record=path)
     try:
-        assert _wait(lambda: s.state().ticks > 1.5 * rec.CHUNK_ROWS)
+        assert wait(lambda: s.state().ticks > 1.5 * rec.CHUNK_ROWS)
         os.kill(s.servo_pid, signal.SIGSTOP)
     finally:
         summary = s.close(timeout_s=0.2)

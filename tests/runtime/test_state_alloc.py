@@ -5,7 +5,7 @@ A result that is kept costs exactly what it holds: the named tuple, its two coor
 tuples and the numbers in it (a CPython float or int > 256 is an object); a result that
 is dropped leaves nothing. Anything retained per call (a cache, a list of past states,
 a reference cycle) leaves at least one block per call, so the bound of 0.5 blocks per
-call over 20 000 calls allows the session's own threads (reaper, heartbeat, callback
+call over 20 000 calls allows the session's own threads (supervisor, heartbeat, callback
 dispatcher) up to 10 000 blocks of their own during the count while still catching it.
 """
 
