@@ -33,16 +33,21 @@ def test_stats_answers_while_the_lock_is_stuck():
     wd = CommandWatchdog(lambda: None, deadline_s=60.0, lock=lock, name="watchdog stuck-test")
     held = threading.Event()
     release = threading.Event()
+    letting_go = threading.Event()
 
     def holder():
         with lock:
             held.set()
             release.wait(30.0)
+            letting_go.set()  # set before the lock is released
     th = threading.Thread(target=holder, daemon=True)
     th.start()
     try:
         assert held.wait(10.0)
         assert wd.stats()["trips"] == 0     # after STATS_LOCK_WAIT_S, without the lock
+        # ... while the lock was still held (a stats() that waits for the lock returns
+        # only after the holder let go, at 30 s)
+        assert not letting_go.is_set()
     finally:
         release.set()
         th.join(10.0)
