@@ -42,12 +42,11 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import RecordingError, ValidationError
+from . import recording_layout as layout
 
 MAGIC = b"HSDKREC1"
 #: ticks per chunk written (1.0 s at 1 kHz: about 150 kB with three roles)
 CHUNK_ROWS = 1024
-_STATE_COLS = ("t", "px", "py", "pz", "vx", "vy", "vz", "force_n", "penetration_mm", "object_id")
-_CMD = ("force_n", "frequency_hz", "amplitude")
 
 
 def check_record_path(path: Any) -> Path:
@@ -77,7 +76,7 @@ class LiveRecorder:
                  objects: Mapping[int, str] | None = None, chunk_rows: int = CHUNK_ROWS) -> None:
         self.path = Path(path)
         self.roles = list(roles)
-        self.columns = list(_STATE_COLS) + [f"cmd/{r}/{f}" for r in self.roles for f in _CMD]
+        self.columns = layout.columns(self.roles)
         self.width = len(self.columns)
         self.objects = dict(objects or {})
         self.period_s = float(period_s)
@@ -209,7 +208,6 @@ def recover(part: "str | Path", path: "str | Path | None" = None, *,
         return finish_h5(part, path, _run_header(h5_header["period_s"], h5_header["roles"], rows, names,
                                                  recovered=True), rows=rows)
     header, a = _read_part(part)
-    cols = {c: k for k, c in enumerate(header["columns"])}
     n = a.shape[0]
     names = {**{int(k): v for k, v in header.get("objects", {}).items()}, **dict(objects or {})}
     run_header = _run_header(header["period_s"], header["roles"], n, names, recovered=True)
@@ -220,20 +218,13 @@ def recover(part: "str | Path", path: "str | Path | None" = None, *,
 
     with atomic_writer(path, "wb") as fh:
         with zipfile.ZipFile(fh, "w", zipfile.ZIP_STORED, allowZip64=True) as zf:
-            put(zf, "t", a[:, cols["t"]])
-            put(zf, "state_t", a[:, cols["t"]])
-            put(zf, "position_mm", a[:, 1:4])
-            put(zf, "velocity_mm_s", a[:, 4:7])
-            put(zf, "device_force_n", np.zeros((n, 3)))
-            put(zf, "buttons", np.zeros(n, dtype=np.int64))
-            for c in ("force_n", "penetration_mm", "object_id"):
-                put(zf, c, a[:, cols[c]])
-            for r in header["roles"]:
-                for f in _CMD:
-                    col = a[:, cols[f"cmd/{r}/{f}"]]
-                    put(zf, f"cmd/{r}/{f}", col)
-                    if f != "force_n":
-                        put(zf, f"{r}.{f}", col)  # the servo log's names (plotting helpers)
+            arrays = {name: layout.take(a, idx) for name, idx in layout.stored(header["columns"], header["roles"]).items()}
+            for name, arr in arrays.items():
+                put(zf, name, arr)
+            for name, target in layout.aliases(header["roles"]).items():
+                put(zf, name, arrays[target])  # the servo log's names (plotting helpers)
+            for name, (shape, dtype) in layout.ZEROS.items():
+                put(zf, name, np.zeros((n, *shape), dtype=dtype))
             put(zf, "header_json", np.array(json.dumps(run_header, default=_json_default)))
     del a
     try:

@@ -32,11 +32,11 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import RecordingError, ValidationError
+from . import recording_layout as layout
 
 #: the optional extra that installs h5py
 EXTRA = "hapticsdk[h5]"
 _SUFFIXES = (".h5", ".hdf5")
-_CMD = ("force_n", "frequency_hz", "amplitude")
 
 
 def is_h5(path: "str | Path") -> bool:
@@ -57,16 +57,10 @@ def h5py_module(field: str = "record") -> Any:
     return h5py
 
 
-def _layout(columns: Sequence[str], roles: Sequence[str]) -> dict[str, tuple[int, ...]]:
-    """Dataset name -> the stream's column indexes it holds."""
-    cols = {c: k for k, c in enumerate(columns)}
-    out: dict[str, tuple[int, ...]] = {"t": (cols["t"],), "position_mm": (1, 2, 3), "velocity_mm_s": (4, 5, 6)}
-    for c in ("force_n", "penetration_mm", "object_id"):
-        out[c] = (cols[c],)
-    for r in roles:
-        for f in _CMD:
-            out[f"cmd/{r}/{f}"] = (cols[f"cmd/{r}/{f}"],)
-    return out
+def _link_aliases(f: Any, roles: Sequence[str]) -> None:
+    """The npz's repeated names as hard links to the stored datasets (stored once)."""
+    for name, target in layout.aliases(roles).items():
+        f[name] = f[target]
 
 
 class H5Appender:
@@ -75,7 +69,7 @@ class H5Appender:
     def __init__(self, part: Path, header: Mapping[str, Any], chunk_rows: int) -> None:
         h5py = h5py_module()
         self.part = Path(part)
-        self._layout = _layout(header["columns"], header["roles"])
+        self._layout = layout.stored(header["columns"], header["roles"])
         self.rows = 0
         f = self._f = h5py.File(self.part, "w", libver="latest")
         f.attrs["stream_header_json"] = json.dumps(dict(header))
@@ -83,12 +77,9 @@ class H5Appender:
             shape = (0,) if len(idx) == 1 else (0, len(idx))
             f.create_dataset(name, shape=shape, maxshape=(None,) + shape[1:], dtype="<f8",
                              chunks=(chunk_rows,) + shape[1:])
-        f.create_dataset("device_force_n", shape=(0, 3), maxshape=(None, 3), dtype="<f8", chunks=(chunk_rows, 3))
-        f.create_dataset("buttons", shape=(0,), maxshape=(None,), dtype="<i8", chunks=(chunk_rows,))
-        f["state_t"] = f["t"]  # hard links: the npz's duplicate names, stored once
-        for r in header["roles"]:
-            for fld in _CMD[1:]:
-                f[f"{r}.{fld}"] = f[f"cmd/{r}/{fld}"]
+        for name, (rest, dtype) in layout.ZEROS.items():
+            f.create_dataset(name, shape=(0, *rest), maxshape=(None, *rest), dtype=dtype, chunks=(chunk_rows, *rest))
+        _link_aliases(f, header["roles"])
         f.create_dataset("rows", data=np.zeros(1, dtype="<i8"))
         f.swmr_mode = True  # from here on the file on disk stays consistent
         f.flush()
@@ -102,8 +93,8 @@ class H5Appender:
         for name, idx in self._layout.items():
             ds = f[name]
             ds.resize(m, axis=0)
-            ds[self.rows:m] = a[:, idx[0]] if len(idx) == 1 else a[:, idx[0]:idx[-1] + 1]
-        for name in ("device_force_n", "buttons"):
+            ds[self.rows:m] = layout.take(a, idx)
+        for name in layout.ZEROS:
             f[name].resize(m, axis=0)
             f[name][self.rows:m] = 0
         f.flush()  # the data first, then the count that vouches for it
@@ -151,18 +142,15 @@ def finish_h5(part: Path, path: Path, run_header: Mapping[str, Any], *, rows: in
         with _open_part(h5py, part) as src, h5py.File(tmp, "w") as dst:
             header = json.loads(src.attrs["stream_header_json"])
             step = 1 << 16
-            for name in _layout(header["columns"], header["roles"]):
+            for name in layout.stored(header["columns"], header["roles"]):
                 ds = src[name]
                 out = dst.create_dataset(name, shape=(rows,) + ds.shape[1:], dtype=ds.dtype,
                                          chunks=True if rows else None)
                 for i in range(0, rows, step):
                     out[i:min(i + step, rows)] = ds[i:min(i + step, rows)]
-            dst.create_dataset("device_force_n", data=np.zeros((rows, 3)))
-            dst.create_dataset("buttons", data=np.zeros(rows, dtype="<i8"))
-            dst["state_t"] = dst["t"]
-            for r in header["roles"]:
-                for fld in _CMD[1:]:
-                    dst[f"{r}.{fld}"] = dst[f"cmd/{r}/{fld}"]
+            for name, (rest, dtype) in layout.ZEROS.items():
+                dst.create_dataset(name, data=np.zeros((rows, *rest), dtype=dtype))
+            _link_aliases(dst, header["roles"])
             dst.create_dataset("rows", data=np.array([rows], dtype="<i8"))
             dst.attrs["header_json"] = text
         with open(tmp, "rb") as fh:
@@ -182,7 +170,7 @@ def read_part_header(part: Path) -> tuple[dict[str, Any], int]:
         try:
             header = json.loads(f.attrs["stream_header_json"])
             rows = int(f["rows"][0])
-            shortest = min(f[name].shape[0] for name in _layout(header["columns"], header["roles"]))
+            shortest = min(f[name].shape[0] for name in layout.stored(header["columns"], header["roles"]))
         except (KeyError, ValueError) as exc:
             raise RecordingError(f"{part}: not a hapticsdk HDF5 recording ({exc})", field="record") from None
     return header, min(rows, shortest)

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import os
 import signal
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from hapticsdk.actuators import SensedState
 from hapticsdk.runlog import load_run
 from hapticsdk.runtime import recorder as rec
 
@@ -40,7 +40,8 @@ class _Loop:
     def __init__(self) -> None:
         self.ticks, self._cap = 0, 8
         self.last_t, self.last_force_n, self.last_penetration_mm = 0.0, 0.0, 0.0
-        self.last_state = SimpleNamespace(position_mm=(1.0, 2.0, -0.5), velocity_mm_s=(10.0, 0.0, 0.0))
+        # the servo loop keeps a SensedState (loop.py converts any backend's state)
+        self.last_state = SensedState(0.0, (1.0, 2.0, -0.5), (10.0, 0.0, 0.0))
         self._slots = [_Slot(8)]
 
 

@@ -1,0 +1,53 @@
+"""The arrays of a live recording's run file, as slices of its stream's columns.
+
+One description for both writers (:mod:`hapticsdk.runtime.recorder`: ``.npz``;
+:mod:`hapticsdk.runtime.recorder_h5`: ``.h5``): the stream's columns, the arrays stored
+from them, the names that repeat a stored array (the servo log's names, which the
+plotting helpers read; HDF5 stores them as hard links) and the arrays a live recording
+has no data for (zeros, for the ``hapticsdk-run`` format).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+#: command fields recorded per role
+CMD_FIELDS = ("force_n", "frequency_hz", "amplitude")
+#: the stream's state columns, before the commands
+STATE_COLUMNS = ("t", "px", "py", "pz", "vx", "vy", "vz", "force_n", "penetration_mm", "object_id")
+#: arrays written as zeros: name -> (shape after the tick axis, dtype)
+ZEROS: dict[str, tuple[tuple[int, ...], str]] = {"device_force_n": ((3,), "<f8"), "buttons": ((), "<i8")}
+
+
+def columns(roles: Sequence[str]) -> list[str]:
+    """The stream's columns for ``roles`` (the state, then each role's commands)."""
+    return list(STATE_COLUMNS) + [f"cmd/{r}/{f}" for r in roles for f in CMD_FIELDS]
+
+
+def stored(cols: Sequence[str], roles: Sequence[str]) -> dict[str, tuple[int, ...]]:
+    """Array name -> the stream columns it holds, consecutive (one column: a 1-D array)."""
+    at = {c: k for k, c in enumerate(cols)}
+    out: dict[str, tuple[int, ...]] = {"t": (at["t"],), "position_mm": (at["px"], at["py"], at["pz"]),
+                                       "velocity_mm_s": (at["vx"], at["vy"], at["vz"])}
+    for c in ("force_n", "penetration_mm", "object_id"):
+        out[c] = (at[c],)
+    for r in roles:
+        for f in CMD_FIELDS:
+            out[f"cmd/{r}/{f}"] = (at[f"cmd/{r}/{f}"],)
+    return out
+
+
+def aliases(roles: Sequence[str]) -> dict[str, str]:
+    """Name -> the stored array it repeats: ``state_t`` and the servo log's
+    ``<role>.<field>`` (vibration fields)."""
+    out = {"state_t": "t"}
+    for r in roles:
+        for f in CMD_FIELDS[1:]:
+            out[f"{r}.{f}"] = f"cmd/{r}/{f}"
+    return out
+
+
+def take(a: Any, idx: tuple[int, ...]) -> Any:
+    """The array ``idx`` (from :func:`stored`) of the rows ``a``: a view (a slice of the
+    columns, never a copy, so a memory-mapped stream stays on disk)."""
+    return a[:, idx[0]] if len(idx) == 1 else a[:, idx[0]:idx[-1] + 1]
