@@ -226,16 +226,21 @@ function drawTop(f) {
   if (f) { g.fillStyle = "#111"; g.beginPath(); g.arc(X(f.p[0]), Y(f.p[1]), 5, 0, 7); g.fill(); }
   g.fillStyle = "#666"; g.fillText("x-y plane of the device frame (mm)", 6, 12);
 }
-function trace(id, key, label, color) {
+function trace(id, key, names, unit, color) {
+  // one scale per series (the piezo's volts and the voice coil's 0..1 differ a hundredfold),
+  // each series' name and top written in its colour
   const c = $(id), g = c.getContext("2d"); g.clearRect(0, 0, c.width, c.height);
   if (!hist.length) return; const t1 = hist[hist.length - 1].t, t0 = t1 - SPAN;
-  const series = key(hist[0]).length; let lo = 0, hi = 1e-9;
-  for (const h of hist) for (const v of key(h)) { if (v != null) { hi = Math.max(hi, v); lo = Math.min(lo, v); } }
+  const series = key(hist[0]).length; const lo = [], hi = [];
+  for (let k = 0; k < series; k++) { lo.push(0); hi.push(1e-9); }
+  for (const h of hist) key(h).forEach((v, k) => { if (v != null) { hi[k] = Math.max(hi[k], v); lo[k] = Math.min(lo[k], v); } });
+  g.fillStyle = "#000"; g.fillText(unit, 6, 12); let x0 = 6 + g.measureText(unit + "  ").width;
   for (let k = 0; k < series; k++) { g.strokeStyle = color[k % color.length]; g.beginPath(); let first = true;
     for (const h of hist) { const v = key(h)[k]; if (v == null) continue;
-      const x = (h.t - t0) / SPAN * c.width, y = c.height - 14 - (v - lo) / (hi - lo) * (c.height - 28);
-      if (first) { g.moveTo(x, y); first = false; } else g.lineTo(x, y); } g.stroke(); }
-  g.fillStyle = "#000"; g.fillText(label(hi), 6, 12);
+      const x = (h.t - t0) / SPAN * c.width, y = c.height - 14 - (v - lo[k]) / (hi[k] - lo[k]) * (c.height - 28);
+      if (first) { g.moveTo(x, y); first = false; } else g.lineTo(x, y); } g.stroke();
+    const text = (names[k] || "") + " top " + hi[k].toFixed(2) + "   ";
+    g.fillStyle = color[k % color.length]; g.fillText(text, x0, 12); x0 += g.measureText(text).width; }
 }
 const es = new EventSource("/stream");
 es.onmessage = ev => {
@@ -255,8 +260,9 @@ es.onmessage = ev => {
   $("status").textContent = "frames: " + hist.length + " in the last " + SPAN + " s";
   document.body.dataset.frames = String((+document.body.dataset.frames || 0) + 1);
   drawTop(f);
-  trace("force", h => [h.f], hi => "force along the normal (N), top " + hi.toFixed(2), ["#000"]);
-  trace("vib", h => Object.values(h.vib).map(v => v[1]), hi => "vibration amplitude (" + Object.keys(f.vib).join(", ") + "; actuator units), top " + hi.toFixed(2), ["#1f77b4", "#ff7f0e", "#2ca02c"]);
+  trace("force", h => [h.f], ["force"], "force along the normal (N):", ["#000"]);
+  trace("vib", h => Object.values(h.vib).map(v => v[1]), Object.keys(f.vib),
+        "vibration amplitude (each in its actuator's unit, own scale):", ["#1f77b4", "#ff7f0e", "#2ca02c"]);
 };
 es.addEventListener("end", ev => { $("status").textContent = "session ended: " + ev.data; es.close(); });
 drawTop(null);
