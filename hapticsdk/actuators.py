@@ -25,6 +25,7 @@ from typing import Any, ClassVar, Mapping, TypeVar
 
 import numpy as np
 
+from .channels import CHANNELS  # the channel kinds an actuator can serve (also hapticsdk.actuators.CHANNELS)
 from .dimensions import ChannelCommand
 from .errors import DeviceError, HapticSDKError, ValidationError
 
@@ -84,9 +85,6 @@ def stops_since(t0: float) -> list[tuple[str, float, bool]]:
 
 
 atexit.register(stop_all)
-
-#: Channel kinds an actuator can serve.
-from .channels import CHANNELS  # noqa: E402  (re-exported: hapticsdk.actuators.CHANNELS)
 
 
 @dataclass(frozen=True)

@@ -2,12 +2,18 @@
 "Budgets"): each is derived from a device parameter, refused beyond with a
 :class:`~hapticsdk.errors.ValidationError` naming the field, and held by a test.
 
-* :data:`MAX_SAMPLE_RATE_HZ`: 384 kHz, the highest sample rate of USB Audio Class 2
-  interfaces and of the WAV files the voice coil's sinks write. The voice coil's band ends
-  at 1 kHz (``voicecoil-virtual`` limits) and the DRV2667 synthesiser plays 8 kHz, so the
-  ceiling is 384 times the Nyquist rate of the coil band's top and 48 times the piezo's
-  FIFO rate: no rendering needs more. Per servo tick (1 ms) it is 384 samples, 3 kB of
-  float64, where 1e9 Hz was 8 MB per tick and a MemoryError.
+* :data:`MAX_SAMPLE_RATE_HZ`: 384 kHz, the highest rate audio interfaces commonly offer
+  (the top rate of USB Audio Class 2 DACs and of the sound cards the voice coil's sinks
+  play to). The voice coil's band ends at 1 kHz (``voicecoil-virtual`` limits) and the
+  DRV2667 synthesiser plays 8 kHz, so the ceiling is 192 times the Nyquist rate of the
+  coil band's top (2 kHz) and 48 times the piezo's FIFO rate: no rendering needs more.
+  Per servo tick (1 ms) it is 384 samples, 3 kB of float64, where 1e9 Hz was 8 MB per
+  tick and a MemoryError. It is a budget, not a limit of the format: the interop
+  synthesis ceiling (:data:`hapticsdk.interop.budget.MAX_SAMPLE_RATE_HZ`, 48 kHz) is a
+  different quantity, the finest time step an ``.hjif`` file expresses.
+
+The floor is the band: :func:`check_sample_rate` takes ``at_least_hz``, twice the top of
+the actuator's declared band (Nyquist), so no drive frequency the actuator accepts aliases.
 """
 
 from __future__ import annotations

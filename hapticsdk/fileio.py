@@ -8,7 +8,8 @@ and Windows). So:
 - a write that fails (disk full, ``ulimit -f``, SIGKILL, an exception while
   producing the content) leaves the old file intact and no temporary file behind
   (except after SIGKILL, where a ``.<name>.<random>.tmp`` may remain; it is never
-  read as the target);
+  read as the target, and the next write of the same file, holding the directory's
+  lock, removes it, so killed writers do not pile up copies);
 - writers into the same directory, in this process and in other processes, are
   serialised by an advisory lock on the directory (POSIX ``fcntl.flock``; on other
   systems the rename alone keeps readers safe);
@@ -34,6 +35,7 @@ import contextlib
 import io
 import json
 import os
+import re
 import tempfile
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator
@@ -97,26 +99,27 @@ def check_output_path(path: str | os.PathLike[str], *, field: str = "output", ov
 
 
 @contextlib.contextmanager
-def _lock(target: Path) -> Iterator[None]:
+def _lock(target: Path) -> Iterator[bool]:
     """Serialise writers of one directory (an advisory ``flock`` on the directory
-    itself, so no lock file is left behind)."""
+    itself, so no lock file is left behind). Yields whether the lock is held."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - non-POSIX: the rename alone keeps readers safe
-        yield
+        yield False
         return
     parent = target.parent if str(target.parent) else Path(".")
     try:
         fd = os.open(parent, os.O_RDONLY)
     except OSError:
-        yield
+        yield False
         return
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX)
+            held = True
         except OSError:
-            pass
-        yield
+            held = False
+        yield held
     finally:
         with contextlib.suppress(OSError):
             fcntl.flock(fd, fcntl.LOCK_UN)
@@ -151,7 +154,9 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
         raise FileWriteError(f"directory {str(parent)!r} does not exist", field=name)
     if target.is_dir() and not target.is_symlink():
         raise FileWriteError(f"{str(target)!r} is a directory", field=name)
-    with _lock(target):
+    with _lock(target) as held:
+        if held:
+            _remove_orphans(parent, target.name)
         try:
             fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent)
         except OSError as exc:
@@ -186,6 +191,22 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
             if not ok:
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
+
+
+def _remove_orphans(parent: Path, name: str) -> None:
+    """Remove the temporary files of ``name`` that a writer killed before its rename
+    (SIGKILL, power loss) left in ``parent``. Called with the directory's lock held:
+    every SDK writer of the folder takes it before it creates its temporary file, so
+    none is being written now."""
+    pattern = re.compile(rf"\.{re.escape(name)}\.[A-Za-z0-9_]{{8}}\.tmp")  # mkstemp's names
+    try:
+        names = os.listdir(parent)
+    except OSError:
+        return
+    for n in names:
+        if pattern.fullmatch(n):
+            with contextlib.suppress(OSError):
+                os.unlink(parent / n)
 
 
 def _in_cache(folder: Path) -> bool:

@@ -25,14 +25,12 @@ def source_checkout() -> Path | None:
     return None
 
 
-def _shown(path: Path) -> str:
-    """``path`` relative to the working directory when it is below it, else absolute."""
+def shown_path(path: Path) -> str:
+    """``path`` (resolved) relative to the working directory when it is below it, else
+    as it is: how the SDK shows its own folders in hints and help examples."""
     try:
-        rel = path.relative_to(Path.cwd().resolve())
-        return str(rel) if str(rel) != "." else "."
-    except ValueError:
-        return str(path)
-    except OSError:  # the working directory is gone
+        return str(path.relative_to(Path.cwd().resolve()))
+    except (ValueError, OSError):  # not below it; the working directory is gone
         return str(path)
 
 
@@ -48,7 +46,7 @@ def pip_hint(distribution: str, extra: str | None = None) -> str:
         root = source_checkout()
         sub = "" if distribution == "hapticsdk" else f"plugins/{distribution}"
         if root is not None:
-            path = _shown(root / sub) if sub else _shown(root)
+            path = shown_path(root / sub) if sub else shown_path(root)
             return f"pip install -e {_quote(path + suffix)}"
         where = f"{sub}{suffix}" if sub else f".{suffix}"
         return (f"pip install -e {_quote(where)} in a hapticsdk source checkout "

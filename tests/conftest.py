@@ -1,5 +1,5 @@
 """Puts ``tests/`` on ``sys.path`` for the builders shared across test folders
-(``kit_variants.py``): the suite runs with ``--import-mode=importlib``, which puts no
+(``kit_variants.py``, ``repo_scripts.py``): the suite runs with ``--import-mode=importlib``, which puts no
 test folder there."""
 
 import sys

@@ -107,9 +107,12 @@ class DiscriminationAnswers:
         """Write the CSV (a ``# GENERATED`` comment line first for generated answers)."""
         from ..fileio import atomic_writer
         p = Path(path)
-        with atomic_writer(p, "w", newline="") as fh:  # temp file + rename: never half a CSV
+        # temp file + rename: never half a CSV; read back by from_csv before the rename
+        with atomic_writer(p, "w", newline="", verify=type(self).from_csv) as fh:
             if self.generated or self.source:
-                fh.write(f"# {'GENERATED, not measured: ' if self.generated else ''}{self.source}\n")
+                head = f"{'GENERATED, not measured: ' if self.generated else ''}{self.source}"
+                for line in head.splitlines() or [""]:  # a line break in source stays a comment
+                    fh.write(f"# {line}\n")
             w = csv.writer(fh)
             w.writerow(CSV_COLUMNS)
             for row in zip(self.person, self.frequency_hz, self.spring_n_per_mm, self.spring_stiffer):

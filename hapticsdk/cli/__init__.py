@@ -127,22 +127,14 @@ class HelpFormatter(argparse.HelpFormatter):
         return f"{text} (default: {shown})"
 
 
-def _shipped_dataset() -> str:
-    """The shipped data set's folder as this installation has it (relative to the working
-    directory when below it), for examples that train on it."""
-    from pathlib import Path
-    folder = Path(__file__).resolve().parent.parent / "data" / "dataset"
-    try:
-        return str(folder.relative_to(Path.cwd().resolve()))
-    except (ValueError, OSError):
-        return str(folder)
-
-
 def example_text(command: str) -> str | None:
     """The example shown in ``command``'s help (``EXAMPLES`` with its paths filled in)."""
     example = EXAMPLES.get(command)
     if example and "{dataset}" in example:
-        example = example.replace("{dataset}", _shipped_dataset())
+        from pathlib import Path
+
+        from ..install_hints import shown_path  # the shipped data set, wherever it was installed
+        example = example.replace("{dataset}", shown_path(Path(__file__).resolve().parent.parent / "data" / "dataset"))
     return example
 
 

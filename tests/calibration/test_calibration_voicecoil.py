@@ -103,3 +103,15 @@ def test_bad_answers_rejected(tmp_path):
     few = generate_answers(levels_hz=(30.0, 60.0, 90.0), seed=0)
     with pytest.raises(CalibrationError, match="at least 4"):
         fit_voicecoil(few)
+
+
+@pytest.mark.parametrize("source", ["lab\nrun 2", "a\r\nb\rc", "\n", "GENERATED\nthen more"])
+def test_answers_with_line_breaks_in_source_read_back(tmp_path, source):
+    """What ``to_csv`` writes ``from_csv`` reads: a line break in ``source`` stays inside
+    the comment (it used to end it, and the next line was taken for the header)."""
+    ans = DiscriminationAnswers(person=np.array([0, 1]), frequency_hz=np.array([100.0, 200.0]),
+                                spring_n_per_mm=np.array([0.5, 0.6]), spring_stiffer=np.array([0, 1]),
+                                source=source)
+    back = DiscriminationAnswers.from_csv(ans.to_csv(tmp_path / "answers.csv"))
+    assert back.person.tolist() == [0, 1] and back.spring_stiffer.tolist() == [0, 1]
+    assert back.generated == ("GENERATED" in source)

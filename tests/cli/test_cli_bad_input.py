@@ -323,6 +323,11 @@ CASES = [
      "scene.settings.renderer_options.hardness.calibration", "calibration"),
     ("render-scene-coil-1e9-hz", ["render", "--scene", "{coil_1e9}", "--seconds", "0.05"],
      "actuator_options.coil.sample_rate_hz", "384000"),
+    ("render-device-no-equals", ["render", "S7", "--device", "coil"], "device", "ROLE=ACTUATOR"),
+    ("render-device-dotted-role", ["render", "S7", "--device", "coil.x=voicecoil-virtual"], "device",
+     "ROLE=ACTUATOR"),
+    ("render-device-unknown-plugin", ["render", "S7", "--device", "coil=no-such-actuator"], "device",
+     "no actuator plugin"),
 ]
 
 

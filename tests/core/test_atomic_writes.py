@@ -186,3 +186,34 @@ def test_wav_sink_replaces_the_file_only_when_complete(tmp_path):
     with wave.open(str(path), "rb") as w:
         assert w.getnframes() == 400 and w.getframerate() == 8000
     assert sorted(p.name for p in tmp_path.iterdir()) == ["coil.wav"]
+
+
+def test_a_killed_writers_temporary_file_is_removed_by_the_next_write(tmp_path):
+    """SIGKILL between mkstemp and the rename leaves ``.<name>.<random>.tmp``; the next
+    write of that file (under the directory's lock) removes it, so killed writers do not
+    pile up copies. Files that only look similar are left alone."""
+    from hapticsdk.fileio import atomic_write_text
+
+    target = tmp_path / "cal.json"
+    child = textwrap.dedent("""
+        import sys
+        from hapticsdk.fileio import atomic_writer
+        with atomic_writer(sys.argv[1], "w") as fh:
+            fh.write("half")
+            fh.flush()
+            print("ready", flush=True)
+            sys.stdin.read()  # killed here, before the rename
+    """)
+    p = subprocess.Popen([sys.executable, "-c", child, str(target)], stdout=subprocess.PIPE,
+                         stdin=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "ready"
+    p.send_signal(signal.SIGKILL)
+    p.wait(10)
+    orphans = [x.name for x in tmp_path.iterdir() if x.name.endswith(".tmp")]
+    assert len(orphans) == 1 and orphans[0].startswith(".cal.json.")
+    keep = [".cal.json.tmp", ".cal.json.toolong12.tmp", ".other.json.abcdefgh.tmp", "cal.json.abcdefgh.tmp"]
+    for name in keep:
+        (tmp_path / name).write_text("not ours")
+    atomic_write_text(target, "new")
+    assert target.read_text() == "new"
+    assert sorted(x.name for x in tmp_path.iterdir()) == sorted(keep + ["cal.json"])

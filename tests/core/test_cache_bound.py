@@ -86,3 +86,16 @@ def test_info_reports_the_bound(cdir, monkeypatch, capsys):
     assert main(["cache", "info", "--json"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["path"] == str(cdir) and rep["max_bytes"] == 12_500_000
+
+
+def test_prune_leaves_a_write_in_progress_alone(cdir):
+    """A temporary file another writer is filling (``.<name>.<random>.tmp``) is neither
+    counted nor removed: removing it would fail that writer's rename."""
+    _fill(cdir / "amortised", 3, 10_000)
+    busy = cdir / "onnx-desc" / ".abc.npz.k2j4h5g6.tmp"
+    busy.parent.mkdir()
+    busy.write_bytes(b"x" * 50_000)
+    os.utime(busy, (1.0, 1.0))  # the oldest file of all
+    assert cache.info(cdir)["bytes"] == 3 * 10_000
+    cache.prune(limit=10_000, root=cdir)
+    assert busy.is_file() and len(list((cdir / "amortised").iterdir())) == 1

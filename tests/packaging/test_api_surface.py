@@ -3,18 +3,13 @@
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import re
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from repo_scripts import ROOT, load_script
 
 
 def _api_check():
-    spec = importlib.util.spec_from_file_location("api_check", ROOT / ".ci" / "api_check.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(".ci/api_check.py")
 
 
 def test_surface_is_the_documented_table():

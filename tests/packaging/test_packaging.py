@@ -6,25 +6,20 @@ contents (`.ci/check_dists.py`) and runs the suite on the floors.
 
 from __future__ import annotations
 
-import importlib.util
 import re
-from pathlib import Path
 
 import pytest
+from repo_scripts import ROOT, load_script
 
 tomllib = pytest.importorskip("tomllib")
 
-ROOT = Path(__file__).resolve().parents[2]
 DISTS = {".": "hapticsdk", "plugins/hapticsdk-onnx": "hapticsdk_onnx", "plugins/hapticsdk-ga": "hapticsdk_ga",
          "plugins/hapticsdk-hardness": "hapticsdk_hardness", "plugins/hapticsdk-roughness": "hapticsdk_roughness",
          "examples/hapticsdk-warmth": "hapticsdk_warmth"}
 
 
 def _check_floors():
-    spec = importlib.util.spec_from_file_location("check_floors", ROOT / ".ci" / "check_floors.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script(".ci/check_floors.py")
 
 
 def test_floors_file_pins_every_declared_lower_bound():

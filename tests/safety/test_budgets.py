@@ -15,10 +15,13 @@ from hapticsdk.device_options import ENV_CONFIG, MAX_CONFIG_BYTES, trusted_optio
 from hapticsdk.errors import ValidationError
 from hapticsdk.schemas_io import MAX_JSON_BYTES, read_json
 
-#: memory budget of read_json per input byte. The costliest JSON per byte is nested empty
-#: containers: "[]" is 2 bytes for a list object (56 bytes) plus its 8-byte slot in the
-#: parent, 32 bytes per input byte; the text is held twice (bytes, str), 2 more; list
-#: over-allocation adds up to an eighth. 64 bytes per byte holds all of it with room.
+#: memory budget of read_json per input byte. The costliest JSON per byte is lists nested
+#: in lists: each "[" + "]" is 2 input bytes for a list object (56 bytes) whose one-slot
+#: item array is a separate allocation (16 bytes, the allocator's smallest) plus its slot in
+#: the parent (8 bytes): 40 bytes per input byte (measured: 42 for "[[[[[[[[[[]]]]]]]]]]",
+#: 22 for "[]" siblings, whose "," adds a byte each); the text is held twice (bytes, str),
+#: 2 more; the bracket-depth scan before the parse (18 bytes per byte, freed before it)
+#: is below that. 64 bytes per byte holds the worst of it with a half to spare.
 BYTES_PER_BYTE = 64
 N = 100_000
 
@@ -33,7 +36,11 @@ SHAPES = {
 
 
 def _peak_reading(p) -> int:
-    """Peak traced memory (bytes) of ``read_json(p)``."""
+    """Peak traced memory (bytes) of ``read_json(p)``, after one read of a small file (the
+    first read's one-off costs, about 6 MB of lazily built tables, are not per byte)."""
+    warm = p.with_name("warm-up.json")
+    warm.write_text('{"a": [1]}')
+    read_json(warm, field="x")
     tracemalloc.start()
     try:
         read_json(p, field="x")

@@ -173,6 +173,24 @@ def test_sample_rate_ceilings():
         assert ei.value.field == "fs"
 
 
+
+@pytest.mark.parametrize("cls_path,key", [("hapticsdk_hardness.voicecoil:VoiceCoilVirtual", "sample_rate_hz"),
+                                          ("hapticsdk_hardness.audio:VoiceCoilAudio", "samplerate"),
+                                          ("hapticsdk_roughness.virtual:PiezoVirtual", "fs")])
+def test_sample_rate_floor_is_the_nyquist_rate_of_the_band(cls_path, key):
+    """Every waveform actuator checks its rate with hapticsdk.budgets.check_sample_rate,
+    from twice the top of its declared band (a lower rate aliases the drive frequencies it
+    accepts) up to the ceiling."""
+    import importlib
+    mod, name = cls_path.split(":")
+    cls = getattr(importlib.import_module(mod), name)
+    top = cls(**{}).limits.frequency_range_hz[1]
+    assert isinstance(cls(**{key: 2 * top}), cls)
+    for bad in (2 * top * 0.99, top, MAX_SAMPLE_RATE_HZ * 1.01):
+        with pytest.raises(ValidationError) as ei:
+            cls(**{key: bad})
+        assert ei.value.field.endswith(key)
+
 def test_figure_format_is_checked_by_the_api(tmp_path):
     pytest.importorskip("matplotlib")
     import matplotlib

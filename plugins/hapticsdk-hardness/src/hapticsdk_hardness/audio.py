@@ -107,8 +107,10 @@ class VoiceCoilAudio(Actuator):
                          safety=safety, **options)
         if device is not None and not (isinstance(device, str) or (isinstance(device, int) and device >= 0)):
             raise ValidationError("must be a device name or index >= 0", field="options.device")
-        if samplerate is not None and not (isinstance(samplerate, (int, float)) and 1000 <= samplerate <= 384000):
-            raise ValidationError("must be in 1000..384000 Hz", field="options.samplerate")
+        if samplerate is not None:  # the SDK's sample-rate budget: Nyquist of the band .. 384 kHz
+            from hapticsdk.budgets import check_sample_rate
+            samplerate = check_sample_rate(samplerate, "options.samplerate",
+                                           at_least_hz=2 * (self.limits.frequency_range_hz or (0.0, 0.0))[1])
         if not (isinstance(blocksize, int) and 0 <= blocksize <= 8192):
             raise ValidationError("must be 0..8192 frames", field="options.blocksize")
         if not (isinstance(channel_index, int) and 0 <= channel_index < 64):

@@ -45,8 +45,9 @@ class VoiceCoilVirtual(Actuator):
     def __init__(self, *, sample_rate_hz: float = 5000.0, sink: Any = None, ramp_s: float = 0.005,
                  label: str | None = None, safety: Any = None, **options: Any) -> None:
         super().__init__(label=label, safety=safety, **options)
-        from hapticsdk.budgets import check_sample_rate  # finite, > 0, at most 384 kHz (a named ceiling)
-        self.fs = check_sample_rate(sample_rate_hz, "sample_rate_hz")
+        from hapticsdk.budgets import check_sample_rate  # finite, Nyquist of the band .. 384 kHz (named)
+        self.fs = check_sample_rate(sample_rate_hz, "sample_rate_hz",
+                                    at_least_hz=2 * (self.limits.frequency_range_hz or (0.0, 0.0))[1])
         self.osc = Oscillator(self.fs, ramp_s=ramp_s, max_amplitude=self.limits.max_amplitude or 1.0)
         self.sink = make_sink(sink, self.fs)
         self._freq = 0.0
