@@ -106,7 +106,7 @@ class _Handler(BaseHTTPRequestHandler):
                         msg = json.dumps({"error": f"{type(exc).__name__}: {exc}"})
                         self.wfile.write(f"event: end\ndata: {msg}\n\n".encode())
                         return
-                    self.wfile.write(b"data: " + json.dumps(data, default=_num).encode() + b"\n\n")
+                    self.wfile.write(b"data: " + _json(data).encode() + b"\n\n")
                     self.wfile.flush()
                     self.server.frames += 1
                     nxt += FRAME_S
@@ -123,8 +123,22 @@ class _Handler(BaseHTTPRequestHandler):
             self.send_error(404)
 
 
-def _num(o: Any) -> Any:
-    return None if isinstance(o, float) and not math.isfinite(o) else str(o)
+def _finite(o: Any) -> Any:
+    """``o`` with every non-finite float as None (JSON has no NaN or infinity; a browser's
+    ``JSON.parse`` refuses the whole frame over one), containers walked."""
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _finite(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_finite(v) for v in o]
+    return o
+
+
+def _json(o: Any) -> str:
+    """One frame as strict JSON (non-finite numbers as null; anything else unknown as
+    its text)."""
+    return json.dumps(_finite(o), default=str, allow_nan=False)
 
 
 class _Server(ThreadingHTTPServer):

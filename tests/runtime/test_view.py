@@ -154,3 +154,22 @@ def test_view_in_headless_chromium(tmp_path):
     # (one 20 ms frame period plus the page's and the machine's delays)
     assert rate >= 30.0
     assert -2.0 <= delay_ms <= 100.0  # Date.now() has 1 ms steps
+
+
+def test_a_frame_with_non_finite_numbers_is_strict_json():
+    """A NaN or infinity anywhere in a frame (a servo figure not measured yet) is sent as
+    null: the browser's JSON.parse refuses NaN and would drop the whole frame."""
+    import json
+
+    import numpy as np
+
+    from hapticsdk.runtime.view import _json
+
+    def refuse(name):
+        raise ValueError(f"not JSON: {name}")
+
+    frame = {"t": float("nan"), "trace": [1.0, float("inf"), np.float64("-inf")],
+             "timing": {"p99_us": np.float64("nan"), "ticks": 3}, "pair": (2.5, float("nan"))}
+    back = json.loads(_json(frame), parse_constant=refuse)
+    assert back == {"t": None, "trace": [1.0, None, None], "timing": {"p99_us": None, "ticks": 3},
+                    "pair": [2.5, None]}
