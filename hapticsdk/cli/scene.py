@@ -15,7 +15,7 @@ from typing import Any
 
 def register(sub: Any) -> None:
     """Add ``plan`` to the ``hapticsdk`` command."""
-    from .argtypes import nonneg_float, nonneg_int
+    from .argtypes import figure_file, nonneg_float, nonneg_int
     from .core import UNREACHED_RULE
 
     p = sub.add_parser("plan", help="compile a scene into a render plan (what is rendered, what is left out)",
@@ -28,7 +28,7 @@ def register(sub: Any) -> None:
     p.add_argument("--threshold", type=nonneg_float, metavar="PERCENT",
                    help="importance threshold: drop a dimension whose predicted realism loss is below it (%%)")
     p.add_argument("--no-importance", action="store_true", help="keep every dimension")
-    p.add_argument("--plot", metavar="PNG", help="write a figure: the materials in intensity space, what "
+    p.add_argument("--plot", metavar="PNG", type=figure_file, help="write a figure: the materials in intensity space, what "
                                                  "is left out of each and why (needs matplotlib)")
     p.add_argument("--compare-paper", action="store_true",
                    help="compile the paper's 8 evaluated samples (library, GENERATED data) and compare the "

@@ -12,6 +12,7 @@ from hapticsdk.cli import main
 @pytest.mark.parametrize("argv, module, fn", [
     (["bench", "solvers", "--quick"], "hapticsdk.benchmarks.solvers", "run"),
     (["bench", "stability", "--quick"], "hapticsdk.benchmarks.stability", "run_matrix"),
+    (["plan", "examples/scenes/library.json"], "hapticsdk.compiler", "compile_scene"),
 ])
 def test_unwritable_figure_format_fails_before_the_benchmark(tmp_path, monkeypatch, capsys, argv, module, fn):
     import importlib
