@@ -304,7 +304,7 @@ while time.monotonic() - t0 < 1.0:   # a servo-like caller: one small expm per m
     time.sleep(0.0008)
 c1 = cpu()
 me = str(threading.get_native_id())
-print(c1[me] - c0[me], sum(c1[t] - c0.get(t, 0) for t in c1 if t != me))
+print(c1[me] - c0[me], sum(c1[t] - c0.get(t, 0) for t in c1 if t != me), len(c1) - 1)
 """
 
 
@@ -320,16 +320,21 @@ def test_one_pool_thread_stops_a_spinning_blas_worker(mode):
     out = subprocess.run([sys.executable, "-c", _POOL_PROBE, mode], capture_output=True, text=True, timeout=120,
                          check=False)
     assert out.returncode == 0, out.stderr
-    main, helpers = map(int, out.stdout.split())
+    main, helpers, n_helpers = map(int, out.stdout.split())
+    # The hazard is a helper that spins between calls: it then uses at least as much CPU
+    # as the caller (on an idle machine about the whole second, 100 ticks, against the
+    # caller's 3-5). CPU time is charged in whole clock ticks, and a thread that ran at
+    # all can be charged one, so each helper thread may show one tick of rounding. On a
+    # busy machine a helper's wake-up and teardown also cost a tick or two (CI saw 3
+    # ticks against the caller's 5), which stays below the caller's own time.
+    bound = main + n_helpers
     if mode == "limit":
         assert "set_num_threads(1)" in out.stderr, out.stderr
-        # an idle helper uses nothing; allow clock-tick rounding (2 ticks) and a quarter
-        # of the caller's own time for anything else the pool does
-        assert helpers <= max(2, 0.25 * main), (main, helpers)
+        assert helpers <= bound, (main, helpers, n_helpers)
     else:
-        if helpers <= max(2, 0.25 * main):
+        if helpers <= bound:
             pytest.skip("this BLAS does not busy-wait between small calls here")
-        assert helpers > 0.25 * main
+        assert helpers > bound
 
 
 def test_partly_written_command_never_blocks_the_servo(wait):
