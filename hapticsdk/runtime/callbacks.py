@@ -15,7 +15,6 @@ ring); neither sends anything to the servo.
 from __future__ import annotations
 
 import logging
-import math
 import threading
 import time
 from typing import TYPE_CHECKING, Any, Callable
@@ -165,7 +164,6 @@ class EventDispatcher:
                 _log.exception("session callback %r for %r raised", cb, ev.kind)
 
     def _run(self) -> None:
-        from .session import SessionEvent
         s = self._session
         while True:
             self._stop.wait(DISPATCH_PERIOD_S)
@@ -179,10 +177,7 @@ class EventDispatcher:
                     self._deliver(ev)
                 s._check()  # noqa: SLF001
             except ServoProcessDied as exc:
-                code = exc.exitcode
-                self._deliver(SessionEvent(s._last_t(), "servo_died", None,  # noqa: SLF001
-                                           float(code) if code is not None else math.nan,
-                                           message=str(exc.reason or exc)))
+                self._deliver(s._servo_died_event(exc))  # noqa: SLF001
                 return
             except SessionError:
                 return  # closed

@@ -25,6 +25,7 @@ from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping
 
 from ..errors import ValidationError
+from .rtkit import _rtprio_limit
 
 _log = logging.getLogger(__name__)
 
@@ -205,16 +206,6 @@ class RealtimeSettings:
 #: default priority of user real-time threads (JACK, PipeWire ask for 20-88), below the
 #: kernel's threaded interrupt handlers (50) so a device's interrupts still run first.
 AUTO_FIFO_PRIORITY = 40
-
-
-def _rtprio_limit() -> int | None:
-    """The soft ``RLIMIT_RTPRIO`` of this process (None where unknown)."""
-    try:
-        import resource
-        soft = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
-    except (ImportError, AttributeError, OSError, ValueError):
-        return None
-    return 99 if soft == getattr(resource, "RLIM_INFINITY", -1) else int(soft)
 
 
 def _os_error(exc: BaseException) -> str:

@@ -166,11 +166,20 @@ def _os_fifo_allowed() -> str:
     return out[0] if out else "unknown"
 
 
+def _rtprio_limit() -> int | None:
+    """The soft ``RLIMIT_RTPRIO`` of this process (None where unknown)."""
+    try:
+        import resource
+        soft = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
+    except (ImportError, AttributeError, OSError, ValueError):
+        return None
+    return 99 if soft == getattr(resource, "RLIM_INFINITY", -1) else int(soft)
+
+
 def machine_report() -> dict[str, Any]:
     """What this machine grants the servo (``hapticsdk doctor``): SCHED_FIFO directly,
     ``RLIMIT_RTPRIO``, RealtimeKit's limits (or why it cannot be asked), the CPUs and
     the one the servo would be pinned to, and how to get more."""
-    from .clock import _rtprio_limit
     direct = _os_fifo_allowed()
     rk = properties()
     try:

@@ -1785,6 +1785,13 @@ class Session:
     def _event_write_index(self) -> int:
         return int(self._mv[_EV_W])
 
+    def _servo_died_event(self, exc: ServoProcessDied) -> SessionEvent:
+        """The ``servo_died`` event of a servo that ended without being asked (the exit
+        status in ``value``, NaN when unknown; the reason in ``message``)."""
+        code = exc.exitcode
+        return SessionEvent(self._last_t(), "servo_died", None, float(code) if code is not None else math.nan,
+                            message=str(exc.reason or exc))
+
     def _last_t(self) -> float:
         try:
             return float(self._mv[_T])

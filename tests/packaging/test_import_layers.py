@@ -126,19 +126,6 @@ def test_the_graph_sees_imports():
     assert g["hapticsdk.compiler"] >= {"hapticsdk.compiler.compile"}
 
 
-#: cycles merged after the check was written (issue 27's live view and RealtimeKit
-#: client), left for the layout step; any other cycle fails
-KNOWN_CYCLES = [["hapticsdk.runtime.clock", "hapticsdk.runtime.rtkit"],
-                ["hapticsdk.runtime.callbacks", "hapticsdk.runtime.session"]]
-
-
-def test_no_new_import_cycle():
-    new = [c for c in cycles(import_graph()) if c not in KNOWN_CYCLES]
-    assert not new, "import cycles: " + "; ".join(" <-> ".join(c) for c in new)
-
-
-@pytest.mark.xfail(strict=False, reason="known cycles for the layout step (issue 29 item 7): " +
-                   "; ".join(" <-> ".join(c) for c in KNOWN_CYCLES))
 def test_no_import_cycle():
     found = cycles(import_graph())
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
