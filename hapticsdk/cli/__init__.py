@@ -13,7 +13,7 @@ import importlib
 import json
 import logging
 import sys
-from typing import Callable, NoReturn, Sequence
+from typing import Any, Callable, Mapping, NoReturn, Sequence
 
 from ..errors import HapticSDKError
 
@@ -234,23 +234,37 @@ def _quiet_stdout() -> None:
         pass
 
 
-def interrupt_message(signame: str, t_signal: float) -> str:
-    """Stop every actuator still open (the last resort), then say which actuators the
-    stop path put in their safe state since ``t_signal`` (``time.monotonic()``, s) --
-    including those already stopped and closed on the way out -- and how soon."""
+def _interrupt_summary(signame: str, t_signal: float) -> dict[str, Any]:
+    """Stop every actuator still open (the last resort), then what the stop path did
+    since ``t_signal``: ``safe_state`` (labels put in their safe state, including those
+    already stopped and closed on the way out), ``stop_failed`` and ``first_stop_ms``
+    (after the signal; None when no actuator was open)."""
     from ..actuators import stop_all, stops_since
 
     stop_all()
     stops = stops_since(t_signal)
-    if not stops:
-        return f"stopped by {signame}; no actuator was open"
     ok = list(dict.fromkeys(label for label, _, good in stops if good))
     failed = [lb for lb in dict.fromkeys(label for label, _, good in stops if not good) if lb not in ok]
-    msg = (f"stopped by {signame}; actuators in safe state: {', '.join(ok) or 'none'} "
-           f"(first stop {1e3 * max(0.0, stops[0][1] - t_signal):.1f} ms after the signal)")
-    if failed:
-        msg += f"; stop FAILED on {', '.join(failed)} (see the log above)"
+    first = 1e3 * max(0.0, stops[0][1] - t_signal) if stops else None
+    return {"signal": signame, "safe_state": ok, "stop_failed": failed, "first_stop_ms": first}
+
+
+def _interrupt_text(summary: Mapping[str, Any]) -> str:
+    signame = summary["signal"]
+    if summary["first_stop_ms"] is None:
+        return f"stopped by {signame}; no actuator was open"
+    msg = (f"stopped by {signame}; actuators in safe state: {', '.join(summary['safe_state']) or 'none'} "
+           f"(first stop {summary['first_stop_ms']:.1f} ms after the signal)")
+    if summary["stop_failed"]:
+        msg += f"; stop FAILED on {', '.join(summary['stop_failed'])} (see the log above)"
     return msg
+
+
+def interrupt_message(signame: str, t_signal: float) -> str:
+    """Stop every actuator still open (the last resort), then say which actuators the
+    stop path put in their safe state since ``t_signal`` (``time.monotonic()``, s) --
+    including those already stopped and closed on the way out -- and how soon."""
+    return _interrupt_text(_interrupt_summary(signame, t_signal))
 
 
 #: exit status after the output pipe closed early (128 + SIGPIPE, as a shell reports it)
@@ -290,7 +304,12 @@ def main(argv: Sequence[str] | None = None) -> int:
                 name, code, t_sig = exc.signame, exc.exit_code, exc.received_at
             else:  # Python's own SIGINT handler, outside the handled block
                 name, code, t_sig = "SIGINT", 130, t_start
-            print(f"hapticsdk: {interrupt_message(name, t_sig)}", file=sys.stderr)
+            summary = _interrupt_summary(name, t_sig)
+            if getattr(args, "json", False):
+                # a script reading --json output gets an object, as for an error
+                print(json.dumps({"error": _interrupt_text(summary), "type": "Interrupted", "field": None,
+                                  "exit_status": code, **summary}))
+            print(f"hapticsdk: {_interrupt_text(summary)}", file=sys.stderr)
             return code
         except BrokenPipeError:
             raise

@@ -217,3 +217,33 @@ def test_cli_with_nothing_open_says_so(monkeypatch, capsys):
     _patch_command(monkeypatch, body)
     assert main(["materials"]) == 130
     assert "stopped by SIGINT; no actuator was open" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("open_one", [True, False])
+def test_cli_json_output_says_what_the_stop_did(monkeypatch, capsys, open_one):
+    """With --json a stop signal prints one JSON object on stdout (as an error does), so a
+    script reading the output learns that the run was interrupted and which actuators were
+    put in their safe state; before, stdout stayed empty."""
+    import gc
+    import json as _json
+
+    from hapticsdk.cli import main
+    from hapticsdk.sim.probe import VirtualProbe
+    gc.collect()
+
+    def body():
+        if open_one:
+            with VirtualProbe(label="probe-json"):
+                raise SafeStop(signal.SIGTERM)
+        raise SafeStop(signal.SIGTERM)
+    _patch_command(monkeypatch, body)
+    assert main(["materials", "--json"]) == 143
+    out, err = capsys.readouterr()
+    rec = _json.loads(out)
+    assert rec["type"] == "Interrupted" and rec["signal"] == "SIGTERM" and rec["exit_status"] == 143
+    assert rec["error"] in err
+    if open_one:
+        assert rec["safe_state"] == ["probe-json"] and rec["stop_failed"] == []
+        assert rec["first_stop_ms"] >= 0.0
+    else:
+        assert rec["safe_state"] == [] and rec["first_stop_ms"] is None
