@@ -210,10 +210,9 @@ def cmd_render(args: argparse.Namespace) -> int:
         role, key, value = parse_device_option(item)
         dev_opts.setdefault(role, {})[key] = value
     plan = compile_scene(scene)
-    from ..plugins import registry
-    real = any(not getattr(registry("actuator").load(name), "simulated", True) for name in devices.values())
+    # paced on the clock with --realtime, and always when an actuator is real (render_plan)
     report = render_plan(plan, seconds=args.seconds, actuator_options=dev_opts,
-                         realtime=True if args.realtime or real else None)
+                         realtime=True if args.realtime else None)
     out = report.to_dict()
     if args.plot:
         from ..plotting import plot_render

@@ -20,7 +20,8 @@ Amplitude mapping, by each actuator's calibration:
   drive. Its calibration (formula (7)) maps drive frequency to perceived added stiffness,
   reported for the played frequencies inside its range.
 
-Time is simulated (as fast as the machine goes) unless ``realtime``; every exit path
+Time is simulated (as fast as the machine goes) unless ``realtime`` or an actuator is
+real (not ``simulated``: then always paced on the clock); every exit path
 (end, exception of any type, ``KeyboardInterrupt``) stops and closes every actuator
 opened. Nothing is opened before the whole file has been checked and tracked.
 """
@@ -147,7 +148,8 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
         seconds: duration (s), at most :data:`~hapticsdk.interop.hjif_synth.MAX_SYNTH_SECONDS`.
         actuators: actuator plugin names to play on.
         tick_s: servo period (s).
-        realtime: pace ticks to the wall clock (default: simulated time).
+        realtime: pace ticks to the wall clock (default: simulated time; always paced
+            when one of the actuators is real, i.e. not ``simulated``).
         piezo_table: the piezo's ``Tab`` (path, dict or table; default the generated one).
         actuator_options: name -> keyword options for :func:`~hapticsdk.actuators.create_actuator`,
             merged over the user device configuration file and ``$HAPTICSDK_DEVICE_OPTIONS``
@@ -248,6 +250,10 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
                 act.safety.set_period(tick_s)
         from ..dimensions import ChannelCommand
 
+        # a real actuator is always paced: content played back to back on hardware would
+        # be all of the file's seconds in a fraction of the time
+        realtime = bool(realtime) or any(not getattr(act, "simulated", False) for act in opened.values())
+        report.realtime = realtime
         t0 = time.monotonic()
         last_f = {a: 0.0 for a in commands}
         for k in range(n):

@@ -186,7 +186,8 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
             the sensing device when it is simulated and accepts one (default: its own,
             a press then a slide at 80 mm/s).
         recorder, realtime, period_s: passed to the servo loop (defaults: the plan's servo
-            settings).
+            settings; ``realtime`` defaults to True whenever an actuator of the material
+            is real, i.e. not ``simulated``, whatever the plan says).
         hooks: call the render hooks of the plan's distributions.
         raise_on_fault: re-raise a device fault after the safe stop.
         actuator_options: role -> options from the application (code or command line),
@@ -213,7 +214,6 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     servo = dict(plan.settings.get("servo") or {})
     period = check_period(period_s if period_s is not None else servo.get("period_s", 0.001),
                           "period_s" if period_s is not None else "plan.settings.servo.period_s")
-    rt = bool(servo.get("realtime", False) if realtime is None else realtime)
     from ..device_options import check_data_settings
     check_data_settings(plan.settings, field="plan.settings")  # safety is not data
     if passivity is not None and not isinstance(passivity, bool):
@@ -230,6 +230,11 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         check_plugin_api(cls, name=mp.actuators[role])
         chosen[role] = (cls, _actuator_options(cls, mp.actuators[role], role, mp, app_options))
 
+    # paced on the clock: as code asks; by default as the plan asks, and always when an
+    # actuator is real (a plan's data cannot run a real device unpaced, commands
+    # back to back and the servo's seconds over in a fraction of the wall time)
+    real = sorted(mp.actuators[r] for r, (cls, _) in chosen.items() if not getattr(cls, "simulated", False))
+    rt = bool(realtime) if realtime is not None else (bool(servo.get("realtime", False)) or bool(real))
     cal_opts, cal_records = _calibrations(mp, plan.settings, {r: o for r, (_, o) in chosen.items()})
     renderers = build_renderers(mp, plan.settings, calibrations=cal_opts,
                                 capabilities=_capabilities(chosen))

@@ -151,3 +151,25 @@ def test_real_encoder_quirks_play(spy):
     assert lo == pytest.approx(1000 / 11)  # the transient: two periods in 22 ms
     assert 159 <= hi <= 218  # the chirp
     assert rep.not_played == []
+
+
+@pytest.mark.parametrize("real", [False, True])
+def test_a_real_actuator_plays_in_real_time(monkeypatch, real):
+    """Content played on a real actuator (not ``simulated``) is paced on the clock even
+    without ``realtime``: back to back, the file's 0.4 s would be over in milliseconds."""
+    import time
+    make = acts.create_actuator
+
+    def create(name, **kw):
+        a = make(name, **kw)
+        if real and name == "voicecoil-virtual":
+            a.simulated = False     # stands for a sound-card coil
+        return a
+    monkeypatch.setattr(acts, "create_actuator", create)
+    h = parse_hjif(two_channel_doc())
+    t0 = time.monotonic()
+    rep = play(h)
+    wall = time.monotonic() - t0
+    assert rep.realtime is real
+    if real:
+        assert wall >= 0.9 * rep.seconds   # paced: at least the content's length, less a tick or so
