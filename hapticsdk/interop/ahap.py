@@ -74,9 +74,14 @@ DEFAULT_INTENSITY = 1.0
 DEFAULT_SHARPNESS = 0.5
 #: time base of the converted content (ticks per second): 0.1 ms
 TIMESCALE = 10000
-#: latest time a pattern may name (s): the largest effect position of the converted
-#: content (2^31 - 1 ticks, as in .hjif)
-MAX_TIME_S = (2 ** 31 - 1 - int((MAX_CONTINUOUS_S + 1) * TIMESCALE)) / TIMESCALE
+#: a transient plays this many periods of its frequency
+TRANSIENT_PERIODS = 2
+#: the longest event converted (s): a continuous event at Apple's cap, or a transient's
+#: periods at the lowest frequency, whichever is longer
+LONGEST_EVENT_S = max(MAX_CONTINUOUS_S, TRANSIENT_PERIODS / SHARPNESS_HZ[0])
+#: latest time a pattern may name (s): an event starting then still ends within the
+#: largest effect position of the converted content (2^31 - 1 ticks, as in .hjif)
+MAX_TIME_S = (2 ** 31 - 1 - math.ceil(LONGEST_EVENT_S * TIMESCALE)) / TIMESCALE
 #: most Pattern entries read (each costs O(log n) to convert; the synthesis budgets of
 #: :mod:`hapticsdk.interop.budget` bound what they cost to play)
 MAX_PATTERN_ENTRIES = 100_000
@@ -340,7 +345,7 @@ def _transient(pat: AhapPattern, ev: AhapEvent) -> Effect:
     t = ev.time_s
     f = _transient_hz(pat, ev)
     a = min(1.0, max(0.0, ev.intensity * pat.control("HapticIntensityControl", t)))
-    length = max(1, _ticks(2.0 / f))  # two periods
+    length = max(1, _ticks(TRANSIENT_PERIODS / f))
     return Effect("Basis", _ticks(t), phase=0.0, base_signal="Sine",
                   keyframes=[Keyframe(0, a, f), Keyframe(length, a, f)], path=ev.path)
 
@@ -379,7 +384,8 @@ def summary(pat: AhapPattern, *, source: str | None = None) -> dict[str, Any]:
     """What an AHAP file holds and what the SDK plays of it (``import --json``)."""
     end = 0.0
     for e in pat.events:
-        end = max(end, e.time_s + (e.duration_s if e.kind == "HapticContinuous" else 2.0 / _transient_hz(pat, e)))
+        last = e.duration_s if e.kind == "HapticContinuous" else TRANSIENT_PERIODS / _transient_hz(pat, e)
+        end = max(end, e.time_s + last)
     return {"file": source, "format": "AHAP", "version": pat.version,
             "events": {k: sum(e.kind == k for e in pat.events) for k in HAPTIC_EVENTS},
             "controls": {k: sum(c.parameter == k for c in pat.controls) for k in CONTROLS},

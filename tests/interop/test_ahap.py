@@ -251,3 +251,18 @@ def test_the_summary_duration_is_the_end_of_the_content_played():
                           {"Parameter": {"ParameterID": "HapticSharpnessControl", "Time": 0.0, "ParameterValue": 1.0}}))
     assert summary(pat)["duration_s"] == pytest.approx(0.5 + 2.0 / SHARPNESS_HZ[1], abs=1.0 / 10000)
     assert summary(pat)["duration_s"] == pytest.approx(file_duration_s(to_haptic_file(pat)), abs=1.0 / 10000)
+
+
+@pytest.mark.parametrize("kind", ["HapticContinuous", "HapticTransient"])
+def test_the_latest_time_read_still_fits_the_position_field(kind):
+    """An event at the latest time read, as long as an event can be (a continuous event at
+    Apple's 30 s cap; a transient at the lowest frequency), ends within the converted
+    content's 2^31 - 1 ticks; one tick later is a named error."""
+    from hapticsdk.interop.ahap import MAX_TIME_S, TIMESCALE
+    dur = 30.0 if kind == "HapticContinuous" else None
+    h = to_haptic_file(parse_ahap(ahap(event(MAX_TIME_S, kind=kind, dur=dur, sharpness=0.0))))
+    ends = [e.position + e.keyframes[-1].relative_position
+            for b in h.perceptions[0].channels[0].bands for e in b.effects]
+    assert ends and max(ends) <= 2 ** 31 - 1
+    with pytest.raises(FormatError):
+        parse_ahap(ahap(event(MAX_TIME_S + 1.0 / TIMESCALE, kind=kind, dur=dur)))
