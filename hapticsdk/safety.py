@@ -106,6 +106,22 @@ class SafetySettings:
 PHASES = ("closed", "waiting", "ramping", "running")
 
 
+def default_command_timeout_s(safety: Any) -> float:
+    """The default deadline (s) of a backend's own dead-man switch (a device-side thread
+    or callback that zeroes or silences the output when the servo stops commanding): the
+    ``restart_after_s`` of ``safety`` (a :class:`SafetyLayer`; its settings' default when
+    it has none), at most 1 s.
+
+    Derivation: after a gap longer than ``restart_after_s`` the safety layer gates and
+    ramps the output again, so an output the dead-man switch cut comes back through the
+    ramp when the servo resumes. A shorter deadline leaves a window (longer than the
+    deadline, shorter than the restart gap) in which the output, cut to zero, resumes at
+    its full level at once: a step. A longer one lets a stalled servo's last command play
+    on after the layer itself already treats the gap as a fault."""
+    settings = getattr(safety, "settings", None)
+    return min(1.0, float(getattr(settings, "restart_after_s", SafetySettings.restart_after_s)))
+
+
 class SafetyLayer:
     """Clamp commands to declared limits, gate and ramp force at start and after faults,
     zero stale commands; count and report each limit hit.

@@ -121,9 +121,8 @@ class ForceArm(HapticDevice):
         if not (isinstance(surface_mm, (int, float)) and np.isfinite(surface_mm)):
             raise ValidationError("must be a finite number of mm", field="options.surface_mm")
         if command_timeout_s is None:   # the safety layer's restart gap (see Args)
-            from hapticsdk.safety import SafetySettings
-            settings = getattr(self.safety, "settings", None)
-            command_timeout_s = min(1.0, float(getattr(settings, "restart_after_s", SafetySettings.restart_after_s)))
+            from hapticsdk.safety import default_command_timeout_s
+            command_timeout_s = default_command_timeout_s(self.safety)
         if not (isinstance(command_timeout_s, (int, float)) and 0 < command_timeout_s <= 1.0):
             raise ValidationError("must be in (0, 1] s", field="options.command_timeout_s")
         if model is not None and model not in self.MODELS:

@@ -81,7 +81,10 @@ class VoiceCoilAudio(Actuator):
             carry silence).
         full_scale: sample peak at amplitude 1 (0 < full_scale <= 1).
         ramp_s: amplitude slew time from 0 to full scale (s).
-        command_timeout_s: the callback renders silence when the last command is older.
+        command_timeout_s: the callback renders silence when the last command is older
+            (s). Default (None): the safety layer's ``restart_after_s`` (50 ms by default;
+            at most 1 s), so sound the switch cut returns through the layer's ramp when
+            the servo resumes (:func:`hapticsdk.safety.default_command_timeout_s`).
         switch_interval_s: while open, the interpreter's thread switch interval
             (``sys.setswitchinterval``) is at most this (s; None: left alone). The
             callback is Python code: it needs the interpreter lock once per audio
@@ -101,7 +104,7 @@ class VoiceCoilAudio(Actuator):
 
     def __init__(self, *, device: int | str | None = None, samplerate: float | None = None, blocksize: int = 0,
                  channel_index: int = 0, full_scale: float = 1.0, ramp_s: float = 0.005,
-                 command_timeout_s: float = 0.05, switch_interval_s: float | None = 1e-4,
+                 command_timeout_s: float | None = None, switch_interval_s: float | None = 1e-4,
                  label: str | None = None, safety: Any = None, **options: Any) -> None:
         super().__init__(label=label or (f"voicecoil-audio:{device}" if device is not None else None),
                          safety=safety, **options)
@@ -119,6 +122,9 @@ class VoiceCoilAudio(Actuator):
             raise ValidationError("must be in (0, 1]", field="options.full_scale")
         if not (isinstance(ramp_s, (int, float)) and 0 < ramp_s <= 1):
             raise ValidationError("must be in (0, 1] s", field="options.ramp_s")
+        if command_timeout_s is None:   # the safety layer's restart gap (see Args)
+            from hapticsdk.safety import default_command_timeout_s
+            command_timeout_s = default_command_timeout_s(self.safety)
         if not (isinstance(command_timeout_s, (int, float)) and 0 < command_timeout_s <= 1):
             raise ValidationError("must be in (0, 1] s", field="options.command_timeout_s")
         if switch_interval_s is not None and not (isinstance(switch_interval_s, (int, float))

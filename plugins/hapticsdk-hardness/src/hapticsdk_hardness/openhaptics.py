@@ -202,8 +202,10 @@ class OmniOpenHaptics(HapticDevice):
         surface_y_mm: Omni y coordinate of the material surface (mm); state positions are
             reported relative to it (y < 0 inside the material).
         command_timeout_s: device-side watchdog (s): the servo writes zero force when the last
-            command is older than this (the Python loop stalled or died); default 0.05 s, the
-            core safety layer's ``restart_after_s``.
+            command is older than this (the Python loop stalled or died). Default (None):
+            the safety layer's ``restart_after_s`` (50 ms by default; at most 1 s), so force
+            the watchdog cut returns through the layer's ramp when the servo resumes
+            (:func:`hapticsdk.safety.default_command_timeout_s`).
         label, safety: as for every actuator.
     """
 
@@ -216,7 +218,7 @@ class OmniOpenHaptics(HapticDevice):
     privileged_options: ClassVar[dict[str, str]] = {"library": "native library"}
 
     def __init__(self, *, config: str | None = None, library: str | None = None, rate_hz: int = 1000,
-                 surface_y_mm: float = 0.0, command_timeout_s: float = 0.05, **options: Any) -> None:
+                 surface_y_mm: float = 0.0, command_timeout_s: float | None = None, **options: Any) -> None:
         if not 100 <= int(rate_hz) <= 4000:
             raise ValidationError(f"rate_hz {rate_hz} outside 100..4000", field="options.rate_hz")
         options.setdefault("label", f"omni-openhaptics:{config}" if config else "omni-openhaptics")
@@ -225,7 +227,10 @@ class OmniOpenHaptics(HapticDevice):
         self.library = library
         self.rate_hz = int(rate_hz)
         self.surface_y_mm = float(surface_y_mm)
-        if not command_timeout_s > 0:
+        if command_timeout_s is None:   # the safety layer's restart gap (see Args)
+            from hapticsdk.safety import default_command_timeout_s
+            command_timeout_s = default_command_timeout_s(self.safety)
+        if not (isinstance(command_timeout_s, (int, float)) and command_timeout_s > 0):
             raise ValidationError("command_timeout_s must be > 0", field="options.command_timeout_s")
         self.command_timeout_s = float(command_timeout_s)
         self._force_t = 0.0

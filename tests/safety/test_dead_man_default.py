@@ -1,0 +1,42 @@
+"""A backend's own dead-man deadline defaults to the safety layer's restart gap, so an
+output the switch cut comes back through the start gate and ramp, never as a step."""
+
+import pytest
+
+from hapticsdk.safety import SafetyLayer, SafetySettings, default_command_timeout_s
+
+
+def _backends():
+    out = []
+    try:
+        from hapticsdk_hardness.audio import VoiceCoilAudio
+        out.append(VoiceCoilAudio)
+    except ImportError:
+        pass
+    try:
+        from hapticsdk_hardness.openhaptics import OmniOpenHaptics
+        out.append(OmniOpenHaptics)
+    except ImportError:
+        pass
+    try:
+        from hapticsdk_hardness.dhd import DhdDevice
+        out.append(DhdDevice)
+    except ImportError:
+        pass
+    return out
+
+
+@pytest.mark.parametrize("gap", [0.02, 0.05, 0.3, 5.0])
+def test_the_default_is_the_layers_restart_gap(gap):
+    from hapticsdk.actuators import ActuatorLimits
+    layer = SafetyLayer(ActuatorLimits(max_force_n=1.0), settings=SafetySettings(restart_after_s=gap))
+    assert default_command_timeout_s(layer) == min(gap, 1.0)
+    assert default_command_timeout_s(None) == SafetySettings.restart_after_s
+
+
+@pytest.mark.parametrize("cls", _backends(), ids=lambda c: c.name)
+@pytest.mark.parametrize("gap", [0.02, 0.3])
+def test_backends_take_it_and_an_explicit_value_wins(cls, gap):
+    layer = SafetyLayer(cls.limits, settings=SafetySettings(restart_after_s=gap))
+    assert cls(safety=layer).command_timeout_s == pytest.approx(gap)
+    assert cls(safety=SafetyLayer(cls.limits), command_timeout_s=0.01).command_timeout_s == 0.01
