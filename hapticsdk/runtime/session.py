@@ -191,6 +191,13 @@ CLAMP_FIELDS = (("max_force_n", "force_n"), ("max_velocity_mm_s", "force_n"),
                 ("negative_amplitude", "amplitude"), ("max_amplitude", "amplitude"),
                 ("min_amplitude", "amplitude"), ("frequency_range_hz", "frequency_hz"), ("other", ""))
 _CLAMP_INDEX = {k: i for i, (k, _) in enumerate(CLAMP_FIELDS)}
+#: a limit that keeps biting is reported at its onset (within 10 ticks), then at most
+#: once per this period of servo time per (actuator, limit), and a last time once it has
+#: not bitten for as long (s). A clamp that persists is a state, not news: at 1 Hz the
+#: 1024-event ring still holds over half a minute of reports with every limit of three
+#: actuators biting at once (3 x 9 pairs), where one report per 10 ticks filled it in
+#: about 0.4 s and a slow ``events()`` reader lost its contact events (docs/runtime.md)
+CLAMP_REPORT_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -565,6 +572,8 @@ class _Servo:
         self._acks: list[int] = []
         self._clamp_src: list = []
         self._clamps_seen: dict[tuple[int, str], int] = {}
+        #: (actuator index, limit) -> [actuator, ticks not yet reported, last report t, last bite t]
+        self._clamp_live: dict[tuple[int, str], list[Any]] = {}
         self.recorder: Any = None
         #: commands received / done / failed; build slices run, forced (did not fit) and
         #: longer than the slack they had, the longest (us); from receipt to done (ms)
@@ -909,11 +918,14 @@ class _Servo:
             out.append((len(roles), dev))
         return out
 
-    def _clamp_events(self) -> None:
-        """One ``clamp`` event per (actuator, limit) that bit since the last call, with
-        the value of the bounded field on the actuator's last command."""
-        nf = len(CLAMP_FIELDS)
+    def _clamp_events(self, final: bool = False) -> None:
+        """``clamp`` events: one per (actuator, limit) at the onset of its biting, then the
+        ticks it bit since, at most once per :data:`CLAMP_REPORT_S` while it keeps biting
+        and once when it has been quiet that long (``final``: whatever is pending, at the
+        end of the run). Every tick a limit bit is counted in exactly one event."""
         last = self._clamps_seen
+        live = self._clamp_live
+        t = (self.loop.last_t or 0.0) if self.loop is not None else 0.0
         for ri, act in self._clamp_src:
             for key, n in list(act.safety.hits.items()):
                 k = (ri, key)
@@ -921,11 +933,29 @@ class _Servo:
                 if d <= 0:
                     continue
                 last[k] = n
-                fi = _CLAMP_INDEX.get(key, nf - 1)
-                attr = CLAMP_FIELDS[fi][1]
-                cmd = getattr(act, "last_command", None)
-                v = getattr(cmd, attr, None) if (cmd is not None and attr) else None
-                self.event("clamp", -1.0, float(v) if v is not None else math.nan, ri * nf + fi, d)
+                st = live.get(k)
+                if st is None:   # onset: reported at once
+                    live[k] = [act, 0, t, t]
+                    self._clamp_event(ri, act, key, d)
+                else:
+                    st[1] += d
+                    st[3] = t
+        for k, st in list(live.items()):
+            act, pending, t_rep, t_bite = st
+            quiet = t - t_bite >= CLAMP_REPORT_S
+            if pending and (final or quiet or t - t_rep >= CLAMP_REPORT_S):
+                self._clamp_event(k[0], act, k[1], pending)
+                st[1], st[2] = 0, t
+            if final or quiet:
+                del live[k]
+
+    def _clamp_event(self, ri: int, act: Any, key: str, count: int) -> None:
+        nf = len(CLAMP_FIELDS)
+        fi = _CLAMP_INDEX.get(key, nf - 1)
+        attr = CLAMP_FIELDS[fi][1]
+        cmd = getattr(act, "last_command", None)
+        v = getattr(cmd, attr, None) if (cmd is not None and attr) else None
+        self.event("clamp", -1.0, float(v) if v is not None else math.nan, ri * nf + fi, count)
 
     def run(self) -> None:
         """The servo thread: tick, publish, watch the application, serve its commands,
@@ -1035,7 +1065,7 @@ class _Servo:
                         seen[key] = ev[key]
                 cl = loop.clamp_count()
                 mv[_CLAMPS] = cl
-                if cl != clamps_seen:
+                if cl != clamps_seen or self._clamp_live:
                     self._clamp_events()
                     clamps_seen = cl
                 if watch and hb_timeout is not None:
@@ -1069,6 +1099,10 @@ class _Servo:
         if loop is not None:
             loop.stop_all()
             out["stop_all_s"] = time.monotonic() - t0  # every actuator told to stop
+            try:   # the clamp ticks not reported yet (after the stop: no actuator waits on it)
+                self._clamp_events(final=True)
+            except Exception as exc:  # noqa: BLE001 - the stop matters more than a report
+                _log.warning("final clamp events: %s", exc)
             try:
                 if loop._running:  # noqa: SLF001
                     rep = loop.finish()
@@ -1967,6 +2001,11 @@ class Session:
                 except ValueError:
                     pass
             if buf is not None:
+                try:   # what the servo wrote after the application's last events(): kept for it
+                    tail, self._events_r = self._events_since(self._events_r)
+                    self._local_events.extend(tail)
+                except Exception as exc:  # noqa: BLE001 - the close matters more
+                    _log.warning("events left at close: %s", exc)
                 self._buf = None
                 buf.release()
         return self._summary or {}
