@@ -158,7 +158,8 @@ def call_with_options(fn: Any, *args: Any, options: Any, field: str) -> Any:
     """``fn(*args, **options)``, where ``options`` came from a file or a caller: not an
     object, or a keyword ``fn`` (or the class it forwards to) does not take, raises a
     :class:`ValidationError` naming the option (``plan.settings.renderer_options.hardness.sink``)
-    instead of a raw ``TypeError``."""
+    instead of a raw ``TypeError``; so does a ``TypeError`` or ``ValueError`` that ``fn``
+    raises on a value of the options (a plugin that did not check one), naming ``field``."""
     import re
     from collections.abc import Mapping
 
@@ -171,12 +172,15 @@ def call_with_options(fn: Any, *args: Any, options: Any, field: str) -> Any:
         if head and head in options:
             raise type(exc)(exc.reason, field=f"{field}.{exc.field}") if type(exc) is ValidationError else exc
         raise
-    except TypeError as exc:
-        m = re.search(r"unexpected keyword argument '([^']*)'", str(exc))
-        if m is None:
-            raise
-        key = m.group(1)
-        raise ValidationError(f"unknown option {key!r} ({exc})", field=f"{field}.{key}") from None
+    except (TypeError, ValueError) as exc:
+        m = re.search(r"unexpected keyword argument '([^']*)'", str(exc)) if isinstance(exc, TypeError) else None
+        if m is not None:
+            key = m.group(1)
+            raise ValidationError(f"unknown option {key!r} ({exc})", field=f"{field}.{key}") from None
+        # the callee (often a plugin) choked on a value of these options instead of
+        # naming it: the options are the input at fault, so the error names them
+        name = getattr(fn, "__qualname__", None) or type(fn).__name__
+        raise ValidationError(f"{name} rejected these options: {type(exc).__name__}: {exc}", field=field) from exc
 
 
 def refuse_file_options(dim: Any, options: Any, field: str) -> None:

@@ -542,7 +542,7 @@ def shape_from_dict(geometry: Any, pose: Any = None, *, field: str = "geometry")
     if not isinstance(geometry, Mapping):
         raise ValidationError(f"expected an object with a 'shape', got {geometry!r}", field=field)
     kind = geometry.get("shape")
-    if kind not in SHAPES:
+    if not isinstance(kind, str) or kind not in SHAPES:
         raise ValidationError(f"unknown shape {kind!r}; valid: {sorted(SHAPES)}", field=f"{field}.shape")
     extra = set(geometry) - _KEYS[kind]
     if extra:

@@ -15,7 +15,6 @@ import numpy as np
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.dimensions import ChannelCommand
-from hapticsdk.errors import ValidationError
 
 from .thermal import T_SKIN_C
 
@@ -34,12 +33,10 @@ class PeltierVirtual(Actuator):
     def __init__(self, *, tau_s: float = 0.4, max_rate_c_per_s: float = 8.0, min_c: float = 10.0,
                  **options: Any) -> None:
         super().__init__(**options)
-        for k, v in (("tau_s", tau_s), ("max_rate_c_per_s", max_rate_c_per_s)):
-            if not (np.isfinite(v) and v > 0):
-                raise ValidationError(f"must be a number > 0, got {v!r}", field=f"options.{k}")
-        self.tau_s = float(tau_s)
-        self.max_rate = float(max_rate_c_per_s)
-        self.min_c = float(min_c)
+        from hapticsdk.argcheck import number
+        self.tau_s = number(tau_s, "options.tau_s", lo=0.0, lo_open=True)
+        self.max_rate = number(max_rate_c_per_s, "options.max_rate_c_per_s", lo=0.0, lo_open=True)
+        self.min_c = number(min_c, "options.min_c")
         self.temperature_c = T_SKIN_C
         self.target_c = T_SKIN_C
 
