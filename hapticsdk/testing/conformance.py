@@ -277,6 +277,32 @@ def _normal_commands(act: Actuator) -> list[ChannelCommand]:
     return out
 
 
+def _edge_commands(act: Actuator) -> list[ChannelCommand]:
+    """Commands at the edges of the declared limits, which :func:`_normal_commands` (10..90 %
+    of each range) never reaches: the declared ``max_force_n``; the lowest and the highest
+    declared frequency at half the amplitude range; the declared ``max_amplitude`` at
+    the middle of the frequency range. A device declaring more than it does (an amplifier
+    saturating short of its declared maximum, a coil that cannot reach its lowest declared
+    frequency) fails ``output-follows-command`` on them."""
+    lim = act.limits
+    role = act.channel
+    out = []
+    if lim.max_force_n is not None:
+        out.append(ChannelCommand(role, force_n=float(lim.max_force_n)))
+    if lim.max_amplitude is not None:
+        a = float(lim.max_amplitude)
+        a0 = float(getattr(lim, "min_amplitude", None) or 0.0)
+        if lim.frequency_range_hz is not None:
+            lo, hi = (float(v) for v in lim.frequency_range_hz)
+            mid = a0 + 0.5 * (a - a0)
+            out += [ChannelCommand(role, frequency_hz=lo, amplitude=mid),
+                    ChannelCommand(role, frequency_hz=hi, amplitude=mid),
+                    ChannelCommand(role, frequency_hz=0.5 * (lo + hi), amplitude=a)]
+        else:
+            out.append(ChannelCommand(role, amplitude=a))
+    return out
+
+
 class _Spy:
     """Wraps an actuator's backend methods to see what reaches the hardware."""
 
@@ -424,6 +450,36 @@ def _assert_matches(act: Actuator, sent: ChannelCommand | None, rb: ChannelComma
             tolf = _tol(act, lim.frequency_resolution_hz, fs_hz)
             assert abs(gf - sent.frequency_hz) <= tolf, \
                 f"commanded {sent.frequency_hz:g} Hz, the device outputs {gf:g} Hz (tolerance {tolf:.3g} Hz)"
+
+
+def _takes_option(cls: type, key: str) -> bool:
+    """Whether the constructor of actuator class ``cls`` takes the keyword option ``key``:
+    named in its signature (without a ``**`` catch-all), else as the constructor answers
+    when given ``key=None`` (with the class's ``conformance_options``): refused as unknown
+    (a ``TypeError`` for an unexpected keyword, the core's ``ValidationError`` on
+    ``options``) or not. Asking the constructor follows ``**kwargs`` forwarded to a base
+    class, whatever the parameter is called; nothing is opened."""
+    import inspect
+    try:
+        params = inspect.signature(cls.__init__).parameters
+    except (TypeError, ValueError):
+        params = None
+    if params is not None:
+        p = params.get(key)
+        if p is not None and p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD):
+            return True
+        if not any(q.kind is q.VAR_KEYWORD for q in params.values()):
+            return False
+    base = cls.conformance_options() if hasattr(cls, "conformance_options") else {}
+    try:
+        cls(**{**base, key: None})
+    except TypeError as exc:
+        return "unexpected keyword" not in str(exc) or repr(key) not in str(exc)
+    except ValidationError as exc:
+        return not (exc.field == "options" and repr(key) in str(exc))
+    except Exception:   # noqa: BLE001 - it read the option and disliked None: it takes it
+        return True
+    return True
 
 
 def _actuator_rules(ctx: _Ctx, device: bool) -> None:
@@ -690,19 +746,10 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             priv = privileged_options(cls)
         except PluginError as exc:
             raise AssertionError(f"the core cannot read its privileged_options: {exc}") from None
-        import inspect
-        try:
-            params = inspect.signature(cls.__init__).parameters
-        except (TypeError, ValueError):
-            return
-        if any(p.kind is p.VAR_KEYWORD for n, p in params.items() if n != "options"):
-            return
-        named = {n for n, p in params.items() if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)}
-        if "options" in params and params["options"].kind is params["options"].VAR_KEYWORD:
-            named |= {"label", "safety"}
-        unknown = sorted(k for k in priv if k not in named)
+        unknown = sorted(k for k in priv if not _takes_option(cls, k))
         assert not unknown, (f"privileged_options names {unknown}, which the constructor does not take "
-                             f"(options: {sorted(named - {'self'})}): a misspelt name protects nothing")
+                             f"(it refuses them as unknown options): a misspelt name protects nothing, and "
+                             f"the option it meant stays settable from scene and plan files")
 
     def r_read_back() -> None:
         a = ctx.make()
@@ -726,7 +773,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             if a.read_back() is None:
                 return   # reported by read-back
             t = 0.0
-            for c in _normal_commands(a):
+            for c in _normal_commands(a) + _edge_commands(a):
                 # held until the safety layer's output has been steady for the declared
                 # settle time (simulated time advances)
                 sent, t = _hold(a, c, t)
