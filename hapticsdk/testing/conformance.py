@@ -17,8 +17,10 @@ plugin-api-declared):
   constraints-cost, constraints-feasible, model-match, renderer, renderer-commands,
   renderer-bad-input, determinism, timing.
 * ``model``: shapes, model-dimensions, vectorised, determinism, bad-input, jacobian,
-  metadata.
-* ``solver``: class, options, solves, determinism, batch, bad-input.
+  metadata, responds.
+* ``solver``: class, template, options, solves, result, constraints, determinism, batch,
+  bad-input. A solver is judged by what the model says at the ``x`` it returns, never by
+  what its result claims.
 * ``hooks``: hookimpls.
 
 The rules that judge what an actuator *outputs* read it back
@@ -39,6 +41,7 @@ and :mod:`hapticsdk.testing.pytest_plugin`.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from dataclasses import dataclass
@@ -52,7 +55,7 @@ from ..dimensions import ChannelCommand, Constraint, DimensionRenderer, Percepti
 from ..errors import DeviceError, PluginError, ValidationError
 from ..features import Feature, FeatureSpace
 from ..models import PerceptionModel
-from ..solvers import SolveProblem, SolveResult, Solver
+from ..solvers import CONSTRAINT_TOL, SolveProblem, SolveResult, Solver
 
 
 @dataclass(frozen=True)
@@ -189,6 +192,15 @@ INTENSITY_TOL = 1e-5
 #: relative tolerance: a float32 model's differences carry ~1e-7 / 1e-4 = 1e-3 noise
 JACOBIAN_STEP = 1e-4
 JACOBIAN_RTOL = 0.01
+#: an output of a model must change by at least this over the model's feature box
+#: (``responds``): the success tolerance a solve is judged at by default (the sum of absolute
+#: intensity errors, :class:`~hapticsdk.solvers.SolveProblem`'s ``tolerance``). An output
+#: spanning less changes by less than that whatever features a solver picks, so the
+#: features do not steer it: a constant, or a model that ignores its inputs.
+RESPONSE_MIN = float(next(f.default for f in dataclasses.fields(SolveProblem) if f.name == "tolerance"))
+#: random points of the box ``responds`` evaluates besides its landmarks (an output that
+#: moves only inside a region under ~1/256 of the box may pass unseen)
+RESPONSE_SAMPLES = 256
 #: servo period the timing rules assume (s)
 KIT_PERIOD_S = 1e-3
 #: share of the period one actuator command may take (the loop runs several per tick)
@@ -1157,6 +1169,34 @@ def _dimension_rules(ctx: _Ctx) -> None:
 # perception models
 # ---------------------------------------------------------------------------
 
+def _landmarks(m: PerceptionModel) -> list[tuple[str, np.ndarray]]:
+    """Points of a model's feature box where a formula breaks first, by name: the corners
+    (the first 10 features), the centre (``x - mid`` is 0 there), the face centres (each
+    feature at a bound, the others at the centre) and the declared ``feature_defaults``."""
+    fs = cast(FeatureSpace, m.feature_space)
+    lo, hi, d = fs.lower, fs.upper, m.n_features
+    k = min(d, 10)
+    corners = np.array([[hi[j] if (i >> j) & 1 else lo[j] for j in range(d)] for i in range(2 ** k)])
+    mid = (lo + hi) / 2
+    faces = np.repeat(mid[None, :], 2 * d, axis=0)
+    faces[np.arange(d), np.arange(d)] = lo
+    faces[d + np.arange(d), np.arange(d)] = hi
+    out = [("the corners of the feature bounds", corners), ("the centre of the feature bounds", mid[None, :]),
+           ("the centres of the faces of the feature bounds", faces)]
+    defaults = m.metadata.get("feature_defaults") if isinstance(m.metadata, Mapping) else None
+    if defaults and all(n in defaults for n in m.feature_names):
+        try:
+            out.append(("the declared feature_defaults",
+                        np.array([[float(defaults[n]) for n in m.feature_names]])))
+        except (TypeError, ValueError):
+            pass   # metadata judges unreadable defaults
+    return out
+
+
+def _row(m: PerceptionModel, x: np.ndarray) -> str:
+    return "{" + ", ".join(f"{n}: {v:.6g}" for n, v in zip(m.feature_names, x)) + "}"
+
+
 def _model_rules(ctx: _Ctx) -> None:
     holder: dict[str, Any] = {}
 
@@ -1178,14 +1218,13 @@ def _model_rules(ctx: _Ctx) -> None:
             assert np.isfinite(Y).all(), "non-finite intensities"
             assert (Y >= -INTENSITY_TOL).all() and (Y <= 1 + INTENSITY_TOL).all(), \
                 f"intensities outside 0..1 (min {Y.min():.6g}, max {Y.max():.6g}) inside the feature bounds"
-        if m.feature_space is not None:   # the corners of the box too (where extrapolation starts)
-            lo, hi = m.feature_space.lower, m.feature_space.upper
-            k = min(m.n_features, 10)
-            corners = np.array([[hi[j] if (i >> j) & 1 else lo[j] for j in range(m.n_features)]
-                                for i in range(2 ** k)])
-            Y = m.predict(corners)
-            assert (Y >= -INTENSITY_TOL).all() and (Y <= 1 + INTENSITY_TOL).all(), \
-                f"intensities outside 0..1 at the corners of the feature bounds (min {Y.min():.6g}, max {Y.max():.6g})"
+        if m.feature_space is not None:   # the box's landmarks too (corners: where extrapolation starts)
+            for where, P in _landmarks(m):
+                Y = m.predict(P)
+                bad = ~np.isfinite(Y).all(axis=1)
+                assert not bad.any(), f"non-finite intensities at {where}, e.g. at {_row(m, P[bad][0])}"
+                assert (Y >= -INTENSITY_TOL).all() and (Y <= 1 + INTENSITY_TOL).all(), \
+                    f"intensities outside 0..1 at {where} (min {Y.min():.6g}, max {Y.max():.6g})"
         assert m.predict(inputs(1)[0]).shape == (1, m.n_outputs), "a 1-D input must give one row"
 
     def r_vectorised() -> None:
@@ -1268,9 +1307,22 @@ def _model_rules(ctx: _Ctx) -> None:
                 assert same_unit(mine, theirs), \
                     f"reads {n} in {mine!r}; the dimension that contributes it declares {theirs!r}"
 
+    def r_responds() -> None:
+        m = holder["m"]
+        X = inputs(RESPONSE_SAMPLES, 4)
+        if m.feature_space is not None:
+            X = np.concatenate([X] + [P for _, P in _landmarks(m)])
+        Y = m.predict(X)
+        span = Y.max(axis=0) - Y.min(axis=0)
+        flat = [f"{d} (spans {s:.3g})" for d, s in zip(m.dimension_names, span) if not s >= RESPONSE_MIN]
+        assert not flat, (f"output(s) {flat} change by less than {RESPONSE_MIN:g} over the whole feature box "
+                          f"({len(X)} points: random, corners, centre, face centres): the features cannot steer "
+                          f"them to the precision a solve is judged at (SolveProblem's default tolerance); "
+                          f"does the model read its inputs?")
+
     _run_rules(ctx, [("shapes", r_shapes), ("model-dimensions", r_dimensions), ("vectorised", r_vectorised),
                      ("determinism", r_determinism), ("bad-input", r_bad_input), ("jacobian", r_jacobian),
-                     ("metadata", r_metadata)],
+                     ("metadata", r_metadata), ("responds", r_responds)],
                always=("shapes",), stop_after=("shapes",))
 
 
@@ -1316,9 +1368,86 @@ def reference_problem(targets: Any = (0.4, 0.75), *, constrained: bool = True, t
                         penalty="normalised", tolerance=tolerance)
 
 
+#: what every solve result carries: scipy.optimize's fields, and the error, constraint
+#: violation and run time the SDK promises with every result
+RESULT_FIELDS = ("x", "fun", "success", "message", "nfev", "error", "constraint_violation", "time_s")
+#: how far a result's error, fun and constraint_violation may be from the kit's
+#: recomputation at its ``x`` (absolute; fun relative to max(1, |fun|)): both evaluate the
+#: float64 reference model at the same ``x`` by different paths (a batch, one row of plain
+#: floats), so they differ by rounding, a few units in the last place of numbers <= 1 per
+#: term (~1e-15); this allows 1000 times that and is 10 orders below the reference tolerance
+REPORT_ATOL = 1e-12
+#: targets of the reference problem whose unconstrained optimum breaks the constraint:
+#: ``d2 = 0.5`` needs ``b = c``; with ``b >= 2c`` the best is ``b = 2c``, ``d2 = 2/3``
+ACTIVE_TARGETS = (0.4, 0.5)
+#: formula (6) (normalised penalty) at the constrained optimum of ACTIVE_TARGETS: ``d1``
+#: met, ``|2/3 - 1/2|`` on ``d2``, no violation. Below ``b = 2c`` the penalty ``(2c - b)/2c``
+#: rises by 1/2 per unit of ``b/c`` while the error falls by ``1/(b/c + 1)^2 <= 1/4``, so
+#: nothing infeasible scores lower; ignoring the constraint scores ``0 + 1/2``
+ACTIVE_OPTIMUM = 1.0 / 6.0
+
+
+def _solver_core_overrides(cls: type) -> list[str]:
+    """The methods of :class:`Solver`'s template (public ``solve`` and the steps through
+    which it validates, calls ``_solve`` and recomputes the result) that ``cls`` replaces."""
+    return [m for m in ("solve", "_call_backend", "_solve_single") if getattr(cls, m, None) is not getattr(Solver, m)]
+
+
+def _judge_result(res: Any, problem: SolveProblem, where: str) -> None:
+    """``res`` carries :data:`RESULT_FIELDS` and what it claims (error, fun, violation,
+    success) is what the core computes at its ``x`` for the (one-target) ``problem``."""
+    missing = [k for k in RESULT_FIELDS if not (isinstance(res, Mapping) and k in res)]
+    assert not missing, f"{where}: the result lacks {missing} (every result carries {list(RESULT_FIELDS)})"
+    x = np.asarray(res["x"], float)
+    assert x.shape == (problem.n_features,) and np.isfinite(x).all(), f"{where}: x {res['x']!r}"
+    assert isinstance(res["success"], (bool, np.bool_)), f"{where}: success is {type(res['success']).__name__}"
+    assert isinstance(res["message"], str), f"{where}: message is {type(res['message']).__name__}"
+    assert isinstance(res["nfev"], (int, np.integer)) and not isinstance(res["nfev"], bool) and res["nfev"] >= 0, \
+        f"{where}: nfev {res['nfev']!r} is not a count"
+    assert _finite(res["time_s"]) and res["time_s"] is not None and res["time_s"] >= 0, \
+        f"{where}: time_s {res['time_s']!r}"
+    fit, err, viol, _, _ = problem.evaluate_one(problem.clip(x[None, :])[0])
+    claims = {"error": (res["error"], err, REPORT_ATOL),
+              "constraint_violation": (res["constraint_violation"], viol, REPORT_ATOL),
+              "fun": (res["fun"], fit, REPORT_ATOL * max(1.0, abs(fit)))}
+    for k, (said, true, tol) in claims.items():
+        assert _finite(said) and said is not None and abs(float(said) - true) <= tol, \
+            f"{where}: {k} {said!r}, but the model at the returned x gives {true:.6g}"
+    ok = err <= problem.tolerance and viol <= CONSTRAINT_TOL
+    near = abs(err - problem.tolerance) <= REPORT_ATOL or abs(viol - CONSTRAINT_TOL) <= REPORT_ATOL
+    assert near or bool(res["success"]) == ok, \
+        (f"{where}: success {bool(res['success'])}, but at the returned x the error is {err:.3g} (tolerance "
+         f"{problem.tolerance:g}) and the constraint violation {viol:.3g}")
+
+
 def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def make() -> Solver:
         return ctx.obj(**dict(options))
+
+    def r_template() -> None:
+        over = _solver_core_overrides(ctx.obj)
+        assert not over, (f"overrides {over} of the Solver template: implement _solve only, so the core "
+                          f"validates the problem and recomputes every result from the model at x")
+
+    def r_result() -> None:
+        for targets in ((0.4, 0.75), ACTIVE_TARGETS):   # reachable; out of reach behind the constraint
+            p = reference_problem(targets)
+            _judge_result(make().solve(p, seed=0), p, f"target {targets}")
+        T = np.array([[0.3, 0.7], ACTIVE_TARGETS])
+        pb = reference_problem(T)
+        batch = make().solve(pb, seed=1)
+        assert len(batch) == len(T), f"a batch of {len(T)} targets gave {len(batch)} results"
+        for i, r in enumerate(batch):
+            _judge_result(r, pb.target_chunk(i, i + 1), f"batch target {i}")
+
+    def r_constraints() -> None:
+        p = reference_problem(ACTIVE_TARGETS)
+        res = make().solve(p, seed=0)
+        fit, err, viol, _, _ = p.evaluate_one(p.clip(np.asarray(res["x"], float)[None, :])[0])
+        assert fit <= ACTIVE_OPTIMUM + p.tolerance, \
+            (f"targets {ACTIVE_TARGETS} with the constraint b >= 2c active: formula (6) at the answer is "
+             f"{fit:.3g} (error {err:.3g}, constraint violation {viol:.3g}), the constrained optimum "
+             f"{ACTIVE_OPTIMUM:.3g} (b = 2c) + tolerance {p.tolerance:g}: does the solver ignore constraints?")
 
     def r_class() -> None:
         cls = ctx.obj
@@ -1363,8 +1492,9 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
             return
         raise AssertionError("solve() accepted something that is not a SolveProblem")
 
-    _run_rules(ctx, [("class", r_class), ("options", r_options), ("solves", r_solves),
-                     ("determinism", r_determinism), ("batch", r_batch), ("bad-input", r_bad_input)],
+    _run_rules(ctx, [("class", r_class), ("template", r_template), ("options", r_options), ("solves", r_solves),
+                     ("result", r_result), ("constraints", r_constraints), ("determinism", r_determinism),
+                     ("batch", r_batch), ("bad-input", r_bad_input)],
                always=("class",), stop_after=("class",))
 
 
@@ -1383,8 +1513,9 @@ RULES: dict[str, tuple[str, ...]] = {
                   "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
                   "renderer-bad-input", "determinism", "timing"),
     "model": ("import", "plugin-api-declared", "shapes", "model-dimensions", "vectorised", "determinism",
-              "bad-input", "jacobian", "metadata"),
-    "solver": ("import", "plugin-api-declared", "class", "options", "solves", "determinism", "batch", "bad-input"),
+              "bad-input", "jacobian", "metadata", "responds"),
+    "solver": ("import", "plugin-api-declared", "class", "template", "options", "solves", "result", "constraints",
+               "determinism", "batch", "bad-input"),
     "hooks": ("import", "plugin-api-declared", "hookimpls"),
 }
 
