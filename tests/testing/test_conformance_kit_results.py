@@ -208,6 +208,12 @@ SOLVER_VARIANTS = {
 }
 
 
+#: what the report of a variant says (the rule names the fault, not a KeyError it ran into)
+SOLVER_WHY = {"scipy-fields-missing": "lacks ['fun', 'message', 'nfev']", "time-missing": "lacks ['time_s']",
+              "error-understated": "error ", "fun-understated": "fun ", "success-flipped": "success ",
+              "violation-hidden": "constraint_violation 0.0, but", "solve-overridden": "overrides ['solve']"}
+
+
 def test_the_correct_solver_conforms():
     v = check_solver(GoodSolver)
     assert v == [], format_report(v)
@@ -219,6 +225,7 @@ def test_each_broken_solver_is_caught_by_its_rule(name):
     v = check_solver(cls)
     # the constraint-active problem shows a hidden violation or a moved x as well
     assert rules <= rules_of(v) <= rules | {"constraints"}, format_report(v)
+    assert SOLVER_WHY.get(name, "") in format_report(v)
 
 
 def test_a_result_overridden_below_the_public_method_is_caught():
