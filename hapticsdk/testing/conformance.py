@@ -35,6 +35,13 @@ for a drive record) or :data:`READBACK_RTOL` of full scale. Timing rules take th
 the servo period: :data:`COMMAND_BUDGET` for ``command()``, :data:`TICK_BUDGET` for a
 renderer's ``tick()``.
 
+Each rule runs in a daemon thread of its own: an ``AssertionError`` is its finding, any
+other exception (a ``BaseException`` too, but ``KeyboardInterrupt`` and ``SystemExit``,
+which propagate) a violation of that rule, and a rule still running after
+:data:`RULE_TIME_BASE_S` plus :data:`RULE_TIME_FACTOR` x the device time it simulated is
+a violation naming where it is stuck; the rules after it are not run (its thread is left
+running).
+
 The pytest side (classes to subclass, fixtures) is in :mod:`hapticsdk.testing.suites`
 and :mod:`hapticsdk.testing.pytest_plugin`.
 """
@@ -44,6 +51,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
+import threading
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence, cast
 
@@ -113,6 +123,8 @@ class _Ctx:
         self.by_name = False
         self.only: set[str] = set()
         self.new_rules: dict[str, str] = {}
+        self.time_base_s = RULE_TIME_BASE_S
+        self.stuck: str | None = None
 
     def fail(self, rule: str, message: str) -> None:
         if rule in self.new_rules:
@@ -154,7 +166,9 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None
         name = getattr(target, "__name__", kind)
         try:
             probe = target()
-        except Exception as exc:
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except BaseException as exc:   # noqa: BLE001 - a plugin's BaseException is its failure
             return name, None, None, ("import", f"{type(exc).__name__}: {exc}")
         return getattr(probe, "name", name) or name, target, type(probe), None
     if isinstance(target, type):
@@ -164,24 +178,118 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None
     return getattr(target, "name", kind), (lambda: target), type(target), None
 
 
+#: a rule may take this much wall time (s) besides its simulated time (below): the work of
+#: a rule that simulates nothing (building the plugin, describing it, a few batches of at
+#: most 10,000 rows, one solve of the kit's 3-feature reference problem). The slowest such
+#: rule of the first-party plugins takes 0.33 s (``de-scipy`` ``solves``, loaded 2-core
+#: machine): 20 s is a 60 x margin, and still reports a hung plugin within half a minute.
+#: ``check(..., rule_time_limit_s=...)`` changes it (a slow solver, a device whose open()
+#: takes long).
+RULE_TIME_BASE_S = 20.0
+#: ... plus this multiple of the device time the rule has simulated so far (its kit ticks
+#: of :data:`KIT_PERIOD_S`): a conforming plugin keeps up with its servo period (one
+#: command within :data:`COMMAND_BUDGET` of it, one renderer tick within
+#: :data:`TICK_BUDGET`), so a rule runs at least in real time; 10 x leaves room for a
+#: loaded machine. The allowance grows as the rule advances: a rule that keeps
+#: simulating is never cut short, one that stops advancing (a call that never returns)
+#: is reported once the allowance is spent.
+RULE_TIME_FACTOR = 10.0
+
+_SIM = threading.local()
+
+
+def _sim_advance(dt: float) -> None:
+    """Book ``dt`` s of simulated device time to the rule running in this thread (its time
+    limit grows by :data:`RULE_TIME_FACTOR` x ``dt``)."""
+    box = getattr(_SIM, "box", None)
+    if box is not None:
+        box[0] += dt
+
+
+def _where(thread: threading.Thread) -> str:
+    """The innermost frame of ``thread`` outside the standard library and the kit (where
+    the plugin is stuck), as ``function (file:line)``."""
+    import os
+    import sysconfig
+    import traceback
+    frame = sys._current_frames().get(thread.ident or -1)
+    if frame is None:
+        return "unknown"
+    stdlib = os.path.realpath(sysconfig.get_paths()["stdlib"])
+    stack = traceback.extract_stack(frame)
+    for fs in reversed(stack):
+        fn = os.path.realpath(fs.filename)
+        if not fn.startswith(stdlib) and fn != os.path.realpath(__file__):
+            return f"{fs.name} ({fs.filename}:{fs.lineno})"
+    fs = stack[-1]
+    return f"{fs.name} ({fs.filename}:{fs.lineno})"
+
+
 def _guard(ctx: _Ctx, rule: str, fn: Callable[[], None]) -> None:
-    try:
-        fn()
-    except AssertionError as exc:
+    """Run one rule in a daemon thread and judge how it ended: an ``AssertionError`` is the
+    rule's finding, any other exception (a ``BaseException`` that is not an ``Exception``
+    too, except ``KeyboardInterrupt`` and ``SystemExit``, which propagate) a violation
+    naming it, and a rule still running after :data:`RULE_TIME_BASE_S` (or the check's
+    ``rule_time_limit_s``) plus :data:`RULE_TIME_FACTOR` x its simulated time a violation
+    naming where it is stuck; its thread is left running (a daemon: it does not keep the
+    process alive) and ``ctx.stuck`` is set, so the rules after it are not run."""
+    sim = [0.0]
+    box: dict[str, BaseException] = {}
+
+    def work() -> None:
+        _SIM.box = sim
+        try:
+            fn()
+        except BaseException as exc:   # noqa: BLE001 - judged by the caller's thread
+            box["exc"] = exc
+        finally:
+            _SIM.box = None
+
+    th = threading.Thread(target=work, name=f"hapticsdk-kit {ctx.kind} {ctx.name!r} {rule}", daemon=True)
+    t0 = time.monotonic()
+    th.start()
+    while True:
+        limit = ctx.time_base_s + RULE_TIME_FACTOR * sim[0]
+        th.join(max(t0 + limit - time.monotonic(), 0.0))
+        if not th.is_alive():
+            break
+        if time.monotonic() - t0 >= ctx.time_base_s + RULE_TIME_FACTOR * sim[0]:
+            ctx.stuck = rule
+            ctx.fail(rule, f"did not finish within {limit:.3g} s ({ctx.time_base_s:g} s + {RULE_TIME_FACTOR:g} x "
+                           f"the {sim[0]:.3g} s of device time it simulated); stuck in {_where(th)}. A call that "
+                           f"never returns hangs the servo loop; the kit left the rule's thread running and "
+                           f"did not run the rules after it")
+            return
+    exc = box.get("exc")
+    if exc is None:
+        return
+    if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+        raise exc
+    if isinstance(exc, AssertionError):
         ctx.fail(rule, str(exc))
-    except Exception as exc:
+    elif isinstance(exc, Exception):
         ctx.fail(rule, f"raised {type(exc).__name__}: {exc}")
+    else:
+        ctx.fail(rule, f"raised {type(exc).__name__}: {exc} (a BaseException that is not an Exception: it "
+                       f"passes every `except Exception`, the servo loop's too, so it ends the program "
+                       f"instead of stopping the render; derive it from Exception)")
 
 
 def _run_rules(ctx: _Ctx, rules: Sequence[tuple[str, Callable[[], None]]], *,
                always: tuple[str, ...] = (), stop_after: tuple[str, ...] = ()) -> None:
     """Run ``rules`` in order (only those of ``ctx.only`` when set, plus ``always``);
-    stop after a rule of ``stop_after`` when anything failed so far."""
+    stop after a rule of ``stop_after`` when anything failed so far, and after a rule that
+    did not finish (:func:`_guard`; the rules not run are named in the result's notes)."""
     before = len(ctx.violations)   # plugin-api-declared runs first and never stops the rest
-    for rule, fn in rules:
+    for i, (rule, fn) in enumerate(rules):
         if ctx.only and rule not in ctx.only and rule not in always:
             continue
         _guard(ctx, rule, fn)
+        if ctx.stuck:
+            rest = [r for r, _ in rules[i + 1:] if not ctx.only or r in ctx.only or r in always]
+            if rest:
+                ctx.note("not-run", f"rule {ctx.stuck!r} did not finish, so the kit did not run {rest}")
+            break
         if rule in stop_after and len(ctx.violations) > before:
             break
 
@@ -340,6 +448,7 @@ def _drive(act: Actuator, cmds: Sequence[ChannelCommand], dt: float = 0.001) -> 
     t = 0.0
     for c in cmds:
         t += dt
+        _sim_advance(dt)
         sent = act.command(c, now=t)
         if isinstance(act, HapticDevice):
             act.step(dt)
@@ -408,6 +517,7 @@ def _hold(act: Actuator, cmd: ChannelCommand, t: float) -> tuple[ChannelCommand 
 def _advance(act: Actuator, dt: float = KIT_PERIOD_S) -> None:
     """One kit tick of simulated time for an actuator that models it (``step(dt)``: a
     HapticDevice, a simulated plate or Peltier)."""
+    _sim_advance(dt)
     step = getattr(act, "step", None)
     if callable(step):
         step(dt)
@@ -810,6 +920,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
 
             def one() -> None:
                 state["t"] += KIT_PERIOD_S
+                _sim_advance(KIT_PERIOD_S)
                 a.command(cmds[state["i"] % len(cmds)], now=state["t"])
                 state["i"] += 1
             best = _fastest(one, budget_s=COMMAND_BUDGET * KIT_PERIOD_S)
@@ -905,13 +1016,80 @@ def _commands_force(cls: type) -> bool:
 # dimensions
 # ---------------------------------------------------------------------------
 
-def _tick_inputs() -> list[TickInput]:
+def _tick_inputs(read_only: bool = False) -> list[TickInput]:
+    """The kit's ticks: out of contact, at the surface, pressing and sliding, leaving. With
+    ``read_only`` the velocity arrays cannot be written (as the servo loop hands them)."""
     out = []
     for i, (pen, vx) in enumerate([(-1.0, 0.0), (0.0, 0.0), (0.5, 0.0), (1.5, 10.0), (2.0, 80.0),
                                    (2.0, -150.0), (1.0, 25.0), (3.0, 400.0), (-0.2, 80.0)]):
-        out.append(TickInput(t=i * 1e-3, dt=1e-3, penetration_mm=pen,
-                             velocity_mm_s=np.array([vx, -5.0 * (i % 3 - 1), 0.0]), in_contact=pen > 0))
+        v = np.array([vx, -5.0 * (i % 3 - 1), 0.0])
+        v.flags.writeable = not read_only
+        out.append(TickInput(t=i * 1e-3, dt=1e-3, penetration_mm=pen, velocity_mm_s=v, in_contact=pen > 0))
     return out
+
+
+def _input_fields(inp: TickInput) -> dict[str, Any]:
+    """What a renderer reads of a tick input, by value (arrays as lists)."""
+    from dataclasses import fields
+    return {f.name: (lambda v: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)(getattr(inp, f.name))
+            for f in fields(inp)}
+
+
+def _tick_unchanged(r: DimensionRenderer, inp: TickInput) -> list[ChannelCommand]:
+    """``r.tick(inp)``, failing when the renderer changed its input: wrote into a read-only
+    array (a ``ValueError`` naming it) or changed a field. The servo loop hands one
+    ``TickInput`` to every renderer of a material, in turn: a change is what the next one
+    reads."""
+    before = _input_fields(inp)
+    try:
+        cmds = r.tick(inp)
+    except ValueError as exc:
+        if "read-only" not in str(exc):
+            raise
+        raise AssertionError(f"tick() wrote into its TickInput in place ({exc}): the servo loop hands one "
+                             f"TickInput to every renderer of the material, and its arrays are read-only; "
+                             f"compute on a copy (`v = inp.velocity_mm_s * 1e-3`)") from None
+    after = _input_fields(inp)
+    changed = {k: (before[k], after[k]) for k in before if before[k] != after[k]}
+    assert not changed, (f"tick() changed its TickInput ({'; '.join(f'{k}: {a!r} -> {b!r}' for k, (a, b) in changed.items())}): "
+                         f"the servo loop hands one TickInput to every renderer of the material, so the next "
+                         f"renderer reads the changed values; compute on copies")
+    return cmds
+
+
+def _commands_of(d: PerceptionDimension, feats: Mapping[str, float]) -> list[Any]:
+    """The commands of a new renderer of ``feats`` over the kit's ticks, as values."""
+    r = d.renderer(dict(feats))
+    return [[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)] for i in _tick_inputs()]
+
+
+def _assert_follows_features(d: PerceptionDimension, mid: Mapping[str, float]) -> None:
+    """A renderer's commands change with what it renders: each of ``render_features`` (all
+    features together when the dimension declares none) set to its declared lower bound,
+    middle and upper bound must change the commands over the kit's ticks, with the other
+    features at the middle, at their lower or at their upper bounds (one of the three
+    suffices: a feature may act only where another lets it, and a renderer may clamp at
+    one end)."""
+    lo = {f.name: float(f.lower) for f in d.features}
+    hi = {f.name: float(f.upper) for f in d.features}
+    bases = (dict(mid), lo, hi)
+    names = [n for n in d.render_features if n in lo]
+    if not names:
+        outs = [_commands_of(d, b) for b in (lo, mid, hi)]
+        assert outs[0] != outs[1] or outs[1] != outs[2], \
+            ("its commands are the same with every feature at its lower bound, middle and upper bound: the "
+             "renderer ignores the features it is given (declare the ones it renders in render_features)")
+        return
+    for n in names:
+        for base in bases:
+            outs = [_commands_of(d, {**base, n: v}) for v in (lo[n], mid[n], hi[n])]
+            if outs[0] != outs[1] or outs[1] != outs[2]:
+                break
+        else:
+            raise AssertionError(f"its commands do not change when the render feature {n!r} goes over its declared "
+                                 f"range ({lo[n]:g}, {mid[n]:g}, {hi[n]:g}; the other features at the middle, lower "
+                                 f"and upper ends of theirs): the renderer ignores it; render it, or leave it out "
+                                 f"of render_features")
 
 
 def _dimension_rules(ctx: _Ctx) -> None:
@@ -987,14 +1165,16 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_renderer() -> None:
         d = holder["d"]
+        from ..dimensions import declared_roles
+        specs = declared_roles(d)
         for feats in (mid(), {f.name: f.lower for f in d.features}, {f.name: f.upper for f in d.features}):
             r = d.renderer(feats)
             assert isinstance(r, DimensionRenderer), f"renderer() returned {type(r).__name__}"
             assert r.roles, "renderer declares no roles"
             for role in r.roles:
                 assert role in d.default_actuators, f"renderer role {role!r} has no default actuator"
-            for inp in _tick_inputs():
-                cmds = r.tick(inp)
+            for inp in _tick_inputs(read_only=True):
+                cmds = _tick_unchanged(r, inp)
                 assert isinstance(cmds, list), "tick() must return a list of ChannelCommand"
                 for c in cmds:
                     assert isinstance(c, ChannelCommand), f"tick() returned {c!r}"
@@ -1006,6 +1186,11 @@ def _dimension_rules(ctx: _Ctx) -> None:
                 if not inp.in_contact:
                     for c in cmds:
                         assert not c.force_n, f"force {c.force_n} N commanded out of contact"
+                        spec = specs.get(c.role)
+                        assert not (getattr(spec, "channel", None) == "vibration" and c.amplitude), \
+                            (f"amplitude {c.amplitude:g} commanded on the vibration role {c.role!r} out of contact "
+                             f"(penetration {inp.penetration_mm:g} mm, {feats}): nothing touches the surface, "
+                             f"so nothing may vibrate; the loop sends amplitude 0 on it away from every object")
             json.dumps(r.describe(), default=str)
 
     def r_renderer_bad() -> None:
@@ -1130,6 +1315,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
                          f"{FORCE_PLAUSIBILITY_FACTOR:g} x the {fmax:g} N its actuator declares")
         silent = [ro for ro in r.roles if ro not in seen]
         assert not silent, f"the renderer sends nothing on role(s) {silent} while in contact"
+        _assert_follows_features(d, mid())
 
     def r_timing() -> None:
         d = holder["d"]
@@ -1138,6 +1324,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
         state = {"i": 0}
 
         def one() -> None:
+            _sim_advance(KIT_PERIOD_S)
             r.tick(inputs[state["i"] % len(inputs)])
             state["i"] += 1
         best = _fastest(one, budget_s=TICK_BUDGET * KIT_PERIOD_S)
@@ -1578,12 +1765,19 @@ def _api_rule(ctx: _Ctx, target: Any) -> None:
 
 
 def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
-          rules: Sequence[str] | None = None) -> list[Violation]:
+          rules: Sequence[str] | None = None, rule_time_limit_s: float | None = None) -> list[Violation]:
     """Run the rules of ``kind`` on ``target`` (an entry-point name, a class, or a
     zero-argument factory); return the violations (empty when it conforms).
 
     ``options``: keyword options to create it with (a solver's options, an actuator's
-    settings). ``rules``: only these rules (``import`` and ``class`` always run)."""
+    settings). ``rules``: only these rules (``import`` and ``class`` always run).
+    ``rule_time_limit_s``: the wall time a rule may take besides :data:`RULE_TIME_FACTOR` x
+    the device time it simulates (default :data:`RULE_TIME_BASE_S`); a rule still running
+    then is a violation, and the rules after it are not run."""
+    if rule_time_limit_s is not None and not (isinstance(rule_time_limit_s, (int, float))
+                                              and math.isfinite(rule_time_limit_s) and rule_time_limit_s > 0):
+        raise ValidationError(f"rule_time_limit_s must be a finite number > 0 (s), got {rule_time_limit_s!r}",
+                              field="rule_time_limit_s")
     if kind not in RULES:
         raise ValidationError(f"unknown plugin kind {kind!r}; valid: {sorted(RULES)}", field="kind")
     if rules:
@@ -1593,12 +1787,16 @@ def check(kind: str, target: Any, *, options: Mapping[str, Any] | None = None,
     reg_kind = "actuator" if kind == "device" else kind
     if kind == "hooks" and not isinstance(target, str):   # a module object: nothing to build
         ctx0 = _Ctx(kind, getattr(target, "__name__", "hooks"), None, target)
+        if rule_time_limit_s is not None:
+            ctx0.time_base_s = float(rule_time_limit_s)
         ctx0.only = set(rules or ())
         _api_rule(ctx0, target)
         _hooks_rules(ctx0)
         return ctx0.violations
     name, factory, obj, err = _resolve(reg_kind, target, options if kind != "solver" else None)
     ctx = _Ctx(kind, name, factory, obj)
+    if rule_time_limit_s is not None:
+        ctx.time_base_s = float(rule_time_limit_s)
     ctx.only = set(rules or ())
     ctx.by_name = isinstance(target, str)
     if err is not None:

@@ -200,7 +200,8 @@ class KitDim(PerceptionDimension):
         x = features.get("kit.x")
         if x is None or not np.isfinite(x):
             raise ValidationError("kit.x needed", field="features.kit.x")
-        return _Renderer(**self.renderer_kw)
+        # the amplitude follows kit.x (a renderer must render its render features)
+        return _Renderer(**{"amp": 0.2 + 0.6 * float(x), **self.renderer_kw})
 
 
 class KitModel(PerceptionModel):

@@ -539,16 +539,20 @@ _Never = never()
 
 
 class _R(DimensionRenderer):
-    def __init__(self, roles=("adhesion",), make=None, delay_s=0.0) -> None:
+    """``make(inp)``, or ``make(inp, x)`` for a renderer that renders its feature kit.x."""
+
+    def __init__(self, roles=("adhesion",), make=None, delay_s=0.0, x=0.5) -> None:
         self.roles = roles
-        self.make = make or (lambda inp: [ChannelCommand("adhesion", amplitude=30.0 if inp.in_contact else 0.0)])
+        self.make = make or (lambda inp, x: [ChannelCommand("adhesion", amplitude=(20.0 + 20.0 * x)
+                                                            if inp.in_contact else 0.0)])
         self.delay_s = delay_s
+        self.x = x
 
     def tick(self, inp):
         if self.delay_s:
             import time
             time.sleep(self.delay_s)
-        return self.make(inp)
+        return self.make(inp, self.x) if self.make.__code__.co_argcount == 2 else self.make(inp)
 
 
 class StickDim(PerceptionDimension):
@@ -570,7 +574,7 @@ class StickDim(PerceptionDimension):
         x = features.get("kit.x")
         if x is None or not np.isfinite(x):
             raise ValidationError("kit.x needed", field="features.kit.x")
-        return _R(**self.renderer_kw)
+        return _R(**{"x": float(x), **self.renderer_kw})
 
 
 class _GoodModel(PerceptionModel):
@@ -603,7 +607,8 @@ def _dim(**attrs):
 def _force_role(value):
     return {"default_actuators": {"adhesion": "omni-virtual"},
             "roles": {"adhesion": RoleSpec("force", {"force_n": "N"})},
-            "renderer_kw": {"make": lambda inp: [ChannelCommand("adhesion", force_n=value if inp.in_contact else 0.0)]}}
+            "renderer_kw": {"make": lambda inp, x: [ChannelCommand("adhesion", force_n=value * (0.5 + x)
+                                                                   if inp.in_contact else 0.0)]}}
 
 
 DIMENSION_VARIANTS = [
@@ -666,7 +671,7 @@ def test_a_force_in_newtons_on_an_amplitude_field_is_checked_too(installed):
         base = {"default_actuators": {"adhesion": "kit-plate-n"},
                 "roles": {"adhesion": RoleSpec("friction", {"amplitude": "newton"})}}
         big = _dim(**base, renderer_kw={"make": lambda inp: [ChannelCommand("adhesion", amplitude=40.0)]})
-        ok = _dim(**base, renderer_kw={"make": lambda inp: [ChannelCommand("adhesion", amplitude=0.4)]})
+        ok = _dim(**base, renderer_kw={"make": lambda inp, x: [ChannelCommand("adhesion", amplitude=0.4 * (0.5 + x))]})
         assert "renderer-commands" in rules_of(check_dimension(big))
         assert check_dimension(ok) == []
     finally:
