@@ -91,7 +91,9 @@ class TickInput:
         dt: measured time since the previous tick (s).
         penetration_mm: depth of the probe into the material along the normal (mm), >= 0
             in contact, <= 0 outside.
-        velocity_mm_s: probe velocity in the contact frame, shape (3,), (mm/s): index 1
+        velocity_mm_s: probe velocity in the contact frame, shape (3,), (mm/s), a read-only
+            array (one input goes to every renderer of the object in turn: compute on
+            copies, never change the input; the conformance kit checks it): index 1
             is the component along the object's outward normal, index 0 the sliding
             speed along the surface (on a surface with normal +y, as in a version-1 scene,
             the signed lateral velocity x, and index 2 is z; on any other normal the

@@ -83,7 +83,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..actuators import Actuator, DeviceState, HapticDevice, SensedState
+from ..actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3
 from ..dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
@@ -871,7 +871,9 @@ class ServoLoop:
                 vn = v0 * nx + v1 * ny + v2 * nz
                 tx, ty, tz = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
                 w0, w1, w2 = math.sqrt(tx * tx + ty * ty + tz * tz), vn, 0.0
-                vin = np.array((w0, w1, w2))
+                # read-only, as the state's own array on the plane: every renderer of the
+                # object gets this one TickInput
+                vin = _frozen3(w0, w1, w2)
                 normal = direction
             if dt != self._vf_dt:   # the coefficient changes only with dt (realtime mode)
                 self._vf_dt = dt
