@@ -181,8 +181,9 @@ def _resolve(kind: str, target: Any, options: Mapping[str, Any] | None
 #: a rule may take this much wall time (s) besides its simulated time (below): the work of
 #: a rule that simulates nothing (building the plugin, describing it, a few batches of at
 #: most 10,000 rows, one solve of the kit's 3-feature reference problem). The slowest such
-#: rule of the first-party plugins takes 0.33 s (``de-scipy`` ``solves``, loaded 2-core
-#: machine): 20 s is a 60 x margin, and still reports a hung plugin within half a minute.
+#: rule of the first-party plugins takes 0.2-0.5 s (``de-scipy`` ``solves``, three runs on a
+#: loaded 2-core machine): 20 s is a 40 x margin or more, and still reports a hung plugin
+#: within half a minute.
 #: ``check(..., rule_time_limit_s=...)`` changes it (a slow solver, a device whose open()
 #: takes long).
 RULE_TIME_BASE_S = 20.0
