@@ -306,7 +306,8 @@ JACOBIAN_RTOL = 0.01
 #: intensity errors, :class:`~hapticsdk.solvers.SolveProblem`'s ``tolerance``). An output
 #: spanning less changes by less than that whatever features a solver picks, so the
 #: features do not steer it: a constant, or a model that ignores its inputs.
-RESPONSE_MIN = float(next(f.default for f in dataclasses.fields(SolveProblem) if f.name == "tolerance"))
+RESPONSE_MIN = float(next(f.default for f in dataclasses.fields(SolveProblem)
+                          if f.name == "tolerance"))  # type: ignore[arg-type]  # a field with a default
 #: random points of the box ``responds`` evaluates besides its landmarks (an output that
 #: moves only inside a region under ~1/256 of the box may pass unseen)
 RESPONSE_SAMPLES = 256
@@ -584,7 +585,7 @@ def _takes_option(cls: type, key: str) -> bool:
     class, whatever the parameter is called; nothing is opened."""
     import inspect
     try:
-        params = inspect.signature(cls.__init__).parameters
+        params = inspect.signature(cls).parameters   # the constructor's, without self
     except (TypeError, ValueError):
         params = None
     if params is not None:
