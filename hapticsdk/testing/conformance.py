@@ -541,6 +541,67 @@ def _kinematics_error(dts: np.ndarray, xs: np.ndarray, vs: np.ndarray, q: float)
             f"count, {q:g} mm): the velocity is not in mm/s, or the position or the velocity is not updated")
 
 
+#: writes of the lost-write part of ``output-follows-command`` (alternating between two
+#: commands: a device losing every second write, or one in four, misses one of them)
+ALTERNATE_WRITES = 4
+
+
+def _drive_field(act: Actuator, c: ChannelCommand) -> tuple[str, float, float]:
+    """(field, value, tolerance) of what drives the output of ``c``: its force, else its
+    amplitude, with the read-back tolerance of that field."""
+    lim = act.limits
+    fs_f, _, fs_a = _full_scale(act)
+    if c.force_n is not None:
+        return "force_n", float(c.force_n), _tol(act, getattr(lim, "force_resolution_n", None), fs_f)
+    return "amplitude", float(c.amplitude or 0.0), _tol(act, lim.amplitude_resolution, fs_a)
+
+
+def _alternate_once(act: Actuator, t: float) -> None:
+    """Lost writes (part of ``output-follows-command``): the kit's holds send the same
+    command every tick, so a device that loses every second write still shows it. Here the
+    two largest distinct normal commands alternate, each written once and then held, with
+    no further write, for the declared settle time (:func:`_settle_ticks`); by then the
+    output must have left the previous command (a write has an effect; a device whose
+    ramp advances per write, not per second, has moved one step). The kit's own safety
+    layer is told that servo period (``set_period``: a command stays in force that long) and
+    a restart gap above it, for this part only."""
+    def drive(c: ChannelCommand) -> float:
+        return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
+    cmds: list[ChannelCommand] = []
+    for c in sorted(_normal_commands(act), key=drive, reverse=True):
+        if all(drive(c) != drive(k) for k in cmds):
+            cmds.append(c)
+    if len(cmds) < 2:
+        return
+    pair = cmds[:2]
+    n = _settle_ticks(act)
+    settings = act.safety.settings
+    act.safety.configure(stale_after_s=n * KIT_PERIOD_S,
+                         restart_after_s=max(settings.restart_after_s, (n + 1) * KIT_PERIOD_S))
+    try:
+        prev, t = _hold(act, pair[0], t)
+        for i in range(ALTERNATE_WRITES):
+            t += KIT_PERIOD_S
+            sent = act.command(pair[(i + 1) % 2], now=t)
+            _advance(act)
+            for _ in range(n - 1):
+                t += KIT_PERIOD_S
+                _advance(act)
+            rb = act.read_back()
+            if prev is None or rb is None:
+                return
+            field, p, tol = _drive_field(act, prev)
+            s = _drive_field(act, sent)[1]
+            r = getattr(rb, field)
+            r = 0.0 if r is None else float(r)
+            assert abs(s - p) <= 2 * tol or abs(r - p) > tol, \
+                (f"one write of {field} {s:g} held for {n} ticks (its declared settle time and two ticks): the "
+                 f"output stayed at the previous command's {p:g} ({r:g}): a lost write (the same command written "
+                 f"every tick hides it)")
+            prev = sent
+    finally:
+        act.safety.settings = settings
+
 def _takes_option(cls: type, key: str) -> bool:
     """Whether the constructor of actuator class ``cls`` takes the keyword option ``key``:
     named in its signature (without a ``**`` catch-all), else as the constructor answers
@@ -882,6 +943,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                 # settle time (simulated time advances)
                 sent, t = _hold(a, c, t)
                 _assert_matches(a, sent, a.read_back())
+            _alternate_once(a, t)
 
     def r_reopen() -> None:
         a = ctx.make()

@@ -281,3 +281,82 @@ def test_a_second_instance_that_cannot_open_is_closed_again():
         with pytest.raises(DeviceError):
             second.open()
         assert not second.is_open
+
+
+# ---------------------------------------------------------------------------
+# lost writes (output-follows-command)
+# ---------------------------------------------------------------------------
+
+class EveryOtherWriteArm(Arm):
+    """Its transport loses every second write."""
+    name: ClassVar[str] = "kit-arm-every-other-write"
+
+    def _open(self) -> None:
+        super()._open()
+        self.writes = 0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.writes += 1
+        if self.writes % 2:
+            super()._command(cmd)
+
+
+class ServoThreadEveryOtherWriteArm(EveryOtherWriteArm):
+    """Loses every second write too, and its output is what a device-side servo thread
+    applies: the motor force while the safety layer holds the command fresh, else zero
+    (as the simulated Omni does). It declares a settle time of 5 ms, longer than the
+    safety layer's default staleness of one period."""
+    name: ClassVar[str] = "kit-arm-servo-thread-every-other"
+    limits = ActuatorLimits(max_force_n=3.0, settle_time_s=0.005)
+
+    def _step(self, dt: float) -> None:
+        super()._step(dt)
+        cur = self.safety.current(self.t)
+        self.out = self.f if cur is not None and cur.force_n else 0.0
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("force", force_n=getattr(self, "out", 0.0) if self.is_open else 0.0)
+
+
+class OneWriteLateArm(Arm):
+    """A one-deep queue: each write applies the previous one."""
+    name: ClassVar[str] = "kit-arm-one-write-late"
+
+    def _open(self) -> None:
+        super()._open()
+        self.queued = 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.f, self.queued = self.queued, float(np.clip(cmd.force_n or 0.0, -3.0, 3.0))
+
+
+class PerWriteRampArm(Arm):
+    """Correct: its driver moves the force at most 0.5 N per write toward the command (a
+    ramp counted in writes, one a servo period), and declares the settle time that gives
+    at one write a tick from rest to full scale."""
+    name: ClassVar[str] = "kit-arm-per-write-ramp"
+    limits = ActuatorLimits(max_force_n=3.0, settle_time_s=6 * 0.001)
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        target = float(np.clip(cmd.force_n or 0.0, -3.0, 3.0))
+        self.f += float(np.clip(target - self.f, -0.5, 0.5))
+
+
+def test_a_ramp_counted_in_writes_is_not_a_lost_write():
+    assert check_device(PerWriteRampArm) == []
+
+
+@pytest.mark.parametrize("cls", [EveryOtherWriteArm, ServoThreadEveryOtherWriteArm, OneWriteLateArm])
+def test_a_lost_or_late_write_is_caught(cls):
+    v = check("actuator", cls)
+    assert "output-follows-command" in rules_of(v), format_report(v)
+    assert "a lost write" in format_report(v)
+
+
+def test_the_lost_write_part_leaves_the_safety_settings_as_they_were():
+    from hapticsdk.testing.conformance import _alternate_once
+    a = Arm()
+    before = a.safety.settings
+    with a:
+        _alternate_once(a, 0.0)
+        assert a.safety.settings == before
