@@ -11,8 +11,10 @@ plugin-api-declared):
 
 * ``actuator``: class, template, limits-declared, options, privileged-options, lifecycle,
   close, bad-input, limits-enforced, safe-stop, read-back, output-follows-command, reopen,
-  determinism, timing.
-* ``device`` (an actuator that senses): the actuator rules plus state.
+  instances, determinism, timing.
+* ``device`` (an actuator that senses): the actuator rules plus state (for a simulated
+  device also: its clock advances as it is stepped, and its position changes as its
+  velocity says, within one declared encoder count).
 * ``dimension``: class, features, roles-declared, constraints-vectorised,
   constraints-cost, constraints-feasible, model-match, renderer, renderer-commands,
   renderer-bad-input, determinism, timing.
@@ -399,6 +401,16 @@ def _normal_commands(act: Actuator) -> list[ChannelCommand]:
     return out
 
 
+def _startable_commands(act: Actuator) -> list[ChannelCommand]:
+    """The normal commands (:func:`_normal_commands`) the safety layer's start gate lets
+    through from rest (force within ``start_max_force_n``), smallest drive first; all of
+    them when none is."""
+    gate = getattr(act.safety.settings, "start_max_force_n", None)
+    cmds = _normal_commands(act)
+    ok = [k for k in cmds if gate is None or abs(k.force_n or 0.0) <= gate] or cmds
+    return sorted(ok, key=lambda k: abs(k.force_n or 0.0) + abs(k.amplitude or 0.0))
+
+
 def _edge_commands(act: Actuator) -> list[ChannelCommand]:
     """Commands at the edges of the declared limits, which :func:`_normal_commands` (10..90 %
     of each range) never reaches: the declared ``max_force_n``; the lowest and the highest
@@ -502,18 +514,31 @@ def _hold(act: Actuator, cmd: ChannelCommand, t: float) -> tuple[ChannelCommand 
     lets through has changed within the last settle time (a declared
     ``max_force_rate_n_per_tick`` still slewing; the layer is asked by its output), up to
     :data:`HOLD_LIMIT_S`. Returns the command in force and the kit time."""
-    least, settle = _settle_ticks(act, ramp=True), _settle_ticks(act)
-    sent: ChannelCommand | None = None
-    steady = 0
+    sent, _, t = _hold_both(act, cmd, None, None, t)
+    return sent, t
+
+
+def _hold_both(a: Actuator, ca: ChannelCommand, b: Actuator | None, cb: ChannelCommand | None,
+               t: float) -> tuple[ChannelCommand | None, ChannelCommand | None, float]:
+    """:func:`_hold` on two open actuators at once: ``ca`` sent to ``a`` and ``cb`` to
+    ``b`` every kit tick (``cb`` None: ``b`` only has its time advanced; ``b`` None: ``a``
+    alone), until each has been steady for its own settle time after both safety layers'
+    ramps. Returns what each safety layer let through and the kit time."""
+    pair = [(a, ca)] + ([(b, cb)] if b is not None else [])
+    least = max(_settle_ticks(x, ramp=True) for x, _ in pair)
+    settle = [_settle_ticks(x) for x, _ in pair]
+    sent: list[ChannelCommand | None] = [None] * len(pair)
+    steady = [0] * len(pair)
     for i in range(max(least, int(math.ceil(HOLD_LIMIT_S / KIT_PERIOD_S)))):
         t += KIT_PERIOD_S
-        now = act.command(cmd, now=t)
-        _advance(act)
-        steady = steady + 1 if now == sent else 1
-        sent = now
-        if i + 1 >= least and steady >= settle:
+        for j, (x, c) in enumerate(pair):
+            now = x.command(c, now=t) if c is not None else None
+            _advance(x)
+            steady[j] = steady[j] + 1 if now == sent[j] else 1
+            sent[j] = now
+        if i + 1 >= least and all(n >= m for n, m in zip(steady, settle)):
             break
-    return sent, t
+    return sent[0], (sent[1] if len(sent) > 1 else None), t
 
 
 def _advance(act: Actuator, dt: float = KIT_PERIOD_S) -> None:
@@ -575,6 +600,119 @@ def _assert_matches(act: Actuator, sent: ChannelCommand | None, rb: ChannelComma
             assert abs(gf - sent.frequency_hz) <= tolf, \
                 f"commanded {sent.frequency_hz:g} Hz, the device outputs {gf:g} Hz (tolerance {tolf:.3g} Hz)"
 
+
+#: step lengths (s) of the state rule's run of a simulated device, in turn: the kit period,
+#: its half and its double (the realtime loop steps by the measured period)
+STATE_STEPS_S = (KIT_PERIOD_S, 0.5 * KIT_PERIOD_S, 2.0 * KIT_PERIOD_S)
+
+def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Drive an open simulated device with ``cmd`` for ``n_on`` steps, then stop it and
+    step ``n_off`` more, reading the state before the first step and after each:
+    ``(dt (n,), t (n+1,), position (n+1, 3), velocity (n+1, 3))``."""
+    n = n_on + n_off
+    dts = np.array([STATE_STEPS_S[i % len(STATE_STEPS_S)] for i in range(n)])
+    ts, xs, vs = [], [], []
+
+    def read() -> None:
+        st = a.read_state()
+        ts.append(float(st.t))
+        xs.append(np.asarray(st.position_mm, float).reshape(3))
+        vs.append(np.asarray(st.velocity_mm_s, float).reshape(3))
+    read()
+    t = 0.0
+    for i in range(n):
+        if i < n_on:
+            a.command(cmd, now=t)
+        elif i == n_on:
+            a.stop()
+        a.step(float(dts[i]))
+        t += float(dts[i])
+        read()
+    return dts, np.array(ts), np.array(xs), np.array(vs)
+
+
+def _kinematics_error(dts: np.ndarray, xs: np.ndarray, vs: np.ndarray, q: float) -> str | None:
+    """The first reading whose change of position since the first one disagrees with the
+    velocity the device reports, or None. Between two readings the velocity is taken to
+    lie between its two readings (monotone within a step: a smooth motion sampled at its
+    step, a velocity that jumps once, a backward difference over the step), so the change
+    of position lies between the sums of the lower and of the higher of each pair times the
+    step, widened by one encoder count ``q`` (each of the two positions is off by at most
+    half a count) and float rounding."""
+    lo = np.cumsum(np.minimum(vs[:-1], vs[1:]) * dts[:, None], axis=0)
+    hi = np.cumsum(np.maximum(vs[:-1], vs[1:]) * dts[:, None], axis=0)
+    dx = xs[1:] - xs[0]
+    eps = 1e-9 * (np.abs(xs[1:]) + np.abs(xs[0]) + np.cumsum(np.abs(vs[1:]) * dts[:, None], axis=0)) + 1e-12
+    bad = (dx < lo - q - eps) | (dx > hi + q + eps)
+    if not bad.any():
+        return None
+    k, j = (int(v) for v in np.argwhere(bad)[0])
+    return (f"after {k + 1} steps ({float(np.sum(dts[:k + 1])):g} s) position {'xyz'[j]} moved {dx[k, j]:.6g} mm, "
+            f"but the velocity it reports (mm/s) integrates to {lo[k, j]:.6g}..{hi[k, j]:.6g} mm (+- one encoder "
+            f"count, {q:g} mm): the velocity is not in mm/s, or the position or the velocity is not updated")
+
+
+#: writes of the lost-write part of ``output-follows-command`` (alternating between two
+#: commands: a device losing every second write, or one in four, misses one of them)
+ALTERNATE_WRITES = 4
+
+
+def _drive_field(act: Actuator, c: ChannelCommand) -> tuple[str, float, float]:
+    """(field, value, tolerance) of what drives the output of ``c``: its force, else its
+    amplitude, with the read-back tolerance of that field."""
+    lim = act.limits
+    fs_f, _, fs_a = _full_scale(act)
+    if c.force_n is not None:
+        return "force_n", float(c.force_n), _tol(act, getattr(lim, "force_resolution_n", None), fs_f)
+    return "amplitude", float(c.amplitude or 0.0), _tol(act, lim.amplitude_resolution, fs_a)
+
+
+def _alternate_once(act: Actuator, t: float) -> None:
+    """Lost writes (part of ``output-follows-command``): the kit's holds send the same
+    command every tick, so a device that loses every second write still shows it. Here the
+    two largest distinct normal commands alternate, each written once and then held, with
+    no further write, for the declared settle time (:func:`_settle_ticks`); by then the
+    output must have left the previous command (a write has an effect; a device whose
+    ramp advances per write, not per second, has moved one step). The kit's own safety
+    layer is told that servo period (``set_period``: a command stays in force that long) and
+    a restart gap above it, for this part only."""
+    def drive(c: ChannelCommand) -> float:
+        return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
+    cmds: list[ChannelCommand] = []
+    for c in sorted(_normal_commands(act), key=drive, reverse=True):
+        if all(drive(c) != drive(k) for k in cmds):
+            cmds.append(c)
+    if len(cmds) < 2:
+        return
+    pair = cmds[:2]
+    n = _settle_ticks(act)
+    settings = act.safety.settings
+    act.safety.configure(stale_after_s=n * KIT_PERIOD_S,
+                         restart_after_s=max(settings.restart_after_s, (n + 1) * KIT_PERIOD_S))
+    try:
+        prev, t = _hold(act, pair[0], t)
+        for i in range(ALTERNATE_WRITES):
+            t += KIT_PERIOD_S
+            sent = act.command(pair[(i + 1) % 2], now=t)
+            _advance(act)
+            for _ in range(n - 1):
+                t += KIT_PERIOD_S
+                _advance(act)
+            rb = act.read_back()
+            if prev is None or rb is None:
+                return
+            field, p, tol = _drive_field(act, prev)
+            s = _drive_field(act, sent)[1]
+            r = getattr(rb, field)
+            r = 0.0 if r is None else float(r)
+            assert abs(s - p) <= 2 * tol or abs(r - p) > tol, \
+                (f"one write of {field} {s:g} held for {n} ticks (its declared settle time and two ticks): the "
+                 f"output stayed at the previous command's {p:g} ({r:g}): a lost write (the same command written "
+                 f"every tick hides it)")
+            prev = sent
+    finally:
+        act.safety.settings = settings
 
 def _takes_option(cls: type, key: str) -> bool:
     """Whether the constructor of actuator class ``cls`` takes the keyword option ``key``:
@@ -821,6 +959,21 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             pass
         else:
             raise AssertionError("read_state() on a closed device did not raise DeviceError")
+        if not getattr(cls, "simulated", False):
+            return   # a real device moves and keeps time on its own: nothing the kit steps
+        # a simulated device: its clock advances by the steps it is given, and its position
+        # changes as its velocity (mm/s) says, under a held force and coasting after stop()
+        b = ctx.make()
+        with b:
+            big = _startable_commands(b)[-1]
+            n_on = _settle_ticks(b, ramp=True) + 100
+            dts, ts, xs, vs = _sensed_run(b, big, n_on, n_on)
+            q = float(getattr(b, "encoder_resolution_mm", 0.0) or 0.0)
+        assert (np.diff(ts) >= 0).all(), "device time went backwards while stepped"
+        assert ts[-1] > ts[0], (f"device time stayed at {ts[0]:g} s over {len(dts)} steps of "
+                                f"{float(np.sum(dts)):g} s in all (step(dt) advances simulated time)")
+        why = _kinematics_error(np.diff(ts), xs, vs, q)
+        assert why is None, why
 
     def r_template() -> None:
         over = [m for m in ("open", "close", "command", "stop", "read_back")
@@ -902,6 +1055,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                 # settle time (simulated time advances)
                 sent, t = _hold(a, c, t)
                 _assert_matches(a, sent, a.read_back())
+            _alternate_once(a, t)
 
     def r_reopen() -> None:
         a = ctx.make()
@@ -913,6 +1067,42 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             _rest_after(a, "after close() and open() again (stale output)")
         finally:
             a.close()
+
+    def r_instances() -> None:
+        a, b = ctx.make(), ctx.make()
+        with a:
+            try:
+                b.open()
+            except Exception as exc:   # noqa: BLE001 - one device, one port: nothing to compare
+                b.close()
+                ctx.note("instances", f"a second instance could not open while the first was open "
+                         f"({type(exc).__name__}: {exc}); the rule needs two and was skipped")
+                return
+            try:
+                if a.read_back() is None or b.read_back() is None:
+                    return   # reported by read-back
+                def drive(c: ChannelCommand) -> float:
+                    return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
+                start = [c for c in _startable_commands(a) if drive(c) > 0]
+                if not start:
+                    return
+                top = max(_normal_commands(a), key=drive)   # allowed once running (past the start gate)
+                # a driven, b left alone (its time advances too): b stays at rest
+                t = 0.0
+                sent_a, _, t = _hold_both(a, start[-1], b, None, t)
+                _assert_rest(b, b.read_back(), "on a second instance while the first was driven (the two share "
+                                               "their output state)")
+                _assert_matches(a, sent_a, a.read_back())
+                # both driven with different commands: each follows its own
+                sent_a, sent_b, t = _hold_both(a, top, b, start[0], t)
+                _assert_matches(b, sent_b, b.read_back())
+                _assert_matches(a, sent_a, a.read_back())
+                # one closed: the other goes on following its own commands (a new one)
+                a.close()
+                sent_b, _, t = _hold_both(b, top, None, None, t)
+                _assert_matches(b, sent_b, b.read_back())
+            finally:
+                b.close()
 
     def r_timing() -> None:
         a = ctx.make()
@@ -935,8 +1125,8 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         ("privileged-options", r_privileged),
         ("lifecycle", r_lifecycle), ("close", r_close), ("bad-input", r_bad_input),
         ("limits-enforced", r_limits_enforced), ("safe-stop", r_safe_stop), ("read-back", r_read_back),
-        ("output-follows-command", r_follows), ("reopen", r_reopen), ("determinism", r_determinism),
-        ("timing", r_timing)]
+        ("output-follows-command", r_follows), ("reopen", r_reopen), ("instances", r_instances),
+        ("determinism", r_determinism), ("timing", r_timing)]
     if device:
         rules.append(("state", r_state))
     _run_rules(ctx, rules, stop_after=("class",))
@@ -1694,10 +1884,10 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
 RULES: dict[str, tuple[str, ...]] = {
     "actuator": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
                  "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
-                 "output-follows-command", "reopen", "determinism", "timing"),
+                 "output-follows-command", "reopen", "instances", "determinism", "timing"),
     "device": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
                "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
-               "output-follows-command", "reopen", "determinism", "timing", "state"),
+               "output-follows-command", "reopen", "instances", "determinism", "timing", "state"),
     "dimension": ("import", "plugin-api-declared", "class", "features", "roles-declared", "constraints-vectorised",
                   "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
                   "renderer-bad-input", "determinism", "timing"),

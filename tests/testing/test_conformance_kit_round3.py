@@ -854,6 +854,8 @@ COVERED_ELSEWHERE = {
     ("solver", "class"), ("solver", "solves"),
     # tests/testing/test_conformance_kit_results.py
     ("model", "responds"), ("solver", "template"), ("solver", "result"), ("solver", "constraints"),
+    # tests/testing/test_conformance_kit_instances_state.py
+    ("actuator", "instances"),
 }
 
 
