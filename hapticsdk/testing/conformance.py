@@ -993,6 +993,19 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         except Exception as exc:
             raise AssertionError(f"close() raised {type(exc).__name__}: {exc} (it must never raise)") from None
         assert not a.is_open, "close() left the actuator open"
+        if getattr(a, "simulated", False):
+            # a simulated backend can still be asked what its model outputs once closed
+            # (the core's read_back() reports rest for any closed actuator without asking):
+            # after its declared settle time it must be at rest, not driving what a
+            # "flush" in _close re-sent after the stop
+            for _ in range(_settle_ticks(a)):
+                _advance(a)
+            try:
+                rb = a._read_back()
+            except Exception:  # noqa: BLE001 - a closed backend may refuse to answer
+                rb = None
+            if isinstance(rb, ChannelCommand):
+                _assert_rest(a, rb, "after close() (the simulated backend's own read-back)")
         err = getattr(a, "close_error", None)
         assert err is None, (f"the backend failed while closing: {type(err).__name__}: {err} (kept in "
                              f"close_error; close() stopped and released what it could)")
