@@ -106,6 +106,19 @@ class SafetySettings:
 PHASES = ("closed", "waiting", "ramping", "running")
 
 
+def command_timeout_s(safety: Any, value: Any = None, *, at_most: float | None = 1.0) -> float:
+    """A backend's dead-man deadline (s) from its ``command_timeout_s`` option: ``value``
+    when given (a number > 0, and at most ``at_most`` unless None), else
+    :func:`default_command_timeout_s` of ``safety``; a bad value is a
+    :class:`~hapticsdk.errors.ValidationError` naming ``options.command_timeout_s``."""
+    if value is None:
+        return default_command_timeout_s(safety)
+    if not (isinstance(value, (int, float)) and value > 0 and (at_most is None or value <= at_most)):
+        raise ValidationError(f"must be in (0, {at_most:g}] s" if at_most is not None else "must be > 0 s",
+                              field="options.command_timeout_s")
+    return float(value)
+
+
 def default_command_timeout_s(safety: Any) -> float:
     """The default deadline (s) of a backend's own dead-man switch (a device-side thread
     or callback that zeroes or silences the output when the servo stops commanding): the

@@ -233,8 +233,8 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     # paced on the clock: as code asks; by default as the plan asks, and always when an
     # actuator is real (a plan's data cannot run a real device unpaced, commands
     # back to back and the servo's seconds over in a fraction of the wall time)
-    real = sorted(mp.actuators[r] for r, (cls, _) in chosen.items() if not getattr(cls, "simulated", False))
-    rt = bool(realtime) if realtime is not None else (bool(servo.get("realtime", False)) or bool(real))
+    real = any(not getattr(cls, "simulated", False) for cls, _ in chosen.values())
+    rt = bool(realtime) if realtime is not None else (bool(servo.get("realtime", False)) or real)
     cal_opts, cal_records = _calibrations(mp, plan.settings, {r: o for r, (_, o) in chosen.items()})
     renderers = build_renderers(mp, plan.settings, calibrations=cal_opts,
                                 capabilities=_capabilities(chosen))

@@ -120,15 +120,12 @@ class ForceArm(HapticDevice):
         super().__init__(label=label, safety=safety, **options)
         if not (isinstance(surface_mm, (int, float)) and np.isfinite(surface_mm)):
             raise ValidationError("must be a finite number of mm", field="options.surface_mm")
-        if command_timeout_s is None:   # the safety layer's restart gap (see Args)
-            from hapticsdk.safety import default_command_timeout_s
-            command_timeout_s = default_command_timeout_s(self.safety)
-        if not (isinstance(command_timeout_s, (int, float)) and 0 < command_timeout_s <= 1.0):
-            raise ValidationError("must be in (0, 1] s", field="options.command_timeout_s")
+        from hapticsdk.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
+        command_timeout_s = _deadline(self.safety, command_timeout_s)
         if model is not None and model not in self.MODELS:
             raise ValidationError(f"unknown model {model!r}; one of {sorted(self.MODELS)}", field="options.model")
         self.surface_mm = float(surface_mm)
-        self.command_timeout_s = float(command_timeout_s)
+        self.command_timeout_s = command_timeout_s
         self.model_option = model
         self.model = self._row(model)
         self.limits = type(self).limits

@@ -122,11 +122,8 @@ class VoiceCoilAudio(Actuator):
             raise ValidationError("must be in (0, 1]", field="options.full_scale")
         if not (isinstance(ramp_s, (int, float)) and 0 < ramp_s <= 1):
             raise ValidationError("must be in (0, 1] s", field="options.ramp_s")
-        if command_timeout_s is None:   # the safety layer's restart gap (see Args)
-            from hapticsdk.safety import default_command_timeout_s
-            command_timeout_s = default_command_timeout_s(self.safety)
-        if not (isinstance(command_timeout_s, (int, float)) and 0 < command_timeout_s <= 1):
-            raise ValidationError("must be in (0, 1] s", field="options.command_timeout_s")
+        from hapticsdk.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
+        command_timeout_s = _deadline(self.safety, command_timeout_s)
         if switch_interval_s is not None and not (isinstance(switch_interval_s, (int, float))
                                                   and 1e-6 <= switch_interval_s <= 0.1):
             raise ValidationError("must be in 1e-6..0.1 s or None", field="options.switch_interval_s")
@@ -138,7 +135,7 @@ class VoiceCoilAudio(Actuator):
         self.channel_index = channel_index
         self.full_scale = float(full_scale)
         self.ramp_s = float(ramp_s)
-        self.command_timeout_s = float(command_timeout_s)
+        self.command_timeout_s = command_timeout_s
         self.stream: Any = None
         self.fs = 0.0
         self.osc: Oscillator | None = None

@@ -227,12 +227,9 @@ class OmniOpenHaptics(HapticDevice):
         self.library = library
         self.rate_hz = int(rate_hz)
         self.surface_y_mm = float(surface_y_mm)
-        if command_timeout_s is None:   # the safety layer's restart gap (see Args)
-            from hapticsdk.safety import default_command_timeout_s
-            command_timeout_s = default_command_timeout_s(self.safety)
-        if not (isinstance(command_timeout_s, (int, float)) and command_timeout_s > 0):
-            raise ValidationError("command_timeout_s must be > 0", field="options.command_timeout_s")
-        self.command_timeout_s = float(command_timeout_s)
+        from hapticsdk.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
+        command_timeout_s = _deadline(self.safety, command_timeout_s, at_most=None)
+        self.command_timeout_s = command_timeout_s
         self._force_t = 0.0
         self.watchdog_zeroed = 0
         self.lib: Any = None
