@@ -50,13 +50,12 @@ and :mod:`hapticsdk.testing.pytest_plugin`.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping, Sequence, cast
 
 import numpy as np
@@ -251,12 +250,12 @@ def _guard(ctx: _Ctx, rule: str, fn: Callable[[], None]) -> None:
     th = threading.Thread(target=work, name=f"hapticsdk-kit {ctx.kind} {ctx.name!r} {rule}", daemon=True)
     t0 = time.monotonic()
     th.start()
-    while True:
-        limit = ctx.time_base_s + RULE_TIME_FACTOR * sim[0]
-        th.join(max(t0 + limit - time.monotonic(), 0.0))
-        if not th.is_alive():
-            break
-        if time.monotonic() - t0 >= ctx.time_base_s + RULE_TIME_FACTOR * sim[0]:
+    while th.is_alive():
+        limit = ctx.time_base_s + RULE_TIME_FACTOR * sim[0]   # grows while the rule simulates
+        left = t0 + limit - time.monotonic()
+        if left > 0:
+            th.join(left)
+        else:
             ctx.stuck = rule
             ctx.fail(rule, f"did not finish within {limit:.3g} s ({ctx.time_base_s:g} s + {RULE_TIME_FACTOR:g} x "
                            f"the {sim[0]:.3g} s of device time it simulated); stuck in {_where(th)}. A call that "
@@ -284,12 +283,11 @@ def _run_rules(ctx: _Ctx, rules: Sequence[tuple[str, Callable[[], None]]], *,
     stop after a rule of ``stop_after`` when anything failed so far, and after a rule that
     did not finish (:func:`_guard`; the rules not run are named in the result's notes)."""
     before = len(ctx.violations)   # plugin-api-declared runs first and never stops the rest
-    for i, (rule, fn) in enumerate(rules):
-        if ctx.only and rule not in ctx.only and rule not in always:
-            continue
+    chosen = [(r, fn) for r, fn in rules if not ctx.only or r in ctx.only or r in always]
+    for i, (rule, fn) in enumerate(chosen):
         _guard(ctx, rule, fn)
         if ctx.stuck:
-            rest = [r for r, _ in rules[i + 1:] if not ctx.only or r in ctx.only or r in always]
+            rest = [r for r, _ in chosen[i + 1:]]
             if rest:
                 ctx.note("not-run", f"rule {ctx.stuck!r} did not finish, so the kit did not run {rest}")
             break
@@ -308,8 +306,7 @@ JACOBIAN_RTOL = 0.01
 #: intensity errors, :class:`~hapticsdk.solvers.SolveProblem`'s ``tolerance``). An output
 #: spanning less changes by less than that whatever features a solver picks, so the
 #: features do not steer it: a constant, or a model that ignores its inputs.
-RESPONSE_MIN = float(next(f.default for f in dataclasses.fields(SolveProblem)
-                          if f.name == "tolerance"))  # type: ignore[arg-type]  # a field with a default
+RESPONSE_MIN = float(SolveProblem.tolerance)
 #: random points of the box ``responds`` evaluates besides its landmarks (an output that
 #: moves only inside a region under ~1/256 of the box may pass unseen)
 RESPONSE_SAMPLES = 256
@@ -334,7 +331,6 @@ def _fastest(fn: Callable[[], Any], n: int = TIMING_CALLS, budget_s: float | Non
     up to ``TIMING_WINDOW_S`` of wall time: on a busy machine the fastest call is the
     one that was not preempted, and a longer sample finds it (a call that is slow
     every time stays slow)."""
-    import time
     best = math.inf
     end = None
     i = 0
@@ -401,6 +397,11 @@ def _normal_commands(act: Actuator) -> list[ChannelCommand]:
     return out
 
 
+def _drive_size(c: ChannelCommand) -> float:
+    """How hard ``c`` drives: its force plus its amplitude (absolute values)."""
+    return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
+
+
 def _startable_commands(act: Actuator) -> list[ChannelCommand]:
     """The normal commands (:func:`_normal_commands`) the safety layer's start gate lets
     through from rest (force within ``start_max_force_n``), smallest drive first; all of
@@ -408,7 +409,7 @@ def _startable_commands(act: Actuator) -> list[ChannelCommand]:
     gate = getattr(act.safety.settings, "start_max_force_n", None)
     cmds = _normal_commands(act)
     ok = [k for k in cmds if gate is None or abs(k.force_n or 0.0) <= gate] or cmds
-    return sorted(ok, key=lambda k: abs(k.force_n or 0.0) + abs(k.amplitude or 0.0))
+    return sorted(ok, key=_drive_size)
 
 
 def _edge_commands(act: Actuator) -> list[ChannelCommand]:
@@ -626,7 +627,7 @@ def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int
             a.command(cmd, now=t)
         elif i == n_on:
             a.stop()
-        a.step(float(dts[i]))
+        _advance(a, float(dts[i]))
         t += float(dts[i])
         read()
     return dts, np.array(ts), np.array(xs), np.array(vs)
@@ -677,11 +678,9 @@ def _alternate_once(act: Actuator, t: float) -> None:
     ramp advances per write, not per second, has moved one step). The kit's own safety
     layer is told that servo period (``set_period``: a command stays in force that long) and
     a restart gap above it, for this part only."""
-    def drive(c: ChannelCommand) -> float:
-        return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
     cmds: list[ChannelCommand] = []
-    for c in sorted(_normal_commands(act), key=drive, reverse=True):
-        if all(drive(c) != drive(k) for k in cmds):
+    for c in sorted(_normal_commands(act), key=_drive_size, reverse=True):
+        if all(_drive_size(c) != _drive_size(k) for k in cmds):
             cmds.append(c)
     if len(cmds) < 2:
         return
@@ -914,7 +913,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         c = ctx.make()
         with c:
             top = _normal_commands(c)
-            big = max(top, key=lambda k: abs(k.force_n or 0.0) + abs(k.amplitude or 0.0))
+            big = max(top, key=_drive_size)
             _hold(c, big, 0.0)
             assert c.stop() is True, "stop() returned False (backend stop failed)"
             _rest_after(c, "after stop()")
@@ -1094,12 +1093,10 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             try:
                 if a.read_back() is None or b.read_back() is None:
                     return   # reported by read-back
-                def drive(c: ChannelCommand) -> float:
-                    return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
-                start = [c for c in _startable_commands(a) if drive(c) > 0]
+                start = [c for c in _startable_commands(a) if _drive_size(c) > 0]
                 if not start:
                     return
-                top = max(_normal_commands(a), key=drive)   # allowed once running (past the start gate)
+                top = max(_normal_commands(a), key=_drive_size)   # allowed once running (past the start gate)
                 # a driven, b left alone (its time advances too): b stays at rest
                 t = 0.0
                 sent_a, _, t = _hold_both(a, start[-1], b, None, t)
@@ -1112,7 +1109,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                 _assert_matches(a, sent_a, a.read_back())
                 # one closed: the other goes on following its own commands (a new one)
                 a.close()
-                sent_b, _, t = _hold_both(b, top, None, None, t)
+                sent_b, t = _hold(b, top, t)
                 _assert_matches(b, sent_b, b.read_back())
             finally:
                 b.close()
@@ -1196,7 +1193,6 @@ def _cost_ratio(c: Constraint, cols: Mapping[str, np.ndarray]) -> tuple[float, f
     ``penalty`` batch over that of the per-row reference (one Python operation per row of
     a column the constraint reads; :data:`COST_FACTOR`), interleaved. Stops early when a
     timing is clearly within the limit."""
-    import time
     name = next((f for f in c.features if f in cols), next(iter(cols)))
     rows = np.asarray(cols[name], float).tolist()
 
@@ -1235,7 +1231,6 @@ def _tick_inputs(read_only: bool = False) -> list[TickInput]:
 
 def _input_fields(inp: TickInput) -> dict[str, Any]:
     """What a renderer reads of a tick input, by value (arrays as lists)."""
-    from dataclasses import fields
     return {f.name: (lambda v: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)(getattr(inp, f.name))
             for f in fields(inp)}
 
@@ -1412,11 +1407,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_determinism() -> None:
         d = holder["d"]
-        outs = []
-        for _ in range(2):
-            r = d.renderer(mid())
-            outs.append([[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)]
-                         for i in _tick_inputs()])
+        outs = [_commands_of(d, mid()) for _ in range(2)]
         assert outs[0] == outs[1], "two renderers of the same features gave different commands"
 
     def r_roles() -> None:
@@ -1785,9 +1776,17 @@ def _solver_core_overrides(cls: type) -> list[str]:
     return [m for m in ("solve", "_call_backend", "_solve_single") if getattr(cls, m, None) is not getattr(Solver, m)]
 
 
-def _judge_result(res: Any, problem: SolveProblem, where: str) -> None:
+def _at_x(res: Any, problem: SolveProblem) -> tuple[float, float, float]:
+    """(formula (6), error, constraint violation) the core computes at the ``x`` of ``res``
+    for the (one-target) ``problem``."""
+    fit, err, viol, _, _ = problem.evaluate_one(problem.clip(np.asarray(res["x"], float)[None, :])[0])
+    return fit, err, viol
+
+
+def _judge_result(res: Any, problem: SolveProblem, where: str) -> tuple[float, float, float]:
     """``res`` carries :data:`RESULT_FIELDS` and what it claims (error, fun, violation,
-    success) is what the core computes at its ``x`` for the (one-target) ``problem``."""
+    success) is what the core computes at its ``x`` for the (one-target) ``problem``.
+    Returns that (:func:`_at_x`)."""
     missing = [k for k in RESULT_FIELDS if not (isinstance(res, Mapping) and k in res)]
     assert not missing, f"{where}: the result lacks {missing} (every result carries {list(RESULT_FIELDS)})"
     x = np.asarray(res["x"], float)
@@ -1798,7 +1797,7 @@ def _judge_result(res: Any, problem: SolveProblem, where: str) -> None:
         f"{where}: nfev {res['nfev']!r} is not a count"
     assert _finite(res["time_s"]) and res["time_s"] is not None and res["time_s"] >= 0, \
         f"{where}: time_s {res['time_s']!r}"
-    fit, err, viol, _, _ = problem.evaluate_one(problem.clip(x[None, :])[0])
+    fit, err, viol = _at_x(res, problem)
     claims = {"error": (res["error"], err, REPORT_ATOL),
               "constraint_violation": (res["constraint_violation"], viol, REPORT_ATOL),
               "fun": (res["fun"], fit, REPORT_ATOL * max(1.0, abs(fit)))}
@@ -1810,11 +1809,33 @@ def _judge_result(res: Any, problem: SolveProblem, where: str) -> None:
     assert near or bool(res["success"]) == ok, \
         (f"{where}: success {bool(res['success'])}, but at the returned x the error is {err:.3g} (tolerance "
          f"{problem.tolerance:g}) and the constraint violation {viol:.3g}")
+    return fit, err, viol
 
 
 def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def make() -> Solver:
         return ctx.obj(**dict(options))
+
+    # the rules solve the same reference problems: each (targets, seed) is solved once, on
+    # a new solver, and judged at its x once (a solver that spoils its own copy of the
+    # problem spoils no other rule's: each rule judges against a problem of its own)
+    solved: dict[tuple[str, int], Any] = {}
+    judged: dict[tuple[str, int], tuple[float, float, float]] = {}
+
+    def key(targets: Any, seed: int) -> tuple[str, int]:
+        return repr(np.asarray(targets, float).tolist()), seed
+
+    def solve(targets: Any, seed: int) -> Any:
+        k = key(targets, seed)
+        if k not in solved:
+            solved[k] = make().solve(reference_problem(np.array(targets, float)), seed=seed)
+        return solved[k]
+
+    def at_x(targets: Any, seed: int) -> tuple[float, float, float]:
+        k = key(targets, seed)
+        if k not in judged:
+            judged[k] = _at_x(solve(targets, seed), reference_problem(targets))
+        return judged[k]
 
     def r_template() -> None:
         over = _solver_core_overrides(ctx.obj)
@@ -1824,18 +1845,16 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def r_result() -> None:
         # judged against a problem of its own: the solver's copy is the solver's to spoil
         for targets in ((0.4, 0.75), ACTIVE_TARGETS):   # reachable; out of reach behind the constraint
-            res = make().solve(reference_problem(targets), seed=0)
-            _judge_result(res, reference_problem(targets), f"target {targets}")
+            judged[key(targets, 0)] = _judge_result(solve(targets, 0), reference_problem(targets), f"target {targets}")
         T = np.array([[0.3, 0.7], ACTIVE_TARGETS])
-        batch = make().solve(reference_problem(T.copy()), seed=1)
+        batch = solve(T, 1)
         assert len(batch) == len(T), f"a batch of {len(T)} targets gave {len(batch)} results"
         for i, r in enumerate(batch):
             _judge_result(r, reference_problem(T[i]), f"batch target {i}")
 
     def r_constraints() -> None:
-        res = make().solve(reference_problem(ACTIVE_TARGETS), seed=0)
         p = reference_problem(ACTIVE_TARGETS)
-        fit, err, viol, _, _ = p.evaluate_one(p.clip(np.asarray(res["x"], float)[None, :])[0])
+        fit, err, viol = at_x(ACTIVE_TARGETS, 0)
         assert fit <= ACTIVE_OPTIMUM + p.tolerance, \
             (f"targets {ACTIVE_TARGETS} with the constraint b >= 2c active: formula (6) at the answer is "
              f"{fit:.3g} (error {err:.3g}, constraint violation {viol:.3g}), the constrained optimum "
@@ -1857,8 +1876,7 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
         raise AssertionError("an unknown option was accepted")
 
     def r_solves() -> None:
-        s = make()
-        res = cast(SolveResult, s.solve(reference_problem(), seed=0))
+        res = cast(SolveResult, solve((0.4, 0.75), 0))   # reference_problem()'s targets
         assert np.shape(res.x) == (3,), f"x has shape {np.shape(res.x)}, expected (3,)"
         p = reference_problem()
         assert p.space.contains(res.x).all(), f"x {res.x} outside the feature bounds"

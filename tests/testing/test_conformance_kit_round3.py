@@ -22,14 +22,11 @@ from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver
 from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model
 from hapticsdk.testing.conformance import KitResult, format_report
-from kit_variants import API, ForceArm, constraint, dishonest, never
+from kit_variants import API, constraint, dishonest, never, rules_of
+from kit_variants import OutputArm as Arm
 
 needs_hardness = pytest.mark.skipif("omni-virtual" not in registry("actuator"),
                                     reason="hapticsdk-hardness not installed")
-
-
-def rules_of(v) -> set[str]:
-    return {x.rule for x in v}
 
 
 # ---------------------------------------------------------------------------
@@ -306,12 +303,6 @@ class MeasuredPlate(Plate):
     """readback_source must be "drive" or "output"."""
     name: ClassVar[str] = "kit-plate-measured"
     readback_source: ClassVar[str] = "measured"
-
-
-class Arm(ForceArm):
-    """A correct force device that reports the force its motors give (saturating at 3 N)."""
-    name: ClassVar[str] = "kit-arm3"
-    readback_source: ClassVar[str] = "output"
 
 
 Arm50 = dishonest(Arm, "kit-arm50")
