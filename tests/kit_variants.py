@@ -9,7 +9,7 @@ Importable as ``kit_variants`` through ``tests/conftest.py`` (the suite runs wit
 
 from __future__ import annotations
 
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable, ClassVar, Iterator
 
 import numpy as np
 
@@ -97,6 +97,18 @@ class LagCoil(Actuator):
 
     def _read_back(self) -> ChannelCommand:
         return ChannelCommand("vibration", frequency_hz=self.drive_f, amplitude=self.out_a)
+
+
+def registered(regs: Any) -> Iterator[None]:
+    """Register ``(registry, name, object)`` triples as if installed, for the duration of
+    the generator (a fixture body: ``yield from registered([...])``)."""
+    for reg, name, obj in regs:
+        reg.register(name, obj)
+    try:
+        yield
+    finally:
+        for reg, name, _ in regs:
+            reg.unregister(name)
 
 
 def rules_of(v: Any) -> set[str]:

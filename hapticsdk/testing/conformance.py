@@ -11,7 +11,7 @@ plugin-api-declared):
 
 * ``actuator``: class, template, limits-declared, options, privileged-options, lifecycle,
   close, bad-input, limits-enforced, safe-stop, read-back, output-follows-command, reopen,
-  instances, determinism, timing.
+  instances, servo-loop, determinism, timing.
 * ``device`` (an actuator that senses): the actuator rules plus state (for a simulated
   device also: its clock advances as it is stepped, and its position changes as its
   velocity says, within one declared encoder count).
@@ -198,6 +198,10 @@ RULE_TIME_BASE_S = 20.0
 RULE_TIME_FACTOR = 10.0
 
 _SIM = threading.local()
+#: the kit's own clock, bound at import: the dimension determinism rule moves the
+#: ``time`` module's clocks to other epochs while a renderer ticks
+_monotonic = time.monotonic
+_perf_counter = time.perf_counter
 
 
 def _sim_advance(dt: float) -> None:
@@ -248,11 +252,11 @@ def _guard(ctx: _Ctx, rule: str, fn: Callable[[], None]) -> None:
             _SIM.box = None
 
     th = threading.Thread(target=work, name=f"hapticsdk-kit {ctx.kind} {ctx.name!r} {rule}", daemon=True)
-    t0 = time.monotonic()
+    t0 = _monotonic()
     th.start()
     while th.is_alive():
         limit = ctx.time_base_s + RULE_TIME_FACTOR * sim[0]   # grows while the rule simulates
-        left = t0 + limit - time.monotonic()
+        left = t0 + limit - _monotonic()
         if left > 0:
             th.join(left)
         else:
@@ -335,9 +339,9 @@ def _fastest(fn: Callable[[], Any], n: int = TIMING_CALLS, budget_s: float | Non
     end = None
     i = 0
     while True:
-        t0 = time.perf_counter()
+        t0 = _perf_counter()
         fn()
-        t1 = time.perf_counter()
+        t1 = _perf_counter()
         best = min(best, t1 - t0)
         i += 1
         if i < n:
@@ -713,6 +717,150 @@ def _alternate_once(act: Actuator, t: float) -> None:
     finally:
         act.safety.settings = settings
 
+def _reached_at_write(act: Actuator, prev: ChannelCommand | None, new: ChannelCommand | None,
+                      rb: ChannelCommand | None) -> bool | None:
+    """Whether the read-back ``rb``, taken the instant ``new`` was written after ``prev`` had
+    settled (no simulated time between), already shows ``new`` in every field where the
+    two commands differ by more than twice the read-back tolerance; None when they do
+    not differ so (or nothing to compare)."""
+    if prev is None or new is None or rb is None:
+        return None
+    lim = act.limits
+    fs_f, fs_hz, fs_a = _full_scale(act)
+    pairs = [("force_n", _tol(act, getattr(lim, "force_resolution_n", None), fs_f)),
+             ("amplitude", _tol(act, lim.amplitude_resolution, fs_a))]
+    if (new.amplitude or 0.0) > 0 and (prev.amplitude or 0.0) > 0:
+        pairs.append(("frequency_hz", _tol(act, lim.frequency_resolution_hz, fs_hz)))
+    reached = []
+    for field, tol in pairs:
+        p, n = getattr(prev, field), getattr(new, field)
+        if p is None or n is None or abs(float(n) - float(p)) <= 2 * tol:
+            continue
+        r = getattr(rb, field)
+        reached.append(r is not None and abs(float(r) - float(n)) <= tol)
+    return all(reached) if reached else None
+
+
+#: wall time (s) the ``close`` rule gives a thread started while the actuator was open to
+#: end once ``close()`` has returned: the timing rules' sampling window
+#: (:data:`TIMING_WINDOW_S`), scheduling on a loaded machine; a thread that close() told
+#: to stop ends within it, one nobody told runs on
+THREAD_GRACE_S = 1.0
+
+
+def _threads_left(before: set[threading.Thread]) -> list[threading.Thread]:
+    """Threads alive now that were not in ``before``, each given up to
+    :data:`THREAD_GRACE_S` of wall time (all together) to end."""
+    end = _monotonic() + THREAD_GRACE_S
+    left = []
+    for th in threading.enumerate():
+        if th in before or th is threading.current_thread():
+            continue
+        th.join(max(end - _monotonic(), 0.0))
+        if th.is_alive():
+            left.append(th)
+    return left
+
+
+#: servo time (s) of the ``timing`` rule's long run: every command of one second of a
+#: 1 kHz loop is timed (a stall rarer than once per this many commands may go unseen)
+STALL_RUN_S = 1.0
+
+
+def _stalls(act: Actuator, limit_s: float) -> list[tuple[int, float]]:
+    """(index, wall s) of the commands of a run of :data:`STALL_RUN_S` of kit ticks
+    (the normal commands in turn, simulated time advancing) that took longer than
+    ``limit_s``."""
+    cmds = _normal_commands(act)
+    out = []
+    t = 0.0
+    for i in range(int(round(STALL_RUN_S / KIT_PERIOD_S))):
+        t += KIT_PERIOD_S
+        t0 = _perf_counter()
+        act.command(cmds[i % len(cmds)], now=t)
+        d = _perf_counter() - t0
+        if d > limit_s:
+            out.append((i, d))
+        _advance(act)
+    return out
+
+
+class _StillProbe(HapticDevice):
+    """The servo-loop rule's sensing device: a simulated stylus held still 1 mm into the
+    version-1 plane (in contact), commanding nothing itself."""
+    name = "kit-still-probe"
+    simulated = True
+    limits = ActuatorLimits(max_force_n=1.0)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.t = 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        pass
+
+    def _stop(self) -> None:
+        pass
+
+    def _read_state(self) -> Any:
+        from ..actuators import DeviceState
+        return DeviceState(t=self.t, position_mm=np.array([0.0, -1.0, 0.0]), velocity_mm_s=np.zeros(3))
+
+    def _step(self, dt: float) -> None:
+        self.t += dt
+
+
+class _Replay(DimensionRenderer):
+    """Sends one command on one role every tick (the servo-loop rule's renderer)."""
+
+    def __init__(self, cmd: ChannelCommand) -> None:
+        self.roles = (cmd.role,)
+        self.cmd = cmd
+
+    def tick(self, inp: TickInput) -> list[ChannelCommand]:
+        c = self.cmd
+        return [ChannelCommand(c.role, force_n=c.force_n, frequency_hz=c.frequency_hz, amplitude=c.amplitude)]
+
+
+class _LastSent:
+    """Servo-loop recorder: what the loop's safety layer let through on ``role`` and the
+    actuator's read-back, at the last tick."""
+
+    def __init__(self, act: Actuator) -> None:
+        self.act = act
+        self.sent: ChannelCommand | None = None
+        self.rb: ChannelCommand | None = None
+
+    def record(self, t: float, state: Any, sent: Mapping[str, ChannelCommand]) -> None:
+        self.sent = sent.get(self.act.channel)
+        self.rb = self.act.read_back()
+
+    def close(self) -> None:
+        pass
+
+
+def _in_servo_loop(act: Actuator, cmd: ChannelCommand) -> tuple[ChannelCommand | None, ChannelCommand | None]:
+    """Drive ``act`` (closed) with ``cmd`` from the core's :class:`ServoLoop`, simulated
+    time, in a worker thread of the standard library's (no kit code on its stack while the
+    actuator is commanded, as in a render), for the safety layer's start ramp, the declared
+    settle time and the time a declared force-rate limit takes to slew to ``cmd``. Returns
+    what the loop's safety layer let through at the last tick and the read-back then."""
+    from concurrent.futures import ThreadPoolExecutor
+    from ..runtime.loop import ServoLoop
+    n = _settle_ticks(act, ramp=True)
+    rate = act.limits.max_force_rate_n_per_tick
+    if rate and cmd.force_n:
+        n += int(math.ceil(abs(cmd.force_n) / rate))
+    rec = _LastSent(act)
+    loop = ServoLoop(_StillProbe(), [_Replay(ChannelCommand(act.channel, force_n=cmd.force_n,
+                                                            frequency_hz=cmd.frequency_hz, amplitude=cmd.amplitude))],
+                     {act.channel: act}, period_s=KIT_PERIOD_S, passivity=False, recorder=rec, cpu_time=False)
+    _sim_advance(n * KIT_PERIOD_S)
+    with ThreadPoolExecutor(1, thread_name_prefix="hapticsdk-servo") as pool:
+        pool.submit(loop.run, n * KIT_PERIOD_S).result()
+    return rec.sent, rec.rb
+
+
 def _takes_option(cls: type, key: str) -> bool:
     """Whether the constructor of actuator class ``cls`` takes the keyword option ``key``:
     named in its signature (without a ``**`` catch-all), else as the constructor answers
@@ -1008,6 +1156,18 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         err = getattr(a, "close_error", None)
         assert err is None, (f"the backend failed while closing: {type(err).__name__}: {err} (kept in "
                              f"close_error; close() stopped and released what it could)")
+        # what open() took, close() gives back: no thread started while it was open runs on
+        # (the open and close above started what a library starts once per process)
+        before = set(threading.enumerate())
+        for _ in range(2):
+            c = ctx.make()
+            c.open()
+            _drive(c, _normal_commands(c)[:2])
+            c.close()
+        left = _threads_left(before)
+        assert not left, (f"{len(left)} thread(s) started while it was open still run {THREAD_GRACE_S:g} s after "
+                          f"close() ({', '.join(repr(th.name) for th in left)}; two opens and closes): close() "
+                          f"must stop and join what open() started, or every reopen leaves one more behind")
         b = ctx.make()
         b.open()
         stops = _Spy(b)
@@ -1058,15 +1218,34 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             ctx.note("output-follows-command", "the actuator reports its drive record (readback_source 'drive'): "
                      "the kit compared what the backend wrote, not the physical output; declare "
                      "readback_source = 'output' where read_back measures or models the output")
+        # a modelled output that takes time to settle cannot show a new command the
+        # instant it is written (no simulated time passed)
+        lags = _reports_output(a) and bool(getattr(a, "simulated", False)) and \
+            float(getattr(a, "settle_time_s", 0.0) or 0.0) > 0
+        instant: list[bool] = []
         with a:
             if a.read_back() is None:
                 return   # reported by read-back
             t = 0.0
+            sent = None
             for c in _normal_commands(a) + _edge_commands(a):
+                if lags and sent is not None:
+                    t += KIT_PERIOD_S
+                    now = a.command(c, now=t)
+                    seen = _reached_at_write(a, sent, now, a.read_back())
+                    if seen is not None:
+                        instant.append(seen)
+                    _advance(a)
                 # held until the safety layer's output has been steady for the declared
                 # settle time (simulated time advances)
                 sent, t = _hold(a, c, t)
                 _assert_matches(a, sent, a.read_back())
+            assert not (instant and all(instant)), \
+                (f"the read-back showed each of {len(instant)} new commands the instant it was written, before any "
+                 f"simulated time passed, though the actuator declares readback_source 'output' and a settle time "
+                 f"of {a.settle_time_s:g} s: an output cannot reach a command in no time, so it reports the command "
+                 f"(its drive record), not the output; report the modelled output (advanced by step(dt)) or declare "
+                 f"readback_source = 'drive'")
             _alternate_once(a, t)
 
     def r_reopen() -> None:
@@ -1129,6 +1308,42 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         assert best <= COMMAND_BUDGET * KIT_PERIOD_S, \
             (f"command() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {COMMAND_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per actuator")
+        # the worst call: one that blocks longer than the safety layer's restart gap makes
+        # the next command a restart (a fault, the output ramped from zero); seen in two
+        # runs on new instances (a preempted call does not recur at the same place)
+        runs = []
+        for _ in range(2):
+            b = ctx.make()
+            limit = float(b.safety.settings.restart_after_s)
+            with b:
+                runs.append(_stalls(b, limit))
+            if not runs[-1]:
+                return
+        i = runs[0][0][0]
+        d = max(w for _, w in runs[0])
+        raise AssertionError(f"command() blocked for up to {d * 1e3:.0f} ms (first at call {i + 1} of a run of "
+                             f"{STALL_RUN_S / KIT_PERIOD_S:.0f}; {len(runs[0])} and {len(runs[1])} calls over the limit "
+                             f"in two runs), longer than the safety layer's restart_after_s {limit * 1e3:g} ms: the "
+                             f"servo loop misses that many periods and the next command restarts the output from "
+                             f"zero; never block in _command (a write timeout below the servo period, or a queue)")
+
+    def r_servo_loop() -> None:
+        a = ctx.make()
+        if a.check_available()[0] is False:
+            return
+        cmd = max(_startable_commands(a), key=_drive_size)
+        try:
+            sent, rb = _in_servo_loop(a, cmd)
+        finally:
+            a.close()
+        if rb is None:
+            return   # reported by read-back
+        try:
+            _assert_matches(a, sent, rb)
+        except AssertionError as exc:
+            raise AssertionError(f"driven by the core's ServoLoop (as a render drives it, from a thread of its "
+                                 f"own): {exc}; the kit's own holds saw it follow: it behaves differently in "
+                                 f"the loop") from None
 
     rules: list[tuple[str, Callable[[], None]]] = [
         ("class", r_class), ("template", r_template), ("limits-declared", r_limits), ("options", r_options),
@@ -1136,7 +1351,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         ("lifecycle", r_lifecycle), ("close", r_close), ("bad-input", r_bad_input),
         ("limits-enforced", r_limits_enforced), ("safe-stop", r_safe_stop), ("read-back", r_read_back),
         ("output-follows-command", r_follows), ("reopen", r_reopen), ("instances", r_instances),
-        ("determinism", r_determinism), ("timing", r_timing)]
+        ("servo-loop", r_servo_loop), ("determinism", r_determinism), ("timing", r_timing)]
     if device:
         rules.append(("state", r_state))
     _run_rules(ctx, rules, stop_after=("class",))
@@ -1198,11 +1413,11 @@ def _cost_ratio(c: Constraint, cols: Mapping[str, np.ndarray]) -> tuple[float, f
 
     best_c, best_r = math.inf, math.inf
     for i in range(COST_REPEATS):
-        t0 = time.perf_counter()
+        t0 = _perf_counter()
         [v * 0.5 for v in rows]
-        t1 = time.perf_counter()
+        t1 = _perf_counter()
         c.penalty(cols, "paper")
-        t2 = time.perf_counter()
+        t2 = _perf_counter()
         best_r, best_c = min(best_r, t1 - t0), min(best_c, t2 - t1)
         if i >= 1 and best_c <= 0.5 * COST_FACTOR * best_r:
             break
@@ -1257,10 +1472,91 @@ def _tick_unchanged(r: DimensionRenderer, inp: TickInput) -> list[ChannelCommand
     return cmds
 
 
+_TICKS = _tick_inputs()
+
+
 def _commands_of(d: PerceptionDimension, feats: Mapping[str, float]) -> list[Any]:
     """The commands of a new renderer of ``feats`` over the kit's ticks, as values."""
     r = d.renderer(dict(feats))
     return [[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)] for i in _tick_inputs()]
+
+
+#: epochs (s) the dimension ``determinism`` rule sets the process clocks to while a
+#: renderer ticks (each tick reads epoch + its TickInput.t): 8 drawn uniformly from
+#: 0..2e9 s (1970-2033) with a fixed seed, so a command that depends on the absolute wall
+#: time through any bucket from milliseconds to seasons (a value that flips every 0.5 s,
+#: every other hour, in summer) differs between them or from the real clock's (a
+#: two-valued bucket agrees with all 8 by chance once in 2^8), while a renderer reading
+#: only differences of the clock sees the same
+CLOCK_EPOCHS_S = tuple(float(e) for e in np.random.default_rng(2025).uniform(0.0, 2e9, 8))
+_CLOCKS = ("time", "monotonic", "perf_counter")
+
+
+def _commands_at_epoch(d: PerceptionDimension, feats: Mapping[str, float], epoch: float) -> list[Any]:
+    """:func:`_commands_of` with ``time.time``, ``time.monotonic`` and ``time.perf_counter``
+    (and their ``_ns`` forms, and ``time.localtime()`` / ``time.gmtime()`` without an
+    argument) reading ``epoch`` + the tick's ``t`` (the wall clock at another epoch,
+    advancing as the ticks do). Names bound at import (``from time import time``) and
+    ``datetime.now()`` are not moved."""
+    now = [epoch]
+    saved = {n: getattr(time, n) for n in _CLOCKS + tuple(c + "_ns" for c in _CLOCKS) + ("localtime", "gmtime")}
+    fake: dict[str, Callable[..., Any]] = {}
+    for c in _CLOCKS:
+        fake[c] = lambda: now[0]
+        fake[c + "_ns"] = lambda: int(now[0] * 1e9)
+    for c in ("localtime", "gmtime"):
+        fake[c] = lambda secs=None, _f=saved[c]: _f(now[0] if secs is None else secs)
+    r = d.renderer(dict(feats))
+    out = []
+    try:
+        for n, f in fake.items():
+            setattr(time, n, f)
+        for inp in _tick_inputs():
+            now[0] = epoch + inp.t
+            out.append([(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(inp)])
+    finally:
+        for n, f in saved.items():
+            setattr(time, n, f)
+    return out
+
+
+#: servo time (s) of the ``timing`` rule's long run of one renderer, and where its tick
+#: cost is measured (fastest of :data:`TIMING_CALLS`): after 1, 2, 4 and 8 s
+GROWTH_POINTS_S = (1.0, 2.0, 4.0, 8.0)
+#: the cost at the last point over the cost at the first that, rising at every doubling,
+#: fails the rule. A cost proportional to the history rises ~8 x from 1 s to 8 s; the
+#: fastest of 25 calls of an unchanged tick moves by far less than 2 x between two
+#: samples (the first-party renderers: see docs/plugin-authors.md); a state bounded in
+#: time (filters, buffers under 1 s) costs the same at every point
+GROWTH_FACTOR = 2.0
+
+
+def _run_inputs(k: int) -> TickInput:
+    """Kit tick ``k`` of a long run: the kit's ticks in turn, its time ``k`` periods."""
+    base = _TICKS[k % len(_TICKS)]
+    return TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
+                     velocity_mm_s=base.velocity_mm_s.copy(), in_contact=base.in_contact)
+
+
+def _cost_growth(r: DimensionRenderer) -> list[tuple[float, float]]:
+    """(run length s, fastest tick s) at :data:`GROWTH_POINTS_S` of a run of ``r``."""
+    k = 0
+    out = []
+    for at in GROWTH_POINTS_S:
+        n = int(round(at / KIT_PERIOD_S))
+        while k < n:
+            r.tick(_run_inputs(k))
+            _sim_advance(KIT_PERIOD_S)
+            k += 1
+        state = {"k": k}
+
+        def one() -> None:
+            r.tick(_run_inputs(state["k"]))
+            state["k"] += 1
+        out.append((at, _fastest(one)))
+        _sim_advance(TIMING_CALLS * KIT_PERIOD_S)
+        k = state["k"]
+    return out
 
 
 def _assert_follows_features(d: PerceptionDimension, mid: Mapping[str, float]) -> None:
@@ -1367,7 +1663,12 @@ def _dimension_rules(ctx: _Ctx) -> None:
         d = holder["d"]
         from ..dimensions import declared_roles
         specs = declared_roles(d)
-        for feats in (mid(), {f.name: f.lower for f in d.features}, {f.name: f.upper for f in d.features}):
+        # the middle and the ends, and each feature at the tenths of its declared range
+        # (the values scenes write, e.g. 0.3) with the others at the middle
+        grid = [mid(), {f.name: f.lower for f in d.features}, {f.name: f.upper for f in d.features}]
+        for f in d.features:
+            grid += [{**mid(), f.name: f.lower + (f.upper - f.lower) * k / 10} for k in range(1, 10)]
+        for feats in grid:
             r = d.renderer(feats)
             assert isinstance(r, DimensionRenderer), f"renderer() returned {type(r).__name__}"
             assert r.roles, "renderer declares no roles"
@@ -1409,6 +1710,11 @@ def _dimension_rules(ctx: _Ctx) -> None:
         d = holder["d"]
         outs = [_commands_of(d, mid()) for _ in range(2)]
         assert outs[0] == outs[1], "two renderers of the same features gave different commands"
+        for e in CLOCK_EPOCHS_S:
+            assert _commands_at_epoch(d, mid(), e) == outs[0], \
+                (f"the same features and ticks gave other commands with the process clocks (time.time, "
+                 f"time.monotonic, time.perf_counter, time.localtime) at another epoch ({e:.6g} s, advancing with the ticks' t): "
+                 f"the renderer reads the wall clock; take time from TickInput.t and dt")
 
     def r_roles() -> None:
         d = holder["d"]
@@ -1527,6 +1833,17 @@ def _dimension_rules(ctx: _Ctx) -> None:
         assert best <= TICK_BUDGET * KIT_PERIOD_S, \
             (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per renderer")
+        # and keeps that cost over a long run: a cost that grows with the run's length
+        # passes the budget at some length (a render may last 24 h)
+        pts = _cost_growth(d.renderer(mid()))
+        costs = [c for _, c in pts]
+        rising = all(b > a for a, b in zip(costs, costs[1:]))
+        assert not (rising and costs[-1] >= GROWTH_FACTOR * costs[0]), \
+            (f"the cost of tick() grows with the length of the run: fastest tick "
+             f"{', '.join(f'{c * 1e6:.3g} us after {s:g} s' for s, c in pts)} (rising at every doubling, "
+             f"{costs[-1] / costs[0]:.2g} x): it keeps and walks a history that grows every tick; at that rate it "
+             f"passes its {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms budget within a render; keep bounded state "
+             f"(a running sum, a fixed-size buffer)")
 
     def r_cost() -> None:
         d = holder["d"]
@@ -1915,10 +2232,10 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
 RULES: dict[str, tuple[str, ...]] = {
     "actuator": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
                  "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
-                 "output-follows-command", "reopen", "instances", "determinism", "timing"),
+                 "output-follows-command", "reopen", "instances", "servo-loop", "determinism", "timing"),
     "device": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
                "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
-               "output-follows-command", "reopen", "instances", "determinism", "timing", "state"),
+               "output-follows-command", "reopen", "instances", "servo-loop", "determinism", "timing", "state"),
     "dimension": ("import", "plugin-api-declared", "class", "features", "roles-declared", "constraints-vectorised",
                   "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
                   "renderer-bad-input", "determinism", "timing"),

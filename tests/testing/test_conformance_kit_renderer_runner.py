@@ -28,7 +28,7 @@ from hapticsdk.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_actuator, check_dimension
 from hapticsdk.testing.conformance import RULE_TIME_FACTOR, format_report
-from kit_variants import API, rules_of
+from kit_variants import API, registered, rules_of
 from kit_variants import LAG_COIL_MAX_V as MAX_V
 from kit_variants import LagCoil as Coil
 
@@ -90,13 +90,8 @@ class RModel(PerceptionModel):
 
 @pytest.fixture
 def installed():
-    regs = [(registry("actuator"), "kit-lag-coil", Coil), (registry("dimension"), "kit-rr", RDim),
-            (registry("model"), "kit-rr-model", RModel)]
-    for reg, n, obj in regs:
-        reg.register(n, obj)
-    yield
-    for reg, n, _ in regs:
-        reg.unregister(n)
+    yield from registered([(registry("actuator"), "kit-lag-coil", Coil), (registry("dimension"), "kit-rr", RDim),
+                           (registry("model"), "kit-rr-model", RModel)])
 
 
 def _dim(make: Callable, **attrs: Any) -> type[RDim]:

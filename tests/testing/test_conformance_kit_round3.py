@@ -22,7 +22,7 @@ from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver
 from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model
 from hapticsdk.testing.conformance import KitResult, format_report
-from kit_variants import API, constraint, dishonest, never, rules_of
+from kit_variants import API, constraint, dishonest, never, registered, rules_of
 from kit_variants import OutputArm as Arm
 
 needs_hardness = pytest.mark.skipif("omni-virtual" not in registry("actuator"),
@@ -582,13 +582,8 @@ class _GoodModel(PerceptionModel):
 @pytest.fixture
 def installed():
     """The plate, the dimension and its model registered as if installed."""
-    regs = [(registry("actuator"), "kit-plate", Plate), (registry("dimension"), "kit-stick", StickDim),
-            (registry("model"), "kit-stick-model", _GoodModel)]
-    for reg, n, obj in regs:
-        reg.register(n, obj)
-    yield
-    for reg, n, _ in regs:
-        reg.unregister(n)
+    yield from registered([(registry("actuator"), "kit-plate", Plate), (registry("dimension"), "kit-stick", StickDim),
+                           (registry("model"), "kit-stick-model", _GoodModel)])
 
 
 def _dim(**attrs):
@@ -847,6 +842,8 @@ COVERED_ELSEWHERE = {
     ("model", "responds"), ("solver", "template"), ("solver", "result"), ("solver", "constraints"),
     # tests/testing/test_conformance_kit_instances_state.py
     ("actuator", "instances"),
+    # tests/testing/test_conformance_kit_in_use.py
+    ("actuator", "servo-loop"),
 }
 
 
