@@ -754,8 +754,8 @@ def _threads_left(before: set[threading.Thread]) -> list[threading.Thread]:
     end = _monotonic() + THREAD_GRACE_S
     left = []
     for th in threading.enumerate():
-        if th in before or th is threading.current_thread():
-            continue
+        if th in before or th is threading.current_thread() or isinstance(th, threading._DummyThread):
+            continue   # a _DummyThread stands for a foreign (native) thread: listed until exit
         th.join(max(end - _monotonic(), 0.0))
         if th.is_alive():
             left.append(th)
