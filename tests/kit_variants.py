@@ -1,17 +1,19 @@
 """Builders shared by the conformance-kit tests (``tests/testing``) and the scene tests
-(``tests/scene``): a force device that reports the force its motors give, and one-line
-constraints (``x >= bound``) whose bound and value a test supplies, correct or broken.
+(``tests/scene``): a force device that reports the force its motors give (and the same
+declaring its read-back the output), a voice coil whose output lags its drive, one-line
+constraints (``x >= bound``) whose bound and value a test supplies, correct or broken, and
+``rules_of`` (the rules a kit result names).
 
 Importable as ``kit_variants`` through ``tests/conftest.py`` (the suite runs with
 ``--import-mode=importlib``, which puts no test folder on ``sys.path``)."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable, ClassVar, Iterator
 
 import numpy as np
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
 from hapticsdk.dimensions import ChannelCommand, Constraint
 
 #: the plugin API the test plugins are written for
@@ -49,6 +51,69 @@ class ForceArm(HapticDevice):
 
     def _step(self, dt: float) -> None:
         self.t += dt
+
+
+class OutputArm(ForceArm):
+    """:class:`ForceArm` declaring that its read-back is the output (the force its motors
+    give), so the kit's output rules judge it."""
+    name: ClassVar[str] = "kit-arm-output"
+    readback_source: ClassVar[str] = "output"
+
+
+#: the lagging coil's declared max_amplitude (V)
+LAG_COIL_MAX_V = 2.0
+
+
+class LagCoil(Actuator):
+    """A correct simulated voice coil: its output follows the drive through a first-order
+    lag (``tau_s``) it declares (settle time ``tau ln(full scale / half a step)``), and it
+    reads back that output."""
+    hapticsdk_api = API
+    name: ClassVar[str] = "kit-lag-coil"
+    channel: ClassVar[str] = "vibration"
+    simulated: ClassVar[bool] = True
+    readback_source: ClassVar[str] = "output"
+    tau_s = 0.002
+    limits = ActuatorLimits(frequency_range_hz=(30.0, 300.0), max_amplitude=LAG_COIL_MAX_V, amplitude_unit="V",
+                            amplitude_resolution=0.001, frequency_resolution_hz=0.5,
+                            settle_time_s=0.002 * float(np.log(LAG_COIL_MAX_V / 0.0005)))
+
+    def __init__(self, **kw: Any) -> None:
+        super().__init__(**kw)
+        self.drive_f = self.drive_a = self.out_a = 0.0
+
+    def _open(self) -> None:
+        self.drive_f = self.drive_a = self.out_a = 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        self.drive_f = float(cmd.frequency_hz or 0.0)
+        self.drive_a = float(cmd.amplitude or 0.0)
+
+    def _stop(self) -> None:
+        self.drive_a = 0.0
+
+    def step(self, dt: float) -> None:
+        self.out_a += (self.drive_a - self.out_a) * (1.0 - float(np.exp(-dt / self.tau_s)))
+
+    def _read_back(self) -> ChannelCommand:
+        return ChannelCommand("vibration", frequency_hz=self.drive_f, amplitude=self.out_a)
+
+
+def registered(regs: Any) -> Iterator[None]:
+    """Register ``(registry, name, object)`` triples as if installed, for the duration of
+    the generator (a fixture body: ``yield from registered([...])``)."""
+    for reg, name, obj in regs:
+        reg.register(name, obj)
+    try:
+        yield
+    finally:
+        for reg, name, _ in regs:
+            reg.unregister(name)
+
+
+def rules_of(v: Any) -> set[str]:
+    """The rules a kit result's violations name."""
+    return {x.rule for x in v}
 
 
 def dishonest(arm: type[ForceArm], name: str) -> type[ForceArm]:

@@ -11,7 +11,7 @@ plugin-api-declared):
 
 * ``actuator``: class, template, limits-declared, options, privileged-options, lifecycle,
   close, bad-input, limits-enforced, safe-stop, read-back, output-follows-command, reopen,
-  instances, determinism, timing.
+  instances, servo-loop, determinism, timing.
 * ``device`` (an actuator that senses): the actuator rules plus state (for a simulated
   device also: its clock advances as it is stepped, and its position changes as its
   velocity says, within one declared encoder count).
@@ -50,13 +50,12 @@ and :mod:`hapticsdk.testing.pytest_plugin`.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Callable, Mapping, Sequence, cast
 
 import numpy as np
@@ -199,6 +198,10 @@ RULE_TIME_BASE_S = 20.0
 RULE_TIME_FACTOR = 10.0
 
 _SIM = threading.local()
+#: the kit's own clock, bound at import: the dimension determinism rule moves the
+#: ``time`` module's clocks to other epochs while a renderer ticks
+_monotonic = time.monotonic
+_perf_counter = time.perf_counter
 
 
 def _sim_advance(dt: float) -> None:
@@ -249,14 +252,14 @@ def _guard(ctx: _Ctx, rule: str, fn: Callable[[], None]) -> None:
             _SIM.box = None
 
     th = threading.Thread(target=work, name=f"hapticsdk-kit {ctx.kind} {ctx.name!r} {rule}", daemon=True)
-    t0 = time.monotonic()
+    t0 = _monotonic()
     th.start()
-    while True:
-        limit = ctx.time_base_s + RULE_TIME_FACTOR * sim[0]
-        th.join(max(t0 + limit - time.monotonic(), 0.0))
-        if not th.is_alive():
-            break
-        if time.monotonic() - t0 >= ctx.time_base_s + RULE_TIME_FACTOR * sim[0]:
+    while th.is_alive():
+        limit = ctx.time_base_s + RULE_TIME_FACTOR * sim[0]   # grows while the rule simulates
+        left = t0 + limit - _monotonic()
+        if left > 0:
+            th.join(left)
+        else:
             ctx.stuck = rule
             ctx.fail(rule, f"did not finish within {limit:.3g} s ({ctx.time_base_s:g} s + {RULE_TIME_FACTOR:g} x "
                            f"the {sim[0]:.3g} s of device time it simulated); stuck in {_where(th)}. A call that "
@@ -284,12 +287,11 @@ def _run_rules(ctx: _Ctx, rules: Sequence[tuple[str, Callable[[], None]]], *,
     stop after a rule of ``stop_after`` when anything failed so far, and after a rule that
     did not finish (:func:`_guard`; the rules not run are named in the result's notes)."""
     before = len(ctx.violations)   # plugin-api-declared runs first and never stops the rest
-    for i, (rule, fn) in enumerate(rules):
-        if ctx.only and rule not in ctx.only and rule not in always:
-            continue
+    chosen = [(r, fn) for r, fn in rules if not ctx.only or r in ctx.only or r in always]
+    for i, (rule, fn) in enumerate(chosen):
         _guard(ctx, rule, fn)
         if ctx.stuck:
-            rest = [r for r, _ in rules[i + 1:] if not ctx.only or r in ctx.only or r in always]
+            rest = [r for r, _ in chosen[i + 1:]]
             if rest:
                 ctx.note("not-run", f"rule {ctx.stuck!r} did not finish, so the kit did not run {rest}")
             break
@@ -308,8 +310,7 @@ JACOBIAN_RTOL = 0.01
 #: intensity errors, :class:`~hapticsdk.solvers.SolveProblem`'s ``tolerance``). An output
 #: spanning less changes by less than that whatever features a solver picks, so the
 #: features do not steer it: a constant, or a model that ignores its inputs.
-RESPONSE_MIN = float(next(f.default for f in dataclasses.fields(SolveProblem)
-                          if f.name == "tolerance"))  # type: ignore[arg-type]  # a field with a default
+RESPONSE_MIN = float(SolveProblem.tolerance)
 #: random points of the box ``responds`` evaluates besides its landmarks (an output that
 #: moves only inside a region under ~1/256 of the box may pass unseen)
 RESPONSE_SAMPLES = 256
@@ -334,14 +335,13 @@ def _fastest(fn: Callable[[], Any], n: int = TIMING_CALLS, budget_s: float | Non
     up to ``TIMING_WINDOW_S`` of wall time: on a busy machine the fastest call is the
     one that was not preempted, and a longer sample finds it (a call that is slow
     every time stays slow)."""
-    import time
     best = math.inf
     end = None
     i = 0
     while True:
-        t0 = time.perf_counter()
+        t0 = _perf_counter()
         fn()
-        t1 = time.perf_counter()
+        t1 = _perf_counter()
         best = min(best, t1 - t0)
         i += 1
         if i < n:
@@ -401,6 +401,11 @@ def _normal_commands(act: Actuator) -> list[ChannelCommand]:
     return out
 
 
+def _drive_size(c: ChannelCommand) -> float:
+    """How hard ``c`` drives: its force plus its amplitude (absolute values)."""
+    return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
+
+
 def _startable_commands(act: Actuator) -> list[ChannelCommand]:
     """The normal commands (:func:`_normal_commands`) the safety layer's start gate lets
     through from rest (force within ``start_max_force_n``), smallest drive first; all of
@@ -408,7 +413,7 @@ def _startable_commands(act: Actuator) -> list[ChannelCommand]:
     gate = getattr(act.safety.settings, "start_max_force_n", None)
     cmds = _normal_commands(act)
     ok = [k for k in cmds if gate is None or abs(k.force_n or 0.0) <= gate] or cmds
-    return sorted(ok, key=lambda k: abs(k.force_n or 0.0) + abs(k.amplitude or 0.0))
+    return sorted(ok, key=_drive_size)
 
 
 def _edge_commands(act: Actuator) -> list[ChannelCommand]:
@@ -626,7 +631,7 @@ def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int
             a.command(cmd, now=t)
         elif i == n_on:
             a.stop()
-        a.step(float(dts[i]))
+        _advance(a, float(dts[i]))
         t += float(dts[i])
         read()
     return dts, np.array(ts), np.array(xs), np.array(vs)
@@ -677,11 +682,9 @@ def _alternate_once(act: Actuator, t: float) -> None:
     ramp advances per write, not per second, has moved one step). The kit's own safety
     layer is told that servo period (``set_period``: a command stays in force that long) and
     a restart gap above it, for this part only."""
-    def drive(c: ChannelCommand) -> float:
-        return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
     cmds: list[ChannelCommand] = []
-    for c in sorted(_normal_commands(act), key=drive, reverse=True):
-        if all(drive(c) != drive(k) for k in cmds):
+    for c in sorted(_normal_commands(act), key=_drive_size, reverse=True):
+        if all(_drive_size(c) != _drive_size(k) for k in cmds):
             cmds.append(c)
     if len(cmds) < 2:
         return
@@ -713,6 +716,150 @@ def _alternate_once(act: Actuator, t: float) -> None:
             prev = sent
     finally:
         act.safety.settings = settings
+
+def _reached_at_write(act: Actuator, prev: ChannelCommand | None, new: ChannelCommand | None,
+                      rb: ChannelCommand | None) -> bool | None:
+    """Whether the read-back ``rb``, taken the instant ``new`` was written after ``prev`` had
+    settled (no simulated time between), already shows ``new`` in every field where the
+    two commands differ by more than twice the read-back tolerance; None when they do
+    not differ so (or nothing to compare)."""
+    if prev is None or new is None or rb is None:
+        return None
+    lim = act.limits
+    fs_f, fs_hz, fs_a = _full_scale(act)
+    pairs = [("force_n", _tol(act, getattr(lim, "force_resolution_n", None), fs_f)),
+             ("amplitude", _tol(act, lim.amplitude_resolution, fs_a))]
+    if (new.amplitude or 0.0) > 0 and (prev.amplitude or 0.0) > 0:
+        pairs.append(("frequency_hz", _tol(act, lim.frequency_resolution_hz, fs_hz)))
+    reached = []
+    for field, tol in pairs:
+        p, n = getattr(prev, field), getattr(new, field)
+        if p is None or n is None or abs(float(n) - float(p)) <= 2 * tol:
+            continue
+        r = getattr(rb, field)
+        reached.append(r is not None and abs(float(r) - float(n)) <= tol)
+    return all(reached) if reached else None
+
+
+#: wall time (s) the ``close`` rule gives a thread started while the actuator was open to
+#: end once ``close()`` has returned: the timing rules' sampling window
+#: (:data:`TIMING_WINDOW_S`), scheduling on a loaded machine; a thread that close() told
+#: to stop ends within it, one nobody told runs on
+THREAD_GRACE_S = 1.0
+
+
+def _threads_left(before: set[threading.Thread]) -> list[threading.Thread]:
+    """Threads alive now that were not in ``before``, each given up to
+    :data:`THREAD_GRACE_S` of wall time (all together) to end."""
+    end = _monotonic() + THREAD_GRACE_S
+    left = []
+    for th in threading.enumerate():
+        if th in before or th is threading.current_thread() or isinstance(th, threading._DummyThread):
+            continue   # a _DummyThread stands for a foreign (native) thread: listed until exit
+        th.join(max(end - _monotonic(), 0.0))
+        if th.is_alive():
+            left.append(th)
+    return left
+
+
+#: servo time (s) of the ``timing`` rule's long run: every command of one second of a
+#: 1 kHz loop is timed (a stall rarer than once per this many commands may go unseen)
+STALL_RUN_S = 1.0
+
+
+def _stalls(act: Actuator, limit_s: float) -> list[tuple[int, float]]:
+    """(index, wall s) of the commands of a run of :data:`STALL_RUN_S` of kit ticks
+    (the normal commands in turn, simulated time advancing) that took longer than
+    ``limit_s``."""
+    cmds = _normal_commands(act)
+    out = []
+    t = 0.0
+    for i in range(int(round(STALL_RUN_S / KIT_PERIOD_S))):
+        t += KIT_PERIOD_S
+        t0 = _perf_counter()
+        act.command(cmds[i % len(cmds)], now=t)
+        d = _perf_counter() - t0
+        if d > limit_s:
+            out.append((i, d))
+        _advance(act)
+    return out
+
+
+class _StillProbe(HapticDevice):
+    """The servo-loop rule's sensing device: a simulated stylus held still 1 mm into the
+    version-1 plane (in contact), commanding nothing itself."""
+    name = "kit-still-probe"
+    simulated = True
+    limits = ActuatorLimits(max_force_n=1.0)
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.t = 0.0
+
+    def _command(self, cmd: ChannelCommand) -> None:
+        pass
+
+    def _stop(self) -> None:
+        pass
+
+    def _read_state(self) -> Any:
+        from ..actuators import DeviceState
+        return DeviceState(t=self.t, position_mm=np.array([0.0, -1.0, 0.0]), velocity_mm_s=np.zeros(3))
+
+    def _step(self, dt: float) -> None:
+        self.t += dt
+
+
+class _Replay(DimensionRenderer):
+    """Sends one command on one role every tick (the servo-loop rule's renderer)."""
+
+    def __init__(self, cmd: ChannelCommand) -> None:
+        self.roles = (cmd.role,)
+        self.cmd = cmd
+
+    def tick(self, inp: TickInput) -> list[ChannelCommand]:
+        c = self.cmd
+        return [ChannelCommand(c.role, force_n=c.force_n, frequency_hz=c.frequency_hz, amplitude=c.amplitude)]
+
+
+class _LastSent:
+    """Servo-loop recorder: what the loop's safety layer let through on ``role`` and the
+    actuator's read-back, at the last tick."""
+
+    def __init__(self, act: Actuator) -> None:
+        self.act = act
+        self.sent: ChannelCommand | None = None
+        self.rb: ChannelCommand | None = None
+
+    def record(self, t: float, state: Any, sent: Mapping[str, ChannelCommand]) -> None:
+        self.sent = sent.get(self.act.channel)
+        self.rb = self.act.read_back()
+
+    def close(self) -> None:
+        pass
+
+
+def _in_servo_loop(act: Actuator, cmd: ChannelCommand) -> tuple[ChannelCommand | None, ChannelCommand | None]:
+    """Drive ``act`` (closed) with ``cmd`` from the core's :class:`ServoLoop`, simulated
+    time, in a worker thread of the standard library's (no kit code on its stack while the
+    actuator is commanded, as in a render), for the safety layer's start ramp, the declared
+    settle time and the time a declared force-rate limit takes to slew to ``cmd``. Returns
+    what the loop's safety layer let through at the last tick and the read-back then."""
+    from concurrent.futures import ThreadPoolExecutor
+    from ..runtime.loop import ServoLoop
+    n = _settle_ticks(act, ramp=True)
+    rate = act.limits.max_force_rate_n_per_tick
+    if rate and cmd.force_n:
+        n += int(math.ceil(abs(cmd.force_n) / rate))
+    rec = _LastSent(act)
+    loop = ServoLoop(_StillProbe(), [_Replay(ChannelCommand(act.channel, force_n=cmd.force_n,
+                                                            frequency_hz=cmd.frequency_hz, amplitude=cmd.amplitude))],
+                     {act.channel: act}, period_s=KIT_PERIOD_S, passivity=False, recorder=rec, cpu_time=False)
+    _sim_advance(n * KIT_PERIOD_S)
+    with ThreadPoolExecutor(1, thread_name_prefix="hapticsdk-servo") as pool:
+        pool.submit(loop.run, n * KIT_PERIOD_S).result()
+    return rec.sent, rec.rb
+
 
 def _takes_option(cls: type, key: str) -> bool:
     """Whether the constructor of actuator class ``cls`` takes the keyword option ``key``:
@@ -914,7 +1061,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         c = ctx.make()
         with c:
             top = _normal_commands(c)
-            big = max(top, key=lambda k: abs(k.force_n or 0.0) + abs(k.amplitude or 0.0))
+            big = max(top, key=_drive_size)
             _hold(c, big, 0.0)
             assert c.stop() is True, "stop() returned False (backend stop failed)"
             _rest_after(c, "after stop()")
@@ -1009,6 +1156,18 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         err = getattr(a, "close_error", None)
         assert err is None, (f"the backend failed while closing: {type(err).__name__}: {err} (kept in "
                              f"close_error; close() stopped and released what it could)")
+        # what open() took, close() gives back: no thread started while it was open runs on
+        # (the open and close above started what a library starts once per process)
+        before = set(threading.enumerate())
+        for _ in range(2):
+            c = ctx.make()
+            c.open()
+            _drive(c, _normal_commands(c)[:2])
+            c.close()
+        left = _threads_left(before)
+        assert not left, (f"{len(left)} thread(s) started while it was open still run {THREAD_GRACE_S:g} s after "
+                          f"close() ({', '.join(repr(th.name) for th in left)}; two opens and closes): close() "
+                          f"must stop and join what open() started, or every reopen leaves one more behind")
         b = ctx.make()
         b.open()
         stops = _Spy(b)
@@ -1059,15 +1218,34 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             ctx.note("output-follows-command", "the actuator reports its drive record (readback_source 'drive'): "
                      "the kit compared what the backend wrote, not the physical output; declare "
                      "readback_source = 'output' where read_back measures or models the output")
+        # a modelled output that takes time to settle cannot show a new command the
+        # instant it is written (no simulated time passed)
+        lags = _reports_output(a) and bool(getattr(a, "simulated", False)) and \
+            float(getattr(a, "settle_time_s", 0.0) or 0.0) > 0
+        instant: list[bool] = []
         with a:
             if a.read_back() is None:
                 return   # reported by read-back
             t = 0.0
+            sent = None
             for c in _normal_commands(a) + _edge_commands(a):
+                if lags and sent is not None:
+                    t += KIT_PERIOD_S
+                    now = a.command(c, now=t)
+                    seen = _reached_at_write(a, sent, now, a.read_back())
+                    if seen is not None:
+                        instant.append(seen)
+                    _advance(a)
                 # held until the safety layer's output has been steady for the declared
                 # settle time (simulated time advances)
                 sent, t = _hold(a, c, t)
                 _assert_matches(a, sent, a.read_back())
+            assert not (instant and all(instant)), \
+                (f"the read-back showed each of {len(instant)} new commands the instant it was written, before any "
+                 f"simulated time passed, though the actuator declares readback_source 'output' and a settle time "
+                 f"of {a.settle_time_s:g} s: an output cannot reach a command in no time, so it reports the command "
+                 f"(its drive record), not the output; report the modelled output (advanced by step(dt)) or declare "
+                 f"readback_source = 'drive'")
             _alternate_once(a, t)
 
     def r_reopen() -> None:
@@ -1094,12 +1272,10 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             try:
                 if a.read_back() is None or b.read_back() is None:
                     return   # reported by read-back
-                def drive(c: ChannelCommand) -> float:
-                    return abs(c.force_n or 0.0) + abs(c.amplitude or 0.0)
-                start = [c for c in _startable_commands(a) if drive(c) > 0]
+                start = [c for c in _startable_commands(a) if _drive_size(c) > 0]
                 if not start:
                     return
-                top = max(_normal_commands(a), key=drive)   # allowed once running (past the start gate)
+                top = max(_normal_commands(a), key=_drive_size)   # allowed once running (past the start gate)
                 # a driven, b left alone (its time advances too): b stays at rest
                 t = 0.0
                 sent_a, _, t = _hold_both(a, start[-1], b, None, t)
@@ -1112,7 +1288,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                 _assert_matches(a, sent_a, a.read_back())
                 # one closed: the other goes on following its own commands (a new one)
                 a.close()
-                sent_b, _, t = _hold_both(b, top, None, None, t)
+                sent_b, t = _hold(b, top, t)
                 _assert_matches(b, sent_b, b.read_back())
             finally:
                 b.close()
@@ -1132,6 +1308,42 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         assert best <= COMMAND_BUDGET * KIT_PERIOD_S, \
             (f"command() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {COMMAND_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per actuator")
+        # the worst call: one that blocks longer than the safety layer's restart gap makes
+        # the next command a restart (a fault, the output ramped from zero); seen in two
+        # runs on new instances (a preempted call does not recur at the same place)
+        runs = []
+        for _ in range(2):
+            b = ctx.make()
+            limit = float(b.safety.settings.restart_after_s)
+            with b:
+                runs.append(_stalls(b, limit))
+            if not runs[-1]:
+                return
+        i = runs[0][0][0]
+        d = max(w for _, w in runs[0])
+        raise AssertionError(f"command() blocked for up to {d * 1e3:.0f} ms (first at call {i + 1} of a run of "
+                             f"{STALL_RUN_S / KIT_PERIOD_S:.0f}; {len(runs[0])} and {len(runs[1])} calls over the limit "
+                             f"in two runs), longer than the safety layer's restart_after_s {limit * 1e3:g} ms: the "
+                             f"servo loop misses that many periods and the next command restarts the output from "
+                             f"zero; never block in _command (a write timeout below the servo period, or a queue)")
+
+    def r_servo_loop() -> None:
+        a = ctx.make()
+        if a.check_available()[0] is False:
+            return
+        cmd = max(_startable_commands(a), key=_drive_size)
+        try:
+            sent, rb = _in_servo_loop(a, cmd)
+        finally:
+            a.close()
+        if rb is None:
+            return   # reported by read-back
+        try:
+            _assert_matches(a, sent, rb)
+        except AssertionError as exc:
+            raise AssertionError(f"driven by the core's ServoLoop (as a render drives it, from a thread of its "
+                                 f"own): {exc}; the kit's own holds saw it follow: it behaves differently in "
+                                 f"the loop") from None
 
     rules: list[tuple[str, Callable[[], None]]] = [
         ("class", r_class), ("template", r_template), ("limits-declared", r_limits), ("options", r_options),
@@ -1139,7 +1351,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         ("lifecycle", r_lifecycle), ("close", r_close), ("bad-input", r_bad_input),
         ("limits-enforced", r_limits_enforced), ("safe-stop", r_safe_stop), ("read-back", r_read_back),
         ("output-follows-command", r_follows), ("reopen", r_reopen), ("instances", r_instances),
-        ("determinism", r_determinism), ("timing", r_timing)]
+        ("servo-loop", r_servo_loop), ("determinism", r_determinism), ("timing", r_timing)]
     if device:
         rules.append(("state", r_state))
     _run_rules(ctx, rules, stop_after=("class",))
@@ -1196,17 +1408,16 @@ def _cost_ratio(c: Constraint, cols: Mapping[str, np.ndarray]) -> tuple[float, f
     ``penalty`` batch over that of the per-row reference (one Python operation per row of
     a column the constraint reads; :data:`COST_FACTOR`), interleaved. Stops early when a
     timing is clearly within the limit."""
-    import time
     name = next((f for f in c.features if f in cols), next(iter(cols)))
     rows = np.asarray(cols[name], float).tolist()
 
     best_c, best_r = math.inf, math.inf
     for i in range(COST_REPEATS):
-        t0 = time.perf_counter()
+        t0 = _perf_counter()
         [v * 0.5 for v in rows]
-        t1 = time.perf_counter()
+        t1 = _perf_counter()
         c.penalty(cols, "paper")
-        t2 = time.perf_counter()
+        t2 = _perf_counter()
         best_r, best_c = min(best_r, t1 - t0), min(best_c, t2 - t1)
         if i >= 1 and best_c <= 0.5 * COST_FACTOR * best_r:
             break
@@ -1235,7 +1446,6 @@ def _tick_inputs(read_only: bool = False) -> list[TickInput]:
 
 def _input_fields(inp: TickInput) -> dict[str, Any]:
     """What a renderer reads of a tick input, by value (arrays as lists)."""
-    from dataclasses import fields
     return {f.name: (lambda v: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)(getattr(inp, f.name))
             for f in fields(inp)}
 
@@ -1262,10 +1472,91 @@ def _tick_unchanged(r: DimensionRenderer, inp: TickInput) -> list[ChannelCommand
     return cmds
 
 
+_TICKS = _tick_inputs()
+
+
 def _commands_of(d: PerceptionDimension, feats: Mapping[str, float]) -> list[Any]:
     """The commands of a new renderer of ``feats`` over the kit's ticks, as values."""
     r = d.renderer(dict(feats))
     return [[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)] for i in _tick_inputs()]
+
+
+#: epochs (s) the dimension ``determinism`` rule sets the process clocks to while a
+#: renderer ticks (each tick reads epoch + its TickInput.t): 8 drawn uniformly from
+#: 0..2e9 s (1970-2033) with a fixed seed, so a command that depends on the absolute wall
+#: time through any bucket from milliseconds to seasons (a value that flips every 0.5 s,
+#: every other hour, in summer) differs between them or from the real clock's (a
+#: two-valued bucket agrees with all 8 by chance once in 2^8), while a renderer reading
+#: only differences of the clock sees the same
+CLOCK_EPOCHS_S = tuple(float(e) for e in np.random.default_rng(2025).uniform(0.0, 2e9, 8))
+_CLOCKS = ("time", "monotonic", "perf_counter")
+
+
+def _commands_at_epoch(d: PerceptionDimension, feats: Mapping[str, float], epoch: float) -> list[Any]:
+    """:func:`_commands_of` with ``time.time``, ``time.monotonic`` and ``time.perf_counter``
+    (and their ``_ns`` forms, and ``time.localtime()`` / ``time.gmtime()`` without an
+    argument) reading ``epoch`` + the tick's ``t`` (the wall clock at another epoch,
+    advancing as the ticks do). Names bound at import (``from time import time``) and
+    ``datetime.now()`` are not moved."""
+    now = [epoch]
+    saved = {n: getattr(time, n) for n in _CLOCKS + tuple(c + "_ns" for c in _CLOCKS) + ("localtime", "gmtime")}
+    fake: dict[str, Callable[..., Any]] = {}
+    for c in _CLOCKS:
+        fake[c] = lambda: now[0]
+        fake[c + "_ns"] = lambda: int(now[0] * 1e9)
+    for c in ("localtime", "gmtime"):
+        fake[c] = lambda secs=None, _f=saved[c]: _f(now[0] if secs is None else secs)
+    r = d.renderer(dict(feats))
+    out = []
+    try:
+        for n, f in fake.items():
+            setattr(time, n, f)
+        for inp in _tick_inputs():
+            now[0] = epoch + inp.t
+            out.append([(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(inp)])
+    finally:
+        for n, f in saved.items():
+            setattr(time, n, f)
+    return out
+
+
+#: servo time (s) of the ``timing`` rule's long run of one renderer, and where its tick
+#: cost is measured (fastest of :data:`TIMING_CALLS`): after 1, 2, 4 and 8 s
+GROWTH_POINTS_S = (1.0, 2.0, 4.0, 8.0)
+#: the cost at the last point over the cost at the first that, rising at every doubling,
+#: fails the rule. A cost proportional to the history rises ~8 x from 1 s to 8 s; the
+#: fastest of 25 calls of an unchanged tick moves by far less than 2 x between two
+#: samples (the first-party renderers: see docs/plugin-authors.md); a state bounded in
+#: time (filters, buffers under 1 s) costs the same at every point
+GROWTH_FACTOR = 2.0
+
+
+def _run_inputs(k: int) -> TickInput:
+    """Kit tick ``k`` of a long run: the kit's ticks in turn, its time ``k`` periods."""
+    base = _TICKS[k % len(_TICKS)]
+    return TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
+                     velocity_mm_s=base.velocity_mm_s.copy(), in_contact=base.in_contact)
+
+
+def _cost_growth(r: DimensionRenderer) -> list[tuple[float, float]]:
+    """(run length s, fastest tick s) at :data:`GROWTH_POINTS_S` of a run of ``r``."""
+    k = 0
+    out = []
+    for at in GROWTH_POINTS_S:
+        n = int(round(at / KIT_PERIOD_S))
+        while k < n:
+            r.tick(_run_inputs(k))
+            _sim_advance(KIT_PERIOD_S)
+            k += 1
+        state = {"k": k}
+
+        def one() -> None:
+            r.tick(_run_inputs(state["k"]))
+            state["k"] += 1
+        out.append((at, _fastest(one)))
+        _sim_advance(TIMING_CALLS * KIT_PERIOD_S)
+        k = state["k"]
+    return out
 
 
 def _assert_follows_features(d: PerceptionDimension, mid: Mapping[str, float]) -> None:
@@ -1372,7 +1663,12 @@ def _dimension_rules(ctx: _Ctx) -> None:
         d = holder["d"]
         from ..dimensions import declared_roles
         specs = declared_roles(d)
-        for feats in (mid(), {f.name: f.lower for f in d.features}, {f.name: f.upper for f in d.features}):
+        # the middle and the ends, and each feature at the tenths of its declared range
+        # (the values scenes write, e.g. 0.3) with the others at the middle
+        grid = [mid(), {f.name: f.lower for f in d.features}, {f.name: f.upper for f in d.features}]
+        for f in d.features:
+            grid += [{**mid(), f.name: f.lower + (f.upper - f.lower) * k / 10} for k in range(1, 10)]
+        for feats in grid:
             r = d.renderer(feats)
             assert isinstance(r, DimensionRenderer), f"renderer() returned {type(r).__name__}"
             assert r.roles, "renderer declares no roles"
@@ -1412,12 +1708,13 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_determinism() -> None:
         d = holder["d"]
-        outs = []
-        for _ in range(2):
-            r = d.renderer(mid())
-            outs.append([[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)]
-                         for i in _tick_inputs()])
+        outs = [_commands_of(d, mid()) for _ in range(2)]
         assert outs[0] == outs[1], "two renderers of the same features gave different commands"
+        for e in CLOCK_EPOCHS_S:
+            assert _commands_at_epoch(d, mid(), e) == outs[0], \
+                (f"the same features and ticks gave other commands with the process clocks (time.time, "
+                 f"time.monotonic, time.perf_counter, time.localtime) at another epoch ({e:.6g} s, advancing with the ticks' t): "
+                 f"the renderer reads the wall clock; take time from TickInput.t and dt")
 
     def r_roles() -> None:
         d = holder["d"]
@@ -1536,6 +1833,17 @@ def _dimension_rules(ctx: _Ctx) -> None:
         assert best <= TICK_BUDGET * KIT_PERIOD_S, \
             (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per renderer")
+        # and keeps that cost over a long run: a cost that grows with the run's length
+        # passes the budget at some length (a render may last 24 h)
+        pts = _cost_growth(d.renderer(mid()))
+        costs = [c for _, c in pts]
+        rising = all(b > a for a, b in zip(costs, costs[1:]))
+        assert not (rising and costs[-1] >= GROWTH_FACTOR * costs[0]), \
+            (f"the cost of tick() grows with the length of the run: fastest tick "
+             f"{', '.join(f'{c * 1e6:.3g} us after {s:g} s' for s, c in pts)} (rising at every doubling, "
+             f"{costs[-1] / costs[0]:.2g} x): it keeps and walks a history that grows every tick; at that rate it "
+             f"passes its {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms budget within a render; keep bounded state "
+             f"(a running sum, a fixed-size buffer)")
 
     def r_cost() -> None:
         d = holder["d"]
@@ -1785,9 +2093,17 @@ def _solver_core_overrides(cls: type) -> list[str]:
     return [m for m in ("solve", "_call_backend", "_solve_single") if getattr(cls, m, None) is not getattr(Solver, m)]
 
 
-def _judge_result(res: Any, problem: SolveProblem, where: str) -> None:
+def _at_x(res: Any, problem: SolveProblem) -> tuple[float, float, float]:
+    """(formula (6), error, constraint violation) the core computes at the ``x`` of ``res``
+    for the (one-target) ``problem``."""
+    fit, err, viol, _, _ = problem.evaluate_one(problem.clip(np.asarray(res["x"], float)[None, :])[0])
+    return fit, err, viol
+
+
+def _judge_result(res: Any, problem: SolveProblem, where: str) -> tuple[float, float, float]:
     """``res`` carries :data:`RESULT_FIELDS` and what it claims (error, fun, violation,
-    success) is what the core computes at its ``x`` for the (one-target) ``problem``."""
+    success) is what the core computes at its ``x`` for the (one-target) ``problem``.
+    Returns that (:func:`_at_x`)."""
     missing = [k for k in RESULT_FIELDS if not (isinstance(res, Mapping) and k in res)]
     assert not missing, f"{where}: the result lacks {missing} (every result carries {list(RESULT_FIELDS)})"
     x = np.asarray(res["x"], float)
@@ -1798,7 +2114,7 @@ def _judge_result(res: Any, problem: SolveProblem, where: str) -> None:
         f"{where}: nfev {res['nfev']!r} is not a count"
     assert _finite(res["time_s"]) and res["time_s"] is not None and res["time_s"] >= 0, \
         f"{where}: time_s {res['time_s']!r}"
-    fit, err, viol, _, _ = problem.evaluate_one(problem.clip(x[None, :])[0])
+    fit, err, viol = _at_x(res, problem)
     claims = {"error": (res["error"], err, REPORT_ATOL),
               "constraint_violation": (res["constraint_violation"], viol, REPORT_ATOL),
               "fun": (res["fun"], fit, REPORT_ATOL * max(1.0, abs(fit)))}
@@ -1810,11 +2126,33 @@ def _judge_result(res: Any, problem: SolveProblem, where: str) -> None:
     assert near or bool(res["success"]) == ok, \
         (f"{where}: success {bool(res['success'])}, but at the returned x the error is {err:.3g} (tolerance "
          f"{problem.tolerance:g}) and the constraint violation {viol:.3g}")
+    return fit, err, viol
 
 
 def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def make() -> Solver:
         return ctx.obj(**dict(options))
+
+    # the rules solve the same reference problems: each (targets, seed) is solved once, on
+    # a new solver, and judged at its x once (a solver that spoils its own copy of the
+    # problem spoils no other rule's: each rule judges against a problem of its own)
+    solved: dict[tuple[str, int], Any] = {}
+    judged: dict[tuple[str, int], tuple[float, float, float]] = {}
+
+    def key(targets: Any, seed: int) -> tuple[str, int]:
+        return repr(np.asarray(targets, float).tolist()), seed
+
+    def solve(targets: Any, seed: int) -> Any:
+        k = key(targets, seed)
+        if k not in solved:
+            solved[k] = make().solve(reference_problem(np.array(targets, float)), seed=seed)
+        return solved[k]
+
+    def at_x(targets: Any, seed: int) -> tuple[float, float, float]:
+        k = key(targets, seed)
+        if k not in judged:
+            judged[k] = _at_x(solve(targets, seed), reference_problem(targets))
+        return judged[k]
 
     def r_template() -> None:
         over = _solver_core_overrides(ctx.obj)
@@ -1824,18 +2162,16 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def r_result() -> None:
         # judged against a problem of its own: the solver's copy is the solver's to spoil
         for targets in ((0.4, 0.75), ACTIVE_TARGETS):   # reachable; out of reach behind the constraint
-            res = make().solve(reference_problem(targets), seed=0)
-            _judge_result(res, reference_problem(targets), f"target {targets}")
+            judged[key(targets, 0)] = _judge_result(solve(targets, 0), reference_problem(targets), f"target {targets}")
         T = np.array([[0.3, 0.7], ACTIVE_TARGETS])
-        batch = make().solve(reference_problem(T.copy()), seed=1)
+        batch = solve(T, 1)
         assert len(batch) == len(T), f"a batch of {len(T)} targets gave {len(batch)} results"
         for i, r in enumerate(batch):
             _judge_result(r, reference_problem(T[i]), f"batch target {i}")
 
     def r_constraints() -> None:
-        res = make().solve(reference_problem(ACTIVE_TARGETS), seed=0)
         p = reference_problem(ACTIVE_TARGETS)
-        fit, err, viol, _, _ = p.evaluate_one(p.clip(np.asarray(res["x"], float)[None, :])[0])
+        fit, err, viol = at_x(ACTIVE_TARGETS, 0)
         assert fit <= ACTIVE_OPTIMUM + p.tolerance, \
             (f"targets {ACTIVE_TARGETS} with the constraint b >= 2c active: formula (6) at the answer is "
              f"{fit:.3g} (error {err:.3g}, constraint violation {viol:.3g}), the constrained optimum "
@@ -1857,8 +2193,7 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
         raise AssertionError("an unknown option was accepted")
 
     def r_solves() -> None:
-        s = make()
-        res = cast(SolveResult, s.solve(reference_problem(), seed=0))
+        res = cast(SolveResult, solve((0.4, 0.75), 0))   # reference_problem()'s targets
         assert np.shape(res.x) == (3,), f"x has shape {np.shape(res.x)}, expected (3,)"
         p = reference_problem()
         assert p.space.contains(res.x).all(), f"x {res.x} outside the feature bounds"
@@ -1897,10 +2232,10 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
 RULES: dict[str, tuple[str, ...]] = {
     "actuator": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
                  "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
-                 "output-follows-command", "reopen", "instances", "determinism", "timing"),
+                 "output-follows-command", "reopen", "instances", "servo-loop", "determinism", "timing"),
     "device": ("import", "plugin-api-declared", "class", "template", "limits-declared", "options",
                "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
-               "output-follows-command", "reopen", "instances", "determinism", "timing", "state"),
+               "output-follows-command", "reopen", "instances", "servo-loop", "determinism", "timing", "state"),
     "dimension": ("import", "plugin-api-declared", "class", "features", "roles-declared", "constraints-vectorised",
                   "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
                   "renderer-bad-input", "determinism", "timing"),

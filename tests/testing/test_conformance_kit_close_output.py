@@ -5,52 +5,16 @@ the kit now asks the simulated backend itself after its declared settle time."""
 
 from __future__ import annotations
 
-import math
-from typing import Any, ClassVar
+from typing import ClassVar
 
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.testing import check
-from kit_variants import API
+from kit_variants import LagCoil
 
 
-class _LagCoil(Actuator):
-    """A simulated coil whose output follows its drive with a first-order lag it declares."""
-
-    hapticsdk_api = API
-    name: ClassVar[str] = "kit-lag-coil"
-    channel: ClassVar[str] = "vibration"
-    simulated: ClassVar[bool] = True
-    readback_source: ClassVar[str] = "output"
-    tau_s = 0.002
-    limits = ActuatorLimits(frequency_range_hz=(30.0, 300.0), max_amplitude=2.0, amplitude_unit="V",
-                            amplitude_resolution=0.001, frequency_resolution_hz=0.5,
-                            settle_time_s=0.002 * math.log(2.0 / 0.0005))
-
-    def __init__(self, **kw: Any) -> None:
-        super().__init__(**kw)
-        self.drive_f = self.drive_a = self.out_a = 0.0
-
-    def _open(self) -> None:
-        self.drive_f = self.drive_a = self.out_a = 0.0
-
-    def _command(self, cmd: ChannelCommand) -> None:
-        self.drive_f = float(cmd.frequency_hz or 0.0)
-        self.drive_a = float(cmd.amplitude or 0.0)
-
-    def _stop(self) -> None:
-        self.drive_a = 0.0
-
-    def step(self, dt: float) -> None:
-        self.out_a += (self.drive_a - self.out_a) * (1.0 - math.exp(-dt / self.tau_s))
-
-    def _read_back(self) -> ChannelCommand:
-        return ChannelCommand("vibration", frequency_hz=self.drive_f, amplitude=self.out_a)
-
-
-class _FlushOnClose(_LagCoil):
+class _FlushOnClose(LagCoil):
     """Its _close re-sends the last non-zero drive after the stop."""
 
     name = "kit-flush-on-close"
@@ -65,7 +29,7 @@ class _FlushOnClose(_LagCoil):
         self.drive_a = self._last
 
 
-class _RefusesWhenClosed(_LagCoil):
+class _RefusesWhenClosed(LagCoil):
     """A backend that refuses to be read once closed: not a violation."""
 
     name = "kit-refuses-closed"
@@ -76,7 +40,7 @@ class _RefusesWhenClosed(_LagCoil):
         return super()._read_back()
 
 
-@pytest.mark.parametrize("cls", [_LagCoil, _RefusesWhenClosed])
+@pytest.mark.parametrize("cls", [LagCoil, _RefusesWhenClosed])
 def test_honest_simulated_actuators_pass(cls):
     v = check("actuator", cls)
     assert not [x for x in v if x.rule == "close"], v

@@ -21,11 +21,7 @@ from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.testing import check_actuator, check_device
 from hapticsdk.testing.conformance import format_report
-from kit_variants import API, ForceArm
-
-
-def rules_of(v) -> set[str]:
-    return {x.rule for x in v}
+from kit_variants import API, ForceArm, rules_of
 
 
 class Coil(Actuator):

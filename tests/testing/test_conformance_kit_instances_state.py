@@ -15,22 +15,13 @@ from hapticsdk.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError
 from hapticsdk.testing import check, check_device
 from hapticsdk.testing.conformance import format_report
-from kit_variants import API, ForceArm
-
-
-def rules_of(v) -> set[str]:
-    return {x.rule for x in v}
+from kit_variants import API, rules_of
+from kit_variants import OutputArm as Arm
 
 
 # ---------------------------------------------------------------------------
 # instances
 # ---------------------------------------------------------------------------
-
-class Arm(ForceArm):
-    """A correct force device reporting the force its motors give."""
-    name: ClassVar[str] = "kit-arm-own-state"
-    readback_source: ClassVar[str] = "output"
-
 
 class SharedArm(Arm):
     """Keeps its motor force in a class-level dict: every instance drives one output."""

@@ -21,7 +21,6 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import ValidationError
 from hapticsdk.features import Feature, FeatureSpace
@@ -29,47 +28,10 @@ from hapticsdk.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_actuator, check_dimension
 from hapticsdk.testing.conformance import RULE_TIME_FACTOR, format_report
-from kit_variants import API
+from kit_variants import API, registered, rules_of
+from kit_variants import LAG_COIL_MAX_V as MAX_V
+from kit_variants import LagCoil as Coil
 
-MAX_V = 2.0   # the coil's declared max_amplitude
-
-
-def rules_of(v) -> set[str]:
-    return {x.rule for x in v}
-
-
-class Coil(Actuator):
-    """A correct voice coil: its output follows the drive through a first-order lag it
-    declares (settle time ``tau ln(full scale / half a step)``)."""
-    hapticsdk_api = API
-    name: ClassVar[str] = "kit-rr-coil"
-    channel: ClassVar[str] = "vibration"
-    simulated: ClassVar[bool] = True
-    readback_source: ClassVar[str] = "output"
-    tau_s = 0.002
-    limits = ActuatorLimits(frequency_range_hz=(30.0, 300.0), max_amplitude=MAX_V, amplitude_unit="V",
-                            amplitude_resolution=0.001, frequency_resolution_hz=0.5,
-                            settle_time_s=0.002 * float(np.log(MAX_V / 0.0005)))
-
-    def __init__(self, **kw: Any) -> None:
-        super().__init__(**kw)
-        self.f, self.drive, self.out = 0.0, 0.0, 0.0
-
-    def _open(self) -> None:
-        self.f, self.drive, self.out = 0.0, 0.0, 0.0
-
-    def _command(self, cmd: ChannelCommand) -> None:
-        self.f = float(cmd.frequency_hz or 0.0)
-        self.drive = float(cmd.amplitude or 0.0)
-
-    def _stop(self) -> None:
-        self.drive = 0.0
-
-    def step(self, dt: float) -> None:
-        self.out += (self.drive - self.out) * (1.0 - np.exp(-dt / self.tau_s))
-
-    def _read_back(self) -> ChannelCommand:
-        return ChannelCommand("vibration", frequency_hz=self.f, amplitude=self.out)
 
 
 def _correct(inp, a: float, b: float) -> list[ChannelCommand]:
@@ -97,7 +59,7 @@ class RDim(PerceptionDimension):
     name = "kit-rr"
     features = (Feature("kit-rr.a", "1", 0.0, 1.0), Feature("kit-rr.b", "1", 0.0, 1.0))
     render_features = ("kit-rr.a", "kit-rr.b")
-    default_actuators: ClassVar[dict[str, str]] = {"buzz": "kit-rr-coil"}
+    default_actuators: ClassVar[dict[str, str]] = {"buzz": "kit-lag-coil"}
     roles: ClassVar[dict[str, RoleSpec]] = {"buzz": RoleSpec("vibration", {"frequency_hz": "Hz", "amplitude": "V"})}
     default_model = "kit-rr-model"
     make: ClassVar[Callable] = staticmethod(_correct)
@@ -128,13 +90,8 @@ class RModel(PerceptionModel):
 
 @pytest.fixture
 def installed():
-    regs = [(registry("actuator"), "kit-rr-coil", Coil), (registry("dimension"), "kit-rr", RDim),
-            (registry("model"), "kit-rr-model", RModel)]
-    for reg, n, obj in regs:
-        reg.register(n, obj)
-    yield
-    for reg, n, _ in regs:
-        reg.unregister(n)
+    yield from registered([(registry("actuator"), "kit-lag-coil", Coil), (registry("dimension"), "kit-rr", RDim),
+                           (registry("model"), "kit-rr-model", RModel)])
 
 
 def _dim(make: Callable, **attrs: Any) -> type[RDim]:
@@ -297,7 +254,7 @@ def test_a_thermal_role_may_hold_its_set_point_out_of_contact(installed):
 
     def hold(inp, a, b):
         return _correct(inp, a, b) + [ChannelCommand("heat", amplitude=30.0 + 5.0 * a)]
-    HDim = _dim(hold, default_actuators={"buzz": "kit-rr-coil", "heat": "peltier-virtual"},
+    HDim = _dim(hold, default_actuators={"buzz": "kit-lag-coil", "heat": "peltier-virtual"},
                 roles={**RDim.roles, "heat": RoleSpec("thermal", {"amplitude": "degC"})})
 
     class HR(_R):
@@ -388,7 +345,7 @@ class StopAborts(Coil):
     name: ClassVar[str] = "kit-rr-abort"
 
     def _stop(self) -> None:
-        self.drive = 0.0
+        self.drive_a = 0.0
         if self.is_open:
             raise _Abort("driver aborted")
 

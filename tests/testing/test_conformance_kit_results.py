@@ -19,11 +19,7 @@ from hapticsdk.solvers import SolveProblem, Solver, SolverOutput
 from hapticsdk.testing import check_model, check_solver
 from hapticsdk.testing.conformance import (ACTIVE_OPTIMUM, ACTIVE_TARGETS, RESPONSE_MIN, format_report,
                                            reference_problem)
-from kit_variants import API
-
-
-def rules_of(v) -> set[str]:
-    return {x.rule for x in v}
+from kit_variants import API, rules_of
 
 
 # ---------------------------------------------------------------------------

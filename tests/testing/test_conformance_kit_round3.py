@@ -22,14 +22,11 @@ from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver
 from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model
 from hapticsdk.testing.conformance import KitResult, format_report
-from kit_variants import API, ForceArm, constraint, dishonest, never
+from kit_variants import API, constraint, dishonest, never, registered, rules_of
+from kit_variants import OutputArm as Arm
 
 needs_hardness = pytest.mark.skipif("omni-virtual" not in registry("actuator"),
                                     reason="hapticsdk-hardness not installed")
-
-
-def rules_of(v) -> set[str]:
-    return {x.rule for x in v}
 
 
 # ---------------------------------------------------------------------------
@@ -306,12 +303,6 @@ class MeasuredPlate(Plate):
     """readback_source must be "drive" or "output"."""
     name: ClassVar[str] = "kit-plate-measured"
     readback_source: ClassVar[str] = "measured"
-
-
-class Arm(ForceArm):
-    """A correct force device that reports the force its motors give (saturating at 3 N)."""
-    name: ClassVar[str] = "kit-arm3"
-    readback_source: ClassVar[str] = "output"
 
 
 Arm50 = dishonest(Arm, "kit-arm50")
@@ -591,13 +582,8 @@ class _GoodModel(PerceptionModel):
 @pytest.fixture
 def installed():
     """The plate, the dimension and its model registered as if installed."""
-    regs = [(registry("actuator"), "kit-plate", Plate), (registry("dimension"), "kit-stick", StickDim),
-            (registry("model"), "kit-stick-model", _GoodModel)]
-    for reg, n, obj in regs:
-        reg.register(n, obj)
-    yield
-    for reg, n, _ in regs:
-        reg.unregister(n)
+    yield from registered([(registry("actuator"), "kit-plate", Plate), (registry("dimension"), "kit-stick", StickDim),
+                           (registry("model"), "kit-stick-model", _GoodModel)])
 
 
 def _dim(**attrs):
@@ -856,6 +842,8 @@ COVERED_ELSEWHERE = {
     ("model", "responds"), ("solver", "template"), ("solver", "result"), ("solver", "constraints"),
     # tests/testing/test_conformance_kit_instances_state.py
     ("actuator", "instances"),
+    # tests/testing/test_conformance_kit_in_use.py
+    ("actuator", "servo-loop"),
 }
 
 

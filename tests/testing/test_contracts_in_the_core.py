@@ -64,7 +64,8 @@ def test_a_reported_output_within_one_step_of_rest_passes_the_kit_and_ends_the_r
     from hapticsdk_roughness.virtual import PiezoVirtual, piezo_limits
 
     class ReadingPiezo(PiezoVirtual):
-        """Reports its measured output, 0.7 of its declared step above its drive."""
+        """Reports its measured output: the synthesised amplitude (ramped, advanced by
+        step()), read 0.7 of its declared step high."""
         hapticsdk_api = ">=1.2,<2"
         name: ClassVar[str] = "kit-reading-piezo"
         readback_source: ClassVar[str] = "output"
@@ -76,7 +77,7 @@ def test_a_reported_output_within_one_step_of_rest_passes_the_kit_and_ends_the_r
         def _read_back(self):
             rb = super()._read_back()
             return ChannelCommand("vibration", frequency_hz=rb.frequency_hz,
-                                  amplitude=rb.amplitude + 0.7 * self.limits.amplitude_resolution)
+                                  amplitude=self.osc.amplitude + 0.7 * self.limits.amplitude_resolution)
     registry("actuator").register("kit-reading-piezo", ReadingPiezo)
     try:
         assert check_actuator(ReadingPiezo) == []
