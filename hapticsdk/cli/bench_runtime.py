@@ -62,6 +62,11 @@ def register_bench(bench_sub: Any) -> None:
                    help="request SCHED_FIFO priority P, 1..99 (reported if refused; prefer with --realtime)")
     p.add_argument("--mlockall", action="store_true", help="lock the process's memory (Linux; reported if refused)")
     p.add_argument("--declared-rt-machine", action="store_true", help="judge the jitter limits (pass/fail)")
+    p.add_argument("--baseline", metavar="REF", default=None,
+                   help="instead: the tick of git ref REF and of this code side by side, interleaved in one run "
+                        "(needs a git checkout; simulated clock; --seconds per run)")
+    p.add_argument("--rounds", type=bounded_int(1, 100), default=3,
+                   help="with --baseline: interleaved rounds (default 3)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_timing)
 
@@ -157,9 +162,27 @@ def _fidelity(args: argparse.Namespace) -> int:
 def _timing(args: argparse.Namespace) -> int:
     from ..benchmarks.timing import format_table, run_timing
     from . import emit
+    if args.baseline is not None:
+        return _timing_baseline(args)
     rt = {"cpu": args.pin_cpu, "fifo_priority": args.fifo_priority, "mlockall": args.mlockall}
     d = run_timing(args.seconds, realtime=args.realtime, load=args.load, period_s=args.period, rt=rt,
                    declared_rt_machine=args.declared_rt_machine)
     text = (f"{d['ticks']} ticks ({', '.join(d['dimensions'])}), overruns {d['overruns']}\n" + format_table([d]))
     emit(d, args.json, text)
+    return 0
+
+
+def _timing_baseline(args: argparse.Namespace) -> int:
+    """``bench timing --baseline REF``: :func:`hapticsdk.benchmarks.baseline.run_baseline`."""
+    from ..benchmarks.baseline import format_baseline, run_baseline
+    from ..errors import ValidationError
+    from . import emit
+    other = [f for f, on in (("--realtime", args.realtime), ("--load", args.load),
+                             ("--pin-cpu", args.pin_cpu is not None), ("--fifo-priority", args.fifo_priority is not None),
+                             ("--mlockall", args.mlockall), ("--declared-rt-machine", args.declared_rt_machine)) if on]
+    if other:
+        raise ValidationError(f"--baseline compares the tick's compute cost on the simulated clock; it does not "
+                              f"take {', '.join(other)}", field="--baseline")
+    d = run_baseline(args.baseline, seconds=args.seconds, rounds=args.rounds, period_s=args.period)
+    emit(d, args.json, format_baseline(d))
     return 0
