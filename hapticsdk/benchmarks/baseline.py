@@ -44,14 +44,18 @@ from typing import Any
 from ..errors import ValidationError
 from ..quantiles import median
 
-#: the measurement each child runs (the same source for both trees); argv: seconds,
-#: period, 1 to take the editable-install finders out first
-SCENE = r'''
-import sys
-if sys.argv[3] == "1":   # import from PYTHONPATH, not from the environment's editable installs
+#: first lines of a child's code: with ``HAPTICSDK_BASELINE_TREE`` set, import from
+#: PYTHONPATH, not from the environment's editable installs
+PRELUDE = r'''
+import os, sys
+if os.environ.get("HAPTICSDK_BASELINE_TREE"):
     sys.meta_path[:] = [f for f in sys.meta_path
                         if not str(getattr(f, "__module__", "")).startswith("__editable__")
                         and not str(getattr(type(f), "__module__", "")).startswith("__editable__")]
+'''
+
+#: the measurement each child runs (the same source for both trees); argv: seconds, period
+SCENE = PRELUDE + r'''
 import json, time
 import hapticsdk
 from hapticsdk.plugins import registry
@@ -136,18 +140,29 @@ def _child_env(tree: Path | None) -> dict[str, str]:
     return env
 
 
+def run_code(tree: Path | None, code: str, args: list[str], timeout_s: float = 600.0) -> dict[str, Any]:
+    """Run ``code`` (starting with :data:`PRELUDE`) in a child of this interpreter that
+    imports from ``tree`` (``None``: this environment's code) and prints one JSON object
+    as its last line, which is returned. Raises RuntimeError with the child's last error
+    line when it fails."""
+    env = _child_env(tree)
+    if tree is not None:
+        env["HAPTICSDK_BASELINE_TREE"] = str(tree)
+    else:
+        env.pop("HAPTICSDK_BASELINE_TREE", None)
+    out = subprocess.run([sys.executable, "-c", code, *args], env=env, capture_output=True, text=True,
+                         timeout=timeout_s, cwd=tree)   # `python -c` imports from its working folder first
+    if out.returncode != 0:
+        last = (out.stderr.strip().splitlines() or ["(no output)"])[-1]
+        raise RuntimeError(f"the measurement failed in {'the baseline tree' if tree else 'this tree'}: {last}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
 def run_child(tree: Path | None, seconds: float, period_s: float) -> dict[str, Any]:
     """One measurement (:data:`SCENE`) in a child of this interpreter, importing from
     ``tree`` (``None``: this environment's code). Raises RuntimeError with the child's
     last error line when it fails, or when it imported code from elsewhere."""
-    out = subprocess.run([sys.executable, "-c", SCENE, repr(float(seconds)), repr(float(period_s)),
-                          "1" if tree is not None else "0"],
-                         env=_child_env(tree), capture_output=True, text=True, timeout=max(600.0, 60 * seconds),
-                         cwd=tree)   # `python -c` imports from its working folder first
-    if out.returncode != 0:
-        last = (out.stderr.strip().splitlines() or ["(no output)"])[-1]
-        raise RuntimeError(f"the measurement failed in {'the baseline tree' if tree else 'this tree'}: {last}")
-    d = json.loads(out.stdout.strip().splitlines()[-1])
+    d = run_code(tree, SCENE, [repr(float(seconds)), repr(float(period_s))], timeout_s=max(600.0, 60 * seconds))
     if tree is not None:
         root = str(tree.resolve())
         wrong = [f for f in d["files"] if not str(Path(f).resolve()).startswith(root)]
