@@ -204,9 +204,10 @@ class Trace:
         self.best_error: list[np.ndarray] = []
         self.violation: list[np.ndarray] = []
 
-    def record(self, nfev: int, best_error: np.ndarray, violation: np.ndarray | None = None) -> None:
+    def record(self, nfev: int, best_error: np.ndarray | float, violation: np.ndarray | float | None = None) -> None:
         """Record one iteration: evaluations so far, best error per target ``(m,)`` and its
-        constraint violation (zeros when not given); the time is taken now.
+        constraint violation (zeros when not given); the time is taken now. A trace of one
+        target also takes both as plain floats.
         """
         self.times.append(time.perf_counter() - self.t0)
         self.nfev.append(int(nfev))

@@ -187,3 +187,15 @@ def test_one_targeted_dimension_takes_the_same_step():
         assert np.all(np.abs(r.x - want) <= cond * 64 * np.finfo(float).eps * span), (h, r.x, want)
         checked += 1
     assert checked >= 5
+
+
+def test_the_fast_paths_trace_row_is_the_answers_evaluation():
+    """The one-target trace is recorded from plain floats (``Trace.record``): its row is
+    the answer's error and violation, the numbers the result reports."""
+    import hapticsdk as hs
+    r = hs.solve({"hardness": 0.5, "roughness": 0.5}, method="amortised")
+    assert "Gauss-Newton" in r.message
+    row = r.trace[-1]
+    assert row["best_error"] == r.error and row["constraint_violation"] == r.constraint_violation
+    assert row["best_error"] != row["constraint_violation"]      # distinguishable (violation 0, error > 0)
+    assert row["nfev"] <= r.nfev and row["time_s"] >= 0.0
