@@ -163,6 +163,13 @@ def run_child(tree: Path | None, seconds: float, period_s: float) -> dict[str, A
     ``tree`` (``None``: this environment's code). Raises RuntimeError with the child's
     last error line when it fails, or when it imported code from elsewhere."""
     d = run_code(tree, SCENE, [repr(float(seconds)), repr(float(period_s))], timeout_s=max(600.0, 60 * seconds))
+    _check_files(tree, d)
+    return d
+
+
+def _check_files(tree: Path | None, d: dict[str, Any]) -> None:
+    """RuntimeError unless the child's imported ``files`` lie in ``tree`` (or, for
+    ``None``, are this process's own package)."""
     if tree is not None:
         root = str(tree.resolve())
         wrong = [f for f in d["files"] if not str(Path(f).resolve()).startswith(root)]
@@ -172,7 +179,6 @@ def run_child(tree: Path | None, seconds: float, period_s: float) -> dict[str, A
         import hapticsdk
         if Path(d["files"][0]).resolve() != Path(hapticsdk.__file__).resolve():
             raise RuntimeError(f"the child imported {d['files'][0]}, not this code ({hapticsdk.__file__})")
-    return d
 
 
 def summarise(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> dict[str, Any]:
@@ -193,10 +199,11 @@ def summarise(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> dict[str,
             "ratio_median_per_round": per_med, "ratio_p99_per_round": per_p99}
 
 
-def run_baseline(ref: str, seconds: float = 10.0, rounds: int = 3, period_s: float = 0.001,
-                 progress: Any = None) -> dict[str, Any]:
-    """The tick of ``ref`` and of this code, ``rounds`` interleaved pairs (see the module
-    doc); returns :func:`summarise` plus the commit, the settings and the machine."""
+def _interleaved(ref: str, rounds: int, run: Any, progress: Any = None
+                 ) -> tuple[str, dict[str, Any], dict[str, Any], list[dict[str, Any]], list[dict[str, Any]]]:
+    """``run(tree)`` for the export of ``ref`` and for this code (``tree=None``),
+    ``rounds`` pairs, the order alternating; returns the commit, the machine before and
+    after, and the baseline's and this code's results."""
     from .reference import machine
     if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
         raise ValidationError(f"rounds must be an integer >= 1, got {rounds!r}", field="--rounds")
@@ -210,23 +217,132 @@ def run_baseline(ref: str, seconds: float = 10.0, rounds: int = 3, period_s: flo
         for r in range(rounds):
             order = [(old, tree), (new, None)] if r % 2 == 0 else [(new, None), (old, tree)]
             for runs, t in order:
-                runs.append(run_child(t, seconds, period_s))
+                runs.append(run(t))
                 if progress is not None:
                     progress(f"round {r + 1}/{rounds}: {'baseline' if t else 'this tree'} done")
+    return commit, before, machine(), old, new
+
+
+def run_baseline(ref: str, seconds: float = 10.0, rounds: int = 3, period_s: float = 0.001,
+                 progress: Any = None) -> dict[str, Any]:
+    """The tick of ``ref`` and of this code, ``rounds`` interleaved pairs (see the module
+    doc); returns :func:`summarise` plus the commit, the settings and the machine."""
+    commit, before, after, old, new = _interleaved(ref, rounds, lambda t: run_child(t, seconds, period_s),
+                                                   progress)
     out = summarise(old, new)
     out.update({"ref": ref, "commit": commit, "seconds": seconds, "rounds": rounds, "period_s": period_s,
                 "clock": "time.thread_time_ns (on-CPU time of the servo thread)",
                 "statistic": "per run: median and p99 over the ticks; reported: median over rounds",
-                "machine_before": before, "machine_after": machine()})
+                "machine_before": before, "machine_after": after})
     return out
+
+
+#: a live session (``hapticsdk.benchmarks.live.run_live`` of the child's own tree, with
+#: its reference loop); argv: isolation, application load, seconds, period, record
+LIVE = PRELUDE + r'''
+import json
+import hapticsdk
+from hapticsdk.benchmarks.live import run_live
+isolation, load, seconds, period, record = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4]), sys.argv[5]
+res = run_live(isolation, (load,), seconds, period_s=period, record=record)
+row = res[0] if isinstance(res, list) else res
+print(json.dumps({"jitter": row["jitter"], "reference": row.get("reference"),
+                  "state_us": row["app_call_us"]["state"], "state_p99_us": row["app_call_us"]["state_p99"],
+                  "files": [hapticsdk.__file__, sys.modules["hapticsdk.benchmarks.live"].__file__]}))
+'''
+
+
+def run_live_child(tree: Path | None, isolation: str, load: str, seconds: float, period_s: float,
+                   record: str) -> dict[str, Any]:
+    """One live session (:data:`LIVE`) in a child importing from ``tree`` (``None``: this
+    code); its servo process inherits the child's environment and working folder, so it
+    imports from the same tree."""
+    d = run_code(tree, LIVE, [isolation, load, repr(float(seconds)), repr(float(period_s)), record],
+                 timeout_s=max(600.0, 20 * seconds))
+    _check_files(tree, d)
+    return d
+
+
+def summarise_live(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> dict[str, Any]:
+    """Medians over rounds of each tree's period jitter (p50 / p99 / max, us), missed-tick
+    rate and ``state()`` call (p50 / p99, us), the reference loop's jitter of the same
+    minutes (the bare reference), each tree's jitter p99 over its reference's, and this
+    code over the baseline paired by round (jitter p99, ``state()`` p50)."""
+    def side(runs: list[dict[str, Any]]) -> dict[str, Any]:
+        j = {k: median([r["jitter"][k] for r in runs]) for k in ("p50_us", "p99_us", "max_us", "missed_tick_rate")}
+        refs = [r["reference"] for r in runs if r.get("reference")]
+        ref = {k: median([x[k] for x in refs]) for k in ("p50_us", "p99_us", "missed_tick_rate")} if refs else None
+        out = {"jitter": j, "reference": ref, "state_us": median([r["state_us"] for r in runs]),
+               "state_p99_us": median([r["state_p99_us"] for r in runs]), "runs": runs}
+        out["jitter_p99_over_reference"] = j["p99_us"] / ref["p99_us"] if ref and ref["p99_us"] else float("nan")
+        return out
+
+    def ratio(a: float, b: float) -> float:
+        return a / b if b else float("nan")
+    per_p99 = [ratio(n["jitter"]["p99_us"], o["jitter"]["p99_us"]) for o, n in zip(old, new)]
+    per_state = [ratio(n["state_us"], o["state_us"]) for o, n in zip(old, new)]
+    return {"baseline": side(old), "this": side(new), "ratio_jitter_p99": median(per_p99),
+            "ratio_state": median(per_state), "ratio_jitter_p99_per_round": per_p99,
+            "ratio_state_per_round": per_state}
+
+
+def run_live_baseline(ref: str, isolation: str = "process", load: str = "python-thread", seconds: float = 10.0,
+                      rounds: int = 2, period_s: float = 0.001, record: str = "none",
+                      progress: Any = None) -> dict[str, Any]:
+    """``bench live`` of ``ref`` and of this code, interleaved (:func:`_interleaved`)."""
+    commit, before, after, old, new = _interleaved(
+        ref, rounds, lambda t: run_live_child(t, isolation, load, seconds, period_s, record), progress)
+    out = summarise_live(old, new)
+    out.update({"ref": ref, "commit": commit, "seconds": seconds, "rounds": rounds, "period_s": period_s,
+                "isolation": isolation, "app_load": load, "record": record,
+                "clock": "time.perf_counter: the servo's periods (|period - T|) and the application's wall time of "
+                         "each state() call",
+                "statistic": "per run: p50 / p99 / max over the periods, state() p50 / p99 over the calls; "
+                             "reported: median over rounds",
+                "machine_before": before, "machine_after": after})
+    return out
+
+
+def _named_rows(d: dict[str, Any]) -> tuple[list[tuple[str, dict[str, Any]]], int]:
+    """The two sides of a side-by-side report with their row names, and the names' width."""
+    rows = [(f"baseline {d['ref']} ({d['commit'][:10]})", d["baseline"]), ("this code", d["this"])]
+    return rows, max(len(n) for n, _ in rows)
+
+
+def _machine_line(d: dict[str, Any]) -> str:
+    mb, ma = d["machine_before"], d["machine_after"]
+    return (f"machine: {mb['cpu_model']}, {mb['cpus']} CPUs, load {mb['load_1min']:.2f} -> "
+            f"{ma['load_1min']:.2f}, Python {mb['python']}")
+
+
+def format_live_baseline(d: dict[str, Any]) -> str:
+    """Text report of :func:`run_live_baseline`."""
+    rows, w = _named_rows(d)
+    lines = [f"live session, {d['isolation']} isolation, application load {d['app_load']}, period "
+             f"{d['period_s'] * 1e3:g} ms, {d['rounds']} interleaved rounds x {d['seconds']:g} s, one child "
+             f"process per tree and round, same interpreter",
+             f"clock: {d['clock']}; statistic: {d['statistic']}",
+             f"{'':{w}}  jitter p50 / p99 / max (us)   missed    reference loop p99 (us), missed   "
+             f"jitter p99 / reference p99   state() p50 / p99 (us)"]
+    for name, s in rows:
+        j, r = s["jitter"], s["reference"] or {"p99_us": float("nan"), "missed_tick_rate": float("nan")}
+        lines.append(f"{name:{w}}  {j['p50_us']:6.1f} / {j['p99_us']:6.1f} / {j['max_us']:8.1f}   "
+                     f"{j['missed_tick_rate'] * 100:6.3f} %   {r['p99_us']:8.1f}, {r['missed_tick_rate'] * 100:6.3f} %"
+                     f"        {s['jitter_p99_over_reference']:8.2f}            {s['state_us']:5.1f} / "
+                     f"{s['state_p99_us']:.1f}")
+    lines.append(f"this code / baseline, paired by round: jitter p99 {d['ratio_jitter_p99']:.3f} (rounds "
+                 f"{', '.join(f'{x:.3f}' for x in d['ratio_jitter_p99_per_round'])}), state() p50 "
+                 f"{d['ratio_state']:.3f} (rounds {', '.join(f'{x:.3f}' for x in d['ratio_state_per_round'])})")
+    lines.append(_machine_line(d))
+    lines.append("measures period jitter, missed ticks and state() calls of both trees' live sessions in the same "
+                 "minutes, each next to a loop doing nothing else; not the tick's compute cost (bench timing "
+                 "--baseline)")
+    return "\n".join(lines)
 
 
 def format_baseline(d: dict[str, Any]) -> str:
     """Text report of :func:`run_baseline`."""
-    b, t = d["baseline"], d["this"]
-    mb, ma = d["machine_before"], d["machine_after"]
-    rows = [(f"baseline {d['ref']} ({d['commit'][:10]})", b), ("this code", t)]
-    w = max(len(n) for n, _ in rows)
+    rows, w = _named_rows(d)
     lines = [f"servo tick, {d['rounds']} interleaved rounds x {d['seconds']:g} s simulated at period "
              f"{d['period_s'] * 1e3:g} ms, one child process per tree and round, same interpreter",
              f"clock: {d['clock']}; statistic: {d['statistic']}",
@@ -238,8 +354,7 @@ def format_baseline(d: dict[str, Any]) -> str:
     lines.append(f"this code / baseline, paired by round: median {d['ratio_median']:.3f} (rounds "
                  f"{', '.join(f'{x:.3f}' for x in d['ratio_median_per_round'])}), p99 {d['ratio_p99']:.3f} "
                  f"(rounds {', '.join(f'{x:.3f}' for x in d['ratio_p99_per_round'])})")
-    lines.append(f"machine: {mb['cpu_model']}, {mb['cpus']} CPUs, load {mb['load_1min']:.2f} -> "
-                 f"{ma['load_1min']:.2f}, Python {mb['python']}")
+    lines.append(_machine_line(d))
     lines.append("measures the tick's compute cost of both trees in the same minutes; not period jitter, "
                  "real-time behaviour or live sessions (bench live)")
     return "\n".join(lines)

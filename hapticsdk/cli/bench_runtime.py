@@ -42,6 +42,11 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--record", choices=("npz", "h5", "none"), default="npz",
                    help="record every tick to a temporary file of this format meanwhile (default npz; h5 needs "
                         "hapticsdk[h5]); the servo's RSS slope is reported")
+    p.add_argument("--baseline", metavar="REF", default=None,
+                   help="instead: the live session of git ref REF and of this code side by side, interleaved in "
+                        "one run (needs a git checkout; one application load; --seconds per run)")
+    p.add_argument("--rounds", type=bounded_int(1, 100), default=2,
+                   help="with --baseline: interleaved rounds (default 2)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_live)
 
@@ -82,6 +87,8 @@ def _fifo_priority(text: str) -> int | str | None:
 def _live(args: argparse.Namespace) -> int:
     from ..benchmarks.live import APP_LOADS, format_rows, run_live
     from . import emit
+    if args.baseline is not None:
+        return _live_baseline(args)
     loads = APP_LOADS if args.app_load == "all" else (args.app_load,)
     rt: dict[str, Any] = {}   # options not given: the session's defaults
     if hasattr(args, "fifo_priority"):
@@ -185,4 +192,20 @@ def _timing_baseline(args: argparse.Namespace) -> int:
                               f"take {', '.join(other)}", field="--baseline")
     d = run_baseline(args.baseline, seconds=args.seconds, rounds=args.rounds, period_s=args.period)
     emit(d, args.json, format_baseline(d))
+    return 0
+
+
+def _live_baseline(args: argparse.Namespace) -> int:
+    """``bench live --baseline REF``: :func:`hapticsdk.benchmarks.baseline.run_live_baseline`."""
+    from ..benchmarks.baseline import format_live_baseline, run_live_baseline
+    from ..errors import ValidationError
+    from . import emit
+    other = [f for f, on in (("--app-load all", args.app_load == "all"), ("--pin-cpu", args.pin_cpu is not None),
+                             ("--fifo-priority", hasattr(args, "fifo_priority"))) if on]
+    if other:
+        raise ValidationError(f"--baseline runs one application load with the session's default real-time "
+                              f"settings in both trees; it does not take {', '.join(other)}", field="--baseline")
+    d = run_live_baseline(args.baseline, isolation=args.isolation, load=args.app_load, seconds=args.seconds,
+                          rounds=args.rounds, period_s=args.period or 1e-3, record=args.record)
+    emit(d, args.json, format_live_baseline(d))
     return 0

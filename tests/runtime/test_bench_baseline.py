@@ -91,3 +91,37 @@ def test_cli_refuses_options_the_comparison_does_not_take():
     out = subprocess.run([sys.executable, "-m", "hapticsdk", "bench", "timing", "--baseline", "HEAD",
                           "--realtime"], capture_output=True, text=True, timeout=120)
     assert out.returncode != 0 and "--realtime" in out.stderr
+
+
+def _live(p50, p99, mx, missed, ref_p99, state):
+    return {"jitter": {"p50_us": p50, "p99_us": p99, "max_us": mx, "missed_tick_rate": missed},
+            "reference": {"p50_us": 0.0, "p99_us": ref_p99, "missed_tick_rate": 0.0},
+            "state_us": state, "state_p99_us": 2 * state, "files": []}
+
+
+def test_live_summary_pairs_rounds_and_relates_each_tree_to_its_reference_loop():
+    old = [_live(1.0, 40.0, 90.0, 0.002, 4.0, 10.0), _live(1.0, 60.0, 80.0, 0.004, 6.0, 12.0)]
+    new = [_live(1.0, 20.0, 70.0, 0.001, 4.0, 5.0), _live(1.0, 45.0, 99.0, 0.001, 5.0, 6.0)]
+    s = baseline.summarise_live(old, new)
+    assert s["ratio_jitter_p99_per_round"] == [0.5, 0.75] and s["ratio_jitter_p99"] == 0.625
+    assert s["ratio_state_per_round"] == [0.5, 0.5]
+    assert s["baseline"]["jitter"]["p99_us"] == 50.0 and s["this"]["jitter"]["missed_tick_rate"] == 0.001
+    assert s["baseline"]["reference"]["p99_us"] == 5.0
+    assert s["this"]["jitter_p99_over_reference"] == 32.5 / 4.5
+
+
+def test_live_cli_refuses_what_the_comparison_does_not_take():
+    out = subprocess.run([sys.executable, "-m", "hapticsdk", "bench", "live", "--baseline", "HEAD",
+                          "--app-load", "all"], capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0 and "--app-load all" in out.stderr
+
+
+def test_live_cli_runs_both_trees_and_reports_both_sessions():
+    _need_git_checkout()
+    out = subprocess.run([sys.executable, "-m", "hapticsdk", "bench", "live", "--baseline", "HEAD",
+                          "--seconds", "0.3", "--rounds", "1", "--record", "none"],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    text = out.stdout
+    assert "baseline HEAD (" in text and "this code" in text and "reference loop" in text
+    assert "paired by round: jitter p99" in text and "perf_counter" in text and "goal" not in text.lower()
