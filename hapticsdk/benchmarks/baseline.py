@@ -41,8 +41,14 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from ..errors import ValidationError
+from ..errors import HapticSDKError, ValidationError
 from ..quantiles import median
+
+
+class BaselineRunError(HapticSDKError, RuntimeError):
+    """A child of a side-by-side run failed (its last error line is in the message: e.g.
+    a live session's servo stopped by its safety watchdog on a loaded machine) or imported
+    code from outside the tree it was given. Not a figure: rerun, or read the message."""
 
 #: first lines of a child's code: with ``HAPTICSDK_BASELINE_TREE`` set, import from
 #: PYTHONPATH, not from the environment's editable installs
@@ -143,7 +149,7 @@ def _child_env(tree: Path | None) -> dict[str, str]:
 def run_code(tree: Path | None, code: str, args: list[str], timeout_s: float = 600.0) -> dict[str, Any]:
     """Run ``code`` (starting with :data:`PRELUDE`) in a child of this interpreter that
     imports from ``tree`` (``None``: this environment's code) and prints one JSON object
-    as its last line, which is returned. Raises RuntimeError with the child's last error
+    as its last line, which is returned. Raises BaselineRunError with the child's last error
     line when it fails."""
     env = _child_env(tree)
     if tree is not None:
@@ -154,13 +160,13 @@ def run_code(tree: Path | None, code: str, args: list[str], timeout_s: float = 6
                          timeout=timeout_s, cwd=tree)   # `python -c` imports from its working folder first
     if out.returncode != 0:
         last = (out.stderr.strip().splitlines() or ["(no output)"])[-1]
-        raise RuntimeError(f"the measurement failed in {'the baseline tree' if tree else 'this tree'}: {last}")
+        raise BaselineRunError(f"the measurement failed in {'the baseline tree' if tree else 'this tree'}: {last}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def run_child(tree: Path | None, seconds: float, period_s: float) -> dict[str, Any]:
     """One measurement (:data:`SCENE`) in a child of this interpreter, importing from
-    ``tree`` (``None``: this environment's code). Raises RuntimeError with the child's
+    ``tree`` (``None``: this environment's code). Raises BaselineRunError with the child's
     last error line when it fails, or when it imported code from elsewhere."""
     d = run_code(tree, SCENE, [repr(float(seconds)), repr(float(period_s))], timeout_s=max(600.0, 60 * seconds))
     _check_files(tree, d)
@@ -168,17 +174,17 @@ def run_child(tree: Path | None, seconds: float, period_s: float) -> dict[str, A
 
 
 def _check_files(tree: Path | None, d: dict[str, Any]) -> None:
-    """RuntimeError unless the child's imported ``files`` lie in ``tree`` (or, for
+    """BaselineRunError unless the child's imported ``files`` lie in ``tree`` (or, for
     ``None``, are this process's own package)."""
     if tree is not None:
         root = str(tree.resolve())
         wrong = [f for f in d["files"] if not str(Path(f).resolve()).startswith(root)]
         if wrong:
-            raise RuntimeError(f"the baseline child imported {wrong} instead of the baseline tree {root}")
+            raise BaselineRunError(f"the baseline child imported {wrong} instead of the baseline tree {root}")
     else:
         import hapticsdk
         if Path(d["files"][0]).resolve() != Path(hapticsdk.__file__).resolve():
-            raise RuntimeError(f"the child imported {d['files'][0]}, not this code ({hapticsdk.__file__})")
+            raise BaselineRunError(f"the child imported {d['files'][0]}, not this code ({hapticsdk.__file__})")
 
 
 def summarise(old: list[dict[str, Any]], new: list[dict[str, Any]]) -> dict[str, Any]:

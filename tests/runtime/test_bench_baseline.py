@@ -125,3 +125,14 @@ def test_live_cli_runs_both_trees_and_reports_both_sessions():
     text = out.stdout
     assert "baseline HEAD (" in text and "this code" in text and "reference loop" in text
     assert "paired by round: jitter p99" in text and "perf_counter" in text and "goal" not in text.lower()
+
+
+def test_a_failing_child_is_a_named_error_not_an_internal_one(tmp_path):
+    """A child that fails (here: a tree without hapticsdk's benchmarks) is reported with
+    its last error line as a BaselineRunError (an SDK error: the CLI prints it as such)."""
+    from hapticsdk.errors import HapticSDKError
+    (tmp_path / "hapticsdk").mkdir()
+    (tmp_path / "hapticsdk" / "__init__.py").write_text("")
+    with pytest.raises(baseline.BaselineRunError, match="the baseline tree") as e:
+        baseline.run_code(tmp_path, baseline.LIVE, ["process", "none", "0.1", "0.001", "none"])
+    assert isinstance(e.value, HapticSDKError)
