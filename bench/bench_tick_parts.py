@@ -106,7 +106,7 @@ def run(ticks: int, mode: str) -> dict:
         if a.size:
             out["parts_us"][k] = {"calls": len(v), "median": round(float(np.median(a)), 2),
                                   "p99": round(float(np.percentile(a, 99)), 2), "max": round(float(a.max()), 1)}
-    cpu = np.asarray(loop._L["cpu"], float)[100:ticks] * 1e6
+    cpu = loop._log[100:min(ticks, loop._cap), loop._ncol - 2] * 1e6   # the per-tick CPU column of the ring
     out["whole_tick_cpu_us"] = {"median": round(float(np.median(cpu)), 2), "p99": round(float(np.percentile(cpu, 99)), 2),
                                 "max": round(float(cpu.max()), 1)}
     return out

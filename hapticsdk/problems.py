@@ -58,12 +58,15 @@ def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.n
     if isinstance(targets, Mapping):
         if not targets:
             raise ValidationError("no targets given", field="targets")
-        dims = tuple(dimensions) if dimensions else tuple(targets)
-        extra = [k for k in targets if k not in dims]
-        missing = [d for d in dims if d not in targets]
-        if extra or missing:
-            raise ValidationError(f"targets name {list(targets)} but dimensions are {list(dims)}",
-                                  field="targets")
+        if dimensions:   # the mapping's keys must be exactly these names (else they are)
+            dims = tuple(dimensions)
+            extra = [k for k in targets if k not in dims]
+            missing = [d for d in dims if d not in targets]
+            if extra or missing:
+                raise ValidationError(f"targets name {list(targets)} but dimensions are {list(dims)}",
+                                      field="targets")
+        else:
+            dims = tuple(targets)
         row = []
         for d in dims:
             v = targets[d]
@@ -258,12 +261,15 @@ def _problem_for(targets: Any, build_kw: dict[str, Any]) -> SolveProblem:
     there is one (then only the targets are validated)."""
     mapping = type(targets) is dict or isinstance(targets, Mapping)
     def setup_key() -> tuple:
-        dims = tuple(targets) if mapping and build_kw.get("dimensions") is None else \
-            tuple(build_kw.get("dimensions") or ())
         # the plugins and models the setup resolves to are part of the key: a plugin
         # registered anew or a model reloaded gets a new problem
+        models = (tuple(_model_cache), tuple(map(id, _model_cache.values())))
+        if mapping and not build_kw:     # the common call: {dimension: intensity}, defaults
+            dims = tuple(targets)
+            return (True, dims, tuple(map(registry("dimension").load, dims)), models, ())
+        dims = tuple(targets) if mapping and build_kw.get("dimensions") is None else \
+            tuple(build_kw.get("dimensions") or ())
         plugins = tuple(registry("dimension").load(d) if isinstance(d, str) else d for d in dims)
-        models = tuple((k, id(v)) for k, v in _model_cache.items())
         return (mapping, dims, plugins, models, _hashable(build_kw) if build_kw else ())
 
     try:

@@ -179,8 +179,9 @@ class SafetyLayer:
 
     @limits.setter
     def limits(self, value: Any) -> None:
+        checked = declared_limits(value)    # a bad declaration is refused here, not on a tick
         self._limits = value
-        self._cache()
+        self._cache(checked)
 
     @property
     def settings(self) -> SafetySettings:
@@ -192,21 +193,23 @@ class SafetyLayer:
         self._settings = value
         self._cache()
 
-    def _cache(self) -> None:
+    def _cache(self, checked: dict[str, Any] | None = None) -> None:
         """Copy the limits and settings the per-tick path reads into plain attributes
         (both are frozen dataclasses: replaced, never changed in place, so the copies
-        stay valid until the next assignment, which refreshes them)."""
+        stay valid until the next assignment, which refreshes them). The limits are
+        validated and made floats here (:func:`declared_limits`), once per configuration:
+        the per-command path compares with them as they are."""
         if not (hasattr(self, "_limits") and hasattr(self, "_settings")):
             return  # __init__ sets both before the first command
-        lim, s = self._limits, self._settings
-        # read directly: a limits object without these fields fails here, not mid-run
-        self._fmax = lim.max_force_n
-        self._amax = lim.max_amplitude
-        self._frange = lim.frequency_range_hz
-        self._vmax = getattr(lim, "max_velocity_mm_s", None)
-        self._kmax = getattr(lim, "max_stiffness_n_per_mm", None)
-        self._rate = getattr(lim, "max_force_rate_n_per_tick", None)
-        self._amin = getattr(lim, "min_amplitude", None)
+        lim = checked if checked is not None else declared_limits(self._limits)
+        s = self._settings
+        self._fmax = lim["max_force_n"]
+        self._amax = lim["max_amplitude"]
+        self._frange = lim["frequency_range_hz"]
+        self._vmax = lim["max_velocity_mm_s"]
+        self._kmax = lim["max_stiffness_n_per_mm"]
+        self._rate = lim["max_force_rate_n_per_tick"]
+        self._amin = lim["min_amplitude"]
         self._knee = s.velocity_knee
         self._k_offset = s.stiffness_offset_n
         self._ramp_amp = s.ramp_amplitude
@@ -341,15 +344,15 @@ class SafetyLayer:
             amax = self._amax
             if amax is not None and amp > amax:
                 self._hit("max_amplitude")
-                amp = float(amax)
+                amp = amax              # a float >= 0 (declared_limits)
         freq = cmd.frequency_hz
         if freq is not None:
             frange = self._frange
             if frange is not None:
-                lo, hi = frange
+                lo, hi = frange         # floats, 0 <= lo <= hi (declared_limits)
                 if not lo <= freq <= hi:
                     self._hit("frequency_range_hz")
-                    freq = float(min(max(freq, lo), hi))
+                    freq = lo if freq < lo else hi if freq > hi else freq   # NaN stays NaN, as min/max left it
 
         if self._overspeed or self.phase != "running":
             gain = self._envelope(force, now)
@@ -370,7 +373,7 @@ class SafetyLayer:
             amin = self._amin
             if amin is not None and amp < amin:
                 self._hit("min_amplitude")
-                amp = float(amin)
+                amp = amin
         # one new command per tick (dataclasses.replace costs several us on the servo path)
         out = ChannelCommand(cmd.role, force, freq, amp, cmd.direction)
         self._last = out
@@ -434,6 +437,55 @@ class SafetyLayer:
         commands it clamped), ``events``, ``phase``, ``last_fault``, ``settings``."""
         return {"limit_hits": dict(self.hits), "events": dict(self.events), "phase": self.phase,
                 "last_fault": self.last_fault, "settings": self.settings.to_dict()}
+
+
+#: declared limits the safety layer enforces, with the least value each may take
+#: (``>=``; ``max_velocity_mm_s`` must be above 0: the speed-dependent force limit
+#: divides by ``(1 - velocity_knee) max_velocity_mm_s``)
+_LIMIT_FLOORS = {"max_force_n": 0.0, "max_stiffness_n_per_mm": 0.0, "max_amplitude": 0.0,
+                 "max_force_rate_n_per_tick": 0.0, "max_velocity_mm_s": None}
+
+
+def declared_limits(lim: Any) -> dict[str, Any]:
+    """The limits the safety layer enforces, checked once when they are configured and
+    returned as Python floats (``None`` where not declared): each ``max_*`` a finite
+    number >= 0 (``max_velocity_mm_s`` > 0), ``frequency_range_hz`` two finite numbers
+    ``0 <= lo <= hi``, ``min_amplitude`` finite and at most ``max_amplitude``. A bad
+    value is a :class:`~hapticsdk.errors.ValidationError` naming ``limits.<field>``: a
+    NaN bound would let every command through (a comparison with NaN is false), a
+    string would fail on the first tick that reaches the limit. Objects without the
+    optional fields (not an ActuatorLimits) have those limits undeclared."""
+    from .checks import is_number
+    out: dict[str, Any] = {}
+    for name, floor in _LIMIT_FLOORS.items():
+        v = getattr(lim, name) if name in ("max_force_n", "max_amplitude") else getattr(lim, name, None)
+        if v is not None:
+            if not (is_number(v) and math.isfinite(v) and (v > 0 if floor is None else v >= floor)):
+                raise ValidationError(f"must be None or a finite number {'> 0' if floor is None else '>= 0'}, "
+                                      f"got {v!r}", field=f"limits.{name}")
+            v = float(v)
+        out[name] = v
+    fr = lim.frequency_range_hz
+    if fr is not None:
+        try:
+            lo, hi = fr
+        except (TypeError, ValueError):
+            raise ValidationError(f"must be None or (lowest, highest) in Hz, got {fr!r}",
+                                  field="limits.frequency_range_hz") from None
+        if not (is_number(lo) and is_number(hi) and math.isfinite(lo) and math.isfinite(hi) and 0 <= lo <= hi):
+            raise ValidationError(f"must be two finite numbers 0 <= lowest <= highest (Hz), got {fr!r}",
+                                  field="limits.frequency_range_hz")
+        fr = (float(lo), float(hi))
+    out["frequency_range_hz"] = fr
+    amin = getattr(lim, "min_amplitude", None)
+    if amin is not None:
+        amax = out["max_amplitude"]
+        if not (is_number(amin) and math.isfinite(amin) and (amax is None or amin <= amax)):
+            raise ValidationError(f"must be None or a finite number <= max_amplitude ({amax!r}), got {amin!r}",
+                                  field="limits.min_amplitude")
+        amin = float(amin)
+    out["min_amplitude"] = amin
+    return out
 
 
 def _zeroed(cmd: ChannelCommand) -> ChannelCommand:

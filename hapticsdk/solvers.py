@@ -190,6 +190,7 @@ def _row_medians(a: np.ndarray) -> np.ndarray:
 
 
 _F64 = np.dtype(np.float64)
+_np_array = np.array
 
 
 class Trace:
@@ -203,13 +204,18 @@ class Trace:
         self.best_error: list[np.ndarray] = []
         self.violation: list[np.ndarray] = []
 
-    def record(self, nfev: int, best_error: np.ndarray, violation: np.ndarray | None = None) -> None:
+    def record(self, nfev: int, best_error: np.ndarray | float, violation: np.ndarray | float | None = None) -> None:
         """Record one iteration: evaluations so far, best error per target ``(m,)`` and its
-        constraint violation (zeros when not given); the time is taken now.
+        constraint violation (zeros when not given); the time is taken now. A trace of one
+        target also takes both as plain floats.
         """
         self.times.append(time.perf_counter() - self.t0)
         self.nfev.append(int(nfev))
         n = self.n_targets
+        if n == 1 and type(best_error) is float and type(violation) is float:   # one target, plain floats
+            self.best_error.append(_np_array((best_error,)))
+            self.violation.append(_np_array((violation,)))
+            return
         # a copy (the solver keeps updating its arrays); float (n,) arrays copy directly
         self.best_error.append(best_error.copy() if type(best_error) is np.ndarray and best_error.shape == (n,)
                                and best_error.dtype is _F64 else np.array(best_error, float).reshape(n))
@@ -426,9 +432,8 @@ class SolveProblem:
         column}`` for the constraints. For more than 64 rows the columns are rows of one
         transposed copy (contiguous: the constraints' arithmetic on them runs ~1.5x faster
         than on strided views, well above the cost of the copy)."""
-        if G.ndim == 2 and G.shape[0] > 64:
-            GT = G.T.copy()
-            return {n: GT[i] for i, n in enumerate(self.model.feature_names)}
+        if G.ndim == 2:   # the rows of the transpose are the columns (views, or of one copy)
+            return dict(zip(self.model.feature_names, G.T.copy() if G.shape[0] > 64 else G.T))
         return {n: G[..., i] for i, n in enumerate(self.model.feature_names)}
 
     # -- evaluation --------------------------------------------------------
@@ -594,7 +599,9 @@ class SolveProblem:
         if self._base_formulas:
             for c in self.constraints:
                 bnd, val = c.bound_and_value(cols)
-                b, v = _first(bnd), _first(val)
+                # the first (only) value, as _first, for the usual (1,) arrays without a call
+                b = float(bnd[0]) if type(bnd) is np.ndarray and bnd.shape == (1,) else _first(bnd)
+                v = float(val[0]) if type(val) is np.ndarray and val.shape == (1,) else _first(val)
                 if v < b:     # a NaN row counts as met, as in evaluate
                     nv = (b - v) / (abs(b) or 1.0)
                     pen += nv if form == "normalised" else b * b - v * v
@@ -868,8 +875,8 @@ class Solver(ABC):
         elapsed = time.perf_counter() - t0
         rows: list[dict[str, Any]] = []
         if trace.times:   # as a batch's per-target trace: times from the solver's start
-            E = np.concatenate(trace.best_error).tolist()     # one conversion, not one per row
-            V = np.concatenate(trace.violation).tolist()
+            E = [a.item() for a in trace.best_error]     # (1,) arrays: a trace of one target
+            V = [a.item() for a in trace.violation]
             rows = [{"time_s": t, "nfev": n, "best_error": e, "constraint_violation": v}
                     for t, n, e, v in zip(trace.times, trace.nfev, E, V)]
         return _make_result(problem, 0, x, I, error, fun, viol, pc, out.message, rows,

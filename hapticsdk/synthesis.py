@@ -107,6 +107,12 @@ class PhaseAccumulator:
         ph = inc * _ramp_index(n)
         ph += self.phase + self._lo
         np.mod(ph, 1.0, out=ph)
+        self.skip(frequency_hz, n, fs)
+        return ph
+
+    def skip(self, frequency_hz: float, n: int, fs: float) -> None:
+        """Advance past ``n`` samples at rate ``fs`` and a constant frequency, exactly as
+        :meth:`block` does, without computing their phases (a silent block)."""
         dt = 1.0 / fs
         if n == 1:
             self.advance(frequency_hz, dt)
@@ -116,7 +122,6 @@ class PhaseAccumulator:
             self.advance(p, dt)
             if e:
                 self.advance(e, dt)
-        return ph
 
 
 class Oscillator:
@@ -151,11 +156,13 @@ class Oscillator:
         """Next ``n`` samples at the given frequency (Hz), amplitude ramping to ``amplitude``."""
         if n <= 0:
             return np.zeros(0)
+        a0 = self.amplitude
+        if amplitude == a0 == 0.0:  # silent: the phase still advances, no phases or sine needed
+            self.acc.skip(frequency_hz, n, self.fs)
+            self.frequency_hz = float(frequency_hz)
+            return np.zeros(n)
         ph = self.acc.block(frequency_hz, n, self.fs)
         self.frequency_hz = float(frequency_hz)
-        a0 = self.amplitude
-        if amplitude == a0 == 0.0:  # silent: the phase still advances, no sine needed
-            return np.zeros(n)
         ph *= 2.0 * np.pi
         np.sin(ph, out=ph)
         if amplitude == a0:

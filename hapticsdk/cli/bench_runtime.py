@@ -42,6 +42,11 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--record", choices=("npz", "h5", "none"), default="npz",
                    help="record every tick to a temporary file of this format meanwhile (default npz; h5 needs "
                         "hapticsdk[h5]); the servo's RSS slope is reported")
+    p.add_argument("--baseline", metavar="REF", default=None,
+                   help="instead: the live session of git ref REF and of this code side by side, interleaved in "
+                        "one run (needs a git checkout; one application load; --seconds per run)")
+    p.add_argument("--rounds", type=bounded_int(1, 100), default=2,
+                   help="with --baseline: interleaved rounds (default 2)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_live)
 
@@ -62,6 +67,11 @@ def register_bench(bench_sub: Any) -> None:
                    help="request SCHED_FIFO priority P, 1..99 (reported if refused; prefer with --realtime)")
     p.add_argument("--mlockall", action="store_true", help="lock the process's memory (Linux; reported if refused)")
     p.add_argument("--declared-rt-machine", action="store_true", help="judge the jitter limits (pass/fail)")
+    p.add_argument("--baseline", metavar="REF", default=None,
+                   help="instead: the tick of git ref REF and of this code side by side, interleaved in one run "
+                        "(needs a git checkout; simulated clock; --seconds per run)")
+    p.add_argument("--rounds", type=bounded_int(1, 100), default=3,
+                   help="with --baseline: interleaved rounds (default 3)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_timing)
 
@@ -77,6 +87,8 @@ def _fifo_priority(text: str) -> int | str | None:
 def _live(args: argparse.Namespace) -> int:
     from ..benchmarks.live import APP_LOADS, format_rows, run_live
     from . import emit
+    if args.baseline is not None:
+        return _live_baseline(args)
     loads = APP_LOADS if args.app_load == "all" else (args.app_load,)
     rt: dict[str, Any] = {}   # options not given: the session's defaults
     if hasattr(args, "fifo_priority"):
@@ -157,9 +169,43 @@ def _fidelity(args: argparse.Namespace) -> int:
 def _timing(args: argparse.Namespace) -> int:
     from ..benchmarks.timing import format_table, run_timing
     from . import emit
+    if args.baseline is not None:
+        return _timing_baseline(args)
     rt = {"cpu": args.pin_cpu, "fifo_priority": args.fifo_priority, "mlockall": args.mlockall}
     d = run_timing(args.seconds, realtime=args.realtime, load=args.load, period_s=args.period, rt=rt,
                    declared_rt_machine=args.declared_rt_machine)
     text = (f"{d['ticks']} ticks ({', '.join(d['dimensions'])}), overruns {d['overruns']}\n" + format_table([d]))
     emit(d, args.json, text)
+    return 0
+
+
+def _timing_baseline(args: argparse.Namespace) -> int:
+    """``bench timing --baseline REF``: :func:`hapticsdk.benchmarks.baseline.run_baseline`."""
+    from ..benchmarks.baseline import format_baseline, run_baseline
+    from ..errors import ValidationError
+    from . import emit
+    other = [f for f, on in (("--realtime", args.realtime), ("--load", args.load),
+                             ("--pin-cpu", args.pin_cpu is not None), ("--fifo-priority", args.fifo_priority is not None),
+                             ("--mlockall", args.mlockall), ("--declared-rt-machine", args.declared_rt_machine)) if on]
+    if other:
+        raise ValidationError(f"--baseline compares the tick's compute cost on the simulated clock; it does not "
+                              f"take {', '.join(other)}", field="--baseline")
+    d = run_baseline(args.baseline, seconds=args.seconds, rounds=args.rounds, period_s=args.period)
+    emit(d, args.json, format_baseline(d))
+    return 0
+
+
+def _live_baseline(args: argparse.Namespace) -> int:
+    """``bench live --baseline REF``: :func:`hapticsdk.benchmarks.baseline.run_live_baseline`."""
+    from ..benchmarks.baseline import format_live_baseline, run_live_baseline
+    from ..errors import ValidationError
+    from . import emit
+    other = [f for f, on in (("--app-load all", args.app_load == "all"), ("--pin-cpu", args.pin_cpu is not None),
+                             ("--fifo-priority", hasattr(args, "fifo_priority"))) if on]
+    if other:
+        raise ValidationError(f"--baseline runs one application load with the session's default real-time "
+                              f"settings in both trees; it does not take {', '.join(other)}", field="--baseline")
+    d = run_live_baseline(args.baseline, isolation=args.isolation, load=args.app_load, seconds=args.seconds,
+                          rounds=args.rounds, period_s=args.period or 1e-3, record=args.record)
+    emit(d, args.json, format_live_baseline(d))
     return 0

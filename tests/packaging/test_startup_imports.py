@@ -25,8 +25,8 @@ print(json.dumps(heavy))
 """
 
 
-def _imported(body: str) -> list[str]:
-    code = PROBE.format(body=body, heavy=HEAVY)
+def _imported(body: str, heavy: tuple[str, ...] = HEAVY) -> list[str]:
+    code = PROBE.format(body=body, heavy=heavy)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-3000:]
     return json.loads(out.stdout.strip().splitlines()[-1])
@@ -63,3 +63,17 @@ assert code in (0, 1), code
 assert "servo loop:" in buf.getvalue()
 """
     assert _imported(body) == []
+
+
+def test_render_of_a_library_material_does_not_import_numpy_ma():
+    """numpy's median and percentile import ``numpy.ma`` (~6-10 ms of start-up); the
+    render path computes them with :mod:`hapticsdk.quantiles` (the same numbers, bit for
+    bit), the importance estimate included (issue 30)."""
+    body = """
+import contextlib, io
+from hapticsdk.cli import main
+with contextlib.redirect_stdout(io.StringIO()) as buf:
+    code = main(["render", "S7", "--seconds", "0.05"])
+assert code in (0, 1), code
+"""
+    assert _imported(body, ("numpy.ma",)) == []

@@ -112,3 +112,24 @@ def test_block_phase_continuity_across_frequency_changes():
     # the first sample of the new block continues from the last phase of the previous one
     assert abs(b[0] - a[-1]) <= 2 * np.pi * 120.0 / 5000.0 + 1e-12
     assert 0.0 <= osc.acc.phase < 1.0
+
+
+def test_a_silent_block_advances_the_phase_exactly_as_a_computed_one():
+    """``Oscillator.render`` of a silent block advances the accumulator without computing
+    the phases (``PhaseAccumulator.skip``); the sound after it is bit for bit the sound of
+    an oscillator that computed them (issue 30), for random frequencies and block sizes."""
+    import numpy as np
+
+    from hapticsdk.synthesis import Oscillator
+    rng = np.random.default_rng(30)
+    for _ in range(50):
+        fs = float(rng.choice([5000.0, 8000.0, 44100.0]))
+        a, b = Oscillator(fs), Oscillator(fs)
+        for _ in range(int(rng.integers(1, 6))):
+            f, n = float(rng.uniform(1, 500)), int(rng.integers(1, 60))
+            assert not a.render(f, 0.0, n).any()
+            b.acc.block(f, n, fs)                          # the phases computed, then dropped
+            b.frequency_hz = f
+        assert (a.acc.phase, a.acc._lo, a.acc.cycles) == (b.acc.phase, b.acc._lo, b.acc.cycles)
+        f, n = float(rng.uniform(1, 500)), int(rng.integers(1, 60))
+        np.testing.assert_array_equal(a.render(f, 0.7, n), b.render(f, 0.7, n))

@@ -20,7 +20,10 @@ def _problem():
 def test_folded_network_is_the_models_prediction_and_jacobian():
     from hapticsdk_ga.amortised import _one_row
     p = _problem()
-    W1, b1, W2, b2, ys, y_min, W1u, lo, hi, span, k = _one_row(p)
+    W1, b1, W2, b2, ys, y_min, W1u, lo, hi, span, k, Wa, W2a, P, ys_l, y_min_l, inv_span, Psum, *bounds = _one_row(p)
+    assert ys_l == ys.tolist() and y_min_l == y_min.tolist()
+    assert bounds == [lo.tolist(), span.tolist(), hi.tolist()]
+    np.testing.assert_array_equal(Psum, P.sum(axis=0))
     model = p.model
     mlp = getattr(model, "mlp", model)
     idx = [model.dimension_names.index(d) for d in p.dimensions]
@@ -37,7 +40,20 @@ def test_folded_network_is_the_models_prediction_and_jacobian():
         Ju = ((W2 * (1.0 - h * h)) @ W1u) * (s * ys)[:, None]
         J = mlp.jacobian(g[None])[0][idx][:, cols] * span
         np.testing.assert_allclose(Ju, J, rtol=1e-9, atol=1e-12)
-
+        # the augmented form the one-target step runs, from unit-box coordinates with a
+        # trailing 1: the same hidden layer, output and Jacobian. Each entry is a sum of at
+        # most 22 products of terms of magnitude <= ~100 (weights times bounds): float64
+        # rounding stays below 1e-9 absolute on the O(1) results
+        u = np.append((x - lo) * inv_span, 1.0)
+        assert np.all((u >= 0) & (u <= 1))
+        ha = np.tanh(Wa @ u)
+        assert ha[-1] == 1.0                       # the saturated unit carries the output bias
+        np.testing.assert_allclose(ha[:-1], h, rtol=0, atol=1e-9)
+        np.testing.assert_allclose((np.tanh(W2a @ ha) + 1.0) * ys + y_min, y, rtol=0, atol=1e-9)
+        Jh = ((1.0 - ha * ha) @ P).reshape(k, -1)
+        assert np.all(Jh[:, -1] == 0.0)            # a step never moves the trailing 1
+        np.testing.assert_allclose(Jh[:, :-1] * (s * ys)[:, None], J, rtol=0, atol=1e-9 * np.abs(J).max())
+        np.testing.assert_allclose(lo + u[:-1] * span, x, rtol=1e-12)
 
 def test_one_target_calls_meet_the_constraints_and_never_lose_to_the_lookup():
     import hapticsdk as hs
@@ -80,9 +96,9 @@ def test_a_step_that_loses_to_the_lookup_is_never_kept(monkeypatch):
     from hapticsdk.benchmarks.solvers import feasible_samples
     real = am._one_row
 
-    def overshooting(problem):
+    def overshooting(problem):     # the Jacobian the step uses (P and its sum over the hidden units), halved
         net = real(problem)
-        return None if net is None else net[:6] + (net[6] * 0.5,) + net[7:]
+        return None if net is None else net[:13] + (net[13] * 0.5,) + net[14:17] + (net[17] * 0.5,) + net[18:]
 
     p = _problem()
     _, Y = feasible_samples(p, 3000, seed=11)
@@ -104,3 +120,82 @@ def test_a_step_that_loses_to_the_lookup_is_never_kept(monkeypatch):
             err0 = twin_error(look.x, np.array([a, b]))
             assert r.error <= err0 and r.error <= p.tolerance, (a, b, r.error, err0)
     assert 0 < kept < len(Y)        # both outcomes occur: the rule was exercised
+
+
+def _reference_steps(p, y, x, steps):
+    """``steps`` minimum-norm Gauss-Newton steps from ``x`` recomputed independently: the
+    model's own float64 Jacobian (``MLPModel.jacobian``, physical units, scaled to the unit
+    box), the float64 network's residual, the minimum-norm solution of ``J du = -r`` by
+    ``numpy.linalg.lstsq`` (SVD), clipped to the box. Returns the point and the largest
+    condition number of ``J`` met on the way."""
+    model = p.model
+    mlp = getattr(model, "mlp", model)
+    idx = [model.dimension_names.index(d) for d in p.dimensions]
+    cols = [model.feature_names.index(n) for n in p.space.names]
+    lo, hi = p.space.lower, p.space.upper
+    span = hi - lo
+    cond = 1.0
+    for _ in range(steps):
+        g = p.full_inputs(x[None])
+        res = mlp.predict(g)[0][idx] - y
+        J = mlp.jacobian(g)[0][idx][:, cols] * span
+        du = np.linalg.lstsq(J, -res, rcond=None)[0]
+        x = lo + np.clip((x - lo) / span + du, 0.0, 1.0) * span
+        cond = max(cond, np.linalg.cond(J))
+    return x, cond
+
+
+@pytest.mark.parametrize("steps", [1, 2])
+def test_the_one_target_step_is_the_minimum_norm_gauss_newton_step_of_the_model(steps):
+    """What the fast path returns equals :func:`_reference_steps` from the lookup. The two
+    differ by float64 rounding amplified by the condition number of ``J``: the tolerance
+    is ``cond(J)`` times 64 units of rounding, relative to each feature's span."""
+    import hapticsdk as hs
+    from hapticsdk.benchmarks.solvers import feasible_samples
+    p = _problem()
+    span = p.space.upper - p.space.lower
+    _, Y = feasible_samples(p, 3000, seed=5)
+    Y = Y[(Y.min(1) > 0.02) & (Y.max(1) < 0.98)][:40]
+    checked = 0
+    for y in Y:
+        t = {"hardness": float(y[0]), "roughness": float(y[1])}
+        r = hs.solve(t, method="amortised", options={"polish_steps": steps})
+        if "Gauss-Newton" not in r.message:
+            continue
+        x0 = hs.solve(t, method="amortised", options={"polish_steps": 0}).x
+        want, cond = _reference_steps(p, y, x0, steps)
+        tol = cond * 64 * np.finfo(float).eps * span
+        assert np.all(np.abs(r.x - want) <= tol), (t, r.x, want, tol)
+        checked += 1
+    assert checked >= len(Y) // 2
+
+
+def test_one_targeted_dimension_takes_the_same_step():
+    """A table over one dimension (the scalar branch of the step): the same reference."""
+    import hapticsdk as hs
+    from hapticsdk.problems import build_problem
+    p = build_problem({"hardness": 0.5})
+    span = p.space.upper - p.space.lower
+    opts = {"grid": 41, "build_samples": 2000}
+    checked = 0
+    for h in np.linspace(0.1, 0.9, 9):
+        r = hs.solve({"hardness": float(h)}, method="amortised", options=opts)
+        if "Gauss-Newton" not in r.message:
+            continue
+        x0 = hs.solve({"hardness": float(h)}, method="amortised", options={**opts, "polish_steps": 0}).x
+        want, cond = _reference_steps(p, np.array([h]), x0, 1)
+        assert np.all(np.abs(r.x - want) <= cond * 64 * np.finfo(float).eps * span), (h, r.x, want)
+        checked += 1
+    assert checked >= 5
+
+
+def test_the_fast_paths_trace_row_is_the_answers_evaluation():
+    """The one-target trace is recorded from plain floats (``Trace.record``): its row is
+    the answer's error and violation, the numbers the result reports."""
+    import hapticsdk as hs
+    r = hs.solve({"hardness": 0.5, "roughness": 0.5}, method="amortised")
+    assert "Gauss-Newton" in r.message
+    row = r.trace[-1]
+    assert row["best_error"] == r.error and row["constraint_violation"] == r.constraint_violation
+    assert row["best_error"] != row["constraint_violation"]      # distinguishable (violation 0, error > 0)
+    assert row["nfev"] <= r.nfev and row["time_s"] >= 0.0

@@ -47,7 +47,7 @@ from ._common import check_int, rank_key
 from .polish import levenberg_marquardt
 
 log = logging.getLogger(__name__)
-_dot = np.dot
+_dot, _tanh, _max, _min, _square = np.dot, np.tanh, np.maximum, np.minimum, np.square
 
 TABLE_VERSION = 2   # 2: the file records its build time
 _MEMO: dict[str, "AmortisedTable"] = {}
@@ -89,6 +89,7 @@ class AmortisedTable:
         self.lower, self.upper = lower, upper
         self.k = len(self.dimensions)
         self.shape = self.X.shape[:-1]
+        self.shape_text = str(self.shape)   # as results' messages print it
         self._g = [n - 1 for n in self.shape]
         if self.k == 2:
             self._flat = self.X.reshape(-1, self.X.shape[-1])
@@ -97,6 +98,7 @@ class AmortisedTable:
             C = np.stack([self.X[:-1, :-1], self.X[1:, :-1], self.X[:-1, 1:], self.X[1:, 1:]], axis=2)
             self._cells = np.ascontiguousarray(C)
             self._g1f, self._g2f = float(self._g[0]), float(self._g[1])
+        self._unit_cells: np.ndarray | None = None
 
     def lookup(self, targets: Any) -> np.ndarray:
         """Interpolated features for ``targets`` (``(m, k)`` or one ``(k,)`` row) in 0..1.
@@ -122,7 +124,22 @@ class AmortisedTable:
         out = (1 - a) * self.X[i] + a * self.X[i + 1]
         return out[0] if single else out
 
-    def _one(self, h: float, r: float) -> np.ndarray:
+    def unit_one(self, h: float, r: float) -> np.ndarray:
+        """The lookup of one target ``(h, r)`` (two targeted dimensions) in unit-box
+        coordinates of the table's bounds, ``(x - lower) / (upper - lower)`` (0 where a
+        feature's range is empty), clipped to 0..1, with a trailing 1: ``(d + 1,)``, what
+        the one-target Gauss-Newton step starts from. The same interpolation as
+        :meth:`lookup` on corner rows converted once (memoised)."""
+        U = self._unit_cells
+        if U is None:
+            span = self.upper - self.lower
+            inv = np.where(span > 0, 1.0 / np.where(span > 0, span, 1.0), 0.0)
+            U = np.ones(self._cells.shape[:-1] + (self._cells.shape[-1] + 1,))
+            U[..., :-1] = np.clip((self._cells - self.lower) * inv, 0.0, 1.0)
+            U = self._unit_cells = np.ascontiguousarray(U)
+        return self._one(h, r, U)
+
+    def _one(self, h: float, r: float, cells: np.ndarray | None = None) -> np.ndarray:
         # bilinear weights on plain floats, then one (4,) @ (4, d) product on the cell's
         # corner block (a fresh (d,) array)
         g1, g2 = self._g
@@ -138,7 +155,7 @@ class AmortisedTable:
         b = fr - j
         a1 = 1.0 - a
         b1 = 1.0 - b
-        return _dot((a1 * b1, a * b1, a1 * b, a * b), self._cells[i, j])
+        return _dot((a1 * b1, a * b1, a1 * b, a * b), (self._cells if cells is None else cells)[i, j])
 
     def _many(self, T: np.ndarray) -> np.ndarray:
         g1, g2 = self._g
@@ -389,53 +406,90 @@ class AmortisedSolver(Solver):
         net = _one_row(problem)
         if net is None:
             return None
-        W1, b1, W2, b2, ys_scale, y_min, W1u, lo, hi, span, k = net
-        T = problem.targets[0]
-        x = tab.lookup(T)
-        x = np.minimum(np.maximum(x, lo), hi)
-        full = None if problem._identity else problem.full_inputs
+        lo, hi, span, k = net[7:11]
+        Wa, W2a, P, s_l, m_l, inv_span, Psum = net[11:18]
+        T = problem.targets[0].tolist()
+        d = len(span)
+        if k == 2:
+            u = tab.unit_one(T[0], T[1])         # (u, 1): unit-box coordinates, clipped
+        else:
+            u = np.ones(d + 1)
+            u[:d] = (tab.lookup(T) - lo) * inv_span
+            _max(u, 0.0, out=u)
+            _min(u, 1.0, out=u)
         err0 = -1.0
-        for _ in range(steps):
-            g = x if full is None else full(x)
-            h = np.tanh(W1 @ g + b1)
-            ys = np.tanh(W2 @ h + b2)
-            r = (ys + 1.0) * ys_scale + y_min - T
-            if err0 < 0.0:
-                err0 = float(np.abs(r).sum())
-            Ju = ((W2 * (1.0 - h * h)) @ W1u) * ((1.0 - ys * ys) * ys_scale)[:, None]   # (k, d), unit box
-            A = Ju @ Ju.T
+        ul: list[float] = []
+        for step in range(steps):
+            if step:
+                u = np.array(ul + [1.0])
+            # forward pass on the augmented vectors: the bias, the lower bounds and the
+            # fixed inputs ride on u's trailing 1, the output bias on a saturated hidden unit
+            h = _dot(Wa, u)
+            _tanh(h, out=h)
+            ys = _dot(W2a, h)
+            ys = _tanh(ys, out=ys).tolist()
+            _square(h, out=h)
+            # (k, d + 1) Jacobian in the unit box before the output scaling: sum_j (1 - h_j^2) P_j
+            J = (Psum - _dot(h, P)).reshape(k, d + 1).tolist()
+            ut = u.tolist()
             if k == 2:   # (J J^T)^-1 r by Cramer's rule on floats; a singular J gives up
-                a, b, c, e = A[0, 0], A[0, 1], A[1, 0], A[1, 1]
-                det = a * e - b * c
-                if not det > 1e-12 * (a * e + 1e-300):
+                (y0, y1), (s0, s1), (m0, m1) = ys, s_l, m_l
+                r0 = (y0 + 1.0) * s0 + m0 - T[0]      # residuals
+                r1 = (y1 + 1.0) * s1 + m1 - T[1]
+                if err0 < 0.0:
+                    err0 = abs(r0) + abs(r1)
+                a0 = (1.0 - y0 * y0) * s0              # the output scaling: J = diag(a) Jh
+                a1 = (1.0 - y1 * y1) * s1
+                J0, J1 = J
+                p = q = w = 0.0
+                for v0, v1 in zip(J0, J1):
+                    p += v0 * v0
+                    q += v0 * v1
+                    w += v1 * v1
+                A00, A01, A11 = a0 * a0 * p, a0 * a1 * q, a1 * a1 * w
+                det = A00 * A11 - A01 * A01
+                if not det > 1e-12 * (A00 * A11 + 1e-300):
                     return None
-                y0, y1 = r[0], r[1]
-                du = -(Ju[0] * ((e * y0 - b * y1) / det) + Ju[1] * ((a * y1 - c * y0) / det))
-            else:
-                try:
-                    du = -Ju.T @ np.linalg.solve(A, r)
-                except np.linalg.LinAlgError:
+                c0 = -a0 * (A11 * r0 - A01 * r1) / det
+                c1 = -a1 * (A00 * r1 - A01 * r0) / det
+                # du = -J^T (J J^T)^-1 r (minimum norm), clipped to the unit box
+                ul = [v + c0 * g0 + c1 * g1 for v, g0, g1 in zip(ut[:d], J0, J1)]
+            else:        # one targeted dimension: J J^T is a number
+                y0, s0, m0 = ys[0], s_l[0], m_l[0]
+                r0 = (y0 + 1.0) * s0 + m0 - T[0]
+                if err0 < 0.0:
+                    err0 = abs(r0)
+                a0 = (1.0 - y0 * y0) * s0
+                J0 = J[0]
+                n2 = a0 * a0 * sum(v * v for v in J0)
+                if not n2 > 0.0:
                     return None
-            x = np.minimum(np.maximum(x + du * span, lo), hi)
+                c0 = -a0 * r0 / n2
+                ul = [v + c0 * g0 for v, g0 in zip(ut[:d], J0)]
+            ul = [0.0 if v < 0.0 else 1.0 if v > 1.0 else v for v in ul]
+        # back to physical units (lo + span may round one unit above hi)
+        x = np.array([hi_ if lo_ + v * sp > hi_ else lo_ + v * sp for v, lo_, sp, hi_ in zip(ul, *net[18:])])
         _, err, viol, _, _ = problem.evaluate_one(x)
         if not (viol <= CONSTRAINT_TOL and err <= err0 and err <= problem.tolerance):
             return None
-        trace.record(steps + 1, np.array([err]), np.array([viol]))
+        trace.record(steps + 1, float(err), float(viol))
         return SolverOutput(x=x[None], nfev=steps + 2, nit=steps,
-                            message=f"table {tab.shape} lookup + {steps} Gauss-Newton step(s), one target")
+                            message=f"table {tab.shape_text} lookup + {steps} Gauss-Newton step(s), one target")
 
 
 def _one_row(problem: SolveProblem) -> tuple | None:
     """The targeted outputs of the model's numpy twin with the min-max scaling folded in,
     per problem setup (memoised on the setup cache the public ``solve`` keeps):
-    ``(W1, b1, W2, b2, y_scale, y_min, W1u, lower, upper, span, k)`` with ``h = tanh(W1 g
-    + b1)``, ``y = (tanh(W2 h + b2) + 1) y_scale + y_min`` for the targeted dimensions and
-    ``W1u`` the searched columns of ``W1`` per unit-box coordinate; ``None`` when the
-    model has no analytic numpy form (then the general LM runs)."""
-    from hapticsdk.models import MLPModel
+    ``(W1, b1, W2, b2, y_scale, y_min, W1u, lower, upper, span, k, Wa, W2a, P,
+    y_scale_list, y_min_list, inv_span)`` with ``h = tanh(W1 g + b1)``, ``y = (tanh(W2 h +
+    b2) + 1) y_scale + y_min`` for the targeted dimensions, ``W1u`` the searched columns of
+    ``W1`` per unit-box coordinate, and the augmented form the one-target step runs
+    (:func:`_augmented`); ``None`` when the model has no analytic numpy form (then the
+    general LM runs)."""
     memo = getattr(problem, "_setup_cache", None)
     net: Any = memo.get("amortised-one-row", False) if memo is not None else False
     if net is False:
+        from hapticsdk.models import MLPModel
         model = problem.model
         mlp = model if isinstance(model, MLPModel) else getattr(model, "mlp", None)
         net = None
@@ -445,8 +499,40 @@ def _one_row(problem: SolveProblem) -> tuple | None:
             lo, hi = problem.space.lower, problem.space.upper
             W1 = mlp.W1 * mlp._xs                                  # x_s = (x - x_min) xs - 1 folded in
             b1 = mlp.b1 - W1 @ mlp.x_min - mlp.W1.sum(axis=1)
+            span = hi - lo
+            W1u = np.ascontiguousarray(W1[:, cols] * span)
             net = (W1, b1, mlp.W2[idx], mlp.b2[idx], mlp._ys[idx], mlp.y_min[idx],
-                   np.ascontiguousarray(W1[:, cols] * (hi - lo)), lo, hi, hi - lo, len(idx))
+                   W1u, lo, hi, span, len(idx)) + _augmented(problem, W1, b1, W1u, mlp.W2[idx], mlp.b2[idx]) + (
+                   mlp._ys[idx].tolist(), mlp.y_min[idx].tolist(),
+                   np.where(span > 0, 1.0 / np.where(span > 0, span, 1.0), 0.0))
+            net += (net[13].sum(axis=0), lo.tolist(), span.tolist(), hi.tolist())
         if memo is not None:
             memo["amortised-one-row"] = net
     return net
+
+
+#: a hidden unit with this pre-activation outputs exactly 1.0 in float64: 1 - tanh(z) is
+#: about 2 exp(-2 z), below half a unit in the last place of 1 (2^-53) from z = 18.7 on
+_SATURATED = 40.0
+
+
+def _augmented(problem: SolveProblem, W1: np.ndarray, b1: np.ndarray, W1u: np.ndarray,
+               W2: np.ndarray, b2: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The network on augmented vectors, so that a forward pass and the Jacobian are three
+    matrix products: with ``u`` the unit-box coordinates of the searched features and a
+    trailing 1, ``h = tanh(Wa u)`` (``H + 1`` units: the first layer with its bias, the
+    lower bounds and the fixed inputs in the last column, and one saturated unit that is
+    exactly 1), ``y_s = tanh(W2a h)`` (the output bias on that unit), and the unit-box
+    Jacobian before the output scaling ``Jh = ((1 - h^2) @ P).reshape(k, d + 1)``, whose
+    row ``P[j]`` is the outer product of ``W2[:, j]`` and ``W1u[j]`` (the saturated unit's
+    derivative is 0; the trailing column is 0, so a step never moves the 1)."""
+    H, d = W1u.shape
+    k = W2.shape[0]
+    Wa = np.zeros((H + 1, d + 1))
+    Wa[:H, :d] = W1u
+    Wa[:H, d] = b1 + W1 @ problem.full_inputs(problem.space.lower)
+    Wa[H, d] = _SATURATED
+    W2a = np.concatenate([W2, b2[:, None]], axis=1)
+    Pk = np.zeros((H + 1, k, d + 1))
+    Pk[:H, :, :d] = W2.T[:, :, None] * W1u[:, None, :]
+    return Wa, np.ascontiguousarray(W2a), Pk.reshape(H + 1, k * (d + 1))

@@ -44,7 +44,7 @@ class WorkConstraint(Constraint):
         gs = np.asarray(cols["GS"], float)
         w = np.asarray(cols["W"], float)
         q = np.multiply(gs, 2.0)
-        if q.ndim and q.size and np.minimum.reduce(q, axis=None) > 0:
+        if q.ndim and q.size and (q.item() > 0 if q.size == 1 else np.minimum.reduce(q, axis=None) > 0):
             # every GS > 0 (a NaN fails the test): MF^2 / (2 GS) in one plain division
             return np.divide(self.mf_n ** 2, q, out=q), w
         # MF^2 / (2 GS) where GS > 0, +inf elsewhere (NaN included)
