@@ -351,6 +351,22 @@ class ControllerSettings:
         if not (math.isfinite(self.ramp_time_s) and self.ramp_time_s > 0):
             raise ValidationError(f"must be a finite number > 0 (s), got {self.ramp_time_s!r}", field="ramp_time_s")
 
+    @classmethod
+    def for_device(cls, device: Any) -> "ControllerSettings":
+        """Settings from what a device declares: ``apparent_mass_kg``, ``damping_ns_per_m``,
+        ``encoder_resolution_mm`` and ``limits.max_force_n`` (each optional)."""
+        def num(v: Any) -> float | None:
+            try:
+                f = float(v)
+            except (TypeError, ValueError):
+                return None
+            return f if math.isfinite(f) and f > 0 else None
+        lim = getattr(device, "limits", None)
+        return cls(device_mass_kg=num(getattr(device, "apparent_mass_kg", None)),
+                   device_damping_ns_per_m=num(getattr(device, "damping_ns_per_m", None)) or 0.0,
+                   position_resolution_mm=num(getattr(device, "encoder_resolution_mm", None)) or 0.0,
+                   max_force_n=num(getattr(lim, "max_force_n", None)))
+
     def ramp_step_n(self, dt: float, full_scale_n: float | None = None) -> float:
         """The ramp's own step (N per tick) at period ``dt``: ``F_max dt / ramp_time_s``,
         at most ``F_max`` (``full_scale_n`` when the device declares no limit)."""
@@ -358,8 +374,9 @@ class ControllerSettings:
         return fs * min(dt / self.ramp_time_s, 1.0)
 
     def energy_budget_j(self, dt: float, full_scale_n: float | None = None) -> float:
-        """``E0 = s Delta`` (J): what one ramp step held across one encoder count may be
-        worth beyond the observed bound, so a wall met from outside can start."""
+        """``E0 = s Delta`` (J): the reading's uncertainty about the controller's smallest
+        action, one ramp step ``s`` held across one encoder count, so a wall met from
+        outside can start."""
         return self.ramp_step_n(dt, full_scale_n) * self.position_resolution_mm * 1e-3
 
 
@@ -380,17 +397,19 @@ def plan_cost_j(a: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any, half_cou
     ``s`` per tick" hands to a hand that does not pull the stylus out (all along the
     force's direction; ``p`` the force held now):
 
-    ``lead S + c_m S^2 + (Delta/2) (|a - p| + a)``,  ``S = S(a)`` (:func:`_ramp_sum`)
+    ``(Delta/2) |p| + lead S + c_m S^2``,  ``S = S(a)`` (:func:`_ramp_sum`)
 
     The first two terms are the work of the held forces on the free arm of (declared,
     smallest) mass m starting at the speed ``lead / T``: the forces ``a_j`` held for T each
     move it ``v0 T + T^2 (sum_{i<j} a_i + a_j / 2) / m`` in tick j, so their work sums to
     exactly ``v0 T S + T^2 S^2 / (2 m)`` (``c_m = T^2 / 2m``); a hand pushing in, a heavier
-    hand and the arm's damping only take from it. The last term is the encoder's share:
-    half a count per unit of force change, up and down (summation by parts)."""
+    hand and the arm's damping only take from it. These are *true* displacements, so the
+    only encoder term is the one the booked bound ``U`` leaves open: ``(Delta/2) |p|``, the
+    reading's error times the force held now (summation by parts); ``lead`` carries the
+    velocity estimate's own half count."""
     a = np.asarray(a, float)
     S = _ramp_sum(a, s)
-    return lead_m * S + push_m_per_n * S * S + half_count_m * (np.abs(a - p) + a)
+    return half_count_m * np.abs(p) + lead_m * S + push_m_per_n * S * S + 0.0 * a
 
 
 def _plan_slope(a: Any, p: Any, lead_m: Any, c_m: Any, s: Any, c: Any) -> Any:
@@ -398,7 +417,7 @@ def _plan_slope(a: Any, p: Any, lead_m: Any, c_m: Any, s: Any, c: Any) -> Any:
     S = _ramp_sum(a, s)
     with np.errstate(divide="ignore", invalid="ignore"):
         dS = np.where(a <= s, 1.0, a / s + 0.5)
-    return (lead_m + 2.0 * c_m * S) * dS + c * np.where(a >= p, 2.0, 0.0)
+    return (lead_m + 2.0 * c_m * S) * dS
 
 
 def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any,
@@ -430,7 +449,7 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
         fit = cost(m) <= A
         a = np.where(fit, m, a)
         b = np.where(fit, b, m)
-    out = np.where(ok_hi, hi, np.where(fits, a, amin))
+    out = np.where(ok_hi, hi, np.where(fits, a, lo))
     return out if out.ndim else float(out)
 
 
@@ -442,10 +461,10 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
 
     def cost(a: float) -> float:
         S = ramp(a)
-        return d * S + c_m * S * S + c * (abs(a - p) + a)
+        return c * abs(p) + d * S + c_m * S * S
 
     def slope(a: float) -> float:
-        return (d + 2.0 * c_m * ramp(a)) * (1.0 if a <= s else a / s + 0.5) + (2.0 * c if a >= p else 0.0)
+        return (d + 2.0 * c_m * ramp(a)) * (1.0 if a <= s else a / s + 0.5)
     if cost(hi) <= A:
         return hi
     a, b = lo, hi
@@ -457,7 +476,7 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
             else:
                 a = m
     if cost(a) > A:
-        return a
+        return lo
     b = hi
     for _ in range(_BISECT):
         m = 0.5 * (a + b)
@@ -495,7 +514,7 @@ class PassivityController:
     bound; with the output at 0 and no wall force, the credit is dropped (``U <- max(U, 0)``).
     """
 
-    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2",
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_q3",
                  "_f1", "_f2", "_out", "_started")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
@@ -508,7 +527,7 @@ class PassivityController:
         self.active_ticks = 0       # ticks where the output was below the wall's force
         self.withheld_n_ticks = 0.0 # sum over ticks of the force withheld (N)
         self.overdrawn_j = 0.0      # largest U - E0 seen (J): motion beyond the prediction
-        self._q1 = self._q2 = 0.0
+        self._q1 = self._q2 = self._q3 = 0.0
         self._f1 = self._f2 = 0.0
         self._out = 0.0
         self._started = False
@@ -520,23 +539,40 @@ class PassivityController:
             f_wall = 0.0
         if not self._started or not dt > 0:
             if not self._started:
-                self._q1 = self._q2 = x_mm
+                self._q1 = self._q2 = self._q3 = x_mm
                 self._started = True
             return 0.0 if not dt > 0 else self._out
         dq = (x_mm - self._q1) * 1e-3
         q = s.position_resolution_mm * 1e-3
         h = 0.5 * q
         f1 = self._f1
-        u = self.energy_j + f1 * dq + h * abs(f1 - self._f2)
+        dfo = f1 - self._f2
+        dqo = (self._q1 - self._q2) * 1e-3
+        u = self.energy_j + f1 * dq
+        if dfo * dqo < 0.0 and -q <= dqo <= q and self._q2 == self._q3:
+            # the held force changed with a one-count step of the reading, in the wall's own
+            # direction, after a tick without a step: the arm had just crossed the count's
+            # edge, so the reading is off by half a count the other way (a slow crossing)
+            u -= h * abs(dfo)
+        else:
+            # any other change: half a count of reading error per newton, the worst case
+            u += h * abs(dfo)
         ex = abs(dq) - q
         if ex > 0.0:
             u -= s.damping_trust * s.device_damping_ns_per_m * ex * ex / dt
         ahead = 0.5 * (x_mm - self._q2) * 1e-3
+        # the change of the per-tick motion beyond what quantisation alone makes (2 counts)
+        jerk = abs(x_mm - 2.0 * self._q1 + self._q2) * 1e-3 - 2.0 * s.position_resolution_mm * 1e-3
+        if jerk < 0.0:
+            jerk = 0.0
+        self._q3 = self._q2
         self._q2 = self._q1
         self._q1 = x_mm
         fm = s.max_force_n
         full = fm if fm is not None else max(abs(f_wall), abs(self._out))
         step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
+        m = s.device_mass_kg
+        c_m = dt * dt / (2.0 * m) if m else 0.0
         e0 = step * q
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
@@ -559,11 +595,9 @@ class PassivityController:
             hi = target if target > lo else lo
         a = hi
         if s.energy_bound and hi > lo:
-            m = s.device_mass_kg
-            c_m = dt * dt / (2.0 * m) if m else 0.0
             # the arm's speed now: the last two ticks' mean, half a count of reading error,
             # and what the held force added since the middle of those ticks
-            lead = sg * ahead + h + 2.0 * c_m * sg * f1
+            lead = sg * ahead + 1.5 * jerk + h
             a = _affordable_scalar(e0 - u, lo, hi, sg * f1, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
@@ -591,7 +625,7 @@ class PassivityController:
 def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
     z = np.zeros(n)
-    return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
+    return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "q3": z.copy(), "f1": z.copy(), "f2": z.copy(),
             "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy()}
 
 
@@ -618,16 +652,24 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     q2 = np.where(started, state["q2"], x)
     dq = (x - q1) * 1e-3
     f1 = state["f1"]
-    u = state["energy"] + f1 * dq + 0.5 * q * np.abs(f1 - state["f2"])
+    dfo = f1 - state["f2"]
+    dqo = (q1 - q2) * 1e-3
+    q3 = np.where(started, state["q3"], x)
+    slow = (dfo * dqo < 0.0) & (np.abs(dqo) <= q) & (q2 == q3)
+    u = state["energy"] + f1 * dq + np.where(slow, -0.5, 0.5) * q * np.abs(dfo)
     ex = np.maximum(np.abs(dq) - q, 0.0)
     u = u - s.damping_trust * bd * ex * ex / dt
     ahead = 0.5 * (x - q2) * 1e-3
+    jerk = np.maximum(np.abs(x - 2.0 * q1 + q2) * 1e-3 - 2.0 * q, 0.0)
+    state["q3"] = q2
     state["q2"] = q1
     state["q1"] = x.copy()
     out_prev = state["out"]
     full = (np.maximum(np.abs(fw), np.abs(out_prev)) if fm is None
             else np.broadcast_to(np.asarray(fm, float), x.shape))
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
+    m = s.device_mass_kg if mass_kg is None else mass_kg
+    c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
     e0 = step * q
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)
     u = np.where(idle, np.maximum(u, 0.0), u)
@@ -642,9 +684,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     hi = np.maximum(np.minimum(p + step, target), lo)
     a = hi
     if s.energy_bound:
-        m = s.device_mass_kg if mass_kg is None else mass_kg
-        c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
-        lead = sg * ahead + 0.5 * q + 2.0 * c_m * sg * f1
+        lead = sg * ahead + 1.5 * jerk + 0.5 * q
         a = affordable_force(e0 - u, lo, hi, sg * f1, lead, c_m, step, 0.5 * q)
     out = np.where(started & ~idle, sg * a, 0.0)
     state["out"] = out
