@@ -59,7 +59,6 @@ negative ``E`` means the wall has produced energy.
 from __future__ import annotations
 
 import math
-import os as _os
 from dataclasses import dataclass
 from typing import Any
 
@@ -375,10 +374,10 @@ class ControllerSettings:
         return fs * min(dt / self.ramp_time_s, 1.0)
 
     def energy_budget_j(self, dt: float, full_scale_n: float | None = None) -> float:
-        """``E0 = s Delta`` (J): the reading's uncertainty about the controller's smallest
-        action, one ramp step ``s`` held across one encoder count, so a wall met from
-        outside can start."""
-        return self.ramp_step_n(dt, full_scale_n) * self.position_resolution_mm * 1e-3
+        """``E0 = s Delta / 2`` (J): the reading's uncertainty about the controller's
+        smallest action, one ramp step ``s`` held while the arm may sit half a count from
+        its reading, so a wall met from outside can start."""
+        return self.ramp_step_n(dt, full_scale_n) * 0.5 * self.position_resolution_mm * 1e-3
 
 
 #: Bisection steps of :func:`affordable_force` (2^-30 of the ramp step: far below any
@@ -547,17 +546,9 @@ class PassivityController:
         q = s.position_resolution_mm * 1e-3
         h = 0.5 * q
         f1 = self._f1
-        dfo = f1 - self._f2
-        dqo = (self._q1 - self._q2) * 1e-3
-        u = self.energy_j + f1 * dq
-        if dfo * dqo < 0.0 and -q <= dqo <= q and self._q2 == self._q3:
-            # the held force changed with a one-count step of the reading, in the wall's own
-            # direction, after a tick without a step: the arm had just crossed the count's
-            # edge, so the reading is off by half a count the other way (a slow crossing)
-            u -= h * abs(dfo)
-        else:
-            # any other change: half a count of reading error per newton, the worst case
-            u += h * abs(dfo)
+        # a change of the held force: half a count of reading error per newton (summation
+        # by parts; the reading's error may have either sign at that tick)
+        u = self.energy_j + f1 * dq + h * abs(f1 - self._f2)
         ex = abs(dq) - q
         if ex > 0.0:
             u -= s.damping_trust * s.device_damping_ns_per_m * ex * ex / dt
@@ -574,7 +565,7 @@ class PassivityController:
         step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
         m = s.device_mass_kg
         c_m = dt * dt / (2.0 * m) if m else 0.0
-        e0 = step * q
+        e0 = step * h
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
             return 0.0
@@ -653,11 +644,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     q2 = np.where(started, state["q2"], x)
     dq = (x - q1) * 1e-3
     f1 = state["f1"]
-    dfo = f1 - state["f2"]
-    dqo = (q1 - q2) * 1e-3
-    q3 = np.where(started, state["q3"], x)
-    slow = (dfo * dqo < 0.0) & (np.abs(dqo) <= q) & (q2 == q3) & (_os.environ.get("I23V1") is None)
-    u = state["energy"] + f1 * dq + np.where(slow, -0.5, 0.5) * q * np.abs(dfo)
+    u = state["energy"] + f1 * dq + 0.5 * q * np.abs(f1 - state["f2"])
     ex = np.maximum(np.abs(dq) - q, 0.0)
     u = u - s.damping_trust * bd * ex * ex / dt
     ahead = 0.5 * (x - q2) * 1e-3
@@ -671,7 +658,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
     m = s.device_mass_kg if mass_kg is None else mass_kg
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
-    e0 = step * q
+    e0 = step * 0.5 * q
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)
     u = np.where(idle, np.maximum(u, 0.0), u)
     state["energy"] = np.where(started, u, 0.0)

@@ -26,8 +26,10 @@ finger), ``delivered_ratio`` (over the contact ticks, i.e. reading inside the wa
 ``sum min(F+, F_target) / sum F_target`` with ``F_target = min(K pen, 3.3 N)``; force
 beyond the wall's law, e.g. a damper's, is not counted as delivered), ``max_force_step_n``
 (largest change of the applied force between two ticks, all ticks), ``min_contact_force_n``
-(most negative applied force on a contact tick; 0 if none) and ``ramp_step_n`` (the SDK
-controller's own step at that period). Not modelled: Coulomb friction, computation
+(most negative applied force on a contact tick; 0 if none); for ``sdk`` also
+``ramp_step_n`` (the controller's own step at that period) and ``bound_shortfall_j``
+(largest ``true energy - U - (Delta/2) |F|`` over the ticks: <= 0 when the controller's
+bound ``U`` held as an upper bound of the truth). Not modelled: Coulomb friction, computation
 delay, jitter, multi-axis coupling, a reacting hand.
 """
 
@@ -191,6 +193,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     fneg = np.zeros(L)
     contact = np.zeros(L, int)
     f_last = np.zeros(L)
+    unsound = np.full(L, -np.inf)
     r_now = lane_ref(np.zeros(L))
     for k in range(int(n_ticks.max())):
         live = k < n_ticks
@@ -204,6 +207,10 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd, resolution_mm=plant.res_mm,
                                       max_force_n=plant.fmax, mass_kg=plant.m)
         f_cmd = np.where(sdk, f_sdk, f_peer)
+        # soundness of the controller's bound: the true energy so far (plant) never exceeds
+        # U plus the reading's error times the held force (the bound's open tail)
+        gap = plant.energy_to_user_j() - cst["energy"] - 0.5 * plant.res_mm * 1e-3 * np.abs(cst["f1"])
+        unsound = np.maximum(unsound, np.where(sdk & live, gap, -np.inf))
         f = plant.step(f_cmd, r_now, (r_next - r_now) / T, live)
         f = np.where(live, f, f_last)
         P.commit(pst, f)
@@ -231,6 +238,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
                        "contact_ticks": int(contact[ln])}
             if name == "sdk":
                 d[name]["ramp_step_n"] = float(step[ln])
+                d[name]["bound_shortfall_j"] = float(unsound[ln])
         out.append(d)
     return out
 
