@@ -262,12 +262,13 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
     rng = np.random.default_rng(0)   # horizontal jitter only
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.2))
     a0, a1, a2 = axes
+    within: list[str] = []
     for i, name in enumerate(names):
         e = np.array([c["results"][name]["energy_to_user_j"] for c in cells])
         d = np.array([c["results"][name]["delivered_ratio"] for c in cells])
         x = i + rng.uniform(-0.3, 0.3, e.size)
         a0.scatter(x, np.maximum(e, ENERGY_FLOOR_J), s=4, alpha=0.4)
-        a0.text(i, goal * 3e3, f"{int((e <= goal).sum())}/{e.size}\nwithin", ha="center", fontsize=8)
+        within.append(f"{name}\n{int((e <= goal).sum())}/{e.size}")
         ok = np.isfinite(d)
         a1.scatter(x[ok], d[ok], s=4, alpha=0.4)
         if ok.any():
@@ -276,7 +277,8 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
     a0.axhline(goal, color="red", lw=1)
     a0.set_yscale("log")
     a0.set_ylim(ENERGY_FLOOR_J / 2, None)
-    a0.set_xticks(range(len(names)), names)
+    a0.set_xticks(range(len(names)), within, fontsize=8)
+    a0.set_xlabel("controller, cells within the goal")
     a0.set_ylabel(f"max energy given to the user (J, log; < {ENERGY_FLOOR_J:g} drawn at it)")
     a0.set_title(f"energy to the user per cell (red: goal {goal * 1e3:g} mJ)", fontsize=10)
     a1.set_xticks(range(len(names)), names)
