@@ -374,10 +374,12 @@ class ControllerSettings:
         return fs * min(dt / self.ramp_time_s, 1.0)
 
     def energy_budget_j(self, dt: float, full_scale_n: float | None = None) -> float:
-        """``E0 = s Delta / 2`` (J): the reading's uncertainty about the controller's
-        smallest action, one ramp step ``s`` held while the arm may sit half a count from
-        its reading, so a wall met from outside can start."""
-        return self.ramp_step_n(dt, full_scale_n) * 0.5 * self.position_resolution_mm * 1e-3
+        """``E0 = F_max Delta / 2`` (J): what bringing the full force up at one reading
+        costs in the bound (a monotone ramp's quantisation term is ``Delta/2`` times its
+        height), so a wall pressed from rest is never withheld for want of an allowance
+        (docs/runtime.md, Passivity item 6)."""
+        fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
+        return fs * 0.5 * self.position_resolution_mm * 1e-3
 
 
 #: Bisection steps of :func:`affordable_force` (2^-30 of the ramp step: far below any
@@ -506,7 +508,7 @@ class PassivityController:
     arm's kinetic energy is left out). It then sends the largest force, between 0 and the
     wall's force (a wall never pulls), within one ramp step ``s`` of the last output, such
     that the plan "hold it one tick, then ramp to 0 at ``s`` per tick" keeps ``U`` below
-    ``E0 = s Delta`` if the reading keeps moving along the force at the rate of the last
+    ``E0 = F_max Delta / 2`` if the reading keeps moving along the force at the rate of the last
     two ticks (:func:`affordable_force`). If the motion outruns that prediction the output
     ramps down at ``s`` (it never steps further), and the excess is booked and repaid.
 
@@ -515,7 +517,7 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_q3",
-                 "_f1", "_f2", "_out", "_started")
+                 "_f1", "_f2", "_out", "_started", "_still")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -531,6 +533,7 @@ class PassivityController:
         self._f1 = self._f2 = 0.0
         self._out = 0.0
         self._started = False
+        self._still = 0             # ticks since the reading last changed
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
@@ -557,6 +560,7 @@ class PassivityController:
         jerk = abs(x_mm - 2.0 * self._q1 + self._q2) * 1e-3 - 2.0 * s.position_resolution_mm * 1e-3
         if jerk < 0.0:
             jerk = 0.0
+        self._still = self._still + 1 if dq == 0.0 else 0
         self._q3 = self._q2
         self._q2 = self._q1
         self._q1 = x_mm
@@ -565,7 +569,7 @@ class PassivityController:
         step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
         m = s.device_mass_kg
         c_m = dt * dt / (2.0 * m) if m else 0.0
-        e0 = step * h
+        e0 = full * h
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
             return 0.0
@@ -587,9 +591,10 @@ class PassivityController:
             hi = target if target > lo else lo
         a = hi
         if s.energy_bound and hi > lo:
-            # the arm's speed now: the last two ticks' mean, half a count of reading error,
-            # and what the held force added since the middle of those ticks
-            lead = sg * ahead + 1.5 * jerk + h
+            # the arm's speed now: the last two ticks' mean, its reading error (half a
+            # count; Delta/n after n > 2 ticks at one reading), and what the held force
+            # added since the middle of those ticks
+            lead = sg * ahead + 1.5 * jerk + q / (self._still if self._still > 2 else 2)
             a = _affordable_scalar(e0 - u, lo, hi, sg * f1, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
@@ -618,7 +623,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
     z = np.zeros(n)
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "q3": z.copy(), "f1": z.copy(), "f2": z.copy(),
-            "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy()}
+            "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy()}
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "float | np.ndarray",
@@ -649,6 +654,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     u = u - s.damping_trust * bd * ex * ex / dt
     ahead = 0.5 * (x - q2) * 1e-3
     jerk = np.maximum(np.abs(x - 2.0 * q1 + q2) * 1e-3 - 2.0 * q, 0.0)
+    still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
+    state["still"] = still
     state["q3"] = q2
     state["q2"] = q1
     state["q1"] = x.copy()
@@ -658,7 +665,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
     m = s.device_mass_kg if mass_kg is None else mass_kg
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
-    e0 = step * 0.5 * q
+    e0 = full * 0.5 * q
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)
     u = np.where(idle, np.maximum(u, 0.0), u)
     state["energy"] = np.where(started, u, 0.0)
@@ -672,7 +679,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     hi = np.maximum(np.minimum(p + step, target), lo)
     a = hi
     if s.energy_bound:
-        lead = sg * ahead + 1.5 * jerk + 0.5 * q
+        lead = sg * ahead + 1.5 * jerk + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, sg * f1, lead, c_m, step, 0.5 * q)
     out = np.where(started & ~idle, sg * a, 0.0)
     state["out"] = out

@@ -258,7 +258,7 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
     if not cells:
         raise HapticSDKError("the stability result has no cells to plot")
     names = list(cells[0]["results"])
-    goal = float(result["summary"]["energy_goal_j"])
+    goal = float(result["summary"]["energy_bound_j"])
     rng = np.random.default_rng(0)   # horizontal jitter only
     fig, axes = plt.subplots(1, 3, figsize=(16, 5.2))
     a0, a1, a2 = axes
@@ -278,9 +278,9 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
     a0.set_yscale("log")
     a0.set_ylim(ENERGY_FLOOR_J / 2, None)
     a0.set_xticks(range(len(names)), within, fontsize=8)
-    a0.set_xlabel("controller, cells within the goal")
+    a0.set_xlabel("controller, cells within the bound")
     a0.set_ylabel(f"max energy given to the user (J, log; < {ENERGY_FLOOR_J:g} drawn at it)")
-    a0.set_title(f"energy to the user per cell (red: goal {goal * 1e3:g} mJ)", fontsize=10)
+    a0.set_title(f"energy to the user per cell (red: bound {goal * 1e3:g} mJ)", fontsize=10)
     a1.set_xticks(range(len(names)), names)
     a1.set_ylim(-0.03, 1.12)
     a1.set_ylabel("delivered force / (K x penetration), contact ticks")
@@ -294,7 +294,7 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
         sc = a2.scatter(best[ok], mine[ok], c=per[ok], s=6, cmap="viridis", norm=_lognorm(per[ok]))
         a2.plot([0, 1], [0, 1], color="gray", lw=1)
         a2.plot([0, 1], [0, 0.95], color="gray", lw=1, ls="--")
-        a2.set_xlabel("best passive peer's delivered ratio (popc / eb / vc within the goal)")
+        a2.set_xlabel("best passive peer's delivered ratio (popc / eb / vc within the bound)")
         a2.set_ylabel("sdk delivered ratio")
         a2.set_title(f"sdk against the best passive peer ({int(ok.sum())} cells with one)", fontsize=10)
         fig.colorbar(sc, ax=a2, label="period T (ms, log)")

@@ -49,8 +49,8 @@ from ..sim.plant import PlantBatch
 CONTROLLERS = (*P.PEERS, "sdk")
 PASSIVE_PEERS = ("popc", "eb", "vc")
 KINDS = ("press_hold", "tap", "bumpy_slide", "plain_slide", "creep", "knots")
-#: Energy to the user a cell may show (J), the issue's goal (0.1 mJ over a run).
-ENERGY_GOAL_J = 1.0e-4
+#: Energy to the user a cell may show (J), the issue's bound (0.1 mJ over a run).
+ENERGY_BOUND_J = 1.0e-4
 #: Relative shortfall of the delivered ratio allowed against the best passive peer.
 DELIVERED_SHORTFALL = 0.05
 FORCE_LIMIT_N = 3.3
@@ -245,16 +245,16 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
 
 def cell_verdicts(cell: dict[str, Any]) -> dict[str, Any]:
     """The SDK controller's goals in one cell: energy, no pull, step within its ramp,
-    delivered ratio against the best peer that stayed within the energy goal."""
+    delivered ratio against the best peer that stayed within the energy bound."""
     r = cell["results"]
     me = r["sdk"]
     best = [r[p]["delivered_ratio"] for p in PASSIVE_PEERS if p in r
-            and r[p]["energy_to_user_j"] <= ENERGY_GOAL_J and r[p]["delivered_ratio"] == r[p]["delivered_ratio"]]
+            and r[p]["energy_to_user_j"] <= ENERGY_BOUND_J and r[p]["delivered_ratio"] == r[p]["delivered_ratio"]]
     best_r = max(best) if best else float("nan")
     mine = me["delivered_ratio"]
     deliv = (True if not best or mine != mine and best_r != best_r
              else (mine == mine and mine >= (1.0 - DELIVERED_SHORTFALL) * best_r))
-    return {"energy_ok": me["energy_to_user_j"] <= ENERGY_GOAL_J, "no_pull": me["min_contact_force_n"] >= 0.0,
+    return {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
             "step_ok": me["max_force_step_n"] <= me["ramp_step_n"] * (1 + 1e-9) + 1e-12,
             "delivered_ok": bool(deliv), "best_passive_peer_ratio": best_r}
 
@@ -270,12 +270,12 @@ def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
         d = np.array([c["results"][name]["delivered_ratio"] for c in cells])
         st = np.array([c["results"][name]["max_force_step_n"] for c in cells])
         mn = np.array([c["results"][name]["min_contact_force_n"] for c in cells])
-        per[name] = {"cells_energy_within_goal": int((e <= ENERGY_GOAL_J).sum()),
+        per[name] = {"cells_energy_within_bound": int((e <= ENERGY_BOUND_J).sum()),
                      "max_energy_to_user_j": float(e.max()), "median_energy_to_user_j": float(np.median(e)),
                      "median_delivered_ratio": float(np.nanmedian(d)) if np.isfinite(d).any() else float("nan"),
                      "max_force_step_n": float(st.max()), "most_negative_contact_force_n": float(mn.min())}
-    return {"cells": n, "energy_goal_j": ENERGY_GOAL_J, "delivered_shortfall_allowed": DELIVERED_SHORTFALL,
-            "sdk_energy_within_goal": sum(x["energy_ok"] for x in v),
+    return {"cells": n, "energy_bound_j": ENERGY_BOUND_J, "delivered_shortfall_allowed": DELIVERED_SHORTFALL,
+            "sdk_energy_within_bound": sum(x["energy_ok"] for x in v),
             "sdk_no_pull": sum(x["no_pull"] for x in v),
             "sdk_step_within_ramp": sum(x["step_ok"] for x in v),
             "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] for x in v),

@@ -123,20 +123,20 @@ def _stability(args: argparse.Namespace) -> int:
     n = s["cells"]
     rows = []
     for name, c in s["controllers"].items():
-        rows.append(f"  {name:<6} {c['cells_energy_within_goal']:>6}/{n:<6} {c['max_energy_to_user_j'] * 1e3:>12.4g} "
+        rows.append(f"  {name:<6} {c['cells_energy_within_bound']:>6}/{n:<6} {c['max_energy_to_user_j'] * 1e3:>12.4g} "
                     f"{c['median_delivered_ratio']:>10.3f} {c['max_force_step_n']:>10.3f} "
                     f"{c['most_negative_contact_force_n']:>10.3f}")
     text = (f"{head}, {res['runtime_s']:.1f} s (simulated arm, exact zero-order hold; energy from the raw state)\n"
-            f"  {'ctrl':<6} {'E<=' + format(s['energy_goal_j'] * 1e3, 'g') + 'mJ':>13} {'max E (mJ)':>12} "
+            f"  {'ctrl':<6} {'E<=' + format(s['energy_bound_j'] * 1e3, 'g') + 'mJ':>13} {'max E (mJ)':>12} "
             f"{'median F/Kx':>10} {'max dF (N)':>10} {'min F (N)':>10}\n" + "\n".join(rows) + "\n"
-            f"sdk controller: energy within {s['energy_goal_j'] * 1e3:g} mJ in {s['sdk_energy_within_goal']}/{n} cells; "
+            f"sdk controller: energy within {s['energy_bound_j'] * 1e3:g} mJ in {s['sdk_energy_within_bound']}/{n} cells; "
             f"never pulls in {s['sdk_no_pull']}/{n}; force steps within its ramp in {s['sdk_step_within_ramp']}/{n}; "
             f"delivered >= {100 - s['delivered_shortfall_allowed'] * 100:g} % of the best passive peer's in "
             f"{s['sdk_delivered_vs_best_passive_peer']}/{n} ({s['cells_with_a_passive_peer']} cells have a peer "
-            f"within the energy goal)"
+            f"within the energy bound)"
             + (f"\nfigure saved to {args.plot}" if args.plot else ""))
     emit(res, args.json, text)
-    return 0 if s["sdk_energy_within_goal"] == n else 1
+    return 0 if s["sdk_energy_within_bound"] == n else 1
 
 
 def _fidelity(args: argparse.Namespace) -> int:

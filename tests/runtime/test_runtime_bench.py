@@ -74,7 +74,7 @@ def test_cli_handlers(capsys):
     rc = args.func(args)
     out = json.loads(capsys.readouterr().out)
     # exit status 0 exactly when the sdk controller met the energy goal in every cell
-    assert rc == (0 if out["summary"]["sdk_energy_within_goal"] == out["summary"]["cells"] else 1)
+    assert rc == (0 if out["summary"]["sdk_energy_within_bound"] == out["summary"]["cells"] else 1)
     assert {"cells", "summary", "mode"} <= set(out) and out["mode"] == "grid"
     assert set(out["summary"]["controllers"]) == {"plain", "popc", "eb", "vc", "sdk"}
     args = parser.parse_args(["fidelity", "--periods", "0.001", "0.004", "--json"])

@@ -7,7 +7,7 @@ the controller's guarantee is stated for in docs/runtime.md, runs them through t
 zero-order-hold plant (:mod:`hapticsdk.sim.plant`, energy from the raw state, not from the
 controller) and checks, per cell:
 
-* energy given to the finger <= ``E0 + ENERGY_SLACK_J``, where ``E0 = s Delta / 2`` is the
+* energy given to the finger <= ``E0 + ENERGY_SLACK_J``, where ``E0 = F_max Delta / 2`` is the
   controller's own starting allowance (computed here from the cell's declared parameters,
   not read from the controller), and ``ENERGY_SLACK_J`` = 0.1 mJ is the issue's goal: the
   room left for motion the one-tick prediction does not foresee;
@@ -62,7 +62,7 @@ def cell(draw):
 
 def _bound(c):
     s = F_MAX * min(c["period_s"] / RAMP_S, 1.0)
-    return s * 0.5 * c["resolution_mm"] * 1e-3 + ENERGY_SLACK_J, s
+    return F_MAX * 0.5 * c["resolution_mm"] * 1e-3 + ENERGY_SLACK_J, s
 
 
 @settings(max_examples=3, deadline=None, derandomize=True, database=None)

@@ -63,9 +63,8 @@ def _press_and_hold(passivity, finger, gs=2.3, dur=4.0, *, period=1e-3, b=None, 
 
 
 def _allowance(dev, period):
-    """E0 = s Delta / 2 (docs/runtime.md, Passivity item 6) from the device's declaration."""
-    s = 3.3 * min(period / 5e-3, 1.0)
-    return s * 0.5 * dev.encoder_resolution_mm * 1e-3
+    """E0 = F_max Delta / 2 (docs/runtime.md, Passivity item 6) from the device's declaration."""
+    return 3.3 * 0.5 * dev.encoder_resolution_mm * 1e-3
 
 
 def _no_pull_and_ramp(L, period):
