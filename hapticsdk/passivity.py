@@ -595,7 +595,7 @@ class PassivityController:
             # count; Delta/n after n > 2 ticks at one reading), and what the held force
             # added since the middle of those ticks
             lead = sg * ahead + 1.5 * jerk + q / (self._still if self._still > 2 else 2)
-            a = _affordable_scalar(e0 - u if u < e0 else 0.0, lo, hi, sg * f1, lead, c_m, step, h)
+            a = _affordable_scalar(e0 - u, lo, hi, sg * f1, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a
@@ -680,7 +680,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     a = hi
     if s.energy_bound:
         lead = sg * ahead + 1.5 * jerk + q / np.maximum(still, 2.0)
-        a = affordable_force(np.maximum(e0 - u, 0.0), lo, hi, sg * f1, lead, c_m, step, 0.5 * q)
+        a = affordable_force(e0 - u, lo, hi, sg * f1, lead, c_m, step, 0.5 * q)
     out = np.where(started & ~idle, sg * a, 0.0)
     state["out"] = out
     state["started"] = np.ones_like(started)
