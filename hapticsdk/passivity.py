@@ -609,6 +609,7 @@ class PassivityController:
             f_applied = 0.0
         self._f2 = self._f1
         self._f1 = f_applied
+        self._out = f_applied   # the ramp starts from what the device applied
 
     def report(self) -> dict[str, float]:
         """``energy_bound_j`` (U, J: upper bound of the energy given to the user over the
@@ -691,6 +692,7 @@ def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray)
     """Record the forces actually applied over the coming interval (N)."""
     state["f2"] = state["f1"]
     state["f1"] = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
+    state["out"] = state["f1"].copy()   # the ramp starts from what was applied
 
 
 def zoh_observer_energy(x_mm: np.ndarray, f_applied: np.ndarray) -> np.ndarray:

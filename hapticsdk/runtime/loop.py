@@ -894,6 +894,8 @@ class ServoLoop:
                     f = s.pending.popleft()
                 if s.pc is not None:
                     f = s.pc.step(x_n, dt, f)
+                if bad:
+                    f = 0.0   # an unknown position gets no force (the controller ramps from what was applied)
                 # the role's own record, refilled (the actuator keeps only its safety
                 # layer's output)
                 cmd.force_n = f
