@@ -14,41 +14,21 @@ Two tools:
   mass (``mass_kg=``), :func:`critical_stiffness` and :func:`passivity_margin` return that
   eigenvalue (stability) limit analytically via :func:`mass_correction` (exact for d = 0,
   second order in ``b T / m`` for d >= 1); the passivity label never uses it.
-* :class:`PassivityController` is a time-domain passivity observer (PO) with a
-  variable damper (PC), after Hannaford & Ryu (IEEE TRA 18(1), 2002), with the energy
-  paired to the zero-order hold: the force actually *held* over an interval is
-  multiplied by that interval's displacement, ``E += -F(n-1) * (x(n) - x(n-1))``. The
-  naive pairing ``f(n) v(n)`` never sees the energy the hold generates (see
-  :func:`naive_observer_energy` and the tests). On top of the bounded damper the
-  controller bounds the force it lets the wall push outward with by the energy the
-  observer holds (energy bounding), so a wall far stiffer than the device can hold
-  (a saturated relay on a quantised encoder) cannot feed energy to the user either.
-  The cut is spread over ticks: the output moves at most ``max_force_step_n`` (0.8 N)
-  per tick while the controller acts, and the bound caps the force so that the whole
-  ramp-down at that rate fits in the energy budget (predicted work
-  ``S (v+ T + Delta) + S^2 T^2 / 2m`` for the sum S of the ramp's forces, Delta one
-  encoder count), in the spirit of energy bounding / reference energy following
-  (Kim & Ryu; Ryu, Preusche, Hannaford & Hirzinger 2005) rather than a one-tick dump.
-  A second observer ``G`` books, every tick, what the hold generates *relative to the
-  wall's own continuous law* (held-force work minus the trapezoid of the wall's force,
-  plus the credited device damping) and drives a damper on the raw velocity the moment
-  it goes negative: the Colgate deficit ``K T / 2 - b`` is paid as it arises instead of
-  after the wall's stored energy is spent, which is what keeps walls up to 4 x 2b/T
-  passive, settled and at their full spring law (goal 4 of the reference).
-  Before all of these, a **stiffness cap** limits the wall's outward force to
-  ``K_c x penetration`` (:func:`cap_stiffness_n_per_mm`): a wall stiffer than the device
-  can render passively is rendered as the stiffest spring it can (a conservative spring,
-  after the idea of a virtual coupling), with the observers as the backstop, instead of
-  a relay the observers withhold.
-  After all of these, a **felt floor** keeps the output, deeper than 1 mm, at no less than
-  ``min(0.6 N, 0.95 x the wall's own force)`` whenever the floor's work over one tick is
-  affordable, and a **pre-paid budget** makes the damper pay, while the probe moves into
-  the wall (extra resistance, not less force), for the withdrawal where the floor limits
-  it; where the floor's one-tick work is not affordable by itself (long periods, no
-  device damping, fast taps) an **entry boost** lets that damper exceed its bound and the
-  slew limit while the probe moves in, up to the device's saturation, until the reserve
-  covers the floor's cost of the withdrawal, and the floor's gate counts the reserve
-  (see :class:`ControllerSettings`).
+* :class:`PassivityController` renders a unilateral wall in two parts, both fixed by
+  what the device declares (docs/runtime.md, "Passivity", derives every constant):
+
+  - a **Colgate spring**: the wall's force up to the stiffness ``K_c = 2 b_lo / T`` that
+    the trusted device damping ``b_lo`` makes passive under the zero-order hold
+    (Colgate & Schenkel), as a function of the depth below the surface. It is a spring,
+    continuous in depth and zero at the surface: no relay, no threshold;
+  - the **extra** above it (the rest of the wall's force), bounded by energy: the
+    controller books ``U``, an upper bound of the energy the extra has given the user,
+    from the readings and the held forces alone (ZOH pairing plus the encoder's
+    quantisation terms, Ryu, Kim & Hannaford 2004; Kim & Ryu's energy bounding), and
+    sends the largest extra, within one ramp step of the last, whose plan "hold, then
+    ramp to 0" keeps ``U`` within ``E0 = F_max Delta / 2``.
+
+  The output lies between 0 and the wall's force: a unilateral wall never pulls.
 
 Sign conventions: ``x`` is the probe position along the surface normal (mm, y axis,
 inside the material at x < 0); ``F`` is the force on the probe along +x (N, "pushing the
@@ -490,34 +470,46 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
 
 
 class PassivityController:
-    """Energy-bounded wall: passive by construction from the device's declared parameters.
+    """Passive wall from the device's declared parameters: a Colgate spring plus an
+    energy-bounded extra.
 
-    Per tick call :meth:`step` with the measured position (mm), the measured period ``dt``
-    (s) and the wall's force (N); send the returned force; then call :meth:`commit` with
-    the force the device actually applied (after its safety clamp).
+    Per tick call :meth:`step` with the measured position (mm, along the normal, the
+    surface at 0, inside at x < 0), the measured period ``dt`` (s) and the wall's force
+    (N); send the returned force; then call :meth:`commit` with the force the device
+    actually applied (after its safety clamp).
 
-    The controller keeps ``U``, an *upper bound* of the energy the device has given the
-    user since contact began, from the readings ``q`` and the held forces ``F`` alone:
+    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = 2 b_lo / dt``,
+    ``b_lo = damping_trust x declared damping``: a spring no stiffer than the trusted
+    damping makes passive under the zero-order hold (Colgate & Schenkel's ``b > K T / 2``).
+    It follows the reading at once (a spring, not a ramp: a ramp on a spring lags it,
+    and a lagging spring gives energy), so the force changes by at most
+    ``K_c |dq|`` plus the extra's ramp step per tick.
 
-        ``U += F_{k-1} dq_k + (Delta/2) |F_{k-1} - F_{k-2}| - b_lo max(|dq_k| - Delta, 0)^2 / dt``
+    **The extra** ``X = F - P`` carries the rest of the wall. The controller keeps ``U``,
+    an *upper bound* of the energy the extra has given the user, from the readings ``q``
+    and the held extras alone:
 
-    (ZOH pairing: the force held over an interval times that interval's reading change;
-    summation by parts bounds the true work by this plus ``Delta/2`` per unit of force
-    change, plus ``Delta/2 |F|`` at the end; ``b_lo = damping_trust x declared damping``
-    dissipates at least ``b_lo dy^2 / dt`` per interval, and ``|dy| >= |dq| - Delta``; the
-    arm's kinetic energy is left out). It then sends the largest force, between 0 and the
-    wall's force (a wall never pulls), within one ramp step ``s`` of the last output, such
-    that the plan "hold it one tick, then ramp to 0 at ``s`` per tick" keeps ``U`` below
-    ``E0 = F_max Delta / 2`` if the reading keeps moving along the force at the rate of the last
-    two ticks (:func:`affordable_force`). If the motion outruns that prediction the output
-    ramps down at ``s`` (it never steps further), and the excess is booked and repaid.
+        ``U += X_{k-1} dq_k + (Delta/2) |X_{k-1} - X_{k-2}| - b_x max(|dq_k| - Delta, 0)^2 / dt``
 
-    On release (wall force 0) the output ramps to 0 at ``s`` per tick, charged to the same
-    bound; with the output at 0 and no wall force, the credit is dropped (``U <- max(U, 0)``).
+    (ZOH pairing: the extra held over an interval times that interval's reading change;
+    summation by parts bounds its true work by this plus ``Delta/2`` per unit of change,
+    plus ``Delta/2 |X|`` at the end; ``b_x = b_lo - K_f dt / 2`` is the damping the spring
+    of secant stiffness ``K_f`` leaves, which dissipates at least ``b_x dy^2 / dt`` per
+    interval with ``|dy| >= |dq| - Delta``). It sends the largest extra, between 0 and
+    ``F_wall - P``, within one ramp step ``s`` of the last, whose plan "hold it one tick,
+    then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = F_max Delta / 2`` if the
+    reading keeps moving at the rate of the last two ticks (:func:`affordable_force`).
+    If the motion outruns that prediction the extra ramps down at ``s`` and the excess
+    is booked (``overdrawn_j``).
+
+    **Release.** The spring follows the reading out; the extra ramps to 0 at ``s`` per
+    tick, charged to the same bound, and once the bound is spent only the spring is
+    left (the force never drops below it while the stylus is inside). With no wall force
+    and no output, credit is dropped (``U <- max(U, 0)``); a debt is kept.
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_q3",
-                 "_f1", "_f2", "_out", "_started", "_still")
+                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -530,10 +522,12 @@ class PassivityController:
         self.withheld_n_ticks = 0.0 # sum over ticks of the force withheld (N)
         self.overdrawn_j = 0.0      # largest U - E0 seen (J): motion beyond the prediction
         self._q1 = self._q2 = self._q3 = 0.0
-        self._f1 = self._f2 = 0.0
+        self._f1 = self._f2 = 0.0   # the extra (applied force minus the spring) over the last two ticks
         self._out = 0.0
         self._started = False
         self._still = 0             # ticks since the reading last changed
+        self._spring = 0.0          # the Colgate spring sent this tick (N)
+        self._kf = 0.0              # its secant stiffness (N/m)
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
@@ -549,12 +543,16 @@ class PassivityController:
         q = s.position_resolution_mm * 1e-3
         h = 0.5 * q
         f1 = self._f1
-        # a change of the held force: half a count of reading error per newton (summation
-        # by parts; the reading's error may have either sign at that tick)
+        b_lo = s.damping_trust * s.device_damping_ns_per_m
+        # the extra above the spring: ZOH-paired work plus half a count of reading error
+        # per newton of change (summation by parts); the damping the Colgate spring does
+        # not need (b_lo - K_f T / 2) is credited
         u = self.energy_j + f1 * dq + h * abs(f1 - self._f2)
         ex = abs(dq) - q
         if ex > 0.0:
-            u -= s.damping_trust * s.device_damping_ns_per_m * ex * ex / dt
+            b_x = b_lo - 0.5 * self._kf * dt
+            if b_x > 0.0:
+                u -= b_x * ex * ex / dt
         ahead = 0.5 * (x_mm - self._q2) * 1e-3
         # the change of the per-tick motion beyond what quantisation alone makes (2 counts)
         jerk = abs(x_mm - 2.0 * self._q1 + self._q2) * 1e-3 - 2.0 * s.position_resolution_mm * 1e-3
@@ -564,7 +562,22 @@ class PassivityController:
         self._q3 = self._q2
         self._q2 = self._q1
         self._q1 = x_mm
+        # the Colgate spring: the wall up to the stiffness the trusted damping makes
+        # passive (K_c = 2 b_lo / T), as a function of the depth below the surface x = 0
+        depth = -x_mm * 1e-3
+        spring = 0.0
+        kf = 0.0
+        if f_wall > 0.0 and depth > 0.0 and b_lo > 0.0:
+            spring = 2.0 * b_lo / dt * depth
+            if spring > f_wall:
+                spring = f_wall
         fm = s.max_force_n
+        if fm is not None and spring > fm:
+            spring = fm
+        if spring > 0.0:
+            kf = spring / depth
+        self._spring = spring
+        self._kf = kf
         full = fm if fm is not None else max(abs(f_wall), abs(self._out))
         step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
         m = s.device_mass_kg
@@ -581,8 +594,9 @@ class PassivityController:
         target = sg * f_wall
         if fm is not None and target > fm:
             target = fm
-        p = sg * self._out
-        # the ramp: within one step of the last output, and not past 0 while it can reach it
+        target -= spring
+        p = sg * f1
+        # the extra's ramp: within one step of the last one, and not past 0 while it can reach it
         lo = p - step
         if lo < 0.0:
             lo = 0.0 if p + step >= 0.0 else p + step
@@ -595,11 +609,11 @@ class PassivityController:
             # count; Delta/n after n > 2 ticks at one reading), and what the held force
             # added since the middle of those ticks
             lead = sg * ahead + 1.5 * jerk + q / (self._still if self._still > 2 else 2)
-            a = _affordable_scalar(e0 - u, lo, hi, sg * f1, lead, c_m, step, h)
+            a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a
-        out = sg * a
+        out = spring + sg * a
         self._out = out
         return out
 
@@ -608,8 +622,8 @@ class PassivityController:
         if f_applied != f_applied or f_applied in (math.inf, -math.inf):
             f_applied = 0.0
         self._f2 = self._f1
-        self._f1 = f_applied
-        self._out = f_applied   # the ramp starts from what the device applied
+        self._f1 = f_applied - self._spring   # the extra actually held (the ramp starts from it)
+        self._out = f_applied
 
     def report(self) -> dict[str, float]:
         """``energy_bound_j`` (U, J: upper bound of the energy given to the user over the
@@ -624,7 +638,8 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
     z = np.zeros(n)
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "q3": z.copy(), "f1": z.copy(), "f2": z.copy(),
-            "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy()}
+            "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
+            "spring": z.copy(), "kf": z.copy()}
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "float | np.ndarray",
@@ -650,9 +665,11 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     q2 = np.where(started, state["q2"], x)
     dq = (x - q1) * 1e-3
     f1 = state["f1"]
+    b_lo = s.damping_trust * bd
     u = state["energy"] + f1 * dq + 0.5 * q * np.abs(f1 - state["f2"])
     ex = np.maximum(np.abs(dq) - q, 0.0)
-    u = u - s.damping_trust * bd * ex * ex / dt
+    b_x = np.maximum(b_lo - 0.5 * state["kf"] * dt, 0.0)
+    u = u - b_x * ex * ex / dt
     ahead = 0.5 * (x - q2) * 1e-3
     jerk = np.maximum(np.abs(x - 2.0 * q1 + q2) * 1e-3 - 2.0 * q, 0.0)
     still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
@@ -663,6 +680,10 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     out_prev = state["out"]
     full = (np.maximum(np.abs(fw), np.abs(out_prev)) if fm is None
             else np.broadcast_to(np.asarray(fm, float), x.shape))
+    depth = np.maximum(-x * 1e-3, 0.0)
+    spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(2.0 * b_lo / dt * depth, fw), 0.0)
+    if fm is not None:
+        spring = np.minimum(spring, full)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
     m = s.device_mass_kg if mass_kg is None else mass_kg
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
@@ -675,14 +696,18 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     target = sg * fw
     if fm is not None:
         target = np.minimum(target, full)
-    p = sg * out_prev
+    target = target - spring
+    p = sg * f1
     lo = np.where(p - step >= 0.0, p - step, np.minimum(p + step, 0.0))
     hi = np.maximum(np.minimum(p + step, target), lo)
     a = hi
     if s.energy_bound:
         lead = sg * ahead + 1.5 * jerk + q / np.maximum(still, 2.0)
-        a = affordable_force(e0 - u, lo, hi, sg * f1, lead, c_m, step, 0.5 * q)
-    out = np.where(started & ~idle, sg * a, 0.0)
+        a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
+    spring = np.where(started & ~idle, spring, 0.0)
+    state["spring"] = spring
+    state["kf"] = np.where(spring > 0.0, spring / np.where(depth > 0.0, depth, 1.0), 0.0)
+    out = np.where(started & ~idle, spring + sg * a, 0.0)
     state["out"] = out
     state["started"] = np.ones_like(started)
     return np.where(on, out, fw)
@@ -690,9 +715,10 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
 
 def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray) -> None:
     """Record the forces actually applied over the coming interval (N)."""
+    f = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
     state["f2"] = state["f1"]
-    state["f1"] = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
-    state["out"] = state["f1"].copy()   # the ramp starts from what was applied
+    state["f1"] = f - state["spring"]   # the extra actually held (its ramp starts from it)
+    state["out"] = f.copy()
 
 
 def zoh_observer_energy(x_mm: np.ndarray, f_applied: np.ndarray) -> np.ndarray:

@@ -190,6 +190,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     given = np.zeros(L)
     asked = np.zeros(L)
     dmax = np.zeros(L)
+    dspring = np.zeros(L)   # sdk: largest step beyond the Colgate spring (K_c |dq|)
+    x_last = None
     fneg = np.zeros(L)
     contact = np.zeros(L, int)
     f_last = np.zeros(L)
@@ -222,6 +224,11 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         contact += tl
         fneg = np.minimum(fneg, np.where(tl, f, 0.0))
         dmax = np.maximum(dmax, np.where(live, np.abs(f - f_last), 0.0))
+        if x_last is not None:
+            kc = 2.0 * s.damping_trust * bd / T
+            beyond = np.abs(f - f_last) - kc * np.abs(x - x_last) * 1e-3
+            dspring = np.maximum(dspring, np.where(live & sdk, beyond, 0.0))
+        x_last = x
         f_last = f
         e_max = np.maximum(e_max, plant.energy_to_user_j())
         r_now = r_next
@@ -238,6 +245,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
                        "contact_ticks": int(contact[ln])}
             if name == "sdk":
                 d[name]["ramp_step_n"] = float(step[ln])
+                d[name]["max_step_beyond_spring_n"] = float(dspring[ln])
                 d[name]["bound_shortfall_j"] = float(unsound[ln])
         out.append(d)
     return out
@@ -256,6 +264,8 @@ def cell_verdicts(cell: dict[str, Any]) -> dict[str, Any]:
              else (mine == mine and mine >= (1.0 - DELIVERED_SHORTFALL) * best_r))
     return {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
             "step_ok": me["max_force_step_n"] <= me["ramp_step_n"] * (1 + 1e-9) + 1e-12,
+            "step_ok_plus_spring": (me.get("max_step_beyond_spring_n", me["max_force_step_n"])
+                                      <= me["ramp_step_n"] * (1 + 1e-9) + 1e-12),
             "delivered_ok": bool(deliv), "best_passive_peer_ratio": best_r}
 
 
@@ -278,6 +288,7 @@ def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "sdk_energy_within_bound": sum(x["energy_ok"] for x in v),
             "sdk_no_pull": sum(x["no_pull"] for x in v),
             "sdk_step_within_ramp": sum(x["step_ok"] for x in v),
+            "sdk_step_within_ramp_plus_spring": sum(x["step_ok_plus_spring"] for x in v),
             "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] for x in v),
             "cells_with_a_passive_peer": sum(x["best_passive_peer_ratio"] == x["best_passive_peer_ratio"] for x in v),
             "controllers": per}

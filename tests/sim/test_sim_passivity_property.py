@@ -15,7 +15,9 @@ controller) and checks, per cell:
   (up to the reading's error times the held force, the bound's open tail): a bound with
   its sign flipped, or booking the wrong pairing, fails here even where it withholds;
 * the wall never pulls: no negative force on a contact tick;
-* no force step beyond the ramp's own ``s = F_max T / 5 ms``.
+* no force step beyond the ramp's own ``s = F_max T / 5 ms`` plus the Colgate spring's
+  change ``K_c |dq|`` (``K_c = 2 b_lo / T``; measured by the benchmark as
+  ``max_step_beyond_spring_n``).
 
 The draws are derandomised (``derandomize=True``) so CI sees the same examples every run,
 and hypothesis keeps no example database (nothing is written).
@@ -76,5 +78,5 @@ def test_energy_to_the_finger_stays_within_the_bound(cells):
         # (1 nJ: float rounding of sums over up to 10^4 ticks of millijoules)
         assert r["bound_shortfall_j"] <= 1e-9, (c, r)
         assert r["min_contact_force_n"] >= 0.0, (c, r)
-        assert r["max_force_step_n"] <= step * (1 + 1e-9), (c, r)
+        assert r["max_step_beyond_spring_n"] <= step * (1 + 1e-9), (c, r)
 

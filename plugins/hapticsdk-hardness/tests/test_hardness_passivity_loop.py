@@ -67,11 +67,15 @@ def _allowance(dev, period):
     return 3.3 * 0.5 * dev.encoder_resolution_mm * 1e-3
 
 
-def _no_pull_and_ramp(L, period):
+def _no_pull_and_ramp(L, period, dev):
+    """No pull on a contact tick; each step within the extra's ramp (3.3 N x T / 5 ms)
+    plus the Colgate spring's own change, K_c |d pen| with K_c = 2 (b_decl / 2) / T."""
     f = L["force_n"]
     contact = L["penetration_mm"] > 0
     assert f[contact].min() >= 0.0
-    assert np.abs(np.diff(f)).max() <= 3.3 * min(period / 5e-3, 1.0) * (1 + 1e-9)
+    kc = 2.0 * 0.5 * dev.damping_ns_per_m / period
+    allowed = 3.3 * min(period / 5e-3, 1.0) + kc * np.abs(np.diff(L["penetration_mm"])) * 1e-3
+    assert (np.abs(np.diff(f)) <= allowed * (1 + 1e-9)).all()
 
 
 @pytest.mark.parametrize("finger", ["soft", "medium", "stiff"])
@@ -80,7 +84,7 @@ def test_wall_at_gs_max_is_passive_through_the_loop(finger):
     within the ramp."""
     e, _, f, pen, L, dev = _press_and_hold(True, finger)
     assert e <= _allowance(dev, 1e-3)
-    _no_pull_and_ramp(L, 1e-3)
+    _no_pull_and_ramp(L, 1e-3, dev)
 
 
 @pytest.mark.parametrize("finger", ["soft", "medium"])
@@ -93,7 +97,7 @@ def test_the_servo_loops_default_is_the_passive_controller():
     """Without a passivity argument the loop renders the same wall with the controller."""
     e, _, _, _, L, dev = _press_and_hold(None, "medium", dur=2.0)
     assert e <= _allowance(dev, 1e-3)
-    _no_pull_and_ramp(L, 1e-3)
+    _no_pull_and_ramp(L, 1e-3, dev)
 
 
 #: issue 23 (5): the extreme cases through the real servo loop. Energy to the finger must
@@ -120,7 +124,7 @@ def test_extreme_press_through_the_loop(kind, k, period, b):
     print(f"{kind} {k:g} N/mm T={period * 1e3:g} ms b={b:g}: energy {e * 1e3:.4f} mJ (off {off * 1e3:.3f}), "
           f"delivered {_delivered(L, 2.3 if kind == 'GS' else k):.3f}")
     assert e <= _allowance(dev, period) + 1e-4
-    _no_pull_and_ramp(L, period)
+    _no_pull_and_ramp(L, period, dev)
 
 
 def test_impact_at_half_a_metre_per_second_through_the_loop():
@@ -129,7 +133,7 @@ def test_impact_at_half_a_metre_per_second_through_the_loop():
     e, _, _, _, L, dev = _press_and_hold(True, "stiff", dur=1.0, period=4e-3, b=0.0, raw=50.0, tr=tr)
     print(f"impact 0.5 m/s, 4 ms: energy {e * 1e3:.4f} mJ, delivered {_delivered(L, 50.0):.3f}")
     assert e <= _allowance(dev, 4e-3) + 1e-4
-    _no_pull_and_ramp(L, 4e-3)
+    _no_pull_and_ramp(L, 4e-3, dev)
 
 
 def test_scenes_render_with_the_passivity_controller_by_default():
