@@ -38,7 +38,9 @@ negative ``E`` means the wall has produced energy.
 
 from __future__ import annotations
 
+import functools
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Any
 
@@ -360,6 +362,57 @@ class ControllerSettings:
         (docs/runtime.md, Passivity item 6)."""
         fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
         return fs * 0.5 * self.position_resolution_mm * 1e-3
+
+
+#: Settings of the 0.1 controller (stiffness cap, observers, dither damper, felt floor,
+#: pre-paid budget, entry boost), removed in 0.2: still accepted by
+#: :class:`ControllerSettings`, with a ``DeprecationWarning``, and ignored.
+DEPRECATED_SETTINGS = frozenset({
+    "max_damping_ns_per_m", "velocity_deadband_mm_s", "velocity_filter_hz", "energy_tolerance_j",
+    "bound_tolerance_j", "max_force_step_n", "ramp_reserve_j", "generation_observer", "generation_budget_j",
+    "generation_floor_j", "dither_damping_ns_per_m", "count_play_ratio", "stiffness_cap", "cap_colgate_multiple",
+    "cap_damping_share", "cap_count_force_n", "felt_floor_fraction", "felt_force_n", "felt_depth_mm",
+    "felt_tick_energy_j", "felt_damping_multiple", "prepay_factor", "prepay_budget_j", "entry_force_limit_n",
+    "entry_force_step_n", "felt_uses_reserve"})
+
+_settings_init = ControllerSettings.__init__
+
+
+@functools.wraps(_settings_init)
+def _settings_init_accepting_old_names(self: ControllerSettings, *args: Any, **kw: Any) -> None:
+    old = sorted(k for k in kw if k in DEPRECATED_SETTINGS)
+    if old:
+        warnings.warn(f"ControllerSettings: {', '.join(old)} no longer exist (the 0.1 controller's tuned "
+                      "settings; the controller is derived from the device's declared parameters, "
+                      "docs/runtime.md 'Passivity'); they are ignored and will be refused in 0.3",
+                      DeprecationWarning, stacklevel=2)
+        for k in old:
+            del kw[k]
+    _settings_init(self, *args, **kw)
+
+
+ControllerSettings.__init__ = _settings_init_accepting_old_names  # type: ignore[method-assign]
+
+
+def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None,
+                           resolution_mm: float | None = None) -> float:
+    """Deprecated (0.2; removed in 0.3): the stiffness cap is gone. Returns the stiffness
+    of the controller's Colgate spring instead, ``K_c = 2 b_lo / dt`` in N/mm (``b_lo`` the
+    trusted share of the declared damping); ``resolution_mm`` is ignored."""
+    warnings.warn("cap_stiffness_n_per_mm is deprecated: the controller has no stiffness cap; use "
+                  "colgate_stiffness_n_per_mm (the stiffness of its passive spring)", DeprecationWarning, stacklevel=2)
+    return colgate_stiffness_n_per_mm(settings, dt, damping_ns_per_m)
+
+
+def colgate_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None
+                               ) -> float:
+    """Stiffness (N/mm) of :class:`PassivityController`'s Colgate spring at period ``dt``
+    (s): ``K_c = 2 b_lo / dt`` with ``b_lo = damping_trust x`` the declared damping
+    (``damping_ns_per_m`` overrides the settings' declaration); 0 for ``dt <= 0``."""
+    b = settings.device_damping_ns_per_m if damping_ns_per_m is None else float(damping_ns_per_m)
+    if not dt > 0 or not b > 0:
+        return 0.0
+    return 2.0 * settings.damping_trust * b / dt / 1000.0
 
 
 #: Bisection steps of :func:`affordable_force` (2^-30 of the ramp step: far below any
