@@ -5,9 +5,10 @@
   motion, and one panel per vibration channel that was driven (drive amplitude in that
   actuator's unit, drive frequency). Channels that were never driven and dimensions the
   plan left out are listed under the figure instead of being drawn as empty panels.
-* :func:`plot_stability`: ``hapticsdk bench stability``'s matrix, stiffness x servo
-  period per damping, coloured by the delivered force ratio, energy given to the user
-  written in each cell and unstable cells marked.
+* :func:`plot_stability`: ``hapticsdk bench stability``'s cells: energy to the user on a
+  log axis and the delivered force ratio per controller, and the SDK controller against
+  the best passive peer (:func:`plot_stability_cells`); an older matrix result as a
+  stiffness x period map (:func:`plot_stability_matrix`).
 * :func:`plot_plan`: a compiled plan's materials in intensity space, with what was left
   out of each and why.
 * :func:`plot_paper_comparison`: leave-out decisions on the paper's 8 evaluated samples
@@ -233,6 +234,87 @@ def _cells_grid(cells: Sequence[Mapping[str, Any]], damping: float, controller: 
 
 
 def plot_stability(result: Mapping[str, Any], path: str | Path) -> Path:
+    """Save ``hapticsdk bench stability``'s result as a figure: the per-controller cells
+    (``run_grid`` / ``run_random``, with ``mode``) go to :func:`plot_stability_cells`; an
+    older matrix (``StabilityResult.to_dict()``) to :func:`plot_stability_matrix`."""
+    if "mode" in result:
+        return plot_stability_cells(result, path)
+    return plot_stability_matrix(result, path)
+
+
+#: Energies below this (J) are drawn at it on the log axis (a display floor, marked).
+ENERGY_FLOOR_J = 1e-9
+
+
+def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
+    """Three panels over the same cells: (1) the energy each controller gave the user, one
+    dot per cell on a log axis (energies below :data:`ENERGY_FLOOR_J` drawn at it), the goal
+    as a line and the count within it; (2) the delivered force ratio ``F / (K x pen)`` over
+    the contact ticks, one dot per cell, the median marked; (3) the SDK controller's ratio
+    against the best peer that stayed within the energy goal in the same cell, coloured by
+    the cell's period."""
+    plt = _pyplot()
+    cells = list(result["cells"])
+    if not cells:
+        raise HapticSDKError("the stability result has no cells to plot")
+    names = list(cells[0]["results"])
+    goal = float(result["summary"]["energy_bound_j"])
+    rng = np.random.default_rng(0)   # horizontal jitter only
+    fig, axes = plt.subplots(1, 3, figsize=(16, 5.2))
+    a0, a1, a2 = axes
+    within: list[str] = []
+    for i, name in enumerate(names):
+        e = np.array([c["results"][name]["energy_to_user_j"] for c in cells])
+        d = np.array([c["results"][name]["delivered_ratio"] for c in cells])
+        x = i + rng.uniform(-0.3, 0.3, e.size)
+        a0.scatter(x, np.maximum(e, ENERGY_FLOOR_J), s=4, alpha=0.4)
+        within.append(f"{name}\n{int((e <= goal).sum())}/{e.size}")
+        ok = np.isfinite(d)
+        a1.scatter(x[ok], d[ok], s=4, alpha=0.4)
+        if ok.any():
+            a1.plot([i - 0.35, i + 0.35], [np.median(d[ok])] * 2, color="black", lw=2)
+            a1.text(i, 1.06, f"median {np.median(d[ok]):.2f}", ha="center", fontsize=8)
+    a0.axhline(goal, color="red", lw=1)
+    a0.set_yscale("log")
+    a0.set_ylim(ENERGY_FLOOR_J / 2, None)
+    a0.set_xticks(range(len(names)), within, fontsize=8)
+    a0.set_xlabel("controller, cells within the bound")
+    a0.set_ylabel(f"max energy given to the user (J, log; < {ENERGY_FLOOR_J:g} drawn at it)")
+    a0.set_title(f"energy to the user per cell (red: bound {goal * 1e3:g} mJ)", fontsize=10)
+    a1.set_xticks(range(len(names)), names)
+    a1.set_ylim(-0.03, 1.12)
+    a1.set_ylabel("delivered force / (K x penetration), contact ticks")
+    a1.set_title("delivered force ratio per cell (bar: median)", fontsize=10)
+    if "sdk" in names:
+        from .benchmarks.stability_random import cell_verdicts
+        best = np.array([cell_verdicts(c)["best_passive_peer_ratio"] for c in cells])
+        mine = np.array([c["results"]["sdk"]["delivered_ratio"] for c in cells])
+        per = np.array([c["period_s"] for c in cells]) * 1e3
+        ok = np.isfinite(best) & np.isfinite(mine)
+        sc = a2.scatter(best[ok], mine[ok], c=per[ok], s=6, cmap="viridis", norm=_lognorm(per[ok]))
+        a2.plot([0, 1], [0, 1], color="gray", lw=1)
+        a2.plot([0, 1], [0, 0.95], color="gray", lw=1, ls="--")
+        a2.set_xlabel("best passive peer's delivered ratio (popc / eb / vc within the bound)")
+        a2.set_ylabel("sdk delivered ratio")
+        a2.set_title(f"sdk against the best passive peer ({int(ok.sum())} cells with one)", fontsize=10)
+        fig.colorbar(sc, ax=a2, label="period T (ms, log)")
+    mode = result.get("mode", "")
+    fig.suptitle(f"stiff virtual walls, {len(cells)} {mode} cells on a simulated arm (generated data; "
+                 "exact zero-order hold, energy from the raw state)", fontsize=11)
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, 0.94))
+    out = Path(path)
+    save_figure(fig, out, dpi=90)
+    return out
+
+
+def _lognorm(v: np.ndarray) -> Any:
+    from matplotlib.colors import LogNorm
+    lo = float(np.min(v)) if v.size else 0.1
+    hi = float(np.max(v)) if v.size else 1.0
+    return LogNorm(vmin=lo, vmax=max(hi, lo * 1.0001))
+
+
+def plot_stability_matrix(result: Mapping[str, Any], path: str | Path) -> Path:
     """Save ``hapticsdk bench stability``'s matrix (``StabilityResult.to_dict()``) as a
     figure: for each damping (columns) and controller on/off (rows), a stiffness x period
     map coloured by the delivered force ratio against the stiffest passive spring,

@@ -219,6 +219,7 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
     batch = ArmBatch(period_s, arms, fings, y0_mm=x0, track_energy=True)
     st = controller_state_batch(n)
     limit = batch.fmax
+    batch_m = np.array([a.mass_kg for a in arms])
     kp = np.full(n, np.nan) if k_pass is None else np.broadcast_to(np.asarray(k_pass, float), (n,))
     k_eff = np.minimum(K, kp)
     peak = np.zeros(n)
@@ -243,7 +244,7 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
         touching = pen > 0
         f_wall = np.where(touching, K * pen, 0.0)
         f_cmd = controller_step_batch(st, y_meas, period_s, f_wall, on, settings, damping_ns_per_m=b,
-                                      resolution_mm=batch.res_mm)
+                                      resolution_mm=batch.res_mm, max_force_n=limit, mass_kg=batch_m)
         f_cmd = np.nan_to_num(f_cmd, nan=0.0)
         np.maximum(peak_cmd, np.abs(f_cmd), out=peak_cmd)
         f = batch.step(f_cmd, r[k], (r[k + 1] - r[k]) / period_s)  # one reference for all cells (broadcast)
@@ -279,7 +280,7 @@ def run_period(period_s: float, K: np.ndarray, b: np.ndarray, fingers: Sequence[
             "delivered_vs_wall_min_ratio_above_1mm": np.where(none, np.nan, min_wall),
             "felt_force_ratio_min": np.where(none, np.nan, min_felt),
             "min_force_above_1mm_n": np.where(none, np.nan, min_f), "contact_ticks": contact,
-            "limit_n": limit, "observed_energy_j": st["energy"], "dissipated_j": st["dissipated"]}
+            "limit_n": limit, "energy_bound_j": st["energy"]}
 
 
 def _is_stable(res: dict[str, np.ndarray]) -> np.ndarray:

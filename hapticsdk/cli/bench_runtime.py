@@ -13,15 +13,20 @@ def register_bench(bench_sub: Any) -> None:
     """Add ``bench stability``, ``bench fidelity``, ``bench timing`` (and the other runtime
     benchmarks) under ``hapticsdk bench``.
     """
-    from .argtypes import bounded_int, figure_file, nonneg_int, positive_float
+    from .argtypes import bounded_int, figure_file, nonneg_int, positive_float, positive_int
 
-    p = bench_sub.add_parser("stability", help="stability matrix of a virtual wall on the simulated Omni "
-                                               "(stiffness x period x damping x finger, controller on/off)")
+    p = bench_sub.add_parser("stability", help="stiff virtual walls on a simulated arm: the SDK's passivity "
+                                               "controller beside the plain wall, PO/PC, energy bounding and a "
+                                               "virtual coupling, on the fixed grid or --random cells")
     p.add_argument("--quick", action="store_true", help="small grid, 3 s runs (for tests)")
+    p.add_argument("--random", type=positive_int, default=None, metavar="N",
+                   help="N cells drawn from the whole space (trajectory, finger, period, encoder, arm, "
+                        "damping) instead of the fixed grid")
+    p.add_argument("--seed", type=nonneg_int, default=1, help="seed of --random (default 1)")
     p.add_argument("--duration", type=positive_float, default=None, help="seconds per cell (default 10)")
-    p.add_argument("--plot", metavar="PNG", type=figure_file,
-                   help="write a figure: stiffness x period map per damping, coloured by delivered force "
-                        "ratio, energy marked (needs matplotlib)")
+    p.add_argument("--plot", metavar="PNG", type=figure_file, help="write a figure: energy to the user (log scale) and "
+                                                 "delivered force ratio per controller, and the SDK's ratio "
+                                                 "against the best passive peer (needs matplotlib)")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(func=_stability)
 
@@ -105,48 +110,47 @@ def _live(args: argparse.Namespace) -> int:
 
 
 def _stability(args: argparse.Namespace) -> int:
-    from ..benchmarks.stability import DEFAULT_GRID, QUICK_GRID, run_matrix
+    from ..benchmarks.stability import DEFAULT_GRID, QUICK_GRID
+    from ..benchmarks.stability_random import run_grid, run_random
     from ..progress import Progress
     from . import emit
-    grid = dict(QUICK_GRID if args.quick else DEFAULT_GRID)
-    if args.duration:
-        grid["duration_s"] = args.duration
     if args.plot:  # before the work: a figure that cannot be written fails now
         from ..fileio import check_output_path
         check_output_path(args.plot, field="--plot")
     with Progress("bench stability", quiet=args.json) as progress:
-        res = run_matrix(grid, progress=progress).to_dict()
+        if args.random is not None:
+            res = run_random(args.random, args.seed, progress=progress)
+            head = f"{args.random} random cells (seed {args.seed})"
+        else:
+            grid = dict(QUICK_GRID if args.quick else DEFAULT_GRID)
+            if args.duration:
+                grid["duration_s"] = args.duration
+            res = run_grid(grid, progress=progress)
+            head = f"fixed grid, {len(res['cells'])} cells, {grid['duration_s']:g} s each"
     if args.plot:
         from ..plotting import plot_stability
         plot_stability(res, args.plot)
         res["plot"] = args.plot
     s = res["summary"]
-    pct = res["transparent_fraction"] * 100
-    text = (f"{s['cells']} cells, {grid['duration_s']:g} s each, {res['runtime_s']:.1f} s\n"
-            f"controller on : {s['controller_on_stable_transparent']} stable and transparent, "
-            f"{s['controller_on_stable_withholding']} stable by withholding "
-            f"(< {pct:g} % of min(K, K_pass) x penetration delivered), {s['controller_on_unstable']} unstable\n"
-            f"                max energy to user {s['controller_on_max_energy_j'] * 1e3:.3f} mJ "
-            f"(tolerance {res['energy_tolerance_j'] * 1e3:g} mJ); delivered force >= "
-            f"{s['controller_on_min_delivered_vs_passive'] * 100:.0f} % of min(K, K_pass) x penetration and >= "
-            f"{s['controller_on_min_delivered_vs_wall'] * 100:.0f} % of K x penetration in every cell\n"
-            f"                force below min({res['felt_force_n']:g} N, {res['felt_fraction']:g} K x penetration) "
-            f"on some tick deeper than {res['felt_depth_mm']:g} mm: {s['controller_on_felt_force_missed']} cells\n"
-            f"                cells within each limit (of {s['controller_on_cells']}): energy to user <= "
-            f"{res['energy_tolerance_j'] * 1e3:g} mJ: {s['controller_on_energy_within_tolerance']}; delivered >= "
-            f"{pct:g} % of min(K, K_pass) x penetration: {s['controller_on_delivered_within_tolerance']}; "
-            f"felt force on every tick deeper than {res['felt_depth_mm']:g} mm: "
-            f"{s['controller_on_felt_force_met']} (+{s['controller_on_felt_force_not_applicable']} never that deep); "
-            f"all three: {s['controller_on_all_three_met']}\n"
-            f"                peak force commanded {s['controller_on_max_peak_commanded_force_n']:.2f} N, "
-            f"applied {s['controller_on_max_peak_force_n']:.2f} N; largest force step "
-            f"{s['controller_on_max_force_step_n']:.2f} N per tick\n"
-            f"controller off: {s['controller_off_stable_transparent'] + s['controller_off_stable_withholding']} "
-            f"stable, {s['controller_off_unstable']} unstable "
-            f"({s['controller_off_predicted_active']} predicted active by b < K T / 2)"
+    n = s["cells"]
+    rows = []
+    for name, c in s["controllers"].items():
+        rows.append(f"  {name:<6} {c['cells_energy_within_bound']:>6}/{n:<6} {c['max_energy_to_user_j'] * 1e3:>12.4g} "
+                    f"{c['median_delivered_ratio']:>10.3f} {c['max_force_step_n']:>10.3f} "
+                    f"{c['most_negative_contact_force_n']:>10.3f}")
+    text = (f"{head}, {res['runtime_s']:.1f} s (simulated arm, exact zero-order hold; energy from the raw state)\n"
+            f"  {'ctrl':<6} {'E<=' + format(s['energy_bound_j'] * 1e3, 'g') + 'mJ':>13} {'max E (mJ)':>12} "
+            f"{'median F/Kx':>10} {'max dF (N)':>10} {'min F (N)':>10}\n" + "\n".join(rows) + "\n"
+            f"sdk controller: energy within {s['energy_bound_j'] * 1e3:g} mJ in {s['sdk_energy_within_bound']}/{n} cells; "
+            f"never pulls in {s['sdk_no_pull']}/{n}; force steps within its ramp in {s['sdk_step_within_ramp']}/{n} "
+            f"(within the ramp plus the Colgate spring, K_c x reading change, in "
+            f"{s['sdk_step_within_ramp_plus_spring']}/{n}); "
+            f"delivered >= {100 - s['delivered_shortfall_allowed'] * 100:g} % of the best passive peer's in "
+            f"{s['sdk_delivered_vs_best_passive_peer']}/{n} ({s['cells_with_a_passive_peer']} cells have a peer "
+            f"within the energy bound)"
             + (f"\nfigure saved to {args.plot}" if args.plot else ""))
     emit(res, args.json, text)
-    return 0 if s["controller_on_unstable"] == 0 else 1
+    return 0 if s["sdk_energy_within_bound"] == n else 1
 
 
 def _fidelity(args: argparse.Namespace) -> int:

@@ -427,12 +427,8 @@ class ServoLoop:
         q = float(getattr(device, "encoder_resolution_mm", 0.0) or 0.0)
         self.switch_ramp_s = float(switch_ramp_s)
         if passivity_settings is None:
-            # the device's apparent mass (if it declares one) bounds the in-period push
-            # and its declared physical damping is credited (device + wall passivity)
-            passivity_settings = ControllerSettings(
-                device_mass_kg=getattr(device, "apparent_mass_kg", None),
-                device_damping_ns_per_m=float(getattr(device, "damping_ns_per_m", 0.0) or 0.0),
-                position_resolution_mm=q)
+            # the energy bound from what the device declares (mass, damping, encoder, force limit)
+            passivity_settings = ControllerSettings.for_device(device)
         self.passivity_settings = passivity_settings
         #: contact gate hysteresis (mm): contact begins at penetration > 0 and ends at
         #: penetration <= -one encoder count of the device (0 for an exact position;
@@ -920,6 +916,8 @@ class ServoLoop:
                     f = s.pending.popleft()
                 if s.pc is not None:
                     f = s.pc.step(x_n, dt, f)
+                if bad:
+                    f = 0.0   # an unknown position gets no force (the controller ramps from what was applied)
                 # the role's own record, refilled (the actuator keeps only its safety
                 # layer's output)
                 cmd.force_n = f

@@ -23,21 +23,50 @@ def _slow_press(depth_mm=3.0, speed=5.0):
                        (0.4 + 2 * s, 0, 2.0)])
 
 
+def _press_log(gs, finger):
+    tr = _slow_press()
+    dev = OmniVirtual(trajectory=tr, finger=finger)
+    r = HardnessDimension().renderer({"GS": gs})
+    rep = ServoLoop(dev, [r], {"force": dev, "coil": VoiceCoilVirtual()}).run(tr.duration_s)
+    # the loading branch: the press and the hold (the reference stops at 0.4 + s)
+    load = rep.log["t"] < tr.duration_s - (tr.duration_s - 0.4) / 2
+    return rep.log, load, dev
+
+
 @pytest.mark.parametrize("gs", [0.08, 0.3, 0.8, 1.5, 2.3, 4.5])
 def test_rendered_force_follows_the_spring_law(gs):
     """Goal 7: press the simulated Omni through the servo loop (passivity on), regress the
-    force the arm applied on the measured penetration: slope within 7 % of min(GS, 2.3)."""
-    tr = _slow_press()
-    dev = OmniVirtual(trajectory=tr, finger="stiff")
-    coil = VoiceCoilVirtual()
-    r = HardnessDimension().renderer({"GS": gs})
-    rep = ServoLoop(dev, [r], {"force": dev, "coil": coil}).run(tr.duration_s)
-    L = rep.log
-    m = (L["penetration_mm"] > 0.1) & (L["force_n"] < 0.95 * 3.3) & (np.abs(L["velocity_mm_s"][:, 1]) < 60)
+    force the arm applied on the measured penetration while the finger presses and holds:
+    slope within 7 % of min(GS, 2.3). On the release the force lies between the wall's
+    law and the controller's Colgate spring, min(GS, 2 b_lo / T) x penetration (the
+    energy-bounded extra above the spring may be let go early; docs/runtime.md)."""
+    L, load, dev = _press_log(gs, "stiff")
+    pen, f = L["penetration_mm"], L["force_n"]
+    m = (pen > 0.1) & (f < 0.95 * 3.3) & (np.abs(L["velocity_mm_s"][:, 1]) < 60) & load
     assert m.sum() > 200
-    slope = np.polyfit(L["penetration_mm"][m], L["force_n"][m], 1)[0]
+    slope = np.polyfit(pen[m], f[m], 1)[0]
     assert slope == pytest.approx(min(gs, GS_MAX_N_PER_MM), rel=0.07)
-    assert L["force_n"].max() <= 3.3
+    assert f.max() <= 3.3
+    rel = ~load & (pen > 0)
+    wall = np.minimum(min(gs, GS_MAX_N_PER_MM) * pen[rel], 3.3)
+    k_c = 2.0 * (dev.damping_ns_per_m / 2.0) / 1e-3 * 1e-3   # N/mm
+    spring = np.minimum(min(gs, GS_MAX_N_PER_MM, k_c) * pen[rel], 3.3)
+    assert (f[rel] <= wall * (1 + 1e-9)).all()
+    assert (f[rel] >= spring * (1 - 1e-9)).all()
+
+
+@pytest.mark.parametrize("gs", [0.3, 0.8, 1.5, 2.3])
+@pytest.mark.parametrize("finger", ["medium", "soft"])
+def test_lighter_fingers_get_at_least_the_passive_spring(gs, finger):
+    """A lighter finger bounces on contact; the wall above the passive spring is then
+    withheld as far as the energy bound needs, never the spring itself: on every contact
+    tick the force is at least min(GS, 2 b_lo / T) x penetration and at most the wall."""
+    L, _, dev = _press_log(gs, finger)
+    pen, f = L["penetration_mm"], L["force_n"]
+    c = pen > 0
+    k_c = 2.0 * (dev.damping_ns_per_m / 2.0) / 1e-3 * 1e-3
+    assert (f[c] >= np.minimum(min(gs, k_c) * pen[c], 3.3) * (1 - 1e-9)).all()
+    assert (f[c] <= np.minimum(min(gs, GS_MAX_N_PER_MM) * pen[c], 3.3) * (1 + 1e-9)).all()
 
 
 def test_stiffness_above_the_limit_goes_to_the_coil_never_to_the_arm():

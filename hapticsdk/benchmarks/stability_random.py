@@ -1,0 +1,332 @@
+"""Stiff walls off the grid: randomised stability cells, each run with the SDK's
+passivity controller and four textbook peers on the same plant and trajectory
+(``hapticsdk bench stability --random N --seed S``; the fixed grid runs through the same
+code as a regression set).
+
+A cell is a wall ``F = K x penetration`` (of the encoder reading; the surface at 0) on one
+normal axis of an arm (mass, true damping, encoder, 3.3 N force limit) held by a finger
+(mass, spring, damper) that follows a scripted reference. Drawn, per cell, independently:
+
+* trajectory: press-and-hold, taps (up to 1.5 m/s), bumpy sliding (depth modulated by
+  0.3-1 mm at 5-40 Hz), plain sliding (depth drifting), slow creep (1-5 mm/s);
+* finger: mass 3-50 g, stiffness 50-2000 N/m, damping 0.1-5 N*s/m (log-uniform; a band
+  around the presets of :data:`hapticsdk.sim.finger.FINGERS`, generated, not measured);
+* period 0.25-10 ms, encoder 0.001-0.2 mm, arm mass 0.02-0.1 kg (log-uniform);
+* true damping 0 (a quarter of the cells) or 0.05-1 N*s/m, declared at 0.5x-2x the true
+  value (log-uniform factor);
+* stiffness 0.01-10^4 N/mm (log-uniform).
+
+Plant: :class:`hapticsdk.sim.plant.PlantBatch` (exact ZOH, energy from the raw state).
+Controllers per cell: ``plain``, ``popc``, ``eb``, ``vc`` (:mod:`hapticsdk.sim.peers`,
+the declared damping at face value) and ``sdk`` (:class:`~hapticsdk.passivity.PassivityController`
+with the declared damping, resolution and force limit).
+
+Per cell and controller: ``energy_to_user_j`` (max over time of the energy given to the
+finger), ``delivered_ratio`` (over the contact ticks, i.e. reading inside the wall:
+``sum min(F+, F_target) / sum F_target`` with ``F_target = min(K pen, 3.3 N)``; force
+beyond the wall's law, e.g. a damper's, is not counted as delivered), ``max_force_step_n``
+(largest change of the applied force between two ticks, all ticks), ``min_contact_force_n``
+(most negative applied force on a contact tick; 0 if none); for ``sdk`` also
+``ramp_step_n`` (the controller's own step at that period) and ``bound_shortfall_j``
+(largest ``true energy - U - (Delta/2) |F|`` over the ticks: <= 0 when the controller's
+bound ``U`` held as an upper bound of the truth). Not modelled: Coulomb friction, computation
+delay, jitter, multi-axis coupling, a reacting hand.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..passivity import ControllerSettings, controller_commit_batch, controller_state_batch, controller_step_batch
+from ..sim import peers as P
+from ..sim.arm import ArmParams
+from ..sim.finger import FINGERS, FingerParams
+from ..sim.plant import PlantBatch
+
+CONTROLLERS = (*P.PEERS, "sdk")
+PASSIVE_PEERS = ("popc", "eb", "vc")
+KINDS = ("press_hold", "tap", "bumpy_slide", "plain_slide", "creep", "knots")
+#: Energy to the user a cell may show (J), the issue's bound (0.1 mJ over a run).
+ENERGY_BOUND_J = 1.0e-4
+#: Relative shortfall of the delivered ratio allowed against the best passive peer.
+DELIVERED_SHORTFALL = 0.05
+FORCE_LIMIT_N = 3.3
+REST_S = 0.3
+
+
+def _lu(rng: np.random.Generator, lo: float, hi: float, n: int) -> np.ndarray:
+    return np.exp(rng.uniform(np.log(lo), np.log(hi), n))
+
+
+def draw_cells(n: int, seed: int) -> list[dict[str, Any]]:
+    """``n`` cells drawn from the whole space (see the module docstring)."""
+    rng = np.random.default_rng(seed)
+    kind = rng.integers(0, 5, n)
+    b_true = np.where(rng.random(n) < 0.25, 0.0, _lu(rng, 0.05, 1.0, n))
+    cells = []
+    cols = {
+        "stiffness_n_per_mm": _lu(rng, 0.01, 1e4, n), "period_s": _lu(rng, 0.25e-3, 10e-3, n),
+        "resolution_mm": _lu(rng, 0.001, 0.2, n), "arm_mass_kg": _lu(rng, 0.02, 0.1, n),
+        "damping_true_ns_per_m": b_true, "damping_declared_ns_per_m": b_true * _lu(rng, 0.5, 2.0, n),
+        "finger_mass_kg": _lu(rng, 0.003, 0.05, n), "finger_stiffness_n_per_m": _lu(rng, 50.0, 2000.0, n),
+        "finger_damping_ns_per_m": _lu(rng, 0.1, 5.0, n),
+        "depth_mm": rng.uniform(0.5, 6.0, n), "speed_in_mm_s": _lu(rng, 5.0, 200.0, n),
+        "speed_out_mm_s": _lu(rng, 5.0, 200.0, n), "hold_s": rng.uniform(0.3, 1.2, n),
+        "tap_speed_mm_s": _lu(rng, 100.0, 1500.0, n), "taps": rng.integers(2, 7, n).astype(float),
+        "tap_dwell_s": rng.uniform(0.0, 0.02, n), "tap_pause_s": rng.uniform(0.05, 0.2, n),
+        "bump_mm": rng.uniform(0.3, 1.0, n), "bump_hz": rng.uniform(5.0, 40.0, n),
+        "drift_mm": rng.uniform(-1.0, 1.0, n), "creep_mm_s": rng.uniform(1.0, 5.0, n),
+    }
+    for i in range(n):
+        c = {k: float(v[i]) for k, v in cols.items()}
+        c["trajectory"] = KINDS[int(kind[i])]
+        if c["trajectory"] == "creep":
+            c["depth_mm"] = min(c["depth_mm"], 1.5)
+        cells.append(c)
+    return cells
+
+
+class _Ref:
+    """Vectorised finger references of many cells (mm)."""
+
+    def __init__(self, cells: Sequence[dict[str, Any]], knots: Any = None) -> None:
+        g = lambda k, d=0.0: np.array([float(c.get(k, d)) for c in cells])  # noqa: E731
+        self.kind = np.array([KINDS.index(c["trajectory"]) for c in cells])
+        creep = self.kind == 4
+        self.a = np.where(creep, 0.2, 2.0)
+        self.d = g("depth_mm", 1.0)
+        vin = np.where(creep, g("creep_mm_s", 1.0), g("speed_in_mm_s", 50.0))
+        vout = np.where(creep, g("creep_mm_s", 1.0), g("speed_out_mm_s", 50.0))
+        self.d2 = self.d + np.where(self.kind == 3, g("drift_mm"), 0.0)
+        self.d2 = np.maximum(self.d2, 0.2)
+        self.t_in = (self.a + self.d) / vin
+        self.f = g("bump_hz", 10.0)
+        hold = g("hold_s", 0.5)
+        hold = np.where(self.kind == 2, np.maximum(np.round(hold * self.f), 1.0) / self.f, hold)
+        self.hold = hold
+        self.A = np.where(self.kind == 2, g("bump_mm"), 0.0)
+        self.t_out = (self.a + self.d2) / vout
+        self.t_h = self.t_in + hold
+        # taps
+        self.td = (self.a + self.d) / g("tap_speed_mm_s", 500.0)
+        self.dw = g("tap_dwell_s")
+        self.per = 2 * self.td + self.dw + g("tap_pause_s", 0.1)
+        self.n_taps = g("taps", 3.0)
+        self.knots = knots
+        dur = np.where(self.kind == 1, self.n_taps * self.per, self.t_h + self.t_out) + REST_S
+        if knots is not None:
+            dur = np.where(self.kind == 5, float(knots.t[-1]), dur)
+        self.duration_s = dur
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        c = lambda z: np.clip(z, 0.0, 1.0)  # noqa: E731
+        a, d = self.a, self.d
+        hold_part = np.where((t > self.t_in) & (t < self.t_h), 1.0, 0.0)
+        r = (a - (a + d) * c(t / self.t_in) - (self.d2 - d) * c((t - self.t_in) / self.hold)
+             + (a + self.d2) * c((t - self.t_h) / self.t_out)
+             - self.A * np.sin(2 * np.pi * self.f * (t - self.t_in)) * hold_part)
+        u = np.mod(t, self.per)
+        k = np.floor(t / self.per)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tri = c(np.minimum(u / self.td, (2 * self.td + self.dw - u) / self.td))
+        rt = a - (a + d) * tri * (k < self.n_taps)
+        r = np.where(self.kind == 1, rt, r)
+        if self.knots is not None:
+            r = np.where(self.kind == 5, np.interp(t, self.knots.t, self.knots.y), r)
+        return r
+
+
+def run_cells(cells: Sequence[dict[str, Any]], *, knots: Any = None, chunk_lanes: int = 6000,
+              settings: ControllerSettings | None = None, controllers: Sequence[str] = CONTROLLERS,
+              progress: Any = None) -> list[dict[str, Any]]:
+    """Run every cell with every controller; returns one dict per cell (the cell's
+    parameters plus ``results[controller]`` with the metrics of the module docstring)."""
+    cells = [dict(c) for c in cells]
+    order = np.argsort([c["period_s"] for c in cells], kind="stable")
+    nc = len(controllers)
+    per_chunk = max(1, chunk_lanes // nc)
+    total_ticks = sum(int(np.ceil(_Ref([c], knots).duration_s[0] / c["period_s"])) for c in cells)
+    done = 0
+    from ..progress import report
+    for s0 in range(0, len(cells), per_chunk):
+        idx = order[s0:s0 + per_chunk]
+        sub = [cells[i] for i in idx]
+        res = _run_chunk(sub, knots, settings, controllers)
+        for c, r in zip(sub, res):
+            c["results"] = r
+        done += sum(int(np.ceil(_Ref([c], knots).duration_s[0] / c["period_s"])) for c in sub)
+        report(progress, "simulated cell ticks", done, total_ticks)
+    return cells
+
+
+def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: ControllerSettings | None,
+               controllers: Sequence[str]) -> list[dict[str, dict[str, float]]]:
+    n = len(cells)
+    nc = len(controllers)
+    arms = [ArmParams(mass_kg=c["arm_mass_kg"], damping_ns_per_m=c["damping_true_ns_per_m"],
+                      max_force_n=FORCE_LIMIT_N, encoder_resolution_mm=c["resolution_mm"]) for c in cells]
+    fings = [FingerParams(mass_kg=c["finger_mass_kg"], stiffness_n_per_m=c["finger_stiffness_n_per_m"],
+                          damping_ns_per_m=c["finger_damping_ns_per_m"]) for c in cells]
+    ref = _Ref(cells, knots)
+    rows = np.repeat(np.arange(n), nc)
+    kind = np.tile(np.array([CONTROLLERS.index(k) for k in controllers]), n)
+    T = np.array([c["period_s"] for c in cells])[rows]
+    K = np.array([c["stiffness_n_per_mm"] for c in cells])[rows]
+    bd = np.array([c["damping_declared_ns_per_m"] for c in cells])[rows]
+    dur = ref.duration_s[rows]
+    y0 = ref(np.zeros(n))
+    plant = PlantBatch([c["period_s"] for c in cells], arms, fings, y0, rows=rows)
+    L = rows.size
+    pst = P.state(L)
+    cst = controller_state_batch(L)
+    sdk = kind == CONTROLLERS.index("sdk")
+    s = settings or ControllerSettings()
+    lane_ref = _Ref([cells[i] for i in rows], knots)
+    n_ticks = np.ceil(dur / T).astype(int)
+    e_max = np.zeros(L)
+    given = np.zeros(L)
+    asked = np.zeros(L)
+    dmax = np.zeros(L)
+    dspring = np.zeros(L)   # sdk: largest step beyond the Colgate spring (K_c |dq|)
+    x_last = None
+    fneg = np.zeros(L)
+    contact = np.zeros(L, int)
+    f_last = np.zeros(L)
+    unsound = np.full(L, -np.inf)
+    r_now = lane_ref(np.zeros(L))
+    for k in range(int(n_ticks.max())):
+        live = k < n_ticks
+        t1 = (k + 1) * T
+        r_next = lane_ref(t1)
+        x = plant.measured_mm()
+        pen = -x
+        touching = pen > 0
+        fw = np.where(touching, K * pen, 0.0)
+        f_peer = P.step(kind, pst, x, T, fw, K, pen, bd)
+        f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd, resolution_mm=plant.res_mm,
+                                      max_force_n=plant.fmax, mass_kg=plant.m)
+        f_cmd = np.where(sdk, f_sdk, f_peer)
+        # soundness of the controller's bound: the true energy so far (plant) never exceeds
+        # U plus the reading's error times the held force (the bound's open tail)
+        gap = plant.energy_to_user_j() - cst["energy"] - 0.5 * plant.res_mm * 1e-3 * np.abs(cst["f1"])
+        unsound = np.maximum(unsound, np.where(sdk & live, gap, -np.inf))
+        f = plant.step(f_cmd, r_now, (r_next - r_now) / T, live)
+        f = np.where(live, f, f_last)
+        P.commit(pst, f)
+        controller_commit_batch(cst, f)
+        tgt = np.minimum(fw, plant.fmax)
+        tl = touching & live
+        given += np.where(tl, np.minimum(np.maximum(f, 0.0), tgt), 0.0)
+        asked += np.where(tl, tgt, 0.0)
+        contact += tl
+        fneg = np.minimum(fneg, np.where(tl, f, 0.0))
+        dmax = np.maximum(dmax, np.where(live, np.abs(f - f_last), 0.0))
+        if x_last is not None:
+            kc = 2.0 * s.damping_trust * bd / T
+            beyond = np.abs(f - f_last) - kc * np.abs(x - x_last) * 1e-3
+            dspring = np.maximum(dspring, np.where(live & sdk, beyond, 0.0))
+        x_last = x
+        f_last = f
+        e_max = np.maximum(e_max, plant.energy_to_user_j())
+        r_now = r_next
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(asked > 0, given / np.where(asked > 0, asked, 1.0), np.nan)
+    step = np.minimum(T / s.ramp_time_s, 1.0) * plant.fmax
+    out: list[dict[str, dict[str, float]]] = []
+    for i in range(n):
+        d = {}
+        for j, name in enumerate(controllers):
+            ln = i * nc + j
+            d[name] = {"energy_to_user_j": float(e_max[ln]), "delivered_ratio": float(ratio[ln]),
+                       "max_force_step_n": float(dmax[ln]), "min_contact_force_n": float(fneg[ln]),
+                       "contact_ticks": int(contact[ln])}
+            if name == "sdk":
+                d[name]["ramp_step_n"] = float(step[ln])
+                d[name]["max_step_beyond_spring_n"] = float(dspring[ln])
+                d[name]["bound_shortfall_j"] = float(unsound[ln])
+        out.append(d)
+    return out
+
+
+def cell_verdicts(cell: dict[str, Any]) -> dict[str, Any]:
+    """The SDK controller's goals in one cell: energy, no pull, step within its ramp,
+    delivered ratio against the best peer that stayed within the energy bound."""
+    r = cell["results"]
+    me = r["sdk"]
+    best = [r[p]["delivered_ratio"] for p in PASSIVE_PEERS if p in r
+            and r[p]["energy_to_user_j"] <= ENERGY_BOUND_J and r[p]["delivered_ratio"] == r[p]["delivered_ratio"]]
+    best_r = max(best) if best else float("nan")
+    mine = me["delivered_ratio"]
+    deliv = (True if not best or mine != mine and best_r != best_r
+             else (mine == mine and mine >= (1.0 - DELIVERED_SHORTFALL) * best_r))
+    return {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
+            "step_ok": me["max_force_step_n"] <= me["ramp_step_n"] * (1 + 1e-9) + 1e-12,
+            "step_ok_plus_spring": (me.get("max_step_beyond_spring_n", me["max_force_step_n"])
+                                      <= me["ramp_step_n"] * (1 + 1e-9) + 1e-12),
+            "delivered_ok": bool(deliv), "best_passive_peer_ratio": best_r}
+
+
+def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Goal counts for the SDK controller and per-controller medians and worst figures."""
+    v = [cell_verdicts(c) for c in cells]
+    n = len(cells)
+    per: dict[str, Any] = {}
+    names = list(cells[0]["results"]) if cells else []
+    for name in names:
+        e = np.array([c["results"][name]["energy_to_user_j"] for c in cells])
+        d = np.array([c["results"][name]["delivered_ratio"] for c in cells])
+        st = np.array([c["results"][name]["max_force_step_n"] for c in cells])
+        mn = np.array([c["results"][name]["min_contact_force_n"] for c in cells])
+        per[name] = {"cells_energy_within_bound": int((e <= ENERGY_BOUND_J).sum()),
+                     "max_energy_to_user_j": float(e.max()), "median_energy_to_user_j": float(np.median(e)),
+                     "median_delivered_ratio": float(np.nanmedian(d)) if np.isfinite(d).any() else float("nan"),
+                     "max_force_step_n": float(st.max()), "most_negative_contact_force_n": float(mn.min())}
+    return {"cells": n, "energy_bound_j": ENERGY_BOUND_J, "delivered_shortfall_allowed": DELIVERED_SHORTFALL,
+            "sdk_energy_within_bound": sum(x["energy_ok"] for x in v),
+            "sdk_no_pull": sum(x["no_pull"] for x in v),
+            "sdk_step_within_ramp": sum(x["step_ok"] for x in v),
+            "sdk_step_within_ramp_plus_spring": sum(x["step_ok_plus_spring"] for x in v),
+            "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] for x in v),
+            "cells_with_a_passive_peer": sum(x["best_passive_peer_ratio"] == x["best_passive_peer_ratio"] for x in v),
+            "controllers": per}
+
+
+def run_random(n: int, seed: int, *, progress: Any = None, settings: ControllerSettings | None = None
+               ) -> dict[str, Any]:
+    """Draw ``n`` cells with ``seed`` and run them (see the module docstring)."""
+    t0 = time.perf_counter()
+    cells = run_cells(draw_cells(n, seed), settings=settings, progress=progress)
+    return {"mode": "random", "seed": int(seed), "cells": cells, "summary": summarise(cells),
+            "runtime_s": time.perf_counter() - t0}
+
+
+def grid_cells(grid: dict[str, Any]) -> list[dict[str, Any]]:
+    """The fixed grid (keys as :data:`hapticsdk.benchmarks.stability.DEFAULT_GRID`) as cells on
+    the simulated Omni (45 g, 0.055 mm, declared damping = true damping) with the grid's
+    press/slide/tap trajectory."""
+    out = []
+    for K in grid["stiffness_n_per_mm"]:
+        for T in grid["period_s"]:
+            for b in grid["damping_ns_per_m"]:
+                for fn in grid["finger"]:
+                    f: FingerParams = FINGERS[fn]
+                    out.append({"trajectory": "knots", "stiffness_n_per_mm": float(K), "period_s": float(T),
+                                "resolution_mm": 0.055, "arm_mass_kg": 0.045, "damping_true_ns_per_m": float(b),
+                                "damping_declared_ns_per_m": float(b), "finger": fn, "finger_mass_kg": f.mass_kg,
+                                "finger_stiffness_n_per_m": f.stiffness_n_per_m,
+                                "finger_damping_ns_per_m": f.damping_ns_per_m})
+    return out
+
+
+def run_grid(grid: dict[str, Any], *, progress: Any = None, settings: ControllerSettings | None = None
+             ) -> dict[str, Any]:
+    """The fixed grid through the same simulation and peers (regression set)."""
+    from .stability import matrix_trajectory
+    t0 = time.perf_counter()
+    tr = matrix_trajectory(float(grid["duration_s"]))
+
+    cells = run_cells(grid_cells(grid), knots=tr, settings=settings, progress=progress)
+    return {"mode": "grid", "cells": cells, "summary": summarise(cells), "runtime_s": time.perf_counter() - t0}
