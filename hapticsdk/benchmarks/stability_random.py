@@ -81,7 +81,7 @@ def draw_cells(n: int, seed: int) -> list[dict[str, Any]]:
         "drift_mm": rng.uniform(-1.0, 1.0, n), "creep_mm_s": rng.uniform(1.0, 5.0, n),
     }
     for i in range(n):
-        c = {k: float(v[i]) for k, v in cols.items()}
+        c: dict[str, Any] = {k: float(v[i]) for k, v in cols.items()}
         c["trajectory"] = KINDS[int(kind[i])]
         if c["trajectory"] == "creep":
             c["depth_mm"] = min(c["depth_mm"], 1.5)
@@ -93,7 +93,8 @@ class _Ref:
     """Vectorised finger references of many cells (mm)."""
 
     def __init__(self, cells: Sequence[dict[str, Any]], knots: Any = None) -> None:
-        g = lambda k, d=0.0: np.array([float(c.get(k, d)) for c in cells])  # noqa: E731
+        def g(k: str, d: float = 0.0) -> np.ndarray:
+            return np.array([float(c.get(k, d)) for c in cells])
         self.kind = np.array([KINDS.index(c["trajectory"]) for c in cells])
         creep = self.kind == 4
         self.a = np.where(creep, 0.2, 2.0)
@@ -184,7 +185,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     cst = controller_state_batch(L)
     sdk = kind == CONTROLLERS.index("sdk")
     s = settings or ControllerSettings()
-    lane_ref = _Ref([cells[i] for i in rows], knots)
+    lane_ref = _Ref([cells[int(i)] for i in rows], knots)
     n_ticks = np.ceil(dur / T).astype(int)
     e_max = np.zeros(L)
     given = np.zeros(L)
