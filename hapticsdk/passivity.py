@@ -661,7 +661,7 @@ class PassivityController:
             # the arm's speed now: the last two ticks' mean, its reading error (half a
             # count; Delta/n after n > 2 ticks at one reading), and what the held force
             # added since the middle of those ticks
-            lead = sg * ahead + 1.5 * jerk + q / (self._still if self._still > 2 else 2)
+            lead = sg * ahead + (1.5 + 0.5 * hi / step) * jerk + q / (self._still if self._still > 2 else 2)
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
@@ -755,7 +755,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     hi = np.maximum(np.minimum(p + step, target), lo)
     a = hi
     if s.energy_bound:
-        lead = sg * ahead + 1.5 * jerk + q / np.maximum(still, 2.0)
+        lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring
