@@ -303,7 +303,7 @@ class ControllerSettings:
             damping (:data:`DAMPING_TRUST`, 1/2: a declaration is trusted to a factor 2).
         position_resolution_mm: encoder resolution Delta (mm); 0 = exact positions.
         max_force_n: force limit of the device (N), the full scale of the ramp. None:
-            the larger of the wall's force and the last output is the full scale.
+            the largest of the wall's forces and the outputs so far is the full scale.
         ramp_time_s: time of a full-scale ramp (s, :data:`RAMP_TIME_S`); the output
             changes by at most ``s = max_force_n * T / ramp_time_s`` per tick (at most
             ``max_force_n``).
@@ -562,7 +562,7 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_q3",
-                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf")
+                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -581,6 +581,7 @@ class PassivityController:
         self._still = 0             # ticks since the reading last changed
         self._spring = 0.0          # the Colgate spring sent this tick (N)
         self._kf = 0.0              # its secant stiffness (N/m)
+        self._full = 0.0            # full scale without a declared force limit: the largest force so far
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
@@ -631,7 +632,14 @@ class PassivityController:
             kf = spring / depth
         self._spring = spring
         self._kf = kf
-        full = fm if fm is not None else max(abs(f_wall), abs(self._out))
+        if fm is None:
+            # no declared limit: the largest force seen so far is the full scale (a fixed
+            # step, so a ramp to 0 ends; a scale that followed the output would shrink
+            # with it and never reach 0)
+            full = max(self._full, abs(f_wall), abs(self._out))
+            self._full = full
+        else:
+            full = fm
         step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
         m = s.device_mass_kg
         c_m = dt * dt / (2.0 * m) if m else 0.0
@@ -661,7 +669,7 @@ class PassivityController:
             # the arm's speed now: the last two ticks' mean, its reading error (half a
             # count; Delta/n after n > 2 ticks at one reading), and what the held force
             # added since the middle of those ticks
-            lead = sg * ahead + 1.5 * jerk + q / (self._still if self._still > 2 else 2)
+            lead = sg * ahead + (1.5 + 0.5 * hi / step) * jerk + q / (self._still if self._still > 2 else 2)
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
@@ -692,7 +700,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     z = np.zeros(n)
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "q3": z.copy(), "f1": z.copy(), "f2": z.copy(),
             "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
-            "spring": z.copy(), "kf": z.copy()}
+            "spring": z.copy(), "kf": z.copy(), "full": z.copy()}
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "float | np.ndarray",
@@ -731,8 +739,11 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     state["q2"] = q1
     state["q1"] = x.copy()
     out_prev = state["out"]
-    full = (np.maximum(np.abs(fw), np.abs(out_prev)) if fm is None
-            else np.broadcast_to(np.asarray(fm, float), x.shape))
+    if fm is None:
+        full = np.maximum(state["full"], np.maximum(np.abs(fw), np.abs(out_prev)))
+        state["full"] = full
+    else:
+        full = np.broadcast_to(np.asarray(fm, float), x.shape)
     depth = np.maximum(-x * 1e-3, 0.0)
     spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(2.0 * b_lo / dt * depth, fw), 0.0)
     if fm is not None:
@@ -755,7 +766,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     hi = np.maximum(np.minimum(p + step, target), lo)
     a = hi
     if s.energy_bound:
-        lead = sg * ahead + 1.5 * jerk + q / np.maximum(still, 2.0)
+        lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring

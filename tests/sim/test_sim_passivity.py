@@ -236,3 +236,29 @@ def test_scalar_controller_equals_batch():
         pc.commit(fa)
         controller_commit_batch(bs, np.array([fa]))
     assert pc.report()["energy_bound_j"] == pytest.approx(bs["energy"][0], abs=1e-9)
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_release_without_a_declared_force_limit_reaches_zero(batch):
+    """With no force limit declared, a wall that goes to 0 (a pause, a release) is ramped
+    down linearly and reaches exactly 0 within F / s ticks (s the ramp step of the largest
+    force seen); a step relative to the current output would shrink with it (geometric
+    decay, never 0)."""
+    st = ControllerSettings()   # no limit, no damping, exact encoder
+    f_hold, dt = 3.45, 1e-3
+    n_ramp = int(np.ceil(st.ramp_time_s / dt))   # ticks of a full-scale ramp
+    if batch:
+        state = controller_state_batch(1)
+        step = lambda fw: float(controller_step_batch(state, np.array([-1.5]), dt, np.array([fw]), True, st)[0])  # noqa: E731
+        commit = lambda f: controller_commit_batch(state, np.array([f]))  # noqa: E731
+    else:
+        pc = PassivityController(st)
+        step = lambda fw: pc.step(-1.5, dt, fw)  # noqa: E731
+        commit = pc.commit
+    out = []
+    for k in range(40):
+        f = step(f_hold if k < 20 else 0.0)
+        commit(f)
+        out.append(f)
+    assert out[19] == pytest.approx(f_hold)
+    assert out[20 + n_ramp] == 0.0
