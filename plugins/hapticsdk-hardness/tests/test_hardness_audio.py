@@ -51,14 +51,21 @@ def _coil(**kw):
     return VoiceCoilAudio(safety=SafetyLayer(VoiceCoilAudio.limits, ramp_time_s=0.0), **kw)
 
 
-def test_missing_sounddevice_is_named(monkeypatch):
+@pytest.mark.parametrize("isolation", ["thread", "process"])
+def test_missing_sounddevice_is_named(monkeypatch, tmp_path, isolation):
+    """sounddevice or PortAudio missing where the stream would run: in this process
+    (the import fails here), or in the audio process (a ``sounddevice`` on its path that
+    fails to load, as sounddevice does without the PortAudio library)."""
     from hapticsdk_hardness import audio
     def fail(name):
         raise OSError("PortAudio library not found")
     monkeypatch.setattr(audio.importlib, "import_module", fail)
+    (tmp_path / "sounddevice.py").write_text("raise OSError('PortAudio library not found')\n")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
     with pytest.raises(DeviceNotFoundError) as ei:
-        audio.VoiceCoilAudio().open()
+        audio.VoiceCoilAudio(isolation=isolation).open()
     assert "libportaudio2" in str(ei.value) and "hapticsdk-hardness[audio]" in str(ei.value)
+    assert "PortAudio library not found" in str(ei.value)
     ok, why = audio.VoiceCoilAudio.check_available()
     assert not ok and "sounddevice" in why
 
@@ -162,7 +169,7 @@ def test_underruns_are_counted(jack):
     measured by bench/bench_voicecoil_audio.py, not here (a timing figure of a loaded
     machine is not a unit test)."""
     from hapticsdk_hardness.audio_loopback import hold
-    coil = _coil(device="system")
+    coil = _coil(device="system", isolation="thread")
     with coil:
         hold(coil, 0.2, frequency_hz=150.0, amplitude=0.3)
         quiet = coil.underruns

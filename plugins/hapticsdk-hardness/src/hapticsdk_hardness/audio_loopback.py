@@ -7,11 +7,19 @@ name, and points PortAudio at it (``JACK_DEFAULT_SERVER``, PortAudio re-initiali
 :class:`LoopbackCapture` opens a PortAudio input stream on it and connects every
 PortAudio output port to that input with ``jack_connect``, so what an output stream of
 this process (or of a child process) plays is captured back, sample for sample, each
-block stamped with the input stream's own clock (``inputBufferAdcTime``).
+block stamped with the input stream's own clock.
 
-What the loopback shows: a sample when it leaves the client into the JACK graph. A
-card adds its playback latency on top (the output stream's ``latency``; one period for
-the dummy driver); :func:`measure` reports both.
+What the loopback shows: a sample when it leaves the client into the JACK graph, i.e.
+the start of the JACK cycle that rendered it. The capture callback's ``currentTime`` is
+the start of its own cycle (JACK's frame time, read just after the cycle began); a block
+rendered by another client (an audio process, or a child process) in a cycle reaches the
+capture in that same cycle (JACK runs a client whose output feeds another one first); a
+block rendered by a stream of the capture's own PortAudio client (an output stream in
+this process) reaches it one cycle later (a client's own output read back by its input),
+so such blocks are stamped one period earlier. (PortAudio's ``inputBufferAdcTime``
+subtracts the latency of the capture port the input would read from, the dummy
+driver's, which is not this path.) A card adds its playback latency on top (the output
+stream's ``latency``; one period for the dummy driver); :func:`measure` reports both.
 """
 
 from __future__ import annotations
@@ -161,10 +169,13 @@ class LoopbackCapture:
         self._lock = threading.Lock()
         self.stream = sd.InputStream(samplerate=server.rate, channels=1, dtype="float32", callback=self._cb)
         self.in_port: str | None = None
+        #: JACK cycles between rendering and capture (see the module doc): 1 when the
+        #: routed outputs are on the capture's own client, else 0
+        self.cycles = 0
 
     def _cb(self, data: np.ndarray, frames: int, t: Any, status: Any) -> None:
         with self._lock:
-            self.blocks.append((float(t.inputBufferAdcTime), data[:, 0].copy()))
+            self.blocks.append((float(t.currentTime), data[:, 0].copy()))
 
     def __enter__(self) -> "LoopbackCapture":
         self.stream.start()
@@ -181,6 +192,8 @@ class LoopbackCapture:
         outs = [p for p in self.server.ports() if re.match(r"PortAudio[^:]*:out_\d+$", p)]
         for p in outs:
             self.server.connect(p, self.in_port or "")
+        own = (self.in_port or "").split(":")[0]
+        self.cycles = int(bool(outs) and all(p.split(":")[0] == own for p in outs))
         return outs
 
     def now(self) -> float:
@@ -199,7 +212,8 @@ class LoopbackCapture:
         if not blocks:
             return np.zeros(0), np.zeros(0)
         fs = self.server.rate
-        t = np.concatenate([t0 + np.arange(b.size) / fs for t0, b in blocks])
+        back = self.cycles * self.server.period / fs
+        t = np.concatenate([t0 - back + np.arange(b.size) / fs for t0, b in blocks])
         y = np.concatenate([b for _, b in blocks]).astype(float)
         return t, y
 
@@ -258,7 +272,7 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     time.sleep(0.1)
     t, y = cap.signal()
     loud = np.nonzero(np.abs(y) > 1e-3 * amplitude * act.full_scale)[0]
-    out_lat = float(act.stream.latency) if act.stream is not None else 0.0
+    out_lat = float(act.output_latency_s or 0.0)
     if loud.size == 0:
         return {"frequency_error_hz": float("nan"), "amplitude_rel_error": float("nan"),
                 "latency_ms": float("nan"), "stop_ms": float("nan"), "underruns": act.underruns - u0}
