@@ -353,6 +353,10 @@ class VoiceCoilAudio(Actuator):
             return
         err: DeviceError | ValidationError
         if msg is None:
+            try:    # end of file: the audio process is ending (reaped here); else it hangs
+                self._proc.wait(1.0)
+            except subprocess.TimeoutExpired:
+                pass
             alive = self._proc.poll() is None
             err = (DeviceError(f"the audio process did not start within {START_WAIT_S:g} s", device=self.label)
                    if alive else self._process_gone())

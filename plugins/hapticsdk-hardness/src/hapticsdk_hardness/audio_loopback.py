@@ -24,13 +24,14 @@ stream's ``latency``; one period for the dummy driver); :func:`measure` reports 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
 import subprocess
 import threading
 import time
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -58,6 +59,8 @@ class JackServer:
         self._old_env: str | None = None
         self.log = ""
         self._xruns = 0
+        #: xruns by the client named late (see late_clients)
+        self.late: dict[str, int] = {}
 
     @staticmethod
     def available() -> str | None:
@@ -78,6 +81,7 @@ class JackServer:
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                                      preexec_fn=_die_with_parent)
         self._xruns = 0
+        self.late = {}
         threading.Thread(target=self._read_log, args=(self.proc,), daemon=True).start()
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
@@ -95,11 +99,32 @@ class JackServer:
         for line in proc.stdout or ():
             if "XRun" in line:
                 self._xruns += 1
+                m = re.search(r"client = (.+?) was not finished", line)
+                who = m.group(1) if m else "(none named)"
+                self.late[who] = self.late.get(who, 0) + 1
             self.log = (self.log + line)[-4000:]
 
     def xruns(self) -> int:
         """xruns the server has reported so far (its log)."""
         return self._xruns
+
+    def late_clients(self) -> dict[str, int]:
+        """xruns so far by the client the server named as not finished in time (a copy).
+        An xrun is one for the whole graph: JACK tells every client (PortAudio flags each
+        stream's next callback with an underflow), whichever client was late."""
+        return dict(self.late)
+
+    @contextlib.contextmanager
+    def portaudio_detached(self) -> Iterator[None]:
+        """This process's PortAudio leaves the server for the block (its JACK client, a
+        member of the graph that an xrun can be charged to, although it runs no stream
+        here) and comes back after. For measuring a client in another process alone."""
+        import sounddevice as sd
+        sd._terminate()
+        try:
+            yield
+        finally:
+            sd._initialize()
 
     def __enter__(self) -> "JackServer":
         if not (self.realtime and self._start(True)) and not self._start(False):
@@ -136,6 +161,11 @@ class JackServer:
     def connect(self, a: str, b: str) -> None:
         """Connect port ``a`` to ``b``."""
         _jack(["jack_connect", a, b], self.name)
+
+    def clients(self, pattern: str = r"PortAudio[^:]*:out_\d+$") -> list[str]:
+        """Names of the clients owning ports that match ``pattern`` (default: PortAudio
+        output ports)."""
+        return sorted({p.split(":")[0] for p in self.ports() if re.match(pattern, p)})
 
     def disconnect(self, a: str, b: str) -> None:
         """Disconnect port ``a`` from ``b``."""

@@ -47,9 +47,10 @@ Silence on every stop path of the audio process:
   :data:`EXIT_WAIT_S` it is killed (a killed JACK client's ports leave the graph);
 * the process that opened the coil dies (the application, or a live session's servo
   process): the kernel closes its end of the control pipe, the audio process reads end
-  of file at once (and checks every :data:`PARENT_POLL_S` that its parent is still its
-  parent, for a control pipe that a forked child of the application still holds), then
-  goes silent and exits as on ``close()``;
+  of file at once, goes silent and exits as on ``close()``; and the callback checks at
+  every block that its parent is still its parent (a forked copy of the application may
+  still hold the control pipe open), renders silence from the first block after, and
+  wakes the main thread to exit;
 * the stream stops under it (audio server or device gone): the audio process reports it
   on the status pipe and exits without touching the dead stream (PortAudio's JACK
   backend hangs or aborts when such a stream is closed, and in ``Pa_Terminate``);
@@ -82,12 +83,13 @@ SIZE = NSLOTS * 8
 #: the four target values after the sequence number, in one read
 _TARGET = struct.Struct("=4d")
 
-#: how often the audio process checks that its parent is still its parent (s), for a
-#: control pipe whose write end another process still holds (a fork of the application);
-#: the control pipe's end of file answers at once in every other case. It bounds how long
-#: the coil keeps playing after its owner vanished in that one case, and it is the
-#: main thread's only wake-up: 20 wake-ups a second cost the callback nothing.
-PARENT_POLL_S = 0.05
+#: how often the audio process's main thread checks that its stream still runs (s): when
+#: the audio server or the device vanishes no callback comes to tell. This is the main
+#: thread's only periodic wake-up, and every wake-up takes the interpreter lock for a
+#: moment the callback may want it (a wake-up preempted by the callback's real-time
+#: thread, then kept off the CPU by other processes, would hold the callback up: a late
+#: period); it bounds only how long a dead stream goes unreported (nothing plays then).
+STREAM_POLL_S = 0.5
 #: how long ``close()`` waits for the audio process to exit before killing it (s); a hang
 #: guard (the exit takes one audio period plus PortAudio's shutdown), not a timing figure
 EXIT_WAIT_S = 5.0
@@ -263,7 +265,9 @@ def main(argv: list[str]) -> int:
     mv = shared.mv
     stopping = [False]
     mono = time.monotonic
+    getppid = os.getppid
     holder: list[BlockRenderer] = []
+    wake_r, wake_w = os.pipe()   # the callback wakes the main thread (parent changed, failure)
 
     def make_callback(fs: float) -> Any:
         r = BlockRenderer(fs, ramp_s=cfg["ramp_s"], full_scale=cfg["full_scale"],
@@ -273,12 +277,22 @@ def main(argv: list[str]) -> int:
         read = shared.read
 
         def callback(out: np.ndarray, frames: int, _time: Any, st: Any) -> None:
-            f, a, t_cmd, silent = read()
-            r(out, frames, st.output_underflow, f, a, t_cmd, silent != 0.0 or stopping[0], mono())
-            mv[CALLBACKS] = r.callbacks
-            mv[UNDERRUNS] = r.underruns
-            mv[TIMEOUTS] = r.timeouts
-            mv[TIMED_OUT] = 1.0 if r.timed_out else 0.0
+            try:
+                if not stopping[0] and getppid() != ppid:
+                    stopping[0] = True     # the owner is gone: silence from this block on
+                    os.write(wake_w, b"p")
+                f, a, t_cmd, silent = read()
+                r(out, frames, st.output_underflow, f, a, t_cmd, silent != 0.0 or stopping[0], mono())
+                mv[CALLBACKS] = r.callbacks
+                mv[UNDERRUNS] = r.underruns
+                mv[TIMEOUTS] = r.timeouts
+                mv[TIMED_OUT] = 1.0 if r.timed_out else 0.0
+                if r.error is not None and not stopping[0]:
+                    stopping[0] = True
+                    os.write(wake_w, b"e")
+            except BaseException as exc:  # never into PortAudio; the main thread reports it
+                r.error = r.error or exc
+                out.fill(0.0)
         return callback
 
     try:
@@ -297,8 +311,8 @@ def main(argv: list[str]) -> int:
     r = holder[0]
     why = ""
     while True:
-        ready_fds, _, _ = select.select([ctl], [], [], PARENT_POLL_S)
-        if ready_fds:
+        ready_fds, _, _ = select.select([ctl, wake_r], [], [], STREAM_POLL_S)
+        if ctl in ready_fds:
             data = os.read(ctl, 64)
             if not data:
                 why = "parent"     # end of file: the application side is gone
@@ -306,7 +320,7 @@ def main(argv: list[str]) -> int:
             if b"q" in data:
                 why = "close"
                 break
-        if os.getppid() != ppid:
+        if getppid() != ppid:
             why = "parent"
             break
         if r.error is not None:
