@@ -121,6 +121,8 @@ def _run(a, out, iso, other, new_coil, rng, hogs) -> int:
                     hold(c, seconds, frequency_hz=150.0, amplitude=0.3)
                     stop.set()
                     res = {"underruns": c.underruns - u0, "callbacks": c.callbacks - c0}
+                    if c.isolation == "process":
+                        res["audio_process"] = c.audio_process_timing()
                 if th.is_alive():
                     th.join()
                 res["server_xruns_during"] = srv.xruns() - log0
@@ -157,6 +159,11 @@ def _run(a, out, iso, other, new_coil, rng, hogs) -> int:
               f"underruns in {out['callbacks']} callbacks; the server counted {out['server_xruns_during']} xruns, "
               f"{out['coil_client_late']} of them naming the coil's client late (late clients: "
               f"{out['late_clients'] or 'none'})")
+        if out.get("audio_process"):
+            ap_ = out["audio_process"]
+            print(f"  in the audio process: longest callback {ap_['callback_max_ms']:.2f} ms, "
+                  f"{ap_['late_starts']} callbacks started more than 1.5 periods after the previous one "
+                  "(over the whole time the coil was open)")
         ref = out.get("reference_other_isolation")
         if ref:
             print(f"reference: isolation {ref['isolation']!r}, {ref['seconds']:g} s right after, same conditions: "

@@ -76,8 +76,8 @@ from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 from hapticsdk.install_hints import pip_hint
 from hapticsdk.synthesis import Oscillator
 
-from .audio_process import (CALLBACKS, EXIT_WAIT_S, START_WAIT_S, TIMED_OUT, TIMEOUTS, UNDERRUNS, BlockRenderer,
-                            SharedTarget)
+from .audio_process import (CALLBACK_MAX_S, CALLBACKS, EXIT_WAIT_S, LATE_STARTS, START_WAIT_S, TIMED_OUT, TIMEOUTS,
+                            UNDERRUNS, BlockRenderer, SharedTarget)
 
 log = logging.getLogger(__name__)
 
@@ -251,6 +251,15 @@ class VoiceCoilAudio(Actuator):
         """Times the callback went silent because the last command was older than
         ``command_timeout_s``."""
         return self._count(TIMEOUTS, 2)
+
+    def audio_process_timing(self) -> dict[str, float] | None:
+        """The audio process's own timing (``isolation="process"``, while open): the
+        longest callback (ms) and the callbacks that started more than 1.5 blocks after
+        the previous one (late starts); None otherwise."""
+        sh = self._shared
+        if sh is None:
+            return None
+        return {"callback_max_ms": float(sh.mv[CALLBACK_MAX_S]) * 1e3, "late_starts": int(sh.mv[LATE_STARTS])}
 
     # -- audio thread (isolation="thread") ----------------------------------------------------------
     def _callback(self, out: np.ndarray, frames: int, _time: Any, status: Any) -> None:

@@ -78,6 +78,11 @@ from hapticsdk.synthesis import Oscillator
 # -- shared-memory layout (float64 slots) ----------------------------------------------
 SEQ, FREQ, AMP, T_CMD, SILENT = 0, 1, 2, 3, 4          # the target: servo side writes
 CALLBACKS, UNDERRUNS, TIMEOUTS, TIMED_OUT = 8, 9, 10, 11  # counters: audio process writes
+#: diagnostics the audio process writes: the longest callback (s, from entering the
+#: Python callback to leaving it) and the callbacks that started more than 1.5 blocks
+#: after the previous one started (this process was late to run its callback: an
+#: audio thread waiting for the CPU or the interpreter lock)
+CALLBACK_MAX_S, LATE_STARTS = 12, 13
 NSLOTS = 16
 SIZE = NSLOTS * 8
 #: the four target values after the sequence number, in one read
@@ -127,6 +132,8 @@ class BlockRenderer:
 
     def __call__(self, out: np.ndarray, frames: int, underflow: bool, freq: float, amp: float, t_cmd: float,
                  silent: bool, now: float) -> None:
+        """Fill ``out`` (frames x channels) for the target; ``underflow``: PortAudio's
+        flag for this callback; ``now``: ``time.monotonic()``."""
         try:
             self.callbacks += 1
             if underflow:
@@ -187,9 +194,11 @@ class SharedTarget:
         return self._last
 
     def counter(self, slot: int) -> int:
+        """A counter the audio process publishes (``CALLBACKS``, ``UNDERRUNS``, ``TIMEOUTS``)."""
         return int(self.mv[slot])
 
     def close(self) -> None:
+        """Unmap this side's view (the file lives on while the other side maps it)."""
         for v in (self.mv, self.raw):
             try:
                 v.release()
@@ -276,13 +285,19 @@ def main(argv: list[str]) -> int:
         holder.append(r)
         read = shared.read
 
+        last_start = [0.0]
+
         def callback(out: np.ndarray, frames: int, _time: Any, st: Any) -> None:
+            t0 = mono()
             try:
+                if t0 - last_start[0] > 1.5 * frames / fs and last_start[0]:
+                    mv[LATE_STARTS] += 1.0
+                last_start[0] = t0
                 if not stopping[0] and getppid() != ppid:
                     stopping[0] = True     # the owner is gone: silence from this block on
                     os.write(wake_w, b"p")
                 f, a, t_cmd, silent = read()
-                r(out, frames, st.output_underflow, f, a, t_cmd, silent != 0.0 or stopping[0], mono())
+                r(out, frames, st.output_underflow, f, a, t_cmd, silent != 0.0 or stopping[0], t0)
                 mv[CALLBACKS] = r.callbacks
                 mv[UNDERRUNS] = r.underruns
                 mv[TIMEOUTS] = r.timeouts
@@ -290,6 +305,9 @@ def main(argv: list[str]) -> int:
                 if r.error is not None and not stopping[0]:
                     stopping[0] = True
                     os.write(wake_w, b"e")
+                dt = mono() - t0
+                if dt > mv[CALLBACK_MAX_S]:
+                    mv[CALLBACK_MAX_S] = dt
             except BaseException as exc:  # never into PortAudio; the main thread reports it
                 r.error = r.error or exc
                 out.fill(0.0)
