@@ -420,3 +420,75 @@ def test_underruns_in_the_audio_process_are_counted(jack):
         assert coil.underruns - quiet >= 1
         assert coil.describe()["underruns"] == coil.underruns
     assert coil.underruns >= quiet + 1          # kept after close
+
+
+SESSION_APP = """
+import time
+import hapticsdk as hs
+from hapticsdk.sim.finger import Trajectory
+scene = {"schema_version": 2, "name": "pad",
+         "objects": [{"name": "pad", "material": {"intensities": {"hardness": 1.0}},
+                      "geometry": {"shape": "box", "half_size_mm": [20, 10, 20]}, "pose": {"position_mm": [0, -10, 0]}}],
+         "devices": {"force": "probe-virtual", "coil": "voicecoil-audio"},
+         "settings": {"solver": {"seed": 0}}}
+tr = Trajectory([(0.0, 0.0, 3.0), (0.3, 0.0, -1.5), (600.0, 0.0, -1.5)])
+with hs.Session(scene, trajectory=tr,
+                actuator_options={"coil": {"device": "system", "command_timeout_s": 1.0}}) as s:
+    print(s.servo_pid, flush=True)
+    while True:
+        time.sleep(0.05)
+"""
+
+
+def _cmdline(pid):
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return fh.read()
+    except OSError:
+        return b""
+
+
+def _children(pid):
+    out = []
+    try:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{tid}/children") as fh:
+                out += [int(x) for x in fh.read().split()]
+    except OSError:
+        pass
+    return out
+
+
+@pytest.mark.parametrize("who", ["servo", "application"])
+def test_live_session_death_silences_the_coil(jack, loop, who):
+    """A live session (servo in its own process) plays hardness 1.0 on the coil; the
+    servo process, or the application, is killed. The coil's audio process is the
+    servo's child: it goes silent and exits (the servo killed: its owner is gone; the
+    application killed: the servo notices, stops and closes its devices). Bound as for
+    the owner test: 0.25 s, a quarter of the coil's 1 s dead-man's switch."""
+    app = subprocess.Popen([sys.executable, "-c", SESSION_APP], stdout=subprocess.PIPE, text=True)
+    audio = []
+    try:
+        servo = int(app.stdout.readline())
+        deadline = time.monotonic() + 60
+        while not audio and time.monotonic() < deadline:
+            audio = [p for p in _children(servo) if b"audio_process" in _cmdline(p)]
+            time.sleep(0.1)
+        assert audio, "no audio process under the servo"
+        _until_heard(loop, 60.0)
+        t_kill = loop.now()
+        os.kill(servo if who == "servo" else app.pid, signal.SIGKILL)
+        time.sleep(1.3)
+        t, y = loop.signal()
+        loud = t[np.abs(y) > 1e-4]
+        assert loud.size and loud[-1] - t_kill <= 0.25, loud[-1] - t_kill
+        deadline = time.monotonic() + 10
+        while _alive(audio[0]) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _alive(audio[0]), "the audio process outlived the session"
+    finally:
+        app.kill()
+        app.wait(10)
+        for pid in audio:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)
