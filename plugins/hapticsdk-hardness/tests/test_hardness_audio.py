@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -51,14 +52,21 @@ def _coil(**kw):
     return VoiceCoilAudio(safety=SafetyLayer(VoiceCoilAudio.limits, ramp_time_s=0.0), **kw)
 
 
-def test_missing_sounddevice_is_named(monkeypatch):
+@pytest.mark.parametrize("isolation", ["thread", "process"])
+def test_missing_sounddevice_is_named(monkeypatch, tmp_path, isolation):
+    """sounddevice or PortAudio missing where the stream would run: in this process
+    (the import fails here), or in the audio process (a ``sounddevice`` on its path that
+    fails to load, as sounddevice does without the PortAudio library)."""
     from hapticsdk_hardness import audio
     def fail(name):
         raise OSError("PortAudio library not found")
     monkeypatch.setattr(audio.importlib, "import_module", fail)
+    (tmp_path / "sounddevice.py").write_text("raise OSError('PortAudio library not found')\n")
+    monkeypatch.setenv("PYTHONPATH", str(tmp_path))
     with pytest.raises(DeviceNotFoundError) as ei:
-        audio.VoiceCoilAudio().open()
+        audio.VoiceCoilAudio(isolation=isolation).open()
     assert "libportaudio2" in str(ei.value) and "hapticsdk-hardness[audio]" in str(ei.value)
+    assert "PortAudio library not found" in str(ei.value)
     ok, why = audio.VoiceCoilAudio.check_available()
     assert not ok and "sounddevice" in why
 
@@ -69,10 +77,11 @@ def test_unknown_device_lists_outputs(jack):
     assert "no such card" in str(ei.value) and "system" in str(ei.value)
 
 
+@pytest.mark.parametrize("isolation", ["process", "thread"])
 @pytest.mark.parametrize("freq,amp", [(250.0, 0.5), (61.3, 0.8), (997.0, 0.2)])
-def test_frequency_amplitude_latency_stop_through_the_loopback(jack, loop, freq, amp):
+def test_frequency_amplitude_latency_stop_through_the_loopback(jack, loop, freq, amp, isolation):
     from hapticsdk_hardness.audio_loopback import measure
-    coil = _coil(device="system", full_scale=0.9)
+    coil = _coil(device="system", full_scale=0.9, isolation=isolation)
     with coil:
         loop.route()
         m = measure(coil, loop, frequency_hz=freq, amplitude=amp, seconds=0.6)
@@ -83,10 +92,11 @@ def test_frequency_amplitude_latency_stop_through_the_loopback(jack, loop, freq,
     assert m["samples_after_stop"] == 0, m
 
 
-def test_phase_continuous_across_frequency_changes(jack, loop):
+@pytest.mark.parametrize("isolation", ["process", "thread"])
+def test_phase_continuous_across_frequency_changes(jack, loop, isolation):
     """A sweep of frequency steps every 20 ms: no sample-to-sample jump beyond what a
     continuous sine of the highest frequency can do (2 pi f A / fs)."""
-    coil = _coil(device="system")
+    coil = _coil(device="system", isolation=isolation)
     fs, amp = 48000.0, 0.7
     with coil:
         loop.route()
@@ -104,9 +114,10 @@ def test_phase_continuous_across_frequency_changes(jack, loop):
     assert np.abs(np.diff(seg)).max() <= bound * 1.01 + 1e-6
 
 
-def test_dead_servo_goes_silent(jack, loop):
+@pytest.mark.parametrize("isolation", ["process", "thread"])
+def test_dead_servo_goes_silent(jack, loop, isolation):
     """No command for longer than command_timeout_s: the callback itself goes silent."""
-    coil = _coil(device="system", command_timeout_s=0.03)
+    coil = _coil(device="system", command_timeout_s=0.03, isolation=isolation)
     with coil:
         loop.route()
         from hapticsdk_hardness.audio_loopback import hold
@@ -162,7 +173,7 @@ def test_underruns_are_counted(jack):
     measured by bench/bench_voicecoil_audio.py, not here (a timing figure of a loaded
     machine is not a unit test)."""
     from hapticsdk_hardness.audio_loopback import hold
-    coil = _coil(device="system")
+    coil = _coil(device="system", isolation="thread")
     with coil:
         hold(coil, 0.2, frequency_hz=150.0, amplitude=0.3)
         quiet = coil.underruns
@@ -239,3 +250,245 @@ def test_sine_fit_on_silence_gaps_and_exact_zeros():
     f, a = sine_fit(t, y)
     assert f == pytest.approx(f0, abs=0.01) and a == pytest.approx(0.5, rel=0.02)
     assert np.isnan(sine_fit(t, np.zeros_like(t))[0])
+
+
+# -- the audio process (isolation="process", the default) ------------------------------
+def test_seqlock_keeps_the_previous_target_during_a_write():
+    """The callback's read of the shared target (two mappings of one file, as the two
+    processes have): a write in progress (odd sequence number, half the values written)
+    is never rendered; the previous target is, until the write completes."""
+    from hapticsdk_hardness.audio_process import AMP, FREQ, SEQ, SharedTarget, new_shared_file
+    fd = new_shared_file()
+    try:
+        w, r = SharedTarget(fd), SharedTarget(fd)
+        w.write(100.0, 0.5, 1.0, False)
+        assert r.read() == (100.0, 0.5, 1.0, 0.0)
+        s = w.mv[SEQ]
+        w.mv[SEQ] = s + 1.0          # the writer has begun ...
+        w.mv[FREQ] = 999.0           # ... and written one value of two
+        assert r.read() == (100.0, 0.5, 1.0, 0.0)
+        w.mv[AMP] = 0.9
+        w.mv[SEQ] = s + 2.0          # done
+        assert r.read() == (999.0, 0.9, 1.0, 0.0)
+        w.write(50.0, 0.0, 2.0, True)
+        assert r.read() == (50.0, 0.0, 2.0, 1.0)
+        w.close()
+        r.close()
+    finally:
+        os.close(fd)
+
+
+def test_process_isolation_leaves_the_application_interpreter_alone(jack):
+    """The stream runs in another process: this process's switch interval is untouched
+    and no PortAudio stream is opened here."""
+    before = sys.getswitchinterval()
+    coil = _coil(device="system")
+    with coil:
+        assert coil.isolation == "process" and coil.stream is None
+        assert coil.audio_pid is not None and coil.audio_pid != os.getpid()
+        assert sys.getswitchinterval() == before
+
+
+def _alive(pid):
+    """Whether ``pid`` runs (a zombie, dead but not reaped, does not)."""
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+    except OSError:
+        return False
+
+
+def _until_heard(loop, seconds=10.0):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        loop.route()
+        time.sleep(0.1)
+        _, y = loop.signal()
+        if y.size and np.abs(y[-4800:]).max() > 0.1:
+            return
+    pytest.fail("the coil was never heard")
+
+
+def _silent_then_gone(loop, t_kill, audio_pid):
+    """After a kill at ``t_kill`` (capture clock): the last sound within 0.25 s (a quarter
+    of the coil's 1 s dead-man's switch, which the tests set: silence before that is not
+    the switch's doing), and the audio process gone within 10 s."""
+    time.sleep(1.3)                                   # past the dead-man's switch
+    t, y = loop.signal()
+    loud = t[np.abs(y) > 1e-4]
+    assert loud.size and loud[-1] - t_kill <= 0.25, (loud[-1] - t_kill if loud.size else None)
+    deadline = time.monotonic() + 10
+    while _alive(audio_pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not _alive(audio_pid), "the audio process outlived its owner"
+
+
+OWNER = """
+import os, sys, time
+from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.safety import SafetyLayer
+from hapticsdk_hardness.audio import VoiceCoilAudio
+coil = VoiceCoilAudio(device="system", command_timeout_s=1.0,
+                      safety=SafetyLayer(VoiceCoilAudio.limits, ramp_time_s=0.0)).open()
+other = 0
+if sys.argv[1] == "fork":
+    other = os.fork()       # this copy holds the control pipe's write end on
+    if other == 0:
+        time.sleep(60)
+        os._exit(0)
+print(coil.audio_pid, other, flush=True)
+c = ChannelCommand("vibration", frequency_hz=200.0, amplitude=0.5)
+while True:
+    coil.command(c)
+    time.sleep(0.001)
+"""
+
+
+@pytest.mark.parametrize("variant", ["plain", "fork"])
+def test_owner_dying_silences_the_audio_process(jack, loop, variant):
+    """The process that opened the coil (an application; a live session's servo process
+    is the same case) is killed while it plays: the audio process goes silent and exits.
+
+    The coil's own dead-man's switch is set to its longest, 1 s, so silence well before
+    that is the parent check's doing, not the switch's: bound 0.25 s (a quarter of it).
+    ``fork``: a forked copy of the owner still holds the control pipe open, so no end of
+    file comes; the audio process must notice that its parent changed."""
+    app = subprocess.Popen([sys.executable, "-c", OWNER, variant], stdout=subprocess.PIPE, text=True)
+    pids = []
+    try:
+        pids = [int(x) for x in app.stdout.readline().split()]
+        assert pids and _alive(pids[0])
+        _until_heard(loop)
+        t_kill = loop.now()
+        app.kill()
+        app.wait(10)
+        _silent_then_gone(loop, t_kill, pids[0])
+    finally:
+        app.kill()
+        for pid in pids:
+            if pid and _alive(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
+def test_audio_process_dying_is_a_named_error(jack, loop):
+    """The audio process is killed under a playing coil: the capture goes silent, the
+    next command raises AudioProcessDied (a DeviceError) naming the signal, the read-back
+    is silence, and close() returns at once (the process is already gone: nothing to
+    wait for; bound 1 s)."""
+    from hapticsdk_hardness.audio import AudioProcessDied
+    from hapticsdk_hardness.audio_loopback import hold
+    coil = _coil(device="system", command_timeout_s=1.0)
+    coil.open()
+    try:
+        loop.route()
+        hold(coil, 0.3, frequency_hz=200.0, amplitude=0.5)
+        pid = coil.audio_pid
+        t_kill = loop.now()
+        os.kill(pid, signal.SIGKILL)
+        c = ChannelCommand("vibration", frequency_hz=200.0, amplitude=0.5)
+        deadline = time.monotonic() + 2.0
+        with pytest.raises(AudioProcessDied) as ei:
+            while time.monotonic() < deadline:
+                coil.command(c)
+                time.sleep(0.001)
+        assert isinstance(ei.value, DeviceError)
+        assert ei.value.exitcode == -signal.SIGKILL and ei.value.reason == "killed by SIGKILL"
+        assert str(pid) in str(ei.value) and "voicecoil-audio" in str(ei.value)
+        assert coil.read_back().amplitude == 0.0
+        with pytest.raises(DeviceError):
+            coil.command(c)
+        time.sleep(0.2)
+        t, y = loop.signal()
+        loud = t[np.abs(y) > 1e-4]
+        # the killed client leaves the graph: silence by the stop-to-silence goal (20 ms)
+        assert loud.size and loud[-1] - t_kill <= 0.02, loud[-1] - t_kill
+    finally:
+        t0 = time.monotonic()
+        coil.close()
+        assert time.monotonic() - t0 <= 1.0
+    assert not coil.is_open
+
+
+def test_underruns_in_the_audio_process_are_counted(jack):
+    """The audio process is stopped (SIGSTOP) for 20 ms, several periods, five times:
+    the JACK server reports the late client, PortAudio flags the next callback with an
+    output underflow, and ``underruns`` (the audio process's shared counter) shows it."""
+    from hapticsdk_hardness.audio_loopback import hold
+    coil = _coil(device="system")
+    with coil:
+        hold(coil, 0.2, frequency_hz=150.0, amplitude=0.3)
+        quiet, calls = coil.underruns, coil.callbacks
+        for _ in range(5):
+            os.kill(coil.audio_pid, signal.SIGSTOP)
+            time.sleep(0.02)
+            os.kill(coil.audio_pid, signal.SIGCONT)
+            hold(coil, 0.05, frequency_hz=150.0, amplitude=0.3)
+        assert coil.callbacks > calls
+        assert coil.underruns - quiet >= 1
+        assert coil.describe()["underruns"] == coil.underruns
+    assert coil.underruns >= quiet + 1          # kept after close
+
+
+SESSION_APP = """
+import time
+import hapticsdk as hs
+from hapticsdk.sim.finger import Trajectory
+scene = {"schema_version": 2, "name": "pad",
+         "objects": [{"name": "pad", "material": {"intensities": {"hardness": 1.0}},
+                      "geometry": {"shape": "box", "half_size_mm": [20, 10, 20]}, "pose": {"position_mm": [0, -10, 0]}}],
+         "devices": {"force": "probe-virtual", "coil": "voicecoil-audio"},
+         "settings": {"solver": {"seed": 0}}}
+tr = Trajectory([(0.0, 0.0, 3.0), (0.3, 0.0, -1.5), (600.0, 0.0, -1.5)])
+with hs.Session(scene, trajectory=tr,
+                actuator_options={"coil": {"device": "system", "command_timeout_s": 1.0}}) as s:
+    print(s.servo_pid, flush=True)
+    while True:
+        time.sleep(0.05)
+"""
+
+
+def _cmdline(pid):
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            return fh.read()
+    except OSError:
+        return b""
+
+
+def _children(pid):
+    out = []
+    try:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{tid}/children") as fh:
+                out += [int(x) for x in fh.read().split()]
+    except OSError:
+        pass
+    return out
+
+
+@pytest.mark.parametrize("who", ["servo", "application"])
+def test_live_session_death_silences_the_coil(jack, loop, who):
+    """A live session (servo in its own process) plays hardness 1.0 on the coil; the
+    servo process, or the application, is killed. The coil's audio process is the
+    servo's child: it goes silent and exits (the servo killed: its owner is gone; the
+    application killed: the servo notices, stops and closes its devices). Bound as for
+    the owner test: 0.25 s, a quarter of the coil's 1 s dead-man's switch."""
+    app = subprocess.Popen([sys.executable, "-c", SESSION_APP], stdout=subprocess.PIPE, text=True)
+    audio = []
+    try:
+        servo = int(app.stdout.readline())
+        deadline = time.monotonic() + 60
+        while not audio and time.monotonic() < deadline:
+            audio = [p for p in _children(servo) if b"audio_process" in _cmdline(p)]
+            time.sleep(0.1)
+        assert audio, "no audio process under the servo"
+        _until_heard(loop, 60.0)
+        t_kill = loop.now()
+        os.kill(servo if who == "servo" else app.pid, signal.SIGKILL)
+        _silent_then_gone(loop, t_kill, audio[0])
+    finally:
+        app.kill()
+        app.wait(10)
+        for pid in audio:
+            if _alive(pid):
+                os.kill(pid, signal.SIGKILL)

@@ -7,22 +7,31 @@ name, and points PortAudio at it (``JACK_DEFAULT_SERVER``, PortAudio re-initiali
 :class:`LoopbackCapture` opens a PortAudio input stream on it and connects every
 PortAudio output port to that input with ``jack_connect``, so what an output stream of
 this process (or of a child process) plays is captured back, sample for sample, each
-block stamped with the input stream's own clock (``inputBufferAdcTime``).
+block stamped with the input stream's own clock.
 
-What the loopback shows: a sample when it leaves the client into the JACK graph. A
-card adds its playback latency on top (the output stream's ``latency``; one period for
-the dummy driver); :func:`measure` reports both.
+What the loopback shows: a sample when it leaves the client into the JACK graph, i.e.
+the start of the JACK cycle that rendered it. The capture callback's ``currentTime`` is
+the start of its own cycle (JACK's frame time, read just after the cycle began); a block
+rendered by another client (an audio process, or a child process) in a cycle reaches the
+capture in that same cycle (JACK runs a client whose output feeds another one first); a
+block rendered by a stream of the capture's own PortAudio client (an output stream in
+this process) reaches it one cycle later (a client's own output read back by its input),
+so such blocks are stamped one period earlier. (PortAudio's ``inputBufferAdcTime``
+subtracts the latency of the capture port the input would read from, the dummy
+driver's, which is not this path.) A card adds its playback latency on top (the output
+stream's ``latency``; one period for the dummy driver); :func:`measure` reports both.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import shutil
 import subprocess
 import threading
 import time
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -50,6 +59,8 @@ class JackServer:
         self._old_env: str | None = None
         self.log = ""
         self._xruns = 0
+        #: xruns by the client named late (see late_clients)
+        self.late: dict[str, int] = {}
 
     @staticmethod
     def available() -> str | None:
@@ -70,6 +81,7 @@ class JackServer:
         self.proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                                      preexec_fn=_die_with_parent)
         self._xruns = 0
+        self.late = {}
         threading.Thread(target=self._read_log, args=(self.proc,), daemon=True).start()
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
@@ -87,11 +99,32 @@ class JackServer:
         for line in proc.stdout or ():
             if "XRun" in line:
                 self._xruns += 1
+                m = re.search(r"client = (.+?) was not finished", line)
+                who = m.group(1) if m else "(none named)"
+                self.late[who] = self.late.get(who, 0) + 1
             self.log = (self.log + line)[-4000:]
 
     def xruns(self) -> int:
         """xruns the server has reported so far (its log)."""
         return self._xruns
+
+    def late_clients(self) -> dict[str, int]:
+        """xruns so far by the client the server named as not finished in time (a copy).
+        An xrun is one for the whole graph: JACK tells every client (PortAudio flags each
+        stream's next callback with an underflow), whichever client was late."""
+        return dict(self.late)
+
+    @contextlib.contextmanager
+    def portaudio_detached(self) -> Iterator[None]:
+        """This process's PortAudio leaves the server for the block (its JACK client, a
+        member of the graph that an xrun can be charged to, although it runs no stream
+        here) and comes back after. For measuring a client in another process alone."""
+        import sounddevice as sd
+        sd._terminate()
+        try:
+            yield
+        finally:
+            sd._initialize()
 
     def __enter__(self) -> "JackServer":
         if not (self.realtime and self._start(True)) and not self._start(False):
@@ -129,6 +162,11 @@ class JackServer:
         """Connect port ``a`` to ``b``."""
         _jack(["jack_connect", a, b], self.name)
 
+    def clients(self, pattern: str = r"PortAudio[^:]*:out_\d+$") -> list[str]:
+        """Names of the clients owning ports that match ``pattern`` (default: PortAudio
+        output ports)."""
+        return sorted({p.split(":")[0] for p in self.ports() if re.match(pattern, p)})
+
     def disconnect(self, a: str, b: str) -> None:
         """Disconnect port ``a`` from ``b``."""
         _jack(["jack_disconnect", a, b], self.name)
@@ -161,10 +199,13 @@ class LoopbackCapture:
         self._lock = threading.Lock()
         self.stream = sd.InputStream(samplerate=server.rate, channels=1, dtype="float32", callback=self._cb)
         self.in_port: str | None = None
+        #: JACK cycles between rendering and capture (see the module doc): 1 when the
+        #: routed outputs are on the capture's own client, else 0
+        self.cycles = 0
 
     def _cb(self, data: np.ndarray, frames: int, t: Any, status: Any) -> None:
         with self._lock:
-            self.blocks.append((float(t.inputBufferAdcTime), data[:, 0].copy()))
+            self.blocks.append((float(t.currentTime), data[:, 0].copy()))
 
     def __enter__(self) -> "LoopbackCapture":
         self.stream.start()
@@ -181,6 +222,8 @@ class LoopbackCapture:
         outs = [p for p in self.server.ports() if re.match(r"PortAudio[^:]*:out_\d+$", p)]
         for p in outs:
             self.server.connect(p, self.in_port or "")
+        own = (self.in_port or "").split(":")[0]
+        self.cycles = int(bool(outs) and all(p.split(":")[0] == own for p in outs))
         return outs
 
     def now(self) -> float:
@@ -199,7 +242,8 @@ class LoopbackCapture:
         if not blocks:
             return np.zeros(0), np.zeros(0)
         fs = self.server.rate
-        t = np.concatenate([t0 + np.arange(b.size) / fs for t0, b in blocks])
+        back = self.cycles * self.server.period / fs
+        t = np.concatenate([t0 - back + np.arange(b.size) / fs for t0, b in blocks])
         y = np.concatenate([b for _, b in blocks]).astype(float)
         return t, y
 
@@ -258,7 +302,7 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     time.sleep(0.1)
     t, y = cap.signal()
     loud = np.nonzero(np.abs(y) > 1e-3 * amplitude * act.full_scale)[0]
-    out_lat = float(act.stream.latency) if act.stream is not None else 0.0
+    out_lat = float(act.output_latency_s or 0.0)
     if loud.size == 0:
         return {"frequency_error_hz": float("nan"), "amplitude_rel_error": float("nan"),
                 "latency_ms": float("nan"), "stop_ms": float("nan"), "underruns": act.underruns - u0}
