@@ -415,6 +415,15 @@ def colgate_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_
     return 2.0 * settings.damping_trust * b / dt / 1000.0
 
 
+#: Spans (ticks) over which the change of motion is read: the second difference
+#: ``x_k - 2 x_(k-m) + x_(k-2m) = a (m T)^2`` under a constant acceleration a, and the
+#: encoder adds at most 2 counts to it, whatever m; so a longer span sees an acceleration
+#: m^2 times smaller above the same quantisation (powers of two up to 16 ticks).
+_SCALES = (1, 2, 4, 8, 16)   # (the scalar tick unrolls these five)
+#: Length of the reading ring (2 x the longest span + 1).
+_HIST = 2 * _SCALES[-1] + 1
+
+
 #: Bisection steps of :func:`affordable_force` (2^-30 of the ramp step: far below any
 #: force a device resolves).
 _BISECT = 30
@@ -561,7 +570,7 @@ class PassivityController:
     and no output, credit is dropped (``U <- max(U, 0)``); a debt is kept.
     """
 
-    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_q3",
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
@@ -574,7 +583,9 @@ class PassivityController:
         self.active_ticks = 0       # ticks where the output was below the wall's force
         self.withheld_n_ticks = 0.0 # sum over ticks of the force withheld (N)
         self.overdrawn_j = 0.0      # largest U - E0 seen (J): motion beyond the prediction
-        self._q1 = self._q2 = self._q3 = 0.0
+        self._q1 = self._q2 = 0.0
+        self._hist = [0.0] * _HIST    # the last readings (mm), a ring; _hp the newest
+        self._hp = 0
         self._f1 = self._f2 = 0.0   # the extra (applied force minus the spring) over the last two ticks
         self._out = 0.0
         self._started = False
@@ -590,7 +601,8 @@ class PassivityController:
             f_wall = 0.0
         if not self._started or not dt > 0:
             if not self._started:
-                self._q1 = self._q2 = self._q3 = x_mm
+                self._q1 = self._q2 = x_mm
+                self._hist = [x_mm] * _HIST
                 self._started = True
             return 0.0 if not dt > 0 else self._out
         dq = (x_mm - self._q1) * 1e-3
@@ -609,11 +621,29 @@ class PassivityController:
                 u -= b_x * ex * ex / dt
         ahead = 0.5 * (x_mm - self._q2) * 1e-3
         # the change of the per-tick motion beyond what quantisation alone makes (2 counts)
-        jerk = abs(x_mm - 2.0 * self._q1 + self._q2) * 1e-3 - 2.0 * s.position_resolution_mm * 1e-3
-        if jerk < 0.0:
-            jerk = 0.0
+        # the change of the per-tick motion, read over spans of 1-16 ticks (_SCALES)
+        hist = self._hist
+        hp = self._hp + 1
+        if hp == _HIST:
+            hp = 0
+        self._hp = hp
+        hist[hp] = x_mm
+        c2 = 2.0 * s.position_resolution_mm
+        jerk = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2]) - c2
+        d = (abs(x_mm - 2.0 * hist[hp - 2] + hist[hp - 4]) - c2) * 0.25
+        if d > jerk:
+            jerk = d
+        d = (abs(x_mm - 2.0 * hist[hp - 4] + hist[hp - 8]) - c2) * 0.0625
+        if d > jerk:
+            jerk = d
+        d = (abs(x_mm - 2.0 * hist[hp - 8] + hist[hp - 16]) - c2) * 0.015625
+        if d > jerk:
+            jerk = d
+        d = (abs(x_mm - 2.0 * hist[hp - 16] + hist[hp - 32]) - c2) * 0.00390625
+        if d > jerk:
+            jerk = d
+        jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
         self._still = self._still + 1 if dq == 0.0 else 0
-        self._q3 = self._q2
         self._q2 = self._q1
         self._q1 = x_mm
         # the Colgate spring: the wall up to the stiffness the trusted damping makes
@@ -698,9 +728,10 @@ class PassivityController:
 def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
     z = np.zeros(n)
-    return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "q3": z.copy(), "f1": z.copy(), "f2": z.copy(),
+    return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
             "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
-            "spring": z.copy(), "kf": z.copy(), "full": z.copy()}
+            "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
+            "hp": np.zeros(1, int)}
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "float | np.ndarray",
@@ -732,10 +763,16 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     b_x = np.maximum(b_lo - 0.5 * state["kf"] * dt, 0.0)
     u = u - b_x * ex * ex / dt
     ahead = 0.5 * (x - q2) * 1e-3
-    jerk = np.maximum(np.abs(x - 2.0 * q1 + q2) * 1e-3 - 2.0 * q, 0.0)
+    hist = state["hist"]
+    hist[:, ~started] = x[~started]
+    hp = state["hp"][0] = (state["hp"][0] + 1) % _HIST
+    hist[hp] = x
+    jerk = np.zeros(x.shape)
+    for m in _SCALES:
+        d2 = np.abs(x - 2.0 * hist[hp - m] + hist[hp - 2 * m]) * 1e-3 - 2.0 * q
+        np.maximum(jerk, d2 / (m * m), out=jerk)
     still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
     state["still"] = still
-    state["q3"] = q2
     state["q2"] = q1
     state["q1"] = x.copy()
     out_prev = state["out"]
