@@ -768,9 +768,9 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     hp = state["hp"][0] = (state["hp"][0] + 1) % _HIST
     hist[hp] = x
     jerk = np.zeros(x.shape)
-    for m in _SCALES:
-        d2 = np.abs(x - 2.0 * hist[hp - m] + hist[hp - 2 * m]) * 1e-3 - 2.0 * q
-        np.maximum(jerk, d2 / (m * m), out=jerk)
+    for span in _SCALES:
+        d2 = np.abs(x - 2.0 * hist[hp - span] + hist[hp - 2 * span]) * 1e-3 - 2.0 * q
+        np.maximum(jerk, d2 / (span * span), out=jerk)
     still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
     state["still"] = still
     state["q2"] = q1
