@@ -186,7 +186,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from ..scene import Scene, load_scene
     from ..scene.model import DeviceSpec
 
-    from ..runtime.limits import check_seconds
+    from ..scene.limits import check_seconds
 
     check_seconds(args.seconds, "--seconds")   # before solving, opening or allocating anything
     targets = _targets(args)
