@@ -18,7 +18,8 @@ REMOVED_IN = "0.3"
 #: calls :func:`moved_module`; the API reference leaves them out)
 MOVED_MODULES = {"hapticsdk.rendering": "hapticsdk.runtime.render",
                  "hapticsdk.importance": "hapticsdk.compiler.importance",
-                 "hapticsdk.runtime.limits": "hapticsdk.scene.limits"}
+                 "hapticsdk.runtime.limits": "hapticsdk.scene.limits",
+                 "hapticsdk.problems": "hapticsdk.solvers.problems"}
 
 
 def _warn(old: str, new: str) -> None:

@@ -144,7 +144,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     when reached, 1 when not.
     """
     from ..errors import ValidationError
-    from ..problems import solve
+    from ..solvers.problems import solve
 
     targets = _targets(args)
     if not targets:

@@ -493,7 +493,7 @@ class Session:
     def _amortised(self, targets: Mapping[str, float]) -> Any:
         """The table's interpolated answer alone (``polish_steps`` 0): the background
         refine does the polishing."""
-        from ...problems import solve
+        from ...solvers.problems import solve
         return solve(dict(targets), method="amortised", seed=0, options={"polish_steps": 0},
                      **self._solve_kw())
 
@@ -535,7 +535,7 @@ class Session:
             except HapticSDKError:
                 res = None
         if res is None:
-            from ...problems import solve
+            from ...solvers.problems import solve
             method = self._settings["solver"]["method"]
             res = solve(dict(targets), method=method, seed=self._settings["solver"].get("seed", 0),
                         options=dict(self._settings["solver"].get("options") or {}), **self._solve_kw())
@@ -553,7 +553,7 @@ class Session:
                                       f"opened (roles: {sorted(self.devices)})", field=field)
 
     def _refine(self, r: Retarget, oid: int) -> None:
-        from ...problems import solve
+        from ...solvers.problems import solve
         try:
             s = self._settings["solver"]
             res = solve(dict(r.targets), method=s["method"], seed=s.get("seed", 0),

@@ -22,11 +22,11 @@ from typing import Any, ClassVar, Iterator, Sequence
 
 import numpy as np
 
-from .checks import MAX_SEED, check_seed
-from .dimensions import PENALTY_FORMS, Constraint
-from .errors import ModelError, SolverError, ValidationError
-from .features import FeatureSpace
-from .models import PerceptionModel
+from ..checks import MAX_SEED, check_seed
+from ..dimensions import PENALTY_FORMS, Constraint
+from ..errors import ModelError, SolverError, ValidationError
+from ..features import FeatureSpace
+from ..models import PerceptionModel
 
 #: Violation (relative, normalised form) below which a constraint counts as met.
 CONSTRAINT_TOL = 1e-9
@@ -93,7 +93,7 @@ class BatchSolveResult(list):  # type: ignore[type-arg]
     nit: int
     trace: list[dict[str, Any]]
     method: str
-    model: dict[str, Any]      # provenance of the model, set by hapticsdk.problems.solve
+    model: dict[str, Any]      # provenance of the model, set by hapticsdk.solvers.problems.solve
 
     def __init__(self, results: Sequence[SolveResult] | None = None, *, data: "_BatchData | None" = None,
                  **attrs: Any) -> None:
@@ -312,7 +312,7 @@ class SolveProblem:
 
     def __post_init__(self) -> None:
         self.dimensions = tuple(self.dimensions)
-        from .argcheck import number_array
+        from ..argcheck import number_array
         T = number_array(self.targets, "targets", finite=False)  # a string is named by its index
         #: True when targets were given as one 1-D row: ``Solver.solve`` returns one result.
         self.single = T.ndim == 1
@@ -327,7 +327,7 @@ class SolveProblem:
         if self.penalty not in PENALTY_FORMS:
             raise ValidationError(f"unknown penalty {self.penalty!r}; valid: {list(PENALTY_FORMS)}",
                                   field="penalty")
-        from .argcheck import number
+        from ..argcheck import number
         self.tolerance = number(self.tolerance, "tolerance", lo=0.0, lo_open=True)
         model_in = list(self.model.feature_names)
         for n in self.space.names:
