@@ -143,9 +143,10 @@ def test_no_import_cycle():
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
 
 
-#: the request's path as dependencies: a scene, the plan (the data the compiler makes),
-#: the compiler, the runtime; a stage may import an earlier one, never a later one
-STAGES = ("hapticsdk.scene", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
+#: the request's path as dependencies: a scene, the solvers (targets -> features, which
+#: the plan's model provenance and the compiler call), the plan (the data the compiler
+#: makes), the compiler, the runtime; a stage may import an earlier one, never a later one
+STAGES = ("hapticsdk.scene", "hapticsdk.solvers", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
 
 
 def _stage(mod: str) -> int | None:
@@ -162,7 +163,7 @@ def test_no_stage_imports_a_later_stage():
         if s is None:
             continue
         upward += [f"{mod} -> {d}" for d in sorted(deps) if (_stage(d) or -1) > s]
-    assert not upward, "upward imports along scene -> compiler -> plan -> runtime: " + "; ".join(upward)
+    assert not upward, "upward imports along scene -> solvers -> plan -> compiler -> runtime: " + "; ".join(upward)
 
 
 def test_the_project_imports_no_deprecated_path():
