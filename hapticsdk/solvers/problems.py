@@ -21,7 +21,9 @@ from ..errors import ModelError, ValidationError
 from ..features import FeatureSpace
 from ..models import CompositeModel, PerceptionModel
 from ..plugins import registry
-from .base import BatchSolveResult, SolveProblem, SolveResult, Solver
+from .base import Solver
+from .objective import SolveProblem
+from .results import BatchSolveResult, SolveResult
 
 #: the default solver: the paper's GA (short) followed by a Levenberg-Marquardt polish
 DEFAULT_METHOD = "ga-polish"
