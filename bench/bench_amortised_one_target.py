@@ -30,7 +30,7 @@ def measure() -> dict:
     import hapticsdk as hs
     import hapticsdk_ga.amortised as am
     from hapticsdk.benchmarks.solvers import feasible_samples
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
 
     p = build_problem({"hardness": 0.5, "roughness": 0.5})
     _, Y = feasible_samples(p, 4000, seed=7)

@@ -40,11 +40,11 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load laz
     from .materials import load_library as load_library
     from .models import PerceptionModel as PerceptionModel
     from .plugins import list_plugins as list_plugins
-    from .problems import build_problem as build_problem
-    from .problems import get_solver as get_solver
-    from .problems import load_dimension as load_dimension
-    from .problems import load_model as load_model
-    from .problems import solve as solve
+    from .solvers.problems import build_problem as build_problem
+    from .solvers.problems import get_solver as get_solver
+    from .solvers.problems import load_dimension as load_dimension
+    from .solvers.problems import load_model as load_model
+    from .solvers.problems import solve as solve
     from .runtime.render import RenderReport as RenderReport
     from .runtime.render import render_plan as render_plan
     from .runtime.session import Session as Session
@@ -58,11 +58,11 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load laz
 
 #: name -> module it is loaded from on first use
 _LAZY = {
-    "solve": "hapticsdk.problems",
-    "build_problem": "hapticsdk.problems",
-    "get_solver": "hapticsdk.problems",
-    "load_model": "hapticsdk.problems",
-    "load_dimension": "hapticsdk.problems",
+    "solve": "hapticsdk.solvers.problems",
+    "build_problem": "hapticsdk.solvers.problems",
+    "get_solver": "hapticsdk.solvers.problems",
+    "load_model": "hapticsdk.solvers.problems",
+    "load_dimension": "hapticsdk.solvers.problems",
     "load_library": "hapticsdk.materials",
     "Material": "hapticsdk.materials",
     "Feature": "hapticsdk.features",

@@ -17,7 +17,9 @@ REMOVED_IN = "0.3"
 #: modules that moved as a whole: old name -> new name (each old one is a shim file that
 #: calls :func:`moved_module`; the API reference leaves them out)
 MOVED_MODULES = {"hapticsdk.rendering": "hapticsdk.runtime.render",
-                 "hapticsdk.importance": "hapticsdk.compiler.importance"}
+                 "hapticsdk.importance": "hapticsdk.compiler.importance",
+                 "hapticsdk.runtime.limits": "hapticsdk.scene.limits",
+                 "hapticsdk.problems": "hapticsdk.solvers.problems"}
 
 
 def _warn(old: str, new: str) -> None:

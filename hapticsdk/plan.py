@@ -353,7 +353,7 @@ def feature_ranges(mp: "MaterialPlan") -> dict[str, tuple[float, float]]:
             if not isinstance(name, str) or name.endswith(".onnx") or name not in mreg.names():
                 continue
             try:
-                from .problems import load_model
+                from .solvers.problems import load_model
                 for f in load_model(name).feature_space or ():
                     widen(f.name, float(f.lower), float(f.upper))
             except HapticSDKError:

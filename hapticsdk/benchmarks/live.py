@@ -443,7 +443,7 @@ def run_live(isolation: str = "process", app_loads: tuple[str, ...] = ("python-t
     for the same time (key ``reference``): the session's jitter next to what a loop
     doing nothing else gets from this machine in the same minute. ``period_s``: the
     servo period (default the scene's, 1 ms); the reference loop runs at the same period."""
-    from ..runtime.session import _default_rt
+    from ..runtime.session.app import _default_rt
     sw = switch_figures()
     rows = []
     for load in app_loads:

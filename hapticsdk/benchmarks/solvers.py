@@ -32,7 +32,7 @@ that ended outside the problem's tolerance or with a violated constraint (``fail
 
 Times: ``time_s`` is wall time (the machine may be shared), ``cpu_s`` the process CPU
 time of the same call (what to compare on a loaded machine). Public calls
-(:func:`public_calls`) time :func:`hapticsdk.problems.solve` itself, one target per call,
+(:func:`public_calls`) time :func:`hapticsdk.solvers.problems.solve` itself, one target per call,
 next to the solver-internal ``time_s`` the result reports; the amortised table's build
 time is reported separately (:func:`amortised_stats`). Not measured: start-up (imports,
 plugin and model loading; see docs/runtime.md), and any machine but the one it runs on.
@@ -51,7 +51,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..errors import ValidationError
-from ..problems import get_solver as _solver
+from ..solvers.problems import get_solver as _solver
 from ..solvers import CONSTRAINT_TOL, SolveProblem
 
 THRESHOLDS = (1e-1, 1e-2, 1e-3)
@@ -71,7 +71,7 @@ def load_material_targets(path: str | Path | None = None) -> tuple[list[str], np
 def make_problem_factory() -> tuple[Callable[..., SolveProblem], str]:
     """``factory(targets, penalty=...) -> SolveProblem`` on the default model, and its
     description. Raises when the default model or the dimensions are not installed."""
-    from ..problems import build_problem
+    from ..solvers.problems import build_problem
 
     probe = build_problem(np.array([[0.5, 0.5]]), dimensions=DIMS)
     mdl = probe.model
@@ -425,7 +425,7 @@ def run_peers(factory: Callable[..., SolveProblem], T: np.ndarray, seeds: list[i
         times, errs, fails = [], [], 0
         for s in seeds:
             for i in range(len(T)):
-                # the same problem setup, one target (as hapticsdk.problems.solve keeps it per
+                # the same problem setup, one target (as hapticsdk.solvers.problems.solve keeps it per
                 # setup); the peers get that setup too
                 pi = p.with_targets(T[i])     # a 1-D target: the one-target call of the public API
                 c0 = time.process_time()
@@ -461,11 +461,11 @@ def run_peers(factory: Callable[..., SolveProblem], T: np.ndarray, seeds: list[i
 
 
 def public_calls(targets: np.ndarray, n: int = 200) -> dict[str, Any]:
-    """CPU time of :func:`hapticsdk.problems.solve` itself, one target per call (a dict of
+    """CPU time of :func:`hapticsdk.solvers.problems.solve` itself, one target per call (a dict of
     intensities, the default model), after a warm-up call of the same setup: the cost an
     application pays per call, next to the solver-internal ``time_s`` of the results.
     Median over ``n`` calls (fewer for the slow methods), targets cycled from ``targets``."""
-    from ..problems import solve as public_solve
+    from ..solvers.problems import solve as public_solve
     cases = [("amortised", {"polish_steps": 0}), ("amortised", {}), ("polish", {}), ("ga-polish", {}),
              ("ga", {}), ("ga", {"target_error": 0})]
     out = {}
@@ -568,9 +568,9 @@ def amortised_stats(factory: Callable[..., SolveProblem], T: np.ndarray, ref_ga_
 
 def batch_call_times(factory: Callable[..., SolveProblem], T: np.ndarray, seeds: list[int]) -> dict[str, Any]:
     """ONE batched call on the material targets, per method (median over seeds): CPU and
-    wall time of the solver call, and of the public ``hapticsdk.problems.solve`` call with
+    wall time of the solver call, and of the public ``hapticsdk.solvers.problems.solve`` call with
     the same targets; error p90 (median over seeds) and max, failures over all seeds."""
-    from ..problems import solve as public_solve
+    from ..solvers.problems import solve as public_solve
     p = factory(T)
     out = {}
     for name, opts in (("ga-polish", {}), ("polish", {}), ("ga", {}), ("amortised", {}), ("amortised", {"polish_steps": 5})):
@@ -888,7 +888,7 @@ def summary_text(rep: dict[str, Any]) -> str:
                          f"{v.get('error_max', float('nan')):.1e}  {v.get('failures', '-')}/{v.get('solves', '-')}")
     pc = rep.get("public_calls", {})
     if pc:
-        lines.append("public hapticsdk.problems.solve, one target per call (CPU us median / p90; solver time_s us; max error; failed):")
+        lines.append("public hapticsdk.solvers.problems.solve, one target per call (CPU us median / p90; solver time_s us; max error; failed):")
         for k, v in pc.items():
             lines.append(f"  {k:<26} {v['public_call_cpu_us']:9.1f} / {v['public_call_cpu_us_p90']:9.1f}  "
                          f"{v['internal_time_s_us']:9.1f}  {v['error_max']:.1e}  {v['failures']}/{v['solves']}")

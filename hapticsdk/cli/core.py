@@ -144,7 +144,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
     when reached, 1 when not.
     """
     from ..errors import ValidationError
-    from ..problems import solve
+    from ..solvers.problems import solve
 
     targets = _targets(args)
     if not targets:
@@ -186,7 +186,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from ..scene import Scene, load_scene
     from ..scene.model import DeviceSpec
 
-    from ..runtime.limits import check_seconds
+    from ..scene.limits import check_seconds
 
     check_seconds(args.seconds, "--seconds")   # before solving, opening or allocating anything
     targets = _targets(args)

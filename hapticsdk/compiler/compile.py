@@ -5,7 +5,7 @@ little, map channel roles to actuators.
 :class:`~hapticsdk.plan.RenderPlan`:
 
 1. every material's target intensities are solved for features with every dimension it
-   names (:func:`hapticsdk.problems.solve`, materials with the same dimensions in one
+   names (:func:`hapticsdk.solvers.problems.solve`, materials with the same dimensions in one
    batch);
 2. the importance model (``settings.importance.model``, default ``paper``;
    :mod:`hapticsdk.compiler.importance`) predicts the realism loss of leaving each
@@ -209,7 +209,7 @@ def _solve_groups(groups: dict[tuple[str, ...], list[_Mat]], settings: Mapping[s
                   device: Mapping[str, Sequence[Any]] | None = None) -> dict[str, Any]:
     """Solve each group of materials sharing a dimension tuple in one batch; ``device``:
     dimension -> constraints of what its mapped actuators can produce."""
-    from ..problems import solve
+    from ..solvers.problems import solve
     s = settings["solver"]
     out: dict[str, Any] = {}
     for dims, mats in groups.items():
@@ -239,7 +239,7 @@ def _pin_at_first_solve(second: dict[str, Any], first: Mapping[str, Any], mats: 
     end depends on the texture features) is solved again, alone, with those features
     pinned at the values of the full solve, which reached every target. ``second`` is
     updated in place; the result's ``pinned_from`` says which pinning was used."""
-    from ..problems import solve
+    from ..solvers.problems import solve
     s = settings["solver"]
     for m in mats:
         r = second.get(m.name)
@@ -287,7 +287,7 @@ def _check_satisfiable(dims: Sequence[str], settings: Mapping[str, Any]) -> None
     """Refuse dimensions whose constraints cannot hold anywhere in the searched feature
     box (a 16384-point Halton design, the one the solution sets use): a plugin error at
     compile time, not a material that renders something the constraints forbid."""
-    from ..problems import build_problem
+    from ..solvers.problems import build_problem
     from .solution_set import _design
     s = settings["solver"]
     problem = build_problem({d: 0.5 for d in dims}, model=settings.get("model"),
@@ -457,7 +457,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     estimates: dict[str, dict[str, Any]] = {m.name: {} for m in mats}
     imp_features: dict[str, dict[str, float]] = {m.name: {} for m in mats}
     if imp_cfg.get("enabled", True):
-        from ..problems import build_problem
+        from ..solvers.problems import build_problem
         from .importance import decide_from_estimates, judge_material, load_importance
         from .leave_out import material_points
         imp_model = load_importance(imp_cfg.get("model", "paper"))

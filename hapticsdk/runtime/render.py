@@ -28,7 +28,7 @@ from ..dimensions import DimensionRenderer
 from ..errors import DeviceError, PluginError, ValidationError
 from ..plan import FALLBACK_SENSOR, MaterialPlan, RenderPlan
 from ..plugin_api import check_plugin_api
-from .limits import check_period, check_seconds
+from ..scene.limits import check_period, check_seconds
 from .replacements import make_replacement
 
 log = logging.getLogger(__name__)
@@ -203,7 +203,7 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
         plan = RenderPlan.from_dict(plan)
     if not isinstance(plan, RenderPlan):
         raise ValidationError("plan must be a RenderPlan or its dict", field="plan")
-    # ranges checked before any actuator opens or any buffer is allocated (runtime.limits)
+    # ranges checked before any actuator opens or any buffer is allocated (scene.limits)
     secs = check_seconds(seconds, "seconds")
     mp = plan.material(material)
     app_options = _check_app_options(actuator_options)

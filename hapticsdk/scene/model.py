@@ -177,7 +177,7 @@ class Scene:
         if not isinstance(thr, (int, float)) or not np.isfinite(thr):
             raise ValidationError(f"threshold must be a finite number (%), got {thr!r}",
                                   field="scene.settings.importance.threshold_percent")
-        from ..runtime.limits import check_period
+        from .limits import check_period
         check_period(self.settings["servo"]["period_s"], "scene.settings.servo.period_s")
         names = [o.name for o in self.objects]
         dup = sorted({n for n in names if names.count(n) > 1})

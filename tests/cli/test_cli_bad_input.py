@@ -446,7 +446,7 @@ def test_truncated_npz_error_names_the_file(files, capsys):
 
 def test_api_seed_text_is_a_validation_error():
     from hapticsdk.errors import ValidationError
-    from hapticsdk.problems import solve
+    from hapticsdk.solvers.problems import solve
 
     for bad in ("abc", -1, 1.5, True):
         with pytest.raises(ValidationError) as ei:

@@ -41,7 +41,7 @@ def test_solve_json_reaches_library_targets_deterministically(capsys, name):
     assert set(out) >= {"success", "x", "intensities", "error", "constraint_violation", "time_s", "nfev"}
     assert out["success"] and code == 0, out["message"]
     # closed loop: run the model on the answer ourselves
-    from hapticsdk.problems import load_model
+    from hapticsdk.solvers.problems import load_model
     model = load_model("default")
     G = [[out["x"][n] for n in model.feature_names]]
     pred = model.predict(G)[0]

@@ -32,7 +32,7 @@ def test_a_plugin_dimension_redeclaring_gs_in_n_per_m_fails_at_problem_build(mon
     pytest.importorskip("hapticsdk_hardness")
     from hapticsdk.dimensions import PerceptionDimension
     from hapticsdk.plugins import registry
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
 
     class Stickiness(PerceptionDimension):
         name = "stickiness"
@@ -54,7 +54,7 @@ def test_a_plugin_dimension_redeclaring_gs_in_n_per_m_fails_at_problem_build(mon
 def test_a_model_reading_a_feature_in_another_unit_is_a_model_error():
     pytest.importorskip("hapticsdk_hardness")
     from hapticsdk.models import MLPModel
-    from hapticsdk.problems import build_problem, load_model
+    from hapticsdk.solvers.problems import build_problem, load_model
     import numpy as np
     base = load_model("default")
     fs = base.feature_space

@@ -8,7 +8,7 @@ import pytest
 pytest.importorskip("hapticsdk_hardness")
 pytest.importorskip("hapticsdk_roughness")
 
-from hapticsdk.problems import build_problem  # noqa: E402
+from hapticsdk.solvers.problems import build_problem  # noqa: E402
 
 MF_N = 3.3
 

@@ -8,7 +8,7 @@ from hapticsdk.dimensions import Constraint, DimensionRenderer, PerceptionDimens
 from hapticsdk.errors import ModelError, SolverError, ValidationError
 from hapticsdk.features import Feature, FeatureSpace
 from hapticsdk.models import MLPModel
-from hapticsdk.problems import build_problem, solve
+from hapticsdk.solvers.problems import build_problem, solve
 from hapticsdk.solvers import Solver, SolverOutput
 
 
@@ -82,7 +82,7 @@ def toys():
     model = toy_model()
     plugins.registry("model").register("toymodel", lambda: model)
     plugins.registry("solver").register("random", RandomSearch)
-    from hapticsdk import problems
+    from hapticsdk.solvers import problems
     problems._model_cache.pop("toymodel", None)
     yield model
     for kind, name in (("dimension", "toyhard"), ("dimension", "toyrough"), ("model", "toymodel"),

@@ -9,7 +9,7 @@ pytest.importorskip("hapticsdk_hardness")
 
 from hapticsdk.cli import main  # noqa: E402
 from hapticsdk.models import MLPModel  # noqa: E402
-from hapticsdk.problems import load_model, solve  # noqa: E402
+from hapticsdk.solvers.problems import load_model, solve  # noqa: E402
 
 
 def _copy_of_default(data_generated):

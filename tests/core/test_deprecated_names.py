@@ -24,6 +24,9 @@ MOVED_MODULES = [  # (old module, new module, a name users imported from it)
     ("hapticsdk.rendering", "hapticsdk.runtime.render", "render_plan"),
     ("hapticsdk.rendering", "hapticsdk.runtime.render", "RenderReport"),
     ("hapticsdk.importance", "hapticsdk.compiler.importance", "PaperRegressionImportance"),
+    ("hapticsdk.runtime.limits", "hapticsdk.scene.limits", "check_period"),
+    ("hapticsdk.problems", "hapticsdk.solvers.problems", "build_problem"),
+    ("hapticsdk.problems", "hapticsdk.solvers.problems", "solve"),
 ]
 
 

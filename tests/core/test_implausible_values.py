@@ -118,7 +118,7 @@ def test_check_number_refuses_bool_nan_and_range():
 
 
 def test_solve_and_scenes_refuse_true_as_a_target():
-    from hapticsdk.problems import solve
+    from hapticsdk.solvers.problems import solve
     from hapticsdk.scene import Scene
 
     with pytest.raises(ValidationError):

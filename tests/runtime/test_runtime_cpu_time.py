@@ -289,7 +289,7 @@ def test_auto_is_the_only_word_fifo_priority_takes():
 
 
 def test_a_servo_process_asks_for_auto_fifo_unless_told_otherwise():
-    from hapticsdk.runtime.session import _default_rt
+    from hapticsdk.runtime.session.app import _default_rt
     assert _default_rt(None, "process") == {"fifo_priority": "auto"}
     assert _default_rt({"cpu": 1}, "process") == {"cpu": 1, "fifo_priority": "auto"}
     assert _default_rt({"fifo_priority": None}, "process") == {"fifo_priority": None}

@@ -286,7 +286,7 @@ _POOL_PROBE = r"""
 import os, sys, threading, time
 import numpy as np
 import scipy.linalg as sl
-from hapticsdk.runtime.session import _one_pool_thread
+from hapticsdk.runtime.session.servo import _one_pool_thread
 if sys.argv[1] == "limit":
     print(_one_pool_thread(), file=sys.stderr)
 def cpu():
@@ -408,8 +408,9 @@ def test_command_work_waits_for_slack_then_is_forced():
     then runs it anyway; a slice longer than any period's slack runs at once."""
     from collections import deque
 
-    from hapticsdk.runtime import session as sm
-    srv = sm._Servo({}, memoryview(bytearray(sm._NSLOTS * 8)).cast("d"), None, True)
+    from hapticsdk.runtime.session import servo as sm
+    from hapticsdk.runtime.session.protocol import _NSLOTS
+    srv = sm._Servo({}, memoryview(bytearray(_NSLOTS * 8)).cast("d"), None, True)
     loop = srv.loop = _StubLoop()
     ran = []
 
@@ -509,7 +510,7 @@ def test_calibration_tables_cross_the_pipe_once(wait):
     import pickle
 
     from hapticsdk.calibration.piezo import PiezoTable
-    from hapticsdk.runtime import session as sm
+    from hapticsdk.runtime.session import shipping as sm
     scene = {"schema_version": 1, "name": "s7", "objects": [{"name": "pad", "material": "S7"}],
              "settings": {"importance": {"enabled": False}, "solver": {"seed": 0}}}
     with Session(scene, isolation="thread", trajectory=SLIDE_AND_HOLD, realtime=False, refine=False) as s:
@@ -544,7 +545,7 @@ def test_state_fields_come_from_the_slots_the_servo_writes():
     """state() reads the slots with one struct call and builds the tuple by position:
     every field must come from the slot the servo publishes it in (distinct values in
     every slot, each field checked against its named slot)."""
-    import hapticsdk.runtime.session as ss
+    import hapticsdk.runtime.session.protocol as ss
     slots = [0.0] + [float(100 + i) for i in range(1, 24)] + [0.0]  # slot i holds 100 + i
     slots[ss._OBJ], slots[ss._NEAR] = 3.0, 7.0
     slots[ss._PAUSED_S] = 1.0

@@ -8,7 +8,7 @@ import pytest
 
 from hapticsdk.actuators import Actuator
 from hapticsdk.errors import ValidationError
-from hapticsdk.runtime.limits import MAX_SECONDS, PERIOD_RANGE_S, check_period, check_seconds
+from hapticsdk.scene.limits import MAX_SECONDS, PERIOD_RANGE_S, check_period, check_seconds
 
 
 @pytest.mark.parametrize("bad", [1e-9, 0, -0.001, 0.2, float("nan"), float("inf"), "abc", True, None])

@@ -96,7 +96,7 @@ def test_library_points_do_not_read_the_solve():
     the compile's solved features (which follow the solver seed) are not read."""
     from hapticsdk.compiler.leave_out import material_points
     from hapticsdk.materials import load_library
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
     lib = load_library()
     mat = lib.get("S16")
     p = build_problem(np.array([[mat.intensities[d] for d in BOTH]]), dimensions=BOTH, data_support=True)

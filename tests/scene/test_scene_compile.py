@@ -20,7 +20,7 @@ needs_hardness = pytest.mark.skipif("hardness" not in registry("dimension"),
 
 
 def _model():
-    from hapticsdk.problems import load_model
+    from hapticsdk.solvers.problems import load_model
     return load_model("default")
 
 
@@ -242,7 +242,7 @@ def test_library_plan_drops_exactly_when_the_whole_interval_is_below_the_thresho
 @needs_hardness
 def test_solution_set_members_reach_the_target_and_satisfy_the_constraints():
     from hapticsdk.compiler.solution_set import solution_sets
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
     T = np.array([[0.3, 0.3], [0.7, 0.5], [0.15, 0.45]])
     problem = build_problem(T, dimensions=["hardness", "roughness"], data_support=True)
     sets = solution_sets(problem)
@@ -292,7 +292,7 @@ def test_left_out_features_pinned_at_the_full_solve_when_the_defaults_miss_the_t
     model on the plan's features ourselves."""
     from hapticsdk.compiler import compile_scene
     from hapticsdk.materials import load_library
-    from hapticsdk.problems import load_model
+    from hapticsdk.solvers.problems import load_model
 
     plan = compile_scene({"schema_version": 1, "name": "s12", "objects": [{"name": "pad", "material": "S12"}],
                           "settings": {"solver": {"seed": 0}}})

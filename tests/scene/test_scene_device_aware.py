@@ -11,7 +11,7 @@ pytest.importorskip("hapticsdk_roughness")
 
 from hapticsdk.compiler import compile_scene  # noqa: E402
 from hapticsdk.plugins import registry  # noqa: E402
-from hapticsdk.problems import load_model  # noqa: E402
+from hapticsdk.solvers.problems import load_model  # noqa: E402
 from hapticsdk.runtime.render import render_plan  # noqa: E402
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "lra_device_aware.py"
@@ -97,7 +97,7 @@ def test_the_solution_family_follows_the_device_band_not_the_constraints_name():
     """Two problems whose device bands differ only in their bound: each family respects
     its own band (the design's feasibility is cached per constraint parameters)."""
     from hapticsdk.compiler.solution_set import solution_sets
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
     from hapticsdk_roughness.dimension import DeviceBandConstraint
     for lo in (60.0, 150.0, 60.0, 150.0):
         # reachable targets and an unreachable one (whose set is the nearest feasible design points)

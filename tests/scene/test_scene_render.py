@@ -49,7 +49,7 @@ def test_roughness_render_follows_formula_9():
 def test_render_from_saved_plan_needs_no_solver(tmp_path, monkeypatch):
     plan = compile_scene(Scene.for_material({"roughness": 0.5}))
     path = plan.save(tmp_path / "p.json")
-    import hapticsdk.problems as problems
+    import hapticsdk.solvers.problems as problems
 
     def boom(*a, **k):
         raise AssertionError("render must not solve")

@@ -15,7 +15,7 @@ pytestmark = pytest.mark.skipif("hardness" not in registry("dimension"),
 
 def test_design_cache_checks_the_model_object(monkeypatch):
     from hapticsdk.compiler import solution_set as ss
-    from hapticsdk.problems import build_problem, load_model
+    from hapticsdk.solvers.problems import build_problem, load_model
 
     monkeypatch.setattr(ss, "_CACHE", {})
     model = load_model("default")

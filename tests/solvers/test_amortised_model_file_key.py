@@ -16,7 +16,7 @@ OPTS = {"grid": 101, "build_samples": 20000, "build_iter": 15}
 
 
 def _problem(path):
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
     return build_problem({"hardness": 0.5, "roughness": 0.5}, model=str(path))
 
 

@@ -13,7 +13,7 @@ pytestmark = pytest.mark.skipif("hardness" not in registry("dimension"), reason=
 
 
 def _problem():
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
     return build_problem({"hardness": 0.5, "roughness": 0.5})
 
 
@@ -173,7 +173,7 @@ def test_the_one_target_step_is_the_minimum_norm_gauss_newton_step_of_the_model(
 def test_one_targeted_dimension_takes_the_same_step():
     """A table over one dimension (the scalar branch of the step): the same reference."""
     import hapticsdk as hs
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
     p = build_problem({"hardness": 0.5})
     span = p.space.upper - p.space.lower
     opts = {"grid": 41, "build_samples": 2000}

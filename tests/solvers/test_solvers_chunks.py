@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import hapticsdk.solvers as core
+import hapticsdk.solvers.base as core
 from hapticsdk.errors import ValidationError
 from hapticsdk.solvers import BatchSolveResult, SolveResult
 from hapticsdk_ga._common import SampleCloud, sample_cloud
@@ -130,7 +130,7 @@ def test_size_options_have_upper_limits(fx, model, cls, opts, field):
 
 def test_public_call_reuses_the_setup_but_not_the_targets(monkeypatch):
     from hapticsdk.errors import PluginError
-    from hapticsdk import problems
+    from hapticsdk.solvers import problems
 
     # an empty cache: other tests leave setups with the same dimensions behind
     monkeypatch.setattr(problems, "_PROBLEMS", {})

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import hapticsdk as hs
-from hapticsdk.problems import build_problem
+from hapticsdk.solvers.problems import build_problem
 
 
 def test_model_carries_the_recorded_press_force_range():

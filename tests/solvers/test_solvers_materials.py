@@ -19,7 +19,7 @@ DIMS = ("hardness", "roughness")
 def library_problem():
     from hapticsdk.errors import PluginError
     from hapticsdk.materials import load_library
-    from hapticsdk.problems import build_problem
+    from hapticsdk.solvers.problems import build_problem
 
     mats = list(load_library())
     T = np.array([[m.intensities[d] for d in DIMS] for m in mats], float)
@@ -32,7 +32,7 @@ def library_problem():
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_default_method_meets_every_material(library_problem, seed):
-    from hapticsdk.problems import DEFAULT_METHOD, get_solver
+    from hapticsdk.solvers.problems import DEFAULT_METHOD, get_solver
 
     names, T, problem = library_problem
     assert len(names) >= 20
@@ -57,7 +57,7 @@ def test_polish_alone_meets_every_material_over_15_seeds(library_problem):
     """``polish`` from its default starts (nearest cloud samples + random, with the rescue
     round) meets every material, batched, for 15 seeds: from random starts only it left S4
     at 0.011 and S1 at 0.05 in some of them (a local minimum, a stall along a bound)."""
-    from hapticsdk.problems import get_solver
+    from hapticsdk.solvers.problems import get_solver
 
     names, T, problem = library_problem
     S = get_solver("polish")

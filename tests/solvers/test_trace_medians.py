@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from hapticsdk.solvers import _row_medians
+from hapticsdk.solvers.results import _row_medians
 
 
 @pytest.mark.parametrize("cols", [1, 2, 3, 4, 7, 10])

@@ -12,7 +12,7 @@ import pytest
 
 from hapticsdk.models import CompositeModel
 from hapticsdk.plugins import list_plugins
-from hapticsdk.problems import build_problem, load_model
+from hapticsdk.solvers.problems import build_problem, load_model
 from hapticsdk.runtime.render import render_plan
 from hapticsdk.compiler import compile_scene
 
