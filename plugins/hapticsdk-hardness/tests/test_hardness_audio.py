@@ -492,3 +492,24 @@ def test_live_session_death_silences_the_coil(jack, loop, who):
         for pid in audio:
             if _alive(pid):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_read_back_of_a_fresh_command_after_an_idle_spell(jack):
+    """An opened coil left without commands longer than its dead-man timeout (its audio
+    process then marks its blocks timed out), then commanded: the read-back right after
+    the command shows it, before the audio process has run another block. The timed-out
+    state is the callback's rule on the command's age, judged on the same clock; the
+    process's flag describes a block that predates the command (on a busy machine the
+    conformance kit's holds finish within one audio period and read that stale flag)."""
+    coil = _coil(device="system", command_timeout_s=0.05)
+    coil.open()
+    try:
+        time.sleep(0.3)   # several timeouts' worth of blocks without a command
+        c = ChannelCommand("vibration", frequency_hz=200.0, amplitude=0.4)
+        for _ in range(20):   # each at once after its command: no audio block in between
+            coil.command(c)
+            assert coil.read_back().amplitude == pytest.approx(0.4)
+            time.sleep(0.12)  # idle past the timeout again
+            assert coil.read_back().amplitude == 0.0
+    finally:
+        coil.close()

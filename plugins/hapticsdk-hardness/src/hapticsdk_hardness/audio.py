@@ -76,7 +76,7 @@ from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 from hapticsdk.install_hints import pip_hint
 from hapticsdk.synthesis import Oscillator
 
-from .audio_process import (CALLBACK_MAX_S, CALLBACKS, EXIT_WAIT_S, LATE_STARTS, START_WAIT_S, TIMED_OUT, TIMEOUTS,
+from .audio_process import (CALLBACK_MAX_S, CALLBACKS, EXIT_WAIT_S, LATE_STARTS, START_WAIT_S, TIMEOUTS,
                             UNDERRUNS, BlockRenderer, SharedTarget)
 
 log = logging.getLogger(__name__)
@@ -452,11 +452,16 @@ class VoiceCoilAudio(Actuator):
     def _read_back(self) -> ChannelCommand:
         """The target the audio callback renders (Hz, amplitude 0..1; 0 when silenced:
         stopped, timed out, or no audio process any more)."""
-        freq, amp, _ = self._target
+        freq, amp, t_cmd = self._target
         silent = self._silent
         if self.isolation == "process":
             sh, p = self._shared, self._proc
-            silent = silent or sh is None or sh.mv[TIMED_OUT] != 0.0 or p is None or p.poll() is not None
+            # the callback's own dead-man rule, judged here on the same clock
+            # (time.monotonic() is system-wide): the process's TIMED_OUT flag describes its
+            # last block, which may predate the newest command by a period or more on a
+            # busy machine, so it would report a fresh command as silenced
+            silent = (silent or sh is None or p is None or p.poll() is not None
+                      or time.monotonic() - t_cmd > self.command_timeout_s)
         return ChannelCommand("vibration", frequency_hz=freq, amplitude=0.0 if silent else amp)
 
     def _stop(self) -> None:
