@@ -25,6 +25,7 @@ A softer object is held several counts deep and shows a smooth trace.
 
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -69,16 +70,24 @@ def main() -> None:
         detail = f" {e.actuator}.{e.field} sent {e.value:.3g} ({e.count} ticks)" if e.kind == "clamp" else (
             f"  ({e.value:g})" if e.value else "")
         print(f"  t={e.t:6.3f} s  {e.kind}{where}{detail}")
+        if e.kind == "material_switched":
+            switched.set()
+
+    handled = threading.Event()   # the retarget handler has finished (its solve can be slow on a busy machine)
+    switched = threading.Event()  # the servo's material_switched event has been printed
 
     def on_contact(e) -> None:
         if e.object == RETARGET[0] and not retarget:
-            r = s.set_material(*RETARGET)
-            retarget.append(r)
-            feats = ", ".join(f"{k}={v:.3g}" for f in r.features.values() for k, v in f.items())
-            ok = r.wait(0.1)
-            print(f"  -> {RETARGET[0]} retargeted to {RETARGET[1]} during contact: {r.source} answer "
-                  f"({feats}), error {r.error:.3g}; "
-                  + (f"rendered from tick {r.tick} (t={r.t:.3f} s)" if ok else "not acknowledged within 0.1 s"))
+            try:
+                r = s.set_material(*RETARGET)
+                retarget.append(r)
+                feats = ", ".join(f"{k}={v:.3g}" for f in r.features.values() for k, v in f.items())
+                ok = r.wait(0.1)
+                print(f"  -> {RETARGET[0]} retargeted to {RETARGET[1]} during contact: {r.source} answer "
+                      f"({feats}), error {r.error:.3g}; "
+                      + (f"rendered from tick {r.tick} (t={r.t:.3f} s)" if ok else "not acknowledged within 0.1 s"))
+            finally:
+                handled.set()
 
     with hs.Session(scene, trajectory=finger, record=record, view=args.view is not None) as s:
         print(f"servo running in process {s.servo_pid}; objects: {s.objects}")
@@ -87,6 +96,10 @@ def main() -> None:
         s.on_event("*", show)
         s.on_event("contact_enter", on_contact)
         time.sleep(finger.duration_s + 0.3 + (args.view or 0.0))
+        # the walk is over; on a busy machine the event thread may still be in the
+        # handler: let it finish, and let the servo render the new material, before closing
+        if handled.wait(30.0) and retarget:
+            switched.wait(10.0)
         st = s.state()
         print(f"servo: {st.ticks} ticks, {st.overruns} overruns, {st.skipped_ticks} skipped, "
               f"{st.renderer_errors} renderer errors, {st.clamps} clamps, {st.material_switches} switches")
