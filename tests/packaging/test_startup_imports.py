@@ -14,6 +14,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 #: never imported by the render path (each is 20-300 ms of import time)
 HEAVY = ("scipy", "numpy.f2py")
 
@@ -68,7 +70,11 @@ assert "servo loop:" in buf.getvalue()
 def test_render_of_a_library_material_does_not_import_numpy_ma():
     """numpy's median and percentile import ``numpy.ma`` (~6-10 ms of start-up); the
     render path computes them with :mod:`hapticsdk.quantiles` (the same numbers, bit for
-    bit), the importance estimate included (issue 30)."""
+    bit), the importance estimate included (issue 30). numpy before 1.25 imports
+    ``numpy.ma`` itself in ``import numpy`` (the oldest numpy the project allows is
+    1.24): there the check has nothing to measure, and says so."""
+    if _imported("import numpy", ("numpy.ma",)):
+        pytest.skip("this numpy imports numpy.ma in `import numpy` itself (numpy < 1.25)")
     body = """
 import contextlib, io
 from hapticsdk.cli import main
