@@ -26,7 +26,7 @@ the default ``b`` is an assumption and a parameter.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -147,6 +147,26 @@ def quantise(y_mm: "float | np.ndarray", resolution_mm: float) -> "float | np.nd
     return np.round(np.asarray(y_mm) / resolution_mm) * resolution_mm
 
 
+def readings_mm(y_m: np.ndarray, res_mm: np.ndarray) -> np.ndarray:
+    """Encoder readings (mm) of true positions ``y_m`` (m): rounded to each lane's
+    resolution (exact where the resolution is 0)."""
+    y = y_m * 1e3
+    return np.where(res_mm > 0, np.round(y / np.where(res_mm > 0, res_mm, 1.0)) * res_mm, y)
+
+
+def zoh_step(P: np.ndarray, z: np.ndarray, y: np.ndarray, v: np.ndarray, f: np.ndarray, r_mm: Any,
+             rd_mm_s: Any) -> tuple[np.ndarray, np.ndarray]:
+    """One exact zero-order-hold step of every lane: fills the augmented state ``z``
+    (``[y, v, r, r', F]``, SI) in place and returns ``(P z, z)``, the new ``[y, v]`` per lane
+    (``P`` from :func:`transition_matrices`)."""
+    z[:, 0] = y
+    z[:, 1] = v
+    z[:, 2] = np.asarray(r_mm, float) * 1e-3
+    z[:, 3] = np.asarray(rd_mm_s, float) * 1e-3
+    z[:, 4] = f
+    return np.einsum("nij,nj->ni", P, z), z
+
+
 class ArmBatch:
     """Many independent arm+finger cells advanced together (vectorised).
 
@@ -178,21 +198,13 @@ class ArmBatch:
         """Every arm's position as its encoder reports it (mm, rounded to the encoder
         resolution).
         """
-        y = self.y * 1e3
-        q = np.where(self.res_mm > 0, np.round(y / np.where(self.res_mm > 0, self.res_mm, 1.0)) * self.res_mm, y)
-        return q
+        return readings_mm(self.y, self.res_mm)
 
     def step(self, force_n: np.ndarray, r_mm: np.ndarray, rd_mm_s: np.ndarray) -> np.ndarray:
         """Advance one period under the held force (saturated at the limit); returns the
         force actually applied (N)."""
         f = np.clip(force_n, -self.fmax, self.fmax)
-        z = self._z
-        z[:, 0] = self.y
-        z[:, 1] = self.v
-        z[:, 2] = np.asarray(r_mm, float) * 1e-3
-        z[:, 3] = np.asarray(rd_mm_s, float) * 1e-3
-        z[:, 4] = f
-        yv = np.einsum("nij,nj->ni", self.P, z)
+        yv, z = zoh_step(self.P, self._z, self.y, self.v, f, r_mm, rd_mm_s)
         if self.track_energy:
             self.damper_j += self.b * np.einsum("ni,nij,nj->n", z, self.G, z)
             self.motor_work_j += f * (yv[:, 0] - self.y)

@@ -20,7 +20,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .arm import ArmParams, dissipation_gramians, transition_matrices
+from .arm import ArmParams, dissipation_gramians, readings_mm, transition_matrices, zoh_step
 from .finger import FingerParams
 
 
@@ -54,22 +54,14 @@ class PlantBatch:
 
     def measured_mm(self) -> np.ndarray:
         """Encoder readings (mm): the true position rounded to each cell's resolution."""
-        y = self.y * 1e3
-        r = self.res_mm
-        return np.where(r > 0, np.round(y / np.where(r > 0, r, 1.0)) * r, y)
+        return readings_mm(self.y, self.res_mm)
 
     def step(self, force_n: np.ndarray, r_mm: np.ndarray, rd_mm_s: np.ndarray, live: "np.ndarray | None" = None
              ) -> np.ndarray:
         """Advance every live lane one of its periods under its held force (saturated);
         returns the applied forces (N). Lanes not live keep their state."""
         f = np.clip(np.nan_to_num(np.asarray(force_n, float)), -self.fmax, self.fmax)
-        z = self._z
-        z[:, 0] = self.y
-        z[:, 1] = self.v
-        z[:, 2] = np.asarray(r_mm, float) * 1e-3
-        z[:, 3] = np.asarray(rd_mm_s, float) * 1e-3
-        z[:, 4] = f
-        yv = np.einsum("nij,nj->ni", self.P, z)
+        yv, z = zoh_step(self.P, self._z, self.y, self.v, f, r_mm, rd_mm_s)
         dis = self.b * np.einsum("ni,nij,nj->n", z, self.G, z)
         work = f * (yv[:, 0] - self.y)
         if live is None:
