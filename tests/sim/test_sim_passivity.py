@@ -262,3 +262,16 @@ def test_release_without_a_declared_force_limit_reaches_zero(batch):
         out.append(f)
     assert out[19] == pytest.approx(f_hold)
     assert out[20 + n_ramp] == 0.0
+
+
+def test_old_controller_settings_warn_and_are_ignored():
+    """The 0.1 controller's tuned settings still construct (one minor version), with a
+    DeprecationWarning naming them, and change nothing; cap_stiffness_n_per_mm warns and
+    returns the Colgate spring's stiffness, 2 b_lo / T (N/mm)."""
+    from hapticsdk.passivity import cap_stiffness_n_per_mm, colgate_stiffness_n_per_mm
+    with pytest.warns(DeprecationWarning, match="felt_force_n, stiffness_cap"):
+        old = ControllerSettings(stiffness_cap=False, felt_force_n=0.6, device_damping_ns_per_m=0.5)
+    assert old == ControllerSettings(device_damping_ns_per_m=0.5)
+    with pytest.warns(DeprecationWarning, match="no stiffness cap"):
+        k = cap_stiffness_n_per_mm(old, 1e-3)
+    assert k == colgate_stiffness_n_per_mm(old, 1e-3) == pytest.approx(2 * 0.25 / 1e-3 / 1000)
