@@ -62,10 +62,10 @@ import numpy as np
 
 from ..actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevice, readback_tolerance
 from ..actuators import READBACK_RTOL as READBACK_RTOL  # re-exported: the kit's name since 1.1
-from ..dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from ..perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
 from ..errors import DeviceError, PluginError, ValidationError
-from ..features import Feature, FeatureSpace
-from ..models import PerceptionModel
+from ..perception.features import Feature, FeatureSpace
+from ..perception.models import PerceptionModel
 from ..solvers import CONSTRAINT_TOL, SolveProblem, SolveResult, Solver
 
 
@@ -936,7 +936,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             assert _finite(v) and (v is None or v > 0 or (k == "settle_time_s" and v == 0)), \
                 f"limit {k}={v!r} must be a finite number > 0 or None"
         # the units it accepts are the units of its limits (a clean unit clash otherwise)
-        from ..features import same_unit
+        from ..perception.features import same_unit
         acc = cls.accepted_fields()
         if "force_n" in acc:
             assert same_unit(acc["force_n"], "N"), f"accepts force_n in {acc['force_n']!r}; force_n is in newtons"
@@ -1617,7 +1617,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
         assert not extra, f"render_features {extra} are not among its features {sorted(names)}"
         # a feature is one quantity in one unit across the installed dimensions (a scene
         # naming both would be refused by FeatureSpace.merge)
-        from ..features import same_unit
+        from ..perception.features import same_unit
         from ..plugins import registry
         for other in registry("dimension").names():
             if other == d.name:
@@ -1661,7 +1661,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_renderer() -> None:
         d = holder["d"]
-        from ..dimensions import declared_roles
+        from ..perception.dimensions import declared_roles
         specs = declared_roles(d)
         # the middle and the ends, and each feature at the tenths of its declared range
         # (the values scenes write, e.g. 0.3) with the others at the middle
@@ -1718,12 +1718,12 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_roles() -> None:
         d = holder["d"]
-        from ..dimensions import RoleSpec
+        from ..perception.dimensions import RoleSpec
         declared = dict(getattr(d, "roles", {}) or {})
         r = d.renderer(mid())
         assert declared, (f"the dimension declares no `roles` (role -> RoleSpec(channel, fields with units)) "
                           f"for its renderer's roles {list(r.roles)}")
-        from ..features import same_unit
+        from ..perception.features import same_unit
         for role, spec in declared.items():
             assert isinstance(spec, RoleSpec), f"roles[{role!r}] is {spec!r}, not a RoleSpec"
             for fname, unit in (("force_n", "N"), ("frequency_hz", "Hz")):
@@ -1761,7 +1761,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_model_match() -> None:
         d = holder["d"]
-        from ..features import same_unit
+        from ..perception.features import same_unit
         from ..plugins import registry
         try:
             m = registry("model").load(d.default_model)
@@ -1794,7 +1794,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
 
     def r_commands() -> None:
         d = holder["d"]
-        from ..dimensions import declared_roles, undeclared_fields
+        from ..perception.dimensions import declared_roles, undeclared_fields
         r = d.renderer(mid())
         seen: set[str] = set()
         specs = declared_roles(d)
@@ -1986,7 +1986,7 @@ def _model_rules(ctx: _Ctx) -> None:
 
     def r_dimensions() -> None:
         m = holder["m"]
-        from ..features import same_unit
+        from ..perception.features import same_unit
         from ..plugins import registry
         reg = registry("dimension")
         missing = [n for n in m.dimension_names if n not in reg]

@@ -122,7 +122,8 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_the_graph_sees_imports():
     g = import_graph()
-    assert "hapticsdk.errors" in g["hapticsdk.features"] or any("hapticsdk" in d for d in g["hapticsdk.features"])
+    assert "hapticsdk.errors" in g["hapticsdk.perception.features"]
+    assert "hapticsdk.perception.features" in g["hapticsdk.perception.dimensions"]
     assert g["hapticsdk.compiler"] >= {"hapticsdk.compiler.compile"}
 
 
@@ -134,7 +135,8 @@ def test_the_graph_covers_the_whole_core():
     assert set(graph) == files
     assert len(files) > 100                      # the core, not a folder of it
     for sub in ("hapticsdk.runtime.session", "hapticsdk.scene.model", "hapticsdk.cli.core",
-                "hapticsdk.testing.conformance", "hapticsdk.interop.hjif_model"):
+                "hapticsdk.testing.conformance", "hapticsdk.interop.hjif_model",
+                "hapticsdk.perception.features", "hapticsdk.perception.dimensions"):
         assert sub in graph
 
 
@@ -143,10 +145,11 @@ def test_no_import_cycle():
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
 
 
-#: the request's path as dependencies: a scene, the solvers (targets -> features, which
+#: the request's path as dependencies: perception (features, dimensions, models,
+#: materials: what every later stage speaks in), a scene, the solvers (targets -> features, which
 #: the plan's model provenance and the compiler call), the plan (the data the compiler
 #: makes), the compiler, the runtime; a stage may import an earlier one, never a later one
-STAGES = ("hapticsdk.scene", "hapticsdk.solvers", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
+STAGES = ("hapticsdk.perception", "hapticsdk.scene", "hapticsdk.solvers", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
 
 
 def _stage(mod: str) -> int | None:
@@ -163,7 +166,7 @@ def test_no_stage_imports_a_later_stage():
         if s is None:
             continue
         upward += [f"{mod} -> {d}" for d in sorted(deps) if (_stage(d) or -1) > s]
-    assert not upward, "upward imports along scene -> solvers -> plan -> compiler -> runtime: " + "; ".join(upward)
+    assert not upward, "upward imports along perception -> scene -> solvers -> plan -> compiler -> runtime: " + "; ".join(upward)
 
 
 #: the first-party plugins and the example plugin: they import the core's new places too
@@ -204,3 +207,4 @@ def test_the_project_imports_no_deprecated_path():
 def test_the_checks_catch_a_cycle_and_an_upward_edge():
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert _stage("hapticsdk.runtime.render") > _stage("hapticsdk.scene.model")
+    assert _stage("hapticsdk.scene.model") > _stage("hapticsdk.perception.materials")

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError
 from hapticsdk.testing import check, check_device
 from hapticsdk.testing.conformance import format_report
