@@ -136,7 +136,8 @@ def test_the_graph_covers_the_whole_core():
     assert len(files) > 100                      # the core, not a folder of it
     for sub in ("hapticsdk.runtime.session", "hapticsdk.scene.model", "hapticsdk.cli.core",
                 "hapticsdk.testing.conformance", "hapticsdk.interop.hjif_model",
-                "hapticsdk.perception.features", "hapticsdk.perception.dimensions"):
+                "hapticsdk.perception.features", "hapticsdk.perception.dimensions",
+                "hapticsdk.testing.conformance.runner", "hapticsdk.testing.conformance.actuator_rules"):
         assert sub in graph
 
 

@@ -345,7 +345,7 @@ def test_a_lost_or_late_write_is_caught(cls):
 
 
 def test_the_lost_write_part_leaves_the_safety_settings_as_they_were():
-    from hapticsdk.testing.conformance import _alternate_once
+    from hapticsdk.testing.conformance.actuator_drive import _alternate_once
     a = Arm()
     before = a.safety.settings
     with a:
