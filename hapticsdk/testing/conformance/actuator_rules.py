@@ -22,7 +22,7 @@ from .actuator_drive import (STALL_RUN_S, THREAD_GRACE_S, _Spy, _advance, _alter
                              _stalls, _startable_commands, _takes_option, _threads_left, _tol)
 from .runner import _Ctx, _run_rules
 from .timing import COMMAND_BUDGET, KIT_PERIOD_S, TIMING_CALLS, _fastest, _sim_advance
-from .values import _finite
+from .values import _finite, _refuses
 
 
 def _actuator_rules(ctx: _Ctx, device: bool) -> None:
@@ -96,12 +96,8 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         a = ctx.make()
         assert not a.is_open, "a new actuator must not be open before open()"
         a.stop()  # stop on a closed actuator must not raise
-        try:
-            a.command(_normal_commands(a)[0])
-        except DeviceError:
-            pass
-        else:
-            raise AssertionError("command() on a closed actuator did not raise DeviceError")
+        assert _refuses(DeviceError, lambda: a.command(_normal_commands(a)[0])), \
+            "command() on a closed actuator did not raise DeviceError"
         with a:
             assert a.is_open
             a.open()  # idempotent
@@ -118,18 +114,12 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         with a:
             for attr in ("force_n", "frequency_hz", "amplitude"):
                 for bad in (float("nan"), float("inf")):
-                    try:
-                        a.command(ChannelCommand(a.channel, **cast("dict[str, Any]", {attr: bad})))
-                    except ValidationError:
-                        continue
-                    raise AssertionError(f"{attr}={bad} was accepted")
+                    cmd = cast("dict[str, Any]", {attr: bad})
+                    assert _refuses(ValidationError, lambda: a.command(ChannelCommand(a.channel, **cmd))), \
+                        f"{attr}={bad} was accepted"
             if isinstance(a, HapticDevice):
                 for bad in (0.0, -1.0, float("nan")):
-                    try:
-                        a.step(bad)
-                    except ValidationError:
-                        continue
-                    raise AssertionError(f"step({bad}) was accepted")
+                    assert _refuses(ValidationError, lambda: a.step(bad)), f"step({bad}) was accepted"
 
     def r_limits_enforced() -> None:
         a = ctx.make()
@@ -206,12 +196,8 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             def broken(c: ChannelCommand) -> None:
                 raise OSError("simulated transport failure")
             b._command = broken  # type: ignore[method-assign]
-            try:
-                b.command(_normal_commands(b)[0])
-            except DeviceError:
-                pass
-            else:
-                raise AssertionError("a failing backend command was not reported as DeviceError")
+            assert _refuses(DeviceError, lambda: b.command(_normal_commands(b)[0])), \
+                "a failing backend command was not reported as DeviceError"
 
     def r_determinism() -> None:
         runs = []
@@ -234,12 +220,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             for _ in range(10):
                 a.step(0.001)
             assert a.read_state().t >= t0, "device time went backwards"
-        try:
-            a.read_state()
-        except DeviceError:
-            pass
-        else:
-            raise AssertionError("read_state() on a closed device did not raise DeviceError")
+        assert _refuses(DeviceError, a.read_state), "read_state() on a closed device did not raise DeviceError"
         if not getattr(cls, "simulated", False):
             return   # a real device moves and keeps time on its own: nothing the kit steps
         # a simulated device: its clock advances by the steps it is given, and its position
