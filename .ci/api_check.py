@@ -33,15 +33,17 @@ BASELINE = "73fd5b9"
 #: the documented surface (docs/api.md): public names of these modules
 SURFACE = (
     "hapticsdk",
-    "hapticsdk.errors", "hapticsdk.features", "hapticsdk.materials", "hapticsdk.solvers.problems",
+    "hapticsdk.errors", "hapticsdk.perception.features", "hapticsdk.perception.materials",
+    "hapticsdk.solvers.problems",
     "hapticsdk.solvers", "hapticsdk.scene", "hapticsdk.compiler", "hapticsdk.plan",
     "hapticsdk.runtime", "hapticsdk.runtime.render", "hapticsdk.runtime.session",
     "hapticsdk.sim.finger", "hapticsdk.calibration", "hapticsdk.interop", "hapticsdk.runlog",
-    "hapticsdk.dimensions", "hapticsdk.models", "hapticsdk.actuators", "hapticsdk.plugins",
+    "hapticsdk.perception.dimensions", "hapticsdk.perception.models", "hapticsdk.actuators", "hapticsdk.plugins",
     "hapticsdk.plugin_api", "hapticsdk.hookspecs", "hapticsdk.device_options",
     "hapticsdk.safety", "hapticsdk.testing",
-    # deprecated (a shim until 0.3): its removals must stay announced
-    "hapticsdk.problems",
+    # deprecated (shims until 0.3): their removals must stay announced
+    "hapticsdk.problems", "hapticsdk.features", "hapticsdk.materials", "hapticsdk.dimensions",
+    "hapticsdk.models",
 )
 
 

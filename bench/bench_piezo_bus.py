@@ -30,7 +30,7 @@ import numpy as np
 from hapticsdk_roughness.emulation import SerialBridgeEmulator
 from hapticsdk_roughness.hardware import PiezoMCP2221, PiezoSerial
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 
 
 def run(transport: str, pattern: str, n: int) -> dict:

@@ -51,7 +51,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hapticsdk.dimensions import DimensionRenderer
+from hapticsdk.perception.dimensions import DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.sim.finger import press_slide
 from hapticsdk.sim.probe import VirtualProbe
@@ -266,7 +266,7 @@ def one_unplug(transport: str) -> tuple[float | None, str]:
 
 
 def _cmd():  # type: ignore[no-untyped-def]
-    from hapticsdk.dimensions import ChannelCommand
+    from hapticsdk.perception.dimensions import ChannelCommand
     return ChannelCommand("vibration", frequency_hz=120.0, amplitude=10.0)
 
 

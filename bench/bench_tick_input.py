@@ -28,7 +28,7 @@ import numpy as np
 import hapticsdk.actuators as A
 import hapticsdk.runtime.loop as L
 from hapticsdk.benchmarks.timing import build_scene
-from hapticsdk.dimensions import DimensionRenderer
+from hapticsdk.perception.dimensions import DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory

@@ -27,7 +27,7 @@ import numpy as np
 from hapticsdk.actuators import Actuator, ActuatorLimits, DriveCapability
 from hapticsdk.calibration import PiezoTable
 from hapticsdk.compiler import compile_scene
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.plugins import registry
 from hapticsdk.runtime.render import render_plan
 

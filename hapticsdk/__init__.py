@@ -32,13 +32,13 @@ if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load laz
     from .actuators import HapticDevice as HapticDevice
     from .actuators import create_actuator as create_actuator
     from .compiler import compile_scene as compile_scene
-    from .dimensions import PerceptionDimension as PerceptionDimension
+    from .perception.dimensions import PerceptionDimension as PerceptionDimension
     from .errors import HapticSDKError as HapticSDKError
-    from .features import Feature as Feature
-    from .features import FeatureSpace as FeatureSpace
-    from .materials import Material as Material
-    from .materials import load_library as load_library
-    from .models import PerceptionModel as PerceptionModel
+    from .perception.features import Feature as Feature
+    from .perception.features import FeatureSpace as FeatureSpace
+    from .perception.materials import Material as Material
+    from .perception.materials import load_library as load_library
+    from .perception.models import PerceptionModel as PerceptionModel
     from .plugins import list_plugins as list_plugins
     from .solvers.problems import build_problem as build_problem
     from .solvers.problems import get_solver as get_solver
@@ -63,12 +63,12 @@ _LAZY = {
     "get_solver": "hapticsdk.solvers.problems",
     "load_model": "hapticsdk.solvers.problems",
     "load_dimension": "hapticsdk.solvers.problems",
-    "load_library": "hapticsdk.materials",
-    "Material": "hapticsdk.materials",
-    "Feature": "hapticsdk.features",
-    "FeatureSpace": "hapticsdk.features",
-    "PerceptionDimension": "hapticsdk.dimensions",
-    "PerceptionModel": "hapticsdk.models",
+    "load_library": "hapticsdk.perception.materials",
+    "Material": "hapticsdk.perception.materials",
+    "Feature": "hapticsdk.perception.features",
+    "FeatureSpace": "hapticsdk.perception.features",
+    "PerceptionDimension": "hapticsdk.perception.dimensions",
+    "PerceptionModel": "hapticsdk.perception.models",
     "Solver": "hapticsdk.solvers",
     "SolveProblem": "hapticsdk.solvers",
     "SolveResult": "hapticsdk.solvers",

@@ -19,7 +19,11 @@ REMOVED_IN = "0.3"
 MOVED_MODULES = {"hapticsdk.rendering": "hapticsdk.runtime.render",
                  "hapticsdk.importance": "hapticsdk.compiler.importance",
                  "hapticsdk.runtime.limits": "hapticsdk.scene.limits",
-                 "hapticsdk.problems": "hapticsdk.solvers.problems"}
+                 "hapticsdk.problems": "hapticsdk.solvers.problems",
+                 "hapticsdk.features": "hapticsdk.perception.features",
+                 "hapticsdk.dimensions": "hapticsdk.perception.dimensions",
+                 "hapticsdk.models": "hapticsdk.perception.models",
+                 "hapticsdk.materials": "hapticsdk.perception.materials"}
 
 
 def _warn(old: str, new: str) -> None:

@@ -27,7 +27,7 @@ from typing import Any, ClassVar, Mapping, TypeVar
 import numpy as np
 
 from .channels import CHANNELS  # the channel kinds an actuator can serve (also hapticsdk.actuators.CHANNELS)
-from .dimensions import ChannelCommand
+from .perception.dimensions import ChannelCommand
 from .errors import DeviceError, HapticSDKError, ValidationError
 
 log = logging.getLogger(__name__)

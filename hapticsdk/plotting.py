@@ -51,7 +51,7 @@ def describe_material(name: str) -> str:
     if _TARGETS_NAME.fullmatch(name):
         return f"targets {name}"
     try:
-        from .materials import load_library
+        from .perception.materials import load_library
         lib = load_library()
         m = lib.get(name)
     except Exception:  # not a library material (a scene's own name)

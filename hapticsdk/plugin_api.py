@@ -20,7 +20,7 @@ from typing import Any
 from .errors import PluginError, ValidationError
 
 #: Version of the plugin interface of this core: the base classes of
-#: :mod:`hapticsdk.dimensions`, :mod:`hapticsdk.models`, :mod:`hapticsdk.solvers`,
+#: :mod:`hapticsdk.perception.dimensions`, :mod:`hapticsdk.perception.models`, :mod:`hapticsdk.solvers`,
 #: :mod:`hapticsdk.actuators`, the entry-point groups and the hook specifications.
 #: ``MAJOR.MINOR``: MINOR grows when something is added (old plugins keep working),
 #: MAJOR when something is removed or changes meaning. A plugin declares the range it
@@ -46,7 +46,7 @@ API_HISTORY: dict[str, tuple[str, ...]] = {
             "Actuator.close_error: a backend error of close() is kept (and logged), not swallowed",
             "privileged_options: any collection of option names (dict, tuple, list, set, frozenset)",
             "a 1.0-style dimension gets typed roles from its default actuators' channels "
-            "(hapticsdk.dimensions.declared_roles)",
+            "(hapticsdk.perception.dimensions.declared_roles)",
             "hapticsdk_api ranges are PEP 440 specifiers (~=, wildcards)"),
 }
 

@@ -44,7 +44,7 @@ from typing import Any, ClassVar, Mapping, cast
 import numpy as np
 
 from .actuators import ActuatorLimits, DeviceState, HapticDevice
-from .dimensions import ChannelCommand
+from .perception.dimensions import ChannelCommand
 from .errors import DeviceError, RecordingError, ValidationError
 from .quantiles import median
 

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from .dimensions import ChannelCommand
+from .perception.dimensions import ChannelCommand
 from .errors import ValidationError
 
 #: small slack when comparing times (s): simulated clocks accumulate rounding error

@@ -14,7 +14,7 @@ from typing import Any, Callable, ClassVar, Iterator
 import numpy as np
 
 from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
-from hapticsdk.dimensions import ChannelCommand, Constraint
+from hapticsdk.perception.dimensions import ChannelCommand, Constraint
 
 #: the plugin API the test plugins are written for
 API = ">=1.2,<2"

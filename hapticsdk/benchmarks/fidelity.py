@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ..dimensions import TickInput
+from ..perception.dimensions import TickInput
 from ..plugins import registry
 from ..runtime import ServoLoop
 from ..sim.finger import Trajectory

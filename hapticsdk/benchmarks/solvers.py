@@ -63,7 +63,7 @@ DIMS = ("hardness", "roughness")
 
 def load_material_targets(path: str | Path | None = None) -> tuple[list[str], np.ndarray]:
     """Names and ``(m, 2)`` (hardness, roughness) intensities of the material library."""
-    from ..materials import load_library
+    from ..perception.materials import load_library
     mats = list(load_library(path))
     return [m.name for m in mats], np.array([[m.intensities[d] for d in DIMS] for m in mats], float)
 

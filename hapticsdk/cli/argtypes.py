@@ -130,8 +130,8 @@ def open_unit_interval(text: str) -> float:
 
 
 def intensity(text: str) -> float:
-    """A 0..1 perceptual intensity (same rule as :func:`hapticsdk.dimensions.check_intensity`)."""
-    from ..dimensions import check_intensity
+    """A 0..1 perceptual intensity (same rule as :func:`hapticsdk.perception.dimensions.check_intensity`)."""
+    from ..perception.dimensions import check_intensity
     from ..errors import ValidationError
 
     try:

@@ -106,7 +106,7 @@ def cmd_materials(args: argparse.Namespace) -> int:
     """``materials``: print the material library (name, label, intensities), marked
     GENERATED when it is. Returns the exit status.
     """
-    from ..materials import load_library
+    from ..perception.materials import load_library
 
     lib = load_library(args.library, with_plugins=args.with_plugins)
     rows = [m.to_dict() for m in lib]
@@ -123,7 +123,7 @@ def cmd_materials(args: argparse.Namespace) -> int:
 
 
 def _targets(args: argparse.Namespace) -> dict[str, float]:
-    from ..dimensions import check_intensity
+    from ..perception.dimensions import check_intensity
     from ..errors import ValidationError
 
     targets: dict[str, float] = {}

@@ -44,7 +44,7 @@ def _scene_from_arg(text: str) -> Any:
     path = Path(text)
     if path.suffix.lower() == ".json" or path.exists():
         return Scene.load(path)
-    from ..materials import load_library
+    from ..perception.materials import load_library
     lib = load_library()
     if text in lib.names():
         return Scene.for_material(text)

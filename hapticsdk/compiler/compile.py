@@ -35,7 +35,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..calibration.selection import select_calibrations
-from ..dimensions import RoleSpec, check_intensity
+from ..perception.dimensions import RoleSpec, check_intensity
 from ..errors import PluginError, ValidationError
 from ..plan import FALLBACK_SENSOR, DroppedDimension, MaterialPlan, RenderPlan
 from ..plugin_api import check_plugin_api
@@ -61,7 +61,7 @@ def _resolve_materials(scene: Scene) -> list[_Mat]:
         where = f"scene.objects[{i}]"
         if isinstance(obj.material, str):
             if library is None:
-                from ..materials import load_library
+                from ..perception.materials import load_library
                 library = load_library()
             try:
                 m = library.get(obj.material)
@@ -352,8 +352,8 @@ def _device_summary(r: Any, targets: Mapping[str, float], kept: Sequence[str], c
 def _check_commands(d: str, rend: Any, dim: Any) -> None:
     """One tick of the new renderer in contact (1 mm, sliding at 20 mm/s): every command
     must be on a role it lists and set only the fields that role declares (typed roles of
-    :func:`hapticsdk.dimensions.declared_roles`). Cheap: the renderer is built anyway."""
-    from ..dimensions import TickInput, declared_roles, undeclared_fields
+    :func:`hapticsdk.perception.dimensions.declared_roles`). Cheap: the renderer is built anyway."""
+    from ..perception.dimensions import TickInput, declared_roles, undeclared_fields
     specs = declared_roles(dim)
     if not specs:
         return
@@ -376,7 +376,7 @@ def _role_spec(owner: str, dname: str, role: str, dim_objs: Mapping[str, Any], i
     if owner.startswith("replacement:"):
         rep = imp_model.replacement(dname) if imp_model is not None else None
         return _REPLACEMENT_ROLES.get(rep["renderer"]) if rep else None
-    from ..dimensions import declared_roles
+    from ..perception.dimensions import declared_roles
     return declared_roles(dim_objs[dname]).get(role)
 
 
@@ -384,7 +384,7 @@ def _check_role(owner: str, role: str, rspec: RoleSpec | None, actuator: str,
                 contracts: dict[str, dict[str, Any]]) -> None:
     """Refuse an actuator that cannot carry what ``owner`` commands on ``role``; record
     the contract for the plan."""
-    from ..features import same_unit
+    from ..perception.features import same_unit
     from ..plugins import registry
     cls = registry("actuator").load(actuator)
     check_plugin_api(cls, name=actuator)

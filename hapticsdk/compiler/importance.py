@@ -116,7 +116,7 @@ class ImportanceModel(ABC):
 
     def describe(self) -> dict[str, Any]:
         """Name and one-line description of this importance model."""
-        from ..dimensions import first_line
+        from ..perception.dimensions import first_line
         return {"name": self.name, "doc": first_line(self.__doc__)}
 
 

@@ -101,7 +101,7 @@ def _is_generated(name: str, source: str) -> bool:
     if source != "library":
         return False
     try:
-        from ..materials import load_library
+        from ..perception.materials import load_library
         return bool(load_library().get(name).generated)
     except ValidationError:
         return False

@@ -248,7 +248,7 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
                 # like the servo loop: stale-command age and the backend's command
                 # deadline (DRV2667 host watchdog: 3 periods at least) follow the tick
                 act.safety.set_period(tick_s)
-        from ..dimensions import ChannelCommand
+        from ..perception.dimensions import ChannelCommand
 
         # a real actuator is always paced: content played back to back on hardware would
         # be all of the file's seconds in a fraction of the time

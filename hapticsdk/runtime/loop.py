@@ -84,7 +84,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from ..actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3
-from ..dimensions import ChannelCommand, DimensionRenderer, TickInput
+from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
 from ..quantiles import median

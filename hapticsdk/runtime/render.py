@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 from ..actuators import Actuator, HapticDevice
-from ..dimensions import DimensionRenderer
+from ..perception.dimensions import DimensionRenderer
 from ..errors import DeviceError, PluginError, ValidationError
 from ..plan import FALLBACK_SENSOR, MaterialPlan, RenderPlan
 from ..plugin_api import check_plugin_api

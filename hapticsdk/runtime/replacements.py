@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import Any, Mapping
 
-from ..dimensions import ChannelCommand, DimensionRenderer, TickInput
+from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import ValidationError
 
 

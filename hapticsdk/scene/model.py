@@ -278,7 +278,7 @@ class Scene:
             name = material
         elif isinstance(material, Mapping):
             # named after its targets: "hardness 0.8, roughness 0.3"; each checked (True is no intensity)
-            from ..dimensions import check_intensity
+            from ..perception.dimensions import check_intensity
             its = {k: check_intensity(v, f"targets.{k}") for k, v in material.items()}
             name = ", ".join(f"{k} {v:g}" for k, v in its.items()) or "intensities"
             mat = {"name": name, "intensities": its}

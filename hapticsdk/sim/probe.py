@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ..actuators import ActuatorLimits, DeviceState, HapticDevice
-from ..dimensions import ChannelCommand
+from ..perception.dimensions import ChannelCommand
 from ..errors import ValidationError
 from .finger import Trajectory, press_slide
 

@@ -15,10 +15,10 @@ from typing import Any
 
 import numpy as np
 
-from ..dimensions import Constraint, PENALTY_FORMS
+from ..perception.dimensions import Constraint, PENALTY_FORMS
 from ..errors import ModelError, ValidationError
-from ..features import FeatureSpace
-from ..models import PerceptionModel
+from ..perception.features import FeatureSpace
+from ..perception.models import PerceptionModel
 
 
 def _check_targets(T: np.ndarray, dimensions: tuple[str, ...], given_shape: tuple[int, ...]) -> None:

@@ -16,10 +16,10 @@ from typing import Any, Sequence, overload
 import numpy as np
 
 from ..checks import MAX_SEED, check_seed
-from ..dimensions import PerceptionDimension, check_intensity
+from ..perception.dimensions import PerceptionDimension, check_intensity
 from ..errors import ModelError, ValidationError
-from ..features import FeatureSpace
-from ..models import CompositeModel, PerceptionModel
+from ..perception.features import FeatureSpace
+from ..perception.models import CompositeModel, PerceptionModel
 from ..plugins import registry
 from .base import Solver
 from .objective import SolveProblem
@@ -106,7 +106,7 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
             press-force range for hardness). Off by default, as in the paper: the inverse is
             not unique, and without it the solver may return feature combinations no
             recording had (see docs/solvers.md, "Data support").
-        extra_constraints: further :class:`~hapticsdk.dimensions.Constraint` objects on
+        extra_constraints: further :class:`~hapticsdk.perception.dimensions.Constraint` objects on
             the model's features, e.g. what the mapped actuators can produce (the scene
             compiler's device-aware solving).
     """
@@ -138,7 +138,7 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
     searched = [n for n in model_inputs if n in space and n not in pinned]
     space = space.subset(searched)
     if mdl.feature_space is not None:
-        from ..features import same_unit
+        from ..perception.features import same_unit
         for n in space.names:
             if n in mdl.feature_space and not same_unit(mdl.feature_space[n].unit, space[n].unit):
                 raise ModelError(f"model {mdl.name!r} reads feature {n!r} in {mdl.feature_space[n].unit!r}, "
@@ -213,7 +213,7 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
         scipy-style result(s): ``x`` (features, physical units), ``x_dict``, ``fun``,
         ``success``, ``message``, ``nfev``, ``nit``, ``error`` (sum of absolute intensity
         errors), ``intensities``, ``constraint_violation``, ``time_s``, ``trace``, and
-        ``model``: :meth:`~hapticsdk.models.PerceptionModel.provenance` of the model the
+        ``model``: :meth:`~hapticsdk.perception.models.PerceptionModel.provenance` of the model the
         error is measured against (``data_generated``, ``statement``).
 
     >>> res = solve({"hardness": 0.8, "roughness": 0.3}, seed=1)   # doctest: +SKIP

@@ -1,6 +1,6 @@
 """Training of the paper's 5-20-2 network by Levenberg-Marquardt, and its metrics.
 
-Network (as :class:`hapticsdk.models.MLPModel`): inputs and targets scaled to [-1, 1]
+Network (as :class:`hapticsdk.perception.models.MLPModel`): inputs and targets scaled to [-1, 1]
 the MATLAB ``mapminmax`` way, ``tanh`` hidden layer, ``tanh`` output layer.
 
 Training (own implementation, after MATLAB ``trainlm``): residuals are the scaled
@@ -25,7 +25,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import ValidationError
-from ..models import MLPModel
+from ..perception.models import MLPModel
 
 SPLITS = ("train", "validation", "test")
 

@@ -1,4 +1,4 @@
-"""Export of a trained :class:`~hapticsdk.models.MLPModel` to an ONNX file.
+"""Export of a trained :class:`~hapticsdk.perception.models.MLPModel` to an ONNX file.
 
 Graph (``onnx.helper``, opset 17)::
 
@@ -26,8 +26,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import ModelError
-from ..features import FeatureSpace
-from ..models import MLPModel
+from ..perception.features import FeatureSpace
+from ..perception.models import MLPModel
 
 OPSET = 17
 IR_VERSION = 8

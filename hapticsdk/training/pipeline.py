@@ -25,7 +25,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..errors import RecordingError, ValidationError
-from ..features import Feature, FeatureSpace
+from ..perception.features import Feature, FeatureSpace
 from ..schemas_io import read_json
 from .extraction import FEATURE_DESCRIPTIONS, FEATURE_NAMES, FEATURE_UNITS, FeatureTable, extract_set, extract_trials
 from .recordings import (MANIFEST_NAME, Ratings, load_manifest, load_ratings, path_inside, validate_json,
@@ -311,7 +311,7 @@ def write_materials(table: TrainingTable, path: Path | str) -> Path:
     from ..fileio import atomic_write_text
     p = Path(path)
     _mkdir(p.parent)
-    from ..materials import load_library
+    from ..perception.materials import load_library
     # read back by the library reader (its size, depth and schema checks) before the rename
     return atomic_write_text(p, json.dumps(build_materials(table), indent=1) + "\n", verify=load_library)
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from hapticsdk.actuators import DeviceState
 from hapticsdk.cli import main
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.runlog import RunRecorder
 
 

@@ -7,7 +7,7 @@ import sys
 import pytest
 
 from hapticsdk.cli import main
-from hapticsdk.materials import load_library
+from hapticsdk.perception.materials import load_library
 
 EXPECTED_PLUGINS = {
     ("dimension", "hardness", "hapticsdk-hardness"),

@@ -154,7 +154,7 @@ def test_wav_sink_replaces_the_file_only_when_complete(tmp_path):
     import errno
     import wave
 
-    from hapticsdk.dimensions import ChannelCommand
+    from hapticsdk.perception.dimensions import ChannelCommand
     from hapticsdk_hardness.voicecoil import VoiceCoilVirtual
 
     path = tmp_path / "coil.wav"

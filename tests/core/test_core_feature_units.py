@@ -3,7 +3,7 @@
 import pytest
 
 from hapticsdk.errors import FeatureConflictError, ModelError
-from hapticsdk.features import Feature, FeatureSpace, same_unit
+from hapticsdk.perception.features import Feature, FeatureSpace, same_unit
 
 
 def test_same_name_same_unit_merges():
@@ -30,7 +30,7 @@ def test_owner_is_not_part_of_identity():
 
 def test_a_plugin_dimension_redeclaring_gs_in_n_per_m_fails_at_problem_build(monkeypatch):
     pytest.importorskip("hapticsdk_hardness")
-    from hapticsdk.dimensions import PerceptionDimension
+    from hapticsdk.perception.dimensions import PerceptionDimension
     from hapticsdk.plugins import registry
     from hapticsdk.solvers.problems import build_problem
 
@@ -53,7 +53,7 @@ def test_a_plugin_dimension_redeclaring_gs_in_n_per_m_fails_at_problem_build(mon
 
 def test_a_model_reading_a_feature_in_another_unit_is_a_model_error():
     pytest.importorskip("hapticsdk_hardness")
-    from hapticsdk.models import MLPModel
+    from hapticsdk.perception.models import MLPModel
     from hapticsdk.solvers.problems import build_problem, load_model
     import numpy as np
     base = load_model("default")

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.errors import ValidationError
-from hapticsdk.features import Feature, FeatureSpace
+from hapticsdk.perception.features import Feature, FeatureSpace
 
 
 def space():

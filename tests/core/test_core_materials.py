@@ -3,7 +3,7 @@ import json
 import pytest
 
 from hapticsdk.errors import ValidationError
-from hapticsdk.materials import load_library
+from hapticsdk.perception.materials import load_library
 
 
 def test_shipped_library_has_the_23_generated_samples():

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.errors import ModelError, ValidationError
-from hapticsdk.models import CompositeModel, MLPModel, PerceptionModel
+from hapticsdk.perception.models import CompositeModel, MLPModel, PerceptionModel
 
 
 def mlp(seed=0, d=5, k=2, feats=None, dims=None):

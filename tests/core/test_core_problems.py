@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from hapticsdk import plugins
-from hapticsdk.dimensions import Constraint, DimensionRenderer, PerceptionDimension
+from hapticsdk.perception.dimensions import Constraint, DimensionRenderer, PerceptionDimension
 from hapticsdk.errors import ModelError, SolverError, ValidationError
-from hapticsdk.features import Feature, FeatureSpace
-from hapticsdk.models import MLPModel
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import MLPModel
 from hapticsdk.solvers.problems import build_problem, solve
 from hapticsdk.solvers import Solver, SolverOutput
 
@@ -163,7 +163,7 @@ def test_unknown_names_and_options(toys):
 
 
 def test_model_must_read_the_dimension_features(toys):
-    from hapticsdk.models import MLPModel
+    from hapticsdk.perception.models import MLPModel
     small = MLPModel(dict(W1=np.ones((2, 1)), b1=np.zeros(2), W2=np.ones((2, 2)), b2=np.zeros(2),
                           x_min=[0.0], x_max=[1.0], y_min=[0, 0], y_max=[1, 1]), ["GS"], ["toyhard", "x"])
     with pytest.raises(ModelError, match="W"):

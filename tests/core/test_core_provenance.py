@@ -8,7 +8,7 @@ import pytest
 pytest.importorskip("hapticsdk_hardness")
 
 from hapticsdk.cli import main  # noqa: E402
-from hapticsdk.models import MLPModel  # noqa: E402
+from hapticsdk.perception.models import MLPModel  # noqa: E402
 from hapticsdk.solvers.problems import load_model, solve  # noqa: E402
 
 

@@ -27,7 +27,21 @@ MOVED_MODULES = [  # (old module, new module, a name users imported from it)
     ("hapticsdk.runtime.limits", "hapticsdk.scene.limits", "check_period"),
     ("hapticsdk.problems", "hapticsdk.solvers.problems", "build_problem"),
     ("hapticsdk.problems", "hapticsdk.solvers.problems", "solve"),
+    ("hapticsdk.features", "hapticsdk.perception.features", "Feature"),
+    ("hapticsdk.features", "hapticsdk.perception.features", "FeatureSpace"),
+    ("hapticsdk.features", "hapticsdk.perception.features", "same_unit"),
+    ("hapticsdk.dimensions", "hapticsdk.perception.dimensions", "PerceptionDimension"),
+    ("hapticsdk.dimensions", "hapticsdk.perception.dimensions", "ChannelCommand"),
+    ("hapticsdk.dimensions", "hapticsdk.perception.dimensions", "declared_roles"),
+    ("hapticsdk.models", "hapticsdk.perception.models", "PerceptionModel"),
+    ("hapticsdk.models", "hapticsdk.perception.models", "MLPModel"),
+    ("hapticsdk.materials", "hapticsdk.perception.materials", "load_library"),
+    ("hapticsdk.materials", "hapticsdk.perception.materials", "DEFAULT_LIBRARY"),
 ]
+
+#: the perception stage's four modules (0.1: flat in hapticsdk/), with a class of each
+PERCEPTION = [("features", "Feature"), ("dimensions", "ChannelCommand"), ("models", "MLPModel"),
+              ("materials", "Material")]
 
 
 @pytest.mark.parametrize("old, name, new", MOVED_NAMES)
@@ -76,3 +90,53 @@ def test_scene_compile_method_warns_and_compiles():
     with pytest.warns(DeprecationWarning, match=r"hapticsdk\.compiler\.compile_scene"):
         plan = scene.compile()
     assert plan.to_dict()["materials"].keys() == compile_scene(scene).to_dict()["materials"].keys()
+
+
+def test_every_moved_module_is_tested_here():
+    """A shim registered in ``MOVED_MODULES`` has a row above (and a row names a real
+    shim): a module moved later is covered by the parametrised test, or this fails."""
+    from hapticsdk._deprecation import MOVED_MODULES as registered
+    assert {(old, new) for old, new, _ in MOVED_MODULES} == set(registered.items())
+
+
+@pytest.mark.parametrize("old, cls", PERCEPTION)
+def test_a_class_pickled_at_its_old_place_still_unpickles(old, cls, monkeypatch):
+    """0.1 and 0.2 pickles name ``hapticsdk.<old>.<cls>``; unpickling resolves that
+    path through the shim (warning) to the class at its new place. Protocol 0's
+    ``GLOBAL`` opcode names the module and class as text, the way those pickles do."""
+    import pickle
+    monkeypatch.delitem(sys.modules, f"hapticsdk.{old}", raising=False)
+    with pytest.warns(DeprecationWarning, match=rf"hapticsdk\.perception\.{old}"):
+        got = pickle.loads(f"chapticsdk.{old}\n{cls}\n.".encode())
+    assert got is getattr(importlib.import_module(f"hapticsdk.perception.{old}"), cls)
+
+
+def test_a_feature_pickled_by_0_1_still_unpickles():
+    """A whole ``Feature`` instance pickled when the class lived in ``hapticsdk.features``."""
+    import pickle
+
+    from hapticsdk.perception.features import Feature
+    blob = pickle.dumps(Feature("GS", "N/mm", 0.1, 2.0), protocol=2)
+    assert b"hapticsdk.perception.features" in blob
+    old = blob.replace(b"hapticsdk.perception.features", b"hapticsdk.features")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        got = pickle.loads(old)
+    assert got == Feature("GS", "N/mm", 0.1, 2.0) and type(got) is Feature
+
+
+def test_the_top_level_perception_names_do_not_warn():
+    """``hs.Feature``, ``hs.PerceptionDimension`` ... resolve to the new places with no
+    warning (a fresh interpreter: the top level caches what it resolved)."""
+    import subprocess
+    code = ("import warnings; warnings.simplefilter('error', DeprecationWarning)\n"
+            "import hapticsdk as hs\n"
+            "names = ['Feature', 'FeatureSpace', 'PerceptionDimension', 'PerceptionModel', "
+            "'Material', 'load_library']\n"
+            "print(' '.join(getattr(hs, n).__module__ for n in names))\n"
+            "print(len(hs.load_library()))\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    mods, n = r.stdout.split("\n")[:2]
+    assert set(mods.split()) == {f"hapticsdk.perception.{m}" for m in ("features", "dimensions", "models", "materials")}
+    assert int(n) > 0

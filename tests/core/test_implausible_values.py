@@ -96,7 +96,7 @@ def test_voicecoil_calibration_is_checked_against_the_device_range():
 
 @pytest.mark.parametrize("value", [True, False, np.bool_(True)])
 def test_bool_is_not_an_intensity(value):
-    from hapticsdk.dimensions import check_intensity
+    from hapticsdk.perception.dimensions import check_intensity
 
     with pytest.raises(ValidationError, match="must be a number"):
         check_intensity(value, "targets.hardness")

@@ -9,7 +9,7 @@ from typing import ClassVar
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 
 
 class _Held(Actuator):

@@ -12,7 +12,7 @@ import sys
 import pytest
 
 from hapticsdk.errors import ValidationError
-from hapticsdk.materials import DEFAULT_LIBRARY
+from hapticsdk.perception.materials import DEFAULT_LIBRARY
 from hapticsdk.schemas_io import load_json
 
 

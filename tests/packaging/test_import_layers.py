@@ -10,6 +10,7 @@ reached at its new place for one minor version, removed in 0.3).
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -122,7 +123,8 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_the_graph_sees_imports():
     g = import_graph()
-    assert "hapticsdk.errors" in g["hapticsdk.features"] or any("hapticsdk" in d for d in g["hapticsdk.features"])
+    assert "hapticsdk.errors" in g["hapticsdk.perception.features"]
+    assert "hapticsdk.perception.features" in g["hapticsdk.perception.dimensions"]
     assert g["hapticsdk.compiler"] >= {"hapticsdk.compiler.compile"}
 
 
@@ -134,7 +136,9 @@ def test_the_graph_covers_the_whole_core():
     assert set(graph) == files
     assert len(files) > 100                      # the core, not a folder of it
     for sub in ("hapticsdk.runtime.session", "hapticsdk.scene.model", "hapticsdk.cli.core",
-                "hapticsdk.testing.conformance", "hapticsdk.interop.hjif_model"):
+                "hapticsdk.testing.conformance", "hapticsdk.interop.hjif_model",
+                "hapticsdk.perception.features", "hapticsdk.perception.dimensions",
+                "hapticsdk.testing.conformance.runner", "hapticsdk.testing.conformance.actuator_rules"):
         assert sub in graph
 
 
@@ -143,10 +147,11 @@ def test_no_import_cycle():
     assert not found, "import cycles: " + "; ".join(" <-> ".join(c) for c in found)
 
 
-#: the request's path as dependencies: a scene, the solvers (targets -> features, which
+#: the request's path as dependencies: perception (features, dimensions, models,
+#: materials: what every later stage speaks in), a scene, the solvers (targets -> features, which
 #: the plan's model provenance and the compiler call), the plan (the data the compiler
 #: makes), the compiler, the runtime; a stage may import an earlier one, never a later one
-STAGES = ("hapticsdk.scene", "hapticsdk.solvers", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
+STAGES = ("hapticsdk.perception", "hapticsdk.scene", "hapticsdk.solvers", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
 
 
 def _stage(mod: str) -> int | None:
@@ -163,7 +168,7 @@ def test_no_stage_imports_a_later_stage():
         if s is None:
             continue
         upward += [f"{mod} -> {d}" for d in sorted(deps) if (_stage(d) or -1) > s]
-    assert not upward, "upward imports along scene -> solvers -> plan -> compiler -> runtime: " + "; ".join(upward)
+    assert not upward, "upward imports along perception -> scene -> solvers -> plan -> compiler -> runtime: " + "; ".join(upward)
 
 
 #: the first-party plugins and the example plugin: they import the core's new places too
@@ -204,3 +209,76 @@ def test_the_project_imports_no_deprecated_path():
 def test_the_checks_catch_a_cycle_and_an_upward_edge():
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert _stage("hapticsdk.runtime.render") > _stage("hapticsdk.scene.model")
+    assert _stage("hapticsdk.scene.model") > _stage("hapticsdk.perception.materials")
+
+
+#: where the repository's own code lives besides the core: every file there is read
+REPO_CODE = ("hapticsdk", "plugins", "examples", "tests", "bench", "docs", ".ci", "README.md")
+
+
+def _repo_files() -> list[Path]:
+    out: list[Path] = []
+    for top in REPO_CODE:
+        p = ROOT / top
+        files = [p] if p.is_file() else [*p.rglob("*.py"), *p.rglob("*.md")]
+        out += [f for f in files if not any(part in (".venv", "build", "node_modules") or part.endswith(".egg-info")
+                                            for part in f.relative_to(ROOT).parts)]
+    return out
+
+
+def moved_imports(path: Path, text: str, moved: dict[str, str]) -> list[str]:
+    """The imports of a module path in ``moved`` (old -> new) that ``path`` makes: every
+    ``import``/``from`` statement of a Python file (relative ones resolved inside the
+    core), and of the Python code blocks of a Markdown page."""
+    def old(name: str) -> str | None:
+        return next((o for o in moved if name == o or name.startswith(o + ".")), None)
+
+    if path.suffix == ".md":
+        hits = re.findall(r"^\s*(?:from|import)\s+(hapticsdk(?:\.\w+)+)", text, re.M)
+        hits += [f"hapticsdk.{m}" for line in re.findall(r"^\s*from\s+hapticsdk\s+import\s+(.+)$", text, re.M)
+                 for m in re.split(r"\s*,\s*", line.strip("() "))]
+        return [h for h in hits if old(h)]
+    rel = path.relative_to(ROOT)
+    mod = _module_name(path) if rel.parts[0] == "hapticsdk" else None
+    base = (mod.split(".") if path.name == "__init__.py" else mod.split(".")[:-1]) if mod else []
+    out = []
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.Import):
+            out += [a.name for a in node.names if old(a.name)]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                if not base:
+                    continue
+                target = ".".join(base[: len(base) - node.level + 1] + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            names = [target] + [f"{target}.{a.name}" for a in node.names]
+            out += [n for n in names if old(n) and (n == target or old(n) == n)]
+    return out
+
+
+def test_no_file_of_the_repository_imports_a_moved_module():
+    """Core, plugins, examples, tests, benchmarks, CI scripts and the docs' code use the
+    new places; only the shims themselves and the tests of the deprecation (which import
+    the old paths by string, on purpose) name the old ones."""
+    from hapticsdk._deprecation import MOVED_MODULES
+    shims = {ROOT / (old.replace(".", "/") + ".py") for old in MOVED_MODULES}
+    on_purpose = {ROOT / "tests" / "core" / "test_deprecated_names.py"}   # imports the old paths to test them
+    bad = []
+    for f in _repo_files():
+        if f in shims | on_purpose:
+            continue
+        found = moved_imports(f, f.read_text(encoding="utf-8"), MOVED_MODULES)
+        bad += [f"{f.relative_to(ROOT)}: {name} (now {MOVED_MODULES[name]})" for name in found]
+    assert not bad, "imports of moved modules:\n" + "\n".join(bad)
+
+
+def test_the_moved_import_scan_sees_every_form():
+    moved = {"hapticsdk.features": "hapticsdk.perception.features"}
+    core = PKG / "scene" / "model.py"
+    py = ("from hapticsdk.features import Feature\nimport hapticsdk.features\n"
+          "from hapticsdk import features\nfrom ..features import FeatureSpace\n"
+          "from hapticsdk.perception.features import Feature\nfrom hapticsdk import scene\n")
+    assert moved_imports(core, py, moved) == ["hapticsdk.features"] * 4
+    md = "```python\nfrom hapticsdk.features import Feature\nfrom hapticsdk import scene, features\n```\n"
+    assert moved_imports(ROOT / "docs" / "x.md", md, moved) == ["hapticsdk.features"] * 2

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, TickInput
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
 from hapticsdk.errors import DeviceError, RecordingError
 from hapticsdk.runlog import PlaybackDevice, RunRecorder, load_run
 

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 
 virtual = pytest.importorskip("hapticsdk_roughness.virtual")
 voicecoil = pytest.importorskip("hapticsdk_hardness.voicecoil")

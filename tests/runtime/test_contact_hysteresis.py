@@ -5,7 +5,7 @@ gate is the contact); away from the surface the rendered force is unchanged."""
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.sim.finger import Trajectory
 from hapticsdk.sim.probe import VirtualProbe
@@ -74,7 +74,7 @@ def _piezo():
 
 
 def _inp(v_raw, v_filt, step, t=0.0):
-    from hapticsdk.dimensions import TickInput
+    from hapticsdk.perception.dimensions import TickInput
     return TickInput(t, 1e-3, 1.0, np.array([v_raw, 0.0, 0.0]), True, (0.0, 1.0, 0.0), "o", (v_filt, 0.0, 0.0), step)
 
 

@@ -6,7 +6,7 @@ a soft -> stiff switch while pressed."""
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import ValidationError
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose

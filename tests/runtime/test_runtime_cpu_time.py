@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import ValidationError
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.runtime import clock as rclock

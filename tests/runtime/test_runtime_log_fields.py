@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import ValidationError
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.sim.finger import Trajectory

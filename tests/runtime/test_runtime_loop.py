@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime import EVENT_KEYS, ServoLoop, SimulatedClock
 from hapticsdk.sim.finger import press_slide

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.runtime.loop import MAX_LOG_TICKS
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import Actuator, DeviceState, SensedState
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.safety import SafetyLayer

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 import hapticsdk as hs
-from hapticsdk.dimensions import DimensionRenderer
+from hapticsdk.perception.dimensions import DimensionRenderer
 from hapticsdk.errors import HapticSDKError, ServoProcessDied, SessionError
 from hapticsdk.runtime.session import Session
 from hapticsdk.sim.finger import Trajectory

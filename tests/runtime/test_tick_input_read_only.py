@@ -7,7 +7,7 @@ velocity itself)."""
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
-from hapticsdk.dimensions import ChannelCommand, TickInput
+from hapticsdk.perception.dimensions import ChannelCommand, TickInput
 from hapticsdk.errors import ValidationError
 from hapticsdk.safety import SafetyLayer
 

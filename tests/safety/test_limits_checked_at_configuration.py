@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import ActuatorLimits
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
 from hapticsdk.safety import SafetyLayer, declared_limits
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.safety import SafetyLayer, SafetySettings
 

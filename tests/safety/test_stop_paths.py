@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits, stops_since
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError
 from hapticsdk.runtime import ServoLoop, SimulatedClock
 from hapticsdk.runtime.signals import SafeStop

@@ -193,7 +193,7 @@ def test_cli_stops_an_actuator_the_command_left_open(monkeypatch, capsys):
 
     def body():
         left.open()
-        left.command(__import__("hapticsdk.dimensions", fromlist=["x"]).ChannelCommand("force", force_n=0.5),
+        left.command(__import__("hapticsdk.perception.dimensions", fromlist=["x"]).ChannelCommand("force", force_n=0.5),
                      now=0.0)
         left.ignored_force_n = 0.5
         raise SafeStop(signal.SIGHUP)

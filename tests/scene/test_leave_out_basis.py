@@ -20,13 +20,13 @@ BOTH = ["hardness", "roughness"]
 
 
 def _library_scene(**settings_):
-    from hapticsdk.materials import load_library
+    from hapticsdk.perception.materials import load_library
     return {"name": "library", "objects": [{"name": n, "material": n} for n in load_library().names()],
             "settings": settings_}
 
 
 def test_predictor_means_are_the_librarys_evaluated_samples():
-    from hapticsdk.materials import load_library
+    from hapticsdk.perception.materials import load_library
     lib = load_library()
     f = {k: np.mean([lib.get(s).features[k] for s in EVALUATED]) for k in ("GS", "Fpeak", "AFpeak")}
     gs, fp, af_g = PaperRegressionImportance.PREDICTOR_MEANS
@@ -95,7 +95,7 @@ def test_library_points_do_not_read_the_solve():
     """For a library material the points are its recorded features and their projection:
     the compile's solved features (which follow the solver seed) are not read."""
     from hapticsdk.compiler.leave_out import material_points
-    from hapticsdk.materials import load_library
+    from hapticsdk.perception.materials import load_library
     from hapticsdk.solvers.problems import build_problem
     lib = load_library()
     mat = lib.get("S16")

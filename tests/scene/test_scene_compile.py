@@ -183,7 +183,7 @@ def test_plugin_api_versions():
 
 @needs_hardness
 def test_library_plan_drops_exactly_when_the_whole_interval_is_below_the_threshold():
-    from hapticsdk.materials import load_library
+    from hapticsdk.perception.materials import load_library
     lib = load_library()
     names = lib.names()
     thr = 20.0
@@ -291,7 +291,7 @@ def test_left_out_features_pinned_at_the_full_solve_when_the_defaults_miss_the_t
     full solve's values. The kept target must then be reached, checked here by running the
     model on the plan's features ourselves."""
     from hapticsdk.compiler import compile_scene
-    from hapticsdk.materials import load_library
+    from hapticsdk.perception.materials import load_library
     from hapticsdk.solvers.problems import load_model
 
     plan = compile_scene({"schema_version": 1, "name": "s12", "objects": [{"name": "pad", "material": "S12"}],

@@ -19,7 +19,7 @@ from hapticsdk.runtime.replacements import ConstantForceRenderer
 from hapticsdk.compiler import compile_scene
 from hapticsdk.scene import Scene
 from hapticsdk.schemas_io import read_json
-from hapticsdk.dimensions import TickInput
+from hapticsdk.perception.dimensions import TickInput
 
 needs_hardness = pytest.mark.skipif("hardness" not in registry("dimension"),
                                     reason="hapticsdk-hardness not installed")

@@ -7,9 +7,9 @@ import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
 from hapticsdk.compiler import compile_scene
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import PluginError, ValidationError
-from hapticsdk.features import Feature
+from hapticsdk.perception.features import Feature
 from hapticsdk.plugins import registry
 
 pytest.importorskip("hapticsdk_hardness")

@@ -45,7 +45,7 @@ def test_simulated_vibration_actuators_hold_a_bounded_waveform(name):
     acts = registry("actuator")
     if name not in acts:
         pytest.skip(f"{name} not installed")
-    from hapticsdk.dimensions import ChannelCommand
+    from hapticsdk.perception.dimensions import ChannelCommand
     # the piezo synthesises period_s of waveform per command
     a = acts.load(name)(**({"period_s": 0.05} if name == "piezo-virtual" else {}))
     a.open()

@@ -153,7 +153,7 @@ def test_taps_and_standard_set():
 
 
 def test_virtual_probe_follows_trajectory_and_ignores_force():
-    from hapticsdk.dimensions import ChannelCommand
+    from hapticsdk.perception.dimensions import ChannelCommand
     tr = press_slide()
     p = VirtualProbe(trajectory=tr)
     p.open()

@@ -8,9 +8,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import Constraint
-from hapticsdk.features import Feature, FeatureSpace
-from hapticsdk.models import MLPModel
+from hapticsdk.perception.dimensions import Constraint
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import MLPModel
 from hapticsdk.solvers import SolveProblem
 
 NAMES = ("GS", "W", "Fpeak", "AFpeak", "P")

@@ -196,7 +196,7 @@ def test_ga_nearest_init_starts_from_the_cloud(fx, model):
 
 
 def test_ga_stall_rule_ends_hopeless_targets(fx):
-    from hapticsdk.models import MLPModel
+    from hapticsdk.perception.models import MLPModel
     base = fx.make_model()
     w = dict(base.weights, y_min=np.full(2, 0.1), y_max=np.full(2, 0.9))
     model = MLPModel(w, base.feature_names, base.dimension_names, feature_space=base.feature_space)

@@ -18,7 +18,7 @@ SOLVERS = [GASolver(), DESolver(generations=30), PolishSolver(), GAPolishSolver(
 def test_unreachable_targets_fail_with_residual(fx, solver):
     # a model whose outputs are scaled into (0.1, 0.9): a tanh output never reaches the
     # ends, so every target below is provably at least 0.1 + 0.1 away from reachable
-    from hapticsdk.models import MLPModel
+    from hapticsdk.perception.models import MLPModel
     base = fx.make_model()
     w = dict(base.weights, y_min=np.full(2, 0.1), y_max=np.full(2, 0.9))
     model = MLPModel(w, base.feature_names, base.dimension_names, feature_space=base.feature_space)

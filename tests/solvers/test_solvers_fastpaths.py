@@ -180,7 +180,7 @@ def test_work_constraint_fast_path_equals_masked_formula():
 
 
 def _model_of(dims, seed=3):
-    from hapticsdk.models import MLPModel
+    from hapticsdk.perception.models import MLPModel
     r = np.random.default_rng(seed)
     k = len(dims)
     w = {"W1": r.normal(size=(20, 5)) * 0.8, "b1": r.normal(size=20) * 0.3,
@@ -199,7 +199,7 @@ def test_buffers_equal_plain_for_other_than_two_targeted_dimensions(fx, dims, ta
     (a third-party dimension next to the paper's two; one dimension alone), buffered,
     lazy and plain evaluation give the same fitness, error and violation (the two-column
     case has its own path; a three-dimension sum once read a buffer only that path fills)."""
-    from hapticsdk.models import MLPModel
+    from hapticsdk.perception.models import MLPModel
     from hapticsdk.solvers import SolveProblem
     model = MLPModel(_model_of(dims), fx.NAMES, dims, feature_space=fx.make_space(), name="test-k")
     T = np.random.default_rng(4).uniform(0.1, 0.9, (6, len(targeted)))

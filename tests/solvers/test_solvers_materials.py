@@ -18,7 +18,7 @@ DIMS = ("hardness", "roughness")
 @pytest.fixture(scope="module")
 def library_problem():
     from hapticsdk.errors import PluginError
-    from hapticsdk.materials import load_library
+    from hapticsdk.perception.materials import load_library
     from hapticsdk.solvers.problems import build_problem
 
     mats = list(load_library())

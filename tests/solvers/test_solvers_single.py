@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import Constraint
+from hapticsdk.perception.dimensions import Constraint
 from hapticsdk.solvers import SolveResult, Solver, SolverOutput
 from hapticsdk_ga.amortised import AmortisedSolver
 from hapticsdk_ga.ga import GASolver

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension
-from hapticsdk.features import Feature
-from hapticsdk.models import PerceptionModel
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension
+from hapticsdk.perception.features import Feature
+from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver, SolverOutput
 from hapticsdk.testing import (ActuatorConformance, SolverConformance, check, check_actuator,
@@ -151,7 +151,7 @@ class NonVectorModel(PerceptionModel):
     hapticsdk_api = ">=1.2,<2"   # the plugin API these test plugins are written for
 
     def __init__(self) -> None:
-        from hapticsdk.features import FeatureSpace
+        from hapticsdk.perception.features import FeatureSpace
         sp = FeatureSpace((Feature("a", "1", 0, 1), Feature("b", "1", 0, 1)))
         super().__init__(("a", "b"), ("x",), feature_space=sp, name="non-vector")
 

@@ -9,7 +9,7 @@ from typing import ClassVar
 
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.testing import check
 from kit_variants import LagCoil
 

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
-from hapticsdk.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
-from hapticsdk.features import Feature, FeatureSpace
-from hapticsdk.models import MLPModel, PerceptionModel
+from hapticsdk.perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import MLPModel, PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check_actuator, check_device, check_dimension, check_model
 from kit_variants import ForceArm, dishonest, never

@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.testing import check_actuator, check_device
 from hapticsdk.testing.conformance import format_report
 from kit_variants import API, ForceArm, rules_of

@@ -28,10 +28,10 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import ValidationError
-from hapticsdk.features import Feature, FeatureSpace
-from hapticsdk.models import PerceptionModel
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_dimension
 from hapticsdk.testing.conformance import format_report

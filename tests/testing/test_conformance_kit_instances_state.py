@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError
 from hapticsdk.testing import check, check_device
 from hapticsdk.testing.conformance import format_report
@@ -345,7 +345,7 @@ def test_a_lost_or_late_write_is_caught(cls):
 
 
 def test_the_lost_write_part_leaves_the_safety_settings_as_they_were():
-    from hapticsdk.testing.conformance import _alternate_once
+    from hapticsdk.testing.conformance.actuator_drive import _alternate_once
     a = Arm()
     before = a.safety.settings
     with a:

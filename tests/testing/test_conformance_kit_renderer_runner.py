@@ -21,10 +21,10 @@ from typing import Any, Callable, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import ValidationError
-from hapticsdk.features import Feature, FeatureSpace
-from hapticsdk.models import PerceptionModel
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_actuator, check_dimension
 from hapticsdk.testing.conformance import RULE_TIME_FACTOR, format_report

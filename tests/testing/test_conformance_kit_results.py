@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.models import PerceptionModel
+from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.solvers import SolveProblem, Solver, SolverOutput
 from hapticsdk.testing import check_model, check_solver

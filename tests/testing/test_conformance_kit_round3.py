@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import ValidationError
-from hapticsdk.features import Feature, FeatureSpace
-from hapticsdk.models import PerceptionModel
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver
 from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model

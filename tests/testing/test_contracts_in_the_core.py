@@ -11,7 +11,7 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand, Constraint, RoleSpec, declared_roles
+from hapticsdk.perception.dimensions import ChannelCommand, Constraint, RoleSpec, declared_roles
 from hapticsdk.errors import PluginError, ValidationError
 from hapticsdk.plugins import registry
 from hapticsdk.units import is_force_unit, parse_unit, same_unit

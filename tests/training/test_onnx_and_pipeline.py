@@ -166,7 +166,7 @@ def test_onnx_metadata_and_initializers(shipped_report):
 
 
 def test_parity_on_random_network_across_feature_box():
-    from hapticsdk.models import MLPModel
+    from hapticsdk.perception.models import MLPModel
 
     rng = np.random.default_rng(4)
     w = {"W1": rng.normal(size=(20, 5)), "b1": rng.normal(size=20), "W2": rng.normal(size=(2, 20)),
@@ -175,7 +175,7 @@ def test_parity_on_random_network_across_feature_box():
     w = {k: np.asarray(v, np.float32).astype(float) for k, v in w.items()}
     m = MLPModel(w, FEATURE_NAMES, ["hardness", "roughness"])
     X = w["x_min"] + rng.random((500, 5)) * (w["x_max"] - w["x_min"])
-    from hapticsdk.features import Feature, FeatureSpace
+    from hapticsdk.perception.features import Feature, FeatureSpace
     space = FeatureSpace(tuple(Feature(n, "u", float(a), float(b)) for n, a, b in zip(FEATURE_NAMES, w["x_min"], w["x_max"])))
     meta = onnx_export.build_metadata(space, ["hardness", "roughness"], feature_defaults={}, df_hz=0.4,
                                       metrics={}, training_data_sha256="x", data_generated=True)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hapticsdk.models import CompositeModel
+from hapticsdk.perception.models import CompositeModel
 from hapticsdk.plugins import list_plugins
 from hapticsdk.solvers.problems import build_problem, load_model
 from hapticsdk.runtime.render import render_plan

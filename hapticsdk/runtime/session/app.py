@@ -507,9 +507,9 @@ class Session:
         return out
 
     def _targets(self, material: Any, field: str) -> tuple[str, dict[str, float]]:
-        from ...dimensions import check_intensity
+        from ...perception.dimensions import check_intensity
         if isinstance(material, str):
-            from ...materials import load_library
+            from ...perception.materials import load_library
             if self._library is None:
                 self._library = load_library()
             try:

@@ -24,7 +24,7 @@ import time
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError
 from hapticsdk.testing import ActuatorConformance
 
@@ -134,7 +134,7 @@ def test_dead_servo_goes_silent(jack, loop, isolation):
 
 GONE = """
 import os, sys, time
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError
 from hapticsdk_hardness.audio import VoiceCoilAudio
 from hapticsdk_hardness.audio_loopback import JackServer
@@ -325,7 +325,7 @@ def _silent_then_gone(loop, t_kill, audio_pid):
 
 OWNER = """
 import os, sys, time
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.safety import SafetyLayer
 from hapticsdk_hardness.audio import VoiceCoilAudio
 coil = VoiceCoilAudio(device="system", command_timeout_s=1.0,

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError
 from hapticsdk.safety import SafetyLayer
 from hapticsdk.testing import DeviceConformance

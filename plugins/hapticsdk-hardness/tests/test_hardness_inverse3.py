@@ -13,7 +13,7 @@ import types
 
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError
 from hapticsdk.safety import SafetyLayer
 from hapticsdk.testing import DeviceConformance

@@ -11,7 +11,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError
 from hapticsdk_hardness import openhaptics as oh
 

@@ -8,7 +8,7 @@ fail)."""
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import DimensionRenderer
+from hapticsdk.perception.dimensions import DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.sim.finger import Trajectory
 from hapticsdk_hardness.dimension import HardnessDimension

@@ -73,7 +73,7 @@ def test_stiffness_above_the_limit_goes_to_the_coil_never_to_the_arm():
     r = HardnessRenderer(4.0)
     assert r.omni_stiffness_n_per_mm == 2.3 and r.coil_stiffness_n_per_mm == pytest.approx(1.7)
     assert r.rendered_stiffness_n_per_mm() == pytest.approx(4.0)
-    from hapticsdk.dimensions import TickInput
+    from hapticsdk.perception.dimensions import TickInput
     out = {c.role: c for c in r.tick(TickInput(0, 1e-3, 1.0, np.zeros(3), True))}
     assert out["force"].force_n == pytest.approx(2.3)
     assert out["coil"].amplitude > 0
@@ -143,7 +143,7 @@ def test_entry_points():
 
 
 def test_voicecoil_sinks(tmp_path):
-    from hapticsdk.dimensions import ChannelCommand
+    from hapticsdk.perception.dimensions import ChannelCommand
     path = tmp_path / "coil.wav"
     got = []
     for sink in (f"wav:{path}", got.append):

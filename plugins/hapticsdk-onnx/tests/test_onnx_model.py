@@ -8,7 +8,7 @@ import onnx
 import pytest
 
 from hapticsdk.errors import ModelError, ValidationError
-from hapticsdk.models import PerceptionModel
+from hapticsdk.perception.models import PerceptionModel
 from hapticsdk_onnx import REQUIRED_METADATA, OnnxModel, default_model_path, load_default
 
 

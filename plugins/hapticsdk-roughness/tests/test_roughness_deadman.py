@@ -21,7 +21,7 @@ import pytest
 from hapticsdk_roughness.emulation import DRV2667Emulator, SerialBridgeEmulator
 from hapticsdk_roughness.hardware import PiezoMCP2221, PiezoSerial
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pty tests need POSIX")
 pytest.importorskip("serial")

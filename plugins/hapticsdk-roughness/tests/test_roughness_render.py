@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from hapticsdk.dimensions import TickInput
+from hapticsdk.perception.dimensions import TickInput
 from hapticsdk.errors import CalibrationError, ValidationError
 from hapticsdk_roughness.dimension import DEFAULT_DF_HZ, RoughnessDimension
 from hapticsdk_roughness.table import generated_table, load_table, model_acceleration, save_table
@@ -158,7 +158,7 @@ def test_virtual_output_follows_speed_and_is_silent_below_gate():
 def test_virtual_limits_and_options():
     act = PiezoVirtual(gain=0, quantize=True)
     assert act.limits.max_amplitude == 25.0
-    from hapticsdk.dimensions import ChannelCommand
+    from hapticsdk.perception.dimensions import ChannelCommand
     with act:
         sent = act.command(ChannelCommand("vibration", frequency_hz=3000.0, amplitude=40.0), now=0.0)
         assert sent.amplitude == 25.0 and sent.frequency_hz == pytest.approx(1992.1875)
@@ -175,7 +175,7 @@ def test_simulated_path_never_imports_serial_or_usb():
     code = (
         "import sys, numpy as np\n"
         "from hapticsdk.plugins import registry\n"
-        "from hapticsdk.dimensions import TickInput\n"
+        "from hapticsdk.perception.dimensions import TickInput\n"
         "dim = registry('dimension').load('roughness')()\n"
         "act = registry('actuator').load('piezo-virtual')()\n"
         "r = dim.renderer({'Fpeak': 100.0, 'AFpeak': 1.0})\n"

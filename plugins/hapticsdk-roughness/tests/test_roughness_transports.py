@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from hapticsdk import actuators as core_act
-from hapticsdk.dimensions import ChannelCommand, TickInput
+from hapticsdk.perception.dimensions import ChannelCommand, TickInput
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, SafetyError, TransportError
 from hapticsdk_roughness import bridge_protocol as bp
 from hapticsdk_roughness.dimension import RoughnessDimension
@@ -377,7 +377,7 @@ def test_interpreter_exit_leaves_piezo_in_standby():
         "def report():\n"
         "    print('STANDBY' if state['emu'].drv.standby else 'DRIVING', flush=True)\n"
         "atexit.register(report)\n"
-        "from hapticsdk.dimensions import ChannelCommand\n"
+        "from hapticsdk.perception.dimensions import ChannelCommand\n"
         "from hapticsdk_roughness.emulation import SerialBridgeEmulator\n"
         "from hapticsdk_roughness.hardware import PiezoSerial\n"
         "emu = SerialBridgeEmulator(watchdog_s=0).start()\n"

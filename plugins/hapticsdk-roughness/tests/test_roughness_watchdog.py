@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from hapticsdk import actuators as core_act
-from hapticsdk.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.runtime.watchdog import RETRY_MAX_S

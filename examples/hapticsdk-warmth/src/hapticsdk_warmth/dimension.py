@@ -6,10 +6,10 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
-from hapticsdk.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
+from hapticsdk.perception.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
                                   TickInput)
 from hapticsdk.errors import ValidationError
-from hapticsdk.features import Feature
+from hapticsdk.perception.features import Feature
 
 from .model import FEATURES
 from .thermal import T_SKIN_C, contact_temperature

@@ -7,15 +7,15 @@ temperature) and ``S = 2.0 °C`` are ASSUMED parameters chosen so that aluminium
 rates about 0.01, wood at 22 °C about 0.3 and foam at 30 °C about 0.75; they are not
 fitted to measurements. The model is published under ``hapticsdk.models: warmth`` and
 named by ``WarmthDimension.default_model``; the core combines it with the
-hardness/roughness model in a :class:`~hapticsdk.models.CompositeModel`.
+hardness/roughness model in a :class:`~hapticsdk.perception.models.CompositeModel`.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from hapticsdk.features import Feature, FeatureSpace
-from hapticsdk.models import PerceptionModel
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import PerceptionModel
 
 from .thermal import contact_temperature
 

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 
 from .thermal import T_SKIN_C
 

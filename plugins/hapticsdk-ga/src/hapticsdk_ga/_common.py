@@ -85,7 +85,7 @@ class Evaluator:
 def constraint_shortfalls(problem: SolveProblem, G: np.ndarray) -> np.ndarray:
     """Relative constraint shortfalls ``(n, c)``: ``(bound - value) / |bound|`` (``|bound|``
     replaced by 1 where it is 0); positive = violated. ``max(0, .)`` of a column is the
-    constraint's ``violation`` (the base :class:`~hapticsdk.dimensions.Constraint` formula);
+    constraint's ``violation`` (the base :class:`~hapticsdk.perception.dimensions.Constraint` formula);
     one ``bound_and_value`` call per constraint."""
     cons = problem.constraints
     n = G.shape[0]

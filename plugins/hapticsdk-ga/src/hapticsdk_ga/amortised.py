@@ -489,7 +489,7 @@ def _one_row(problem: SolveProblem) -> tuple | None:
     memo = getattr(problem, "_setup_cache", None)
     net: Any = memo.get("amortised-one-row", False) if memo is not None else False
     if net is False:
-        from hapticsdk.models import MLPModel
+        from hapticsdk.perception.models import MLPModel
         model = problem.model
         mlp = model if isinstance(model, MLPModel) else getattr(model, "mlp", None)
         net = None

@@ -11,7 +11,7 @@ makes Gauss-Newton zig-zag along an active constraint, the equality converges
 quadratically, and with 5 features for 2 intensities the system stays solvable on the
 constraint surface. Steps are taken in unit
 coordinates (``u = (x - lower) / span``) with the model's Jacobian
-(``problem.model.jacobian``, analytic for :class:`~hapticsdk.models.MLPModel`; constraint
+(``problem.model.jacobian``, analytic for :class:`~hapticsdk.perception.models.MLPModel`; constraint
 columns by central differences, which need no model call), damped (``(J^T J + lambda I)
 step = -J^T r``, features on a bound whose descent direction leaves the box held there),
 projected onto the bounds, and accepted only when the sum of squares falls (``lambda`` /3

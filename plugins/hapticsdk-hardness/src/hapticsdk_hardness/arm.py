@@ -37,7 +37,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 
 

@@ -71,7 +71,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from hapticsdk.actuators import Actuator, ActuatorLimits
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 from hapticsdk.install_hints import pip_hint
 from hapticsdk.synthesis import Oscillator

@@ -35,7 +35,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 
 
 def _jack(cmd: list[str], server: str) -> subprocess.CompletedProcess:

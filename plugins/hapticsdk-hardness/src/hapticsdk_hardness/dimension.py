@@ -15,10 +15,10 @@ from typing import Any, ClassVar, Mapping
 import numpy as np
 
 from hapticsdk.calibration import VoiceCoilCalibration
-from hapticsdk.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
+from hapticsdk.perception.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
                                   TickInput)
 from hapticsdk.errors import ValidationError
-from hapticsdk.features import Feature
+from hapticsdk.perception.features import Feature
 
 #: Omni force at the nominal position (N): MF of formula (4).
 MF_N = 3.3

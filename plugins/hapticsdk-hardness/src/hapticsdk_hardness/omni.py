@@ -23,7 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
 from hapticsdk.passivity import classify_wall, critical_stiffness
 from hapticsdk.sim.arm import OMNI_SOURCES, ArmParams, ArmSim

@@ -5,7 +5,7 @@ and reads its metadata (``docs/architecture.md``, "ONNX model file"): the declar
 features with their data-set bounds become :attr:`feature_space`, the dimensions the
 outputs, and ``df_hz``, ``feature_defaults``, ``metrics`` ... land in
 :attr:`metadata`. For ``architecture == "mlp-tanh"`` the Jacobian is the analytic one
-of a :class:`hapticsdk.models.MLPModel` rebuilt from the file's initializers. A graph
+of a :class:`hapticsdk.perception.models.MLPModel` rebuilt from the file's initializers. A graph
 that is a plain chain of dense layers is evaluated with numpy instead of onnxruntime
 (:mod:`hapticsdk_onnx.chain`, 1.4-1.7x faster; ``OnnxModel(path, runtime="onnxruntime")``
 keeps onnxruntime).
@@ -26,8 +26,8 @@ from typing import Any
 import numpy as np
 
 from hapticsdk.errors import HapticSDKError, ModelError
-from hapticsdk.features import FeatureSpace
-from hapticsdk.models import MLPModel, PerceptionModel
+from hapticsdk.perception.features import FeatureSpace
+from hapticsdk.perception.models import MLPModel, PerceptionModel
 
 __all__ = ["OnnxModel", "load_default", "default_model_path", "REQUIRED_METADATA", "hapticsdk_api"]
 

@@ -24,10 +24,10 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
-from hapticsdk.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
+from hapticsdk.perception.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec,
                                   TickInput)
 from hapticsdk.errors import ValidationError
-from hapticsdk.features import Feature
+from hapticsdk.perception.features import Feature
 
 #: default FFT resolution (Hz) when no ``df_hz`` is given: 2 s recording at 500 Hz
 DEFAULT_DF_HZ = 0.5

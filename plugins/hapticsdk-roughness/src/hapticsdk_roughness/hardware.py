@@ -54,7 +54,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar
 
 from hapticsdk.actuators import Actuator, DriveCapability
-from hapticsdk.dimensions import ChannelCommand
+from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime.watchdog import CommandWatchdog
 

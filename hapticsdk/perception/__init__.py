@@ -1,0 +1,17 @@
+"""Perception: what a person feels, and the physical features that make them feel it.
+
+The bottom stage every other one uses (it imports none of them):
+
+* :mod:`~hapticsdk.perception.features`: ``Feature``, ``FeatureSpace``, the paper's G
+  and the bounded spaces they span;
+* :mod:`~hapticsdk.perception.dimensions`: ``PerceptionDimension`` (features,
+  constraints, renderers), ``Constraint``, ``DimensionRenderer``, ``TickInput``,
+  ``ChannelCommand``;
+* :mod:`~hapticsdk.perception.models`: ``PerceptionModel``, the model I = f(G), batched;
+* :mod:`~hapticsdk.perception.materials`: the named material library.
+
+The modules were ``hapticsdk.features``, ``hapticsdk.dimensions``, ``hapticsdk.models``
+and ``hapticsdk.materials`` until 0.2; those names still import, with a
+``DeprecationWarning``, until 0.3. This package imports nothing on its own, so
+``import hapticsdk`` stays light.
+"""

@@ -1,0 +1,525 @@
+"""The rules of the ``dimension`` kind (``RULES['dimension']``): class, features, roles, the
+constraints (vectorised, their cost against a per-row reference, feasible), the model
+match, the renderer (its commands, bad input, determinism under moved clocks, timing and
+its growth over a run), and the force a renderer commands against its actuator's limit."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import fields
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from ...actuators import ActuatorLimits
+from ...errors import ValidationError
+from ...perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from ...perception.features import Feature, FeatureSpace
+from ...perception.models import PerceptionModel
+from .runner import _Ctx, _run_rules
+from .timing import KIT_PERIOD_S, TICK_BUDGET, TIMING_CALLS, _fastest, _perf_counter, _sim_advance
+from .values import _finite, _refuses
+
+
+#: a renderer's force in contact may exceed its default actuator's max_force_n (which
+#: the safety layer clamps) up to this factor at penetrations <= 3 mm; a multiple of it
+#: is a unit or formula error, not a stiff material
+FORCE_PLAUSIBILITY_FACTOR = 10.0
+
+
+def _force_limit(d: Any, role: str, spec: Any) -> tuple[str | None, float | None]:
+    """``(field, N)``: the command field that carries force on ``role`` (``force_n``, or a
+    field whose declared unit is a force: a friction plate's amplitude in N) and the largest
+    force the role's default actuator declares (``max_force_n``, or ``max_amplitude`` when
+    its amplitude is a force); ``(None, None)`` when the role carries no force."""
+    from ...plugins import registry
+    from ...units import is_force_unit
+    fields = dict(getattr(spec, "fields", {}) or {})
+    field = "force_n" if ("force_n" in fields or not fields) else \
+        next((f for f, u in fields.items() if is_force_unit(u)), None)
+    if field is None:
+        return None, None
+    name = d.default_actuators.get(role)
+    if name is None or name not in registry("actuator"):
+        return field, None
+    lim = getattr(registry("actuator").load(name), "limits", ActuatorLimits())
+    if field == "force_n":
+        return field, lim.max_force_n if lim.max_force_n is not None else \
+            (lim.max_amplitude if is_force_unit(lim.amplitude_unit) else None)
+    return field, lim.max_amplitude if is_force_unit(lim.amplitude_unit) else lim.max_force_n
+
+
+#: rows of the constraint-cost rule's batch, and the limit: one ``penalty`` batch may take
+#: at most ``COST_FACTOR`` x a per-row reference on the same rows, a Python loop doing one
+#: operation per row (``[v * 0.5 for v in rows]``, rows a list of floats made beforehand),
+#: both timed in the same process (interleaved, fastest of :data:`COST_REPEATS`). Why that
+#: reference and 1: a row-by-row constraint does at least that loop, plus reading its rows
+#: out of the columns and building the result arrays, so it costs more than the reference
+#: whatever the machine and its load (both sides are interpreted loops over the same rows);
+#: a vectorised constraint runs a fixed number of array operations whose cost per element
+#: is that of compiled code, ~5-10 x below an interpreted operation, so one with up to
+#: ~30 array operations stays below it. Measured (2-core machine, load 2-3, 10 runs each):
+#: the first-party constraints 0.08-0.27 x, a vectorised constraint of 160 array operations
+#: 4.1 x; per-row constraints: ``x.tolist()`` read into a list comprehension 2.1 x,
+#: ``np.fromiter`` over a generator 2.3 x, comprehensions over the array's numpy scalars 6 x.
+#: The limit sits near the geometric midpoint of the first party's worst (0.27) and the
+#: cheapest loop (2.1): a margin of ~2 x or more on either side. (It was 20 x a vectorised
+#: reference of the base class's penalty arithmetic: a ratio of a loop to a few array
+#: operations, which moved with the machine's load (33-87 x for the same loop) and let
+#: the cheapest loops, at ~20 x, through.)
+COST_ROWS = 10_000
+COST_FACTOR = 1.0
+#: repeats of the cost rule's timing (the fastest counts, interleaved with the reference)
+COST_REPEATS = 5
+
+
+def _cost_ratio(c: Constraint, cols: Mapping[str, np.ndarray]) -> tuple[float, float, float]:
+    """(ratio, constraint s, reference s): fastest-of-:data:`COST_REPEATS` time of one
+    ``penalty`` batch over that of the per-row reference (one Python operation per row of
+    a column the constraint reads; :data:`COST_FACTOR`), interleaved. Stops early when a
+    timing is clearly within the limit."""
+    name = next((f for f in c.features if f in cols), next(iter(cols)))
+    rows = np.asarray(cols[name], float).tolist()
+
+    best_c, best_r = math.inf, math.inf
+    for i in range(COST_REPEATS):
+        t0 = _perf_counter()
+        [v * 0.5 for v in rows]
+        t1 = _perf_counter()
+        c.penalty(cols, "paper")
+        t2 = _perf_counter()
+        best_r, best_c = min(best_r, t1 - t0), min(best_c, t2 - t1)
+        if i >= 1 and best_c <= 0.5 * COST_FACTOR * best_r:
+            break
+    return best_c / max(best_r, 1e-9), best_c, best_r
+
+
+def _tick_inputs(read_only: bool = False) -> list[TickInput]:
+    """The kit's ticks: out of contact, at the surface, pressing and sliding, leaving. With
+    ``read_only`` the velocity arrays cannot be written (as the servo loop hands them)."""
+    out = []
+    for i, (pen, vx) in enumerate([(-1.0, 0.0), (0.0, 0.0), (0.5, 0.0), (1.5, 10.0), (2.0, 80.0),
+                                   (2.0, -150.0), (1.0, 25.0), (3.0, 400.0), (-0.2, 80.0)]):
+        v = np.array([vx, -5.0 * (i % 3 - 1), 0.0])
+        v.flags.writeable = not read_only
+        out.append(TickInput(t=i * 1e-3, dt=1e-3, penetration_mm=pen, velocity_mm_s=v, in_contact=pen > 0))
+    return out
+
+
+def _input_fields(inp: TickInput) -> dict[str, Any]:
+    """What a renderer reads of a tick input, by value (arrays as lists)."""
+    return {f.name: (lambda v: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v)(getattr(inp, f.name))
+            for f in fields(inp)}
+
+
+def _tick_unchanged(r: DimensionRenderer, inp: TickInput) -> list[ChannelCommand]:
+    """``r.tick(inp)``, failing when the renderer changed its input: wrote into a read-only
+    array (a ``ValueError`` naming it) or changed a field. The servo loop hands one
+    ``TickInput`` to every renderer of a material, in turn: a change is what the next one
+    reads."""
+    before = _input_fields(inp)
+    try:
+        cmds = r.tick(inp)
+    except ValueError as exc:
+        if "read-only" not in str(exc):
+            raise
+        raise AssertionError(f"tick() wrote into its TickInput in place ({exc}): the servo loop hands one "
+                             f"TickInput to every renderer of the material, and its arrays are read-only; "
+                             f"compute on a copy (`v = inp.velocity_mm_s * 1e-3`)") from None
+    after = _input_fields(inp)
+    changed = {k: (before[k], after[k]) for k in before if before[k] != after[k]}
+    assert not changed, (f"tick() changed its TickInput ({'; '.join(f'{k}: {a!r} -> {b!r}' for k, (a, b) in changed.items())}): "
+                         f"the servo loop hands one TickInput to every renderer of the material, so the next "
+                         f"renderer reads the changed values; compute on copies")
+    return cmds
+
+
+_TICKS = _tick_inputs()
+
+
+def _commands_of(d: PerceptionDimension, feats: Mapping[str, float]) -> list[Any]:
+    """The commands of a new renderer of ``feats`` over the kit's ticks, as values."""
+    r = d.renderer(dict(feats))
+    return [[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)] for i in _tick_inputs()]
+
+
+#: epochs (s) the dimension ``determinism`` rule sets the process clocks to while a
+#: renderer ticks (each tick reads epoch + its TickInput.t): 8 drawn uniformly from
+#: 0..2e9 s (1970-2033) with a fixed seed, so a command that depends on the absolute wall
+#: time through any bucket from milliseconds to seasons (a value that flips every 0.5 s,
+#: every other hour, in summer) differs between them or from the real clock's (a
+#: two-valued bucket agrees with all 8 by chance once in 2^8), while a renderer reading
+#: only differences of the clock sees the same
+CLOCK_EPOCHS_S = tuple(float(e) for e in np.random.default_rng(2025).uniform(0.0, 2e9, 8))
+_CLOCKS = ("time", "monotonic", "perf_counter")
+
+
+def _commands_at_epoch(d: PerceptionDimension, feats: Mapping[str, float], epoch: float) -> list[Any]:
+    """:func:`_commands_of` with ``time.time``, ``time.monotonic`` and ``time.perf_counter``
+    (and their ``_ns`` forms, and ``time.localtime()`` / ``time.gmtime()`` without an
+    argument) reading ``epoch`` + the tick's ``t`` (the wall clock at another epoch,
+    advancing as the ticks do). Names bound at import (``from time import time``) and
+    ``datetime.now()`` are not moved."""
+    now = [epoch]
+    saved = {n: getattr(time, n) for n in _CLOCKS + tuple(c + "_ns" for c in _CLOCKS) + ("localtime", "gmtime")}
+    fake: dict[str, Callable[..., Any]] = {}
+    for c in _CLOCKS:
+        fake[c] = lambda: now[0]
+        fake[c + "_ns"] = lambda: int(now[0] * 1e9)
+    for c in ("localtime", "gmtime"):
+        fake[c] = lambda secs=None, _f=saved[c]: _f(now[0] if secs is None else secs)
+    r = d.renderer(dict(feats))
+    out = []
+    try:
+        for n, f in fake.items():
+            setattr(time, n, f)
+        for inp in _tick_inputs():
+            now[0] = epoch + inp.t
+            out.append([(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(inp)])
+    finally:
+        for n, f in saved.items():
+            setattr(time, n, f)
+    return out
+
+
+#: servo time (s) of the ``timing`` rule's long run of one renderer, and where its tick
+#: cost is measured (fastest of :data:`TIMING_CALLS`): after 1, 2, 4 and 8 s
+GROWTH_POINTS_S = (1.0, 2.0, 4.0, 8.0)
+#: the cost at the last point over the cost at the first that, rising at every doubling,
+#: fails the rule. A cost proportional to the history rises ~8 x from 1 s to 8 s; the
+#: fastest of 25 calls of an unchanged tick moves by far less than 2 x between two
+#: samples (the first-party renderers: see docs/plugin-authors.md); a state bounded in
+#: time (filters, buffers under 1 s) costs the same at every point
+GROWTH_FACTOR = 2.0
+
+
+def _run_inputs(k: int) -> TickInput:
+    """Kit tick ``k`` of a long run: the kit's ticks in turn, its time ``k`` periods."""
+    base = _TICKS[k % len(_TICKS)]
+    return TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
+                     velocity_mm_s=base.velocity_mm_s.copy(), in_contact=base.in_contact)
+
+
+def _cost_growth(r: DimensionRenderer) -> list[tuple[float, float]]:
+    """(run length s, fastest tick s) at :data:`GROWTH_POINTS_S` of a run of ``r``."""
+    k = 0
+    out = []
+    for at in GROWTH_POINTS_S:
+        n = int(round(at / KIT_PERIOD_S))
+        while k < n:
+            r.tick(_run_inputs(k))
+            _sim_advance(KIT_PERIOD_S)
+            k += 1
+        state = {"k": k}
+
+        def one() -> None:
+            r.tick(_run_inputs(state["k"]))
+            state["k"] += 1
+        out.append((at, _fastest(one)))
+        _sim_advance(TIMING_CALLS * KIT_PERIOD_S)
+        k = state["k"]
+    return out
+
+
+def _assert_follows_features(d: PerceptionDimension, mid: Mapping[str, float]) -> None:
+    """A renderer's commands change with what it renders: each of ``render_features`` (all
+    features together when the dimension declares none) set to its declared lower bound,
+    middle and upper bound must change the commands over the kit's ticks, with the other
+    features at the middle, at their lower or at their upper bounds (one of the three
+    suffices: a feature may act only where another lets it, and a renderer may clamp at
+    one end)."""
+    lo = {f.name: float(f.lower) for f in d.features}
+    hi = {f.name: float(f.upper) for f in d.features}
+    bases = (dict(mid), lo, hi)
+    names = [n for n in d.render_features if n in lo]
+    if not names:
+        outs = [_commands_of(d, b) for b in (lo, mid, hi)]
+        assert outs[0] != outs[1] or outs[1] != outs[2], \
+            ("its commands are the same with every feature at its lower bound, middle and upper bound: the "
+             "renderer ignores the features it is given (declare the ones it renders in render_features)")
+        return
+    for n in names:
+        for base in bases:
+            outs = [_commands_of(d, {**base, n: v}) for v in (lo[n], mid[n], hi[n])]
+            if outs[0] != outs[1] or outs[1] != outs[2]:
+                break
+        else:
+            raise AssertionError(f"its commands do not change when the render feature {n!r} goes over its declared "
+                                 f"range ({lo[n]:g}, {mid[n]:g}, {hi[n]:g}; the other features at the middle, lower "
+                                 f"and upper ends of theirs): the renderer ignores it; render it, or leave it out "
+                                 f"of render_features")
+
+
+def _dimension_rules(ctx: _Ctx) -> None:
+    holder: dict[str, Any] = {}
+
+    def r_class() -> None:
+        cls = ctx.obj
+        assert isinstance(cls, type) and issubclass(cls, PerceptionDimension), \
+            f"entry point gives {cls!r}, not a PerceptionDimension subclass"
+        if ctx.by_name:
+            assert cls.name == ctx.name, f"class attribute name {cls.name!r} differs from the entry-point name {ctx.name!r}"
+        d = ctx.make()
+        holder["d"] = d
+        json.dumps(d.describe())
+        from ...plugins import registry
+        for role, act in d.default_actuators.items():
+            assert act in registry("actuator"), f"default actuator {act!r} of role {role!r} is not installed"
+        assert d.default_model in registry("model"), f"default_model {d.default_model!r} is not installed"
+
+    def r_features() -> None:
+        d = holder["d"]
+        assert d.features, "the dimension contributes no feature"
+        for f in d.features:
+            assert isinstance(f, Feature), f"{f!r} is not a Feature"
+            assert f.unit, f"feature {f.name} has no unit"
+        FeatureSpace(tuple(d.features))
+        names = {f.name for f in d.features}
+        extra = [n for n in d.render_features if n not in names]
+        assert not extra, f"render_features {extra} are not among its features {sorted(names)}"
+        # a feature is one quantity in one unit across the installed dimensions (a scene
+        # naming both would be refused by FeatureSpace.merge)
+        from ...perception.features import same_unit
+        from ...plugins import registry
+        for other in registry("dimension").names():
+            if other == d.name:
+                continue
+            try:
+                obj = registry("dimension").load(other)
+                theirs = {f.name: f for f in (obj() if isinstance(obj, type) else obj).features}
+            except Exception:   # noqa: BLE001 - another plugin's failure is not this one's
+                continue
+            for f in d.features:
+                g = theirs.get(f.name)
+                assert g is None or same_unit(f.unit, g.unit), \
+                    (f"feature {f.name!r} is declared in {f.unit!r} here and in {g.unit!r} by the installed "
+                     f"dimension {other!r}: one name, two quantities (prefix yours: '{d.name}.{f.name}')")
+
+    def r_constraints() -> None:
+        d = holder["d"]
+        cons = d.constraints()
+        assert isinstance(cons, list), "constraints() must return a list"
+        space = d.feature_space()
+        rng = np.random.default_rng(0)
+        X = space.random(64, rng)
+        cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        for c in cons:
+            assert isinstance(c, Constraint), f"{c!r} is not a Constraint"
+            missing = [f for f in c.features if f not in space]
+            assert not missing, f"constraint {c.name!r} reads features {missing} the dimension does not contribute"
+            for form in ("paper", "normalised"):
+                p = np.asarray(c.penalty(cols, form))
+                assert p.shape == (64,), f"constraint {c.name!r} penalty has shape {p.shape}, expected (64,)"
+                assert np.isfinite(p).all() and (p >= 0).all(), f"constraint {c.name!r} penalty not finite >= 0"
+                rows = np.array([float(np.asarray(c.penalty({k: v[i:i + 1] for k, v in cols.items()}, form))[0])
+                                 for i in range(0, 64, 9)])
+                np.testing.assert_allclose(rows, p[::9], rtol=1e-9, atol=1e-12,
+                                           err_msg=f"constraint {c.name!r}: batch and row-by-row penalties differ")
+            json.dumps(c.describe())
+
+    def mid() -> dict[str, float]:
+        d = holder["d"]
+        return {f.name: 0.5 * (f.lower + f.upper) for f in d.features}
+
+    def r_renderer() -> None:
+        d = holder["d"]
+        from ...perception.dimensions import declared_roles
+        specs = declared_roles(d)
+        # the middle and the ends, and each feature at the tenths of its declared range
+        # (the values scenes write, e.g. 0.3) with the others at the middle
+        grid = [mid(), {f.name: f.lower for f in d.features}, {f.name: f.upper for f in d.features}]
+        for f in d.features:
+            grid += [{**mid(), f.name: f.lower + (f.upper - f.lower) * k / 10} for k in range(1, 10)]
+        for feats in grid:
+            r = d.renderer(feats)
+            assert isinstance(r, DimensionRenderer), f"renderer() returned {type(r).__name__}"
+            assert r.roles, "renderer declares no roles"
+            for role in r.roles:
+                assert role in d.default_actuators, f"renderer role {role!r} has no default actuator"
+            for inp in _tick_inputs(read_only=True):
+                cmds = _tick_unchanged(r, inp)
+                assert isinstance(cmds, list), "tick() must return a list of ChannelCommand"
+                for c in cmds:
+                    assert isinstance(c, ChannelCommand), f"tick() returned {c!r}"
+                    assert c.role in r.roles, f"tick() commanded role {c.role!r} not in roles {r.roles}"
+                    for k in ("force_n", "frequency_hz", "amplitude"):
+                        assert _finite(getattr(c, k)), f"tick() returned {k}={getattr(c, k)!r} for {feats}"
+                    if c.amplitude is not None:
+                        assert c.amplitude >= 0, f"negative amplitude {c.amplitude}"
+                if not inp.in_contact:
+                    for c in cmds:
+                        assert not c.force_n, f"force {c.force_n} N commanded out of contact"
+                        spec = specs.get(c.role)
+                        assert not (getattr(spec, "channel", None) == "vibration" and c.amplitude), \
+                            (f"amplitude {c.amplitude:g} commanded on the vibration role {c.role!r} out of contact "
+                             f"(penetration {inp.penetration_mm:g} mm, {feats}): nothing touches the surface, "
+                             f"so nothing may vibrate; the loop sends amplitude 0 on it away from every object")
+            json.dumps(r.describe(), default=str)
+
+    def r_renderer_bad() -> None:
+        d = holder["d"]
+        need = list(d.render_features) or [f.name for f in d.features]
+        feats = mid()
+        bad_sets = [{**feats, need[0]: float("nan")}, {k: v for k, v in feats.items() if k != need[0]}]
+        for bad in bad_sets:
+            assert _refuses(ValidationError, lambda: d.renderer(bad)), f"renderer() accepted bad features {bad}"
+
+    def r_determinism() -> None:
+        d = holder["d"]
+        outs = [_commands_of(d, mid()) for _ in range(2)]
+        assert outs[0] == outs[1], "two renderers of the same features gave different commands"
+        for e in CLOCK_EPOCHS_S:
+            assert _commands_at_epoch(d, mid(), e) == outs[0], \
+                (f"the same features and ticks gave other commands with the process clocks (time.time, "
+                 f"time.monotonic, time.perf_counter, time.localtime) at another epoch ({e:.6g} s, advancing with the ticks' t): "
+                 f"the renderer reads the wall clock; take time from TickInput.t and dt")
+
+    def r_roles() -> None:
+        d = holder["d"]
+        from ...perception.dimensions import RoleSpec
+        declared = dict(getattr(d, "roles", {}) or {})
+        r = d.renderer(mid())
+        assert declared, (f"the dimension declares no `roles` (role -> RoleSpec(channel, fields with units)) "
+                          f"for its renderer's roles {list(r.roles)}")
+        from ...perception.features import same_unit
+        for role, spec in declared.items():
+            assert isinstance(spec, RoleSpec), f"roles[{role!r}] is {spec!r}, not a RoleSpec"
+            for fname, unit in (("force_n", "N"), ("frequency_hz", "Hz")):
+                if fname in spec.fields:
+                    assert same_unit(spec.fields[fname], unit), \
+                        f"roles[{role!r}] declares {fname} in {spec.fields[fname]!r}; {fname} is in {unit}"
+        missing = [ro for ro in r.roles if ro not in declared]
+        assert not missing, f"the renderer commands role(s) {missing} that `roles` does not declare"
+        from ...compiler.compile import _check_role
+        for role in r.roles:
+            act = d.default_actuators.get(role)
+            if act is not None:
+                try:
+                    _check_role(d.name, role, declared[role], act, {})
+                except ValidationError as exc:
+                    raise AssertionError(f"its default actuator cannot carry role {role!r}: {exc}") from None
+
+    def r_feasible() -> None:
+        d = holder["d"]
+        cons = d.constraints()
+        if not cons:
+            return
+        from ...compiler.solution_set import halton
+        space = d.feature_space()
+        X = space.from_unit(halton(4096, len(space)))
+        cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        ok_all = np.ones(len(X), bool)
+        for c in cons:
+            ok = np.asarray(c.violation(cols)) <= 0.0
+            assert ok.any(), (f"constraint {c.name!r} holds nowhere in the dimension's feature bounds (4096-point "
+                              f"Halton sample): no material can satisfy it")
+            ok_all &= ok
+        assert ok_all.any(), (f"the constraints {[c.name for c in cons]} never hold together in the feature "
+                              f"bounds (4096-point Halton sample)")
+
+    def r_model_match() -> None:
+        d = holder["d"]
+        from ...perception.features import same_unit
+        from ...plugins import registry
+        try:
+            m = registry("model").load(d.default_model)
+            m = m() if callable(m) and not isinstance(m, PerceptionModel) else m
+        except Exception as exc:
+            raise AssertionError(f"default_model {d.default_model!r} could not be built: {exc}") from None
+        assert d.name in m.dimension_names, \
+            f"default_model {d.default_model!r} predicts {list(m.dimension_names)}, not {d.name!r}"
+        mine = {f.name: f for f in d.features}
+        for n in m.feature_names:
+            if n in mine and m.feature_space is not None and n in m.feature_space:
+                assert same_unit(m.feature_space[n].unit, mine[n].unit), \
+                    f"model reads {n} in {m.feature_space[n].unit!r}, the dimension declares {mine[n].unit!r}"
+        # every model input must be contributed by a dimension the model covers
+        covered: set[str] = set()
+        for dn in m.dimension_names:
+            if dn == d.name:
+                covered |= set(mine)
+            elif dn in registry("dimension"):
+                try:
+                    other = registry("dimension").load(dn)
+                    covered |= {f.name for f in (other() if isinstance(other, type) else other).features}
+                except Exception:
+                    covered |= set(m.feature_names)   # cannot tell: not this plugin's fault
+            else:
+                covered |= set(m.feature_names)
+        stray = [n for n in m.feature_names if n not in covered]
+        assert not stray, (f"default_model {d.default_model!r} reads feature(s) {stray} that no dimension it "
+                           f"predicts contributes")
+
+    def r_commands() -> None:
+        d = holder["d"]
+        from ...perception.dimensions import declared_roles, undeclared_fields
+        r = d.renderer(mid())
+        seen: set[str] = set()
+        specs = declared_roles(d)
+        forces = {role: _force_limit(d, role, specs.get(role)) for role in r.roles}
+        for inp in _tick_inputs():
+            if not inp.in_contact:
+                continue
+            for c in r.tick(inp):
+                seen.add(c.role)
+                spec = specs.get(c.role)
+                if spec is not None:
+                    extra = undeclared_fields(c, spec)
+                    assert not extra, (f"sends {extra} on role {c.role!r}, declared as {spec.describe()}: its "
+                                       f"actuator does not act on {extra[0]}")
+                field, fmax = forces.get(c.role) or (None, None)
+                v = getattr(c, field) if field else None
+                if v is not None and fmax is not None and inp.penetration_mm <= 3.0:
+                    assert abs(v) <= FORCE_PLAUSIBILITY_FACTOR * fmax, \
+                        (f"commands {v:g} N on role {c.role!r} ({field}) at {inp.penetration_mm:g} mm, more than "
+                         f"{FORCE_PLAUSIBILITY_FACTOR:g} x the {fmax:g} N its actuator declares")
+        silent = [ro for ro in r.roles if ro not in seen]
+        assert not silent, f"the renderer sends nothing on role(s) {silent} while in contact"
+        _assert_follows_features(d, mid())
+
+    def r_timing() -> None:
+        d = holder["d"]
+        r = d.renderer(mid())
+        inputs = _tick_inputs()
+        state = {"i": 0}
+
+        def one() -> None:
+            _sim_advance(KIT_PERIOD_S)
+            r.tick(inputs[state["i"] % len(inputs)])
+            state["i"] += 1
+        best = _fastest(one, budget_s=TICK_BUDGET * KIT_PERIOD_S)
+        assert best <= TICK_BUDGET * KIT_PERIOD_S, \
+            (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
+             f"servo period allows {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per renderer")
+        # and keeps that cost over a long run: a cost that grows with the run's length
+        # passes the budget at some length (a render may last 24 h)
+        pts = _cost_growth(d.renderer(mid()))
+        costs = [c for _, c in pts]
+        rising = all(b > a for a, b in zip(costs, costs[1:]))
+        assert not (rising and costs[-1] >= GROWTH_FACTOR * costs[0]), \
+            (f"the cost of tick() grows with the length of the run: fastest tick "
+             f"{', '.join(f'{c * 1e6:.3g} us after {s:g} s' for s, c in pts)} (rising at every doubling, "
+             f"{costs[-1] / costs[0]:.2g} x): it keeps and walks a history that grows every tick; at that rate it "
+             f"passes its {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms budget within a render; keep bounded state "
+             f"(a running sum, a fixed-size buffer)")
+
+    def r_cost() -> None:
+        d = holder["d"]
+        space = d.feature_space()
+        X = space.random(COST_ROWS, np.random.default_rng(5))
+        cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        for c in d.constraints():
+            ratio, t_c, t_ref = _cost_ratio(c, cols)
+            assert ratio <= COST_FACTOR, \
+                (f"constraint {c.name!r}: one batch of {COST_ROWS} rows takes {t_c * 1e3:.3g} ms, {ratio:.2g} x a "
+                 f"Python loop doing one operation per row on the same rows ({t_ref * 1e3:.3g} ms, same process; "
+                 f"limit {COST_FACTOR:g} x): evaluate whole columns with array operations, not row by row")
+
+    _run_rules(ctx, [("class", r_class), ("features", r_features), ("roles-declared", r_roles),
+                     ("constraints-vectorised", r_constraints), ("constraints-cost", r_cost),
+                     ("constraints-feasible", r_feasible),
+                     ("model-match", r_model_match), ("renderer", r_renderer), ("renderer-commands", r_commands),
+                     ("renderer-bad-input", r_renderer_bad), ("determinism", r_determinism), ("timing", r_timing)],
+               always=("class",), stop_after=("class", "features"))

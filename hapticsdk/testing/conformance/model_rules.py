@@ -1,0 +1,188 @@
+"""The rules of the ``model`` kind (``RULES['model']``): shapes, dimensions, vectorised and
+deterministic prediction, bad input, the Jacobian against central differences, metadata,
+and that every output responds to the features."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Mapping, cast
+
+import numpy as np
+
+from ...errors import ValidationError
+from ...perception.features import Feature, FeatureSpace
+from ...perception.models import PerceptionModel
+from ...solvers import SolveProblem
+from .runner import _Ctx, _run_rules
+from .values import _refuses
+
+
+#: how far outside 0..1 a model's intensity may be (float rounding of a float32 graph)
+INTENSITY_TOL = 1e-5
+#: central-difference step of the Jacobian check (share of each feature's range) and the
+#: relative tolerance: a float32 model's differences carry ~1e-7 / 1e-4 = 1e-3 noise
+JACOBIAN_STEP = 1e-4
+JACOBIAN_RTOL = 0.01
+#: an output of a model must change by at least this over the model's feature box
+#: (``responds``): the success tolerance a solve is judged at by default (the sum of absolute
+#: intensity errors, :class:`~hapticsdk.solvers.SolveProblem`'s ``tolerance``). An output
+#: spanning less changes by less than that whatever features a solver picks, so the
+#: features do not steer it: a constant, or a model that ignores its inputs.
+RESPONSE_MIN = float(SolveProblem.tolerance)
+#: random points of the box ``responds`` evaluates besides its landmarks (an output that
+#: moves only inside a region under ~1/256 of the box may pass unseen)
+RESPONSE_SAMPLES = 256
+
+
+def _landmarks(m: PerceptionModel) -> list[tuple[str, np.ndarray]]:
+    """Points of a model's feature box where a formula breaks first, by name: the corners
+    (the first 10 features), the centre (``x - mid`` is 0 there), the face centres (each
+    feature at a bound, the others at the centre) and the declared ``feature_defaults``."""
+    fs = cast(FeatureSpace, m.feature_space)
+    lo, hi, d = fs.lower, fs.upper, m.n_features
+    k = min(d, 10)
+    corners = np.array([[hi[j] if (i >> j) & 1 else lo[j] for j in range(d)] for i in range(2 ** k)])
+    mid = (lo + hi) / 2
+    faces = np.repeat(mid[None, :], 2 * d, axis=0)
+    faces[np.arange(d), np.arange(d)] = lo
+    faces[d + np.arange(d), np.arange(d)] = hi
+    out = [("the corners of the feature bounds", corners), ("the centre of the feature bounds", mid[None, :]),
+           ("the centres of the faces of the feature bounds", faces)]
+    defaults = m.metadata.get("feature_defaults") if isinstance(m.metadata, Mapping) else None
+    if defaults and all(n in defaults for n in m.feature_names):
+        try:
+            out.append(("the declared feature_defaults",
+                        np.array([[float(defaults[n]) for n in m.feature_names]])))
+        except (TypeError, ValueError):
+            pass   # metadata judges unreadable defaults
+    return out
+
+
+def _row(m: PerceptionModel, x: np.ndarray) -> str:
+    return "{" + ", ".join(f"{n}: {v:.6g}" for n, v in zip(m.feature_names, x)) + "}"
+
+
+def _model_rules(ctx: _Ctx) -> None:
+    holder: dict[str, Any] = {}
+
+    def inputs(n: int, seed: int = 0) -> np.ndarray:
+        m = holder["m"]
+        rng = np.random.default_rng(seed)
+        if m.feature_space is not None:
+            return m.feature_space.random(n, rng)
+        return rng.random((n, m.n_features))
+
+    def r_shapes() -> None:
+        m = ctx.make()
+        assert isinstance(m, PerceptionModel), f"factory returned {type(m).__name__}, not a PerceptionModel"
+        holder["m"] = m
+        assert len(set(m.dimension_names)) == m.n_outputs, "repeated dimension names"
+        for n in (1, 7):
+            Y = m.predict(inputs(n))
+            assert Y.shape == (n, m.n_outputs), f"predict gave shape {Y.shape}, expected {(n, m.n_outputs)}"
+            assert np.isfinite(Y).all(), "non-finite intensities"
+            assert (Y >= -INTENSITY_TOL).all() and (Y <= 1 + INTENSITY_TOL).all(), \
+                f"intensities outside 0..1 (min {Y.min():.6g}, max {Y.max():.6g}) inside the feature bounds"
+        if m.feature_space is not None:   # the box's landmarks too (corners: where extrapolation starts)
+            for where, P in _landmarks(m):
+                Y = m.predict(P)
+                bad = ~np.isfinite(Y).all(axis=1)
+                assert not bad.any(), f"non-finite intensities at {where}, e.g. at {_row(m, P[bad][0])}"
+                assert (Y >= -INTENSITY_TOL).all() and (Y <= 1 + INTENSITY_TOL).all(), \
+                    f"intensities outside 0..1 at {where} (min {Y.min():.6g}, max {Y.max():.6g})"
+        assert m.predict(inputs(1)[0]).shape == (1, m.n_outputs), "a 1-D input must give one row"
+
+    def r_vectorised() -> None:
+        m = holder["m"]
+        X = inputs(33, 1)
+        Y = m.predict(X)
+        rows = np.concatenate([m.predict(X[i:i + 1]) for i in range(X.shape[0])])
+        np.testing.assert_allclose(Y, rows, rtol=1e-4, atol=1e-5, err_msg="batch and row-by-row predictions differ")
+
+    def r_determinism() -> None:
+        m = holder["m"]
+        X = inputs(16, 2)
+        np.testing.assert_array_equal(m.predict(X), m.predict(X), err_msg="two calls gave different outputs")
+        m2 = ctx.make()
+        np.testing.assert_allclose(m.predict(X), m2.predict(X), rtol=1e-6, atol=1e-7,
+                                   err_msg="two instances gave different outputs")
+
+    def r_bad_input() -> None:
+        m = holder["m"]
+        bads = [np.zeros((3, m.n_features + 1)), np.zeros((2, 2, m.n_features)),
+                np.full((2, m.n_features), np.nan), np.full((1, m.n_features), np.inf)]
+        for bad in bads:
+            assert _refuses(ValidationError, lambda: m.predict(bad)), \
+                f"predict accepted a bad input of shape {bad.shape}"
+
+    def r_jacobian() -> None:
+        m = holder["m"]
+        X = inputs(4, 3)
+        J = np.asarray(m.jacobian(X))
+        assert J.shape == (4, m.n_outputs, m.n_features), f"jacobian shape {J.shape}"
+        assert np.isfinite(J).all(), "non-finite jacobian"
+        span = (m.feature_space.upper - m.feature_space.lower) if m.feature_space is not None else np.ones(m.n_features)
+        for j in range(m.n_features):
+            h = JACOBIAN_STEP * max(span[j], 1e-6)
+            e = np.zeros(m.n_features)
+            e[j] = h
+            fd = (m.predict(X + e) - m.predict(X - e)) / (2 * h)
+            # per unit of the feature's range: compare the change over the whole span
+            err = np.abs(fd - J[:, :, j]).max() * span[j]
+            scale = max(np.abs(fd).max() * span[j], 1e-6)
+            assert err <= JACOBIAN_RTOL * scale + 1e-6, \
+                (f"jacobian column {m.feature_names[j]} differs from central finite differences by "
+                 f"{err / scale:.2%} of its size (tolerance {JACOBIAN_RTOL:.1%})")
+
+    def r_metadata() -> None:
+        m = holder["m"]
+        json.dumps(m.describe(), default=str)
+        assert m.feature_space is not None, "the model declares no feature_space (training range bounds)"
+        assert tuple(m.feature_space.names) == m.feature_names, "feature_space names differ from inputs"
+        defaults = m.metadata.get("feature_defaults")
+        if defaults is not None:
+            for k, v in defaults.items():
+                assert k in m.feature_names, f"feature_defaults names unknown feature {k!r}"
+                f = m.feature_space[k]
+                assert f.lower - 1e-9 <= float(v) <= f.upper + 1e-9, f"default {k}={v} outside [{f.lower}, {f.upper}]"
+
+    def r_dimensions() -> None:
+        m = holder["m"]
+        from ...perception.features import same_unit
+        from ...plugins import registry
+        reg = registry("dimension")
+        missing = [n for n in m.dimension_names if n not in reg]
+        assert not missing, (f"predicts dimension(s) {missing} that no installed plugin provides (installed: "
+                             f"{reg.names()})")
+        offered: dict[str, Feature] = {}
+        for n in m.dimension_names:
+            obj = reg.load(n)
+            dim = obj() if isinstance(obj, type) else obj
+            for f in getattr(dim, "features", ()):
+                offered.setdefault(f.name, f)
+        stray = [n for n in m.feature_names if n not in offered]
+        assert not stray, (f"reads feature(s) {stray} that none of the dimensions it predicts "
+                           f"({list(m.dimension_names)}) contributes (they offer {sorted(offered)})")
+        if m.feature_space is not None:
+            for n in m.feature_names:
+                mine, theirs = m.feature_space[n].unit, offered[n].unit
+                assert same_unit(mine, theirs), \
+                    f"reads {n} in {mine!r}; the dimension that contributes it declares {theirs!r}"
+
+    def r_responds() -> None:
+        m = holder["m"]
+        X = inputs(RESPONSE_SAMPLES, 4)
+        if m.feature_space is not None:
+            X = np.concatenate([X] + [P for _, P in _landmarks(m)])
+        Y = m.predict(X)
+        span = Y.max(axis=0) - Y.min(axis=0)
+        flat = [f"{d} (spans {s:.3g})" for d, s in zip(m.dimension_names, span) if not s >= RESPONSE_MIN]
+        assert not flat, (f"output(s) {flat} change by less than {RESPONSE_MIN:g} over the whole feature box "
+                          f"({len(X)} points: random, corners, centre, face centres): the features cannot steer "
+                          f"them to the precision a solve is judged at (SolveProblem's default tolerance); "
+                          f"does the model read its inputs?")
+
+    _run_rules(ctx, [("shapes", r_shapes), ("model-dimensions", r_dimensions), ("vectorised", r_vectorised),
+                     ("determinism", r_determinism), ("bad-input", r_bad_input), ("jacobian", r_jacobian),
+                     ("metadata", r_metadata), ("responds", r_responds)],
+               always=("shapes",), stop_after=("shapes",))

@@ -1,0 +1,214 @@
+"""The rules of the ``solver`` kind (``RULES['solver']``), judged on the kit's reference
+problem (:class:`ReferenceModel`, :func:`reference_problem`: a smooth model with known
+inverses) by what the model says at the ``x`` a solver returns, never by what its result
+claims."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Mapping, cast
+
+import numpy as np
+
+from ...perception.dimensions import Constraint
+from ...errors import ValidationError
+from ...perception.features import Feature, FeatureSpace
+from ...perception.models import PerceptionModel
+from ...solvers import CONSTRAINT_TOL, SolveProblem, SolveResult, Solver
+from .runner import _Ctx, _run_rules
+from .values import _finite
+
+
+class ReferenceModel(PerceptionModel):
+    """A smooth 3-feature, 2-dimension model with known inverses (kit use only).
+
+    ``I1 = (1 + tanh(2 a - 1)) / 2`` over ``a`` in [0, 1] (unitless),
+    ``I2 = b / (b + c)`` over ``b`` in [0.1, 10] and ``c`` in [1, 5].
+    """
+
+    def __init__(self) -> None:
+        space = FeatureSpace((Feature("a", "1", 0.0, 1.0), Feature("b", "1", 0.1, 10.0),
+                              Feature("c", "1", 1.0, 5.0)))
+        super().__init__(space.names, ("d1", "d2"), feature_space=space,
+                         metadata={"feature_defaults": {"a": 0.5, "b": 1.0, "c": 2.0}}, name="reference")
+
+    def _predict(self, X: np.ndarray) -> np.ndarray:
+        i1 = (1 + np.tanh(2 * X[:, 0] - 1)) / 2
+        i2 = X[:, 1] / (X[:, 1] + X[:, 2])
+        return np.stack([i1, i2], axis=1)
+
+
+class _RefConstraint(Constraint):
+    """b >= 2 c (kit reference constraint)."""
+
+    name = "reference.b-over-c"
+    features = ("b", "c")
+
+    def _bound_and_value(self, cols: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        return 2 * np.asarray(cols["c"]), np.asarray(cols["b"])
+
+
+def reference_problem(targets: Any = (0.4, 0.75), *, constrained: bool = True, tolerance: float = 0.02) -> SolveProblem:
+    """A reachable problem on :class:`ReferenceModel` (with ``b >= 2c`` when ``constrained``;
+    ``d2 = 0.75`` needs ``b = 3c``, feasible)."""
+    m = ReferenceModel()
+    return SolveProblem(targets=np.asarray(targets, float), dimensions=("d1", "d2"), model=m,
+                        space=cast(FeatureSpace, m.feature_space), constraints=(_RefConstraint(),) if constrained else (),
+                        penalty="normalised", tolerance=tolerance)
+
+
+#: what every solve result carries: scipy.optimize's fields, and the error, constraint
+#: violation and run time the SDK promises with every result
+RESULT_FIELDS = ("x", "fun", "success", "message", "nfev", "error", "constraint_violation", "time_s")
+#: how far a result's error, fun and constraint_violation may be from the kit's
+#: recomputation at its ``x`` (absolute; fun relative to max(1, |fun|)): both evaluate the
+#: float64 reference model at the same ``x`` by different paths (a batch, one row of plain
+#: floats), so they differ by rounding, a few units in the last place of numbers <= 1 per
+#: term (~1e-15); this allows 1000 times that and is 10 orders below the reference tolerance
+REPORT_ATOL = 1e-12
+#: targets of the reference problem whose unconstrained optimum breaks the constraint:
+#: ``d2 = 0.5`` needs ``b = c``; with ``b >= 2c`` the best is ``b = 2c``, ``d2 = 2/3``
+ACTIVE_TARGETS = (0.4, 0.5)
+#: formula (6) (normalised penalty) at the constrained optimum of ACTIVE_TARGETS: ``d1``
+#: met, ``|2/3 - 1/2|`` on ``d2``, no violation. Below ``b = 2c`` the penalty ``(2c - b)/2c``
+#: rises by 1/2 per unit of ``b/c`` while the error falls by ``1/(b/c + 1)^2 <= 1/4``, so
+#: nothing infeasible scores lower; ignoring the constraint scores ``0 + 1/2``
+ACTIVE_OPTIMUM = 1.0 / 6.0
+
+
+def _solver_core_overrides(cls: type) -> list[str]:
+    """The methods of :class:`Solver`'s template (public ``solve`` and the steps through
+    which it validates, calls ``_solve`` and recomputes the result) that ``cls`` replaces."""
+    return [m for m in ("solve", "_call_backend", "_solve_single") if getattr(cls, m, None) is not getattr(Solver, m)]
+
+
+def _at_x(res: Any, problem: SolveProblem) -> tuple[float, float, float]:
+    """(formula (6), error, constraint violation) the core computes at the ``x`` of ``res``
+    for the (one-target) ``problem``."""
+    fit, err, viol, _, _ = problem.evaluate_one(problem.clip(np.asarray(res["x"], float)[None, :])[0])
+    return fit, err, viol
+
+
+def _judge_result(res: Any, problem: SolveProblem, where: str) -> tuple[float, float, float]:
+    """``res`` carries :data:`RESULT_FIELDS` and what it claims (error, fun, violation,
+    success) is what the core computes at its ``x`` for the (one-target) ``problem``.
+    Returns that (:func:`_at_x`)."""
+    missing = [k for k in RESULT_FIELDS if not (isinstance(res, Mapping) and k in res)]
+    assert not missing, f"{where}: the result lacks {missing} (every result carries {list(RESULT_FIELDS)})"
+    x = np.asarray(res["x"], float)
+    assert x.shape == (problem.n_features,) and np.isfinite(x).all(), f"{where}: x {res['x']!r}"
+    assert isinstance(res["success"], (bool, np.bool_)), f"{where}: success is {type(res['success']).__name__}"
+    assert isinstance(res["message"], str), f"{where}: message is {type(res['message']).__name__}"
+    assert isinstance(res["nfev"], (int, np.integer)) and not isinstance(res["nfev"], bool) and res["nfev"] >= 0, \
+        f"{where}: nfev {res['nfev']!r} is not a count"
+    assert _finite(res["time_s"]) and res["time_s"] is not None and res["time_s"] >= 0, \
+        f"{where}: time_s {res['time_s']!r}"
+    fit, err, viol = _at_x(res, problem)
+    claims = {"error": (res["error"], err, REPORT_ATOL),
+              "constraint_violation": (res["constraint_violation"], viol, REPORT_ATOL),
+              "fun": (res["fun"], fit, REPORT_ATOL * max(1.0, abs(fit)))}
+    for k, (said, true, tol) in claims.items():
+        assert _finite(said) and said is not None and abs(float(said) - true) <= tol, \
+            f"{where}: {k} {said!r}, but the model at the returned x gives {true:.6g}"
+    ok = err <= problem.tolerance and viol <= CONSTRAINT_TOL
+    near = abs(err - problem.tolerance) <= REPORT_ATOL or abs(viol - CONSTRAINT_TOL) <= REPORT_ATOL
+    assert near or bool(res["success"]) == ok, \
+        (f"{where}: success {bool(res['success'])}, but at the returned x the error is {err:.3g} (tolerance "
+         f"{problem.tolerance:g}) and the constraint violation {viol:.3g}")
+    return fit, err, viol
+
+
+def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
+    def make() -> Solver:
+        return ctx.obj(**dict(options))
+
+    # the rules solve the same reference problems: each (targets, seed) is solved once, on
+    # a new solver, and judged at its x once (a solver that spoils its own copy of the
+    # problem spoils no other rule's: each rule judges against a problem of its own)
+    solved: dict[tuple[str, int], Any] = {}
+    judged: dict[tuple[str, int], tuple[float, float, float]] = {}
+
+    def key(targets: Any, seed: int) -> tuple[str, int]:
+        return repr(np.asarray(targets, float).tolist()), seed
+
+    def solve(targets: Any, seed: int) -> Any:
+        k = key(targets, seed)
+        if k not in solved:
+            solved[k] = make().solve(reference_problem(np.array(targets, float)), seed=seed)
+        return solved[k]
+
+    def at_x(targets: Any, seed: int) -> tuple[float, float, float]:
+        k = key(targets, seed)
+        if k not in judged:
+            judged[k] = _at_x(solve(targets, seed), reference_problem(targets))
+        return judged[k]
+
+    def r_template() -> None:
+        over = _solver_core_overrides(ctx.obj)
+        assert not over, (f"overrides {over} of the Solver template: implement _solve only, so the core "
+                          f"validates the problem and recomputes every result from the model at x")
+
+    def r_result() -> None:
+        # judged against a problem of its own: the solver's copy is the solver's to spoil
+        for targets in ((0.4, 0.75), ACTIVE_TARGETS):   # reachable; out of reach behind the constraint
+            judged[key(targets, 0)] = _judge_result(solve(targets, 0), reference_problem(targets), f"target {targets}")
+        T = np.array([[0.3, 0.7], ACTIVE_TARGETS])
+        batch = solve(T, 1)
+        assert len(batch) == len(T), f"a batch of {len(T)} targets gave {len(batch)} results"
+        for i, r in enumerate(batch):
+            _judge_result(r, reference_problem(T[i]), f"batch target {i}")
+
+    def r_constraints() -> None:
+        p = reference_problem(ACTIVE_TARGETS)
+        fit, err, viol = at_x(ACTIVE_TARGETS, 0)
+        assert fit <= ACTIVE_OPTIMUM + p.tolerance, \
+            (f"targets {ACTIVE_TARGETS} with the constraint b >= 2c active: formula (6) at the answer is "
+             f"{fit:.3g} (error {err:.3g}, constraint violation {viol:.3g}), the constrained optimum "
+             f"{ACTIVE_OPTIMUM:.3g} (b = 2c) + tolerance {p.tolerance:g}: does the solver ignore constraints?")
+
+    def r_class() -> None:
+        cls = ctx.obj
+        assert isinstance(cls, type) and issubclass(cls, Solver), f"entry point gives {cls!r}, not a Solver subclass"
+        if ctx.by_name:
+            assert cls.name == ctx.name, f"class attribute name {cls.name!r} differs from the entry-point name {ctx.name!r}"
+        assert isinstance(cls.default_options, dict), "default_options must be a dict"
+        json.dumps(cls.default_options, default=str)
+
+    def r_options() -> None:
+        try:
+            ctx.obj(no_such_option_xyz=1)
+        except ValidationError:
+            return
+        raise AssertionError("an unknown option was accepted")
+
+    def r_solves() -> None:
+        res = cast(SolveResult, solve((0.4, 0.75), 0))   # reference_problem()'s targets
+        assert np.shape(res.x) == (3,), f"x has shape {np.shape(res.x)}, expected (3,)"
+        p = reference_problem()
+        assert p.space.contains(res.x).all(), f"x {res.x} outside the feature bounds"
+        assert res.error <= 0.05, f"did not reach an easy reachable target: error {res.error:.3g} ({res.message})"
+        assert res.constraint_violation <= 1e-3, f"constraint violated at the answer ({res.constraint_violation:.3g})"
+
+    def r_determinism() -> None:
+        a = make().solve(reference_problem(), seed=11)
+        b = make().solve(reference_problem(), seed=11)
+        np.testing.assert_array_equal(a.x, b.x, err_msg="the same seed gave different answers")
+
+    def r_batch() -> None:
+        T = np.array([[0.3, 0.7], [0.6, 0.8], [0.5, 0.75]])
+        res = make().solve(reference_problem(T), seed=1)
+        assert isinstance(res, list) and len(res) == 3, "a batch of 3 targets must give 3 results"
+        assert res.x.shape == (3, 3), f"batch x shape {res.x.shape}"
+        assert (res.error <= 0.05).all(), f"batch errors {res.error}"
+
+    def r_bad_input() -> None:
+        try:
+            make().solve("not a problem")  # type: ignore[arg-type]
+        except ValidationError:
+            return
+        raise AssertionError("solve() accepted something that is not a SolveProblem")
+
+    _run_rules(ctx, [("class", r_class), ("template", r_template), ("options", r_options), ("solves", r_solves),
+                     ("result", r_result), ("constraints", r_constraints), ("determinism", r_determinism),
+                     ("batch", r_batch), ("bad-input", r_bad_input)],
+               always=("class",), stop_after=("class",))
