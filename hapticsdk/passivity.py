@@ -26,7 +26,7 @@ Two tools:
     from the readings and the held forces alone (ZOH pairing plus the encoder's
     quantisation terms, Ryu, Kim & Hannaford 2004; Kim & Ryu's energy bounding), and
     sends the largest extra, within one ramp step of the last, whose plan "hold, then
-    ramp to 0" keeps ``U`` within ``E0 = F_max Delta / 2``.
+    ramp to 0" keeps ``U`` within ``E0 = min(F_max Delta / 2, energy_allowance_j)``.
 
   The output lies between 0 and the wall's force: a unilateral wall never pulls.
 
@@ -573,8 +573,10 @@ class PassivityController:
     of secant stiffness ``K_f`` leaves, which dissipates at least ``b_x dy^2 / dt`` per
     interval with ``|dy| >= |dq| - Delta``). It sends the largest extra, between 0 and
     ``F_wall - P``, within one ramp step ``s`` of the last, whose plan "hold it one tick,
-    then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = F_max Delta / 2`` if the
-    reading keeps moving at the rate of the last two ticks (:func:`affordable_force`).
+    then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = min(F_max Delta / 2,
+    energy_allowance_j)`` if the reading keeps moving at the rate of the last two ticks,
+    changing by up to the largest change of motion seen over the last ``_HIST`` ticks
+    (:func:`affordable_force`).
     If the motion outruns that prediction the extra ramps down at ``s`` and the excess
     is booked (``overdrawn_j``).
 
