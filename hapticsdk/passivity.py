@@ -26,7 +26,7 @@ Two tools:
     from the readings and the held forces alone (ZOH pairing plus the encoder's
     quantisation terms, Ryu, Kim & Hannaford 2004; Kim & Ryu's energy bounding), and
     sends the largest extra, within one ramp step of the last, whose plan "hold, then
-    ramp to 0" keeps ``U`` within ``E0 = F_max Delta / 2``.
+    ramp to 0" keeps ``U`` within ``E0 = min(F_max Delta / 2, energy_allowance_j)``.
 
   The output lies between 0 and the wall's force: a unilateral wall never pulls.
 
@@ -290,6 +290,11 @@ RAMP_TIME_S = 5.0e-3
 #: taken as known within a factor of two (the stated uncertainty of a declaration, the
 #: 0.5x-2x band the randomised benchmark draws), so the true damping is at least half of it.
 DAMPING_TRUST = 0.5
+#: Default of ``ControllerSettings.energy_allowance_j`` (J): the most energy the extra's
+#: bound may hand the user over a contact, the SDK's passivity specification (0.1 mJ: a
+#: 10 g fingertip at 0.14 m/s). It caps the encoder allowance ``F_max Delta / 2``, which
+#: exceeds it only on encoders coarser than ``2 E / F_max`` (0.06 mm at 3.3 N).
+ENERGY_ALLOWANCE_J = 1.0e-4
 
 
 @dataclass
@@ -313,6 +318,10 @@ class ControllerSettings:
             bound, which is conservative.)
         energy_bound: False removes the energy bound (the output then follows the wall
             through the ramp only): for tests that must see the bound matter.
+        energy_allowance_j: the most energy (J) the extra's bound may hand the user
+            (:data:`ENERGY_ALLOWANCE_J`): the allowance is ``min(F_max Delta / 2, this)``.
+            A requirement, not a fitted constant: lower it for a stricter bound (with a
+            coarse encoder the wall then rises at one reading only to ``2 E / Delta``).
     """
 
     device_damping_ns_per_m: float = 0.0
@@ -322,6 +331,7 @@ class ControllerSettings:
     ramp_time_s: float = RAMP_TIME_S
     device_mass_kg: float | None = None
     energy_bound: bool = True
+    energy_allowance_j: float = ENERGY_ALLOWANCE_J
 
     def __post_init__(self) -> None:
         for name in ("device_damping_ns_per_m", "position_resolution_mm"):
@@ -332,6 +342,9 @@ class ControllerSettings:
             raise ValidationError(f"must be a finite number > 0 (N), got {self.max_force_n!r}", field="max_force_n")
         if not (math.isfinite(self.ramp_time_s) and self.ramp_time_s > 0):
             raise ValidationError(f"must be a finite number > 0 (s), got {self.ramp_time_s!r}", field="ramp_time_s")
+        if not (math.isfinite(self.energy_allowance_j) and self.energy_allowance_j >= 0):
+            raise ValidationError(f"must be a finite number >= 0 (J), got {self.energy_allowance_j!r}",
+                                  field="energy_allowance_j")
 
     @classmethod
     def for_device(cls, device: Any) -> "ControllerSettings":
@@ -356,12 +369,13 @@ class ControllerSettings:
         return fs * min(dt / self.ramp_time_s, 1.0)
 
     def energy_budget_j(self, dt: float, full_scale_n: float | None = None) -> float:
-        """``E0 = F_max Delta / 2`` (J): what bringing the full force up at one reading
-        costs in the bound (a monotone ramp's quantisation term is ``Delta/2`` times its
-        height), so a wall pressed from rest is never withheld for want of an allowance
+        """``E0 = min(F_max Delta / 2, energy_allowance_j)`` (J): what bringing the full
+        force up at one reading costs in the bound (a monotone ramp's quantisation term is
+        ``Delta/2`` times its height), so a wall pressed from rest is not withheld for want
+        of an allowance, capped by the energy a contact may hand the user
         (docs/runtime.md, Passivity item 6)."""
         fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
-        return fs * 0.5 * self.position_resolution_mm * 1e-3
+        return min(fs * 0.5 * self.position_resolution_mm * 1e-3, self.energy_allowance_j)
 
 
 #: Settings of the 0.1 controller (stiffness cap, observers, dither damper, felt floor,
@@ -559,8 +573,10 @@ class PassivityController:
     of secant stiffness ``K_f`` leaves, which dissipates at least ``b_x dy^2 / dt`` per
     interval with ``|dy| >= |dq| - Delta``). It sends the largest extra, between 0 and
     ``F_wall - P``, within one ramp step ``s`` of the last, whose plan "hold it one tick,
-    then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = F_max Delta / 2`` if the
-    reading keeps moving at the rate of the last two ticks (:func:`affordable_force`).
+    then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = min(F_max Delta / 2,
+    energy_allowance_j)`` if the reading keeps moving at the rate of the last two ticks,
+    changing by up to the largest change of motion seen over the last ``_HIST`` ticks
+    (:func:`affordable_force`).
     If the motion outruns that prediction the extra ramps down at ``s`` and the excess
     is booked (``overdrawn_j``).
 
@@ -571,7 +587,7 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
-                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full")
+                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jh", "_jmax", "_jat")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -586,6 +602,9 @@ class PassivityController:
         self._q1 = self._q2 = 0.0
         self._hist = [0.0] * _HIST    # the last readings (mm), a ring; _hp the newest
         self._hp = 0
+        self._jh = [0.0] * _HIST      # the change-of-motion estimates of the same ticks
+        self._jmax = 0.0              # their largest, at ring index _jat
+        self._jat = 0
         self._f1 = self._f2 = 0.0   # the extra (applied force minus the spring) over the last two ticks
         self._out = 0.0
         self._started = False
@@ -643,6 +662,18 @@ class PassivityController:
         if d > jerk:
             jerk = d
         jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
+        # the largest change of motion over the ring's window (_HIST ticks): a hand that
+        # reversed within it can reverse again; the estimate of this tick alone is blind
+        # between reversals (taps, the finger-and-arm resonance at long periods)
+        jh = self._jh
+        jh[hp] = jerk
+        if jerk >= self._jmax:
+            self._jmax = jerk
+            self._jat = hp
+        elif self._jat == hp:   # the largest left the window: find the next one
+            self._jmax = max(jh)
+            self._jat = jh.index(self._jmax)
+        jerk = self._jmax
         self._still = self._still + 1 if dq == 0.0 else 0
         self._q2 = self._q1
         self._q1 = x_mm
@@ -674,6 +705,8 @@ class PassivityController:
         m = s.device_mass_kg
         c_m = dt * dt / (2.0 * m) if m else 0.0
         e0 = full * h
+        if e0 > s.energy_allowance_j:
+            e0 = s.energy_allowance_j
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
             return 0.0
@@ -731,6 +764,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
             "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
             "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
+            "jh": np.zeros((_HIST, n)),
             "hp": np.zeros(1, int)}
 
 
@@ -771,6 +805,9 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     for span in _SCALES:
         d2 = np.abs(x - 2.0 * hist[hp - span] + hist[hp - 2 * span]) * 1e-3 - 2.0 * q
         np.maximum(jerk, d2 / (span * span), out=jerk)
+    jh = state["jh"]
+    jh[hp] = jerk
+    jerk = jh.max(axis=0)
     still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
     state["still"] = still
     state["q2"] = q1
@@ -788,7 +825,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
     m = s.device_mass_kg if mass_kg is None else mass_kg
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
-    e0 = full * 0.5 * q
+    e0 = np.minimum(full * 0.5 * q, s.energy_allowance_j)
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)
     u = np.where(idle, np.maximum(u, 0.0), u)
     state["energy"] = np.where(started, u, 0.0)

@@ -16,6 +16,7 @@ import pytest
 
 from hapticsdk.benchmarks.stability import QUICK_GRID, matrix_trajectory
 from hapticsdk.benchmarks.stability_random import draw_cells, grid_cells, run_cells, summarise
+from hapticsdk.passivity import ControllerSettings
 
 GRID = dict(QUICK_GRID, duration_s=3.0)
 
@@ -78,3 +79,33 @@ def test_a_tap_reversing_over_many_short_ticks_is_foreseen():
     r = run_cells([cell], controllers=("sdk",))[0]["results"]["sdk"]
     assert r["energy_to_user_j"] <= 1e-4
     assert r["contact_ticks"] > 0
+
+
+def _sdk_energy(idx, settings=None):
+    cells = draw_cells(2000, seed=1)
+    return [run_cells([cells[i]], controllers=("sdk",), settings=settings)[0]["results"]["sdk"]["energy_to_user_j"]
+            for i in idx]
+
+
+def test_a_hand_that_reversed_recently_is_expected_to_reverse_again():
+    """Drawn cells 259 and 1907 of seed 1: taps at T = 7.8 and 4.9 ms, no damping, fine
+    encoders. Between reversals the hand moves at a steady speed, so this tick's change
+    of motion reads 0, and the finger-and-arm resonance (~8 ticks per cycle) reverses it
+    within a tick. The plan uses the largest change of motion over the reading ring's
+    window; with this tick's alone they gave 3.7 and 3.4 mJ."""
+    cells = draw_cells(2000, seed=1)
+    assert [cells[i]["trajectory"] for i in (259, 1907)] == ["tap", "tap"]
+    assert all(cells[i]["damping_true_ns_per_m"] == 0.0 and cells[i]["period_s"] > 4e-3 for i in (259, 1907))
+    assert max(_sdk_energy((259, 1907))) <= 1e-4
+
+
+def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give():
+    """Drawn cells 122 and 580 of seed 1: creeps with 0.18 mm encoders, where
+    ``F_max Delta / 2`` is 0.3 mJ. The allowance is capped at ``energy_allowance_j``
+    (0.1 mJ); uncapped they gave 0.21 and 0.24 mJ. A lower allowance lowers the energy."""
+    cells = draw_cells(2000, seed=1)
+    assert all(cells[i]["resolution_mm"] > 0.15 for i in (122, 580))
+    e = _sdk_energy((122, 580))
+    assert max(e) <= 1e-4
+    strict = _sdk_energy((122, 580), settings=ControllerSettings(energy_allowance_j=2e-5))
+    assert all(b < a for a, b in zip(e, strict)), (e, strict)
