@@ -37,9 +37,9 @@ ENERGY_SLACK_J = 1e-4
 ALLOWANCE_J = 1e-4
 RAMP_S = 5e-3
 F_MAX = 3.3
-#: the region of the stated guarantee (docs/runtime.md, "Where the bound holds")
-PERIOD_S = (0.25e-3, 2e-3)
-RESOLUTION_MM = (0.001, 0.055)
+#: the region of the stated guarantee (docs/runtime.md, "Where the bound holds (measured)")
+PERIOD_S = (0.25e-3, 2.5e-3)
+RESOLUTION_MM = (0.001, 0.2)
 
 
 def _lu(lo, hi):
