@@ -172,7 +172,8 @@ def test_no_stage_imports_a_later_stage():
         if s is None:
             continue
         upward += [f"{mod} -> {d}" for d in sorted(deps) if (_stage(d) or -1) > s]
-    assert not upward, "upward imports along perception -> scene -> solvers -> plan -> compiler -> runtime: " + "; ".join(upward)
+    order = " -> ".join(s.removeprefix("hapticsdk.") for s in STAGES)
+    assert not upward, f"upward imports along {order}: " + "; ".join(upward)
 
 
 #: the first-party plugins and the example plugin: they import the core's new places too
