@@ -38,12 +38,12 @@ SURFACE = (
     "hapticsdk.solvers", "hapticsdk.scene", "hapticsdk.compiler", "hapticsdk.plan",
     "hapticsdk.runtime", "hapticsdk.runtime.render", "hapticsdk.runtime.session",
     "hapticsdk.sim.finger", "hapticsdk.calibration", "hapticsdk.interop", "hapticsdk.runlog",
-    "hapticsdk.perception.dimensions", "hapticsdk.perception.models", "hapticsdk.actuators", "hapticsdk.plugins",
-    "hapticsdk.plugin_api", "hapticsdk.hookspecs", "hapticsdk.device_options",
-    "hapticsdk.safety", "hapticsdk.testing",
+    "hapticsdk.perception.dimensions", "hapticsdk.perception.models", "hapticsdk.devices.actuators",
+    "hapticsdk.plugins", "hapticsdk.plugin_api", "hapticsdk.hookspecs", "hapticsdk.devices.device_options",
+    "hapticsdk.devices.safety", "hapticsdk.testing",
     # deprecated (shims until 0.3): their removals must stay announced
     "hapticsdk.problems", "hapticsdk.features", "hapticsdk.materials", "hapticsdk.dimensions",
-    "hapticsdk.models",
+    "hapticsdk.models", "hapticsdk.actuators", "hapticsdk.device_options", "hapticsdk.safety",
 )
 
 

@@ -62,7 +62,7 @@ def main() -> int:
         "dhd_tests", ROOT / "plugins" / "hapticsdk-hardness" / "tests" / "test_hardness_dhd.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)   # type: ignore[union-attr]
-    from hapticsdk.safety import SafetyLayer
+    from hapticsdk.devices.safety import SafetyLayer
     from hapticsdk_hardness.dhd import DhdDevice
     from hapticsdk_hardness.omni import OmniVirtual
     with tempfile.TemporaryDirectory() as d:

@@ -25,7 +25,7 @@ import gc
 
 import numpy as np
 
-import hapticsdk.actuators as A
+import hapticsdk.devices.actuators as A
 import hapticsdk.runtime.loop as L
 from hapticsdk.benchmarks.timing import build_scene
 from hapticsdk.perception.dimensions import DimensionRenderer

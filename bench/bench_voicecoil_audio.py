@@ -56,7 +56,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args()
-    from hapticsdk.safety import SafetyLayer
+    from hapticsdk.devices.safety import SafetyLayer
     from hapticsdk_hardness.audio import DEFAULT_ISOLATION, VoiceCoilAudio
     from hapticsdk_hardness.audio_loopback import JackServer
     why = JackServer.available()

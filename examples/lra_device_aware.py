@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DriveCapability
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DriveCapability
 from hapticsdk.calibration import PiezoTable
 from hapticsdk.compiler import compile_scene
 from hapticsdk.perception.dimensions import ChannelCommand

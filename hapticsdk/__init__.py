@@ -28,9 +28,9 @@ hapticsdk_api = ">=1.2,<2"
 
 if TYPE_CHECKING:  # what type checkers and IDEs see; at run time names load lazily
     # ``import x as x``: an explicit re-export, so ``mypy --strict`` accepts ``hs.solve``
-    from .actuators import Actuator as Actuator
-    from .actuators import HapticDevice as HapticDevice
-    from .actuators import create_actuator as create_actuator
+    from .devices.actuators import Actuator as Actuator
+    from .devices.actuators import HapticDevice as HapticDevice
+    from .devices.actuators import create_actuator as create_actuator
     from .compiler import compile_scene as compile_scene
     from .perception.dimensions import PerceptionDimension as PerceptionDimension
     from .errors import HapticSDKError as HapticSDKError
@@ -74,9 +74,9 @@ _LAZY = {
     "SolveResult": "hapticsdk.solvers",
     "BatchSolveResult": "hapticsdk.solvers",
     "RenderReport": "hapticsdk.runtime.render",
-    "Actuator": "hapticsdk.actuators",
-    "HapticDevice": "hapticsdk.actuators",
-    "create_actuator": "hapticsdk.actuators",
+    "Actuator": "hapticsdk.devices.actuators",
+    "HapticDevice": "hapticsdk.devices.actuators",
+    "create_actuator": "hapticsdk.devices.actuators",
     "list_plugins": "hapticsdk.plugins",
     "Scene": "hapticsdk.scene",
     "load_scene": "hapticsdk.scene",

@@ -23,7 +23,11 @@ MOVED_MODULES = {"hapticsdk.rendering": "hapticsdk.runtime.render",
                  "hapticsdk.features": "hapticsdk.perception.features",
                  "hapticsdk.dimensions": "hapticsdk.perception.dimensions",
                  "hapticsdk.models": "hapticsdk.perception.models",
-                 "hapticsdk.materials": "hapticsdk.perception.materials"}
+                 "hapticsdk.materials": "hapticsdk.perception.materials",
+                 "hapticsdk.channels": "hapticsdk.perception.channels",
+                 "hapticsdk.actuators": "hapticsdk.devices.actuators",
+                 "hapticsdk.safety": "hapticsdk.devices.safety",
+                 "hapticsdk.device_options": "hapticsdk.devices.device_options"}
 
 
 def _warn(old: str, new: str) -> None:

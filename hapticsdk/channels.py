@@ -1,5 +1,5 @@
-"""The command channels an actuator can take (a leaf module: dimensions, actuators and
-the safety layer all read it)."""
+"""Deprecated since 0.2: moved to :mod:`hapticsdk.perception.channels` (removed in 0.3)."""
 
-#: channels an actuator declares (``Actuator.channels``) and a role asks for
-CHANNELS = ("force", "vibration", "thermal", "friction", "other")
+from ._deprecation import moved_module
+
+__getattr__ = moved_module(__name__, globals())

@@ -276,7 +276,7 @@ class RenderPlan:
         feature values against their ranges (:func:`check_plan_features`)."""
         if validate:
             if isinstance(d, Mapping):  # safety is not data: named before the schema's message
-                from .device_options import check_data_settings
+                from .devices.device_options import check_data_settings
                 check_data_settings(d.get("settings"), field="plan.settings")
             validate_plan_dict(d)
         api = str(d.get("plugin_api_version", PLUGIN_API_VERSION))

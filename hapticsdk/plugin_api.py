@@ -21,7 +21,7 @@ from .errors import PluginError, ValidationError
 
 #: Version of the plugin interface of this core: the base classes of
 #: :mod:`hapticsdk.perception.dimensions`, :mod:`hapticsdk.perception.models`, :mod:`hapticsdk.solvers`,
-#: :mod:`hapticsdk.actuators`, the entry-point groups and the hook specifications.
+#: :mod:`hapticsdk.devices.actuators`, the entry-point groups and the hook specifications.
 #: ``MAJOR.MINOR``: MINOR grows when something is added (old plugins keep working),
 #: MAJOR when something is removed or changes meaning. A plugin declares the range it
 #: supports with a ``hapticsdk_api`` attribute (e.g. ``">=1.0,<2"``); see

@@ -8,7 +8,7 @@ end) and writes one ``.npz`` file holding numpy arrays plus a JSON header (key
 ``header_json``). :func:`load_run` reads it back as a :class:`RunLog`.
 
 :class:`PlaybackDevice` (entry point ``playback-virtual``) is a
-:class:`~hapticsdk.actuators.HapticDevice` that returns the recorded states tick by
+:class:`~hapticsdk.devices.actuators.HapticDevice` that returns the recorded states tick by
 tick, so a bug seen on hardware can be re-run in a test: the renderers see the same
 inputs, and the forces they command can be compared sample for sample with the
 recorded ones (:attr:`PlaybackDevice.received`).
@@ -43,7 +43,7 @@ from typing import Any, ClassVar, Mapping, cast
 
 import numpy as np
 
-from .actuators import ActuatorLimits, DeviceState, HapticDevice
+from .devices.actuators import ActuatorLimits, DeviceState, HapticDevice
 from .perception.dimensions import ChannelCommand
 from .errors import DeviceError, RecordingError, ValidationError
 from .quantiles import median
@@ -446,14 +446,14 @@ def narrowed_limits(base: ActuatorLimits, header: Any) -> ActuatorLimits:
 
 
 def recorded_settings(header: Any) -> Any:
-    """The :class:`~hapticsdk.safety.SafetySettings` recorded in a run-file header, checked
+    """The :class:`~hapticsdk.devices.safety.SafetySettings` recorded in a run-file header, checked
     as data: every value must be a number (never a bool; ``ramp_amplitude`` a bool,
     the start gates may be null) inside the ranges :class:`SafetySettings` accepts, else
     :class:`RecordingError` naming the field. Unknown keys are ignored. They are applied
     as recorded, so a replay reproduces the run sample for sample; the playback device
     is simulated, and its force limits stay those of the device class (:func:`narrowed_limits`)."""
     from .checks import is_number
-    from .safety import SafetySettings
+    from .devices.safety import SafetySettings
 
     base = "runlog.header_json.device.safety_settings"
     if not isinstance(header, dict):
@@ -520,7 +520,7 @@ class PlaybackDevice(HapticDevice):
             limits = narrowed_limits(device_class_limits(dev.get("name")), dev.get("limits"))
         self.limits = limits
         if safety is None and dev.get("safety_settings"):
-            from .safety import SafetyLayer
+            from .devices.safety import SafetyLayer
             safety = SafetyLayer(self.limits, recorded_settings(dev["safety_settings"]))
         super().__init__(label=label or f"playback:{dev.get('label') or dev.get('name') or 'run'}", safety=safety)
         self.at_end = at_end

@@ -13,7 +13,7 @@ from typing import Any, Callable, ClassVar, Iterator
 
 import numpy as np
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
 from hapticsdk.perception.dimensions import ChannelCommand, Constraint
 
 #: the plugin API the test plugins are written for

@@ -248,7 +248,7 @@ def _check_plausible(f: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
 
 
 def check_table_limits(table: "PiezoTable", limits: Any, *, device: str = "piezo") -> None:
-    """Refuse ``table`` for a device whose declared :class:`~hapticsdk.actuators.ActuatorLimits`
+    """Refuse ``table`` for a device whose declared :class:`~hapticsdk.devices.actuators.ActuatorLimits`
     it exceeds: voltages above ``max_amplitude`` (when the unit is V) or frequencies
     outside ``frequency_range_hz``. Raises :class:`CalibrationError` naming the field."""
     if limits is None:

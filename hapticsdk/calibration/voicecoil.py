@@ -93,7 +93,7 @@ class VoiceCoilCalibration:
 
     def check_limits(self, limits: Any, *, device: str = "voice coil") -> None:
         """Refuse this calibration for a device whose declared ``frequency_range_hz``
-        (:class:`~hapticsdk.actuators.ActuatorLimits`) does not hold its frequency range;
+        (:class:`~hapticsdk.devices.actuators.ActuatorLimits`) does not hold its frequency range;
         raises :class:`CalibrationError` naming the field."""
         rng = getattr(limits, "frequency_range_hz", None) if limits is not None else None
         if rng is None:

@@ -239,7 +239,7 @@ def _interrupt_summary(signame: str, t_signal: float) -> dict[str, Any]:
     since ``t_signal``: ``safe_state`` (labels put in their safe state, including those
     already stopped and closed on the way out), ``stop_failed`` and ``first_stop_ms``
     (after the signal; None when no actuator was open)."""
-    from ..actuators import stop_all, stops_since
+    from ..devices.actuators import stop_all, stops_since
 
     stop_all()
     stops = stops_since(t_signal)
@@ -314,7 +314,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except BrokenPipeError:
             raise
         except Exception as exc:  # last resort: a bug, not bad input
-            from ..actuators import stop_all
+            from ..devices.actuators import stop_all
             stop_all()
             if args.verbose:
                 import traceback

@@ -197,7 +197,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.plot:  # before the work: a figure that cannot be written fails now, not after the render
         from ..fileio import check_output_path
         check_output_path(args.plot, field="--plot")
-    from ..device_options import parse_device, parse_device_option
+    from ..devices.device_options import parse_device, parse_device_option
     devices = dict(parse_device(item) for item in args.device)
     if args.scene:
         scene = load_scene(args.scene)

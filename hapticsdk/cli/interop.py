@@ -170,7 +170,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     acts = [a.strip() for a in args.actuators.split(",") if a.strip()]
     if not acts:
         raise ValidationError("no actuator named", field="actuators")
-    from ..device_options import parse_device_option
+    from ..devices.device_options import parse_device_option
     dev_opts: dict[str, dict[str, Any]] = {}
     for item in args.device_option:
         name, key, value = parse_device_option(item)

@@ -135,7 +135,7 @@ def _role_options(scene: Scene, dim: Any) -> dict[str, dict[str, Any]]:
     """Options of the actuators on the roles whose calibration ``dim`` declares (for their
     serial numbers): the scene's, over the user's device configuration."""
     from ..calibration.selection import declared_calibrations
-    from ..device_options import trusted_options
+    from ..devices.device_options import trusted_options
     out: dict[str, dict[str, Any]] = {}
     for _, role in declared_calibrations(dim).values():
         spec = scene.devices.get(role)
@@ -149,7 +149,7 @@ def _capabilities(scene: Scene, dim: Any) -> tuple[dict[str, Any], dict[str, str
     """What the actuators on ``dim``'s roles can produce (role -> DriveCapability), asked
     of their classes with the scene's (non-privileged) options: nothing is created,
     opened or loaded; and role -> why none is known."""
-    from ..device_options import privileged_options, trusted_options
+    from ..devices.device_options import privileged_options, trusted_options
     from ..plugins import registry
     caps: dict[str, Any] = {}
     notes: dict[str, str] = {}
@@ -577,7 +577,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
                                           f"{install_hint('actuator', spec.actuator)}",
                                           field=f"scene.devices.{role}")
                 if spec.options:  # refuse privileged options now, not at render time
-                    from ..device_options import check_data_options
+                    from ..devices.device_options import check_data_options
                     check_data_options(registry("actuator").load(spec.actuator), spec.actuator, role,
                                        spec.options, field=f"scene.devices.{role}.options")
                 actuators[role] = spec.actuator

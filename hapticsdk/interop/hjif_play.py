@@ -2,7 +2,7 @@
 
 The actuators (``piezo-virtual``, ``voicecoil-virtual``, and their hardware siblings) are
 oscillators: each servo tick they take one frequency and one amplitude through their
-public :meth:`~hapticsdk.actuators.Actuator.command`, which passes the safety layer. So
+public :meth:`~hapticsdk.devices.actuators.Actuator.command`, which passes the safety layer. So
 each tick the player sends, per actuator, the loudest component active among the
 channels routed to it (:func:`hapticsdk.interop.hjif_synth.control_track`), and reports
 what that leaves out (other base signals than Sine play as their fundamental; overlapping
@@ -151,14 +151,14 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
         realtime: pace ticks to the wall clock (default: simulated time; always paced
             when one of the actuators is real, i.e. not ``simulated``).
         piezo_table: the piezo's ``Tab`` (path, dict or table; default the generated one).
-        actuator_options: name -> keyword options for :func:`~hapticsdk.actuators.create_actuator`,
+        actuator_options: name -> keyword options for :func:`~hapticsdk.devices.actuators.create_actuator`,
             merged over the user device configuration file and ``$HAPTICSDK_DEVICE_OPTIONS``
-            (:func:`hapticsdk.device_options.trusted_options`), as for ``render_plan``.
+            (:func:`hapticsdk.devices.device_options.trusted_options`), as for ``render_plan``.
         piezo_full_scale: amplitudes are fractions of the piezo's full scale (AHAP content):
             1.0 is the largest acceleration its table reaches at every frequency of the
             content's bands (see :func:`piezo_full_scale_m_s2`), instead of m/s^2.
     """
-    from ..actuators import create_actuator
+    from ..devices.actuators import create_actuator
 
     if not (math.isfinite(tick_s) and 1e-5 <= tick_s <= 0.1):
         raise ValidationError(f"must be in [1e-5, 0.1] s, got {tick_s!r}", field="tick_s")
@@ -196,7 +196,7 @@ def play(hfile: HapticFile, *, seconds: float | None = None, actuators: Sequence
     made: dict[str, Any] = {}  # actuators created (never opened) to read their declared limits
 
     def options(a: str) -> dict[str, Any]:
-        from ..device_options import trusted_options  # as render_plan: config < environment < code
+        from ..devices.device_options import trusted_options  # as render_plan: config < environment < code
         return {**trusted_options(a), **dict((actuator_options or {}).get(a, {}))}
 
     for a, tracks in per_act.items():

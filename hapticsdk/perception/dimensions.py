@@ -153,7 +153,7 @@ class RoleSpec:
     """What a dimension's renderer commands on one channel role.
 
     Attributes:
-        channel: the kind of channel (one of :data:`hapticsdk.actuators.CHANNELS`:
+        channel: the kind of channel (one of :data:`hapticsdk.perception.channels.CHANNELS`:
             ``"force"``, ``"vibration"``, ``"thermal"``, ``"friction"``, ``"other"``).
         fields: the :class:`ChannelCommand` fields it sets, each with its unit
             (``{"force_n": "N"}``; ``{"frequency_hz": "Hz", "amplitude": "V"}``; a
@@ -162,7 +162,7 @@ class RoleSpec:
 
     The scene compiler maps the role to an actuator only when the actuator serves the
     same channel and accepts every field in the same unit
-    (:meth:`hapticsdk.actuators.Actuator.accepted_fields`); otherwise it refuses the
+    (:meth:`hapticsdk.devices.actuators.Actuator.accepted_fields`); otherwise it refuses the
     scene with a :class:`~hapticsdk.errors.ValidationError` naming both.
     """
 
@@ -171,7 +171,7 @@ class RoleSpec:
     description: str = ""
 
     def __post_init__(self) -> None:
-        from ..channels import CHANNELS
+        from .channels import CHANNELS
         if self.channel not in CHANNELS:
             raise ValidationError(f"unknown channel {self.channel!r}; valid: {list(CHANNELS)}", field="role.channel")
         bad = [f for f in self.fields if f not in COMMAND_FIELDS]
@@ -248,7 +248,7 @@ class PerceptionDimension(ABC):
         this dimension's roles can produce (device-aware solving; default: none).
 
         Args:
-            capabilities: role -> :class:`~hapticsdk.actuators.DriveCapability` of the
+            capabilities: role -> :class:`~hapticsdk.devices.actuators.DriveCapability` of the
                 actuator on that role (roles whose actuator publishes none are absent).
             options: the renderer options the material will be rendered with (e.g. the
                 calibrated table), so the constraint and the renderer agree.
@@ -278,7 +278,7 @@ def declared_roles(dim: Any) -> dict[str, RoleSpec]:
     """The typed roles of a dimension (class or instance): its ``roles`` where it declares
     them (plugin API 1.1); otherwise, for a 1.0-style dimension, one per default actuator,
     typed from that actuator's channel and the fields it accepts with their units
-    (:meth:`hapticsdk.actuators.Actuator.accepted_fields`), so that mapping the role to an
+    (:meth:`hapticsdk.devices.actuators.Actuator.accepted_fields`), so that mapping the role to an
     actuator of another kind or unit is refused as for a declared role. A role whose
     default actuator is not installed is left out."""
     declared = dict(getattr(dim, "roles", {}) or {})

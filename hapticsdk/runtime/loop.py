@@ -83,7 +83,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3
+from ..devices.actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3
 from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController

@@ -6,7 +6,7 @@ features (``dimension.renderer(features)``) plus the replacements the plan names
 constant 1 N force in place of a dropped hardness), imports and opens only the
 actuators the plan maps the renderers' roles to (each in a context manager, so every
 one is stopped and closed on any error), picks the sensing device (an actuator of the
-plan that is a :class:`~hapticsdk.actuators.HapticDevice`, such as ``omni-virtual``;
+plan that is a :class:`~hapticsdk.devices.actuators.HapticDevice`, such as ``omni-virtual``;
 otherwise the kinematic ``probe-virtual``), runs :class:`hapticsdk.runtime.ServoLoop`,
 and calls the ``hapticsdk_render_started`` / ``hapticsdk_render_finished`` hooks of the
 distributions the plan uses only.
@@ -23,7 +23,7 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from ..actuators import Actuator, HapticDevice
+from ..devices.actuators import Actuator, HapticDevice
 from ..perception.dimensions import DimensionRenderer
 from ..errors import DeviceError, PluginError, ValidationError
 from ..plan import FALLBACK_SENSOR, MaterialPlan, RenderPlan
@@ -122,7 +122,7 @@ def build_renderers(mp: MaterialPlan, settings: Mapping[str, Any] | None = None,
     """Renderers of one material plan: kept dimensions from the plan's features, then the
     replacements of dropped ones (no solving). ``calibrations``: dimension -> renderer
     options holding saved calibrations (:func:`hapticsdk.calibration.selection.select_calibrations`);
-    ``capabilities``: role -> :class:`~hapticsdk.actuators.DriveCapability` of the actuator
+    ``capabilities``: role -> :class:`~hapticsdk.devices.actuators.DriveCapability` of the actuator
     on that role (an actuator's own drive table goes to the renderer, as at compile time:
     the scene's ``renderer_options`` win, then the actuator's own table, then calibrations)."""
     from ..plugins import registry
@@ -194,10 +194,10 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
             merged over the plan's options, the user's device configuration file and
             ``$HAPTICSDK_DEVICE_OPTIONS``. The only way, with those two, to give an actuator's
             privileged options (a native library, an output file, a port): a plan may not
-            (:mod:`hapticsdk.device_options`).
+            (:mod:`hapticsdk.devices.device_options`).
         passivity: ``False`` switches the passivity controller off (code only: a plan
             whose ``settings.servo.passivity`` is not ``true`` is refused,
-            :func:`hapticsdk.device_options.check_data_settings`). Default on.
+            :func:`hapticsdk.devices.device_options.check_data_settings`). Default on.
     """
     if isinstance(plan, Mapping):
         plan = RenderPlan.from_dict(plan)
@@ -214,7 +214,7 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     servo = dict(plan.settings.get("servo") or {})
     period = check_period(period_s if period_s is not None else servo.get("period_s", 0.001),
                           "period_s" if period_s is not None else "plan.settings.servo.period_s")
-    from ..device_options import check_data_settings
+    from ..devices.device_options import check_data_settings
     check_data_settings(plan.settings, field="plan.settings")  # safety is not data
     if passivity is not None and not isinstance(passivity, bool):
         raise ValidationError(f"passivity must be True or False, got {passivity!r}", field="passivity")
@@ -378,7 +378,7 @@ def _actuator_options(cls: Any, name: str, role: str, mp: MaterialPlan,
                       app_options: Mapping[str, Mapping[str, Any]]) -> dict[str, Any]:
     """The options actuator ``name`` gets for ``role``: the plan's (never a privileged
     one), then the user's configuration and environment, then the application's."""
-    from ..device_options import check_data_options, trusted_options
+    from ..devices.device_options import check_data_options, trusted_options
     from_plan = dict(mp.actuator_options.get(role, {}))
     check_data_options(cls, name, role, from_plan, field=f"plan.materials.{mp.name}.actuator_options.{role}")
     return {**from_plan, **trusted_options(name), **dict(app_options.get(role, {}))}

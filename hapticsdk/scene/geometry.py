@@ -1,7 +1,7 @@
 """Object geometry in the device workspace: poses, shapes and the per-tick hit test.
 
 Coordinates are the device workspace's, in mm, as in
-:class:`~hapticsdk.actuators.DeviceState`: x lateral (the sliding direction of the
+:class:`~hapticsdk.devices.actuators.DeviceState`: x lateral (the sliding direction of the
 scripted fingers), y up (the surface normal of a version-1 scene, whose material
 surface is the plane y = 0 with its inside at y < 0), z towards the user.
 

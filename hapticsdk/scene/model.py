@@ -216,7 +216,7 @@ class Scene:
         the infinite plane y = 0. Version 2: objects may have ``geometry`` and ``pose``
         (checked: positive sizes, unit quaternions and normals, finite numbers; errors
         name the field, e.g. ``scene.objects[2].geometry.radius_mm``)."""
-        from ..device_options import check_data_settings
+        from ..devices.device_options import check_data_settings
         from ..schemas_io import validate
         shapes: dict[int, Shape] = {}
         if isinstance(data, Mapping):

@@ -4,7 +4,7 @@ A :class:`Trajectory` gives the *reference* position of the finger over time: wh
 finger means to be (mm). A kinematic probe (:class:`~hapticsdk.sim.probe.VirtualProbe`)
 follows it exactly; a simulated force arm is pushed towards it through the finger's
 impedance (:class:`FingerParams`: mass, spring, damper). Axes follow
-:class:`~hapticsdk.actuators.DeviceState`: x is the lateral sliding direction, y the
+:class:`~hapticsdk.devices.actuators.DeviceState`: x is the lateral sliding direction, y the
 surface normal with the material surface at y = 0 and its inside at y < 0.
 
 All trajectories are piecewise linear in time, evaluated vectorised with

@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ..actuators import ActuatorLimits, DeviceState, HapticDevice
+from ..devices.actuators import ActuatorLimits, DeviceState, HapticDevice
 from ..perception.dimensions import ChannelCommand
 from ..errors import ValidationError
 from .finger import Trajectory, press_slide

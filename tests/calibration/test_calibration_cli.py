@@ -6,7 +6,7 @@ import json
 
 import numpy as np
 
-from hapticsdk.actuators import DeviceState
+from hapticsdk.devices.actuators import DeviceState
 from hapticsdk.cli import main
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.runlog import RunRecorder

@@ -102,7 +102,7 @@ def test_the_rules_new_since_a_declared_version():
 def test_privileged_options_any_collection_of_names(decl, names):
     """One reading of privileged_options: a dict or any collection of names; the scene
     check refuses each of them."""
-    from hapticsdk.device_options import PrivilegedOptionError, check_data_options, privileged_options
+    from hapticsdk.devices.device_options import PrivilegedOptionError, check_data_options, privileged_options
     Cls = type("Cls", (), {"privileged_options": decl, "name": "x"})
     assert set(privileged_options(Cls)) == names
     for n in names:
@@ -112,7 +112,7 @@ def test_privileged_options_any_collection_of_names(decl, names):
 
 @pytest.mark.parametrize("decl", ["library", 3, ("library", 3), ("",)])
 def test_an_unreadable_privileged_declaration_fails_closed(decl):
-    from hapticsdk.device_options import check_data_options
+    from hapticsdk.devices.device_options import check_data_options
     Cls = type("Cls", (), {"privileged_options": decl, "name": "x"})
     with pytest.raises(PluginError, match="privileged_options"):
         check_data_options(Cls, "x", "role", {"library": "/tmp/x.so"}, field="f")

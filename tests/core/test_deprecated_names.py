@@ -4,6 +4,7 @@ the new place (docs/api.md, CHANGELOG "Deprecated")."""
 from __future__ import annotations
 
 import importlib
+import re
 import sys
 import warnings
 
@@ -37,11 +38,27 @@ MOVED_MODULES = [  # (old module, new module, a name users imported from it)
     ("hapticsdk.models", "hapticsdk.perception.models", "MLPModel"),
     ("hapticsdk.materials", "hapticsdk.perception.materials", "load_library"),
     ("hapticsdk.materials", "hapticsdk.perception.materials", "DEFAULT_LIBRARY"),
+    ("hapticsdk.channels", "hapticsdk.perception.channels", "CHANNELS"),
+    ("hapticsdk.actuators", "hapticsdk.devices.actuators", "Actuator"),
+    ("hapticsdk.actuators", "hapticsdk.devices.actuators", "create_actuator"),
+    ("hapticsdk.actuators", "hapticsdk.devices.actuators", "CHANNELS"),
+    ("hapticsdk.actuators", "hapticsdk.devices.actuators", "_frozen3"),
+    ("hapticsdk.safety", "hapticsdk.devices.safety", "SafetyLayer"),
+    ("hapticsdk.safety", "hapticsdk.devices.safety", "declared_limits"),
+    ("hapticsdk.device_options", "hapticsdk.devices.device_options", "privileged_options"),
+    ("hapticsdk.device_options", "hapticsdk.devices.device_options", "trusted_options"),
 ]
 
-#: the perception stage's four modules (0.1: flat in hapticsdk/), with a class of each
-PERCEPTION = [("features", "Feature"), ("dimensions", "ChannelCommand"), ("models", "MLPModel"),
-              ("materials", "Material")]
+#: the modules that were flat in hapticsdk/ in 0.1 and moved into a stage's folder in 0.2
+#: (old name, new name), with a class of each (the class a pickle names)
+MOVED_CLASSES = [("features", "perception.features", "Feature"),
+                 ("dimensions", "perception.dimensions", "ChannelCommand"),
+                 ("models", "perception.models", "MLPModel"),
+                 ("materials", "perception.materials", "Material"),
+                 ("actuators", "devices.actuators", "ActuatorLimits"),
+                 ("actuators", "devices.actuators", "SensedState"),
+                 ("safety", "devices.safety", "SafetySettings"),
+                 ("device_options", "devices.device_options", "PrivilegedOptionError")]
 
 
 @pytest.mark.parametrize("old, name, new", MOVED_NAMES)
@@ -99,16 +116,16 @@ def test_every_moved_module_is_tested_here():
     assert {(old, new) for old, new, _ in MOVED_MODULES} == set(registered.items())
 
 
-@pytest.mark.parametrize("old, cls", PERCEPTION)
-def test_a_class_pickled_at_its_old_place_still_unpickles(old, cls, monkeypatch):
+@pytest.mark.parametrize("old, new, cls", MOVED_CLASSES)
+def test_a_class_pickled_at_its_old_place_still_unpickles(old, new, cls, monkeypatch):
     """0.1 and 0.2 pickles name ``hapticsdk.<old>.<cls>``; unpickling resolves that
     path through the shim (warning) to the class at its new place. Protocol 0's
     ``GLOBAL`` opcode names the module and class as text, the way those pickles do."""
     import pickle
     monkeypatch.delitem(sys.modules, f"hapticsdk.{old}", raising=False)
-    with pytest.warns(DeprecationWarning, match=rf"hapticsdk\.perception\.{old}"):
+    with pytest.warns(DeprecationWarning, match=re.escape(f"hapticsdk.{new}")):
         got = pickle.loads(f"chapticsdk.{old}\n{cls}\n.".encode())
-    assert got is getattr(importlib.import_module(f"hapticsdk.perception.{old}"), cls)
+    assert got is getattr(importlib.import_module(f"hapticsdk.{new}"), cls)
 
 
 def test_a_feature_pickled_by_0_1_still_unpickles():
@@ -125,18 +142,39 @@ def test_a_feature_pickled_by_0_1_still_unpickles():
     assert got == Feature("GS", "N/mm", 0.1, 2.0) and type(got) is Feature
 
 
-def test_the_top_level_perception_names_do_not_warn():
-    """``hs.Feature``, ``hs.PerceptionDimension`` ... resolve to the new places with no
-    warning (a fresh interpreter: the top level caches what it resolved)."""
+def test_the_top_level_moved_names_do_not_warn():
+    """``hs.Feature``, ``hs.PerceptionDimension``, ``hs.Actuator`` ... resolve to the new
+    places with no warning (a fresh interpreter: the top level caches what it resolved)."""
     import subprocess
     code = ("import warnings; warnings.simplefilter('error', DeprecationWarning)\n"
             "import hapticsdk as hs\n"
             "names = ['Feature', 'FeatureSpace', 'PerceptionDimension', 'PerceptionModel', "
-            "'Material', 'load_library']\n"
+            "'Material', 'load_library', 'Actuator', 'HapticDevice', 'create_actuator']\n"
             "print(' '.join(getattr(hs, n).__module__ for n in names))\n"
             "print(len(hs.load_library()))\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr[-2000:]
     mods, n = r.stdout.split("\n")[:2]
-    assert set(mods.split()) == {f"hapticsdk.perception.{m}" for m in ("features", "dimensions", "models", "materials")}
+    assert set(mods.split()) == {f"hapticsdk.perception.{m}" for m in ("features", "dimensions", "models", "materials")
+                                 } | {"hapticsdk.devices.actuators"}
     assert int(n) > 0
+
+
+def test_the_actuator_log_keeps_its_0_1_logger_name(caplog):
+    """Users silence or route the actuators' log by the logger name ``hapticsdk.actuators``
+    (so does the conformance kit); the module moved, the name did not. A stop that fails
+    is logged through that logger."""
+    import logging
+
+    from hapticsdk.devices.actuators import create_actuator
+    act = create_actuator("voicecoil-virtual")
+    act.open()
+
+    def broken() -> None:
+        raise OSError("stop failed on purpose")
+    act._stop = broken  # type: ignore[method-assign]
+    with caplog.at_level(logging.ERROR, logger="hapticsdk.actuators"):
+        act.stop()
+    del act._stop
+    act.close()
+    assert [r.name for r in caplog.records if "stop failed on purpose" in r.getMessage()] == ["hapticsdk.actuators"]

@@ -42,7 +42,7 @@ def test_piezo_table_negative_acceleration_is_refused():
 
 
 def test_piezo_table_is_checked_against_the_device_limits():
-    from hapticsdk.actuators import ActuatorLimits
+    from hapticsdk.devices.actuators import ActuatorLimits
 
     table = PiezoTable(**_table([100, 200], [0, 50, 100]))
     with pytest.raises(CalibrationError, match="voltages_v.*declared maximum 25 V"):
@@ -83,7 +83,7 @@ def test_nan_gain_is_refused_before_the_fit_and_never_reaches_a_file(tmp_path):
 
 
 def test_voicecoil_calibration_is_checked_against_the_device_range():
-    from hapticsdk.actuators import ActuatorLimits
+    from hapticsdk.devices.actuators import ActuatorLimits
 
     cal = VoiceCoilCalibration()  # the paper's 30..120 Hz
     cal.check_limits(ActuatorLimits(frequency_range_hz=(1.0, 1000.0)))

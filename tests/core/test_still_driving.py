@@ -8,7 +8,7 @@ from typing import ClassVar
 
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand
 
 

@@ -9,7 +9,7 @@ from importlib import metadata
 import pytest
 
 from hapticsdk import doctor
-from hapticsdk.actuators import Actuator
+from hapticsdk.devices.actuators import Actuator
 from hapticsdk.plugins import registry
 
 

@@ -54,7 +54,7 @@ def test_overlapping_long_effects_are_refused_before_any_sample_is_evaluated(eva
 
 
 def test_play_refuses_them_before_opening_an_actuator(monkeypatch):
-    import hapticsdk.actuators as acts
+    import hapticsdk.devices.actuators as acts
 
     opened = []
     monkeypatch.setattr(acts, "create_actuator", lambda name, **kw: opened.append(name))

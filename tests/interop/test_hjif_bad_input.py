@@ -144,7 +144,7 @@ def test_invalid_json_names_line_and_column(tmp_path):
 
 @pytest.mark.parametrize("command", ["import", "play"])
 def test_cli_prints_the_path_exits_2_and_opens_no_actuator(tmp_path, capsys, monkeypatch, command):
-    import hapticsdk.actuators as acts
+    import hapticsdk.devices.actuators as acts
 
     opened = []
     real = acts.create_actuator
@@ -179,7 +179,7 @@ def test_library_reference_loop_is_refused_before_anything_plays(spy_create):
 
 @pytest.fixture
 def spy_create(monkeypatch):
-    import hapticsdk.actuators as acts
+    import hapticsdk.devices.actuators as acts
 
     made: list = []
     real = acts.create_actuator

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hjif_docs import band, basis, channel, doc, kf, perception, tone
 
-import hapticsdk.actuators as acts
+import hapticsdk.devices.actuators as acts
 from hapticsdk.interop.hjif_model import parse_hjif
 from hapticsdk.interop.hjif_play import play
 

@@ -125,6 +125,8 @@ def test_the_graph_sees_imports():
     g = import_graph()
     assert "hapticsdk.errors" in g["hapticsdk.perception.features"]
     assert "hapticsdk.perception.features" in g["hapticsdk.perception.dimensions"]
+    assert "hapticsdk.perception.channels" in g["hapticsdk.devices.actuators"]
+    assert "hapticsdk.devices.actuators" in g["hapticsdk.runtime.loop"]
     assert g["hapticsdk.compiler"] >= {"hapticsdk.compiler.compile"}
 
 
@@ -148,10 +150,12 @@ def test_no_import_cycle():
 
 
 #: the request's path as dependencies: perception (features, dimensions, models,
-#: materials: what every later stage speaks in), a scene, the solvers (targets -> features, which
+#: materials, channels: what every later stage speaks in), the devices (actuators, safety,
+#: device options: scene, plan and compiler read the device options, the runtime drives the
+#: actuators; devices are the request's last stage but import only perception), a scene, the solvers (targets -> features, which
 #: the plan's model provenance and the compiler call), the plan (the data the compiler
 #: makes), the compiler, the runtime; a stage may import an earlier one, never a later one
-STAGES = ("hapticsdk.perception", "hapticsdk.scene", "hapticsdk.solvers", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
+STAGES = ("hapticsdk.perception", "hapticsdk.devices", "hapticsdk.scene", "hapticsdk.solvers", "hapticsdk.plan", "hapticsdk.compiler", "hapticsdk.runtime")
 
 
 def _stage(mod: str) -> int | None:
@@ -168,7 +172,8 @@ def test_no_stage_imports_a_later_stage():
         if s is None:
             continue
         upward += [f"{mod} -> {d}" for d in sorted(deps) if (_stage(d) or -1) > s]
-    assert not upward, "upward imports along perception -> scene -> solvers -> plan -> compiler -> runtime: " + "; ".join(upward)
+    order = " -> ".join(s.removeprefix("hapticsdk.") for s in STAGES)
+    assert not upward, f"upward imports along {order}: " + "; ".join(upward)
 
 
 #: the first-party plugins and the example plugin: they import the core's new places too
@@ -210,6 +215,7 @@ def test_the_checks_catch_a_cycle_and_an_upward_edge():
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert _stage("hapticsdk.runtime.render") > _stage("hapticsdk.scene.model")
     assert _stage("hapticsdk.scene.model") > _stage("hapticsdk.perception.materials")
+    assert _stage("hapticsdk.perception.channels") < _stage("hapticsdk.devices.actuators") < _stage("hapticsdk.scene")
 
 
 #: where the repository's own code lives besides the core: every file there is read

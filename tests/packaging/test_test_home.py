@@ -12,7 +12,7 @@ from pathlib import Path
 import platformdirs
 
 from hapticsdk.calibration.store import calibration_dir
-from hapticsdk.device_options import device_config_path
+from hapticsdk.devices.device_options import device_config_path
 from hapticsdk.fileio import cache_dir
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.devices.actuators import ActuatorLimits, DeviceState, HapticDevice
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
 from hapticsdk.errors import DeviceError, RecordingError
 from hapticsdk.runlog import PlaybackDevice, RunRecorder, load_run
@@ -139,7 +139,7 @@ def test_playback_end_of_run(recorded):
 
 
 def test_playback_via_entry_point(recorded):
-    from hapticsdk.actuators import create_actuator
+    from hapticsdk.devices.actuators import create_actuator
     try:
         dev = create_actuator("playback-virtual", run=str(recorded[0]))
     except Exception as exc:  # core not (re)installed with the entry point

@@ -120,7 +120,7 @@ class _Flicker3(VirtualProbe):
         self._rng = np.random.default_rng(seed)
 
     def _read_state(self):
-        from hapticsdk.actuators import DeviceState
+        from hapticsdk.devices.actuators import DeviceState
         p = self._lo + self._q * (self._rng.random(3) < 0.5)
         return DeviceState(t=self.t, position_mm=p, velocity_mm_s=np.zeros(3))
 

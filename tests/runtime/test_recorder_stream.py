@@ -10,7 +10,7 @@ import signal
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import SensedState
+from hapticsdk.devices.actuators import SensedState
 from hapticsdk.runlog import load_run
 from hapticsdk.runtime import recorder as rec
 

@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, DeviceState, SensedState
+from hapticsdk.devices.actuators import Actuator, DeviceState, SensedState
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError
 from hapticsdk.runtime import ServoLoop
-from hapticsdk.safety import SafetyLayer
-from hapticsdk.actuators import ActuatorLimits
+from hapticsdk.devices.safety import SafetyLayer
+from hapticsdk.devices.actuators import ActuatorLimits
 from hapticsdk.sim.finger import press_slide
 from hapticsdk.sim.probe import VirtualProbe
 

@@ -9,9 +9,9 @@ import threading
 import pytest
 
 import hapticsdk as hs
-from hapticsdk.actuators import ActuatorLimits
+from hapticsdk.devices.actuators import ActuatorLimits
 from hapticsdk.errors import ServoProcessDied, SessionError, ValidationError
-from hapticsdk.safety import SafetyLayer
+from hapticsdk.devices.safety import SafetyLayer
 from hapticsdk.sim.finger import Trajectory
 
 PAD = {"schema_version": 1, "name": "pad",

@@ -16,10 +16,10 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState
 from hapticsdk.perception.dimensions import ChannelCommand, TickInput
 from hapticsdk.errors import ValidationError
-from hapticsdk.safety import SafetyLayer
+from hapticsdk.devices.safety import SafetyLayer
 
 hardness = pytest.importorskip("hapticsdk_hardness.dimension")
 roughness = pytest.importorskip("hapticsdk_roughness.dimension")

@@ -11,7 +11,7 @@ import tracemalloc
 
 import pytest
 
-from hapticsdk.device_options import ENV_CONFIG, MAX_CONFIG_BYTES, trusted_options
+from hapticsdk.devices.device_options import ENV_CONFIG, MAX_CONFIG_BYTES, trusted_options
 from hapticsdk.errors import ValidationError
 from hapticsdk.schemas_io import MAX_JSON_BYTES, read_json
 

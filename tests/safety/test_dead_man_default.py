@@ -3,7 +3,7 @@ output the switch cut comes back through the start gate and ramp, never as a ste
 
 import pytest
 
-from hapticsdk.safety import SafetyLayer, SafetySettings, default_command_timeout_s
+from hapticsdk.devices.safety import SafetyLayer, SafetySettings, default_command_timeout_s
 
 
 def _backends():
@@ -28,7 +28,7 @@ def _backends():
 
 @pytest.mark.parametrize("gap", [0.02, 0.05, 0.3, 5.0])
 def test_the_default_is_the_layers_restart_gap(gap):
-    from hapticsdk.actuators import ActuatorLimits
+    from hapticsdk.devices.actuators import ActuatorLimits
     layer = SafetyLayer(ActuatorLimits(max_force_n=1.0), settings=SafetySettings(restart_after_s=gap))
     assert default_command_timeout_s(layer) == min(gap, 1.0)
     assert default_command_timeout_s(None) == SafetySettings.restart_after_s

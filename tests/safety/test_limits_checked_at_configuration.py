@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import ActuatorLimits
+from hapticsdk.devices.actuators import ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
-from hapticsdk.safety import SafetyLayer, declared_limits
+from hapticsdk.devices.safety import SafetyLayer, declared_limits
 
 NAN, INF = float("nan"), float("inf")
 
@@ -57,7 +57,7 @@ def test_assigning_a_bad_declaration_keeps_the_limits_in_force(fields, name):
 
 
 def test_an_actuator_declaring_bad_limits_fails_when_built_not_on_a_tick():
-    from hapticsdk.actuators import Actuator
+    from hapticsdk.devices.actuators import Actuator
 
     class Bad(Actuator):
         name = "bad-limits"

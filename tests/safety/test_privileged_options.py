@@ -16,9 +16,9 @@ from typing import Any, ClassVar
 
 import pytest
 
-from hapticsdk.actuators import Actuator
+from hapticsdk.devices.actuators import Actuator
 from hapticsdk.compiler import compile_scene
-from hapticsdk.device_options import (ENV_CONFIG, ENV_OPTIONS, PrivilegedOptionError, parse_device_option,
+from hapticsdk.devices.device_options import (ENV_CONFIG, ENV_OPTIONS, PrivilegedOptionError, parse_device_option,
                                       privileged_options, trusted_options)
 from hapticsdk.errors import ValidationError
 from hapticsdk.plugins import registry
@@ -241,7 +241,7 @@ def test_libhd_loader_refuses_untrusted_candidates(tmp_path, monkeypatch):
 def test_the_device_configuration_is_read_again_when_it_changes(tmp_path, monkeypatch):
     import json as _json
 
-    from hapticsdk.device_options import trusted_options
+    from hapticsdk.devices.device_options import trusted_options
     from hapticsdk.fileio import atomic_write_json
     cfg = tmp_path / "devices.json"
     monkeypatch.setenv("HAPTICSDK_DEVICE_CONFIG", str(cfg))

@@ -6,7 +6,7 @@ from typing import Any, ClassVar
 
 import pytest
 
-from hapticsdk.actuators import Actuator
+from hapticsdk.devices.actuators import Actuator
 from hapticsdk.compiler import compile_scene
 from hapticsdk.plugins import registry
 from hapticsdk.runtime.render import render_plan

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from hapticsdk.actuators import Actuator
+from hapticsdk.devices.actuators import Actuator
 from hapticsdk.errors import ValidationError
 from hapticsdk.scene.limits import MAX_SECONDS, PERIOD_RANGE_S, check_period, check_seconds
 

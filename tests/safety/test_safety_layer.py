@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
-from hapticsdk.safety import SafetyLayer, SafetySettings
+from hapticsdk.devices.safety import SafetyLayer, SafetySettings
 
 PERIOD = 0.001
 LIMITS = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3, frequency_range_hz=(30.0, 120.0),

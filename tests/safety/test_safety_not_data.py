@@ -11,7 +11,7 @@ import os
 import pytest
 
 from hapticsdk.compiler import compile_scene
-from hapticsdk.device_options import (ENV_CONFIG, ENV_OPTIONS, PRIVILEGED_SETTINGS, PrivilegedOptionError,
+from hapticsdk.devices.device_options import (ENV_CONFIG, ENV_OPTIONS, PRIVILEGED_SETTINGS, PrivilegedOptionError,
                                       check_data_settings, energy_option_ceilings, trusted_options)
 from hapticsdk.errors import ValidationError
 from hapticsdk.plugins import registry

@@ -16,7 +16,7 @@ import signal
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, stops_since
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits, stops_since
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError
 from hapticsdk.runtime import ServoLoop, SimulatedClock
@@ -261,7 +261,7 @@ def test_one_actuator_whose_stop_raises_does_not_keep_the_others_running():
 def test_stop_all_stops_every_actuator_when_one_stop_raises(monkeypatch):
     """The process-wide stop (signals, interpreter exit) reaches every open actuator even
     when one backend's stop raises a BaseException; that exception comes out afterwards."""
-    from hapticsdk import actuators as A
+    from hapticsdk.devices import actuators as A
 
     bad, good = Out("vib-a"), Out("vib-b")
     for a in (bad, good):
@@ -316,7 +316,7 @@ def test_stops_are_noted_for_the_interrupt_message():
 def test_render_plan_closes_every_actuator_on_an_interrupt(monkeypatch):
     """render_plan: the interrupt reaches the caller and every actuator of the plan is
     stopped and closed (the ExitStack), none left in the open-actuator registry."""
-    from hapticsdk import actuators as A
+    from hapticsdk.devices import actuators as A
     from hapticsdk.compiler import compile_scene
     from hapticsdk.runtime.render import render_plan
     from hapticsdk.scene import Scene

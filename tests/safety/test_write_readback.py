@@ -97,7 +97,7 @@ def _plan_writer(tmp_path):
 def _runlog_writer(tmp_path, monkeypatch):
     import hapticsdk.runlog as rl
     from hapticsdk.runlog import RunRecorder
-    from hapticsdk.actuators import ChannelCommand, DeviceState
+    from hapticsdk.devices.actuators import ChannelCommand, DeviceState
 
     def make(p):
         rec = RunRecorder(p)

@@ -11,7 +11,7 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.plugins import registry
 from hapticsdk.runtime.render import render_plan

@@ -5,7 +5,7 @@ from typing import ClassVar
 
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.compiler import compile_scene
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import PluginError, ValidationError

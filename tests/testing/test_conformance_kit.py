@@ -8,7 +8,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension
 from hapticsdk.perception.features import Feature
 from hapticsdk.perception.models import PerceptionModel

@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.perception.features import Feature, FeatureSpace
 from hapticsdk.perception.models import MLPModel, PerceptionModel

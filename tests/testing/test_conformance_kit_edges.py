@@ -17,7 +17,7 @@ from typing import Any, ClassVar
 
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.testing import check_actuator, check_device
 from hapticsdk.testing.conformance import format_report

@@ -10,7 +10,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.devices.actuators import ActuatorLimits, DeviceState, HapticDevice
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError
 from hapticsdk.testing import check, check_device

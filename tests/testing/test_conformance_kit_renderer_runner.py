@@ -351,7 +351,7 @@ class StopAborts(Coil):
 
 
 def test_a_base_exception_from_plugin_code_is_a_violation_of_the_rule_that_ran_it():
-    from hapticsdk.actuators import _OPEN_ACTUATORS
+    from hapticsdk.devices.actuators import _OPEN_ACTUATORS
     try:
         v = check_actuator(StopAborts)
     finally:   # the abort left instances open: keep them from the exit-time stop_all

@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DeviceState
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.errors import ValidationError
 from hapticsdk.perception.features import Feature, FeatureSpace

@@ -206,7 +206,7 @@ class Session:
         settings = plan.settings
         self._settings = settings
         servo = dict(settings.get("servo") or {})
-        from ...device_options import check_data_settings
+        from ...devices.device_options import check_data_settings
         check_data_settings(settings, field="scene.settings")  # safety is not data (issue 31)
         period = float(period_s if period_s is not None else servo.get("period_s", 0.001))
         # devices: role -> (actuator, options), one actuator per role for every material

@@ -215,7 +215,7 @@ class _Servo:
     def build(self) -> None:
         from contextlib import ExitStack
 
-        from ...actuators import Actuator, HapticDevice
+        from ...devices.actuators import Actuator, HapticDevice
         from ...plan import FALLBACK_SENSOR, RenderPlan
         from ...plugins import registry
         from ...scene.geometry import HitTester, shape_from_dict
@@ -670,7 +670,7 @@ class _Servo:
 
     def shutdown(self) -> dict[str, Any]:
         """Stop every actuator, end the loop, close the devices; a small summary."""
-        from ...actuators import stops_since
+        from ...devices.actuators import stops_since
         t0 = time.monotonic()
         out: dict[str, Any] = {"reason": self.reason, "message": self.message,
                                "commands": {**self.cmd_stats,

@@ -26,7 +26,7 @@ plugin-api-declared):
 * ``hooks``: hookimpls.
 
 The rules that judge what an actuator *outputs* read it back
-(:meth:`hapticsdk.actuators.Actuator.read_back`: the physical output where the
+(:meth:`hapticsdk.devices.actuators.Actuator.read_back`: the physical output where the
 actuator declares ``readback_source = "output"``, else the backend's own record of its
 last write, which the result's ``notes`` say) after holding each command for the safety
 layer's ramp time plus the declared ``limits.settle_time_s``, and on while what the safety
@@ -69,7 +69,7 @@ name is still exported here, the documented home):
 
 from __future__ import annotations
 
-from ...actuators import READBACK_RTOL as READBACK_RTOL  # re-exported: the kit's name since 1.1
+from ...devices.actuators import READBACK_RTOL as READBACK_RTOL  # re-exported: the kit's name since 1.1
 from .actuator_drive import ALTERNATE_WRITES, HOLD_LIMIT_S, STALL_RUN_S, STATE_STEPS_S, THREAD_GRACE_S
 from .dimension_rules import (CLOCK_EPOCHS_S, COST_FACTOR, COST_REPEATS, COST_ROWS, FORCE_PLAUSIBILITY_FACTOR,
                               GROWTH_FACTOR, GROWTH_POINTS_S)

@@ -12,7 +12,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ...actuators import Actuator, ActuatorLimits, HapticDevice, readback_tolerance
+from ...devices.actuators import Actuator, ActuatorLimits, HapticDevice, readback_tolerance
 from ...errors import ValidationError
 from ...perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
 from .timing import KIT_PERIOD_S, _monotonic, _perf_counter, _sim_advance
@@ -150,7 +150,7 @@ def _reports_output(act: Any) -> bool:
     return getattr(act, "readback_source", "drive") == "output"
 
 
-#: read-back tolerance of one field (:func:`hapticsdk.actuators.readback_tolerance`: the
+#: read-back tolerance of one field (:func:`hapticsdk.devices.actuators.readback_tolerance`: the
 #: rule the render's final check uses too)
 _tol = readback_tolerance
 
@@ -460,7 +460,7 @@ class _StillProbe(HapticDevice):
         pass
 
     def _read_state(self) -> Any:
-        from ...actuators import DeviceState
+        from ...devices.actuators import DeviceState
         return DeviceState(t=self.t, position_mm=np.array([0.0, -1.0, 0.0]), velocity_mm_s=np.zeros(3))
 
     def _step(self, dt: float) -> None:

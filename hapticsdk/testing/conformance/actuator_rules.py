@@ -12,7 +12,7 @@ from typing import Any, Callable, cast
 
 import numpy as np
 
-from ...actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevice
+from ...devices.actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevice
 from ...errors import DeviceError, PluginError, ValidationError
 from ...perception.dimensions import ChannelCommand
 from .actuator_drive import (STALL_RUN_S, THREAD_GRACE_S, _Spy, _advance, _alternate_once, _assert_matches,
@@ -305,7 +305,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             "a failing backend _close was not reported (close_error is not set): nobody can see it"
 
     def r_privileged() -> None:
-        from ...device_options import privileged_options
+        from ...devices.device_options import privileged_options
         try:
             priv = privileged_options(cls)
         except PluginError as exc:

@@ -13,7 +13,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from ...actuators import ActuatorLimits
+from ...devices.actuators import ActuatorLimits
 from ...errors import ValidationError
 from ...perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
 from ...perception.features import Feature, FeatureSpace

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping, Sequence
 
-from ...actuators import HapticDevice
+from ...devices.actuators import HapticDevice
 from ...errors import PluginError, ValidationError
 from .actuator_rules import _actuator_rules
 from .api_rule import _api_rule

@@ -47,7 +47,7 @@ def loop(jack):
 
 
 def _coil(**kw):
-    from hapticsdk.safety import SafetyLayer
+    from hapticsdk.devices.safety import SafetyLayer
     from hapticsdk_hardness.audio import VoiceCoilAudio
     return VoiceCoilAudio(safety=SafetyLayer(VoiceCoilAudio.limits, ramp_time_s=0.0), **kw)
 
@@ -326,7 +326,7 @@ def _silent_then_gone(loop, t_kill, audio_pid):
 OWNER = """
 import os, sys, time
 from hapticsdk.perception.dimensions import ChannelCommand
-from hapticsdk.safety import SafetyLayer
+from hapticsdk.devices.safety import SafetyLayer
 from hapticsdk_hardness.audio import VoiceCoilAudio
 coil = VoiceCoilAudio(device="system", command_timeout_s=1.0,
                       safety=SafetyLayer(VoiceCoilAudio.limits, ramp_time_s=0.0)).open()

@@ -18,7 +18,7 @@ import pytest
 
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError
-from hapticsdk.safety import SafetyLayer
+from hapticsdk.devices.safety import SafetyLayer
 from hapticsdk.testing import DeviceConformance
 
 HERE = Path(__file__).parent

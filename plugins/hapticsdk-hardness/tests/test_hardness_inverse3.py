@@ -15,7 +15,7 @@ import pytest
 
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError
-from hapticsdk.safety import SafetyLayer
+from hapticsdk.devices.safety import SafetyLayer
 from hapticsdk.testing import DeviceConformance
 
 
@@ -160,7 +160,7 @@ class TestInverse3Conformance(DeviceConformance):
 def test_watchdog_deadline_is_the_safety_layers_restart_gap(fake):
     """The default ``command_timeout_s`` is the safety layer's ``restart_after_s``: force
     the watchdog cut comes back gated and ramped from zero, never as a step."""
-    from hapticsdk.safety import SafetySettings
+    from hapticsdk.devices.safety import SafetySettings
     from hapticsdk_hardness.inverse3 import Inverse3
     assert Inverse3().command_timeout_s == SafetySettings().restart_after_s
     safety = SafetyLayer(Inverse3.limits, settings=SafetySettings(restart_after_s=0.03))

@@ -135,7 +135,7 @@ def _hold(dev, force_n, seconds):
 
 
 def _dev(stub_lib, **kw):
-    from hapticsdk.safety import SafetyLayer
+    from hapticsdk.devices.safety import SafetyLayer
     return oh.OmniOpenHaptics(library=stub_lib, safety=SafetyLayer(oh.OmniOpenHaptics.limits, ramp_time_s=0.0), **kw)
 
 

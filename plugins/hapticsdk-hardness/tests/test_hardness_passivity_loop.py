@@ -37,7 +37,7 @@ class _RawWall(DimensionRenderer):
         self.k = k
 
     def tick(self, inp):
-        from hapticsdk.actuators import ChannelCommand
+        from hapticsdk.devices.actuators import ChannelCommand
         return [ChannelCommand("force", self.k * inp.penetration_mm if inp.in_contact else 0.0)]
 
 

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from hapticsdk import actuators as core_act
+from hapticsdk.devices import actuators as core_act
 from hapticsdk.perception.dimensions import ChannelCommand, TickInput
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, SafetyError, TransportError
 from hapticsdk_roughness import bridge_protocol as bp

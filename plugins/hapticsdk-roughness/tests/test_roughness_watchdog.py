@@ -22,7 +22,7 @@ import time
 import numpy as np
 import pytest
 
-from hapticsdk import actuators as core_act
+from hapticsdk.devices import actuators as core_act
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime import ServoLoop

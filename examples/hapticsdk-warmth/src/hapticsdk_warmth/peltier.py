@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand
 
 from .thermal import T_SKIN_C

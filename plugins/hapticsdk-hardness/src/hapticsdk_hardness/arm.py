@@ -36,7 +36,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
+from hapticsdk.devices.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 
@@ -88,7 +88,7 @@ class ForceArm(HapticDevice):
         command_timeout_s: zero force when the last command is older than this (s).
             Default (None): the safety layer's ``restart_after_s`` (50 ms by default; at most
             1 s), the gap after which
-            :class:`~hapticsdk.safety.SafetyLayer` gates and ramps force again, so force
+            :class:`~hapticsdk.devices.safety.SafetyLayer` gates and ramps force again, so force
             the watchdog cut never returns as a step when the servo resumes; a shorter
             deadline would (a gap between the two resumes at full force at once).
         model: model name to use when the device does not report one it knows
@@ -120,7 +120,7 @@ class ForceArm(HapticDevice):
         super().__init__(label=label, safety=safety, **options)
         if not (isinstance(surface_mm, (int, float)) and np.isfinite(surface_mm)):
             raise ValidationError("must be a finite number of mm", field="options.surface_mm")
-        from hapticsdk.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
+        from hapticsdk.devices.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
         command_timeout_s = _deadline(self.safety, command_timeout_s)
         if model is not None and model not in self.MODELS:
             raise ValidationError(f"unknown model {model!r}; one of {sorted(self.MODELS)}", field="options.model")
@@ -182,7 +182,7 @@ class ForceArm(HapticDevice):
     # -- HapticDevice backend ----------------------------------------------------------------
     def _open(self) -> None:
         from hapticsdk.runtime.watchdog import CommandWatchdog
-        from hapticsdk.safety import SafetyLayer
+        from hapticsdk.devices.safety import SafetyLayer
         self._io_error = None
         self._force_dev = (0.0, 0.0, 0.0)
         with self._io:

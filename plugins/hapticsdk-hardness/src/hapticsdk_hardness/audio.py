@@ -52,7 +52,7 @@ Silence on every stop path:
 The device is chosen by ``device``, a PortAudio device name (substring, as
 ``sounddevice`` matches it) or index: a privileged option (it picks hardware that a
 scene file must not choose), set in the user device configuration, the environment
-or on the command line (:mod:`hapticsdk.device_options`).
+or on the command line (:mod:`hapticsdk.devices.device_options`).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 from hapticsdk.install_hints import pip_hint
@@ -137,7 +137,7 @@ class VoiceCoilAudio(Actuator):
         command_timeout_s: the callback renders silence when the last command is older
             (s). Default (None): the safety layer's ``restart_after_s`` (50 ms by default;
             at most 1 s), so sound the switch cut returns through the layer's ramp when
-            the servo resumes (:func:`hapticsdk.safety.default_command_timeout_s`).
+            the servo resumes (:func:`hapticsdk.devices.safety.default_command_timeout_s`).
         isolation: ``"process"`` (default on POSIX): the stream runs in an audio process
             of its own, fed through shared memory, so no thread of the application shares
             the callback's interpreter lock; ``"thread"``: in this process (the default
@@ -181,7 +181,7 @@ class VoiceCoilAudio(Actuator):
             raise ValidationError("must be in (0, 1]", field="options.full_scale")
         if not (isinstance(ramp_s, (int, float)) and 0 < ramp_s <= 1):
             raise ValidationError("must be in (0, 1] s", field="options.ramp_s")
-        from hapticsdk.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
+        from hapticsdk.devices.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
         command_timeout_s = _deadline(self.safety, command_timeout_s)
         isolation = DEFAULT_ISOLATION if isolation is None else isolation
         if isolation not in ISOLATIONS:

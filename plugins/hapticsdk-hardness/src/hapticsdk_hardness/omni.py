@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
+from hapticsdk.devices.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
 from hapticsdk.passivity import classify_wall, critical_stiffness

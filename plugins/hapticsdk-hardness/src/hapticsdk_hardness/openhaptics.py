@@ -16,7 +16,7 @@ Library lookup order: ``library=`` option, ``$HAPTICSDK_LIBHD``, ``ctypes.util.f
 then the platform names below; a failure names every file tried and how to install.
 
 Only trusted code is loaded: ``library`` is a privileged option (never from a scene or plan
-file, see :mod:`hapticsdk.device_options`); a bare name is looked up by the system loader
+file, see :mod:`hapticsdk.devices.device_options`); a bare name is looked up by the system loader
 and must be an HD library name (``libHD.so[.N]``, ``libHD.dylib``, ``HD.dll``); an
 explicit path must be absolute and a regular file (a relative path would resolve against
 the current directory, e.g. a downloaded scene's folder).
@@ -36,7 +36,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import ActuatorLimits, DeviceState, HapticDevice
+from hapticsdk.devices.actuators import ActuatorLimits, DeviceState, HapticDevice
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, DeviceNotFoundError, ValidationError
 
@@ -205,7 +205,7 @@ class OmniOpenHaptics(HapticDevice):
             command is older than this (the Python loop stalled or died). Default (None):
             the safety layer's ``restart_after_s`` (50 ms by default; at most 1 s), so force
             the watchdog cut returns through the layer's ramp when the servo resumes
-            (:func:`hapticsdk.safety.default_command_timeout_s`).
+            (:func:`hapticsdk.devices.safety.default_command_timeout_s`).
         label, safety: as for every actuator.
     """
 
@@ -227,7 +227,7 @@ class OmniOpenHaptics(HapticDevice):
         self.library = library
         self.rate_hz = int(rate_hz)
         self.surface_y_mm = float(surface_y_mm)
-        from hapticsdk.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
+        from hapticsdk.devices.safety import command_timeout_s as _deadline  # default: the restart gap (see Args)
         command_timeout_s = _deadline(self.safety, command_timeout_s, at_most=None)
         self.command_timeout_s = command_timeout_s
         self._force_t = 0.0

@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from hapticsdk.actuators import Actuator, ActuatorLimits
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
 from hapticsdk.synthesis import Oscillator

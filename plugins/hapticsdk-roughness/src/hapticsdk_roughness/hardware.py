@@ -53,7 +53,7 @@ import time
 from collections.abc import Callable
 from typing import Any, ClassVar
 
-from hapticsdk.actuators import Actuator, DriveCapability
+from hapticsdk.devices.actuators import Actuator, DriveCapability
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError, ValidationError
 from hapticsdk.runtime.watchdog import CommandWatchdog

@@ -16,7 +16,7 @@ from typing import Any, ClassVar, cast
 
 import numpy as np
 
-from hapticsdk.actuators import Actuator, ActuatorLimits, DriveCapability
+from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DriveCapability
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
 from hapticsdk.sim.samples import SampleWindow
