@@ -89,6 +89,7 @@ def test_the_sender_keeps_every_check_of_command():
     with pytest.raises(DeviceError, match="faulted"):
         send(ChannelCommand("vib", None, 50.0, 0.5), 0.0)
     a.fault = None
+    assert send(ChannelCommand("vib", None, 50.0, 0.5), 0.0).frequency_hz == 50.0   # the first layer
     a.safety = SafetyLayer(ActuatorLimits(frequency_range_hz=(60.0, 70.0), max_amplitude=0.1), ramp_time_s=0.0)
     out = send(ChannelCommand("vib", None, 50.0, 0.5), 0.001)   # the layer assigned after binding
     assert (out.frequency_hz, out.amplitude) == (60.0, 0.1)
