@@ -908,8 +908,8 @@ class ServoLoop:
             # velocity_floats_mm_s): a keyword call costs ~0.3 us more at 1 kHz. Every
             # renderer of the object gets this one input; its velocity array (read-only)
             # is built on the first read
-            inp = _LoopInput(t, dt, pen_in, None, in_contact, normal, o.name, (f0, f1, f2), self._v_step,
-                             (w0, w1, w2))
+            inp = _LoopInput(t, dt, pen_in, None, in_contact, normal, o.name, (f0, f1, f2),  # type: ignore[arg-type]
+                             self._v_step, (w0, w1, w2))
             if o.sw is None:
                 self._render(o.renderers, inp, forces, vib, events)
             elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):
