@@ -36,7 +36,7 @@ Each tick:
    and out of contact in a spatial scene it holds its last position); the force command
    carries the normal as ``direction``;
 5. each role's command is sent as ``actuator.command(cmd, now=t)`` would send it (bound
-   once per run: :func:`~hapticsdk.actuators.servo_sender`; the safety layer
+   once per run: :func:`~hapticsdk.devices.actuators.servo_sender`; the safety layer
    clamps it) and optionally recorded;
 6. simulated devices are stepped (``device.step(dt)``, then every other simulated
    actuator with a ``step`` method).

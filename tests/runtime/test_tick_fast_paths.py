@@ -1,6 +1,6 @@
 """The servo tick's fast paths send exactly what the public paths send.
 
-* ``actuators.servo_sender``: the loop calls ``Actuator._servo_command(cmd, now)``, bound
+* ``devices.actuators.servo_sender``: the loop calls ``Actuator._servo_command(cmd, now)``, bound
   once per run, instead of ``act.command(cmd, now=t)``; same checks, same safety layer,
   same backend call; a class or an instance that replaces ``command`` is still called.
 * The loop's ``TickInput`` carries the velocity as floats (``velocity_floats_mm_s``) and
