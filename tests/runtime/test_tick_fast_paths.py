@@ -17,8 +17,10 @@ logged velocity with formula (9), an independent path.
 
 from __future__ import annotations
 
+import copy as copy_module
 import dataclasses
 import math
+import pickle
 
 import numpy as np
 import pytest
@@ -159,6 +161,10 @@ def test_the_loop_input_builds_its_array_only_on_read_with_the_floats_values(whe
     inp = floats.inputs[-1][0]
     copy = dataclasses.replace(inp, t=inp.t + 1.0)
     assert np.array_equal(copy.velocity_mm_s, inp.velocity_mm_s) and copy.velocity_floats_mm_s == inp.velocity_floats_mm_s
+    # a renderer may keep, copy or pickle its input (a recorder, a process boundary)
+    for other in (pickle.loads(pickle.dumps(inp)), copy_module.deepcopy(inp)):
+        assert isinstance(other, TickInput) and np.array_equal(other.velocity_mm_s, inp.velocity_mm_s)
+    assert np.array_equal(dataclasses.asdict(inp)["velocity_mm_s"], inp.velocity_mm_s)
 
 
 def _scene(public: bool):
