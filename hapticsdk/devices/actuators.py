@@ -456,6 +456,13 @@ class Actuator(ABC):
         (clamped to the declared limits, ramped, counted); the command actually sent is
         returned. A non-finite value raises :class:`ValidationError`; a device that fails
         is put in its safe state and the error re-raised as :class:`DeviceError`."""
+        return self._servo_command(cmd, time.monotonic() if now is None else now)
+
+    def _servo_command(self, cmd: ChannelCommand, now: float) -> ChannelCommand:
+        """:meth:`command` with the time given (what the servo loop calls every tick, as a
+        method bound once per run; see :func:`servo_sender`): every check of
+        :meth:`command`, the same safety layer (looked up on each call: ``safety`` may be
+        replaced), the same backend ``_command``. Not for backends to override."""
         if not self._is_open:
             raise DeviceError("command on a closed actuator; call open() first", device=self.label)
         if self.fault is not None:
@@ -471,7 +478,7 @@ class Actuator(ABC):
         v = cmd.amplitude
         if v is not None and not _isfinite(v):
             raise ValidationError("amplitude is NaN or infinite", field=f"{self.label}.amplitude")
-        safe = self.safety.filter(cmd, time.monotonic() if now is None else now)
+        safe = self.safety.filter(cmd, now)
         try:
             self._command(safe)
         except Exception as exc:
@@ -657,6 +664,21 @@ class HapticDevice(Actuator):
 
     def _step(self, dt: float) -> None:
         """Simulated devices integrate here; real ones ignore it."""
+
+
+def servo_sender(act: Actuator) -> Any:
+    """What a servo loop calls to send ``act`` one tick's command, ``send(cmd, now)``:
+    the bound :meth:`Actuator._servo_command` (bound once per run, no keyword handling,
+    no clock read) when the actuator's class and instance keep the base class's
+    :meth:`Actuator.command`; otherwise a call of its own ``command(cmd, now=now)``, so a
+    class or an instance that replaces ``command`` (a wrapper, a test double) is called
+    as before."""
+    command = act.command
+    # (not ``vars(act)``: reading an instance's __dict__ makes CPython 3.11 keep it as a
+    # dict, and every attribute access on that actuator slower, each tick)
+    if getattr(command, "__func__", None) is Actuator.command and getattr(command, "__self__", None) is act:
+        return act._servo_command
+    return lambda cmd, now: command(cmd, now=now)
 
 
 def create_actuator(name: str, **options: Any) -> Actuator:

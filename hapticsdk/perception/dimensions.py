@@ -112,6 +112,11 @@ class TickInput:
             ``q`` the device's declared ``encoder_resolution_mm``); 0 for a device that
             declares none. A speed gate uses it as its hysteresis width (docs/runtime.md,
             "Gates with hysteresis").
+        velocity_floats_mm_s: ``velocity_mm_s`` as plain floats ``(v0, v1, v2)`` (mm/s),
+            the same numbers, for renderers that read a component every tick (indexing
+            the array makes a numpy scalar); None when the caller gives none (then read
+            ``velocity_mm_s``). The servo loop gives both, and builds the array only when
+            a renderer reads it.
     """
 
     t: float
@@ -123,6 +128,7 @@ class TickInput:
     object: str | None = None
     velocity_filtered_mm_s: tuple[float, float, float] | None = None
     speed_step_mm_s: float = 0.0
+    velocity_floats_mm_s: tuple[float, float, float] | None = None
 
 
 @dataclass

@@ -35,7 +35,8 @@ Each tick:
    when the probe moves from one object to another, as when a wall is met from outside,
    and out of contact in a spatial scene it holds its last position); the force command
    carries the normal as ``direction``;
-5. each role's command is sent with ``actuator.command(cmd, now=t)`` (the safety layer
+5. each role's command is sent as ``actuator.command(cmd, now=t)`` would send it (bound
+   once per run: :func:`~hapticsdk.devices.actuators.servo_sender`; the safety layer
    clamps it) and optionally recorded;
 6. simulated devices are stepped (``device.step(dt)``, then every other simulated
    actuator with a ``step`` method).
@@ -83,7 +84,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..devices.actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3
+from ..devices.actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3, servo_sender
 from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
@@ -211,7 +212,8 @@ def _distinct(acts: Any) -> list:
 class _Slot:
     """Per-role bookkeeping."""
 
-    __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd", "log_n", "log_f", "log_a")
+    __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd", "send", "log_n", "log_f",
+                 "log_a")
     #: what the role was sent, by tick: (cap,) views of the loop's log ring (set by start)
     log_n: np.ndarray
     log_f: np.ndarray
@@ -228,6 +230,8 @@ class _Slot:
         #: the loop's command record of this role, reused every tick (the actuator keeps
         #: only what its safety layer returns, a new record)
         self.cmd = ChannelCommand(role, 0.0 if is_force else None, None, None if is_force else 0.0)
+        #: ``send(cmd, now)``: the actuator's command path, bound when the run starts
+        self.send = servo_sender(act)
 
 
 class _Switch:
@@ -293,6 +297,31 @@ class _ContactState(SensedState):
         c = cls.of(st.t, st.px, st.py, st.pz, st.vx, st.vy, st.vz, st.fx, st.fy, st.fz, st.buttons)
         c._pen = pen
         return c
+
+
+class _LoopInput(TickInput):
+    """The loop's :class:`~hapticsdk.dimensions.TickInput`: ``velocity_mm_s`` is built
+    from ``velocity_floats_mm_s`` on its first read and kept (the same read-only (3,)
+    array the input carried before, the same numbers), so a tick whose renderers read
+    the floats makes no numpy array: on the benchmark's tick, creating one array and
+    indexing it cost ~8 % of the tick's CPU time, most of it in re-loading numpy's code
+    into the CPU caches each tick (docs/runtime.md, "Tick figures")."""
+
+    _va: "np.ndarray | None"
+
+    @property   # type: ignore[override]
+    def velocity_mm_s(self) -> np.ndarray:
+        """Probe velocity in the contact frame, (3,) read-only (mm/s): see TickInput."""
+        a = self._va
+        if a is None:
+            v = self.velocity_floats_mm_s
+            a = self._va = _frozen3(v[0], v[1], v[2])   # type: ignore[index]
+        return a
+
+    @velocity_mm_s.setter
+    def velocity_mm_s(self, value: Any) -> None:
+        # TickInput's __init__ (also dataclasses.replace) assigns the field: None = build on read
+        self._va = value
 
 
 def _check_renderers(renderers: Sequence[DimensionRenderer], actuators: Mapping[str, Actuator],
@@ -859,7 +888,6 @@ class ServoLoop:
         if idx >= 0 and not self.paused:
             o = self._objs[idx]
             if direction is None:
-                vin = st.velocity_mm_s
                 normal = _UP
                 w0, w1, w2 = v0, v1, v2
             else:
@@ -867,9 +895,6 @@ class ServoLoop:
                 vn = v0 * nx + v1 * ny + v2 * nz
                 tx, ty, tz = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
                 w0, w1, w2 = math.sqrt(tx * tx + ty * ty + tz * tz), vn, 0.0
-                # read-only, as the state's own array on the plane: every renderer of the
-                # object gets this one TickInput
-                vin = _frozen3(w0, w1, w2)
                 normal = direction
             if dt != self._vf_dt:   # the coefficient changes only with dt (realtime mode)
                 self._vf_dt = dt
@@ -880,9 +905,12 @@ class ServoLoop:
             f1 = self._vf1 = self._vf1 + a * (w1 - self._vf1)
             f2 = self._vf2 = self._vf2 + a * (w2 - self._vf2)
             # positional, in TickInput's field order (t, dt, penetration_mm, velocity_mm_s,
-            # in_contact, normal, object, velocity_filtered_mm_s): a keyword call costs
-            # ~0.3 us more at 1 kHz
-            inp = TickInput(t, dt, pen_in, vin, in_contact, normal, o.name, (f0, f1, f2), self._v_step)
+            # in_contact, normal, object, velocity_filtered_mm_s, speed_step_mm_s,
+            # velocity_floats_mm_s): a keyword call costs ~0.3 us more at 1 kHz. Every
+            # renderer of the object gets this one input; its velocity array (read-only)
+            # is built on the first read
+            inp = _LoopInput(t, dt, pen_in, None, in_contact, normal, o.name, (f0, f1, f2),  # type: ignore[arg-type]
+                             self._v_step, (w0, w1, w2))
             if o.sw is None:
                 self._render(o.renderers, inp, forces, vib, events)
             elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):
@@ -930,7 +958,7 @@ class ServoLoop:
                     last = s.act.last_command
                     cmd.frequency_hz = last.frequency_hz if last is not None else None
             try:
-                out = s.act.command(cmd, now=t)
+                out = s.send(cmd, t)
             except DeviceError as exc:
                 self._set_fault(exc, s.act.label)
                 return False

@@ -280,7 +280,9 @@ def test_actuator_command_rejects_each_non_finite_field(field, bad):
     assert act.sent == [out] and out.force_n == 0.5
 
 
-def _inputs():
+def _inputs(floats: bool = False):
+    """Seeded inputs; with ``floats`` each also carries its velocity as floats, as the
+    servo loop gives it."""
     rng = np.random.default_rng(3)
     out = []
     for k in range(400):
@@ -289,7 +291,8 @@ def _inputs():
         if k % 50 == 0:
             vx = 20.0 if k % 100 == 0 else -19.999999999  # on and just below the gate
         out.append(TickInput(t=k * 0.001, dt=0.001, penetration_mm=pen,
-                             velocity_mm_s=np.array([vx, 0.0, 0.0]), in_contact=pen > 0.0))
+                             velocity_mm_s=np.array([vx, 0.0, 0.0]), in_contact=pen > 0.0,
+                             velocity_floats_mm_s=(vx, 0.0, 0.0) if floats else None))
     return out
 
 
@@ -313,15 +316,16 @@ def test_hardness_tick_is_formula_8_exactly(gs):
             assert (coil.force_n, coil.frequency_hz, coil.amplitude) == (None, f_coil, 0.0)
 
 
+@pytest.mark.parametrize("floats", [False, True])
 @pytest.mark.parametrize("require_contact", [True, False])
-def test_roughness_tick_is_formula_9_exactly(require_contact):
+def test_roughness_tick_is_formula_9_exactly(require_contact, floats):
     fpeak, afpeak = 150.0, 5.0
     r = roughness.RoughnessDimension().renderer({"Fpeak": fpeak, "AFpeak": afpeak},
                                                 require_contact=require_contact, frequency_range_hz=(40.0, 400.0))
     v_out = r.table.voltage_for(fpeak, afpeak)[0]
     last_f = fpeak                                       # within (40, 400): the start frequency
     active = clamps = 0
-    inputs = _inputs()
+    inputs = _inputs(floats)
     for inp in inputs:
         (c,) = r.tick(inp)
         vx = float(inp.velocity_mm_s[0])

@@ -114,7 +114,10 @@ class RoughnessRenderer(DimensionRenderer):
 
     def tick(self, inp: TickInput) -> list[ChannelCommand]:
         self.ticks += 1
-        avx = abs(float(inp.velocity_mm_s[0]))
+        # the floats when the caller gives them (the servo loop does): indexing the array
+        # makes a numpy scalar every tick; the same number either way
+        vt = getattr(inp, "velocity_floats_mm_s", None)
+        avx = abs(float(vt[0] if vt is not None else inp.velocity_mm_s[0]))
         # the speed gate: on a quantised position (speed_step_mm_s > 0) it looks at the
         # filtered speed with a hysteresis of one count's speed step, so count-level
         # chatter never toggles the piezo; on an exact position, the speed itself
