@@ -136,3 +136,26 @@ def test_a_failing_child_is_a_named_error_not_an_internal_one(tmp_path):
     with pytest.raises(baseline.BaselineRunError, match="the baseline tree") as e:
         baseline.run_code(tmp_path, baseline.LIVE, ["process", "none", "0.1", "0.001", "none"])
     assert isinstance(e.value, HapticSDKError)
+
+
+def test_the_live_benchmark_runs_its_session_with_the_heartbeat_off(monkeypatch, tmp_path):
+    """On a loaded machine the application can miss the 250 ms heartbeat; the servo then
+    stops and the benchmark ends instead of measuring (the suite failed once on it under
+    load). The benchmark's session turns the heartbeat off; the parent-process check stays."""
+    import hapticsdk.benchmarks.live as live
+    import hapticsdk.runtime.session as session_pkg
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake_session(*args, **kw):
+        seen.update(kw)
+        raise Stop
+
+    monkeypatch.setattr(session_pkg, "Session", fake_session)
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))   # its recording folder
+    with pytest.raises(Stop):
+        live.run_session("thread", "none", 0.1, record="none", view=False)
+    assert "heartbeat_timeout_s" in seen and seen["heartbeat_timeout_s"] is None
