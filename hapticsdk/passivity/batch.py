@@ -1,0 +1,111 @@
+"""The same controller over many independent cells at once (numpy arrays): the benchmark's
+and the property tests' path; equal to :class:`~hapticsdk.passivity.PassivityController`
+tick by tick (``tests/sim/test_sim_passivity.py``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .plan import _HIST, _SCALES, affordable_force
+from .settings import ControllerSettings
+
+
+def controller_state_batch(n: int) -> dict[str, np.ndarray]:
+    """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
+    z = np.zeros(n)
+    return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
+            "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
+            "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
+            "jh": np.zeros((_HIST, n)),
+            "hp": np.zeros(1, int)}
+
+
+def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "float | np.ndarray",
+                          f_wall: np.ndarray, on: "np.ndarray | bool" = True,
+                          settings: ControllerSettings | None = None,
+                          damping_ns_per_m: "np.ndarray | float | None" = None,
+                          resolution_mm: "np.ndarray | float | None" = None,
+                          max_force_n: "np.ndarray | float | None" = None,
+                          mass_kg: "np.ndarray | float | None" = None) -> np.ndarray:
+    """Vectorised :class:`PassivityController` over many independent cells (same law).
+    ``dt``, ``damping_ns_per_m`` (declared), ``resolution_mm`` and ``max_force_n`` may be
+    per cell and override ``settings``. Cells where ``on`` is False pass the wall force
+    through. Call :func:`controller_commit_batch` after."""
+    s = settings or ControllerSettings()
+    x = np.asarray(x_mm, float)
+    fw = np.nan_to_num(np.asarray(f_wall, float), nan=0.0, posinf=0.0, neginf=0.0)
+    dt = np.broadcast_to(np.asarray(dt, float), x.shape)
+    bd = np.asarray(s.device_damping_ns_per_m if damping_ns_per_m is None else damping_ns_per_m, float)
+    q = np.asarray(s.position_resolution_mm if resolution_mm is None else resolution_mm, float) * 1e-3
+    fm = s.max_force_n if max_force_n is None else max_force_n
+    started = state["started"]
+    q1 = np.where(started, state["q1"], x)
+    q2 = np.where(started, state["q2"], x)
+    dq = (x - q1) * 1e-3
+    f1 = state["f1"]
+    b_lo = s.damping_trust * bd
+    u = state["energy"] + f1 * dq + 0.5 * q * np.abs(f1 - state["f2"])
+    ex = np.maximum(np.abs(dq) - q, 0.0)
+    b_x = np.maximum(b_lo - 0.5 * state["kf"] * dt, 0.0)
+    u = u - b_x * ex * ex / dt
+    ahead = 0.5 * (x - q2) * 1e-3
+    hist = state["hist"]
+    hist[:, ~started] = x[~started]
+    hp = state["hp"][0] = (state["hp"][0] + 1) % _HIST
+    hist[hp] = x
+    jerk = np.zeros(x.shape)
+    for span in _SCALES:
+        d2 = np.abs(x - 2.0 * hist[hp - span] + hist[hp - 2 * span]) * 1e-3 - 2.0 * q
+        np.maximum(jerk, d2 / (span * span), out=jerk)
+    jh = state["jh"]
+    jh[hp] = jerk
+    jerk = jh.max(axis=0)
+    still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
+    state["still"] = still
+    state["q2"] = q1
+    state["q1"] = x.copy()
+    out_prev = state["out"]
+    if fm is None:
+        full = np.maximum(state["full"], np.maximum(np.abs(fw), np.abs(out_prev)))
+        state["full"] = full
+    else:
+        full = np.broadcast_to(np.asarray(fm, float), x.shape)
+    depth = np.maximum(-x * 1e-3, 0.0)
+    spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(2.0 * b_lo / dt * depth, fw), 0.0)
+    if fm is not None:
+        spring = np.minimum(spring, full)
+    step = full * np.minimum(dt / s.ramp_time_s, 1.0)
+    m = s.device_mass_kg if mass_kg is None else mass_kg
+    c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
+    e0 = np.minimum(full * 0.5 * q, s.energy_allowance_j)
+    idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)
+    u = np.where(idle, np.maximum(u, 0.0), u)
+    state["energy"] = np.where(started, u, 0.0)
+    state["overdrawn"] = np.maximum(state["overdrawn"], np.where(started & ~idle, u - e0, 0.0))
+    sg = np.where((fw > 0.0) | ((fw == 0.0) & (out_prev >= 0.0)), 1.0, -1.0)
+    target = sg * fw
+    if fm is not None:
+        target = np.minimum(target, full)
+    target = target - spring
+    p = sg * f1
+    lo = np.where(p - step >= 0.0, p - step, np.minimum(p + step, 0.0))
+    hi = np.maximum(np.minimum(p + step, target), lo)
+    a = hi
+    if s.energy_bound:
+        lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + q / np.maximum(still, 2.0)
+        a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
+    spring = np.where(started & ~idle, spring, 0.0)
+    state["spring"] = spring
+    state["kf"] = np.where(spring > 0.0, spring / np.where(depth > 0.0, depth, 1.0), 0.0)
+    out = np.where(started & ~idle, spring + sg * a, 0.0)
+    state["out"] = out
+    state["started"] = np.ones_like(started)
+    return np.where(on, out, fw)
+
+
+def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray) -> None:
+    """Record the forces actually applied over the coming interval (N)."""
+    f = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
+    state["f2"] = state["f1"]
+    state["f1"] = f - state["spring"]   # the extra actually held (its ramp starts from it)
+    state["out"] = f.copy()

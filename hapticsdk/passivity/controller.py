@@ -1,0 +1,223 @@
+"""The stiff-wall controller of the servo tick: a Colgate spring plus an energy-bounded
+extra (:class:`PassivityController`)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from .plan import _HIST, _affordable_scalar
+from .settings import ControllerSettings
+
+
+class PassivityController:
+    """Passive wall from the device's declared parameters: a Colgate spring plus an
+    energy-bounded extra.
+
+    Per tick call :meth:`step` with the measured position (mm, along the normal, the
+    surface at 0, inside at x < 0), the measured period ``dt`` (s) and the wall's force
+    (N); send the returned force; then call :meth:`commit` with the force the device
+    actually applied (after its safety clamp).
+
+    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = 2 b_lo / dt``,
+    ``b_lo = damping_trust x declared damping``: a spring no stiffer than the trusted
+    damping makes passive under the zero-order hold (Colgate & Schenkel's ``b > K T / 2``).
+    It follows the reading at once (a spring, not a ramp: a ramp on a spring lags it,
+    and a lagging spring gives energy), so the force changes by at most
+    ``K_c |dq|`` plus the extra's ramp step per tick.
+
+    **The extra** ``X = F - P`` carries the rest of the wall. The controller keeps ``U``,
+    an *upper bound* of the energy the extra has given the user, from the readings ``q``
+    and the held extras alone:
+
+        ``U += X_{k-1} dq_k + (Delta/2) |X_{k-1} - X_{k-2}| - b_x max(|dq_k| - Delta, 0)^2 / dt``
+
+    (ZOH pairing: the extra held over an interval times that interval's reading change;
+    summation by parts bounds its true work by this plus ``Delta/2`` per unit of change,
+    plus ``Delta/2 |X|`` at the end; ``b_x = b_lo - K_f dt / 2`` is the damping the spring
+    of secant stiffness ``K_f`` leaves, which dissipates at least ``b_x dy^2 / dt`` per
+    interval with ``|dy| >= |dq| - Delta``). It sends the largest extra, between 0 and
+    ``F_wall - P``, within one ramp step ``s`` of the last, whose plan "hold it one tick,
+    then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = min(F_max Delta / 2,
+    energy_allowance_j)`` if the reading keeps moving at the rate of the last two ticks,
+    changing by up to the largest change of motion seen over the last ``_HIST`` ticks
+    (:func:`affordable_force`).
+    If the motion outruns that prediction the extra ramps down at ``s`` and the excess
+    is booked (``overdrawn_j``).
+
+    **Release.** The spring follows the reading out; the extra ramps to 0 at ``s`` per
+    tick, charged to the same bound, and once the bound is spent only the spring is
+    left (the force never drops below it while the stylus is inside). With no wall force
+    and no output, credit is dropped (``U <- max(U, 0)``); a debt is kept.
+    """
+
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
+                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jh", "_jmax", "_jat")
+
+    def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
+        self.settings = settings or ControllerSettings(**kw)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the energy observed so far (a new run or a new object)."""
+        self.energy_j = 0.0         # U: upper bound of the energy given to the user (J)
+        self.active_ticks = 0       # ticks where the output was below the wall's force
+        self.withheld_n_ticks = 0.0 # sum over ticks of the force withheld (N)
+        self.overdrawn_j = 0.0      # largest U - E0 seen (J): motion beyond the prediction
+        self._q1 = self._q2 = 0.0
+        self._hist = [0.0] * _HIST    # the last readings (mm), a ring; _hp the newest
+        self._hp = 0
+        self._jh = [0.0] * _HIST      # the change-of-motion estimates of the same ticks
+        self._jmax = 0.0              # their largest, at ring index _jat
+        self._jat = 0
+        self._f1 = self._f2 = 0.0   # the extra (applied force minus the spring) over the last two ticks
+        self._out = 0.0
+        self._started = False
+        self._still = 0             # ticks since the reading last changed
+        self._spring = 0.0          # the Colgate spring sent this tick (N)
+        self._kf = 0.0              # its secant stiffness (N/m)
+        self._full = 0.0            # full scale without a declared force limit: the largest force so far
+
+    def step(self, x_mm: float, dt: float, f_wall: float) -> float:
+        """Book the last interval, then return the force (N) to command this tick."""
+        s = self.settings
+        if f_wall != f_wall or f_wall in (math.inf, -math.inf):
+            f_wall = 0.0
+        if not self._started or not dt > 0:
+            if not self._started:
+                self._q1 = self._q2 = x_mm
+                self._hist = [x_mm] * _HIST
+                self._started = True
+            return 0.0 if not dt > 0 else self._out
+        dq = (x_mm - self._q1) * 1e-3
+        q = s.position_resolution_mm * 1e-3
+        h = 0.5 * q
+        f1 = self._f1
+        b_lo = s.damping_trust * s.device_damping_ns_per_m
+        # the extra above the spring: ZOH-paired work plus half a count of reading error
+        # per newton of change (summation by parts); the damping the Colgate spring does
+        # not need (b_lo - K_f T / 2) is credited
+        u = self.energy_j + f1 * dq + h * abs(f1 - self._f2)
+        ex = abs(dq) - q
+        if ex > 0.0:
+            b_x = b_lo - 0.5 * self._kf * dt
+            if b_x > 0.0:
+                u -= b_x * ex * ex / dt
+        ahead = 0.5 * (x_mm - self._q2) * 1e-3
+        # the change of the per-tick motion beyond what quantisation alone makes (2 counts)
+        # the change of the per-tick motion, read over spans of 1-16 ticks (_SCALES)
+        hist = self._hist
+        hp = self._hp + 1
+        if hp == _HIST:
+            hp = 0
+        self._hp = hp
+        hist[hp] = x_mm
+        c2 = 2.0 * s.position_resolution_mm
+        jerk = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2]) - c2
+        d = (abs(x_mm - 2.0 * hist[hp - 2] + hist[hp - 4]) - c2) * 0.25
+        if d > jerk:
+            jerk = d
+        d = (abs(x_mm - 2.0 * hist[hp - 4] + hist[hp - 8]) - c2) * 0.0625
+        if d > jerk:
+            jerk = d
+        d = (abs(x_mm - 2.0 * hist[hp - 8] + hist[hp - 16]) - c2) * 0.015625
+        if d > jerk:
+            jerk = d
+        d = (abs(x_mm - 2.0 * hist[hp - 16] + hist[hp - 32]) - c2) * 0.00390625
+        if d > jerk:
+            jerk = d
+        jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
+        # the largest change of motion over the ring's window (_HIST ticks): a hand that
+        # reversed within it can reverse again; the estimate of this tick alone is blind
+        # between reversals (taps, the finger-and-arm resonance at long periods)
+        jh = self._jh
+        jh[hp] = jerk
+        if jerk >= self._jmax:
+            self._jmax = jerk
+            self._jat = hp
+        elif self._jat == hp:   # the largest left the window: find the next one
+            self._jmax = max(jh)
+            self._jat = jh.index(self._jmax)
+        jerk = self._jmax
+        self._still = self._still + 1 if dq == 0.0 else 0
+        self._q2 = self._q1
+        self._q1 = x_mm
+        # the Colgate spring: the wall up to the stiffness the trusted damping makes
+        # passive (K_c = 2 b_lo / T), as a function of the depth below the surface x = 0
+        depth = -x_mm * 1e-3
+        spring = 0.0
+        kf = 0.0
+        if f_wall > 0.0 and depth > 0.0 and b_lo > 0.0:
+            spring = 2.0 * b_lo / dt * depth
+            if spring > f_wall:
+                spring = f_wall
+        fm = s.max_force_n
+        if fm is not None and spring > fm:
+            spring = fm
+        if spring > 0.0:
+            kf = spring / depth
+        self._spring = spring
+        self._kf = kf
+        if fm is None:
+            # no declared limit: the largest force seen so far is the full scale (a fixed
+            # step, so a ramp to 0 ends; a scale that followed the output would shrink
+            # with it and never reach 0)
+            full = max(self._full, abs(f_wall), abs(self._out))
+            self._full = full
+        else:
+            full = fm
+        step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
+        m = s.device_mass_kg
+        c_m = dt * dt / (2.0 * m) if m else 0.0
+        e0 = full * h
+        if e0 > s.energy_allowance_j:
+            e0 = s.energy_allowance_j
+        if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
+            self.energy_j = u if u > 0.0 else 0.0
+            return 0.0
+        self.energy_j = u
+        if u - e0 > self.overdrawn_j:
+            self.overdrawn_j = u - e0
+        # work in the direction of the wall's force (the last output's when the wall is 0)
+        sg = 1.0 if (f_wall > 0.0 or (f_wall == 0.0 and self._out >= 0.0)) else -1.0
+        target = sg * f_wall
+        if fm is not None and target > fm:
+            target = fm
+        target -= spring
+        p = sg * f1
+        # the extra's ramp: within one step of the last one, and not past 0 while it can reach it
+        lo = p - step
+        if lo < 0.0:
+            lo = 0.0 if p + step >= 0.0 else p + step
+        hi = p + step
+        if hi > target:
+            hi = target if target > lo else lo
+        a = hi
+        if s.energy_bound and hi > lo:
+            # the arm's speed now: the last two ticks' mean, its reading error (half a
+            # count; Delta/n after n > 2 ticks at one reading), and what the held force
+            # added since the middle of those ticks
+            lead = sg * ahead + (1.5 + 0.5 * hi / step) * jerk + q / (self._still if self._still > 2 else 2)
+            a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
+        if a < target:
+            self.active_ticks += 1
+            self.withheld_n_ticks += target - a
+        out = spring + sg * a
+        self._out = out
+        return out
+
+    def commit(self, f_applied: float) -> None:
+        """Record the force the device actually held over the coming interval (N)."""
+        if f_applied != f_applied or f_applied in (math.inf, -math.inf):
+            f_applied = 0.0
+        self._f2 = self._f1
+        self._f1 = f_applied - self._spring   # the extra actually held (the ramp starts from it)
+        self._out = f_applied
+
+    def report(self) -> dict[str, float]:
+        """``energy_bound_j`` (U, J: upper bound of the energy given to the user over the
+        current contact; the credit is dropped between contacts), ``overdrawn_j`` (largest
+        ``U - E0``, J: > 0 only when the motion outran the one-tick prediction),
+        ``withheld_n_ticks`` (N), ``active_ticks``."""
+        return {"energy_bound_j": self.energy_j, "overdrawn_j": self.overdrawn_j,
+                "withheld_n_ticks": self.withheld_n_ticks, "active_ticks": self.active_ticks}

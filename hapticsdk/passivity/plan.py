@@ -1,0 +1,124 @@
+"""The plan of the energy-bounded extra: "hold a force for one tick, then ramp to 0", its
+cost bound and the largest affordable force (vectorised, and in floats for the tick)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+
+#: Spans (ticks) over which the change of motion is read: the second difference
+#: ``x_k - 2 x_(k-m) + x_(k-2m) = a (m T)^2`` under a constant acceleration a, and the
+#: encoder adds at most 2 counts to it, whatever m; so a longer span sees an acceleration
+#: m^2 times smaller above the same quantisation (powers of two up to 16 ticks).
+_SCALES = (1, 2, 4, 8, 16)   # (the scalar tick unrolls these five)
+#: Length of the reading ring (2 x the longest span + 1).
+_HIST = 2 * _SCALES[-1] + 1
+
+
+#: Bisection steps of :func:`affordable_force` (2^-30 of the ramp step: far below any
+#: force a device resolves).
+_BISECT = 30
+
+
+def _ramp_sum(a: Any, s: Any) -> Any:
+    """Upper bound of ``sum_j max(a - j s, 0)`` (N, the forces of a ramp from ``a`` to 0 at
+    ``s`` per tick): ``a`` for ``a <= s``, else ``a^2/(2s) + a/2 + s/8``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(a <= s, a, a * a / (2.0 * s) + 0.5 * a + 0.125 * s)
+
+
+def plan_cost_j(a: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any, half_count_m: Any) -> Any:
+    """Upper bound (J) of the energy the plan "hold ``a`` for one tick, then ramp to 0 at
+    ``s`` per tick" hands to a hand that does not pull the stylus out (all along the
+    force's direction; ``p`` the force held now):
+
+    ``(Delta/2) |p| + lead S + c_m S^2``,  ``S = S(a)`` (:func:`_ramp_sum`)
+
+    The first two terms are the work of the held forces on the free arm of (declared,
+    smallest) mass m starting at the speed ``lead / T``: the forces ``a_j`` held for T each
+    move it ``v0 T + T^2 (sum_{i<j} a_i + a_j / 2) / m`` in tick j, so their work sums to
+    exactly ``v0 T S + T^2 S^2 / (2 m)`` (``c_m = T^2 / 2m``); a hand pushing in, a heavier
+    hand and the arm's damping only take from it. These are *true* displacements, so the
+    only encoder term is the one the booked bound ``U`` leaves open: ``(Delta/2) |p|``, the
+    reading's error times the force held now (summation by parts); ``lead`` carries the
+    velocity estimate's own half count."""
+    a = np.asarray(a, float)
+    S = _ramp_sum(a, s)
+    return half_count_m * np.abs(p) + lead_m * S + push_m_per_n * S * S + 0.0 * a
+
+
+def _plan_slope(a: Any, p: Any, lead_m: Any, c_m: Any, s: Any, c: Any) -> Any:
+    """Derivative of :func:`plan_cost_j` in ``a`` (non-decreasing: the cost is convex)."""
+    S = _ramp_sum(a, s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dS = np.where(a <= s, 1.0, a / s + 0.5)
+    return (lead_m + 2.0 * c_m * S) * dS
+
+
+def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any,
+                     half_count_m: Any) -> Any:
+    """Largest ``a`` in ``[lo, hi]`` with :func:`plan_cost_j` ``<= avail_j`` (vectorised).
+
+    The cost is convex in ``a``: ``hi`` when it fits; otherwise the cost's minimiser on
+    ``[lo, hi]`` (bisection on the slope) and, when that fits, bisection for the crossing
+    between it and ``hi``; when nothing fits, the minimiser (the ramp allows no deeper
+    cut, and it is the plan that overdraws least)."""
+    A, lo, hi, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (
+        avail_j, lo, hi, p, lead_m, push_m_per_n, s, half_count_m)))
+    def cost(a: np.ndarray) -> np.ndarray:
+        return plan_cost_j(a, p, d, c_m, s, c)
+    ok_hi = cost(hi) <= A
+    if ok_hi.all():
+        return hi.copy() if hi.ndim else float(hi)
+    a, b = lo.copy(), hi.copy()
+    for _ in range(_BISECT):
+        m = 0.5 * (a + b)
+        up = _plan_slope(m, p, d, c_m, s, c) > 0
+        b = np.where(up, m, b)
+        a = np.where(up, a, m)
+    amin = np.where(_plan_slope(lo, p, d, c_m, s, c) > 0, lo, a)
+    fits = cost(amin) <= A
+    a, b = amin.copy(), hi.copy()
+    for _ in range(_BISECT):
+        m = 0.5 * (a + b)
+        fit = cost(m) <= A
+        a = np.where(fit, m, a)
+        b = np.where(fit, b, m)
+    out = np.where(ok_hi, hi, np.where(fits, a, lo))
+    return out if out.ndim else float(out)
+
+
+def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
+                       c: float) -> float:
+    """:func:`affordable_force` for one cell, in floats (the servo tick)."""
+    def ramp(a: float) -> float:
+        return a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+
+    def cost(a: float) -> float:
+        S = ramp(a)
+        return c * abs(p) + d * S + c_m * S * S
+
+    def slope(a: float) -> float:
+        return (d + 2.0 * c_m * ramp(a)) * (1.0 if a <= s else a / s + 0.5)
+    if cost(hi) <= A:
+        return hi
+    a, b = lo, hi
+    if slope(lo) <= 0.0:
+        for _ in range(_BISECT):
+            m = 0.5 * (a + b)
+            if slope(m) > 0.0:
+                b = m
+            else:
+                a = m
+    if cost(a) > A:
+        return lo
+    b = hi
+    for _ in range(_BISECT):
+        m = 0.5 * (a + b)
+        if cost(m) <= A:
+            a = m
+        else:
+            b = m
+    return a

@@ -1,0 +1,160 @@
+"""The declared device parameters of the stiff-wall controller (:class:`ControllerSettings`),
+the constants derived in docs/runtime.md ("Passivity"), and the 0.1 controller's settings,
+still accepted with a ``DeprecationWarning``."""
+
+from __future__ import annotations
+
+import functools
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+from ..errors import ValidationError
+from .margin import _check_nonneg
+
+
+#: Ramp time (s) of a full-scale force change: a change spread over at least 5 ms is
+#: free of clicks (reference goal 11, the same bound as the vibration gate's ramp).
+RAMP_TIME_S = 5.0e-3
+#: Share of the declared device damping the controller credits: a declared damping is
+#: taken as known within a factor of two (the stated uncertainty of a declaration, the
+#: 0.5x-2x band the randomised benchmark draws), so the true damping is at least half of it.
+DAMPING_TRUST = 0.5
+#: Default of ``ControllerSettings.energy_allowance_j`` (J): the most energy the extra's
+#: bound may hand the user over a contact, the SDK's passivity specification (0.1 mJ: a
+#: 10 g fingertip at 0.14 m/s). It caps the encoder allowance ``F_max Delta / 2``, which
+#: exceeds it only on encoders coarser than ``2 E / F_max`` (0.06 mm at 3.3 N).
+ENERGY_ALLOWANCE_J = 1.0e-4
+
+
+@dataclass
+class ControllerSettings:
+    """Declared device parameters of :class:`PassivityController` (nothing tuned).
+
+    Attributes:
+        device_damping_ns_per_m: declared physical viscous damping of the device (N*s/m).
+            Only ``damping_trust`` times it is credited.
+        damping_trust: share of the declared damping taken as a lower bound of the true
+            damping (:data:`DAMPING_TRUST`, 1/2: a declaration is trusted to a factor 2).
+        position_resolution_mm: encoder resolution Delta (mm); 0 = exact positions.
+        max_force_n: force limit of the device (N), the full scale of the ramp. None:
+            the largest of the wall's forces and the outputs so far is the full scale.
+        ramp_time_s: time of a full-scale ramp (s, :data:`RAMP_TIME_S`); the output
+            changes by at most ``s = max_force_n * T / ramp_time_s`` per tick (at most
+            ``max_force_n``).
+        device_mass_kg: declared apparent mass m of the device (kg): a force increase
+            ``dF`` pushes it ``dF T^2 / 2m`` further within the tick, which the plan's cost
+            counts. None: not counted. (The kinetic energy it stores is left out of the
+            bound, which is conservative.)
+        energy_bound: False removes the energy bound (the output then follows the wall
+            through the ramp only): for tests that must see the bound matter.
+        energy_allowance_j: the most energy (J) the extra's bound may hand the user
+            (:data:`ENERGY_ALLOWANCE_J`): the allowance is ``min(F_max Delta / 2, this)``.
+            A requirement, not a fitted constant: lower it for a stricter bound (with a
+            coarse encoder the wall then rises at one reading only to ``2 E / Delta``).
+    """
+
+    device_damping_ns_per_m: float = 0.0
+    damping_trust: float = DAMPING_TRUST
+    position_resolution_mm: float = 0.0
+    max_force_n: float | None = None
+    ramp_time_s: float = RAMP_TIME_S
+    device_mass_kg: float | None = None
+    energy_bound: bool = True
+    energy_allowance_j: float = ENERGY_ALLOWANCE_J
+
+    def __post_init__(self) -> None:
+        for name in ("device_damping_ns_per_m", "position_resolution_mm"):
+            _check_nonneg(name, getattr(self, name))
+        if not (0.0 <= float(self.damping_trust) <= 1.0):
+            raise ValidationError(f"must be in [0, 1], got {self.damping_trust!r}", field="damping_trust")
+        if self.max_force_n is not None and not (math.isfinite(self.max_force_n) and self.max_force_n > 0):
+            raise ValidationError(f"must be a finite number > 0 (N), got {self.max_force_n!r}", field="max_force_n")
+        if not (math.isfinite(self.ramp_time_s) and self.ramp_time_s > 0):
+            raise ValidationError(f"must be a finite number > 0 (s), got {self.ramp_time_s!r}", field="ramp_time_s")
+        if not (math.isfinite(self.energy_allowance_j) and self.energy_allowance_j >= 0):
+            raise ValidationError(f"must be a finite number >= 0 (J), got {self.energy_allowance_j!r}",
+                                  field="energy_allowance_j")
+
+    @classmethod
+    def for_device(cls, device: Any) -> "ControllerSettings":
+        """Settings from what a device declares: ``apparent_mass_kg``, ``damping_ns_per_m``,
+        ``encoder_resolution_mm`` and ``limits.max_force_n`` (each optional)."""
+        def num(v: Any) -> float | None:
+            try:
+                f = float(v)
+            except (TypeError, ValueError):
+                return None
+            return f if math.isfinite(f) and f > 0 else None
+        lim = getattr(device, "limits", None)
+        return cls(device_mass_kg=num(getattr(device, "apparent_mass_kg", None)),
+                   device_damping_ns_per_m=num(getattr(device, "damping_ns_per_m", None)) or 0.0,
+                   position_resolution_mm=num(getattr(device, "encoder_resolution_mm", None)) or 0.0,
+                   max_force_n=num(getattr(lim, "max_force_n", None)))
+
+    def ramp_step_n(self, dt: float, full_scale_n: float | None = None) -> float:
+        """The ramp's own step (N per tick) at period ``dt``: ``F_max dt / ramp_time_s``,
+        at most ``F_max`` (``full_scale_n`` when the device declares no limit)."""
+        fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
+        return fs * min(dt / self.ramp_time_s, 1.0)
+
+    def energy_budget_j(self, dt: float, full_scale_n: float | None = None) -> float:
+        """``E0 = min(F_max Delta / 2, energy_allowance_j)`` (J): what bringing the full
+        force up at one reading costs in the bound (a monotone ramp's quantisation term is
+        ``Delta/2`` times its height), so a wall pressed from rest is not withheld for want
+        of an allowance, capped by the energy a contact may hand the user
+        (docs/runtime.md, Passivity item 6)."""
+        fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
+        return min(fs * 0.5 * self.position_resolution_mm * 1e-3, self.energy_allowance_j)
+
+
+#: Settings of the 0.1 controller (stiffness cap, observers, dither damper, felt floor,
+#: pre-paid budget, entry boost), removed in 0.2: still accepted by
+#: :class:`ControllerSettings`, with a ``DeprecationWarning``, and ignored.
+DEPRECATED_SETTINGS = frozenset({
+    "max_damping_ns_per_m", "velocity_deadband_mm_s", "velocity_filter_hz", "energy_tolerance_j",
+    "bound_tolerance_j", "max_force_step_n", "ramp_reserve_j", "generation_observer", "generation_budget_j",
+    "generation_floor_j", "dither_damping_ns_per_m", "count_play_ratio", "stiffness_cap", "cap_colgate_multiple",
+    "cap_damping_share", "cap_count_force_n", "felt_floor_fraction", "felt_force_n", "felt_depth_mm",
+    "felt_tick_energy_j", "felt_damping_multiple", "prepay_factor", "prepay_budget_j", "entry_force_limit_n",
+    "entry_force_step_n", "felt_uses_reserve"})
+
+_settings_init = ControllerSettings.__init__
+
+
+@functools.wraps(_settings_init)
+def _settings_init_accepting_old_names(self: ControllerSettings, *args: Any, **kw: Any) -> None:
+    old = sorted(k for k in kw if k in DEPRECATED_SETTINGS)
+    if old:
+        warnings.warn(f"ControllerSettings: {', '.join(old)} no longer exist (the 0.1 controller's tuned "
+                      "settings; the controller is derived from the device's declared parameters, "
+                      "docs/runtime.md 'Passivity'); they are ignored and will be refused in 0.3",
+                      DeprecationWarning, stacklevel=2)
+        for k in old:
+            del kw[k]
+    _settings_init(self, *args, **kw)
+
+
+ControllerSettings.__init__ = _settings_init_accepting_old_names  # type: ignore[method-assign]
+
+
+def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None,
+                           resolution_mm: float | None = None) -> float:
+    """Deprecated (0.2; removed in 0.3): the stiffness cap is gone. Returns the stiffness
+    of the controller's Colgate spring instead, ``K_c = 2 b_lo / dt`` in N/mm (``b_lo`` the
+    trusted share of the declared damping); ``resolution_mm`` is ignored."""
+    warnings.warn("cap_stiffness_n_per_mm is deprecated: the controller has no stiffness cap; use "
+                  "colgate_stiffness_n_per_mm (the stiffness of its passive spring)", DeprecationWarning, stacklevel=2)
+    return colgate_stiffness_n_per_mm(settings, dt, damping_ns_per_m)
+
+
+def colgate_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None
+                               ) -> float:
+    """Stiffness (N/mm) of :class:`PassivityController`'s Colgate spring at period ``dt``
+    (s): ``K_c = 2 b_lo / dt`` with ``b_lo = damping_trust x`` the declared damping
+    (``damping_ns_per_m`` overrides the settings' declaration); 0 for ``dt <= 0``."""
+    b = settings.device_damping_ns_per_m if damping_ns_per_m is None else float(damping_ns_per_m)
+    if not dt > 0 or not b > 0:
+        return 0.0
+    return 2.0 * settings.damping_trust * b / dt / 1000.0
