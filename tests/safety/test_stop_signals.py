@@ -109,8 +109,13 @@ def test_render_stops_the_piezo_on_each_signal(tmp_path):
     try:
         for signame, code in SIGNALS:
             emu = emulation.SerialBridgeEmulator(watchdog_s=0).start()
+            # a reply budget of 0.5 s, not the board's 0.05 s: the emulated bridge answers
+            # from a thread of this test process, beside two other emulators and this
+            # polling loop, on a machine that may have more runnable processes than cores
+            # (0.05 s x 4 attempts ran out once next to two busy loops)
             cmd = [sys.executable, "-m", "hapticsdk", "render", "--scene", str(scene),
-                   "--seconds", "30", "--device-option", f"vibration.port={emu.port}"]
+                   "--seconds", "30", "--device-option", f"vibration.port={emu.port}",
+                   "--device-option", "vibration.timeout=0.5"]
             proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                     start_new_session=True)
             runs.append({"signame": signame, "code": code, "emu": emu, "proc": proc})
