@@ -33,28 +33,17 @@ from hapticsdk.devices.safety import SafetyLayer
 from hapticsdk.scene.geometry import HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
 from hapticsdk.sim.probe import VirtualProbe
+from recorders import RecordingActuator
 
 pytest.importorskip("hapticsdk_hardness")
 pytest.importorskip("hapticsdk_roughness")
 
 
-class _Rec(Actuator):
-    """Records what its backend gets (a vibration channel). Defined here, not imported
-    from another test module: with the oldest pytest of .ci/floors.txt, importlib mode
-    leaves ``tests.runtime`` no package, and the import failed collection."""
+class _Rec(RecordingActuator):
+    """Records what its backend gets (a vibration channel)."""
     name = "test-fast-rec"
     channel = "vibration"
     limits = ActuatorLimits(frequency_range_hz=(30.0, 120.0), max_amplitude=2.0, amplitude_unit="V")
-
-    def __init__(self, **kw):
-        super().__init__(**kw)
-        self.sent = []
-
-    def _command(self, cmd):
-        self.sent.append(cmd)
-
-    def _stop(self):
-        pass
 
 
 class _Overrides(_Rec):

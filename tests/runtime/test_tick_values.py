@@ -16,10 +16,11 @@ import math
 import numpy as np
 import pytest
 
-from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState
+from hapticsdk.devices.actuators import ActuatorLimits, DeviceState
 from hapticsdk.perception.dimensions import ChannelCommand, TickInput
 from hapticsdk.errors import ValidationError
 from hapticsdk.devices.safety import SafetyLayer
+from recorders import RecordingActuator
 
 hardness = pytest.importorskip("hapticsdk_hardness.dimension")
 roughness = pytest.importorskip("hapticsdk_roughness.dimension")
@@ -250,20 +251,10 @@ def test_limits_assigned_after_construction_are_enforced():
     assert lay.events["faults"] == 1
 
 
-class _Rec(Actuator):
+class _Rec(RecordingActuator):
     name = "test-tick-rec"
     channel = "force"
     limits = ActuatorLimits(max_force_n=3.3, frequency_range_hz=(1.0, 500.0), max_amplitude=1.0)
-
-    def __init__(self, **kw):
-        super().__init__(**kw)
-        self.sent = []
-
-    def _command(self, cmd):
-        self.sent.append(cmd)
-
-    def _stop(self):
-        pass
 
 
 @pytest.mark.parametrize("field", ["force_n", "frequency_hz", "amplitude"])
