@@ -26,7 +26,7 @@ from typing import Any, ClassVar, Mapping, TypeVar
 
 import numpy as np
 
-from ..perception.channels import CHANNELS  # the channel kinds an actuator can serve (also hapticsdk.actuators.CHANNELS)
+from ..perception.channels import CHANNELS  # the channel kinds an actuator can serve (also hapticsdk.devices.actuators.CHANNELS)
 from ..perception.dimensions import ChannelCommand
 from ..errors import DeviceError, HapticSDKError, ValidationError
 
@@ -399,7 +399,7 @@ class Actuator(ABC):
         elif not isinstance(safety, SafetyLayer):
             # e.g. a scene file's device options {"safety": "off"}: the safety layer is not
             # an option a file can set or switch off
-            raise ValidationError(f"safety must be a hapticsdk.safety.SafetyLayer built in code, got "
+            raise ValidationError(f"safety must be a hapticsdk.devices.safety.SafetyLayer built in code, got "
                                   f"{type(safety).__name__} {safety!r}; the safety layer cannot be set or "
                                   "turned off from a scene or plan file", field="options.safety")
         self.safety = safety

@@ -4,12 +4,12 @@ Scenes and plans are data a user opens (shared, downloaded, generated). Some act
 options are not data: they name a native library to load into the process
 (``omni-openhaptics`` ``library``) or a file to write (``voicecoil-virtual``
 ``sink: "wav:PATH"``). An actuator class lists such options in
-:attr:`hapticsdk.actuators.Actuator.privileged_options` (option name -> what it names);
+:attr:`hapticsdk.devices.actuators.Actuator.privileged_options` (option name -> what it names);
 the core then refuses them wherever they come from a scene or a plan -- whatever the
 plugin -- with an error naming the option and where it may be set instead:
 
 1. the application's code: ``render_plan(plan, ..., actuator_options={role: {key: value}})``
-   (or the actuator's constructor / :func:`~hapticsdk.actuators.create_actuator`);
+   (or the actuator's constructor / :func:`~hapticsdk.devices.actuators.create_actuator`);
 2. the command line: ``hapticsdk render ... --device-option ROLE.KEY=VALUE``;
 3. the environment: ``HAPTICSDK_DEVICE_OPTIONS='{"omni-openhaptics": {"library": "/opt/..."}}'``
    (JSON object: actuator name -> options);

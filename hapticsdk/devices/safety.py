@@ -1,9 +1,9 @@
 """The core safety layer every actuator command passes through.
 
-Every :class:`~hapticsdk.actuators.Actuator` owns a :class:`SafetyLayer` (on by
+Every :class:`~hapticsdk.devices.actuators.Actuator` owns a :class:`SafetyLayer` (on by
 default) and routes each command ``Actuator.command(cmd, now=...)`` through
 :meth:`SafetyLayer.filter` before its backend sees it, so no plugin can exceed what it
-declared in its :class:`~hapticsdk.actuators.ActuatorLimits`, whether or not its own
+declared in its :class:`~hapticsdk.devices.actuators.ActuatorLimits`, whether or not its own
 code checks. What the layer enforces (see ``docs/safety.md``):
 
 * **Declared limits** on every command: force magnitude (N), stiffness (N/mm, as
@@ -140,7 +140,7 @@ class SafetyLayer:
     zero stale commands; count and report each limit hit.
 
     Args:
-        limits: the actuator's :class:`~hapticsdk.actuators.ActuatorLimits`.
+        limits: the actuator's :class:`~hapticsdk.devices.actuators.ActuatorLimits`.
         settings: a :class:`SafetySettings` (default: the SDK defaults).
         **overrides: individual :class:`SafetySettings` fields, e.g. ``ramp_time_s=0.5``.
 
@@ -174,7 +174,7 @@ class SafetyLayer:
     # -- configuration -----------------------------------------------------
     @property
     def limits(self) -> Any:
-        """The declared :class:`~hapticsdk.actuators.ActuatorLimits` enforced (assignable)."""
+        """The declared :class:`~hapticsdk.devices.actuators.ActuatorLimits` enforced (assignable)."""
         return self._limits
 
     @limits.setter
@@ -256,7 +256,7 @@ class SafetyLayer:
 
     def observe(self, state: Any) -> None:
         """Called by the servo loop once per tick with the device state
-        (:class:`~hapticsdk.actuators.DeviceState`), before the tick's commands."""
+        (:class:`~hapticsdk.devices.actuators.DeviceState`), before the tick's commands."""
         self._state = state
         vmax = self._vmax
         if vmax is None:
@@ -293,7 +293,7 @@ class SafetyLayer:
 
         Runs every servo tick for every actuator: it reads limits and settings from
         plain attributes (:meth:`_cache`), works on Python floats and allocates one
-        :class:`~hapticsdk.dimensions.ChannelCommand`."""
+        :class:`~hapticsdk.perception.dimensions.ChannelCommand`."""
         if self.phase == "closed":
             self._restart()
         t_last = self._t_last

@@ -17,7 +17,7 @@ Each tick:
    version-1 scene: the plane y = 0 with normal +y, penetration ``-y``) gives the
    object under the probe, the penetration along its outward normal and the normal;
    every actuator's safety layer observes the state (with that penetration);
-3. that object's renderers get a :class:`~hapticsdk.dimensions.TickInput` in the contact
+3. that object's renderers get a :class:`~hapticsdk.perception.dimensions.TickInput` in the contact
    frame (penetration along the normal; velocity index 0 the sliding speed, index 1 the
    normal component; ``normal`` and ``object`` set); force commands of the same role
    are summed, a renderer that raises or returns NaN is counted and contributes nothing.
@@ -300,7 +300,7 @@ class _ContactState(SensedState):
 
 
 class _LoopInput(TickInput):
-    """The loop's :class:`~hapticsdk.dimensions.TickInput`: ``velocity_mm_s`` is built
+    """The loop's :class:`~hapticsdk.perception.dimensions.TickInput`: ``velocity_mm_s`` is built
     from ``velocity_floats_mm_s`` on its first read and kept (the same read-only (3,)
     array the input carried before, the same numbers), so a tick whose renderers read
     the floats makes no numpy array: on the benchmark's tick, creating one array and

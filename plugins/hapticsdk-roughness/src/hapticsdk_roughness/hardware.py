@@ -111,7 +111,7 @@ class DRV2667Actuator(Actuator):
     accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = False
     #: raise the voltage the piezo gets: a scene or plan may give ``gain`` only up to the
-    #: default (hapticsdk.device_options.check_data_options)
+    #: default (hapticsdk.devices.device_options.check_data_options)
     energy_options: ClassVar[dict[str, str]] = {"gain": "DRV2667 gain: full scale 25/50/75/100 V peak for 0..3"}
     limits = piezo_limits(0, None)  # replaced per instance (gain, band: DEFAULT_BAND_HZ)
     #: time source (s) of the re-arm and STATUS intervals; a test may set its own on an

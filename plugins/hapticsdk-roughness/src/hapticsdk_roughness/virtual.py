@@ -60,7 +60,7 @@ class PiezoVirtual(Actuator):
     accepts: ClassVar[dict[str, str]] = {"frequency_hz": "Hz", "amplitude": "V"}
     simulated: ClassVar[bool] = True
     #: raise the voltage the piezo gets: a scene or plan may give ``gain`` only up to the
-    #: default (hapticsdk.device_options.check_data_options)
+    #: default (hapticsdk.devices.device_options.check_data_options)
     energy_options: ClassVar[dict[str, str]] = {"gain": "DRV2667 gain: full scale 25/50/75/100 V peak for 0..3"}
     limits = piezo_limits(1, None, quantised=False)
 
