@@ -78,7 +78,11 @@ def rig():
     def make(kind, **opts):
         if kind == "serial":
             emu = SerialBridgeEmulator(watchdog_s=0).start()     # firmware watchdog off: host only
-            act = TimedSerial(port=emu.port, timeout=0.05, retries=1, **opts)
+            # a reply budget of 0.5 s, not the board's 0.05 s: the emulated bridge answers
+            # from a thread of this test process, which a stalled loop's polling and a
+            # loaded machine can keep off a CPU for longer than 2 x 0.05 s (the standby
+            # write then failed once, next to two busy loops, and faulted the actuator)
+            act = TimedSerial(port=emu.port, timeout=0.5, retries=1, **opts)
             made.append((act, emu))
             return act, emu.drv, emu
         board = EmulatedMCP2221("WD1")
