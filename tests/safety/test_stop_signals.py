@@ -138,7 +138,9 @@ def test_render_stops_the_piezo_on_each_signal(tmp_path):
                     if o["playing"] and o["amplitude_v"] > 1.0:
                         r["t_play"] = now
                     elif r["proc"].poll() is not None:
-                        pytest.fail(f"{r['signame']} run ended early: {r['proc'].communicate()[1][-800:]}")
+                        out, err = r["proc"].communicate()
+                        pytest.fail(f"{r['signame']} run ended early, exit code {r['proc'].returncode}: "
+                                    f"stderr {err[-800:]!r}, stdout {out[-400:]!r}")
                 elif now - r["t_play"] >= 0.05 and r["emu"].drv.driving:
                     # playing right before the signal (on a loaded machine a command
                     # deadline may have cut it for a moment: then wait for the next play)
