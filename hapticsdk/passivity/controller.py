@@ -104,8 +104,8 @@ class PassivityController:
             if b_x > 0.0:
                 u -= b_x * ex * ex / dt
         ahead = 0.5 * (x_mm - self._q2) * 1e-3
-        # the change of the per-tick motion beyond what quantisation alone makes (2 counts)
-        # the change of the per-tick motion, read over spans of 1-16 ticks (_SCALES)
+        # the change of the per-tick motion beyond what quantisation alone makes (2 counts),
+        # read over spans of 1-16 ticks (_SCALES, unrolled: this is the servo tick)
         hist = self._hist
         hp = self._hp + 1
         if hp == _HIST:

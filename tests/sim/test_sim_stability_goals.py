@@ -81,8 +81,7 @@ def test_a_tap_reversing_over_many_short_ticks_is_foreseen():
     assert r["contact_ticks"] > 0
 
 
-def _sdk_energy(idx, settings=None):
-    cells = draw_cells(2000, seed=1)
+def _sdk_energy(cells, idx, settings=None):
     return [run_cells([cells[i]], controllers=("sdk",), settings=settings)[0]["results"]["sdk"]["energy_to_user_j"]
             for i in idx]
 
@@ -96,7 +95,7 @@ def test_a_hand_that_reversed_recently_is_expected_to_reverse_again():
     cells = draw_cells(2000, seed=1)
     assert [cells[i]["trajectory"] for i in (259, 1907)] == ["tap", "tap"]
     assert all(cells[i]["damping_true_ns_per_m"] == 0.0 and cells[i]["period_s"] > 4e-3 for i in (259, 1907))
-    assert max(_sdk_energy((259, 1907))) <= 1e-4
+    assert max(_sdk_energy(cells, (259, 1907))) <= 1e-4
 
 
 def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give():
@@ -105,7 +104,7 @@ def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give
     (0.1 mJ); uncapped they gave 0.21 and 0.24 mJ. A lower allowance lowers the energy."""
     cells = draw_cells(2000, seed=1)
     assert all(cells[i]["resolution_mm"] > 0.15 for i in (122, 580))
-    e = _sdk_energy((122, 580))
+    e = _sdk_energy(cells, (122, 580))
     assert max(e) <= 1e-4
-    strict = _sdk_energy((122, 580), settings=ControllerSettings(energy_allowance_j=2e-5))
+    strict = _sdk_energy(cells, (122, 580), settings=ControllerSettings(energy_allowance_j=2e-5))
     assert all(b < a for a, b in zip(e, strict)), (e, strict)
