@@ -3,7 +3,7 @@
 :class:`Actuator` is the one interface every output plugin implements (like
 python-can's ``BusABC``). Public methods validate and then call the backend's
 ``_open``/``_command``/``_stop``/``_close``; every command passes through the core
-safety layer (:mod:`hapticsdk.safety`) first, so every plugin gets the same limits for
+safety layer (:mod:`hapticsdk.devices.safety`) first, so every plugin gets the same limits for
 free. :class:`HapticDevice` is an actuator that also senses (a force arm reports its
 stylus position and velocity).
 
@@ -349,7 +349,7 @@ class Actuator(ABC):
     #: options that name native code to load or files to write (option -> what it names,
     #: e.g. ``{"library": "native library", "sink": "output file"}``): never taken from
     #: scene or plan files, only from code, CLI flags, the environment or the user's device
-    #: configuration (:mod:`hapticsdk.device_options`). Merged over base classes.
+    #: configuration (:mod:`hapticsdk.devices.device_options`). Merged over base classes.
     privileged_options: ClassVar[dict[str, str]] = {}
     #: amplitude the output rests at in its safe state (``stop()``): 0 for vibration and
     #: friction; a thermal actuator rests at a neutral temperature (its ``amplitude_unit``)
