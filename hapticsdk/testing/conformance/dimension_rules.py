@@ -187,12 +187,23 @@ def _commands_at_epoch(d: PerceptionDimension, feats: Mapping[str, float], epoch
 #: servo time (s) of the ``timing`` rule's long run of one renderer, and where its tick
 #: cost is measured (fastest of :data:`TIMING_CALLS`): after 1, 2, 4 and 8 s
 GROWTH_POINTS_S = (1.0, 2.0, 4.0, 8.0)
-#: the cost at the last point over the cost at the first that, rising at every doubling,
-#: fails the rule. A cost proportional to the history rises ~8 x from 1 s to 8 s; the
-#: fastest of 25 calls of an unchanged tick moves by far less than 2 x between two
-#: samples (the first-party renderers: see docs/plugin-authors.md); a state bounded in
-#: time (filters, buffers under 1 s) costs the same at every point
+#: the cost at the last point over the cost at the first that, with the growth exponent
+#: at least :data:`GROWTH_EXPONENT`, fails the rule. A cost proportional to the history
+#: rises ~8 x from 1 s to 8 s; the fastest of 25 calls of an unchanged tick moves by far
+#: less than 2 x between two samples (the first-party renderers: see
+#: docs/plugin-authors.md); a state bounded in time (filters, buffers under 1 s) costs the
+#: same at every point
 GROWTH_FACTOR = 2.0
+#: the least growth exponent (least-squares slope of log cost over log run length at
+#: :data:`GROWTH_POINTS_S`) of a cost that grows with the run. A cost proportional to the
+#: history plus a fixed part has an exponent a little under 1 (0.58-0.85 measured on a
+#: renderer taking the median of every input so far). An unchanged renderer whose fastest
+#: tick jumps once by a factor r between two of the four points (a change of memory
+#: regime: up to 1.8 x seen) reaches at most 0.4 log2(r): 0.4 at r = 2 (a step between the
+#: 2 s and 4 s points; 0.3 between the others). A half separates the two. Every point
+#: rising is not asked for: one jump back down in a growing cost (seen: 152 -> 150 us
+#: from 4 s to 8 s, then 285 us in the next run) hid the growth once in 12 runs.
+GROWTH_EXPONENT = 0.5
 
 
 def _run_inputs(k: int) -> TickInput:
@@ -200,6 +211,25 @@ def _run_inputs(k: int) -> TickInput:
     base = _TICKS[k % len(_TICKS)]
     return TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
                      velocity_mm_s=base.velocity_mm_s.copy(), in_contact=base.in_contact)
+
+
+def _growth_exponent(points: list[tuple[float, float]]) -> float:
+    """Least-squares slope of log(cost) over log(run length) of :func:`_cost_growth`'s
+    points (1 for a cost proportional to the run's length, 0 for a constant one)."""
+    xs = [math.log(s) for s, _ in points]
+    ys = [math.log(max(c, 1e-12)) for _, c in points]
+    mx = sum(xs) / len(xs)
+    my = sum(ys) / len(ys)
+    sxx = sum((x - mx) ** 2 for x in xs)
+    return sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx if sxx > 0 else 0.0
+
+
+def _grows(points: list[tuple[float, float]]) -> bool:
+    """Whether the cost of :func:`_cost_growth`'s points grows with the run: the last at
+    :data:`GROWTH_FACTOR` x or more of the first, and the growth exponent at least
+    :data:`GROWTH_EXPONENT`."""
+    costs = [c for _, c in points]
+    return costs[-1] >= GROWTH_FACTOR * costs[0] and _growth_exponent(points) >= GROWTH_EXPONENT
 
 
 def _cost_growth(r: DimensionRenderer) -> list[tuple[float, float]]:
@@ -497,11 +527,10 @@ def _dimension_rules(ctx: _Ctx) -> None:
         # passes the budget at some length (a render may last 24 h)
         pts = _cost_growth(d.renderer(mid()))
         costs = [c for _, c in pts]
-        rising = all(b > a for a, b in zip(costs, costs[1:]))
-        assert not (rising and costs[-1] >= GROWTH_FACTOR * costs[0]), \
+        assert not _grows(pts), \
             (f"the cost of tick() grows with the length of the run: fastest tick "
-             f"{', '.join(f'{c * 1e6:.3g} us after {s:g} s' for s, c in pts)} (rising at every doubling, "
-             f"{costs[-1] / costs[0]:.2g} x): it keeps and walks a history that grows every tick; at that rate it "
+             f"{', '.join(f'{c * 1e6:.3g} us after {s:g} s' for s, c in pts)} (as the length to the power "
+             f"{_growth_exponent(pts):.2g}, {costs[-1] / costs[0]:.2g} x): it keeps and walks a history that grows every tick; at that rate it "
              f"passes its {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms budget within a render; keep bounded state "
              f"(a running sum, a fixed-size buffer)")
 
