@@ -216,12 +216,8 @@ def _run_inputs(k: int) -> TickInput:
 def _growth_exponent(points: list[tuple[float, float]]) -> float:
     """Least-squares slope of log(cost) over log(run length) of :func:`_cost_growth`'s
     points (1 for a cost proportional to the run's length, 0 for a constant one)."""
-    xs = [math.log(s) for s, _ in points]
-    ys = [math.log(max(c, 1e-12)) for _, c in points]
-    mx = sum(xs) / len(xs)
-    my = sum(ys) / len(ys)
-    sxx = sum((x - mx) ** 2 for x in xs)
-    return sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx if sxx > 0 else 0.0
+    s, c = np.asarray(points, dtype=float).T
+    return float(np.polyfit(np.log(s), np.log(np.maximum(c, 1e-12)), 1)[0])
 
 
 def _grows(points: list[tuple[float, float]]) -> bool:
