@@ -327,6 +327,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_BROKEN_PIPE
 
 
+def run() -> NoReturn:
+    """The ``hapticsdk`` script and ``python -m hapticsdk``: :func:`main`, then exit with its
+    status, without the interpreter's last garbage collection.
+
+    When :func:`main` has returned, every command has closed its actuators and files and
+    flushed its output; what is left in memory dies with the process. At exit CPython
+    still runs a full collection and frees the objects held in reference cycles (modules,
+    classes, functions, the argument parser): 25-35 ms of a ``hapticsdk render S7`` that
+    costs 250-300 ms in all (docs/runtime.md, "Start-up"). :func:`gc.freeze` moves every
+    object to the permanent generation, which no collection visits, so the exit skips that
+    work. Everything else at exit runs as before: ``atexit`` handlers (the actuators'
+    last-resort :func:`~hapticsdk.devices.actuators.stop_all`, ``weakref.finalize``,
+    logging's flush), and objects freed by reference counting. Only finalizers of objects
+    that are part of a reference cycle when the process exits do not run, which Python
+    never promises anyway. :func:`main` itself, called in-process (tests, scripts), does
+    not freeze.
+    """
+    code = main()
+    import gc
+    gc.freeze()
+    sys.exit(code)
+
+
 from .argtypes import intensity, positive_float  # noqa: E402  (kept importable from here)
 
 
