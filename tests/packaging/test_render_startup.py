@@ -56,3 +56,41 @@ def test_the_installed_script_exits_through_run():
     as ``python -m hapticsdk`` does."""
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     assert scripts["hapticsdk"] == "hapticsdk.cli:run"
+
+
+#: imported by no ``render S7`` that finds its caches (each 5-120 ms of import time):
+#: the entry-point scan's metadata reader and its mail parser (the plugin index), the
+#: schema validator (validation markers), the ONNX readers (model description and chain)
+#: and the plotting library (only with --plot)
+NOT_ON_A_CACHED_RENDER = ("importlib.metadata", "email", "jsonschema", "onnx", "onnxruntime", "matplotlib",
+                          "scipy")
+
+RENDER_PROBE = r"""
+import json, runpy, sys
+sys.argv = ["hapticsdk", "render", "S7", "--seconds", "0.05"]
+try:
+    runpy.run_module("hapticsdk", run_name="__main__")
+finally:
+    sys.stderr.write(json.dumps(sorted(m for m in sys.modules if m.split(".")[0] in NAMES
+                                       or m in NAMES)) + "\n")
+"""
+
+
+def test_a_render_that_finds_its_caches_imports_none_of_the_heavy_readers(tmp_path):
+    """Two fresh ``python -m hapticsdk render S7`` processes with an empty cache folder:
+    the first fills it (scans entry points, validates the library, reads the model), the
+    second imports none of :data:`NOT_ON_A_CACHED_RENDER` and prints the same report."""
+    import os
+
+    env = {**os.environ, "HAPTICSDK_CACHE_DIR": str(tmp_path)}
+    code = RENDER_PROBE.replace("NAMES", repr(NOT_ON_A_CACHED_RENDER))
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, env=env)
+            for _ in range(2)]
+    for out in runs:
+        assert out.returncode == 0, out.stderr[-3000:]
+    first, second = (json.loads(out.stderr.strip().splitlines()[-1]) for out in runs)
+    assert "importlib.metadata" in first          # the first run had to scan
+    assert second == []
+    strip = [[ln.split(" in ")[0] for ln in out.stdout.splitlines() if not ln.startswith("servo loop")]
+             for out in runs]
+    assert strip[0] == strip[1]
