@@ -124,7 +124,9 @@ _dist_names: dict[Any, tuple[str, str]] = {}
 
 def _dist_name_version(ep: Any) -> tuple[str, str]:
     if isinstance(ep, plugin_index.IndexedEntryPoint):
-        return ("?", "?") if ep.distribution is None else (ep.distribution, ep.version)
+        if ep.distribution is None:
+            return "?", "?"
+        return ep.distribution, "?" if ep.version is None else ep.version
     dist = getattr(ep, "dist", None)
     if dist is None:
         return "?", "?"
