@@ -7,12 +7,15 @@ Each run is a fresh ``python -m hapticsdk render S7`` of this interpreter; its C
 the child's user + sys (``os.wait4`` rusage), its wall time ``time.perf_counter`` around
 it. Byte-code caches are written and used (one warm-up run per tree first, not counted;
 ``PYTHONDONTWRITEBYTECODE`` is removed from the children's environment), as for an
-installed package. With ``--baseline REF`` the files of ``REF`` are exported
+installed package; the warm-up also fills the SDK's cache folder where the tree has one
+(validation markers, the model's description and chain, the entry-point index), as any
+run after the first does. With ``--baseline REF`` the files of ``REF`` are exported
 (:mod:`hapticsdk.benchmarks.baseline`) and the runs alternate baseline / this code, so
 both see the same load; the report gives min and median of each and the ratio of the
 medians (and of the minima). Also printed: an empty ``python -c pass`` of the same
 interpreter (the bare reference: interpreter start-up alone), measured the same way in the
-same run. Not measured: realtime rendering, other materials, a cold disk cache.
+same run. Not measured: realtime rendering, other materials, a cold disk cache, the first run
+after an install (an empty SDK cache folder).
 """
 
 from __future__ import annotations

@@ -2,8 +2,10 @@
 
 Everything in :func:`cache_dir` (also :func:`hapticsdk.fileio.cache_dir`) can be rebuilt: amortised solver tables
 (``amortised/``, ~0.4-0.6 MB each, one per model and constraint set), model descriptions
-(``onnx-desc/``, ``onnx-chain/``, tens of kB) and validation markers (``validated/``,
-empty files, one per JSON file content that passed its schema).
+(``onnx-desc/``, ``onnx-chain/``, tens of kB), validation markers (``validated/``,
+empty files, one per JSON file content that passed its schema) and entry-point indexes
+(``plugin-index/``, a few kB, one per set of installed distributions and ``sys.path``:
+:mod:`hapticsdk.plugin_index`).
 
 **Bound.** The folder is kept at or under ``HAPTICSDK_CACHE_MAX_MB`` megabytes
 (default :data:`DEFAULT_MAX_MB`); every file counts at least one filesystem block

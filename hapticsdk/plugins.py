@@ -17,13 +17,15 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from importlib import metadata
-from typing import Any, Iterable
+from typing import TYPE_CHECKING, Any, Iterable
 
 import pluggy
 
-from . import hookspecs
+from . import hookspecs, plugin_index
 from .errors import PluginError, UnknownPluginError
+
+if TYPE_CHECKING:
+    from importlib import metadata
 
 log = logging.getLogger(__name__)
 
@@ -91,57 +93,51 @@ class PluginInfo:
                 "version": self.version, "value": self.value}
 
 
-class _AnyGroup(str):
-    """An entry-point ``group=`` selector equal to every group of :data:`GROUPS`, so one
-    ``metadata.entry_points(group=...)`` call (one scan of the installed distributions'
-    metadata) returns the entry points of all kinds; works with the ``EntryPoint.matches``
-    of Python 3.9-3.13 and with wrappers of ``metadata.entry_points`` that pass ``**kw``."""
-
-    def __eq__(self, other: object) -> bool:
-        return other in _GROUP_SET
-
-    def __ne__(self, other: object) -> bool:
-        return not self.__eq__(other)
-
-    __hash__ = str.__hash__
-
-
 _GROUP_SET = frozenset(GROUPS.values())
 
 #: the installed entry points of every group in :data:`GROUPS` from one scan (a scan
-#: reads every distribution's metadata, 5-10 ms; a render asks for 5-6 groups);
-#: ``None`` until first asked, reset by :meth:`Registry.refresh` / :func:`refresh`
-_scanned: dict[str, list[metadata.EntryPoint]] | None = None
+#: reads every distribution's metadata, 5-10 ms; a render asks for 5-6 groups), kept
+#: between processes by :mod:`hapticsdk.plugin_index` until the installed distributions
+#: change; ``None`` until first asked, reset by :meth:`Registry.refresh` / :func:`refresh`
+_scanned: dict[str, list[Any]] | None = None
 
 
-def _entry_points(group: str) -> list[metadata.EntryPoint]:
+def _entry_points(group: str) -> list[Any]:
     global _scanned
     if group not in _GROUP_SET:
+        from importlib import metadata
         return list(metadata.entry_points(group=group))
     if _scanned is None:
-        found: dict[str, list[metadata.EntryPoint]] = {g: [] for g in _GROUP_SET}
-        for ep in metadata.entry_points(group=_AnyGroup("hapticsdk.*")):
+        found: dict[str, list[Any]] = {g: [] for g in _GROUP_SET}
+        for ep in plugin_index.current()["entry_points"]:
             if ep.group in found:
                 found[ep.group].append(ep)
         _scanned = found
     return list(_scanned[group])
 
 
-#: (name, version) per installed distribution object: reading them parses its METADATA
-#: file (~0.3 ms each time; a render loads ~30 plugins of 5-6 distributions); reset with
-#: the entry-point scan
+#: (name, version) per installed distribution object of an entry point that did not come
+#: from the index (one registered by hand): reading them parses its METADATA file
+#: (~0.3 ms each time); reset with the entry-point scan
 _dist_names: dict[Any, tuple[str, str]] = {}
 
 
-def _info(kind: str, ep: metadata.EntryPoint) -> PluginInfo:
+def _dist_name_version(ep: Any) -> tuple[str, str]:
+    if isinstance(ep, plugin_index.IndexedEntryPoint):
+        if ep.distribution is None:
+            return "?", "?"
+        return ep.distribution, "?" if ep.version is None else ep.version
     dist = getattr(ep, "dist", None)
     if dist is None:
-        name, version = "?", "?"
-    else:
-        got = _dist_names.get(dist)
-        if got is None:
-            got = _dist_names[dist] = (dist.metadata["Name"], dist.version)
-        name, version = got
+        return "?", "?"
+    got = _dist_names.get(dist)
+    if got is None:
+        got = _dist_names[dist] = (dist.metadata["Name"], dist.version)
+    return got
+
+
+def _info(kind: str, ep: Any) -> PluginInfo:
+    name, version = _dist_name_version(ep)
     return PluginInfo(kind=kind, name=ep.name, value=ep.value, distribution=name, version=version)
 
 
@@ -171,9 +167,7 @@ class Registry:
 
     def refresh(self) -> None:
         """Forget the cached table (after installing or removing a distribution)."""
-        global _scanned
-        _scanned = None
-        _dist_names.clear()
+        _forget_scan()
         self._eps = None
         self._loaded.clear()
         self._infos.clear()
@@ -270,8 +264,18 @@ def load(kind: str, name: str) -> Any:
     return registry(kind).load(name)
 
 
+def _forget_scan() -> None:
+    """Drop the process's entry-point scan: the next lookup scans the installed
+    distributions again (not the stored index)."""
+    global _scanned
+    _scanned = None
+    _dist_names.clear()
+    plugin_index.forget()
+
+
 def refresh() -> None:
     """Re-read entry points for every kind (after ``pip install``/``uninstall`` in-process)."""
+    _forget_scan()
     for r in _registries.values():
         r.refresh()
     _manager.reset()
@@ -354,8 +358,8 @@ class PluginManager:
         """Register only the hook modules of ``distributions`` (the ones a scene uses)."""
         wanted = {d.lower().replace("_", "-") for d in distributions if d}
         for ep in _entry_points(GROUPS["hooks"]):
-            dist = getattr(ep, "dist", None)
-            if dist is not None and dist.metadata["Name"].lower().replace("_", "-") in wanted:
+            dist, _ = _dist_name_version(ep)
+            if dist != "?" and dist.lower().replace("_", "-") in wanted:
                 self._load_ep(ep)
         return self
 

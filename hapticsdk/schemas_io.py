@@ -304,11 +304,13 @@ def _cache_dir() -> Path:
 def _marker_salt(schema: str) -> tuple[bytes, bytes, bytes] | None:
     """The parts of a validation marker that depend on the schema and the installed
     versions, read once per process (the two version lookups scan the installed
-    distributions, ~0.5 ms per file loaded)."""
-    from importlib import metadata
+    distributions, ~0.5 ms per file loaded; :mod:`hapticsdk.plugin_index` keeps them with
+    the plugins' entry points, so a process that finds them there imports no
+    :mod:`importlib.metadata`)."""
+    from .plugin_index import version as installed_version
     try:
         schema_bytes = (schema_dir() / f"{schema}.schema.json").read_bytes()
-        version = metadata.version("jsonschema") + "/" + metadata.version("hapticsdk")
+        version = installed_version("jsonschema") + "/" + installed_version("hapticsdk")
     except Exception:
         return None
     return schema.encode(), schema_bytes, version.encode()

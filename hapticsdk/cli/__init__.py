@@ -22,9 +22,16 @@ COMMAND_MODULES = ("core", "scene", "training", "calibration", "doctor", "bench_
                    "interop", "live", "cache")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``hapticsdk`` argument parser with every command module's subcommands (help with
     defaults and one example per command).
+
+    With ``command`` (a top-level command name such as ``"render"``) only that command's
+    parser and everything below it are built, exactly as in the full parser; every command
+    module is still imported and registers, the other commands' parsers are skipped.
+    :func:`main` parses a command line with it (the ~30 other parsers cost 10-15 ms of a
+    ``hapticsdk render S7``). A name that no module registers gives the full parser, so
+    an unknown command is reported with every valid choice.
     """
     from .. import __version__
 
@@ -38,7 +45,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"hapticsdk {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    bench = sub.add_parser("bench", help="benchmarks")
+    top: Any = sub if command is None else _OnlyCommand(sub, command)
+    bench = top.add_parser("bench", help="benchmarks")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCH")
     bench.set_defaults(func=missing_subcommand(bench, "BENCH"))
     parser.set_defaults(func=missing_subcommand(parser, "COMMAND"))
@@ -49,17 +57,60 @@ def build_parser() -> argparse.ArgumentParser:
             print(f"hapticsdk: command module {name!r} unavailable: {exc}", file=sys.stderr)
             continue
         if hasattr(mod, "register"):
-            mod.register(sub)
+            mod.register(top)
         if hasattr(mod, "register_bench"):
             mod.register_bench(bench_sub)
-    # the benchmarks as registered, in both help texts (a list written by hand went stale)
-    benches = ", ".join(bench_sub.choices)
-    for choice in sub._choices_actions:  # noqa: SLF001 - argparse keeps the help lines here
-        if choice.dest == "bench":
-            choice.help = f"benchmarks, run by hand ({benches})"
-    bench.description = f"Benchmarks, run by hand: {benches}."
+    if command is not None and command not in sub.choices:
+        return build_parser()
+    if "bench" in sub.choices:
+        # the benchmarks as registered, in both help texts (a list written by hand went stale)
+        benches = ", ".join(bench_sub.choices)
+        for choice in sub._choices_actions:  # noqa: SLF001 - argparse keeps the help lines here
+            if choice.dest == "bench":
+                choice.help = f"benchmarks, run by hand ({benches})"
+        bench.description = f"Benchmarks, run by hand: {benches}."
     _finish_help(parser, ())
     return parser
+
+
+class _Skipped:
+    """Stands in for the parser of a command that :func:`build_parser` does not build:
+    every method call (``add_argument``, ``add_subparsers``, ``set_defaults`` ...) does
+    nothing and returns the stand-in again."""
+
+    def __getattr__(self, name: str) -> Callable[..., "_Skipped"]:
+        return self._ignore
+
+    def _ignore(self, *args: Any, **kwargs: Any) -> "_Skipped":
+        return self
+
+
+class _OnlyCommand:
+    """The top-level subparsers action, passed to the command modules' ``register``, that
+    builds only the parser of one command (its name or one of its aliases)."""
+
+    def __init__(self, sub: argparse._SubParsersAction, command: str) -> None:
+        self._sub = sub
+        self._command = command
+
+    def add_parser(self, name: str, **kwargs: Any) -> Any:
+        if self._command != name and self._command not in kwargs.get("aliases", ()):
+            return _Skipped()
+        return self._sub.add_parser(name, **kwargs)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._sub, name)
+
+
+def command_word(argv: Sequence[str]) -> str | None:
+    """The top-level command of a ``hapticsdk`` command line (``"render"`` for ``-v render
+    S7``), or ``None`` when anything else comes first (``--help``, ``--version``, an
+    abbreviated or unknown option, nothing): then the full parser reads it."""
+    for token in argv:
+        if token in ("-v", "--verbose"):
+            continue
+        return None if token.startswith("-") else token
+    return None
 
 
 #: one example per command (shown at the end of its --help)
@@ -284,7 +335,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     t_start = time.monotonic()
     try:
-        parser = build_parser()
+        parser = build_parser(command_word(sys.argv[1:] if argv is None else argv))
         try:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # usage error (2) or --help/--version (0)
@@ -325,6 +376,29 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         _quiet_stdout()
         return EXIT_BROKEN_PIPE
+
+
+def run() -> NoReturn:
+    """The ``hapticsdk`` script and ``python -m hapticsdk``: :func:`main`, then exit with its
+    status, without the interpreter's last garbage collection.
+
+    When :func:`main` has returned, every command has closed its actuators and files and
+    flushed its output; what is left in memory dies with the process. At exit CPython
+    still runs a full collection and frees the objects held in reference cycles (modules,
+    classes, functions, the argument parser): 25-35 ms of a ``hapticsdk render S7`` that
+    costs 250-300 ms in all (docs/runtime.md, "Start-up"). :func:`gc.freeze` moves every
+    object to the permanent generation, which no collection visits, so the exit skips that
+    work. Everything else at exit runs as before: ``atexit`` handlers (the actuators'
+    last-resort :func:`~hapticsdk.devices.actuators.stop_all`, ``weakref.finalize``,
+    logging's flush), and objects freed by reference counting. Only finalizers of objects
+    that are part of a reference cycle when the process exits do not run, which Python
+    never promises anyway. :func:`main` itself, called in-process (tests, scripts), does
+    not freeze.
+    """
+    code = main()
+    import gc
+    gc.freeze()
+    sys.exit(code)
 
 
 from .argtypes import intensity, positive_float  # noqa: E402  (kept importable from here)
