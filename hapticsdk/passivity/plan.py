@@ -3,6 +3,7 @@ cost bound and the largest affordable force (vectorised, and in floats for the t
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -17,9 +18,12 @@ _SCALES = (1, 2, 4, 8, 16)   # (the scalar tick unrolls these five)
 _HIST = 2 * _SCALES[-1] + 1
 
 
-#: Bisection steps of :func:`affordable_force` (2^-30 of the ramp step: far below any
-#: force a device resolves).
+#: Bisection steps of :func:`_affordable_bisect`, the fallback of the closed form
+#: (2^-30 of the ramp step: far below any force a device resolves).
 _BISECT = 30
+#: Relative step back from the closed-form root when its rounding leaves it just over the
+#: budget (1e-12 of the force scale: far below the bisection's 2^-30).
+_NUDGE = 1e-12
 
 
 def _ramp_sum(a: Any, s: Any) -> Any:
@@ -57,14 +61,35 @@ def _plan_slope(a: Any, p: Any, lead_m: Any, c_m: Any, s: Any, c: Any) -> Any:
     return (lead_m + 2.0 * c_m * S) * dS
 
 
+def _largest_ramp_start(S2: Any, s: Any) -> Any:
+    """Largest ``a`` with :func:`_ramp_sum` ``(a, s) <= S2`` (``S`` is non-decreasing in ``a``
+    and jumps from ``s`` to ``9 s / 8`` at ``a = s``): ``S2`` below ``s``, ``s`` up to
+    ``9 s / 8``, above it the root ``(sqrt(8 s S2) - s) / 2`` of ``a^2/(2s) + a/2 + s/8 = S2``."""
+    with np.errstate(invalid="ignore"):
+        return np.where(S2 < s, S2, np.where(S2 < 1.125 * s, s, 0.5 * (np.sqrt(8.0 * s * np.maximum(S2, 0.0)) - s)))
+
+
+def _upper_root(r: Any, d: Any, c_m: Any) -> Any:
+    """Largest ``S`` with ``d S + c_m S^2 <= r`` (``c_m >= 0``); NaN when there is none (no
+    real root, or ``c_m = 0`` with ``d <= 0``: the cost then does not rise with ``S``).
+    The root in the form without cancellation for either sign of ``d``."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        disc = d * d + 4.0 * c_m * r
+        sq = np.sqrt(disc)
+        quad = np.where(d <= 0.0, (sq - d) / (2.0 * c_m), 2.0 * r / (d + sq))
+        lin = np.where(d > 0.0, r / d, np.nan)
+        return np.where(c_m > 0.0, np.where(disc >= 0.0, quad, np.nan), lin)
+
+
 def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any,
                      half_count_m: Any) -> Any:
     """Largest ``a`` in ``[lo, hi]`` with :func:`plan_cost_j` ``<= avail_j`` (vectorised).
 
-    The cost is convex in ``a``: ``hi`` when it fits; otherwise the cost's minimiser on
-    ``[lo, hi]`` (bisection on the slope) and, when that fits, bisection for the crossing
-    between it and ``hi``; when nothing fits, the minimiser (the ramp allows no deeper
-    cut, and it is the plan that overdraws least)."""
+    The cost is a convex quadratic in the ramp's sum ``S = S(a)``, and ``S`` rises with
+    ``a``: ``hi`` when it fits; otherwise the largest ``a`` whose ``S`` is at most the
+    quadratic's upper root (closed form), when that ``a`` is in ``[lo, hi]`` and fits;
+    when nothing fits, ``lo`` (the ramp allows no deeper cut). Where rounding leaves the
+    closed form just outside the budget, bisection decides (:func:`_affordable_bisect`)."""
     A, lo, hi, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (
         avail_j, lo, hi, p, lead_m, push_m_per_n, s, half_count_m)))
     def cost(a: np.ndarray) -> np.ndarray:
@@ -72,6 +97,31 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     ok_hi = cost(hi) <= A
     if ok_hi.all():
         return hi.copy() if hi.ndim else float(hi)
+    S2 = _upper_root(A - c * np.abs(p), d, c_m)
+    a = np.minimum(_largest_ramp_start(S2, s), hi)
+    found = np.isfinite(a) & (a >= lo)
+    a = np.where(found, a, lo)
+    fits = cost(a) <= A
+    # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
+    a2 = a - _NUDGE * (np.abs(a) + s)
+    back = found & ~fits & (a2 >= lo) & (cost(a2) <= A)
+    a = np.where(back, a2, a)
+    fits = fits | back
+    unsure = ~ok_hi & found & ~fits
+    out = np.where(ok_hi, hi, np.where(found & fits, a, lo))
+    if unsure.any():
+        out = np.where(unsure, _affordable_bisect(A, lo, hi, p, d, c_m, s, c), out)
+    return out if out.ndim else float(out)
+
+
+def _affordable_bisect(A: Any, lo: Any, hi: Any, p: Any, d: Any, c_m: Any, s: Any, c: Any) -> Any:
+    """:func:`affordable_force` by bisection: the cost's minimiser on ``[lo, hi]`` (on the
+    slope), then the crossing between it and ``hi``; ``lo`` when nothing fits. The fallback
+    where the closed form sits on the budget's edge within rounding."""
+    A, lo, hi, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (A, lo, hi, p, d, c_m, s, c)))
+    def cost(a: np.ndarray) -> np.ndarray:
+        return plan_cost_j(a, p, d, c_m, s, c)
+    ok_hi = cost(hi) <= A
     a, b = lo.copy(), hi.copy()
     for _ in range(_BISECT):
         m = 0.5 * (a + b)
@@ -86,13 +136,52 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
         fit = cost(m) <= A
         a = np.where(fit, m, a)
         b = np.where(fit, b, m)
-    out = np.where(ok_hi, hi, np.where(fits, a, lo))
-    return out if out.ndim else float(out)
+    return np.where(ok_hi, hi, np.where(fits, a, lo))
 
 
 def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
                        c: float) -> float:
     """:func:`affordable_force` for one cell, in floats (the servo tick)."""
+    base = c * abs(p)
+    S = hi if hi <= s else hi * hi / (2.0 * s) + 0.5 * hi + 0.125 * s
+    if base + d * S + c_m * S * S <= A:
+        return hi
+    r = A - base
+    if c_m > 0.0:
+        disc = d * d + 4.0 * c_m * r
+        if disc < 0.0:
+            return lo
+        sq = math.sqrt(disc)
+        S2 = (sq - d) / (2.0 * c_m) if d <= 0.0 else 2.0 * r / (d + sq)
+    elif d > 0.0:
+        S2 = r / d
+    else:
+        return lo
+    if S2 < s:
+        a = S2
+    elif S2 < 1.125 * s:
+        a = s
+    else:
+        a = 0.5 * (math.sqrt(8.0 * s * S2) - s)
+    if a > hi:
+        a = hi
+    if a < lo:
+        return lo
+    S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+    if base + d * S + c_m * S * S <= A:
+        return a
+    # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
+    a -= _NUDGE * ((a if a > 0.0 else -a) + s)
+    if a >= lo:
+        S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+        if base + d * S + c_m * S * S <= A:
+            return a
+    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+
+
+def _bisect_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
+                   c: float) -> float:
+    """:func:`_affordable_bisect` for one cell, in floats."""
     def ramp(a: float) -> float:
         return a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
 

@@ -196,10 +196,10 @@ GROWTH_POINTS_S = (1.0, 2.0, 4.0, 8.0)
 GROWTH_FACTOR = 2.0
 #: the least growth exponent (least-squares slope of log cost over log run length at
 #: :data:`GROWTH_POINTS_S`) of a cost that grows with the run. A cost proportional to the
-#: history plus a fixed part has an exponent a little under 1 (0.58-0.85 measured on a
+#: history plus a fixed part has an exponent a little under 1 (0.59-0.85 measured on a
 #: renderer taking the median of every input so far). An unchanged renderer whose fastest
 #: tick jumps once by a factor r between two of the four points (a change of memory
-#: regime: up to 1.8 x seen) reaches at most 0.4 log2(r): 0.4 at r = 2 (a step between the
+#: regime: 1.8-1.9 x seen) reaches at most 0.4 log2(r): 0.4 at r = 2 (a step between the
 #: 2 s and 4 s points; 0.3 between the others). A half separates the two. Every point
 #: rising is not asked for: one jump back down in a growing cost (seen: 152 -> 150 us
 #: from 4 s to 8 s, then 285 us in the next run) hid the growth once in 12 runs.

@@ -160,14 +160,62 @@ def test_voicecoil_sinks(tmp_path):
         VoiceCoilVirtual(sink="nonsense")
 
 
-def test_sounddevice_sink_is_optional():
-    try:
-        import sounddevice  # noqa: F401
-    except Exception:
-        with pytest.raises(DeviceNotFoundError, match="sounddevice"):
-            VoiceCoilVirtual(sink="sounddevice")
+@pytest.mark.parametrize("failure", [None, OSError("cannot load library 'libportaudio.so.2'")])
+def test_sounddevice_sink_without_the_library_names_what_to_install(monkeypatch, failure):
+    """Without sounddevice (not installed: ``sys.modules`` entry None; or installed without
+    the PortAudio library: its import raises OSError) the sink is a DeviceNotFoundError
+    naming what to install, whether or not sounddevice is installed here."""
+    import importlib
+    import sys
+
+    if failure is None:
+        monkeypatch.setitem(sys.modules, "sounddevice", None)   # import -> ImportError
     else:
-        pytest.skip("sounddevice installed; the missing-library path is not reachable here")
+        real = importlib.import_module
+
+        def fake(name, *a, **k):
+            if name == "sounddevice":
+                raise failure
+            return real(name, *a, **k)
+        monkeypatch.delitem(sys.modules, "sounddevice", raising=False)
+        monkeypatch.setattr(importlib, "import_module", fake)
+    with pytest.raises(DeviceNotFoundError, match="sounddevice") as err:
+        VoiceCoilVirtual(sink="sounddevice")
+    assert "libportaudio2" in str(err.value)
+
+
+@pytest.mark.parametrize("fails_at", ["open", "start"])
+def test_sounddevice_sink_without_an_output_is_a_named_error(monkeypatch, fails_at):
+    """sounddevice and PortAudio present but no output to open (no audio server, as on a
+    headless machine; PortAudio says "Error querying device -1"): a DeviceNotFoundError
+    naming the sink and the alternatives, not PortAudio's own exception; a stream opened
+    but not started is closed."""
+    import sys
+    import types
+
+    class PortAudioError(Exception):
+        pass
+
+    closed = []
+
+    class Stream:
+        def __init__(self, **kw):
+            if fails_at == "open":
+                raise PortAudioError("Error querying device -1")
+
+        def start(self):
+            raise PortAudioError("Invalid sample rate")
+
+        def close(self):
+            closed.append(True)
+    fake = types.ModuleType("sounddevice")
+    fake.OutputStream = Stream
+    fake.PortAudioError = PortAudioError
+    monkeypatch.setitem(sys.modules, "sounddevice", fake)
+    with pytest.raises(DeviceNotFoundError, match="could not open an audio output") as err:
+        VoiceCoilVirtual(sink="sounddevice")
+    assert "PortAudioError" in str(err.value) and "wav:PATH" in str(err.value)
+    assert closed == ([True] if fails_at == "start" else [])
 
 
 def test_omni_stale_command_becomes_zero():

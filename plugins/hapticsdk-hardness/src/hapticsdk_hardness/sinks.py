@@ -159,17 +159,23 @@ class SoundDeviceSink:
     """Streams to an audio output through the optional ``sounddevice`` package."""
 
     def __init__(self, fs: float, device: Any = None) -> None:
+        from .audio import import_sounddevice  # noqa: PLC0415  (optional library, imported lazily)
+        # ImportError, or OSError without the PortAudio library: a DeviceNotFoundError naming
+        # what to install
+        sd = import_sounddevice("voicecoil-virtual")
+        stream = None
         try:
-            import sounddevice  # noqa: PLC0415  (optional, imported lazily)
-        except Exception as exc:  # ImportError or a missing PortAudio library (OSError)
-            from hapticsdk.install_hints import pip_hint
+            stream = sd.OutputStream(samplerate=fs, channels=1, dtype="float32", device=device)
+            stream.start()
+        except Exception as exc:  # PortAudioError: no output device, or none that takes this format
+            if stream is not None:
+                with contextlib.suppress(Exception):
+                    stream.close()
             raise DeviceNotFoundError(
-                f"audio output needs the optional 'sounddevice' package and PortAudio "
-                f"({pip_hint('sounddevice')}, or {pip_hint('hapticsdk-hardness', 'audio')}); "
-                f"import failed: {exc}",
-                device="voicecoil-virtual") from exc
-        self._stream = sounddevice.OutputStream(samplerate=fs, channels=1, dtype="float32", device=device)
-        self._stream.start()
+                f"the 'sounddevice' sink could not open an audio output at {fs:g} Hz "
+                f"({type(exc).__name__}: {exc}); start an audio server or plug in an output, or use "
+                "sink='buffer' or 'wav:PATH'", device="voicecoil-virtual") from None
+        self._stream = stream
         self.n = 0
 
     def write(self, samples: np.ndarray) -> None:
