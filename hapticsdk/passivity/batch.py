@@ -16,7 +16,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
             "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
             "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
-            "jh": np.zeros((_HIST, n)),
+            "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
             "hp": np.zeros(1, int)}
 
 
@@ -60,6 +60,10 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     jh = state["jh"]
     jh[hp] = jerk
     jerk = jh.max(axis=0)
+    # the third difference beyond its quantisation (4 counts), largest over the window
+    j3h = state["j3h"]
+    j3h[hp] = np.maximum(np.abs(x - 3.0 * (hist[hp - 1] - hist[hp - 2]) - hist[hp - 3]) * 1e-3 - 4.0 * q, 0.0)
+    j3 = j3h.max(axis=0)
     still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
     state["still"] = still
     state["q2"] = q1
@@ -92,7 +96,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     hi = np.maximum(np.minimum(p + step, target), lo)
     a = hi
     if s.energy_bound:
-        lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + q / np.maximum(still, 2.0)
+        lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring

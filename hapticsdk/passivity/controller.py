@@ -10,6 +10,30 @@ from .plan import _HIST, _affordable_scalar
 from .settings import ControllerSettings
 
 
+class _WindowMax:
+    """The values of the reading ring's last ``_HIST`` ticks and their largest, kept as the
+    ring turns (a full search only when the largest leaves the window)."""
+
+    __slots__ = ("ring", "top", "at")
+
+    def __init__(self) -> None:
+        self.ring = [0.0] * _HIST
+        self.top = 0.0
+        self.at = 0
+
+    def push(self, i: int, v: float) -> float:
+        """Store ``v`` at ring index ``i`` (the oldest value's); return the window's largest."""
+        ring = self.ring
+        ring[i] = v
+        if v >= self.top:
+            self.top = v
+            self.at = i
+        elif self.at == i:   # the largest left the window: find the next one
+            self.top = max(ring)
+            self.at = ring.index(self.top)
+        return self.top
+
+
 class PassivityController:
     """Passive wall from the device's declared parameters: a Colgate spring plus an
     energy-bounded extra.
@@ -52,7 +76,7 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
-                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jh", "_jmax", "_jat")
+                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jw", "_j3w")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -67,9 +91,8 @@ class PassivityController:
         self._q1 = self._q2 = 0.0
         self._hist = [0.0] * _HIST    # the last readings (mm), a ring; _hp the newest
         self._hp = 0
-        self._jh = [0.0] * _HIST      # the change-of-motion estimates of the same ticks
-        self._jmax = 0.0              # their largest, at ring index _jat
-        self._jat = 0
+        self._jw = _WindowMax()       # the change-of-motion estimates of the same ticks, and their largest
+        self._j3w = _WindowMax()      # the third differences of the same ticks, and their largest
         self._f1 = self._f2 = 0.0   # the extra (applied force minus the spring) over the last two ticks
         self._out = 0.0
         self._started = False
@@ -130,15 +153,13 @@ class PassivityController:
         # the largest change of motion over the ring's window (_HIST ticks): a hand that
         # reversed within it can reverse again; the estimate of this tick alone is blind
         # between reversals (taps, the finger-and-arm resonance at long periods)
-        jh = self._jh
-        jh[hp] = jerk
-        if jerk >= self._jmax:
-            self._jmax = jerk
-            self._jat = hp
-        elif self._jat == hp:   # the largest left the window: find the next one
-            self._jmax = max(jh)
-            self._jat = jh.index(self._jmax)
-        jerk = self._jmax
+        jerk = self._jw.push(hp, jerk)
+        # the third difference beyond what quantisation alone makes (1 + 3 + 3 + 1 half
+        # counts = 4 counts): the term after the acceleration in the extrapolation to the
+        # next tick, exact for a cubic motion (docs/runtime.md, Passivity item 5); its
+        # largest over the same window
+        j3 = abs(x_mm - 3.0 * (hist[hp - 1] - hist[hp - 2]) - hist[hp - 3]) - 2.0 * c2
+        j3 = self._j3w.push(hp, j3 * 1e-3 if j3 > 0.0 else 0.0)
         self._still = self._still + 1 if dq == 0.0 else 0
         self._q2 = self._q1
         self._q1 = x_mm
@@ -197,7 +218,8 @@ class PassivityController:
             # the arm's speed now: the last two ticks' mean, its reading error (half a
             # count; Delta/n after n > 2 ticks at one reading), and what the held force
             # added since the middle of those ticks
-            lead = sg * ahead + (1.5 + 0.5 * hi / step) * jerk + q / (self._still if self._still > 2 else 2)
+            lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
+                    + q / (self._still if self._still > 2 else 2))
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1

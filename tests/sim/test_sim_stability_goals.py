@@ -98,6 +98,20 @@ def test_a_hand_that_reversed_recently_is_expected_to_reverse_again():
     assert max(_sdk_energy(cells, (259, 1907))) <= 1e-4
 
 
+def test_a_change_of_the_change_of_motion_is_foreseen():
+    """Drawn cells 468, 1191 and 1919 of seed 1: taps at T = 7.2, 4.8 and 9.0 ms with
+    little or no damping. The hand's acceleration changes between ticks (the finger and
+    the arm ring at a few ticks per cycle), so extrapolating the reading with its velocity
+    and acceleration misses the next tick's motion by the third difference (exactly, for a
+    cubic motion). The plan adds the largest third difference over the window; without it
+    they gave 0.16, 0.11 and 0.47 mJ."""
+    cells = draw_cells(2000, seed=1)
+    idx = (468, 1191, 1919)
+    assert [cells[i]["trajectory"] for i in idx] == ["tap"] * 3
+    assert all(cells[i]["period_s"] > 4e-3 and cells[i]["damping_true_ns_per_m"] < 0.1 for i in idx)
+    assert max(_sdk_energy(cells, idx)) <= 1e-4
+
+
 def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give():
     """Drawn cells 122 and 580 of seed 1: creeps with 0.18 mm encoders, where
     ``F_max Delta / 2`` is 0.3 mJ. The allowance is capped at ``energy_allowance_j``
