@@ -14,7 +14,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
     z = np.zeros(n)
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
-            "out": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
+            "out": z.copy(), "app1": z.copy(), "app2": z.copy(), "app3": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
             "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
             "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
             "hp": np.zeros(1, int)}
@@ -57,6 +57,15 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     for span in _SCALES:
         d2 = np.abs(x - 2.0 * hist[hp - span] + hist[hp - 2 * span]) * 1e-3 - 2.0 * q
         np.maximum(jerk, d2 / (span * span), out=jerk)
+    m = s.device_mass_kg if mass_kg is None else mass_kg
+    if m is not None:
+        # the largest change of motion the readings allow (2 counts above the second
+        # difference), up to what the held force's change over the last two ticks gives
+        # the free arm (docs/runtime.md, Passivity item 5)
+        dF = np.maximum(np.abs(state["app1"] - state["app2"]), np.abs(state["app1"] - state["app3"]))
+        free = dF * (dt * dt / np.asarray(m, float))
+        seen = np.abs(x - 2.0 * hist[hp - 1] + hist[hp - 2]) * 1e-3 + 2.0 * q
+        np.maximum(jerk, np.minimum(seen, free), out=jerk)
     jh = state["jh"]
     jh[hp] = jerk
     jerk = jh.max(axis=0)
@@ -79,7 +88,6 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     if fm is not None:
         spring = np.minimum(spring, full)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
-    m = s.device_mass_kg if mass_kg is None else mass_kg
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
     e0 = np.minimum(full * 0.5 * q, s.energy_allowance_j)
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)
@@ -111,5 +119,8 @@ def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray)
     """Record the forces actually applied over the coming interval (N)."""
     f = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
     state["f2"] = state["f1"]
+    state["app3"] = state["app2"]
+    state["app2"] = state["app1"]
+    state["app1"] = f.copy()
     state["f1"] = f - state["spring"]   # the extra actually held (its ramp starts from it)
     state["out"] = f.copy()

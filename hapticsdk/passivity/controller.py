@@ -76,7 +76,8 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
-                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jw", "_j3w")
+                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jw", "_j3w",
+                 "_a1", "_a2", "_a3")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -93,6 +94,7 @@ class PassivityController:
         self._hp = 0
         self._jw = _WindowMax()       # the change-of-motion estimates of the same ticks, and their largest
         self._j3w = _WindowMax()      # the third differences of the same ticks, and their largest
+        self._a1 = self._a2 = self._a3 = 0.0   # the forces applied over the last three ticks (N)
         self._f1 = self._f2 = 0.0   # the extra (applied force minus the spring) over the last two ticks
         self._out = 0.0
         self._started = False
@@ -150,6 +152,20 @@ class PassivityController:
         if d > jerk:
             jerk = d
         jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
+        m = s.device_mass_kg
+        if m:
+            # the largest change of motion the readings allow (2 counts above the second
+            # difference), up to what the held force's change over the last two ticks
+            # gives the free arm (docs/runtime.md, Passivity item 5)
+            a1 = self._a1
+            d = abs(a1 - self._a2)
+            d3 = abs(a1 - self._a3)
+            d = (d if d > d3 else d3) * dt * dt / m
+            seen = (abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2]) + c2) * 1e-3
+            if seen < d:
+                d = seen
+            if d > jerk:
+                jerk = d
         # the largest change of motion over the ring's window (_HIST ticks): a hand that
         # reversed within it can reverse again; the estimate of this tick alone is blind
         # between reversals (taps, the finger-and-arm resonance at long periods)
@@ -188,7 +204,6 @@ class PassivityController:
         else:
             full = fm
         step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
-        m = s.device_mass_kg
         c_m = dt * dt / (2.0 * m) if m else 0.0
         e0 = full * h
         if e0 > s.energy_allowance_j:
@@ -234,6 +249,9 @@ class PassivityController:
             f_applied = 0.0
         self._f2 = self._f1
         self._f1 = f_applied - self._spring   # the extra actually held (the ramp starts from it)
+        self._a3 = self._a2
+        self._a2 = self._a1
+        self._a1 = f_applied
         self._out = f_applied
 
     def report(self) -> dict[str, float]:

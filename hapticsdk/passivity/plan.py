@@ -24,6 +24,8 @@ _BISECT = 30
 #: Relative step back from the closed-form root when its rounding leaves it just over the
 #: budget (1e-12 of the force scale: far below the bisection's 2^-30).
 _NUDGE = 1e-12
+#: The bisection's resolution as a share of ``hi - lo``.
+_RESOLUTION = 2.0 ** -_BISECT
 
 
 def _ramp_sum(a: Any, s: Any) -> Any:
@@ -65,7 +67,7 @@ def _largest_ramp_start(S2: Any, s: Any) -> Any:
     """Largest ``a`` with :func:`_ramp_sum` ``(a, s) <= S2`` (``S`` is non-decreasing in ``a``
     and jumps from ``s`` to ``9 s / 8`` at ``a = s``): ``S2`` below ``s``, ``s`` up to
     ``9 s / 8``, above it the root ``(sqrt(8 s S2) - s) / 2`` of ``a^2/(2s) + a/2 + s/8 = S2``."""
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", over="ignore"):
         return np.where(S2 < s, S2, np.where(S2 < 1.125 * s, s, 0.5 * (np.sqrt(8.0 * s * np.maximum(S2, 0.0)) - s)))
 
 
@@ -73,7 +75,7 @@ def _upper_root(r: Any, d: Any, c_m: Any) -> Any:
     """Largest ``S`` with ``d S + c_m S^2 <= r`` (``c_m >= 0``); NaN when there is none (no
     real root, or ``c_m = 0`` with ``d <= 0``: the cost then does not rise with ``S``).
     The root in the form without cancellation for either sign of ``d``."""
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         disc = d * d + 4.0 * c_m * r
         sq = np.sqrt(disc)
         quad = np.where(d <= 0.0, (sq - d) / (2.0 * c_m), 2.0 * r / (d + sq))
@@ -88,8 +90,10 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     The cost is a convex quadratic in the ramp's sum ``S = S(a)``, and ``S`` rises with
     ``a``: ``hi`` when it fits; otherwise the largest ``a`` whose ``S`` is at most the
     quadratic's upper root (closed form), when that ``a`` is in ``[lo, hi]`` and fits;
-    when nothing fits, ``lo`` (the ramp allows no deeper cut). Where rounding leaves the
-    closed form just outside the budget, bisection decides (:func:`_affordable_bisect`)."""
+    when nothing fits, ``lo`` (the ramp allows no deeper cut). Each answer is checked:
+    a found ``a`` must fit and one bisection resolution above it must not, and "nothing
+    fits" must hold at the cost's minimiser; where rounding, an underflow or an overflow
+    breaks a check, bisection decides (:func:`_affordable_bisect`)."""
     A, lo, hi, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (
         avail_j, lo, hi, p, lead_m, push_m_per_n, s, half_count_m)))
     def cost(a: np.ndarray) -> np.ndarray:
@@ -98,8 +102,11 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     if ok_hi.all():
         return hi.copy() if hi.ndim else float(hi)
     S2 = _upper_root(A - c * np.abs(p), d, c_m)
-    a = np.minimum(_largest_ramp_start(S2, s), hi)
-    found = np.isfinite(a) & (a >= lo)
+    a = _largest_ramp_start(S2, s)
+    # a >= hi: hi is within the upper root and does not fit, so [lo, hi] lies below the
+    # lower root (nothing fits): the minimiser's check below confirms it
+    below = a >= hi
+    found = np.isfinite(a) & (a >= lo) & ~below
     a = np.where(found, a, lo)
     fits = cost(a) <= A
     # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
@@ -107,7 +114,15 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     back = found & ~fits & (a2 >= lo) & (cost(a2) <= A)
     a = np.where(back, a2, a)
     fits = fits | back
-    unsure = ~ok_hi & found & ~fits
+    # largest: one bisection resolution above it does not fit
+    step_up = np.minimum(a + (hi - lo) * 2.0 ** -_BISECT, hi)
+    short = found & fits & (a < hi) & (cost(step_up) <= A)
+    # nothing fits: not even at the cost's minimiser
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        s_min = np.where(c_m > 0.0, -d / (2.0 * c_m), np.where(d > 0.0, -np.inf, np.inf))
+    amin = np.clip(np.where(np.isnan(s_min), lo, _largest_ramp_start(s_min, s)), lo, hi)
+    missed = ~found & (cost(amin) <= A)
+    unsure = ~ok_hi & (hi > lo) & ((found & ~fits) | short | missed)
     out = np.where(ok_hi, hi, np.where(found & fits, a, lo))
     if unsure.any():
         out = np.where(unsure, _affordable_bisect(A, lo, hi, p, d, c_m, s, c), out)
@@ -141,42 +156,60 @@ def _affordable_bisect(A: Any, lo: Any, hi: Any, p: Any, d: Any, c_m: Any, s: An
 
 def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
                        c: float) -> float:
-    """:func:`affordable_force` for one cell, in floats (the servo tick)."""
+    """:func:`affordable_force` for one cell, in floats (the servo tick), with the same checks."""
     base = c * abs(p)
     S = hi if hi <= s else hi * hi / (2.0 * s) + 0.5 * hi + 0.125 * s
-    if base + d * S + c_m * S * S <= A:
-        return hi
+    if base + d * S + c_m * S * S <= A or hi <= lo:
+        return hi if hi > lo else lo
     r = A - base
+    S2 = None
     if c_m > 0.0:
         disc = d * d + 4.0 * c_m * r
-        if disc < 0.0:
-            return lo
-        sq = math.sqrt(disc)
-        S2 = (sq - d) / (2.0 * c_m) if d <= 0.0 else 2.0 * r / (d + sq)
+        if disc > 0.0:   # 0: a double root, or an underflow; the check below decides
+            sq = math.sqrt(disc)
+            S2 = (sq - d) / (2.0 * c_m) if d <= 0.0 else 2.0 * r / (d + sq)
     elif d > 0.0:
         S2 = r / d
+    if S2 is not None:
+        if S2 < s:
+            a = S2
+        elif S2 < 1.125 * s:
+            a = s
+        else:
+            a = 0.5 * (math.sqrt(8.0 * s * S2) - s)
+        # a >= hi: hi is within the upper root and does not fit, so [lo, hi] lies below
+        # the lower root (nothing fits): the minimiser's check below confirms it
+        if lo <= a < hi:
+            S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+            if base + d * S + c_m * S * S > A:
+                # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
+                a -= _NUDGE * ((a if a > 0.0 else -a) + s)
+                if a < lo:
+                    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+                S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+                if base + d * S + c_m * S * S > A:
+                    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+            # largest: one bisection resolution above it does not fit
+            u = a + (hi - lo) * _RESOLUTION
+            if u < hi:
+                S = u if u <= s else u * u / (2.0 * s) + 0.5 * u + 0.125 * s
+                if base + d * S + c_m * S * S <= A:
+                    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+            return a
+    # nothing fits: not even at the cost's minimiser
+    if c_m > 0.0:
+        a = -d / (2.0 * c_m)
+        if a >= 1.125 * s:
+            a = 0.5 * (math.sqrt(8.0 * s * a) - s)
+        elif a > s:
+            a = s
+        a = lo if a < lo else (hi if a > hi else a)
     else:
-        return lo
-    if S2 < s:
-        a = S2
-    elif S2 < 1.125 * s:
-        a = s
-    else:
-        a = 0.5 * (math.sqrt(8.0 * s * S2) - s)
-    if a > hi:
-        a = hi
-    if a < lo:
-        return lo
+        a = lo if d > 0.0 else hi
     S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
     if base + d * S + c_m * S * S <= A:
-        return a
-    # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
-    a -= _NUDGE * ((a if a > 0.0 else -a) + s)
-    if a >= lo:
-        S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
-        if base + d * S + c_m * S * S <= A:
-            return a
-    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+        return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+    return lo
 
 
 def _bisect_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,

@@ -112,6 +112,21 @@ def test_a_change_of_the_change_of_motion_is_foreseen():
     assert max(_sdk_energy(cells, idx)) <= 1e-4
 
 
+def test_the_held_force_s_push_on_the_free_arm_is_foreseen_under_quantisation():
+    """Drawn cells 516, 990 and 1137 of seed 1: presses and a bumpy slide at T = 9.3, 3.1
+    and 2.9 ms with 0.06-0.08 mm encoders. At the first ticks of contact a new force
+    (about 1 N on a 24-71 g arm) changes the arm's motion by up to ``dF T^2 / m`` per tick,
+    while the readings' second difference shows it only within its 2-count quantisation,
+    so the change the readings surely show is 0. The plan takes the largest change the
+    readings allow, up to the free arm's under the force's change over the last two
+    ticks; without it they gave 0.11, 0.27 and 0.14 mJ."""
+    cells = draw_cells(2000, seed=1)
+    idx = (516, 990, 1137)
+    assert [cells[i]["trajectory"] for i in idx] == ["press_hold", "press_hold", "bumpy_slide"]
+    assert all(cells[i]["period_s"] > 2.5e-3 and 0.05 < cells[i]["resolution_mm"] < 0.1 for i in idx)
+    assert max(_sdk_energy(cells, idx)) <= 1e-4
+
+
 def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give():
     """Drawn cells 122 and 580 of seed 1: creeps with 0.18 mm encoders, where
     ``F_max Delta / 2`` is 0.3 mJ. The allowance is capped at ``energy_allowance_j``
