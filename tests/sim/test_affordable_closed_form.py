@@ -3,10 +3,13 @@ the ramp's sum S, which rises with the force) against bisection and a dense grid
 over the budget, never below the bisection's answer by more than its own resolution."""
 
 import numpy as np
-from hypothesis import example, given, settings, strategies as st
+import pytest
 
-from hapticsdk.passivity import _affordable_scalar, affordable_force, plan_cost_j
-from hapticsdk.passivity.plan import _BISECT, _affordable_bisect, _bisect_scalar
+pytest.importorskip("hypothesis", reason="hypothesis (the test extra) is not installed")
+from hypothesis import example, given, settings, strategies as st  # noqa: E402
+
+from hapticsdk.passivity import _affordable_scalar, affordable_force, plan_cost_j  # noqa: E402
+from hapticsdk.passivity.plan import _BISECT, _affordable_bisect, _bisect_scalar  # noqa: E402
 
 force = st.floats(0.0, 5.0)
 ramp = st.floats(0.01, 3.3)
