@@ -45,8 +45,10 @@ class ControllerSettings:
             ``max_force_n``).
         device_mass_kg: declared apparent mass m of the device (kg): a force increase
             ``dF`` pushes it ``dF T^2 / 2m`` further within the tick, which the plan's cost
-            counts. None: not counted. (The kinetic energy it stores is left out of the
-            bound, which is conservative.)
+            counts, and a change ``dF`` of the held force changes its motion by up to
+            ``dF T^2 / m`` per tick, which the plan's prediction counts. None: neither is
+            counted; otherwise a finite number > 0. (The kinetic energy it stores is left
+            out of the bound, which is conservative.)
         energy_bound: False removes the energy bound (the output then follows the wall
             through the ramp only): for tests that must see the bound matter.
         energy_allowance_j: the most energy (J) the extra's bound may hand the user
@@ -71,6 +73,11 @@ class ControllerSettings:
             raise ValidationError(f"must be in [0, 1], got {self.damping_trust!r}", field="damping_trust")
         if self.max_force_n is not None and not (math.isfinite(self.max_force_n) and self.max_force_n > 0):
             raise ValidationError(f"must be a finite number > 0 (N), got {self.max_force_n!r}", field="max_force_n")
+        if self.device_mass_kg is not None and not (math.isfinite(self.device_mass_kg) and self.device_mass_kg > 0):
+            # the plan's free-arm terms divide by it: 0, a negative or a NaN mass would make
+            # a held force look free of cost (None leaves those terms out)
+            raise ValidationError(f"must be None or a finite number > 0 (kg), got {self.device_mass_kg!r}",
+                                  field="device_mass_kg")
         if not (math.isfinite(self.ramp_time_s) and self.ramp_time_s > 0):
             raise ValidationError(f"must be a finite number > 0 (s), got {self.ramp_time_s!r}", field="ramp_time_s")
         if not (math.isfinite(self.energy_allowance_j) and self.energy_allowance_j >= 0):

@@ -275,3 +275,15 @@ def test_old_controller_settings_warn_and_are_ignored():
     with pytest.warns(DeprecationWarning, match="no stiffness cap"):
         k = cap_stiffness_n_per_mm(old, 1e-3)
     assert k == colgate_stiffness_n_per_mm(old, 1e-3) == pytest.approx(2 * 0.25 / 1e-3 / 1000)
+
+
+@pytest.mark.parametrize("mass", [0.0, -0.045, float("nan"), float("inf")])
+def test_a_mass_that_would_make_held_force_free_is_refused(mass):
+    """The plan's free-arm terms (``T^2 / 2m`` and ``dF T^2 / m``) divide by the declared
+    mass: 0, a negative, NaN or infinite mass is a ValidationError naming the field."""
+    from hapticsdk.errors import ValidationError
+
+    with pytest.raises(ValidationError) as err:
+        ControllerSettings(device_mass_kg=mass)
+    assert err.value.field == "device_mass_kg"
+    assert ControllerSettings(device_mass_kg=None).device_mass_kg is None
