@@ -49,3 +49,29 @@ def test_honest_simulated_actuators_pass(cls):
 def test_a_drive_resent_by_close_is_caught():
     v = [x for x in check("actuator", _FlushOnClose) if x.rule == "close"]
     assert v and "after close()" in v[0].message, v
+
+
+class _HoldsAPort(LagCoil):
+    """Takes a resource in open() and gives it back in _close (a port, a thread)."""
+
+    name = "kit-holds-a-port"
+    held: ClassVar[set[int]] = set()
+
+    def _open(self) -> None:
+        super()._open()
+        type(self).held.add(id(self))
+
+    def _close(self) -> None:
+        type(self).held.discard(id(self))
+        super()._close()
+
+
+def test_the_close_rule_releases_what_its_injected_failure_left_open():
+    """The rule checks that a failing backend ``_close`` is reported; that failure is the
+    kit's own, so the instance's backend is then closed for real. Left open, its port and
+    threads outlived the rule and shared the device with the next one (an emulated serial
+    bridge saw a second owner's writes and reported the link lost under load)."""
+    _HoldsAPort.held.clear()
+    v = [x for x in check("actuator", _HoldsAPort, rules=["close"]) if x.rule == "close"]
+    assert not v, v
+    assert not _HoldsAPort.held, f"{len(_HoldsAPort.held)} instance(s) still hold their resource"

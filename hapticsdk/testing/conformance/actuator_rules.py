@@ -300,6 +300,13 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             raise AssertionError(f"close() raised {type(exc).__name__} when the backend's _close failed") from None
         finally:
             quiet.setLevel(level)
+            # the failure was the kit's own: release what the backend holds (its port, its
+            # threads), or it outlives the rule and shares the device with the next one
+            del b._close
+            try:
+                b._close()
+            except Exception:  # noqa: BLE001 - best effort: the check below is the rule
+                pass
         assert stops.stops >= 1, "close() did not stop the backend before releasing it"
         assert isinstance(getattr(b, "close_error", None), OSError), \
             "a failing backend _close was not reported (close_error is not set): nobody can see it"

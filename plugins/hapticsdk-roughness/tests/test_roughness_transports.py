@@ -231,6 +231,27 @@ def test_serial_init_errors_name_what_was_tried(emus, tmp_path):
     assert "0x59" in str(ei.value) and emu.port in str(ei.value)
 
 
+def test_a_serial_port_takes_one_owner(emus):
+    """One bridge, one owner: while an instance holds the port, a second one (of this
+    process or another program) is refused at open() with a DeviceNotFoundError that says
+    the port is in use; it opens once the first is closed. Two owners would interleave
+    their frames and read each other's replies (a watchdog's standby write then found the
+    link "lost" under load)."""
+    bridge, _ = emus
+    emu = bridge()
+    first = PiezoSerial(port=emu.port, **FAST).open()
+    second = PiezoSerial(port=emu.port, **FAST)
+    try:
+        with pytest.raises(DeviceNotFoundError) as ei:
+            second.open()
+        assert "in use" in str(ei.value) and emu.port in str(ei.value)
+        assert first.read_back() is not None          # the first owner is untouched
+    finally:
+        first.close()
+    second.open()
+    second.close()
+
+
 def test_usb_init_errors_name_what_was_tried(emus):
     _, boards = emus
     with pytest.raises(DeviceNotFoundError) as ei:

@@ -90,9 +90,16 @@ class SerialBridgeBus(I2CBus):
                 self.ser = serial.serial_for_url(self.port, baudrate=self.baudrate, timeout=self._poll_s,
                                                  write_timeout=self.timeout * 4)
             else:
+                # exclusive: one bridge, one owner. A second instance (or another program)
+                # on the same port would interleave its frames with ours and read our
+                # replies; the lock (POSIX flock, pyserial >= 3.3) makes it fail here instead
                 self.ser = serial.Serial(self.port, baudrate=self.baudrate, timeout=self._poll_s,
-                                         write_timeout=self.timeout * 4)
+                                         write_timeout=self.timeout * 4, exclusive=True)
         except (serial.SerialException, OSError, ValueError) as exc:
+            if "exclusively lock" in str(exc):
+                raise DeviceNotFoundError(
+                    f"serial port {self.port!r} is in use: another instance or program has it open ({exc}); "
+                    "close it first (one bridge takes one owner)", device=self.device) from None
             ports = [p["port"] for p in list_ports()]
             raise DeviceNotFoundError(
                 f"could not open serial port {self.port!r} at {self.baudrate} baud ({exc}); ports present: "
