@@ -65,7 +65,8 @@ class PassivityController:
     then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = min(F_max Delta / 2,
     energy_allowance_j)`` if the reading keeps moving at the rate of the last two ticks,
     changing by up to the largest change of motion seen over the last ``_HIST`` ticks
-    (:func:`affordable_force`).
+    (counting, as far as the readings allow, what a change of the held force gives the
+    free arm) plus the largest third difference (:func:`affordable_force`).
     If the motion outruns that prediction the extra ramps down at ``s`` and the excess
     is booked (``overdrawn_j``).
 
@@ -230,9 +231,10 @@ class PassivityController:
             hi = target if target > lo else lo
         a = hi
         if s.energy_bound and hi > lo:
-            # the arm's speed now: the last two ticks' mean, its reading error (half a
-            # count; Delta/n after n > 2 ticks at one reading), and what the held force
-            # added since the middle of those ticks
+            # the arm's motion over the next tick: the last two ticks' mean, its reading
+            # error (half a count; Delta/n after n > 2 ticks at one reading), 1.5 x the
+            # largest change of motion of the window carried through the ramp (with what a
+            # change of the held force gives the free arm), and the third difference
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (self._still if self._still > 2 else 2))
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
