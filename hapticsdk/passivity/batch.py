@@ -14,7 +14,8 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     """Fresh state arrays for :func:`controller_step_batch` over ``n`` cells."""
     z = np.zeros(n)
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
-            "out": z.copy(), "app1": z.copy(), "app2": z.copy(), "app3": z.copy(), "started": np.zeros(n, bool), "overdrawn": z.copy(), "still": z.copy(),
+            "out": z.copy(), "app1": z.copy(), "app2": z.copy(), "app3": z.copy(), "started": np.zeros(n, bool),
+            "overdrawn": z.copy(), "still": z.copy(),
             "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
             "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
             "hp": np.zeros(1, int)}
@@ -53,10 +54,12 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     hist[:, ~started] = x[~started]
     hp = state["hp"][0] = (state["hp"][0] + 1) % _HIST
     hist[hp] = x
-    jerk = np.zeros(x.shape)
-    for span in _SCALES:
+    d1 = np.abs(x - 2.0 * hist[hp - 1] + hist[hp - 2]) * 1e-3   # this tick's second difference (m)
+    jerk = d1 - 2.0 * q
+    for span in _SCALES[1:]:
         d2 = np.abs(x - 2.0 * hist[hp - span] + hist[hp - 2 * span]) * 1e-3 - 2.0 * q
         np.maximum(jerk, d2 / (span * span), out=jerk)
+    np.maximum(jerk, 0.0, out=jerk)
     m = s.device_mass_kg if mass_kg is None else mass_kg
     if m is not None:
         # the largest change of motion the readings allow (2 counts above the second
@@ -64,7 +67,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         # the free arm (docs/runtime.md, Passivity item 5)
         dF = np.maximum(np.abs(state["app1"] - state["app2"]), np.abs(state["app1"] - state["app3"]))
         free = dF * (dt * dt / np.asarray(m, float))
-        seen = np.abs(x - 2.0 * hist[hp - 1] + hist[hp - 2]) * 1e-3 + 2.0 * q
+        seen = d1 + 2.0 * q
         np.maximum(jerk, np.minimum(seen, free), out=jerk)
     jh = state["jh"]
     jh[hp] = jerk

@@ -139,7 +139,8 @@ class PassivityController:
         self._hp = hp
         hist[hp] = x_mm
         c2 = 2.0 * s.position_resolution_mm
-        jerk = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2]) - c2
+        d1 = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2])   # this tick's second difference (mm)
+        jerk = d1 - c2
         d = (abs(x_mm - 2.0 * hist[hp - 2] + hist[hp - 4]) - c2) * 0.25
         if d > jerk:
             jerk = d
@@ -161,12 +162,15 @@ class PassivityController:
             a1 = self._a1
             d = abs(a1 - self._a2)
             d3 = abs(a1 - self._a3)
-            d = (d if d > d3 else d3) * dt * dt / m
-            seen = (abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2]) + c2) * 1e-3
-            if seen < d:
-                d = seen
-            if d > jerk:
-                jerk = d
+            if d3 > d:
+                d = d3
+            if d > 0.0:   # a force held steady adds nothing
+                d = d * dt * dt / m
+                seen = (d1 + c2) * 1e-3
+                if seen < d:
+                    d = seen
+                if d > jerk:
+                    jerk = d
         # the largest change of motion over the ring's window (_HIST ticks): a hand that
         # reversed within it can reverse again; the estimate of this tick alone is blind
         # between reversals (taps, the finger-and-arm resonance at long periods)

@@ -115,7 +115,7 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     a = np.where(back, a2, a)
     fits = fits | back
     # largest: one bisection resolution above it does not fit
-    step_up = np.minimum(a + (hi - lo) * 2.0 ** -_BISECT, hi)
+    step_up = np.minimum(a + (hi - lo) * _RESOLUTION, hi)
     short = found & fits & (a < hi) & (cost(step_up) <= A)
     # nothing fits: not even at the cost's minimiser
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
