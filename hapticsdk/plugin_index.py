@@ -4,7 +4,8 @@ Finding the plugins reads every installed distribution's ``entry_points.txt`` th
 :mod:`importlib.metadata`, and naming a plugin's distribution parses its ``METADATA``.
 Importing :mod:`importlib.metadata` alone (it imports :mod:`email`, :mod:`zipfile`,
 :mod:`csv`) costs 12-15 ms, the scan 3 ms, the names 2 ms: a sixth of a ``hapticsdk
-render S7`` that takes no other metadata. So the result of a scan is kept in
+render S7`` that takes no other metadata (pluggy, from 1.4 on, imports it only to load entry
+points, hence the core's floor ``pluggy>=1.4``). So the result of a scan is kept in
 ``<cache>/plugin-index/<sha256>.json`` (:func:`hapticsdk.fileio.cache_dir`), the hash
 taken over everything the scan reads (:func:`fingerprint`):
 

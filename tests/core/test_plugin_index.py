@@ -18,11 +18,19 @@ from hapticsdk.plugins import GROUPS
 
 #: lists the solver plugins of a fresh process and what it imported
 PROBE = r"""
-import json, sys
+import json, os, sys
+read = []                     # every distribution metadata file this process opens
+def _audit(event, args):
+    if event == "open" and isinstance(args[0], (str, bytes, os.PathLike)):
+        name = os.path.basename(os.fsdecode(args[0]))
+        if name in ("entry_points.txt", "METADATA", "PKG-INFO"):
+            read.append(os.fsdecode(args[0]))
+sys.addaudithook(_audit)
 from hapticsdk.plugins import list_plugins
 rows = [r for r in list_plugins(["solver"]) if r["name"].startswith("idx-")]
 print(json.dumps({"rows": sorted((r["name"], r["value"], r["distribution"], r["version"]) for r in rows),
-                  "metadata": "importlib.metadata" in sys.modules, "email": "email" in sys.modules}))
+                  "metadata": "importlib.metadata" in sys.modules, "email": "email" in sys.modules,
+                  "read": read}))
 """
 
 
@@ -48,9 +56,12 @@ def test_a_second_process_reads_the_index_and_imports_no_metadata(tmp_path):
     first = _fresh(tmp_path / "cache", site)
     assert first["rows"] == [["idx-a", "idx_mod:A", "idxa", "1.0"]]
     assert first["metadata"]                      # scanned, and stored
+    assert any(p.endswith("entry_points.txt") for p in first["read"])
     assert list((tmp_path / "cache" / "plugin-index").glob("*.json"))
     again = _fresh(tmp_path / "cache", site)
     assert again["rows"] == first["rows"]
+    assert again["read"] == []                    # no distribution's metadata was opened
+    # nor imported by any module (pluggy >= 1.4, the declared floor, defers its import)
     assert not again["metadata"] and not again["email"]
 
 
