@@ -269,10 +269,21 @@ def atomic_write_json(path: str | os.PathLike[str], obj: Any, *, indent: int | N
 
 def atomic_savez(path: str | os.PathLike[str], *, compressed: bool = True, field: str | None = None,
                  verify: Callable[[Path], Any] | None = None, **arrays: Any) -> Path:
-    """``numpy.savez[_compressed]`` to ``path`` atomically (the name is kept as given:
-    no ``.npz`` suffix is appended)."""
+    """The ``.npz`` of ``numpy.savez[_compressed]`` to ``path`` atomically (the name is kept
+    as given: no ``.npz`` suffix is appended; no array is pickled).
+
+    The archive is written here, in a ``with`` block, rather than by ``numpy.savez``: numpy
+    before 1.25 leaves its ``ZipFile`` open when a write fails (a full disk, a file-size
+    limit), and its ``__del__`` then prints "Exception ignored ... seek of closed file"
+    after :func:`atomic_writer` has closed the file and reported the error."""
+    import zipfile
+
     import numpy as np
 
+    method = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
     with atomic_writer(path, "wb", field=field, verify=verify) as fh:
-        (np.savez_compressed if compressed else np.savez)(fh, **arrays)
+        with zipfile.ZipFile(fh, "w", compression=method, allowZip64=True) as zf:
+            for name, value in arrays.items():
+                with zf.open(name + ".npy", "w", force_zip64=True) as member:
+                    np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
     return Path(os.fspath(path))

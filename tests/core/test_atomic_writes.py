@@ -83,10 +83,13 @@ def _limit_fsize(nbytes: int):
 
 @pytest.mark.parametrize("argv", [["calibrate", "answers", "{out}", "--people", "30"],
                                   ["plan", "S7", "-o", "{out}"]])
-def test_file_size_limit_keeps_the_old_file_and_exits_2(tmp_path, argv):
+def test_file_size_limit_keeps_the_old_file_and_exits_2(tmp_path, tmp_path_factory, argv):
     out = tmp_path / "out.file"
+    cache = tmp_path_factory.mktemp("cache")
     out.write_text("old content\n")
-    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1")
+    # an empty cache folder: the caches' own writes (the model's and the solver's .npz) also
+    # meet the limit, whatever this machine's cache holds
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", HAPTICSDK_CACHE_DIR=str(cache))
     r = subprocess.run([sys.executable, "-m", "hapticsdk", *[a.format(out=out) for a in argv]],
                        capture_output=True, text=True, env=env, timeout=120, preexec_fn=_limit_fsize(2048))
     assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
@@ -94,6 +97,7 @@ def test_file_size_limit_keeps_the_old_file_and_exits_2(tmp_path, argv):
     assert "Traceback" not in r.stderr
     assert out.read_text() == "old content\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out.file"]  # no temporary file left
+    assert not [p for p in cache.rglob("*.tmp")]                                     # nor in the cache
 
 
 def test_concurrent_writers_and_a_reader_never_see_a_partial_file(tmp_path):
@@ -217,3 +221,47 @@ def test_a_killed_writers_temporary_file_is_removed_by_the_next_write(tmp_path):
     atomic_write_text(target, "new")
     assert target.read_text() == "new"
     assert sorted(x.name for x in tmp_path.iterdir()) == sorted(keep + ["cal.json"])
+
+
+SAVEZ_CHILD = r"""
+import sys
+import numpy as np
+from hapticsdk.errors import FileWriteError
+from hapticsdk.fileio import atomic_savez
+try:
+    atomic_savez(sys.argv[1], compressed=sys.argv[2] == "1", a=np.arange(4096.0), b=np.array("text"))
+except FileWriteError as exc:
+    print("refused:", exc)
+"""
+
+
+@pytest.mark.parametrize("compressed", ["0", "1"])
+def test_a_failed_npz_write_leaves_no_open_archive(tmp_path, compressed):
+    """An ``.npz`` that meets a file-size limit is refused with the named error, the old
+    file kept, and nothing is printed after it (numpy < 1.25's ``savez`` left its
+    ``ZipFile`` to ``__del__``, which printed "Exception ignored ... seek of closed file")."""
+    out = tmp_path / "old.npz"
+    out.write_bytes(b"old")
+    r = subprocess.run([sys.executable, "-c", SAVEZ_CHILD, str(out), compressed], capture_output=True, text=True,
+                       timeout=120, preexec_fn=_limit_fsize(2048))
+    assert r.returncode == 0 and r.stdout.startswith("refused:"), (r.stdout, r.stderr)
+    assert r.stderr == ""
+    assert out.read_bytes() == b"old"
+
+
+def test_atomic_savez_round_trips_what_numpy_savez_writes(tmp_path):
+    import numpy as np
+
+    from hapticsdk.fileio import atomic_savez
+
+    arrays = {"x": np.linspace(0, 1, 7).reshape(7, 1), "n": np.arange(5, dtype=np.int16),
+              "s": np.array(json_text := '{"k": 1}'), "e": np.zeros((0, 3)), "cmd/role/f": np.ones(2, bool)}
+    for compressed in (False, True):
+        atomic_savez(tmp_path / "a.npz", compressed=compressed, **arrays)
+        (np.savez_compressed if compressed else np.savez)(tmp_path / "b.npz", **arrays)
+        with np.load(tmp_path / "a.npz", allow_pickle=False) as a, np.load(tmp_path / "b.npz") as b:
+            assert sorted(a.files) == sorted(b.files) == sorted(arrays)
+            for k in arrays:
+                assert a[k].dtype == b[k].dtype and a[k].shape == b[k].shape
+                assert np.array_equal(a[k], b[k])
+    assert str(np.load(tmp_path / "a.npz")["s"]) == json_text
