@@ -35,32 +35,53 @@ def _ramp_sum(a: Any, s: Any) -> Any:
         return np.where(a <= s, a, a * a / (2.0 * s) + 0.5 * a + 0.125 * s)
 
 
+def _pieces(p: Any, lead_m: Any, half_count_m: Any) -> tuple[Any, ...]:
+    """The three pieces of :func:`plan_cost_j`'s encoder term, each a constant plus a
+    multiple of ``S``: ``(top, bot)`` the pieces' edges ``max(p, 0)`` and ``min(p, 0)``, and
+    ``(base, slope)`` for ``a >= top``, ``bot <= a < top`` and ``a < bot``."""
+    c = half_count_m
+    return (np.maximum(p, 0.0), np.minimum(p, 0.0),
+            -c * p, lead_m + 2.0 * c, c * np.abs(p), lead_m, c * p, lead_m - 2.0 * c)
+
+
 def plan_cost_j(a: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any, half_count_m: Any) -> Any:
-    """Upper bound (J) of the energy the plan "hold ``a`` for one tick, then ramp to 0 at
-    ``s`` per tick" hands to a hand that does not pull the stylus out (all along the
-    force's direction; ``p`` the force held now):
+    """Upper bound (J) of what the plan "hold ``a`` for one tick, then ramp to 0 at ``s``
+    per tick" adds to the booked bound ``U`` (item 1 of docs/runtime.md, Passivity), for a
+    hand that does not pull the stylus out (all along the force's direction; ``p`` the
+    force held now):
 
-    ``(Delta/2) |p| + lead S + c_m S^2``,  ``S = S(a)`` (:func:`_ramp_sum`)
+    ``(Delta/2) (|a - p| + |a|) + lead S + c_m S^2``,  ``S = S(a)`` (:func:`_ramp_sum`)
 
-    The first two terms are the work of the held forces on the free arm of (declared,
+    The last two terms are the work of the held forces on the free arm of (declared,
     smallest) mass m starting at the speed ``lead / T``: the forces ``a_j`` held for T each
     move it ``v0 T + T^2 (sum_{i<j} a_i + a_j / 2) / m`` in tick j, so their work sums to
     exactly ``v0 T S + T^2 S^2 / (2 m)`` (``c_m = T^2 / 2m``); a hand pushing in, a heavier
-    hand and the arm's damping only take from it. These are *true* displacements, so the
-    only encoder term is the one the booked bound ``U`` leaves open: ``(Delta/2) |p|``, the
-    reading's error times the force held now (summation by parts); ``lead`` carries the
-    velocity estimate's own half count."""
+    hand and the arm's damping only take from it. The first is the booked bound's own
+    quantisation term ``(Delta/2) |dF|`` over the plan's forces: the step from ``p`` to
+    ``a``, then a monotone ramp from ``a`` to 0, whose steps sum to ``|a|`` (``lead``
+    carries the velocity estimate's own half count). Above ``max(p, 0)`` the ``|a|`` is
+    charged as ``S >= a``, so that every piece is a quadratic in ``S`` (exact up to
+    ``a = s``, where ``S = a``)."""
     a = np.asarray(a, float)
     S = _ramp_sum(a, s)
-    return half_count_m * np.abs(p) + lead_m * S + push_m_per_n * S * S + 0.0 * a
+    top, bot, b_up, d_up, b_mid, d_mid, b_dn, d_dn = _pieces(np.asarray(p, float), np.asarray(lead_m, float),
+                                                             np.asarray(half_count_m, float))
+    base = np.where(a >= top, b_up, np.where(a >= bot, b_mid, b_dn))
+    d = np.where(a >= top, d_up, np.where(a >= bot, d_mid, d_dn))
+    return base + d * S + push_m_per_n * S * S + 0.0 * a
 
 
 def _plan_slope(a: Any, p: Any, lead_m: Any, c_m: Any, s: Any, c: Any) -> Any:
-    """Derivative of :func:`plan_cost_j` in ``a`` (non-decreasing: the cost is convex)."""
+    """Derivative of :func:`plan_cost_j` in ``a`` within its pieces (its sign changes once,
+    from - to +; the pieces meet with no drop)."""
+    a = np.asarray(a, float)
     S = _ramp_sum(a, s)
+    top, bot, _, d_up, _, d_mid, _, d_dn = _pieces(np.asarray(p, float), np.asarray(lead_m, float),
+                                                   np.asarray(c, float))
+    d = np.where(a >= top, d_up, np.where(a >= bot, d_mid, d_dn))
     with np.errstate(divide="ignore", invalid="ignore"):
         dS = np.where(a <= s, 1.0, a / s + 0.5)
-    return (lead_m + 2.0 * c_m * S) * dS
+    return (d + 2.0 * c_m * S) * dS
 
 
 def _largest_ramp_start(S2: Any, s: Any) -> Any:
@@ -87,13 +108,16 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
                      half_count_m: Any) -> Any:
     """Largest ``a`` in ``[lo, hi]`` with :func:`plan_cost_j` ``<= avail_j`` (vectorised).
 
-    The cost is a convex quadratic in the ramp's sum ``S = S(a)``, and ``S`` rises with
-    ``a``: ``hi`` when it fits; otherwise the largest ``a`` whose ``S`` is at most the
-    quadratic's upper root (closed form), when that ``a`` is in ``[lo, hi]`` and fits;
-    when nothing fits, ``lo`` (the ramp allows no deeper cut). Each answer is checked:
-    a found ``a`` must fit and one bisection resolution above it must not, and "nothing
-    fits" must hold at the cost's minimiser; where rounding, an underflow or an overflow
-    breaks a check, bisection decides (:func:`_affordable_bisect`)."""
+    On each of its three pieces (above ``max(p, 0)``, down to ``min(p, 0)``, below) the
+    cost is a convex quadratic in the ramp's sum ``S = S(a)``, and ``S`` rises with ``a``;
+    the pieces meet with no drop, so the cost falls, then rises. ``hi`` when it fits;
+    otherwise, piece by piece from the top (each below the last one's lower edge), the
+    largest ``a`` whose ``S`` is at most that piece's upper root (closed form), when it
+    lies on the piece and in ``[lo, hi]``; when nothing fits, ``lo`` (the ramp allows no
+    deeper cut). Each answer is checked: a found ``a`` must fit and one bisection
+    resolution above it must not, and "nothing fits" must hold at each piece's minimiser;
+    where rounding, an underflow or an overflow breaks a check, bisection decides
+    (:func:`_affordable_bisect`)."""
     A, lo, hi, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (
         avail_j, lo, hi, p, lead_m, push_m_per_n, s, half_count_m)))
     def cost(a: np.ndarray) -> np.ndarray:
@@ -101,13 +125,32 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     ok_hi = cost(hi) <= A
     if ok_hi.all():
         return hi.copy() if hi.ndim else float(hi)
-    S2 = _upper_root(A - c * np.abs(p), d, c_m)
-    a = _largest_ramp_start(S2, s)
-    # a >= hi: hi is within the upper root and does not fit, so [lo, hi] lies below the
-    # lower root (nothing fits): the minimiser's check below confirms it
-    below = a >= hi
-    found = np.isfinite(a) & (a >= lo) & ~below
-    a = np.where(found, a, lo)
+    # lo does not fit and the cost rises from it: nothing fits (the cost falls, then rises)
+    rising = ~ok_hi & (cost(lo) > A) & (_plan_slope(lo, p, d, c_m, s, c) > 0.0)
+    top, bot, b_up, d_up, b_mid, d_mid, b_dn, d_dn = _pieces(p, d, c)
+    pieces = ((top, b_up, d_up), (bot, b_mid, d_mid), (np.full_like(p, -np.inf), b_dn, d_dn))
+    a = lo.copy()
+    found = np.zeros(a.shape, bool)
+    done = ok_hi | (hi <= lo) | rising
+    end = hi
+    for edge, base, slope in pieces:
+        # this piece's formula holds on [edge, end]; skip it where that misses [lo, hi]
+        here = ~done & (end >= edge) & (end >= lo)
+        # below a piece with nothing: its largest point, just under that piece's edge, when it fits
+        top_fits = here & (end < hi) & (cost(end) <= A)
+        a = np.where(top_fits, end, a)
+        found |= top_fits
+        done |= top_fits
+        here &= ~top_fits
+        root = _largest_ramp_start(_upper_root(A - base, slope, c_m), s)
+        on = here & np.isfinite(root) & (root >= edge)   # else nothing fits on this piece
+        # root >= end: end is within the upper root and does not fit, so it lies below the
+        # lower root: nothing fits (the minimisers' check below confirms it)
+        hit = on & (root >= lo) & (root < end)
+        a = np.where(hit, root, a)
+        found |= hit
+        done |= on
+        end = np.minimum(end, np.nextafter(edge, -np.inf))
     fits = cost(a) <= A
     # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
     a2 = a - _NUDGE * (np.abs(a) + s)
@@ -117,12 +160,17 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     # largest: one bisection resolution above it does not fit
     step_up = np.minimum(a + (hi - lo) * _RESOLUTION, hi)
     short = found & fits & (a < hi) & (cost(step_up) <= A)
-    # nothing fits: not even at the cost's minimiser
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        s_min = np.where(c_m > 0.0, -d / (2.0 * c_m), np.where(d > 0.0, -np.inf, np.inf))
-    amin = np.clip(np.where(np.isnan(s_min), lo, _largest_ramp_start(s_min, s)), lo, hi)
-    missed = ~found & (cost(amin) <= A)
-    unsure = ~ok_hi & (hi > lo) & ((found & ~fits) | short | missed)
+    # nothing fits: not even at a piece's minimiser (within [lo, hi])
+    missed = np.zeros(a.shape, bool)
+    end = hi
+    for edge, base, slope in pieces:
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            s_min = np.where(c_m > 0.0, -slope / (2.0 * c_m), np.where(slope > 0.0, -np.inf, np.inf))
+        first = np.maximum(edge, lo)
+        amin = np.clip(_largest_ramp_start(s_min, s), first, end)
+        missed |= ~found & (first <= end) & (cost(amin) <= A)
+        end = np.minimum(end, np.nextafter(edge, -np.inf))
+    unsure = ~ok_hi & ~rising & (hi > lo) & ((found & ~fits) | short | missed)
     out = np.where(ok_hi, hi, np.where(found & fits, a, lo))
     if unsure.any():
         out = np.where(unsure, _affordable_bisect(A, lo, hi, p, d, c_m, s, c), out)
@@ -144,6 +192,9 @@ def _affordable_bisect(A: Any, lo: Any, hi: Any, p: Any, d: Any, c_m: Any, s: An
         b = np.where(up, m, b)
         a = np.where(up, a, m)
     amin = np.where(_plan_slope(lo, p, d, c_m, s, c) > 0, lo, a)
+    # where the pieces jump (at max(p, 0) > s) the least cost can sit just under the jump
+    under = np.nextafter(np.maximum(p, 0.0), -np.inf)
+    amin = np.where((under >= lo) & (under <= hi) & (cost(under) < cost(amin)), under, amin)
     fits = cost(amin) <= A
     a, b = amin.copy(), hi.copy()
     for _ in range(_BISECT):
@@ -156,60 +207,158 @@ def _affordable_bisect(A: Any, lo: Any, hi: Any, p: Any, d: Any, c_m: Any, s: An
 
 def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
                        c: float) -> float:
-    """:func:`affordable_force` for one cell, in floats (the servo tick), with the same checks."""
-    base = c * abs(p)
+    """:func:`affordable_force` for one cell, in floats (the servo tick), with the same checks
+    and the same answers. The tick's case, a held force ``p >= 0`` and ``lo >= 0`` (two
+    pieces: ``[0, p)``, base ``c p`` and slope ``d``, and from ``p`` up, base ``-c p`` and
+    slope ``d + 2c``), is written out; others take :func:`_affordable_pieces_scalar`."""
+    if p < 0.0 or lo < 0.0:
+        return _affordable_pieces_scalar(A, lo, hi, p, d, c_m, s, c)
+    cp = c * p
+    up = d + 2.0 * c
     S = hi if hi <= s else hi * hi / (2.0 * s) + 0.5 * hi + 0.125 * s
-    if base + d * S + c_m * S * S <= A or hi <= lo:
+    if (up * S - cp if hi >= p else cp + d * S) + c_m * S * S <= A or hi <= lo:
         return hi if hi > lo else lo
-    r = A - base
-    S2 = None
-    if c_m > 0.0:
-        disc = d * d + 4.0 * c_m * r
-        if disc > 0.0:   # 0: a double root, or an underflow; the check below decides
-            sq = math.sqrt(disc)
-            S2 = (sq - d) / (2.0 * c_m) if d <= 0.0 else 2.0 * r / (d + sq)
-    elif d > 0.0:
-        S2 = r / d
-    if S2 is not None:
-        if S2 < s:
-            a = S2
-        elif S2 < 1.125 * s:
-            a = s
-        else:
-            a = 0.5 * (math.sqrt(8.0 * s * S2) - s)
-        # a >= hi: hi is within the upper root and does not fit, so [lo, hi] lies below
-        # the lower root (nothing fits): the minimiser's check below confirms it
-        if lo <= a < hi:
-            S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
-            if base + d * S + c_m * S * S > A:
-                # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
-                a -= _NUDGE * ((a if a > 0.0 else -a) + s)
-                if a < lo:
-                    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
-                S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
-                if base + d * S + c_m * S * S > A:
-                    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
-            # largest: one bisection resolution above it does not fit
-            u = a + (hi - lo) * _RESOLUTION
-            if u < hi:
-                S = u if u <= s else u * u / (2.0 * s) + 0.5 * u + 0.125 * s
-                if base + d * S + c_m * S * S <= A:
-                    return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
-            return a
-    # nothing fits: not even at the cost's minimiser
-    if c_m > 0.0:
-        a = -d / (2.0 * c_m)
-        if a >= 1.125 * s:
-            a = 0.5 * (math.sqrt(8.0 * s * a) - s)
-        elif a > s:
-            a = s
-        a = lo if a < lo else (hi if a > hi else a)
+    # lo does not fit and the cost rises from it: nothing fits (the cost falls, then rises)
+    S = lo if lo <= s else lo * lo / (2.0 * s) + 0.5 * lo + 0.125 * s
+    if lo >= p:
+        if up * S - cp + c_m * S * S > A and up + 2.0 * c_m * S > 0.0:
+            return lo
+    elif cp + d * S + c_m * S * S > A and d + 2.0 * c_m * S > 0.0:
+        return lo
+    a = math.nan                     # the answer's candidate; NaN: nothing fits
+    if hi >= p:
+        # the piece from p up: the quadratic's upper root, mapped back through S
+        root = _root_force(A + cp, up, c_m, s)
+        # root >= hi: hi is within the upper root and does not fit, so it lies below the
+        # lower root: nothing fits (the pieces' minimisers confirm it)
+        end = math.nextafter(p, -math.inf)
+        if root >= p:
+            if lo <= root < hi:
+                a = root
+            end = -math.inf
+        elif end >= lo:
+            # nothing from p up: the largest point below p, when it fits
+            S = end if end <= s else end * end / (2.0 * s) + 0.5 * end + 0.125 * s
+            if cp + d * S + c_m * S * S <= A:
+                return end
     else:
-        a = lo if d > 0.0 else hi
-    S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
-    if base + d * S + c_m * S * S <= A:
+        end = hi
+    if end >= lo:
+        # the piece [0, p)
+        root = _root_force(A - cp, d, c_m, s)
+        if root >= 0.0 and lo <= root < end:
+            a = root
+    if a == a:
+        return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
+    return _nothing_fits_scalar(A, lo, hi, p, d, c_m, s, c)
+
+
+def _root_force(r: float, slope: float, c_m: float, s: float) -> float:
+    """Largest ``a`` whose ramp sum ``S(a)`` is at most the upper root of
+    ``slope S + c_m S^2 = r`` (:func:`_upper_root` and :func:`_largest_ramp_start` in
+    floats); ``-inf`` when there is none (a double root or an underflow included: the
+    callers' checks decide those)."""
+    S2 = -math.inf
+    if c_m > 0.0:
+        disc = slope * slope + 4.0 * c_m * r
+        if disc > 0.0:
+            sq = math.sqrt(disc)
+            S2 = (sq - slope) / (2.0 * c_m) if slope <= 0.0 else 2.0 * r / (slope + sq)
+    elif slope > 0.0:
+        S2 = r / slope
+    return S2 if S2 < s else (s if S2 < 1.125 * s else 0.5 * (math.sqrt(8.0 * s * S2) - s))
+
+
+def _checked_scalar(a: float, A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
+                    c: float) -> float:
+    """``a``, a closed form's answer in ``[lo, hi)``, once checked: it fits (or does 1e-12 of
+    the scale lower: the root's rounding) and one bisection resolution above it does not;
+    else the bisection's answer."""
+    if _cost_scalar(a, p, d, c_m, s, c) > A:
+        a -= _NUDGE * ((a if a > 0.0 else -a) + s)
+        if a < lo or _cost_scalar(a, p, d, c_m, s, c) > A:
+            return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+    u = a + (hi - lo) * _RESOLUTION
+    if u < hi and _cost_scalar(u, p, d, c_m, s, c) <= A:
         return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+    return a
+
+
+def _nothing_fits_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
+                         c: float) -> float:
+    """``lo`` when the cost exceeds ``A`` at each piece's minimiser within ``[lo, hi]``, else
+    the bisection's answer."""
+    end = hi
+    for edge, base, slope in ((max(p, 0.0), -c * p, d + 2.0 * c), (min(p, 0.0), c * abs(p), d),
+                              (-math.inf, c * p, d - 2.0 * c)):
+        first = edge if edge > lo else lo
+        if first <= end:
+            if c_m > 0.0:
+                a = -slope / (2.0 * c_m)
+                if a >= 1.125 * s:
+                    a = 0.5 * (math.sqrt(8.0 * s * a) - s)
+                elif a > s:
+                    a = s
+            else:
+                a = -math.inf if slope > 0.0 else math.inf
+            a = first if a < first else (end if a > end else a)
+            S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+            if base + slope * S + c_m * S * S <= A:
+                return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
+            if first == lo:
+                break
+        nxt = math.nextafter(edge, -math.inf)
+        if nxt < end:
+            end = nxt
     return lo
+
+
+def _affordable_pieces_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
+                              c: float) -> float:
+    """:func:`_affordable_scalar` over all three pieces (a held force below 0, or a ramp
+    reaching below 0), as :func:`affordable_force` walks them."""
+    if hi <= lo or _cost_scalar(hi, p, d, c_m, s, c) <= A:
+        return hi if hi > lo else lo
+    if _cost_scalar(lo, p, d, c_m, s, c) > A and _slope_sign_scalar(lo, p, d, c_m, s, c) > 0.0:
+        return lo                    # the cost rises from lo, where it does not fit
+    end = hi
+    for edge, base, slope in ((max(p, 0.0), -c * p, d + 2.0 * c), (min(p, 0.0), c * abs(p), d),
+                              (-math.inf, c * p, d - 2.0 * c)):
+        if end < edge:
+            continue                 # hi lies below this piece
+        if end < lo:
+            break
+        if end < hi and _cost_scalar(end, p, d, c_m, s, c) <= A:
+            return end               # just under the edge of a piece with nothing
+        a = _root_force(A - base, slope, c_m, s)
+        if a >= edge:
+            # a >= end: end is within the upper root and does not fit, so it lies below the
+            # lower root: nothing fits
+            if a >= end or a < lo:
+                break
+            return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
+        end = min(end, math.nextafter(edge, -math.inf))
+    return _nothing_fits_scalar(A, lo, hi, p, d, c_m, s, c)
+
+
+def _slope_sign_scalar(a: float, p: float, d: float, c_m: float, s: float, c: float) -> float:
+    """A number of the sign of :func:`_plan_slope` at ``a`` (``S`` rises with ``a``)."""
+    S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+    if a >= (p if p > 0.0 else 0.0):
+        return d + 2.0 * c + 2.0 * c_m * S
+    if a >= (p if p < 0.0 else 0.0):
+        return d + 2.0 * c_m * S
+    return d - 2.0 * c + 2.0 * c_m * S
+
+
+def _cost_scalar(a: float, p: float, d: float, c_m: float, s: float, c: float) -> float:
+    """:func:`plan_cost_j` in floats."""
+    S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+    if a >= (p if p > 0.0 else 0.0):
+        return -c * p + (d + 2.0 * c) * S + c_m * S * S
+    if a >= (p if p < 0.0 else 0.0):
+        return c * abs(p) + d * S + c_m * S * S
+    return c * p + (d - 2.0 * c) * S + c_m * S * S
 
 
 def _bisect_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
@@ -218,12 +367,20 @@ def _bisect_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: floa
     def ramp(a: float) -> float:
         return a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
 
+    def piece(a: float) -> tuple[float, float]:
+        if a >= max(p, 0.0):
+            return -c * p, d + 2.0 * c
+        if a >= min(p, 0.0):
+            return c * abs(p), d
+        return c * p, d - 2.0 * c
+
     def cost(a: float) -> float:
         S = ramp(a)
-        return c * abs(p) + d * S + c_m * S * S
+        base, dr = piece(a)
+        return base + dr * S + c_m * S * S
 
     def slope(a: float) -> float:
-        return (d + 2.0 * c_m * ramp(a)) * (1.0 if a <= s else a / s + 0.5)
+        return (piece(a)[1] + 2.0 * c_m * ramp(a)) * (1.0 if a <= s else a / s + 0.5)
     if cost(hi) <= A:
         return hi
     a, b = lo, hi
@@ -234,6 +391,10 @@ def _bisect_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: floa
                 b = m
             else:
                 a = m
+    # where the pieces jump (at max(p, 0) > s) the least cost can sit just under the jump
+    under = math.nextafter(max(p, 0.0), -math.inf)
+    if lo <= under <= hi and cost(under) < cost(a):
+        a = under
     if cost(a) > A:
         return lo
     b = hi

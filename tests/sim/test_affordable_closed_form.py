@@ -11,7 +11,7 @@ from hypothesis import example, given, settings, strategies as st  # noqa: E402
 from hapticsdk.passivity import _affordable_scalar, affordable_force, plan_cost_j  # noqa: E402
 from hapticsdk.passivity.plan import _BISECT, _affordable_bisect, _bisect_scalar  # noqa: E402
 
-force = st.floats(0.0, 5.0)
+force = st.floats(-5.0, 5.0)   # a held extra below 0 meets all three pieces of the cost
 ramp = st.floats(0.01, 3.3)
 lead = st.floats(-2e-4, 2e-4)
 push = st.one_of(st.just(0.0), st.floats(1e-7, 1e-3))
@@ -46,12 +46,13 @@ def test_closed_form_is_the_largest_within_budget(A, p, s, up, d, cm, c):
     assert affordable_force(A, lo, hi, p, d, cm, s, c) == a
 
 
-def _typical(n, seed):
-    """Draws of the tick's own sizes: forces up to 3.3 N, leads of +-0.2 mm, free-arm terms
-    up to 1e-3 m/N, half counts up to 0.1 mm; budgets around the cost of a force inside
-    the range, so most answers are interior."""
+def _typical(n, seed, least=0.0):
+    """Draws of the tick's own sizes: forces up to 3.3 N (held forces from ``least``: below 0
+    meets all three pieces of the cost), leads of +-0.2 mm, free-arm terms up to 1e-3 m/N,
+    half counts up to 0.1 mm; budgets around the cost of a force inside the range, so most
+    answers are interior."""
     rng = np.random.default_rng(seed)
-    p = rng.uniform(0, 3.3, n)
+    p = rng.uniform(least, 3.3, n)
     s = rng.uniform(0.01, 3.3, n)
     lo = np.where(p - s >= 0, p - s, np.minimum(p + s, 0.0))
     hi = np.maximum(p + rng.uniform(-1, 1, n) * s, lo)
@@ -62,8 +63,9 @@ def _typical(n, seed):
     return A, lo, hi, p, d, cm, s, c
 
 
-def test_vectorised_closed_form_equals_bisection():
-    A, lo, hi, p, d, cm, s, c = _typical(20000, 11)
+@pytest.mark.parametrize("least", [0.0, -3.0])
+def test_vectorised_closed_form_equals_bisection(least):
+    A, lo, hi, p, d, cm, s, c = _typical(20000, 11, least)
     a = affordable_force(A, lo, hi, p, d, cm, s, c)
     ref = _affordable_bisect(A, lo, hi, p, d, cm, s, c)
     interior = (a > lo) & (a < hi)
@@ -73,7 +75,8 @@ def test_vectorised_closed_form_equals_bisection():
     assert np.all((plan_cost_j(a, p, d, cm, s, c) <= A) | (a == lo))
 
 
-def test_the_closed_form_answers_without_the_bisection(monkeypatch):
+@pytest.mark.parametrize("least", [0.0, -3.0])
+def test_the_closed_form_answers_without_the_bisection(monkeypatch, least):
     """The answers are checked and bisection takes over where a check fails, so a wrong
     closed form would still give right answers, only slower: on inputs of the tick's own
     sizes the bisection must not be needed (none in 20 000 draws of three seeds, measured)."""
@@ -83,10 +86,28 @@ def test_the_closed_form_answers_without_the_bisection(monkeypatch):
     real_vec, real_scalar = plan._affordable_bisect, plan._bisect_scalar
     monkeypatch.setattr(plan, "_affordable_bisect", lambda *a: vec.append(a) or real_vec(*a))
     monkeypatch.setattr(plan, "_bisect_scalar", lambda *a: scalar.append(a) or real_scalar(*a))
-    args = _typical(20000, 5)
+    args = _typical(20000, 5, least)
     out = plan.affordable_force(*args)
     interior = (out > args[1]) & (out < args[2])
     assert interior.sum() > 5000
     for k in range(2000):
         plan._affordable_scalar(*(float(v[k]) for v in args))
     assert not vec and not scalar, (len(vec), len(scalar))
+
+
+@settings(max_examples=300, deadline=None, derandomize=True, database=None)
+# half counts from 1 nm (subnormal ones lose the products' precision)
+@given(a=st.floats(-5.0, 5.0), p=st.floats(-5.0, 5.0), s=ramp, c=st.one_of(st.just(0.0), st.floats(1e-9, 1e-4)))
+def test_the_plan_pays_the_quantisation_term_the_book_adds_for_it(a, p, s, c):
+    """With no motion (lead 0, no free arm) the cost is the booked bound's quantisation term
+    over the plan's forces, ``(Delta/2) sum |dX|`` = ``(Delta/2) (|a - p| + |a|)`` (the step
+    to ``a``, then a monotone ramp to 0): exactly, where ``S(a) = a``; above ``max(p, 0)``
+    and ``s`` it charges ``S(a) >= a`` for ``|a|``. So it is also at least ``(Delta/2)|p|``,
+    the bound's open tail now, which a bound of the true energy at the plan's end needs."""
+    cost = float(plan_cost_j(a, p, 0.0, 0.0, s, c))
+    book = c * (abs(a - p) + abs(a))
+    slack = 1e-12 * c * (abs(a) + abs(p) + s)
+    assert cost >= book - slack
+    assert cost >= c * abs(p) - slack
+    if a <= s or a < max(p, 0.0):
+        assert cost == pytest.approx(book, rel=1e-12, abs=slack)
