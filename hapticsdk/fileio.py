@@ -270,7 +270,8 @@ def atomic_write_json(path: str | os.PathLike[str], obj: Any, *, indent: int | N
 def atomic_savez(path: str | os.PathLike[str], *, compressed: bool = True, field: str | None = None,
                  verify: Callable[[Path], Any] | None = None, **arrays: Any) -> Path:
     """The ``.npz`` of ``numpy.savez[_compressed]`` to ``path`` atomically (the name is kept
-    as given: no ``.npz`` suffix is appended; no array is pickled).
+    as given: no ``.npz`` suffix is appended). An array of Python objects, which only
+    pickling could store, is refused with :class:`FileWriteError`.
 
     The archive is written here, in a ``with`` block, rather than by ``numpy.savez``: numpy
     before 1.25 leaves its ``ZipFile`` open when a write fails (a full disk, a file-size
@@ -280,10 +281,15 @@ def atomic_savez(path: str | os.PathLike[str], *, compressed: bool = True, field
 
     import numpy as np
 
+    values = {name: np.asanyarray(value) for name, value in arrays.items()}
+    for name, value in values.items():
+        if value.dtype.hasobject:   # the SDK's readers load with allow_pickle=False
+            raise FileWriteError(f"not written: array {name!r} holds Python objects (dtype {value.dtype}), "
+                                 "which an .npz stores only by pickling", field=field or str(path))
     method = zipfile.ZIP_DEFLATED if compressed else zipfile.ZIP_STORED
     with atomic_writer(path, "wb", field=field, verify=verify) as fh:
         with zipfile.ZipFile(fh, "w", compression=method, allowZip64=True) as zf:
-            for name, value in arrays.items():
+            for name, value in values.items():
                 with zf.open(name + ".npy", "w", force_zip64=True) as member:
-                    np.lib.format.write_array(member, np.asanyarray(value), allow_pickle=False)
+                    np.lib.format.write_array(member, value, allow_pickle=False)
     return Path(os.fspath(path))

@@ -265,3 +265,15 @@ def test_atomic_savez_round_trips_what_numpy_savez_writes(tmp_path):
                 assert a[k].dtype == b[k].dtype and a[k].shape == b[k].shape
                 assert np.array_equal(a[k], b[k])
     assert str(np.load(tmp_path / "a.npz")["s"]) == json_text
+
+
+def test_atomic_savez_refuses_an_array_of_objects(tmp_path):
+    """The SDK's readers load ``.npz`` files with ``allow_pickle=False``: an array that only
+    pickling could store is refused by name, and no file is written."""
+    import numpy as np
+
+    from hapticsdk.fileio import atomic_savez
+
+    with pytest.raises(FileWriteError, match="'tags'"):
+        atomic_savez(tmp_path / "a.npz", x=np.zeros(3), tags=np.array([{"k": 1}, None], dtype=object))
+    assert list(tmp_path.iterdir()) == []
