@@ -45,10 +45,9 @@ def _pieces(p: Any, lead_m: Any, half_count_m: Any) -> tuple[Any, ...]:
 
 
 def plan_cost_j(a: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any, half_count_m: Any) -> Any:
-    """Upper bound (J) of what the plan "hold ``a`` for one tick, then ramp to 0 at ``s``
-    per tick" adds to the booked bound ``U`` (item 1 of docs/runtime.md, Passivity), for a
-    hand that does not pull the stylus out (all along the force's direction; ``p`` the
-    force held now):
+    """Cost (J) of the plan "hold ``a`` for one tick, then ramp to 0 at ``s`` per tick",
+    charged against the allowance, for a hand that does not pull the stylus out (all
+    along the force's direction; ``p`` the force held now):
 
     ``(Delta/2) (|a - p| + |a|) + lead S + c_m S^2``,  ``S = S(a)`` (:func:`_ramp_sum`)
 
@@ -61,7 +60,9 @@ def plan_cost_j(a: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any, half_cou
     ``a``, then a monotone ramp from ``a`` to 0, whose steps sum to ``|a|`` (``lead``
     carries the velocity estimate's own half count). Above ``max(p, 0)`` the ``|a|`` is
     charged as ``S >= a``, so that every piece is a quadratic in ``S`` (exact up to
-    ``a = s``, where ``S = a``)."""
+    ``a = s``, where ``S = a``). By the triangle inequality the cost is at least
+    ``(Delta/2) |p|`` (the booked bound's open tail now) plus that work: an upper bound
+    of the true energy given when the plan ends (docs/runtime.md, Passivity items 1, 5)."""
     a = np.asarray(a, float)
     S = _ramp_sum(a, s)
     top, bot, b_up, d_up, b_mid, d_mid, b_dn, d_dn = _pieces(np.asarray(p, float), np.asarray(lead_m, float),
