@@ -4,7 +4,6 @@ folder, a failing WAV sink."""
 
 from __future__ import annotations
 
-import json
 import os
 import random
 import resource
@@ -14,7 +13,6 @@ import sys
 import textwrap
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
