@@ -63,22 +63,24 @@ def plan_cost_j(a: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any, half_cou
     ``a = s``, where ``S = a``). By the triangle inequality the cost is at least
     ``(Delta/2) |p|`` (the booked bound's open tail now) plus that work: an upper bound
     of the true energy given when the plan ends (docs/runtime.md, Passivity items 1, 5)."""
-    a = np.asarray(a, float)
+    pieces = _pieces(np.asarray(p, float), np.asarray(lead_m, float), np.asarray(half_count_m, float))
+    return _piece_cost(np.asarray(a, float), pieces, push_m_per_n, s)
+
+
+def _piece_cost(a: np.ndarray, pieces: tuple[Any, ...], c_m: Any, s: Any) -> Any:
+    """:func:`plan_cost_j` from the pieces of :func:`_pieces` (computed once per solve)."""
+    top, bot, b_up, d_up, b_mid, d_mid, b_dn, d_dn = pieces
     S = _ramp_sum(a, s)
-    top, bot, b_up, d_up, b_mid, d_mid, b_dn, d_dn = _pieces(np.asarray(p, float), np.asarray(lead_m, float),
-                                                             np.asarray(half_count_m, float))
     base = np.where(a >= top, b_up, np.where(a >= bot, b_mid, b_dn))
     d = np.where(a >= top, d_up, np.where(a >= bot, d_mid, d_dn))
-    return base + d * S + push_m_per_n * S * S + 0.0 * a
+    return base + d * S + c_m * S * S + 0.0 * a
 
 
-def _plan_slope(a: Any, p: Any, lead_m: Any, c_m: Any, s: Any, c: Any) -> Any:
+def _piece_slope(a: np.ndarray, pieces: tuple[Any, ...], c_m: Any, s: Any) -> Any:
     """Derivative of :func:`plan_cost_j` in ``a`` within its pieces (its sign changes once,
     from - to +; the pieces meet with no drop)."""
-    a = np.asarray(a, float)
+    top, bot, _, d_up, _, d_mid, _, d_dn = pieces
     S = _ramp_sum(a, s)
-    top, bot, _, d_up, _, d_mid, _, d_dn = _pieces(np.asarray(p, float), np.asarray(lead_m, float),
-                                                   np.asarray(c, float))
     d = np.where(a >= top, d_up, np.where(a >= bot, d_mid, d_dn))
     with np.errstate(divide="ignore", invalid="ignore"):
         dS = np.where(a <= s, 1.0, a / s + 0.5)
@@ -121,14 +123,16 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     (:func:`_affordable_bisect`)."""
     A, lo, hi, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (
         avail_j, lo, hi, p, lead_m, push_m_per_n, s, half_count_m)))
+    P = _pieces(p, d, c)
+
     def cost(a: np.ndarray) -> np.ndarray:
-        return plan_cost_j(a, p, d, c_m, s, c)
+        return _piece_cost(a, P, c_m, s)
     ok_hi = cost(hi) <= A
     if ok_hi.all():
         return hi.copy() if hi.ndim else float(hi)
     # lo does not fit and the cost rises from it: nothing fits (the cost falls, then rises)
-    rising = ~ok_hi & (cost(lo) > A) & (_plan_slope(lo, p, d, c_m, s, c) > 0.0)
-    top, bot, b_up, d_up, b_mid, d_mid, b_dn, d_dn = _pieces(p, d, c)
+    rising = ~ok_hi & (cost(lo) > A) & (_piece_slope(lo, P, c_m, s) > 0.0)
+    top, bot, b_up, d_up, b_mid, d_mid, b_dn, d_dn = P
     pieces = ((top, b_up, d_up), (bot, b_mid, d_mid), (np.full_like(p, -np.inf), b_dn, d_dn))
     a = lo.copy()
     found = np.zeros(a.shape, bool)
@@ -183,16 +187,18 @@ def _affordable_bisect(A: Any, lo: Any, hi: Any, p: Any, d: Any, c_m: Any, s: An
     slope), then the crossing between it and ``hi``; ``lo`` when nothing fits. The fallback
     where the closed form sits on the budget's edge within rounding."""
     A, lo, hi, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (A, lo, hi, p, d, c_m, s, c)))
+    P = _pieces(p, d, c)
+
     def cost(a: np.ndarray) -> np.ndarray:
-        return plan_cost_j(a, p, d, c_m, s, c)
+        return _piece_cost(a, P, c_m, s)
     ok_hi = cost(hi) <= A
     a, b = lo.copy(), hi.copy()
     for _ in range(_BISECT):
         m = 0.5 * (a + b)
-        up = _plan_slope(m, p, d, c_m, s, c) > 0
+        up = _piece_slope(m, P, c_m, s) > 0
         b = np.where(up, m, b)
         a = np.where(up, a, m)
-    amin = np.where(_plan_slope(lo, p, d, c_m, s, c) > 0, lo, a)
+    amin = np.where(_piece_slope(lo, P, c_m, s) > 0, lo, a)
     # where the pieces jump (at max(p, 0) > s) the least cost can sit just under the jump
     under = np.nextafter(np.maximum(p, 0.0), -np.inf)
     amin = np.where((under >= lo) & (under <= hi) & (cost(under) < cost(amin)), under, amin)
@@ -204,6 +210,14 @@ def _affordable_bisect(A: Any, lo: Any, hi: Any, p: Any, d: Any, c_m: Any, s: An
         a = np.where(fit, m, a)
         b = np.where(fit, b, m)
     return np.where(ok_hi, hi, np.where(fits, a, lo))
+
+
+def _pieces_scalar(p: float, d: float, c: float) -> tuple[tuple[float, float, float], ...]:
+    """:func:`_pieces` in floats, as ``(edge, base, slope)`` from the top piece down (the
+    bottom piece's edge is ``-inf``)."""
+    return ((p if p > 0.0 else 0.0, -c * p, d + 2.0 * c),
+            (p if p < 0.0 else 0.0, c * (p if p > 0.0 else -p), d),
+            (-math.inf, c * p, d - 2.0 * c))
 
 
 def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
@@ -290,8 +304,7 @@ def _nothing_fits_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m
     """``lo`` when the cost exceeds ``A`` at each piece's minimiser within ``[lo, hi]``, else
     the bisection's answer."""
     end = hi
-    for edge, base, slope in ((max(p, 0.0), -c * p, d + 2.0 * c), (min(p, 0.0), c * abs(p), d),
-                              (-math.inf, c * p, d - 2.0 * c)):
+    for edge, base, slope in _pieces_scalar(p, d, c):
         first = edge if edge > lo else lo
         if first <= end:
             if c_m > 0.0:
@@ -323,8 +336,7 @@ def _affordable_pieces_scalar(A: float, lo: float, hi: float, p: float, d: float
     if _cost_scalar(lo, p, d, c_m, s, c) > A and _slope_sign_scalar(lo, p, d, c_m, s, c) > 0.0:
         return lo                    # the cost rises from lo, where it does not fit
     end = hi
-    for edge, base, slope in ((max(p, 0.0), -c * p, d + 2.0 * c), (min(p, 0.0), c * abs(p), d),
-                              (-math.inf, c * p, d - 2.0 * c)):
+    for edge, base, slope in _pieces_scalar(p, d, c):
         if end < edge:
             continue                 # hi lies below this piece
         if end < lo:
@@ -342,46 +354,36 @@ def _affordable_pieces_scalar(A: float, lo: float, hi: float, p: float, d: float
     return _nothing_fits_scalar(A, lo, hi, p, d, c_m, s, c)
 
 
+def _piece_at(a: float, p: float, d: float, c: float) -> tuple[float, float]:
+    """``(base, slope)`` of the piece of :func:`_pieces_scalar` that holds ``a``."""
+    for edge, base, slope in _pieces_scalar(p, d, c):
+        if a >= edge:
+            return base, slope
+    return base, slope               # a = -inf or NaN: the bottom piece
+
+
 def _slope_sign_scalar(a: float, p: float, d: float, c_m: float, s: float, c: float) -> float:
-    """A number of the sign of :func:`_plan_slope` at ``a`` (``S`` rises with ``a``)."""
+    """A number of the sign of :func:`_piece_slope` at ``a`` (``S`` rises with ``a``)."""
     S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
-    if a >= (p if p > 0.0 else 0.0):
-        return d + 2.0 * c + 2.0 * c_m * S
-    if a >= (p if p < 0.0 else 0.0):
-        return d + 2.0 * c_m * S
-    return d - 2.0 * c + 2.0 * c_m * S
+    return _piece_at(a, p, d, c)[1] + 2.0 * c_m * S
 
 
 def _cost_scalar(a: float, p: float, d: float, c_m: float, s: float, c: float) -> float:
     """:func:`plan_cost_j` in floats."""
     S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
-    if a >= (p if p > 0.0 else 0.0):
-        return -c * p + (d + 2.0 * c) * S + c_m * S * S
-    if a >= (p if p < 0.0 else 0.0):
-        return c * abs(p) + d * S + c_m * S * S
-    return c * p + (d - 2.0 * c) * S + c_m * S * S
+    base, slope = _piece_at(a, p, d, c)
+    return base + slope * S + c_m * S * S
 
 
 def _bisect_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
                    c: float) -> float:
-    """:func:`_affordable_bisect` for one cell, in floats."""
-    def ramp(a: float) -> float:
-        return a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
-
-    def piece(a: float) -> tuple[float, float]:
-        if a >= max(p, 0.0):
-            return -c * p, d + 2.0 * c
-        if a >= min(p, 0.0):
-            return c * abs(p), d
-        return c * p, d - 2.0 * c
-
+    """:func:`_affordable_bisect` for one cell, in floats (the slope's sign is that of
+    :func:`_slope_sign_scalar`: ``dS/da > 0``)."""
     def cost(a: float) -> float:
-        S = ramp(a)
-        base, dr = piece(a)
-        return base + dr * S + c_m * S * S
+        return _cost_scalar(a, p, d, c_m, s, c)
 
     def slope(a: float) -> float:
-        return (piece(a)[1] + 2.0 * c_m * ramp(a)) * (1.0 if a <= s else a / s + 0.5)
+        return _slope_sign_scalar(a, p, d, c_m, s, c)
     if cost(hi) <= A:
         return hi
     a, b = lo, hi
