@@ -21,10 +21,9 @@ _HIST = 2 * _SCALES[-1] + 1
 #: Bisection steps of :func:`_affordable_bisect`, the fallback of the closed form
 #: (2^-30 of the ramp step: far below any force a device resolves).
 _BISECT = 30
-#: Relative step back from the closed-form root when its rounding leaves it just over the
-#: budget (1e-12 of the force scale: far below the bisection's 2^-30).
-_NUDGE = 1e-12
-#: The bisection's resolution as a share of ``hi - lo``.
+#: The bisection's resolution as a share of ``hi - lo``. A closed-form root that its
+#: rounding leaves just over the budget steps back half of it: still within the resolution
+#: the answer's check asks for (one resolution above the answer must not fit).
 _RESOLUTION = 2.0 ** -_BISECT
 
 
@@ -149,17 +148,22 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
         here &= ~top_fits
         root = _largest_ramp_start(_upper_root(A - base, slope, c_m), s)
         on = here & np.isfinite(root) & (root >= edge)   # else nothing fits on this piece
-        # root >= end: end is within the upper root and does not fit, so it lies below the
-        # lower root: nothing fits (the minimisers' check below confirms it)
         hit = on & (root >= lo) & (root < end)
-        a = np.where(hit, root, a)
-        found |= hit
+        # root >= end, where end does not fit: on the cost's falling side end lies below
+        # the lower root (nothing fits; the minimisers' check below confirms it); on its
+        # rising side only the root's rounding put it there (a budget spent to the edge,
+        # as by a force held at its last answer): half a resolution under end
+        under = end - 0.5 * (hi - lo) * _RESOLUTION
+        edge_hit = on & (root >= end) & (under >= lo) & (_piece_slope(end, P, c_m, s) > 0.0)
+        a = np.where(hit, root, np.where(edge_hit, under, a))
+        found |= hit | edge_hit
         done |= on
         end = np.minimum(end, np.nextafter(edge, -np.inf))
     fits = cost(a) <= A
-    # the root's rounding can leave it an ulp over the budget: 1e-12 of the scale back
-    a2 = a - _NUDGE * (np.abs(a) + s)
-    back = found & ~fits & (a2 >= lo) & (cost(a2) <= A)
+    # the root's rounding can leave it an ulp over the budget: half a resolution back (not
+    # below lo: a root within that of lo has lo as its answer, to the same resolution)
+    a2 = np.maximum(a - 0.5 * (hi - lo) * _RESOLUTION, lo)
+    back = found & ~fits & (cost(a2) <= A)
     a = np.where(back, a2, a)
     fits = fits | back
     # largest: one bisection resolution above it does not fit
@@ -230,8 +234,8 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
         return _affordable_pieces_scalar(A, lo, hi, p, d, c_m, s, c)
     cp = c * p
     up = d + 2.0 * c
-    S = hi if hi <= s else hi * hi / (2.0 * s) + 0.5 * hi + 0.125 * s
-    if (up * S - cp if hi >= p else cp + d * S) + c_m * S * S <= A or hi <= lo:
+    Sh = hi if hi <= s else hi * hi / (2.0 * s) + 0.5 * hi + 0.125 * s
+    if (up * Sh - cp if hi >= p else cp + d * Sh) + c_m * Sh * Sh <= A or hi <= lo:
         return hi if hi > lo else lo
     # lo does not fit and the cost rises from it: nothing fits (the cost falls, then rises)
     S = lo if lo <= s else lo * lo / (2.0 * s) + 0.5 * lo + 0.125 * s
@@ -244,12 +248,17 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
     if hi >= p:
         # the piece from p up: the quadratic's upper root, mapped back through S
         root = _root_force(A + cp, up, c_m, s)
-        # root >= hi: hi is within the upper root and does not fit, so it lies below the
-        # lower root: nothing fits (the pieces' minimisers confirm it)
+        # root >= hi, where hi does not fit: on the falling side hi lies below the lower
+        # root (nothing fits: the pieces' minimisers confirm it)
         end = math.nextafter(p, -math.inf)
         if root >= p:
             if lo <= root < hi:
                 a = root
+            elif root >= hi and up + 2.0 * c_m * Sh > 0.0:
+                # the rising side: only the root's rounding put it at or above hi
+                a = hi - 0.5 * (hi - lo) * _RESOLUTION
+                if a < lo:
+                    a = math.nan
             end = -math.inf
         elif end >= lo:
             # nothing from p up: the largest point below p, when it fits
@@ -263,6 +272,11 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
         root = _root_force(A - cp, d, c_m, s)
         if root >= 0.0 and lo <= root < end:
             a = root
+        elif root >= end:
+            # end does not fit: on the rising side only the root's rounding put it there
+            Se = end if end <= s else end * end / (2.0 * s) + 0.5 * end + 0.125 * s
+            if d + 2.0 * c_m * Se > 0.0 and end - 0.5 * (hi - lo) * _RESOLUTION >= lo:
+                a = end - 0.5 * (hi - lo) * _RESOLUTION
     if a == a:
         return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
     return _nothing_fits_scalar(A, lo, hi, p, d, c_m, s, c)
@@ -286,12 +300,14 @@ def _root_force(r: float, slope: float, c_m: float, s: float) -> float:
 
 def _checked_scalar(a: float, A: float, lo: float, hi: float, p: float, d: float, c_m: float, s: float,
                     c: float) -> float:
-    """``a``, a closed form's answer in ``[lo, hi)``, once checked: it fits (or does 1e-12 of
-    the scale lower: the root's rounding) and one bisection resolution above it does not;
+    """``a``, a closed form's answer in ``[lo, hi)``, once checked: it fits (or does half a
+    bisection resolution lower: the root's rounding) and one resolution above it does not;
     else the bisection's answer."""
     if _cost_scalar(a, p, d, c_m, s, c) > A:
-        a -= _NUDGE * ((a if a > 0.0 else -a) + s)
-        if a < lo or _cost_scalar(a, p, d, c_m, s, c) > A:
+        a -= 0.5 * (hi - lo) * _RESOLUTION
+        if a < lo:
+            a = lo                   # a root within half a resolution of lo: lo, to that resolution
+        if _cost_scalar(a, p, d, c_m, s, c) > A:
             return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
     u = a + (hi - lo) * _RESOLUTION
     if u < hi and _cost_scalar(u, p, d, c_m, s, c) <= A:
@@ -345,9 +361,13 @@ def _affordable_pieces_scalar(A: float, lo: float, hi: float, p: float, d: float
             return end               # just under the edge of a piece with nothing
         a = _root_force(A - base, slope, c_m, s)
         if a >= edge:
-            # a >= end: end is within the upper root and does not fit, so it lies below the
-            # lower root: nothing fits
-            if a >= end or a < lo:
+            if a >= end:
+                # end does not fit: on the falling side it lies below the lower root
+                # (nothing fits); on the rising side only the root's rounding put it there
+                a = end - 0.5 * (hi - lo) * _RESOLUTION
+                if a < lo or _slope_sign_scalar(end, p, d, c_m, s, c) <= 0.0:
+                    break
+            elif a < lo:
                 break
             return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
         end = min(end, math.nextafter(edge, -math.inf))

@@ -248,6 +248,8 @@ def test_a_failed_npz_write_leaves_no_open_archive(tmp_path, compressed):
 
 
 def test_atomic_savez_round_trips_what_numpy_savez_writes(tmp_path):
+    import zipfile
+
     import numpy as np
 
     from hapticsdk.fileio import atomic_savez
@@ -257,6 +259,9 @@ def test_atomic_savez_round_trips_what_numpy_savez_writes(tmp_path):
     for compressed in (False, True):
         atomic_savez(tmp_path / "a.npz", compressed=compressed, **arrays)
         (np.savez_compressed if compressed else np.savez)(tmp_path / "b.npz", **arrays)
+        with zipfile.ZipFile(tmp_path / "a.npz") as za, zipfile.ZipFile(tmp_path / "b.npz") as zb:
+            assert sorted(za.namelist()) == sorted(zb.namelist())      # numpy's member names
+            assert {i.compress_type for i in za.infolist()} == {i.compress_type for i in zb.infolist()}
         with np.load(tmp_path / "a.npz", allow_pickle=False) as a, np.load(tmp_path / "b.npz") as b:
             assert sorted(a.files) == sorted(b.files) == sorted(arrays)
             for k in arrays:
