@@ -112,11 +112,14 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
 
     On each of its three pieces (above ``max(p, 0)``, down to ``min(p, 0)``, below) the
     cost is a convex quadratic in the ramp's sum ``S = S(a)``, and ``S`` rises with ``a``;
-    the pieces meet with no drop, so the cost falls, then rises. ``hi`` when it fits;
+    the pieces meet with no drop (going up in ``a``), so once the cost rises it keeps
+    rising. ``hi`` when it fits; ``lo`` when it does not fit and the cost rises from it;
     otherwise, piece by piece from the top (each below the last one's lower edge), the
-    largest ``a`` whose ``S`` is at most that piece's upper root (closed form), when it
-    lies on the piece and in ``[lo, hi]``; when nothing fits, ``lo`` (the ramp allows no
-    deeper cut). Each answer is checked: a found ``a`` must fit and one bisection
+    point just under the edge above when it fits, else the largest ``a`` whose ``S`` is at
+    most that piece's upper root (closed form), when it lies on the piece and in
+    ``[lo, hi]`` (a root beyond the piece's end: on the rising side the root's rounding,
+    half a resolution under the end; on the falling side nothing on this piece); when
+    nothing fits, ``lo`` (the ramp allows no deeper cut). Each answer is checked: a found ``a`` must fit and one bisection
     resolution above it must not, and "nothing fits" must hold at each piece's minimiser;
     where rounding, an underflow or an overflow breaks a check, bisection decides
     (:func:`_affordable_bisect`)."""
@@ -149,15 +152,19 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
         root = _largest_ramp_start(_upper_root(A - base, slope, c_m), s)
         on = here & np.isfinite(root) & (root >= edge)   # else nothing fits on this piece
         hit = on & (root >= lo) & (root < end)
-        # root >= end, where end does not fit: on the cost's falling side end lies below
-        # the lower root (nothing fits; the minimisers' check below confirms it); on its
-        # rising side only the root's rounding put it there (a budget spent to the edge,
-        # as by a force held at its last answer): half a resolution under end
+        # root >= end, where end does not fit: on the falling side end lies below the
+        # lower root (nothing fits on this piece); on the rising side only the root's
+        # rounding put it there (a budget spent to the edge, as by a force held at its last
+        # answer): half a resolution under end
         under = end - 0.5 * (hi - lo) * _RESOLUTION
-        edge_hit = on & (root >= end) & (under >= lo) & (_piece_slope(end, P, c_m, s) > 0.0)
+        beyond = on & (root >= end)
+        rising_end = _piece_slope(end, P, c_m, s) > 0.0
+        edge_hit = beyond & rising_end & (under >= lo)
         a = np.where(hit, root, np.where(edge_hit, under, a))
         found |= hit | edge_hit
-        done |= on
+        # on the falling side nothing fits on this piece, but the piece below starts under
+        # a jump down (the pieces jump up at max(p, 0) > s): go on to it
+        done |= on & ~(beyond & ~rising_end)
         end = np.minimum(end, np.nextafter(edge, -np.inf))
     fits = cost(a) <= A
     # the root's rounding can leave it an ulp over the budget: half a resolution back (not
@@ -249,19 +256,20 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
         # the piece from p up: the quadratic's upper root, mapped back through S
         root = _root_force(A + cp, up, c_m, s)
         # root >= hi, where hi does not fit: on the falling side hi lies below the lower
-        # root (nothing fits: the pieces' minimisers confirm it)
+        # root, and nothing fits from p up
         end = math.nextafter(p, -math.inf)
-        if root >= p:
+        if root >= p and (root < hi or up + 2.0 * c_m * Sh > 0.0):
             if lo <= root < hi:
                 a = root
-            elif root >= hi and up + 2.0 * c_m * Sh > 0.0:
+            elif root >= hi:
                 # the rising side: only the root's rounding put it at or above hi
                 a = hi - 0.5 * (hi - lo) * _RESOLUTION
                 if a < lo:
                     a = math.nan
             end = -math.inf
         elif end >= lo:
-            # nothing from p up: the largest point below p, when it fits
+            # nothing from p up (root >= hi on the falling side included: the piece below
+            # starts under a jump down): the largest point below p, when it fits
             S = end if end <= s else end * end / (2.0 * s) + 0.5 * end + 0.125 * s
             if cp + d * S + c_m * S * S <= A:
                 return end
@@ -363,13 +371,17 @@ def _affordable_pieces_scalar(A: float, lo: float, hi: float, p: float, d: float
         if a >= edge:
             if a >= end:
                 # end does not fit: on the falling side it lies below the lower root
-                # (nothing fits); on the rising side only the root's rounding put it there
-                a = end - 0.5 * (hi - lo) * _RESOLUTION
-                if a < lo or _slope_sign_scalar(end, p, d, c_m, s, c) <= 0.0:
-                    break
+                # (nothing on this piece; the next starts under a jump down); on the rising
+                # side only the root's rounding put it there
+                if _slope_sign_scalar(end, p, d, c_m, s, c) > 0.0:
+                    a = end - 0.5 * (hi - lo) * _RESOLUTION
+                    if a < lo:
+                        break
+                    return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
             elif a < lo:
                 break
-            return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
+            else:
+                return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
         end = min(end, math.nextafter(edge, -math.inf))
     return _nothing_fits_scalar(A, lo, hi, p, d, c_m, s, c)
 

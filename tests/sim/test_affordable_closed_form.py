@@ -122,10 +122,50 @@ def test_the_benchmark_s_own_cells_need_no_bisection(monkeypatch):
     above ``lo``, or a range ``hi - lo`` so small that a step back of 1e-12 of the force
     scale overshot the check's resolution."""
     from hapticsdk.benchmarks.stability_random import draw_cells, run_cells
-    from hapticsdk.passivity import plan
+    from hapticsdk.passivity import batch, plan
 
-    calls = []
+    calls, rows = [], []
     real = plan._affordable_bisect
     monkeypatch.setattr(plan, "_affordable_bisect", lambda *a: calls.append(a) or real(*a))
+
+    def record(*args):
+        out = plan.affordable_force(*args)
+        rows.append(np.stack([np.broadcast_to(np.asarray(v, float), np.shape(out)) for v in (*args, out)], axis=1))
+        return out
+    monkeypatch.setattr(batch, "affordable_force", record)
     run_cells(draw_cells(100, 1), controllers=("sdk",))
     assert not calls, f"{len(calls)} batch calls fell back to the bisection"
+    rows = np.concatenate(rows)
+    A, lo, hi, p, d, cm, s, c, out = rows.T
+    assert np.all((lo <= out) & (out <= hi))
+    # the tick's scalar form, on the same inputs: the same answers, no bisection either
+    scalar = []
+    monkeypatch.setattr(plan, "_bisect_scalar", lambda *a: scalar.append(a) or 0.0)
+    interesting = np.flatnonzero((out > lo) & (out < hi) | (np.abs(p) < 1e-9))
+    for k in interesting:
+        assert plan._affordable_scalar(*rows[k, :8].tolist()) == out[k], k
+    assert not scalar, f"{len(scalar)} scalar calls fell back to the bisection"
+
+
+@pytest.mark.parametrize("least", [0.0, -3.0])
+def test_a_budget_one_ulp_under_hi_s_cost_needs_no_bisection(monkeypatch, least):
+    """``hi`` just over the budget: where the cost still falls at ``hi`` (no force from the
+    held one up fits) the answer can lie just under ``max(p, 0)``, below the pieces' jump;
+    where it rises, within rounding under ``hi``. The closed form finds both, equal to the
+    bisection's answer within its resolution, in the vectorised and the scalar form."""
+    from hapticsdk.passivity import plan
+
+    A, lo, hi, p, d, cm, s, c = _typical(20000, 3, least)
+    A = np.nextafter(plan_cost_j(hi, p, d, cm, s, c), -np.inf)
+    vec, scalar = [], []
+    real_vec, real_scalar = plan._affordable_bisect, plan._bisect_scalar
+    monkeypatch.setattr(plan, "_affordable_bisect", lambda *a: vec.append(a) or real_vec(*a))
+    monkeypatch.setattr(plan, "_bisect_scalar", lambda *a: scalar.append(a) or real_scalar(*a))
+    out = plan.affordable_force(A, lo, hi, p, d, cm, s, c)
+    for k in range(20000):
+        assert plan._affordable_scalar(*(float(v[k]) for v in (A, lo, hi, p, d, cm, s, c))) == out[k]
+    assert not vec and not scalar, (len(vec), len(scalar))
+    ref = real_vec(A, lo, hi, p, d, cm, s, c)
+    tol = (hi - lo) * 2.0 ** -(_BISECT - 1) + 1e-12 * (np.abs(hi) + s)
+    assert np.all(np.abs(out - ref) <= tol)
+    assert np.all((plan_cost_j(out, p, d, cm, s, c) <= A) | (out == lo))
