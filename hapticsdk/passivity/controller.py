@@ -76,13 +76,43 @@ class PassivityController:
     and no output, credit is dropped (``U <- max(U, 0)``); a debt is kept.
     """
 
-    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
+    __slots__ = ("_settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jw", "_j3w",
-                 "_a1", "_a2", "_a3")
+                 "_a1", "_a2", "_a3", "_rev", "_q", "_h", "_c2", "_b_lo", "_m", "_fm", "_ramp", "_allow", "_bound",
+                 "_dt", "_kc", "_rf", "_cm")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
         self.reset()
+
+    @property
+    def settings(self) -> ControllerSettings:
+        """The declared parameters (:class:`ControllerSettings`). The constants derived
+        from them are kept, and derived again when the settings are replaced or one of
+        their fields is assigned (the servo tick reads no field of its own)."""
+        return self._settings
+
+    @settings.setter
+    def settings(self, value: ControllerSettings) -> None:
+        self._settings = value
+        self._derive()
+
+    def _derive(self) -> None:
+        """The constants of the settings (``_rev`` their revision) and, for the last
+        period seen (``_dt``), of the period: computed as the tick computed them."""
+        s = self._settings
+        self._rev = s._rev
+        q = s.position_resolution_mm * 1e-3
+        self._q = q
+        self._h = 0.5 * q
+        self._c2 = 2.0 * s.position_resolution_mm
+        self._b_lo = s.damping_trust * s.device_damping_ns_per_m
+        self._m = s.device_mass_kg
+        self._fm = s.max_force_n
+        self._ramp = s.ramp_time_s
+        self._allow = s.energy_allowance_j
+        self._bound = s.energy_bound
+        self._dt = -1.0   # no period: its constants are derived at the next tick (dt > 0 there)
 
     def reset(self) -> None:
         """Forget the energy observed so far (a new run or a new object)."""
@@ -104,9 +134,20 @@ class PassivityController:
         self._kf = 0.0              # its secant stiffness (N/m)
         self._full = 0.0            # full scale without a declared force limit: the largest force so far
 
+    def _period(self, dt: float) -> None:
+        """The constants of period ``dt`` (s): the Colgate spring's stiffness ``2 b_lo / dt``
+        (N/m), the ramp's share of full scale per tick and the plan's free-arm factor
+        ``dt^2 / 2m``."""
+        self._dt = dt
+        self._kc = 2.0 * self._b_lo / dt
+        r = self._ramp
+        self._rf = dt / r if dt < r else 1.0
+        m = self._m
+        self._cm = dt * dt / (2.0 * m) if m else 0.0
+
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
-        s = self.settings
+        s = self._settings
         if f_wall != f_wall or f_wall in (math.inf, -math.inf):
             f_wall = 0.0
         if not self._started or not dt > 0:
@@ -115,11 +156,15 @@ class PassivityController:
                 self._hist = [x_mm] * _HIST
                 self._started = True
             return 0.0 if not dt > 0 else self._out
+        if s._rev != self._rev:
+            self._derive()
+        if dt != self._dt:
+            self._period(dt)
         dq = (x_mm - self._q1) * 1e-3
-        q = s.position_resolution_mm * 1e-3
-        h = 0.5 * q
+        q = self._q
+        h = self._h
         f1 = self._f1
-        b_lo = s.damping_trust * s.device_damping_ns_per_m
+        b_lo = self._b_lo
         # the extra above the spring: ZOH-paired work plus half a count of reading error
         # per newton of change (summation by parts); the damping the Colgate spring does
         # not need (b_lo - K_f T / 2) is credited
@@ -138,7 +183,7 @@ class PassivityController:
             hp = 0
         self._hp = hp
         hist[hp] = x_mm
-        c2 = 2.0 * s.position_resolution_mm
+        c2 = self._c2
         d1 = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2])   # this tick's second difference (mm)
         jerk = d1 - c2
         d = (abs(x_mm - 2.0 * hist[hp - 2] + hist[hp - 4]) - c2) * 0.25
@@ -154,7 +199,7 @@ class PassivityController:
         if d > jerk:
             jerk = d
         jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
-        m = s.device_mass_kg
+        m = self._m
         if m:
             # the largest change of motion the readings allow (2 counts above the second
             # difference), up to what the held force's change over the last two ticks
@@ -190,10 +235,10 @@ class PassivityController:
         spring = 0.0
         kf = 0.0
         if f_wall > 0.0 and depth > 0.0 and b_lo > 0.0:
-            spring = 2.0 * b_lo / dt * depth
+            spring = self._kc * depth
             if spring > f_wall:
                 spring = f_wall
-        fm = s.max_force_n
+        fm = self._fm
         if fm is not None and spring > fm:
             spring = fm
         if spring > 0.0:
@@ -208,11 +253,11 @@ class PassivityController:
             self._full = full
         else:
             full = fm
-        step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
-        c_m = dt * dt / (2.0 * m) if m else 0.0
+        step = full * self._rf
+        c_m = self._cm
         e0 = full * h
-        if e0 > s.energy_allowance_j:
-            e0 = s.energy_allowance_j
+        if e0 > self._allow:
+            e0 = self._allow
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
             return 0.0
@@ -234,7 +279,7 @@ class PassivityController:
         if hi > target:
             hi = target if target > lo else lo
         a = hi
-        if s.energy_bound and hi > lo:
+        if self._bound and hi > lo:
             # the arm's motion over the next tick: the last two ticks' mean, its reading
             # error (half a count; Delta/n after n > 2 ticks at one reading), 1.5 x the
             # largest change of motion of the window carried through the ramp (with what a

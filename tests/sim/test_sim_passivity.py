@@ -5,6 +5,9 @@ delay accounting (goal 5), no hidden passivity claim at GS_max (goal 6)."""
 import itertools
 
 import numpy as np
+from hypothesis import given
+from hypothesis import settings as hsettings
+from hypothesis import strategies as st
 import pytest
 
 from hapticsdk.passivity import (PASSIVE, STABLE_BY_ASSUMPTION, ControllerSettings, PassivityController,
@@ -287,3 +290,60 @@ def test_a_mass_that_would_make_held_force_free_is_refused(mass):
         ControllerSettings(device_mass_kg=mass)
     assert err.value.field == "device_mass_kg"
     assert ControllerSettings(device_mass_kg=None).device_mass_kg is None
+
+
+def _hold_at(pc, dts, depth_mm=-0.5, f_wall=50.0):
+    out = []
+    for dt in dts:
+        f = pc.step(depth_mm, dt, f_wall)
+        pc.commit(f)
+        out.append(f)
+    return out
+
+
+def test_a_settings_field_assigned_mid_run_takes_effect():
+    """The controller keeps the constants it derives from its settings; assigning a field
+    of the settings (or replacing them) mid-run derives them again: the output obeys the
+    new force limit at the next tick, and equals that of a controller given the new
+    settings object at the same tick."""
+    a_set = ControllerSettings(device_damping_ns_per_m=0.4, position_resolution_mm=0.01, max_force_n=3.3,
+                               device_mass_kg=0.05, energy_bound=False)
+    a = PassivityController(a_set)
+    b = PassivityController(ControllerSettings(device_damping_ns_per_m=0.4, position_resolution_mm=0.01,
+                                               max_force_n=3.3, device_mass_kg=0.05, energy_bound=False))
+    assert _hold_at(a, [1e-3] * 30) == _hold_at(b, [1e-3] * 30)
+    assert a.step(-0.5, 1e-3, 50.0) == pytest.approx(3.3)   # held at the limit
+    a.commit(3.3)
+    b.step(-0.5, 1e-3, 50.0)
+    b.commit(3.3)
+    a_set.max_force_n = 1.0
+    b.settings = ControllerSettings(device_damping_ns_per_m=0.4, position_resolution_mm=0.01, max_force_n=1.0,
+                                    device_mass_kg=0.05, energy_bound=False)
+    fa, fb = _hold_at(a, [1e-3] * 30), _hold_at(b, [1e-3] * 30)
+    assert fa == fb
+    assert max(fa[-10:]) <= 1.0 + 1e-12   # ramped down to the new limit, and kept there
+    assert fa[0] < 3.3   # the ramp down starts at once
+
+
+@hsettings(max_examples=200, deadline=None)
+@given(dt1=st.floats(1e-4, 1e-2), dt2=st.floats(1e-4, 1e-2), depth=st.floats(1e-3, 5.0))
+def test_the_spring_and_the_ramp_follow_a_changing_period(dt1, dt2, depth):
+    """With a measured period that changes from tick to tick (realtime mode), the Colgate
+    spring is ``2 b_lo / dt`` of that tick and the ramp step ``F_max dt / ramp`` of that
+    tick: from rest, two ticks at depth d into a wall far above both (bound off) give
+    ``K(dt1) d + s(dt1)``, then ``K(dt2) d + s(dt1) + s(dt2)``, each at most F_max."""
+    b, fm = 0.3, 1000.0
+    pc = PassivityController(ControllerSettings(device_damping_ns_per_m=b, max_force_n=fm, energy_bound=False))
+    pc.step(0.0, dt1, 0.0)   # the first call takes the position
+    pc.commit(0.0)
+    blo = b * pc.settings.damping_trust
+    d = depth * 1e-3
+
+    def ramp(dt):
+        return fm * min(dt / pc.settings.ramp_time_s, 1.0)
+    k1, k2 = 2 * blo / dt1 * d, 2 * blo / dt2 * d   # both far below F_max here
+    f1 = pc.step(-depth, dt1, 1e6)
+    assert f1 == pytest.approx(min(k1 + ramp(dt1), fm), rel=1e-12)
+    pc.commit(f1)
+    f2 = pc.step(-depth, dt2, 1e6)
+    assert f2 == pytest.approx(k2 + min(f1 - k1 + ramp(dt2), fm - k2), rel=1e-12)
