@@ -198,6 +198,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     f_last = np.zeros(L)
     unsound = np.full(L, -np.inf)
     r_now = lane_ref(np.zeros(L))
+    step_n = np.minimum(T / s.ramp_time_s, 1.0) * plant.fmax   # the controller's ramp step (N per tick)
     for k in range(int(n_ticks.max())):
         live = k < n_ticks
         t1 = (k + 1) * T
@@ -226,7 +227,9 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         fneg = np.minimum(fneg, np.where(tl, f, 0.0))
         dmax = np.maximum(dmax, np.where(live, np.abs(f - f_last), 0.0))
         if x_last is not None:
-            kc = 2.0 * s.damping_trust * bd / T
+            kc = 2.0 * s.damping_trust * bd / T   # the controller's Colgate spring (item 0 of docs/runtime.md)
+            q = plant.res_mm * 1e-3
+            kc = np.where(q > 0.0, np.minimum(kc, step_n / np.where(q > 0.0, q, 1.0)), kc)
             beyond = np.abs(f - f_last) - kc * np.abs(x - x_last) * 1e-3
             dspring = np.maximum(dspring, np.where(live & sdk, beyond, 0.0))
         x_last = x
@@ -235,7 +238,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         r_now = r_next
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.where(asked > 0, given / np.where(asked > 0, asked, 1.0), np.nan)
-    step = np.minimum(T / s.ramp_time_s, 1.0) * plant.fmax
+    step = step_n
     out: list[dict[str, dict[str, float]]] = []
     for i in range(n):
         d = {}

@@ -87,10 +87,12 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     else:
         full = np.broadcast_to(np.asarray(fm, float), x.shape)
     depth = np.maximum(-x * 1e-3, 0.0)
-    spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(2.0 * b_lo / dt * depth, fw), 0.0)
+    step = full * np.minimum(dt / s.ramp_time_s, 1.0)
+    kc = 2.0 * b_lo / dt
+    kc = np.where(q > 0.0, np.minimum(kc, step / np.where(q > 0.0, q, 1.0)), kc)
+    spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(kc * depth, fw), 0.0)
     if fm is not None:
         spring = np.minimum(spring, full)
-    step = full * np.minimum(dt / s.ramp_time_s, 1.0)
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
     e0 = np.minimum(full * 0.5 * q, s.energy_allowance_j)
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)

@@ -231,20 +231,7 @@ class PassivityController:
         self._q1 = x_mm
         # the Colgate spring: the wall up to the stiffness the trusted damping makes
         # passive (K_c = 2 b_lo / T), as a function of the depth below the surface x = 0
-        depth = -x_mm * 1e-3
-        spring = 0.0
-        kf = 0.0
-        if f_wall > 0.0 and depth > 0.0 and b_lo > 0.0:
-            spring = self._kc * depth
-            if spring > f_wall:
-                spring = f_wall
         fm = self._fm
-        if fm is not None and spring > fm:
-            spring = fm
-        if spring > 0.0:
-            kf = spring / depth
-        self._spring = spring
-        self._kf = kf
         if fm is None:
             # no declared limit: the largest force seen so far is the full scale (a fixed
             # step, so a ramp to 0 ends; a scale that followed the output would shrink
@@ -254,6 +241,22 @@ class PassivityController:
         else:
             full = fm
         step = full * self._rf
+        depth = -x_mm * 1e-3
+        spring = 0.0
+        kf = 0.0
+        if f_wall > 0.0 and depth > 0.0 and b_lo > 0.0:
+            kc = self._kc
+            if q > 0.0 and kc > step / q:
+                kc = step / q   # one count of the spring within one ramp step (item 0)
+            spring = kc * depth
+            if spring > f_wall:
+                spring = f_wall
+        if fm is not None and spring > fm:
+            spring = fm
+        if spring > 0.0:
+            kf = spring / depth
+        self._spring = spring
+        self._kf = kf
         c_m = self._cm
         e0 = full * h
         if e0 > self._allow:

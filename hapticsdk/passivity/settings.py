@@ -164,12 +164,20 @@ def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_p
     return colgate_stiffness_n_per_mm(settings, dt, damping_ns_per_m)
 
 
-def colgate_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None
-                               ) -> float:
+def colgate_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None,
+                               full_scale_n: float | None = None) -> float:
     """Stiffness (N/mm) of :class:`PassivityController`'s Colgate spring at period ``dt``
     (s): ``K_c = 2 b_lo / dt`` with ``b_lo = damping_trust x`` the declared damping
-    (``damping_ns_per_m`` overrides the settings' declaration); 0 for ``dt <= 0``."""
+    (``damping_ns_per_m`` overrides the settings' declaration), at most one ramp step per
+    encoder count, ``s / Delta`` (:meth:`ControllerSettings.ramp_step_n`, with
+    ``full_scale_n`` where no force limit is declared; no such cap with an exact encoder
+    or no full scale); 0 for ``dt <= 0``. docs/runtime.md, Passivity item 0."""
     b = settings.device_damping_ns_per_m if damping_ns_per_m is None else float(damping_ns_per_m)
     if not dt > 0 or not b > 0:
         return 0.0
-    return 2.0 * settings.damping_trust * b / dt / 1000.0
+    kc = 2.0 * settings.damping_trust * b / dt
+    q = settings.position_resolution_mm * 1e-3
+    step = settings.ramp_step_n(dt, full_scale_n)
+    if q > 0.0 and step > 0.0 and kc > step / q:
+        kc = step / q
+    return kc / 1000.0

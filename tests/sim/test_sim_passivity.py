@@ -13,7 +13,7 @@ import pytest
 from hapticsdk.passivity import (PASSIVE, STABLE_BY_ASSUMPTION, ControllerSettings, PassivityController,
                                  classify_wall, controller_commit_batch, controller_state_batch,
                                  controller_step_batch, critical_stiffness, critical_stiffness_eig,
-                                 naive_observer_energy, passivity_margin, spectral_radius,
+                                 colgate_stiffness_n_per_mm, naive_observer_energy, passivity_margin, spectral_radius,
                                  zoh_observer_energy)
 from hapticsdk.sim.arm import ArmBatch, ArmParams
 from hapticsdk.sim.finger import FingerParams, Trajectory
@@ -347,3 +347,30 @@ def test_the_spring_and_the_ramp_follow_a_changing_period(dt1, dt2, depth):
     pc.commit(f1)
     f2 = pc.step(-depth, dt2, 1e6)
     assert f2 == pytest.approx(k2 + min(f1 - k1 + ramp(dt2), fm - k2), rel=1e-12)
+
+
+@hsettings(max_examples=300, deadline=None)
+@given(b=st.floats(0.01, 3.0), dt=st.floats(2.5e-4, 1e-2), res=st.floats(1e-3, 0.2), fmax=st.floats(0.5, 12.0),
+       depth=st.floats(1e-3, 5.0))
+def test_one_count_of_the_colgate_spring_is_within_one_ramp_step(b, dt, res, fmax, depth):
+    """The Colgate spring ``K_c = 2 b_lo / T`` is capped at one ramp step per encoder count,
+    ``s / Delta``: a hand crossing one count moves the spring by at most the ramp's own
+    step, and the spring's gain per crossing, ``(K_c Delta)^2 T / 4b``, is at most
+    ``s^2 T / 4b``. With no allowance and the hand at rest the extra stays 0 and the
+    output is the spring alone; the scalar controller, the batch and
+    ``colgate_stiffness_n_per_mm`` agree."""
+    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+                            energy_allowance_j=0.0)
+    s = fmax * min(dt / cs.ramp_time_s, 1.0)
+    kc = min(2 * cs.damping_trust * b / dt, s / (res * 1e-3))   # N/m, from the derivation
+    assert kc * res * 1e-3 <= s * (1 + 1e-12)
+    assert colgate_stiffness_n_per_mm(cs, dt) * 1000 == pytest.approx(kc, rel=1e-12)
+    pc = PassivityController(cs)
+    bs = controller_state_batch(1)
+    for _ in range(2):   # the first call takes the position; the hand rests at the depth
+        a = pc.step(-depth, dt, 1e6)
+        pc.commit(a)
+        f = controller_step_batch(bs, np.array([-depth]), dt, np.array([1e6]), True, cs)[0]
+        controller_commit_batch(bs, np.array([f]))
+        assert a == f
+    assert a == pytest.approx(min(kc * depth * 1e-3, fmax), rel=1e-12)
