@@ -76,43 +76,13 @@ class PassivityController:
     and no output, credit is dropped (``U <- max(U, 0)``); a debt is kept.
     """
 
-    __slots__ = ("_settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jw", "_j3w",
-                 "_a1", "_a2", "_a3", "_rev", "_q", "_h", "_c2", "_b_lo", "_m", "_fm", "_ramp", "_allow", "_bound",
-                 "_dt", "_kc", "_rf", "_cm")
+                 "_a1", "_a2", "_a3")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
         self.reset()
-
-    @property
-    def settings(self) -> ControllerSettings:
-        """The declared parameters (:class:`ControllerSettings`). The constants derived
-        from them are kept, and derived again when the settings are replaced or one of
-        their fields is assigned (the servo tick reads no field of its own)."""
-        return self._settings
-
-    @settings.setter
-    def settings(self, value: ControllerSettings) -> None:
-        self._settings = value
-        self._derive()
-
-    def _derive(self) -> None:
-        """The constants of the settings (``_rev`` their revision) and, for the last
-        period seen (``_dt``), of the period: computed as the tick computed them."""
-        s = self._settings
-        self._rev = s._rev
-        q = s.position_resolution_mm * 1e-3
-        self._q = q
-        self._h = 0.5 * q
-        self._c2 = 2.0 * s.position_resolution_mm
-        self._b_lo = s.damping_trust * s.device_damping_ns_per_m
-        self._m = s.device_mass_kg
-        self._fm = s.max_force_n
-        self._ramp = s.ramp_time_s
-        self._allow = s.energy_allowance_j
-        self._bound = s.energy_bound
-        self._dt = -1.0   # no period: its constants are derived at the next tick (dt > 0 there)
 
     def reset(self) -> None:
         """Forget the energy observed so far (a new run or a new object)."""
@@ -134,20 +104,9 @@ class PassivityController:
         self._kf = 0.0              # its secant stiffness (N/m)
         self._full = 0.0            # full scale without a declared force limit: the largest force so far
 
-    def _period(self, dt: float) -> None:
-        """The constants of period ``dt`` (s): the Colgate spring's stiffness ``2 b_lo / dt``
-        (N/m), the ramp's share of full scale per tick and the plan's free-arm factor
-        ``dt^2 / 2m``."""
-        self._dt = dt
-        self._kc = 2.0 * self._b_lo / dt
-        r = self._ramp
-        self._rf = dt / r if dt < r else 1.0
-        m = self._m
-        self._cm = dt * dt / (2.0 * m) if m else 0.0
-
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
-        s = self._settings
+        s = self.settings
         if f_wall != f_wall or f_wall in (math.inf, -math.inf):
             f_wall = 0.0
         if not self._started or not dt > 0:
@@ -156,15 +115,11 @@ class PassivityController:
                 self._hist = [x_mm] * _HIST
                 self._started = True
             return 0.0 if not dt > 0 else self._out
-        if s._rev != self._rev:
-            self._derive()
-        if dt != self._dt:
-            self._period(dt)
         dq = (x_mm - self._q1) * 1e-3
-        q = self._q
-        h = self._h
+        q = s.position_resolution_mm * 1e-3
+        h = 0.5 * q
         f1 = self._f1
-        b_lo = self._b_lo
+        b_lo = s.damping_trust * s.device_damping_ns_per_m
         # the extra above the spring: ZOH-paired work plus half a count of reading error
         # per newton of change (summation by parts); the damping the Colgate spring does
         # not need (b_lo - K_f T / 2) is credited
@@ -183,7 +138,7 @@ class PassivityController:
             hp = 0
         self._hp = hp
         hist[hp] = x_mm
-        c2 = self._c2
+        c2 = 2.0 * s.position_resolution_mm
         d1 = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2])   # this tick's second difference (mm)
         jerk = d1 - c2
         d = (abs(x_mm - 2.0 * hist[hp - 2] + hist[hp - 4]) - c2) * 0.25
@@ -199,7 +154,7 @@ class PassivityController:
         if d > jerk:
             jerk = d
         jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
-        m = self._m
+        m = s.device_mass_kg
         if m:
             # the largest change of motion the readings allow (2 counts above the second
             # difference), up to what the held force's change over the last two ticks
@@ -231,7 +186,7 @@ class PassivityController:
         self._q1 = x_mm
         # the Colgate spring: the wall up to the stiffness the trusted damping makes
         # passive (K_c = 2 b_lo / T), as a function of the depth below the surface x = 0
-        fm = self._fm
+        fm = s.max_force_n
         if fm is None:
             # no declared limit: the largest force seen so far is the full scale (a fixed
             # step, so a ramp to 0 ends; a scale that followed the output would shrink
@@ -240,12 +195,12 @@ class PassivityController:
             self._full = full
         else:
             full = fm
-        step = full * self._rf
+        step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
         depth = -x_mm * 1e-3
         spring = 0.0
         kf = 0.0
         if f_wall > 0.0 and depth > 0.0 and b_lo > 0.0:
-            kc = self._kc
+            kc = 2.0 * b_lo / dt
             if q > 0.0 and kc > step / q:
                 kc = step / q   # one count of the spring within one ramp step (item 0)
             spring = kc * depth
@@ -257,10 +212,10 @@ class PassivityController:
             kf = spring / depth
         self._spring = spring
         self._kf = kf
-        c_m = self._cm
+        c_m = dt * dt / (2.0 * m) if m else 0.0
         e0 = full * h
-        if e0 > self._allow:
-            e0 = self._allow
+        if e0 > s.energy_allowance_j:
+            e0 = s.energy_allowance_j
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
             return 0.0
@@ -282,7 +237,7 @@ class PassivityController:
         if hi > target:
             hi = target if target > lo else lo
         a = hi
-        if self._bound and hi > lo:
+        if s.energy_bound and hi > lo:
             # the arm's motion over the next tick: the last two ticks' mean, its reading
             # error (half a count; Delta/n after n > 2 ticks at one reading), 1.5 x the
             # largest change of motion of the window carried through the ramp (with what a

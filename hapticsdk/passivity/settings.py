@@ -66,14 +66,6 @@ class ControllerSettings:
     energy_bound: bool = True
     energy_allowance_j: float = ENERGY_ALLOWANCE_J
 
-    #: revision: counts assignments to the fields, so that a controller holding these
-    #: settings derives its constants again after one (not a field)
-    _rev = 0
-
-    def __setattr__(self, name: str, value: Any) -> None:
-        object.__setattr__(self, name, value)
-        object.__setattr__(self, "_rev", self._rev + 1)
-
     def __post_init__(self) -> None:
         for name in ("device_damping_ns_per_m", "position_resolution_mm"):
             _check_nonneg(name, getattr(self, name))

@@ -302,10 +302,10 @@ def _hold_at(pc, dts, depth_mm=-0.5, f_wall=50.0):
 
 
 def test_a_settings_field_assigned_mid_run_takes_effect():
-    """The controller keeps the constants it derives from its settings; assigning a field
-    of the settings (or replacing them) mid-run derives them again: the output obeys the
-    new force limit at the next tick, and equals that of a controller given the new
-    settings object at the same tick."""
+    """Assigning a field of the settings (or replacing them) mid-run takes effect at the
+    next tick: the output obeys the new force limit, and equals that of a controller
+    given the new settings object at the same tick (a controller that kept constants
+    derived at construction would fail this)."""
     a_set = ControllerSettings(device_damping_ns_per_m=0.4, position_resolution_mm=0.01, max_force_n=3.3,
                                device_mass_kg=0.05, energy_bound=False)
     a = PassivityController(a_set)
