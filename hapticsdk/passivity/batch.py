@@ -106,7 +106,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     target = target - spring
     p = sg * f1
     lo = np.where(p - step >= 0.0, p - step, np.minimum(p + step, 0.0))
-    hi = np.maximum(np.minimum(p + step, target), lo)
+    rise = np.maximum(spring - state["spring"], 0.0)   # the whole force rises by at most s (item 3)
+    hi = np.maximum(np.minimum(p + step - rise, target), lo)
     a = hi
     if s.energy_bound:
         lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)

@@ -43,12 +43,14 @@ class PassivityController:
     (N); send the returned force; then call :meth:`commit` with the force the device
     actually applied (after its safety clamp).
 
-    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = 2 b_lo / dt``,
-    ``b_lo = damping_trust x declared damping``: a spring no stiffer than the trusted
-    damping makes passive under the zero-order hold (Colgate & Schenkel's ``b > K T / 2``).
-    It follows the reading at once (a spring, not a ramp: a ramp on a spring lags it,
-    and a lagging spring gives energy), so the force changes by at most
-    ``K_c |dq|`` plus the extra's ramp step per tick.
+    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = min(2 b_lo / dt, s /
+    Delta)``, ``b_lo = damping_trust x declared damping``: a spring no stiffer than the
+    trusted damping makes passive under the zero-order hold (Colgate & Schenkel's
+    ``b > K T / 2``), and one encoder count of it is at most one ramp step ``s``. It
+    follows the reading at once (a spring, not a ramp: a ramp on a spring lags it, and a
+    lagging spring gives energy). The extra gives way to its rise, so the force rises
+    by at most ``s`` per tick while the spring's own rise is within ``s``, and falls by
+    at most ``s`` plus the spring's fall ``K_c |dq|``.
 
     **The extra** ``X = F - P`` carries the rest of the wall. The controller keeps ``U``,
     an *upper bound* of the energy the extra has given the user, from the readings ``q``
@@ -210,6 +212,7 @@ class PassivityController:
             spring = fm
         if spring > 0.0:
             kf = spring / depth
+        rise = spring - self._spring   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf
         c_m = dt * dt / (2.0 * m) if m else 0.0
@@ -233,9 +236,15 @@ class PassivityController:
         lo = p - step
         if lo < 0.0:
             lo = 0.0 if p + step >= 0.0 else p + step
+        # and the whole force rises by at most that step: the extra gives way to the spring's
+        # rise (item 3)
         hi = p + step
+        if rise > 0.0:
+            hi -= rise
         if hi > target:
-            hi = target if target > lo else lo
+            hi = target
+        if hi < lo:
+            hi = lo
         a = hi
         if s.energy_bound and hi > lo:
             # the arm's motion over the next tick: the last two ticks' mean, its reading

@@ -330,8 +330,10 @@ def test_a_settings_field_assigned_mid_run_takes_effect():
 def test_the_spring_and_the_ramp_follow_a_changing_period(dt1, dt2, depth):
     """With a measured period that changes from tick to tick (realtime mode), the Colgate
     spring is ``2 b_lo / dt`` of that tick and the ramp step ``F_max dt / ramp`` of that
-    tick: from rest, two ticks at depth d into a wall far above both (bound off) give
-    ``K(dt1) d + s(dt1)``, then ``K(dt2) d + s(dt1) + s(dt2)``, each at most F_max."""
+    tick: from rest, two ticks at depth d into a wall far above both (bound off) give the
+    spring ``K(dt) d`` plus an extra one ramp step ``s(dt)`` above the last, less what the
+    spring rose by (the whole force rises by at most ``s``), never below the last extra
+    less ``s`` nor below 0, and the sum at most F_max."""
     b, fm = 0.3, 1000.0
     pc = PassivityController(ControllerSettings(device_damping_ns_per_m=b, max_force_n=fm, energy_bound=False))
     pc.step(0.0, dt1, 0.0)   # the first call takes the position
@@ -342,11 +344,14 @@ def test_the_spring_and_the_ramp_follow_a_changing_period(dt1, dt2, depth):
     def ramp(dt):
         return fm * min(dt / pc.settings.ramp_time_s, 1.0)
     k1, k2 = 2 * blo / dt1 * d, 2 * blo / dt2 * d   # both far below F_max here
+
+    def extra(p, s, rise, room):   # one ramp step up, less the spring's rise; not below p - s, 0
+        return max(min(p + s - max(rise, 0.0), room), max(p - s, 0.0))
     f1 = pc.step(-depth, dt1, 1e6)
-    assert f1 == pytest.approx(min(k1 + ramp(dt1), fm), rel=1e-12)
+    assert f1 == pytest.approx(k1 + extra(0.0, ramp(dt1), k1, fm - k1), rel=1e-12, abs=1e-15)
     pc.commit(f1)
     f2 = pc.step(-depth, dt2, 1e6)
-    assert f2 == pytest.approx(k2 + min(f1 - k1 + ramp(dt2), fm - k2), rel=1e-12)
+    assert f2 == pytest.approx(k2 + extra(f1 - k1, ramp(dt2), k2 - k1, fm - k2), rel=1e-12, abs=1e-15)
 
 
 @hsettings(max_examples=300, deadline=None)
@@ -374,3 +379,31 @@ def test_one_count_of_the_colgate_spring_is_within_one_ramp_step(b, dt, res, fma
         controller_commit_batch(bs, np.array([f]))
         assert a == f
     assert a == pytest.approx(min(kc * depth * 1e-3, fmax), rel=1e-12)
+
+
+@hsettings(max_examples=150, deadline=None)
+@given(b=st.floats(0.05, 3.0), dt=st.floats(2.5e-4, 1e-2), res=st.floats(1e-3, 0.2), fmax=st.floats(0.5, 12.0),
+       k=st.floats(0.05, 50.0), seed=st.integers(0, 2**31 - 1), inward=st.floats(0.3, 0.9))
+def test_the_whole_force_rises_by_at_most_one_ramp_step(b, dt, res, fmax, k, seed, inward):
+    """The extra gives way to the spring's rise, so while the reading moves by at most one
+    count per tick (the spring's cap then keeps its own rise within ``s``) the force sent
+    rises by at most one ramp step ``s`` per tick, the spring included (item 3). Presses
+    into walls from 0.05 to 50 N/mm, the energy bound on; the batch sends the same."""
+    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+                            device_mass_kg=0.05)
+    s = fmax * min(dt / cs.ramp_time_s, 1.0)
+    rng = np.random.default_rng(seed)
+    moves = rng.choice([-1, 0, 1], size=400, p=[inward * 0.6, 0.4, 0.6 * (1 - inward)])
+    xs = res * (3 + np.minimum(np.cumsum(moves), 3))   # from 3 counts outside, never above
+    pc = PassivityController(cs)
+    bs = controller_state_batch(1)
+    last = 0.0
+    for x in xs:
+        fw = k * max(-x, 0.0)
+        f = pc.step(float(x), dt, fw)
+        g = controller_step_batch(bs, np.array([x]), dt, np.array([fw]), True, cs)[0]
+        assert f == pytest.approx(g, abs=1e-6)
+        assert f - last <= s * (1 + 1e-9) + 1e-12
+        pc.commit(f)
+        controller_commit_batch(bs, np.array([f]))
+        last = f
