@@ -187,7 +187,8 @@ class PassivityController:
         self._q2 = self._q1
         self._q1 = x_mm
         # the Colgate spring: the wall up to the stiffness the trusted damping makes
-        # passive (K_c = 2 b_lo / T), as a function of the depth below the surface x = 0
+        # passive (K_c = 2 b_lo / T, at most one ramp step per count), as a function of
+        # the depth below the surface x = 0
         fm = s.max_force_n
         if fm is None:
             # no declared limit: the largest force seen so far is the full scale (a fixed

@@ -6,7 +6,7 @@ The points are fastest-tick costs (us) after 1, 2, 4 and 8 s, measured on the ki
 broken variant ``MedianOfAll`` (tests/testing/test_conformance_kit_in_use.py), whose tick
 takes the median of every input so far. One run in 12 on a quiet machine, and once in a
 suite run next to two busy loops, its 8 s point came out below its 4 s point, and the
-old rule (every point rising) let it through. Since 0.3 the four points are timed in
+old rule (every point rising) let it through. The four points are now timed in
 rounds, so a slow spell of the machine no longer lands on one point alone."""
 
 from __future__ import annotations

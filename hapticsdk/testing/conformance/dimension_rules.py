@@ -236,8 +236,8 @@ def _cost_growth(make: Callable[[], DimensionRenderer]) -> list[tuple[float, flo
 
     The rounds pair the points in time: a slow spell of the machine (another process, a
     change of memory or frequency regime) lasting a few ticks slows every point alike
-    instead of the one point measured then. Timed one point after the other (until 0.2.x),
-    a spell covering the 25 consecutive ticks of the 1 s point nearly doubled it (47 us
+    instead of the one point measured then. Timed one point after the other (before the
+    rounds), a spell covering the 25 consecutive ticks of the 1 s point nearly doubled it (47 us
     against 26 us in 1 run of 10 on a quiet machine) and hid a growing renderer once in a
     README suite run."""
     rs = [make() for _ in GROWTH_POINTS_S]
