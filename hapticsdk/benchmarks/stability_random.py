@@ -41,6 +41,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..passivity import ControllerSettings, controller_commit_batch, controller_state_batch, controller_step_batch
+from ..passivity.batch import _colgate_n_per_m
 from ..sim import peers as P
 from ..sim.arm import ArmParams
 from ..sim.finger import FINGERS, FingerParams
@@ -199,6 +200,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     unsound = np.full(L, -np.inf)
     r_now = lane_ref(np.zeros(L))
     step_n = np.minimum(T / s.ramp_time_s, 1.0) * plant.fmax   # the controller's ramp step (N per tick)
+    kc = _colgate_n_per_m(s.damping_trust * bd, T, step_n, plant.res_mm * 1e-3)   # its Colgate spring (N/m)
     for k in range(int(n_ticks.max())):
         live = k < n_ticks
         t1 = (k + 1) * T
@@ -227,9 +229,6 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         fneg = np.minimum(fneg, np.where(tl, f, 0.0))
         dmax = np.maximum(dmax, np.where(live, np.abs(f - f_last), 0.0))
         if x_last is not None:
-            kc = 2.0 * s.damping_trust * bd / T   # the controller's Colgate spring (item 0 of docs/runtime.md)
-            q = plant.res_mm * 1e-3
-            kc = np.where(q > 0.0, np.minimum(kc, step_n / np.where(q > 0.0, q, 1.0)), kc)
             beyond = np.abs(f - f_last) - kc * np.abs(x - x_last) * 1e-3
             dspring = np.maximum(dspring, np.where(live & sdk, beyond, 0.0))
         x_last = x

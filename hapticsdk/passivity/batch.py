@@ -4,6 +4,8 @@ tick by tick (``tests/sim/test_sim_passivity.py``)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .plan import _HIST, _SCALES, affordable_force
@@ -19,6 +21,15 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
             "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
             "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
             "hp": np.zeros(1, int)}
+
+
+def _colgate_n_per_m(b_lo: Any, dt: Any, step_n: Any, q_m: Any) -> np.ndarray:
+    """The Colgate spring's stiffness (N/m) per cell: ``2 b_lo / dt``, at most one ramp step
+    ``step_n`` per encoder count ``q_m`` (m) where both are > 0 (docs/runtime.md, Passivity
+    item 0; :class:`PassivityController` computes the same in floats)."""
+    kc = 2.0 * np.asarray(b_lo, float) / dt
+    cap = (q_m > 0.0) & (step_n > 0.0)
+    return np.where(cap, np.minimum(kc, step_n / np.where(cap, q_m, 1.0)), kc)
 
 
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "float | np.ndarray",
@@ -88,8 +99,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         full = np.broadcast_to(np.asarray(fm, float), x.shape)
     depth = np.maximum(-x * 1e-3, 0.0)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
-    kc = 2.0 * b_lo / dt
-    kc = np.where(q > 0.0, np.minimum(kc, step / np.where(q > 0.0, q, 1.0)), kc)
+    kc = _colgate_n_per_m(b_lo, dt, step, q)
     spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(kc * depth, fw), 0.0)
     if fm is not None:
         spring = np.minimum(spring, full)

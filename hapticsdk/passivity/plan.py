@@ -34,6 +34,19 @@ def _ramp_sum(a: Any, s: Any) -> Any:
         return np.where(a <= s, a, a * a / (2.0 * s) + 0.5 * a + 0.125 * s)
 
 
+def _ramp_sum_scalar(a: float, s: float) -> float:
+    """:func:`_ramp_sum` in floats (written out instead on the servo tick's fast path of
+    :func:`_affordable_scalar`)."""
+    return a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+
+
+def _half_resolution(lo: Any, hi: Any) -> Any:
+    """Half the answer check's resolution, ``(hi - lo) _RESOLUTION / 2``: how far a
+    closed-form root that rounding left just over the budget (or at a piece's end) steps
+    back."""
+    return 0.5 * (hi - lo) * _RESOLUTION
+
+
 def _pieces(p: Any, lead_m: Any, half_count_m: Any) -> tuple[Any, ...]:
     """The three pieces of :func:`plan_cost_j`'s encoder term, each a constant plus a
     multiple of ``S``: ``(top, bot)`` the pieces' edges ``max(p, 0)`` and ``min(p, 0)``, and
@@ -156,7 +169,7 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
         # lower root (nothing fits on this piece); on the rising side only the root's
         # rounding put it there (a budget spent to the edge, as by a force held at its last
         # answer): half a resolution under end
-        under = end - 0.5 * (hi - lo) * _RESOLUTION
+        under = end - _half_resolution(lo, hi)
         beyond = on & (root >= end)
         rising_end = _piece_slope(end, P, c_m, s) > 0.0
         edge_hit = beyond & rising_end & (under >= lo)
@@ -169,7 +182,7 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     fits = cost(a) <= A
     # the root's rounding can leave it an ulp over the budget: half a resolution back (not
     # below lo: a root within that of lo has lo as its answer, to the same resolution)
-    a2 = np.maximum(a - 0.5 * (hi - lo) * _RESOLUTION, lo)
+    a2 = np.maximum(a - _half_resolution(lo, hi), lo)
     back = found & ~fits & (cost(a2) <= A)
     a = np.where(back, a2, a)
     fits = fits | back
@@ -263,14 +276,14 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
                 a = root
             elif root >= hi:
                 # the rising side: only the root's rounding put it at or above hi
-                a = hi - 0.5 * (hi - lo) * _RESOLUTION
+                a = hi - _half_resolution(lo, hi)
                 if a < lo:
                     a = math.nan
             end = -math.inf
         elif end >= lo:
             # nothing from p up (root >= hi on the falling side included: the piece below
             # starts under a jump down): the largest point below p, when it fits
-            S = end if end <= s else end * end / (2.0 * s) + 0.5 * end + 0.125 * s
+            S = _ramp_sum_scalar(end, s)
             if cp + d * S + c_m * S * S <= A:
                 return end
     else:
@@ -282,9 +295,9 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
             a = root
         elif root >= end:
             # end does not fit: on the rising side only the root's rounding put it there
-            Se = end if end <= s else end * end / (2.0 * s) + 0.5 * end + 0.125 * s
-            if d + 2.0 * c_m * Se > 0.0 and end - 0.5 * (hi - lo) * _RESOLUTION >= lo:
-                a = end - 0.5 * (hi - lo) * _RESOLUTION
+            under = end - _half_resolution(lo, hi)
+            if d + 2.0 * c_m * _ramp_sum_scalar(end, s) > 0.0 and under >= lo:
+                a = under
     if a == a:
         return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
     return _nothing_fits_scalar(A, lo, hi, p, d, c_m, s, c)
@@ -312,7 +325,7 @@ def _checked_scalar(a: float, A: float, lo: float, hi: float, p: float, d: float
     bisection resolution lower: the root's rounding) and one resolution above it does not;
     else the bisection's answer."""
     if _cost_scalar(a, p, d, c_m, s, c) > A:
-        a -= 0.5 * (hi - lo) * _RESOLUTION
+        a -= _half_resolution(lo, hi)
         if a < lo:
             a = lo                   # a root within half a resolution of lo: lo, to that resolution
         if _cost_scalar(a, p, d, c_m, s, c) > A:
@@ -340,7 +353,7 @@ def _nothing_fits_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m
             else:
                 a = -math.inf if slope > 0.0 else math.inf
             a = first if a < first else (end if a > end else a)
-            S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+            S = _ramp_sum_scalar(a, s)
             if base + slope * S + c_m * S * S <= A:
                 return _bisect_scalar(A, lo, hi, p, d, c_m, s, c)
             if first == lo:
@@ -374,7 +387,7 @@ def _affordable_pieces_scalar(A: float, lo: float, hi: float, p: float, d: float
                 # (nothing on this piece; the next starts under a jump down); on the rising
                 # side only the root's rounding put it there
                 if _slope_sign_scalar(end, p, d, c_m, s, c) > 0.0:
-                    a = end - 0.5 * (hi - lo) * _RESOLUTION
+                    a = end - _half_resolution(lo, hi)
                     if a < lo:
                         break
                     return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
@@ -396,13 +409,13 @@ def _piece_at(a: float, p: float, d: float, c: float) -> tuple[float, float]:
 
 def _slope_sign_scalar(a: float, p: float, d: float, c_m: float, s: float, c: float) -> float:
     """A number of the sign of :func:`_piece_slope` at ``a`` (``S`` rises with ``a``)."""
-    S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+    S = _ramp_sum_scalar(a, s)
     return _piece_at(a, p, d, c)[1] + 2.0 * c_m * S
 
 
 def _cost_scalar(a: float, p: float, d: float, c_m: float, s: float, c: float) -> float:
     """:func:`plan_cost_j` in floats."""
-    S = a if a <= s else a * a / (2.0 * s) + 0.5 * a + 0.125 * s
+    S = _ramp_sum_scalar(a, s)
     base, slope = _piece_at(a, p, d, c)
     return base + slope * S + c_m * S * S
 

@@ -48,9 +48,9 @@ def test_closed_form_is_the_largest_within_budget(A, p, s, up, d, cm, c):
 
 def _typical(n, seed, least=0.0):
     """Draws of the tick's own sizes: forces up to 3.3 N (held forces from ``least``: below 0
-    meets all three pieces of the cost; a quarter of them exactly 0, a contact's start), leads of +-0.2 mm, free-arm terms up to 1e-3 m/N,
-    half counts up to 0.1 mm; budgets around the cost of a force inside the range, so most
-    answers are interior."""
+    meets all three pieces of the cost; a quarter of them exactly 0, a contact's start),
+    leads of +-0.2 mm, free-arm terms up to 1e-3 m/N, half counts up to 0.1 mm; budgets
+    around the cost of a force inside the range, so most answers are interior."""
     rng = np.random.default_rng(seed)
     p = rng.uniform(least, 3.3, n)
     p[rng.random(n) < 0.25] = 0.0    # a contact's first ticks: nothing held yet
