@@ -146,8 +146,11 @@ def _stability(args: argparse.Namespace) -> int:
             f"(within the ramp plus the Colgate spring, K_c x reading change, in "
             f"{s['sdk_step_within_ramp_plus_spring']}/{n}); "
             f"delivered >= {100 - s['delivered_shortfall_allowed'] * 100:g} % of the best passive peer's in "
-            f"{s['sdk_delivered_vs_best_passive_peer']}/{n} ({s['cells_with_a_passive_peer']} cells have a peer "
-            f"within the energy bound)"
+            f"{s['sdk_delivered_vs_best_passive_peer']}/{s['cells_with_a_passive_peer']} cells that have a peer "
+            f"within the energy bound, and of the best such peer that never pulls and steps within the sdk's "
+            f"ramp in {s['sdk_delivered_vs_best_shaped_peer']}/{s['cells_with_a_shaped_peer']}; "
+            f"the spring alone (the energy bound spent) on more than half the contact ticks in "
+            f"{s['sdk_spring_only_over_half']}/{n}"
             + (f"\nfigure saved to {args.plot}" if args.plot else ""))
     emit(res, args.json, text)
     return 0 if s["sdk_energy_within_bound"] == n else 1
