@@ -339,8 +339,8 @@ def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] is True for x in v),
             "cells_with_a_passive_peer": sum(x["delivered_ok"] is not None for x in v),
             "sdk_delivered_vs_best_shaped_peer": sum(x["delivered_ok_shaped"] is True for x in v),
-            "sdk_spring_only_over_half": sum(c["results"]["sdk"].get("spring_only_share", 0.0) > 0.5 for c in cells),
             "cells_with_a_shaped_peer": sum(x["delivered_ok_shaped"] is not None for x in v),
+            "sdk_spring_only_over_half": sum(c["results"]["sdk"].get("spring_only_share", 0.0) > 0.5 for c in cells),
             "controllers": per}
 
 
