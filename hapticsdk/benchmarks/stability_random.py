@@ -226,9 +226,10 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd, resolution_mm=plant.res_mm,
                                       max_force_n=plant.fmax, mass_kg=plant.m)
         f_cmd = np.where(sdk, f_sdk, f_peer)
+        tgt = np.minimum(fw, plant.fmax)   # the wall's force the device can give
         # the extra held at 0 (the output is the Colgate spring) while the wall asks for more
         spr = cst["spring"]
-        held_back = (f_sdk <= spr) & (np.minimum(fw, plant.fmax) > spr)
+        held_back = (f_sdk <= spr) & (tgt > spr)
         # soundness of the controller's bound: the true energy so far (plant) never exceeds
         # U plus the reading's error times the held force (the bound's open tail)
         gap = plant.energy_to_user_j() - cst["energy"] - 0.5 * plant.res_mm * 1e-3 * np.abs(cst["f1"])
@@ -237,7 +238,6 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         f = np.where(live, f, f_last)
         P.commit(pst, f)
         controller_commit_batch(cst, f)
-        tgt = np.minimum(fw, plant.fmax)
         tl = touching & live
         given += np.where(tl, np.minimum(np.maximum(f, 0.0), tgt), 0.0)
         asked += np.where(tl, tgt, 0.0)
@@ -272,21 +272,27 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     return out
 
 
-def _peer_ratios(r: dict[str, Any], shaped: bool) -> list[float]:
+def _within_ramp(step_n: float, ramp_step_n: float) -> bool:
+    """A force step (N) within a ramp step, up to float rounding of the two."""
+    return step_n <= ramp_step_n * (1 + 1e-9) + 1e-12
+
+
+def _peer_ratios(r: dict[str, Any]) -> tuple[list[float], list[float]]:
     """Delivered ratios of the passive peers (:data:`PASSIVE_PEERS`) that stayed within the
-    energy bound in one cell; with ``shaped`` only those that also kept the force-shape goals
-    the SDK controller is held to (never pulled, no step beyond the SDK controller's ramp
-    step in that cell)."""
-    step = r["sdk"]["ramp_step_n"] if "sdk" in r else float("inf")
-    out = []
+    energy bound in one cell, and of those of them that also kept the force-shape goals the
+    SDK controller is held to (never pulled, no step beyond the SDK controller's ramp step
+    in that cell)."""
+    ramp = r["sdk"]["ramp_step_n"] if "sdk" in r else float("inf")
+    passive: list[float] = []
+    shaped: list[float] = []
     for p in PASSIVE_PEERS:
         q = r.get(p)
         if q is None or not q["energy_to_user_j"] <= ENERGY_BOUND_J or q["delivered_ratio"] != q["delivered_ratio"]:
             continue
-        if shaped and (q["min_contact_force_n"] < 0.0 or q["max_force_step_n"] > step * (1 + 1e-9) + 1e-12):
-            continue
-        out.append(q["delivered_ratio"])
-    return out
+        passive.append(q["delivered_ratio"])
+        if q["min_contact_force_n"] >= 0.0 and _within_ramp(q["max_force_step_n"], ramp):
+            shaped.append(q["delivered_ratio"])
+    return passive, shaped
 
 
 def _at_least(mine: float, best: list[float]) -> bool | None:
@@ -304,13 +310,12 @@ def cell_verdicts(cell: dict[str, Any]) -> dict[str, Any]:
     kept the force-shape goals (``delivered_ok_shaped``; None when none did)."""
     r = cell["results"]
     me = r["sdk"]
-    best = _peer_ratios(r, False)
-    shaped = _peer_ratios(r, True)
+    best, shaped = _peer_ratios(r)
     mine = me["delivered_ratio"]
     return {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
-            "step_ok": me["max_force_step_n"] <= me["ramp_step_n"] * (1 + 1e-9) + 1e-12,
-            "step_ok_plus_spring": (me.get("max_step_beyond_spring_n", me["max_force_step_n"])
-                                      <= me["ramp_step_n"] * (1 + 1e-9) + 1e-12),
+            "step_ok": _within_ramp(me["max_force_step_n"], me["ramp_step_n"]),
+            "step_ok_plus_spring": _within_ramp(me.get("max_step_beyond_spring_n", me["max_force_step_n"]),
+                                                me["ramp_step_n"]),
             "delivered_ok": _at_least(mine, best), "best_passive_peer_ratio": max(best) if best else float("nan"),
             "delivered_ok_shaped": _at_least(mine, shaped),
             "best_shaped_peer_ratio": max(shaped) if shaped else float("nan")}
