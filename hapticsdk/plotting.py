@@ -273,7 +273,7 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
         a1.scatter(x[ok], d[ok], s=4, alpha=0.4)
         if ok.any():
             a1.plot([i - 0.35, i + 0.35], [np.median(d[ok])] * 2, color="black", lw=2)
-            a1.text(i, 1.06, f"median {np.median(d[ok]):.2f}", ha="center", fontsize=8)
+            a1.text(i, 1.04, f"median\n{np.median(d[ok]):.2f}", ha="center", fontsize=7)
     a0.axhline(goal, color="red", lw=1)
     a0.set_yscale("log")
     a0.set_ylim(ENERGY_FLOOR_J / 2, None)
@@ -282,7 +282,7 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
     a0.set_ylabel(f"max energy given to the user (J, log; < {ENERGY_FLOOR_J:g} drawn at it)")
     a0.set_title(f"energy to the user per cell (red: bound {goal * 1e3:g} mJ)", fontsize=10)
     a1.set_xticks(range(len(names)), names)
-    a1.set_ylim(-0.03, 1.12)
+    a1.set_ylim(-0.03, 1.16)
     a1.set_ylabel("delivered force / (K x penetration), contact ticks")
     a1.set_title("delivered force ratio per cell (bar: median)", fontsize=10)
     if "sdk" in names:
@@ -292,12 +292,18 @@ def plot_stability_cells(result: Mapping[str, Any], path: str | Path) -> Path:
         per = np.array([c["period_s"] for c in cells]) * 1e3
         ok = np.isfinite(best) & np.isfinite(mine)
         sc = a2.scatter(best[ok], mine[ok], c=per[ok], s=6, cmap="viridis", norm=_lognorm(per[ok]))
-        a2.plot([0, 1], [0, 1], color="gray", lw=1)
-        a2.plot([0, 1], [0, 0.95], color="gray", lw=1, ls="--")
+        a2.plot([0, 1], [0, 1], color="gray", lw=1, label="equal")
+        a2.plot([0, 1], [0, 0.95], color="gray", lw=1, ls="--", label="95 % of the peer (the goal)")
+        a2.legend(loc="upper left", fontsize=7)
         a2.set_xlabel("best passive peer's delivered ratio (popc / eb / vc within the bound)")
-        a2.set_ylabel("sdk delivered ratio")
+        a2.set_ylabel("sdk delivered ratio (damping measured hands off)")
         a2.set_title(f"sdk against the best passive peer ({int(ok.sum())} cells with one)", fontsize=10)
-        fig.colorbar(sc, ax=a2, label="period T (ms, log)")
+        cb = fig.colorbar(sc, ax=a2, label="period T (ms, log)")
+        from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+        # plain numbers of ms at 1, 2, 5 per decade (not "6 x 10^0")
+        cb.ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        cb.ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+        cb.ax.yaxis.set_minor_formatter(NullFormatter())
     mode = result.get("mode", "")
     fig.suptitle(f"stiff virtual walls, {len(cells)} {mode} cells on a simulated arm (generated data; "
                  "exact zero-order hold, energy from the raw state)", fontsize=11)

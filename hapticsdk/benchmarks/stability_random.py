@@ -18,15 +18,18 @@ normal axis of an arm (mass, true damping, encoder, 3.3 N force limit) held by a
 
 Plant: :class:`hapticsdk.sim.plant.PlantBatch` (exact ZOH, energy from the raw state).
 Controllers per cell: ``plain``, ``popc``, ``eb``, ``vc`` (:mod:`hapticsdk.sim.peers`,
-the declared damping at face value) and ``sdk`` (:class:`~hapticsdk.passivity.PassivityController`
-with the declared damping, resolution and force limit).
+the declared damping at face value), ``sdk`` (:class:`~hapticsdk.passivity.PassivityController`
+with the damping measured hands off on the cell's own arm, :func:`measure_cell_damping`:
+the fit's lower bound trusted and the fit as the device's damping; the declared
+resolution and force limit) and ``sdk_declared`` (the same controller with the declared
+damping only, trusted at ``damping_trust``).
 
 Per cell and controller: ``energy_to_user_j`` (max over time of the energy given to the
 finger), ``delivered_ratio`` (over the contact ticks, i.e. reading inside the wall:
 ``sum min(F+, F_target) / sum F_target`` with ``F_target = min(K pen, 3.3 N)``; force
 beyond the wall's law, e.g. a damper's, is not counted as delivered), ``max_force_step_n``
 (largest change of the applied force between two ticks, all ticks), ``min_contact_force_n``
-(most negative applied force on a contact tick; 0 if none); for ``sdk`` also
+(most negative applied force on a contact tick; 0 if none); for ``sdk`` and ``sdk_declared`` also
 ``ramp_step_n`` (the controller's own step at that period) and ``bound_shortfall_j``
 (largest ``true energy - U - (Delta/2) |F|`` over the ticks: <= 0 when the controller's
 bound ``U`` held as an upper bound of the truth) and ``spring_only_share`` (share of the
@@ -35,7 +38,8 @@ while the wall asked for more: where its energy bound had nothing left for the e
 Not modelled: Coulomb friction, computation
 delay, jitter, multi-axis coupling, a reacting hand.
 
-The summary's delivered goal (:func:`summarise`): the SDK controller delivers at least 95 %
+The summary's delivered goal (:func:`summarise`; the ``sdk`` lane at the top level, the
+``sdk_declared`` lane under ``declared_damping``): the SDK controller delivers at least 95 %
 of the best passive peer's ratio (``popc``, ``eb`` or ``vc``, among those within the energy
 bound in that cell), counted over the cells that have such a peer
 (``sdk_delivered_vs_best_passive_peer`` of ``cells_with_a_passive_peer``); and the same
@@ -54,12 +58,17 @@ import numpy as np
 
 from ..passivity import ControllerSettings, controller_commit_batch, controller_state_batch, controller_step_batch
 from ..passivity.batch import _colgate_n_per_m
+from ..passivity.settings import DAMPING_TRUST
 from ..sim import peers as P
 from ..sim.arm import ArmParams
 from ..sim.finger import FINGERS, FingerParams
 from ..sim.plant import PlantBatch
 
-CONTROLLERS = (*P.PEERS, "sdk")
+CONTROLLERS = (*P.PEERS, "sdk", "sdk_declared")
+#: The SDK controller's lanes: ``sdk`` credits the damping measured hands off on the
+#: cell's own arm (:mod:`hapticsdk.calibration.damping`), ``sdk_declared`` only the share
+#: ``damping_trust`` of the declared damping (a device never calibrated).
+SDK_LANES = ("sdk", "sdk_declared")
 PASSIVE_PEERS = ("popc", "eb", "vc")
 KINDS = ("press_hold", "tap", "bumpy_slide", "plain_slide", "creep", "knots")
 #: Energy to the user a cell may show (J), the issue's bound (0.1 mJ over a run).
@@ -153,12 +162,34 @@ class _Ref:
         return r
 
 
+def measure_cell_damping(cell: dict[str, Any]) -> dict[str, Any]:
+    """The hands-off damping calibration on a cell's own arm (its true mass and damping,
+    its encoder and period; the excitation sized by the arm's mass as declared, here the
+    true one): :func:`hapticsdk.calibration.damping.fit_damping` of the simulated
+    readings. Returns the fit as a dict."""
+    from ..calibration.damping import excitation, fit_damping
+    from ..sim.arm import free_arm_readings_mm
+    T = float(cell["period_s"])
+    arm = ArmParams(mass_kg=cell["arm_mass_kg"], damping_ns_per_m=cell["damping_true_ns_per_m"],
+                    max_force_n=FORCE_LIMIT_N, encoder_resolution_mm=cell["resolution_mm"])
+    f = excitation(T, FORCE_LIMIT_N, cell["arm_mass_kg"])
+    fit = fit_damping(f, free_arm_readings_mm(T, arm, f), T, cell["resolution_mm"])
+    return {"damping_ns_per_m": fit.damping_ns_per_m, "trusted_damping_ns_per_m": fit.trusted_damping_ns_per_m,
+            "worst_error_ns_per_m": fit.worst_error_ns_per_m, "success": fit.success, "message": fit.message,
+            "readings": fit.readings}
+
+
 def run_cells(cells: Sequence[dict[str, Any]], *, knots: Any = None, chunk_lanes: int = 6000,
               settings: ControllerSettings | None = None, controllers: Sequence[str] = CONTROLLERS,
               progress: Any = None) -> list[dict[str, Any]]:
     """Run every cell with every controller; returns one dict per cell (the cell's
-    parameters plus ``results[controller]`` with the metrics of the module docstring)."""
+    parameters plus ``results[controller]`` with the metrics of the module docstring, and
+    ``damping_calibration``, :func:`measure_cell_damping`, where the ``sdk`` lane runs)."""
     cells = [dict(c) for c in cells]
+    if "sdk" in controllers:
+        for c in cells:
+            if "damping_calibration" not in c:
+                c["damping_calibration"] = measure_cell_damping(c)
     order = np.argsort([c["period_s"] for c in cells], kind="stable")
     nc = len(controllers)
     per_chunk = max(1, chunk_lanes // nc)
@@ -196,8 +227,19 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     L = rows.size
     pst = P.state(L)
     cst = controller_state_batch(L)
-    sdk = kind == CONTROLLERS.index("sdk")
+    sdk = np.isin(kind, [CONTROLLERS.index(k) for k in SDK_LANES])
     s = settings or ControllerSettings()
+    # the damping each sdk lane credits: the hands-off measurement (sdk) or the declared share
+    # (sdk: the fit's lower bound, and the fitted damping as the device's; sdk_declared: the
+    # declared share, and the declared damping)
+    b_tr = np.asarray(s.trusted_damping_ns_per_m(bd), float) * np.ones(rows.size)
+    bd_ctrl = bd
+    if "sdk" in controllers:
+        on_sdk = kind == CONTROLLERS.index("sdk")
+        meas = np.array([c["damping_calibration"]["trusted_damping_ns_per_m"] for c in cells])[rows]
+        fit = np.array([c["damping_calibration"]["damping_ns_per_m"] for c in cells])[rows]
+        b_tr = np.where(on_sdk, meas, b_tr)
+        bd_ctrl = np.where(on_sdk, np.nan_to_num(fit), bd)
     lane_ref = _Ref([cells[int(i)] for i in rows], knots)
     n_ticks = np.ceil(dur / T).astype(int)
     e_max = np.zeros(L)
@@ -213,7 +255,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     spring_only = np.zeros(L, int)   # sdk: contact ticks with the spring alone sent, below the wall's force
     r_now = lane_ref(np.zeros(L))
     step_n = np.minimum(T / s.ramp_time_s, 1.0) * plant.fmax   # the controller's ramp step (N per tick)
-    kc = _colgate_n_per_m(s.damping_trust * bd, T, step_n, plant.res_mm * 1e-3)   # its Colgate spring (N/m)
+    kc = _colgate_n_per_m(np.minimum(b_tr, s.damping_trust * bd_ctrl), T, step_n, plant.res_mm * 1e-3)  # its spring
     for k in range(int(n_ticks.max())):
         live = k < n_ticks
         t1 = (k + 1) * T
@@ -223,8 +265,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         touching = pen > 0
         fw = np.where(touching, K * pen, 0.0)
         f_peer = P.step(kind, pst, x, T, fw, K, pen, bd)
-        f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd, resolution_mm=plant.res_mm,
-                                      max_force_n=plant.fmax, mass_kg=plant.m)
+        f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd_ctrl, resolution_mm=plant.res_mm,
+                                      max_force_n=plant.fmax, mass_kg=plant.m, trusted_damping_ns_per_m=b_tr)
         f_cmd = np.where(sdk, f_sdk, f_peer)
         tgt = np.minimum(fw, plant.fmax)   # the wall's force the device can give
         # the extra held at 0 (the output is the Colgate spring) while the wall asks for more
@@ -263,7 +305,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
             d[name] = {"energy_to_user_j": float(e_max[ln]), "delivered_ratio": float(ratio[ln]),
                        "max_force_step_n": float(dmax[ln]), "min_contact_force_n": float(fneg[ln]),
                        "contact_ticks": int(contact[ln])}
-            if name == "sdk":
+            if name in SDK_LANES:
                 d[name]["ramp_step_n"] = float(step[ln])
                 d[name]["max_step_beyond_spring_n"] = float(dspring[ln])
                 d[name]["bound_shortfall_j"] = float(unsound[ln])
@@ -282,7 +324,8 @@ def _peer_ratios(r: dict[str, Any]) -> tuple[list[float], list[float]]:
     energy bound in one cell, and of those of them that also kept the force-shape goals the
     SDK controller is held to (never pulled, no step beyond the SDK controller's ramp step
     in that cell)."""
-    ramp = r["sdk"]["ramp_step_n"] if "sdk" in r else float("inf")
+    lane = next((k for k in SDK_LANES if k in r), None)
+    ramp = r[lane]["ramp_step_n"] if lane else float("inf")
     passive: list[float] = []
     shaped: list[float] = []
     for p in PASSIVE_PEERS:
@@ -303,13 +346,14 @@ def _at_least(mine: float, best: list[float]) -> bool | None:
     return mine == mine and mine >= (1.0 - DELIVERED_SHORTFALL) * max(best)
 
 
-def cell_verdicts(cell: dict[str, Any]) -> dict[str, Any]:
-    """The SDK controller's goals in one cell: energy, no pull, step within its ramp,
-    delivered ratio against the best peer that stayed within the energy bound
-    (``delivered_ok``; None when no peer did) and against the best such peer that also
-    kept the force-shape goals (``delivered_ok_shaped``; None when none did)."""
+def cell_verdicts(cell: dict[str, Any], lane: str = "sdk") -> dict[str, Any]:
+    """The SDK controller's goals in one cell (its lane ``lane``, :data:`SDK_LANES`):
+    energy, no pull, step within its ramp, delivered ratio against the best peer that stayed
+    within the energy bound (``delivered_ok``; None when no peer did) and against the best
+    such peer that also kept the force-shape goals (``delivered_ok_shaped``; None when none
+    did)."""
     r = cell["results"]
-    me = r["sdk"]
+    me = r[lane]
     best, shaped = _peer_ratios(r)
     mine = me["delivered_ratio"]
     return {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
@@ -321,9 +365,36 @@ def cell_verdicts(cell: dict[str, Any]) -> dict[str, Any]:
             "best_shaped_peer_ratio": max(shaped) if shaped else float("nan")}
 
 
+def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, int]:
+    v = [cell_verdicts(c, lane) for c in cells]
+    return {"sdk_energy_within_bound": sum(x["energy_ok"] for x in v),
+            "sdk_no_pull": sum(x["no_pull"] for x in v),
+            "sdk_step_within_ramp": sum(x["step_ok"] for x in v),
+            "sdk_step_within_ramp_plus_spring": sum(x["step_ok_plus_spring"] for x in v),
+            "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] is True for x in v),
+            "cells_with_a_passive_peer": sum(x["delivered_ok"] is not None for x in v),
+            "sdk_delivered_vs_best_shaped_peer": sum(x["delivered_ok_shaped"] is True for x in v),
+            "cells_with_a_shaped_peer": sum(x["delivered_ok_shaped"] is not None for x in v),
+            "sdk_spring_only_over_half": sum(c["results"][lane].get("spring_only_share", 0.0) > 0.5 for c in cells)}
+
+
+def _damping_summary(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """How the hands-off calibration's bound compares with the cells' true damping."""
+    cal = [(c["damping_calibration"], c["damping_true_ns_per_m"], c["damping_declared_ns_per_m"])
+           for c in cells if "damping_calibration" in c]
+    pos = [(d["trusted_damping_ns_per_m"] / b, t / b) for d, b, t in cal if b > 0]
+    return {"cells_calibrated": len(cal),
+            "cells_trusted_above_true": sum(d["trusted_damping_ns_per_m"] > b for d, b, _ in cal),
+            "calibrations_failed": sum(not d["success"] for d, _, _ in cal),
+            "median_trusted_over_true": float(np.median([p[0] for p in pos])) if pos else float("nan"),
+            "median_declared_share_over_true": float(np.median([p[1] for p in pos])) * DAMPING_TRUST
+            if pos else float("nan")}
+
+
 def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """Goal counts for the SDK controller and per-controller medians and worst figures."""
-    v = [cell_verdicts(c) for c in cells]
+    """Goal counts for the SDK controller (the ``sdk`` lane at the top level, the
+    ``sdk_declared`` lane under ``declared_damping``), the calibration's bound against the
+    true damping (``damping_calibration``) and per-controller medians and worst figures."""
     n = len(cells)
     per: dict[str, Any] = {}
     names = list(cells[0]["results"]) if cells else []
@@ -336,17 +407,18 @@ def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
                      "max_energy_to_user_j": float(e.max()), "median_energy_to_user_j": float(np.median(e)),
                      "median_delivered_ratio": float(np.nanmedian(d)) if np.isfinite(d).any() else float("nan"),
                      "max_force_step_n": float(st.max()), "most_negative_contact_force_n": float(mn.min())}
-    return {"cells": n, "energy_bound_j": ENERGY_BOUND_J, "delivered_shortfall_allowed": DELIVERED_SHORTFALL,
-            "sdk_energy_within_bound": sum(x["energy_ok"] for x in v),
-            "sdk_no_pull": sum(x["no_pull"] for x in v),
-            "sdk_step_within_ramp": sum(x["step_ok"] for x in v),
-            "sdk_step_within_ramp_plus_spring": sum(x["step_ok_plus_spring"] for x in v),
-            "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] is True for x in v),
-            "cells_with_a_passive_peer": sum(x["delivered_ok"] is not None for x in v),
-            "sdk_delivered_vs_best_shaped_peer": sum(x["delivered_ok_shaped"] is True for x in v),
-            "cells_with_a_shaped_peer": sum(x["delivered_ok_shaped"] is not None for x in v),
-            "sdk_spring_only_over_half": sum(c["results"]["sdk"].get("spring_only_share", 0.0) > 0.5 for c in cells),
-            "controllers": per}
+    out: dict[str, Any] = {"cells": n, "energy_bound_j": ENERGY_BOUND_J,
+                           "delivered_shortfall_allowed": DELIVERED_SHORTFALL}
+    lane = "sdk" if "sdk" in names else ("sdk_declared" if "sdk_declared" in names else None)
+    if lane:
+        out.update(_goal_counts(cells, lane))
+        out["sdk_lane"] = lane
+    if lane == "sdk" and "sdk_declared" in names:
+        out["declared_damping"] = _goal_counts(cells, "sdk_declared")
+    if any("damping_calibration" in c for c in cells):
+        out["damping_calibration"] = _damping_summary(cells)
+    out["controllers"] = per
+    return out
 
 
 def run_random(n: int, seed: int, *, progress: Any = None, settings: ControllerSettings | None = None

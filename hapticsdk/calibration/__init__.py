@@ -1,7 +1,9 @@
 """Calibration of actuators: the perceptual mapping of the voice coil (formula (7))
 and the piezo's voltage table ``Tab`` (formula (9)), their fits from experiment data,
-and calibration files per device serial number (``docs/calibration.md``)."""
+the force arm's damping measured hands off (:mod:`.damping`), and calibration files per
+device serial number (``docs/calibration.md``)."""
 
+from .damping import DampingCalibration, DampingFit, excitation, fit_damping
 from .discrimination import (TABLE4_SPRINGS_N_PER_MM, DiscriminationAnswers, PsychometricFit,
                              fit_psychometric, generate_answers)
 from .piezo import PiezoTable, read_measurements_csv, table_from_measurements
@@ -14,4 +16,4 @@ __all__ = ["PiezoTable", "VoiceCoilCalibration", "VoiceCoilFit", "fit_voicecoil"
            "PsychometricFit", "fit_psychometric", "generate_answers", "TABLE4_SPRINGS_N_PER_MM",
            "table_from_measurements", "read_measurements_csv", "LoadedCalibration", "calibration_dir",
            "calibrations_in_use", "list_calibrations", "load_calibration", "read_calibration",
-           "save_calibration"]
+           "save_calibration", "DampingCalibration", "DampingFit", "excitation", "fit_damping"]

@@ -12,14 +12,14 @@ file in the directory is considered; its ``kind`` and ``serial`` fields decide.
 :func:`load_calibration` returns the calibration for a device, in this order: a file
 with that kind and serial; a file with that kind and no serial (``"serial": null``,
 any device); the default (voice coil: the paper's formula (7); piezo: the ``default``
-the caller passes, e.g. a plugin's generated table). The answer says which was used,
+the caller passes, e.g. a plugin's generated table; damping: none, the controller then
+credits a share of the declared damping). The answer says which was used,
 for ``hapticsdk doctor``'s "calibrations in use".
 """
 
 from __future__ import annotations
 
 import datetime as _dt
-import json
 import logging
 import os
 from dataclasses import dataclass
@@ -27,13 +27,17 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import CalibrationError, ValidationError
+from .damping import DampingCalibration
 from .piezo import PiezoTable
 from .voicecoil import VoiceCoilCalibration
+
+#: Every calibration object the store reads and writes.
+Calibration = VoiceCoilCalibration | PiezoTable | DampingCalibration
 
 log = logging.getLogger(__name__)
 _WARNED: set[tuple[str, str]] = set()
 
-KINDS = ("voicecoil", "piezo")
+KINDS = ("voicecoil", "piezo", "damping")
 ENV_DIR = "HAPTICSDK_CALIBRATION_DIR"
 
 
@@ -54,9 +58,9 @@ def _check_kind(kind: str) -> None:
         raise ValidationError(f"unknown calibration kind {kind!r}; valid: {list(KINDS)}", field="kind")
 
 
-def calibration_to_dict(cal: VoiceCoilCalibration | PiezoTable) -> dict[str, Any]:
+def calibration_to_dict(cal: Calibration) -> dict[str, Any]:
     """The file content for ``cal`` (schema-valid)."""
-    if not isinstance(cal, (VoiceCoilCalibration, PiezoTable)):
+    if not isinstance(cal, (VoiceCoilCalibration, PiezoTable, DampingCalibration)):
         raise ValidationError(f"not a calibration: {type(cal).__name__}", field="calibration")
     d = {"schema_version": 1, **cal.to_dict(),
          "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
@@ -65,13 +69,15 @@ def calibration_to_dict(cal: VoiceCoilCalibration | PiezoTable) -> dict[str, Any
     return d
 
 
-def calibration_from_dict(data: dict[str, Any], *, source: str = "") -> VoiceCoilCalibration | PiezoTable:
+def calibration_from_dict(data: dict[str, Any], *, source: str = "") -> Calibration:
     """Validate ``data`` against the schema and build the calibration object."""
     from ..schemas_io import validate
 
     validate(data, "calibration", source=source)
     if data["kind"] == "voicecoil":
         return VoiceCoilCalibration.from_dict(data)
+    if data["kind"] == "damping":
+        return DampingCalibration.from_dict(data)
     return PiezoTable.from_dict(data)
 
 
@@ -100,7 +106,7 @@ def _read_file(p: Path) -> tuple[Any, str]:
     return parse_json(text, p, field="calibration"), digest
 
 
-def _from_file(p: Path) -> tuple[VoiceCoilCalibration | PiezoTable, str]:
+def _from_file(p: Path) -> tuple[Calibration, str]:
     data, digest = _read_file(p)
     try:
         return calibration_from_dict(data, source=str(p)), digest
@@ -112,12 +118,12 @@ def _from_file(p: Path) -> tuple[VoiceCoilCalibration | PiezoTable, str]:
         raise CalibrationError(f"{p}: not a usable calibration: {type(exc).__name__}: {exc}") from None
 
 
-def read_calibration(path: str | Path) -> VoiceCoilCalibration | PiezoTable:
+def read_calibration(path: str | Path) -> Calibration:
     """Read one calibration file (errors name the file and the field)."""
     return _from_file(Path(path))[0]
 
 
-def save_calibration(cal: VoiceCoilCalibration | PiezoTable, directory: str | Path | None = None, *,
+def save_calibration(cal: Calibration, directory: str | Path | None = None, *,
                      path: str | Path | None = None) -> Path:
     """Write ``cal`` to ``path``, or to ``<directory>/<kind>-<serial|any>.json`` (default
     directory: :func:`calibration_dir`). Returns the path written."""
@@ -170,11 +176,11 @@ class CalibrationEntry:
                 "sha256": self.sha256}
 
 
-def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, VoiceCoilCalibration | PiezoTable | None]]:
+def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, Calibration | None]]:
     """Every ``*.json`` file of the calibration directory: its entry and the loaded
     calibration (``None`` when it does not load)."""
     d = Path(directory) if directory is not None else calibration_dir()
-    out: list[tuple[CalibrationEntry, VoiceCoilCalibration | PiezoTable | None]] = []
+    out: list[tuple[CalibrationEntry, Calibration | None]] = []
     if not d.is_dir():
         return out
     try:
@@ -195,9 +201,15 @@ def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, VoiceCoi
                 log.warning("skipped calibration file %s: %s", p, msg)
             out.append((CalibrationEntry(p, None, None, None, "", error=msg, claimed_kind=_peek_kind(p)), None))
             continue
-        kind = "voicecoil" if isinstance(cal, VoiceCoilCalibration) else "piezo"
+        kind = _kind_of(cal)
         out.append((CalibrationEntry(p, kind, cal.serial, bool(cal.generated), cal.source, sha256=digest), cal))
     return out
+
+
+def _kind_of(cal: Calibration) -> str:
+    if isinstance(cal, VoiceCoilCalibration):
+        return "voicecoil"
+    return "damping" if isinstance(cal, DampingCalibration) else "piezo"
 
 
 def list_calibrations(directory: str | Path | None = None) -> list[CalibrationEntry]:
@@ -210,7 +222,7 @@ class LoadedCalibration:
     """Answer of :func:`load_calibration`.
 
     Attributes:
-        kind: ``"voicecoil"`` or ``"piezo"``.
+        kind: ``"voicecoil"``, ``"piezo"`` or ``"damping"``.
         serial: the serial asked for.
         calibration: the calibration object (``None``: no file and no default).
         origin: ``"file"`` (serial match), ``"file-any"`` (file without serial),
@@ -222,7 +234,7 @@ class LoadedCalibration:
 
     kind: str
     serial: str | None
-    calibration: VoiceCoilCalibration | PiezoTable | None
+    calibration: Calibration | None
     origin: str
     path: Path | None
     skipped: dict[str, str]
@@ -259,12 +271,12 @@ def load_calibration(kind: str, serial: str | None = None, *, directory: str | P
     """The calibration of kind ``kind`` for the device with ``serial``.
 
     Args:
-        kind: ``"voicecoil"`` or ``"piezo"``.
+        kind: ``"voicecoil"``, ``"piezo"`` or ``"damping"``.
         serial: device serial number (``None``: only files without a serial match).
         directory: calibration directory (default :func:`calibration_dir`).
         default: used when no file matches; a calibration object or a zero-argument
             callable returning one. Voice coil without ``default``: the paper's
-            formula (7). Piezo without ``default``: ``calibration`` is ``None``.
+            formula (7). Piezo or damping without ``default``: ``calibration`` is ``None``.
 
     Files that fail validation are skipped (listed in ``skipped``), never used.
     """
@@ -316,4 +328,4 @@ def calibrations_in_use(serials: dict[str, str | None] | None = None, *, directo
 
 __all__ = ["KINDS", "ENV_DIR", "calibration_dir", "save_calibration", "read_calibration", "load_calibration",
            "list_calibrations", "calibrations_in_use", "calibration_to_dict", "calibration_from_dict",
-           "LoadedCalibration", "CalibrationEntry"]
+           "LoadedCalibration", "CalibrationEntry", "Calibration"]

@@ -136,6 +136,7 @@ EXAMPLES: dict[str, str] = {
     "calibrate": "hapticsdk calibrate list",
     "calibrate voicecoil": "hapticsdk calibrate voicecoil answers.csv --serial VC-001",
     "calibrate piezo": "hapticsdk calibrate piezo measurements.csv --serial PZ-001",
+    "calibrate damping": "hapticsdk calibrate damping --simulate --damping 0.5 --serial OMNI-001",
     "calibrate answers": "hapticsdk calibrate answers answers.csv --people 10 --seed 0",
     "calibrate list": "hapticsdk calibrate list --json",
     "replay": "hapticsdk replay run.npz",

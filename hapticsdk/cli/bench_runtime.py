@@ -135,11 +135,11 @@ def _stability(args: argparse.Namespace) -> int:
     n = s["cells"]
     rows = []
     for name, c in s["controllers"].items():
-        rows.append(f"  {name:<6} {c['cells_energy_within_bound']:>6}/{n:<6} {c['max_energy_to_user_j'] * 1e3:>12.4g} "
+        rows.append(f"  {name:<12} {c['cells_energy_within_bound']:>6}/{n:<6} {c['max_energy_to_user_j'] * 1e3:>12.4g} "
                     f"{c['median_delivered_ratio']:>10.3f} {c['max_force_step_n']:>10.3f} "
                     f"{c['most_negative_contact_force_n']:>10.3f}")
     text = (f"{head}, {res['runtime_s']:.1f} s (simulated arm, exact zero-order hold; energy from the raw state)\n"
-            f"  {'ctrl':<6} {'E<=' + format(s['energy_bound_j'] * 1e3, 'g') + 'mJ':>13} {'max E (mJ)':>12} "
+            f"  {'ctrl':<12} {'E<=' + format(s['energy_bound_j'] * 1e3, 'g') + 'mJ':>13} {'max E (mJ)':>12} "
             f"{'median F/Kx':>10} {'max dF (N)':>10} {'min F (N)':>10}\n" + "\n".join(rows) + "\n"
             f"sdk controller: energy within {s['energy_bound_j'] * 1e3:g} mJ in {s['sdk_energy_within_bound']}/{n} cells; "
             f"never pulls in {s['sdk_no_pull']}/{n}; force steps within its ramp in {s['sdk_step_within_ramp']}/{n} "
@@ -150,10 +150,30 @@ def _stability(args: argparse.Namespace) -> int:
             f"within the energy bound, and of the best such peer that never pulls and steps within the sdk's "
             f"ramp in {s['sdk_delivered_vs_best_shaped_peer']}/{s['cells_with_a_shaped_peer']}; "
             f"the spring alone (the energy bound spent) on more than half the contact ticks in "
-            f"{s['sdk_spring_only_over_half']}/{n}"
+            f"{s['sdk_spring_only_over_half']}/{n}" + _lanes_text(s, n)
             + (f"\nfigure saved to {args.plot}" if args.plot else ""))
     emit(res, args.json, text)
-    return 0 if s["sdk_energy_within_bound"] == n else 1
+    declared_met = s.get("declared_damping", {}).get("sdk_energy_within_bound", n) == n
+    return 0 if s["sdk_energy_within_bound"] == n and declared_met else 1
+
+
+def _lanes_text(s: dict[str, Any], n: int) -> str:
+    """The two sdk lanes' note: which damping each credits, the declared lane's goal counts
+    and the calibration's bound against the true damping."""
+    d = s.get("declared_damping")
+    if d is None:
+        return ""
+    cal = s.get("damping_calibration", {})
+    return (f"\n  (sdk: the damping measured hands off on each cell's arm, its bound above the true damping in "
+            f"{cal.get('cells_trusted_above_true', 'n/a')}/{cal.get('cells_calibrated', n)} cells, median "
+            f"{cal.get('median_trusted_over_true', float('nan')):.3f} of it; sdk_declared: half the declared damping, "
+            f"median {cal.get('median_declared_share_over_true', float('nan')):.3f} of it)\n"
+            f"sdk_declared: energy within {s['energy_bound_j'] * 1e3:g} mJ in {d['sdk_energy_within_bound']}/{n}; never pulls in {d['sdk_no_pull']}/{n}; "
+            f"steps within the ramp in {d['sdk_step_within_ramp']}/{n} ({d['sdk_step_within_ramp_plus_spring']}/{n} "
+            f"with the spring); at the best passive peer in {d['sdk_delivered_vs_best_passive_peer']}/"
+            f"{d['cells_with_a_passive_peer']}, at the best shaped peer in {d['sdk_delivered_vs_best_shaped_peer']}/"
+            f"{d['cells_with_a_shaped_peer']}; the spring alone on more than half the contact ticks in "
+            f"{d['sdk_spring_only_over_half']}/{n}")
 
 
 def _fidelity(args: argparse.Namespace) -> int:

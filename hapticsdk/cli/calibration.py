@@ -1,4 +1,5 @@
-"""Calibration and run-file commands: ``calibrate voicecoil|piezo|answers|list``, ``replay``."""
+"""Calibration and run-file commands: ``calibrate voicecoil|piezo|damping|answers|list``,
+``replay``."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import argparse
 from typing import Any
 
 from . import emit
-from .argtypes import bounded_int, nonneg_int, open_unit_interval, positive_float, serial
+from .argtypes import bounded_int, nonneg_float, nonneg_int, open_unit_interval, positive_float, serial
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,6 +40,29 @@ def register(sub: argparse._SubParsersAction) -> None:
     _save_args(p)
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_piezo)
+
+    p = csub.add_parser("damping", help="the force arm's damping, measured hands off: fit a run of the "
+                                        "excitation, or write the excitation to play (docs/calibration.md)")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--run", metavar="CSV", help="a hands-off run: columns position_mm, force_n, one row per "
+                                                  "period (the reading, then the force applied after it)")
+    src.add_argument("--simulate", action="store_true", help="a GENERATED run on the simulated arm (--mass, "
+                                                             "--damping, --period, --resolution)")
+    src.add_argument("--write-excitation", metavar="CSV", help="write the excitation's forces (column force_n, "
+                                                               "one per period) for --period, --mass, --max-force")
+    p.add_argument("--period", type=positive_float, default=0.001, help="servo period of the run (s, default 0.001)")
+    p.add_argument("--resolution", type=nonneg_float, default=0.055,
+                   help="encoder resolution (mm, default 0.055, the Omni's)")
+    p.add_argument("--mass", type=positive_float, default=0.045,
+                   help="the arm's declared apparent mass (kg, default 0.045): sizes the excitation")
+    p.add_argument("--max-force", type=positive_float, default=3.3, help="the arm's force limit (N, default 3.3)")
+    p.add_argument("--damping", type=nonneg_float, default=0.5,
+                   help="--simulate: the simulated arm's true damping (N*s/m, default 0.5)")
+    p.add_argument("--serial", type=serial, help="device serial number the calibration belongs to (the "
+                                                "controller uses a damping file only for its own serial)")
+    _save_args(p)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_damping)
 
     p = csub.add_parser("answers", help="write GENERATED discrimination answers from formula (7) (for trying "
                                         "the voice-coil fit; not measured data)")
@@ -178,6 +202,53 @@ def cmd_piezo(args: argparse.Namespace) -> int:
               f"Tab round trip max error {out['round_trip_max_rel_error']:.2e}"
               + (f"; saved to {saved}" if saved else ""))
     return 0
+
+
+def cmd_damping(args: argparse.Namespace) -> int:
+    """``calibrate damping``: fit a hands-off run (or a GENERATED one), print the damping and
+    its lower bound, optionally save the calibration; or write the excitation to play.
+    Returns the exit status."""
+    from ..calibration.damping import (DampingCalibration, excitation, fit_damping, read_run_csv, simulated_run,
+                                       write_excitation_csv)
+
+    if args.write_excitation:
+        from ..fileio import check_output_path
+        check_output_path(args.write_excitation, field="--write-excitation")
+        f = excitation(args.period, args.max_force, args.mass)
+        write_excitation_csv(args.write_excitation, f)
+        out = {"path": args.write_excitation, "forces": int(f.size), "period_s": args.period,
+               "duration_s": f.size * args.period, "peak_force_n": float(abs(f).max())}
+        emit(out, args.json, f"wrote {f.size} forces ({f.size * args.period:.2f} s at {args.period:g} s, peak "
+                             f"{out['peak_force_n']:.3g} N) to {args.write_excitation}; play them hands off, record "
+                             "position_mm and force_n per period, then: hapticsdk calibrate damping --run CSV")
+        return 0
+    _check_save(args)
+    if args.simulate:
+        f, y = simulated_run(args.period, args.mass, args.damping, args.resolution, args.max_force)
+        generated, source = True, (f"GENERATED: simulated arm, mass {args.mass:g} kg, damping {args.damping:g} "
+                                   f"N*s/m, encoder {args.resolution:g} mm, period {args.period:g} s")
+    else:
+        f, y = read_run_csv(args.run)
+        generated, source = False, f"hands-off run {args.run}"
+    fit = fit_damping(f, y, args.period, args.resolution)
+    saved = None
+    if fit.success:
+        cal = DampingCalibration.from_fit(fit, period_s=args.period, resolution_mm=args.resolution,
+                                          serial=args.serial, generated=generated, source=source)
+        saved = _save(args, cal)
+    out = {"kind": "damping", "serial": args.serial, "generated": generated, "source": source, **fit.to_dict(),
+           "mass_kg": fit.mass_kg, "damping_ns_per_m": fit.damping_ns_per_m, "saved": saved}
+    if args.json:
+        emit(out, True)
+    else:
+        head = f"damping{' (GENERATED)' if generated else ''} from {fit.readings} readings: {fit.message}"
+        if fit.success:
+            head += (f"\n  fitted {fit.damping_ns_per_m:.4g} N*s/m (mass {fit.mass_kg:.4g} kg, offset "
+                     f"{fit.offset_n:.3g} N); lower bound {fit.trusted_damping_ns_per_m:.4g} N*s/m (worst-case "
+                     f"reading error {fit.worst_error_ns_per_m:.3g}; standard error {fit.damping_se_ns_per_m:.2g}); "
+                     f"rms residual {fit.fun * 1e3:.3g} mm; {fit.runtime_s * 1e3:.1f} ms")
+        print(head + (f"\n  saved to {saved}" if saved else ""))
+    return 0 if fit.success else 1
 
 
 def cmd_answers(args: argparse.Namespace) -> int:

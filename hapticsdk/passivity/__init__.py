@@ -24,9 +24,11 @@ Two tools:
 * :class:`PassivityController` renders a unilateral wall in two parts, both fixed by
   what the device declares (docs/runtime.md, "Passivity", derives every constant):
 
-  - a **Colgate spring**: the wall's force up to the stiffness ``K_c = 2 b_lo / T`` that
-    the trusted device damping ``b_lo`` makes passive under the zero-order hold
-    (Colgate & Schenkel), as a function of the depth below the surface. It is a spring,
+  - a **Colgate spring**: the wall's force up to the stiffness ``K_c = 2 b_s / T`` that
+    its damping ``b_s`` makes passive under the zero-order hold (Colgate & Schenkel):
+    the trusted device damping ``b_lo``, or half the fitted one where the damping was
+    measured hands off (the other half covers the encoder's count crossings), as a
+    function of the depth below the surface. It is a spring,
     continuous in depth and zero at the surface: no relay, no threshold;
   - the **extra** above it (the rest of the wall's force), bounded by energy: the
     controller books ``U``, an upper bound of the energy the extra has given the user,

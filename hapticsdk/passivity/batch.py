@@ -24,7 +24,8 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
 
 
 def _colgate_n_per_m(b_lo: Any, dt: Any, step_n: Any, q_m: Any) -> np.ndarray:
-    """The Colgate spring's stiffness (N/m) per cell: ``2 b_lo / dt``, at most one ramp step
+    """The Colgate spring's stiffness (N/m) per cell: ``2 b_lo / dt`` for the spring's damping
+    ``b_lo`` (:func:`spring_damping`), at most one ramp step
     ``step_n`` per encoder count ``q_m`` (m) where both are > 0 (docs/runtime.md, Passivity
     item 0; :class:`PassivityController` computes the same in floats)."""
     kc = 2.0 * np.asarray(b_lo, float) / dt
@@ -38,11 +39,14 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
                           damping_ns_per_m: "np.ndarray | float | None" = None,
                           resolution_mm: "np.ndarray | float | None" = None,
                           max_force_n: "np.ndarray | float | None" = None,
-                          mass_kg: "np.ndarray | float | None" = None) -> np.ndarray:
+                          mass_kg: "np.ndarray | float | None" = None,
+                          trusted_damping_ns_per_m: "np.ndarray | float | None" = None) -> np.ndarray:
     """Vectorised :class:`PassivityController` over many independent cells (same law).
     ``dt``, ``damping_ns_per_m`` (declared), ``resolution_mm`` and ``max_force_n`` may be
-    per cell and override ``settings``. Cells where ``on`` is False pass the wall force
-    through. Call :func:`controller_commit_batch` after."""
+    per cell and override ``settings``; ``trusted_damping_ns_per_m`` (per cell or one
+    number) is the damping credited in place of the settings' (a measured lower bound,
+    :meth:`ControllerSettings.trusted_damping_ns_per_m`). Cells where ``on`` is False pass
+    the wall force through. Call :func:`controller_commit_batch` after."""
     s = settings or ControllerSettings()
     x = np.asarray(x_mm, float)
     fw = np.nan_to_num(np.asarray(f_wall, float), nan=0.0, posinf=0.0, neginf=0.0)
@@ -55,7 +59,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     q2 = np.where(started, state["q2"], x)
     dq = (x - q1) * 1e-3
     f1 = state["f1"]
-    b_lo = s.damping_trust * bd
+    b_lo = s.trusted_damping_ns_per_m(bd) if trusted_damping_ns_per_m is None \
+        else np.asarray(trusted_damping_ns_per_m, float)
     u = state["energy"] + f1 * dq + 0.5 * q * np.abs(f1 - state["f2"])
     ex = np.maximum(np.abs(dq) - q, 0.0)
     b_x = np.maximum(b_lo - 0.5 * state["kf"] * dt, 0.0)
@@ -99,7 +104,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         full = np.broadcast_to(np.asarray(fm, float), x.shape)
     depth = np.maximum(-x * 1e-3, 0.0)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
-    kc = _colgate_n_per_m(b_lo, dt, step, q)
+    kc = _colgate_n_per_m(np.minimum(b_lo, s.damping_trust * bd), dt, step, q)   # the spring's damping
     spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(kc * depth, fw), 0.0)
     if fm is not None:
         spring = np.minimum(spring, full)

@@ -43,10 +43,15 @@ class PassivityController:
     (N); send the returned force; then call :meth:`commit` with the force the device
     actually applied (after its safety clamp).
 
-    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = min(2 b_lo / dt, s /
-    Delta)``, ``b_lo = damping_trust x declared damping``: a spring no stiffer than the
-    trusted damping makes passive under the zero-order hold (Colgate & Schenkel's
-    ``b > K T / 2``), and one encoder count of it is at most one ramp step ``s``. It
+    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = min(2 b_s / dt, s /
+    Delta)``, ``b_s = min(b_lo, damping_trust x device damping)``: ``b_lo`` the trusted
+    damping (the measured lower bound where the settings carry one, else
+    ``damping_trust x declared damping``), the device damping the declared one or, after
+    a hands-off measurement, the fitted one. So the spring is passive under the
+    zero-order hold for the trusted damping (Colgate & Schenkel's ``b > K T / 2``), and
+    with a measured damping it sits at half Colgate's limit of the fit, which leaves the
+    encoder's count crossings damping of their own; one count of it is at most one ramp
+    step ``s``. It
     follows the reading at once (a spring, not a ramp: a ramp on a spring lags it, and a
     lagging spring gives energy). The extra gives way to its rise, so the force rises
     by at most ``s`` per tick while the spring's own rise is within ``s``, and falls by
@@ -121,7 +126,9 @@ class PassivityController:
         q = s.position_resolution_mm * 1e-3
         h = 0.5 * q
         f1 = self._f1
-        b_lo = s.damping_trust * s.device_damping_ns_per_m
+        b_lo = s.measured_damping_ns_per_m   # ControllerSettings.trusted_damping_ns_per_m, inline (tick)
+        if b_lo is None:
+            b_lo = s.damping_trust * s.device_damping_ns_per_m
         # the extra above the spring: ZOH-paired work plus half a count of reading error
         # per newton of change (summation by parts); the damping the Colgate spring does
         # not need (b_lo - K_f T / 2) is credited
@@ -186,9 +193,9 @@ class PassivityController:
         self._still = self._still + 1 if dq == 0.0 else 0
         self._q2 = self._q1
         self._q1 = x_mm
-        # the Colgate spring: the wall up to the stiffness the trusted damping makes
-        # passive (K_c = 2 b_lo / T, at most one ramp step per count), as a function of
-        # the depth below the surface x = 0
+        # the Colgate spring: the wall up to the stiffness its damping makes passive
+        # (K_c = 2 b_s / T, at most one ramp step per count), as a function of the depth
+        # below the surface x = 0
         fm = s.max_force_n
         if fm is None:
             # no declared limit: the largest force seen so far is the full scale (a fixed
@@ -202,8 +209,13 @@ class PassivityController:
         depth = -x_mm * 1e-3
         spring = 0.0
         kf = 0.0
-        if f_wall > 0.0 and depth > 0.0 and b_lo > 0.0:
-            kc = 2.0 * b_lo / dt
+        # its damping: half the device's damping (the measured fit, else the declaration),
+        # at most the trusted lower bound (docs/runtime.md, Passivity item 0)
+        b_s = s.damping_trust * s.device_damping_ns_per_m
+        if b_s > b_lo:
+            b_s = b_lo
+        if f_wall > 0.0 and depth > 0.0 and b_s > 0.0:
+            kc = 2.0 * b_s / dt
             if q > 0.0 and kc > step / q:
                 kc = step / q   # one count of the spring within one ramp step (item 0)
             spring = kc * depth

@@ -33,10 +33,17 @@ class ControllerSettings:
     """Declared device parameters of :class:`PassivityController` (nothing tuned).
 
     Attributes:
-        device_damping_ns_per_m: declared physical viscous damping of the device (N*s/m).
-            Only ``damping_trust`` times it is credited.
+        device_damping_ns_per_m: physical viscous damping of the device (N*s/m): the
+            declared one, or the fitted one after a hands-off measurement
+            (:meth:`for_device` with a damping calibration). Only ``damping_trust`` times
+            it is credited, or ``measured_damping_ns_per_m`` where set; the Colgate spring
+            takes at most ``damping_trust`` times it.
         damping_trust: share of the declared damping taken as a lower bound of the true
             damping (:data:`DAMPING_TRUST`, 1/2: a declaration is trusted to a factor 2).
+        measured_damping_ns_per_m: a lower bound of the true damping (N*s/m) measured on
+            this device, hands off (:func:`hapticsdk.calibration.damping.measure_damping`,
+            its ``trusted_damping_ns_per_m``). None (the default): ``damping_trust`` times
+            the declared damping is credited; otherwise this is credited instead.
         position_resolution_mm: encoder resolution Delta (mm); 0 = exact positions.
         max_force_n: force limit of the device (N), the full scale of the ramp. None:
             the largest of the wall's forces and the outputs so far is the full scale.
@@ -60,6 +67,7 @@ class ControllerSettings:
     device_damping_ns_per_m: float = 0.0
     damping_trust: float = DAMPING_TRUST
     position_resolution_mm: float = 0.0
+    measured_damping_ns_per_m: float | None = None
     max_force_n: float | None = None
     ramp_time_s: float = RAMP_TIME_S
     device_mass_kg: float | None = None
@@ -71,6 +79,10 @@ class ControllerSettings:
             _check_nonneg(name, getattr(self, name))
         if not (0.0 <= float(self.damping_trust) <= 1.0):
             raise ValidationError(f"must be in [0, 1], got {self.damping_trust!r}", field="damping_trust")
+        if self.measured_damping_ns_per_m is not None and not (
+                math.isfinite(self.measured_damping_ns_per_m) and self.measured_damping_ns_per_m >= 0):
+            raise ValidationError(f"must be None or a finite number >= 0 (N*s/m), got "
+                                  f"{self.measured_damping_ns_per_m!r}", field="measured_damping_ns_per_m")
         if self.max_force_n is not None and not (math.isfinite(self.max_force_n) and self.max_force_n > 0):
             raise ValidationError(f"must be a finite number > 0 (N), got {self.max_force_n!r}", field="max_force_n")
         if self.device_mass_kg is not None and not (math.isfinite(self.device_mass_kg) and self.device_mass_kg > 0):
@@ -85,9 +97,20 @@ class ControllerSettings:
                                   field="energy_allowance_j")
 
     @classmethod
-    def for_device(cls, device: Any) -> "ControllerSettings":
+    def for_device(cls, device: Any, *, damping: Any = None, directory: Any = None) -> "ControllerSettings":
         """Settings from what a device declares: ``apparent_mass_kg``, ``damping_ns_per_m``,
-        ``encoder_resolution_mm`` and ``limits.max_force_n`` (each optional)."""
+        ``encoder_resolution_mm`` and ``limits.max_force_n`` (each optional), and its
+        damping as measured hands off:
+
+        * ``damping``: a :class:`~hapticsdk.calibration.damping.DampingCalibration` (its
+          ``trusted_damping_ns_per_m`` is credited, and its fitted ``damping_ns_per_m``
+          replaces the declared damping as the device's) or a number (N*s/m, a lower bound
+          measured otherwise; the declared damping stays the device's);
+        * else, where the device has a ``serial_number`` (a non-empty string), the
+          ``"damping"`` calibration saved for exactly that serial in the calibration
+          directory (``directory``, default :func:`hapticsdk.calibration.calibration_dir`);
+          a file for any device (no serial) is not used: a damping belongs to one arm;
+        * else none: ``damping_trust`` times the declared damping is credited."""
         def num(v: Any) -> float | None:
             try:
                 f = float(v)
@@ -95,10 +118,21 @@ class ControllerSettings:
                 return None
             return f if math.isfinite(f) and f > 0 else None
         lim = getattr(device, "limits", None)
+        bound, fitted = _measured_damping(device, damping, directory)
+        declared = num(getattr(device, "damping_ns_per_m", None)) or 0.0
         return cls(device_mass_kg=num(getattr(device, "apparent_mass_kg", None)),
-                   device_damping_ns_per_m=num(getattr(device, "damping_ns_per_m", None)) or 0.0,
+                   device_damping_ns_per_m=declared if fitted is None else fitted,
                    position_resolution_mm=num(getattr(device, "encoder_resolution_mm", None)) or 0.0,
-                   max_force_n=num(getattr(lim, "max_force_n", None)))
+                   max_force_n=num(getattr(lim, "max_force_n", None)), measured_damping_ns_per_m=bound)
+
+    def trusted_damping_ns_per_m(self, declared_ns_per_m: Any = None) -> Any:
+        """The damping the controller credits (N*s/m): the measured lower bound where one is
+        set, else ``damping_trust`` times the declared damping (``declared_ns_per_m``, a
+        number or an array, overrides the settings' declaration)."""
+        if self.measured_damping_ns_per_m is not None:
+            return self.measured_damping_ns_per_m
+        b = self.device_damping_ns_per_m if declared_ns_per_m is None else declared_ns_per_m
+        return self.damping_trust * b
 
     def ramp_step_n(self, dt: float, full_scale_n: float | None = None) -> float:
         """The ramp's own step (N per tick) at period ``dt``: ``F_max dt / ramp_time_s``,
@@ -114,6 +148,26 @@ class ControllerSettings:
         (docs/runtime.md, Passivity item 6)."""
         fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
         return min(fs * 0.5 * self.position_resolution_mm * 1e-3, self.energy_allowance_j)
+
+
+def _measured_damping(device: Any, damping: Any, directory: Any) -> tuple[float | None, float | None]:
+    """``(lower bound, fitted damping)`` of :meth:`ControllerSettings.for_device` (None:
+    not measured; the fit is None for a bare number)."""
+    if damping is None:
+        serial = getattr(device, "serial_number", None)
+        if not (isinstance(serial, str) and serial):
+            return None, None
+        from ..calibration.store import load_calibration
+        loaded = load_calibration("damping", serial, directory=directory)
+        if loaded.origin != "file":
+            return None, None
+        damping = loaded.calibration
+    v = getattr(damping, "trusted_damping_ns_per_m", damping)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
+        raise ValidationError(f"must be a DampingCalibration or a finite number >= 0 (N*s/m), got {damping!r}",
+                              field="damping")
+    fit = getattr(damping, "damping_ns_per_m", None)
+    return float(v), (float(fit) if fit is not None else None)
 
 
 #: Settings of the 0.1 controller (stiffness cap, observers, dither damper, felt floor,
@@ -149,8 +203,8 @@ ControllerSettings.__init__ = _settings_init_accepting_old_names  # type: ignore
 def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None,
                            resolution_mm: float | None = None) -> float:
     """Deprecated (0.2; removed in 0.3): the stiffness cap is gone. Returns the stiffness
-    of the controller's Colgate spring instead, ``K_c = 2 b_lo / dt`` in N/mm (``b_lo`` the
-    trusted share of the declared damping); ``resolution_mm`` is ignored."""
+    of the controller's Colgate spring instead (:func:`colgate_stiffness_n_per_mm`, N/mm);
+    ``resolution_mm`` is ignored."""
     warnings.warn("cap_stiffness_n_per_mm is deprecated: the controller has no stiffness cap; use "
                   "colgate_stiffness_n_per_mm (the stiffness of its passive spring)", DeprecationWarning, stacklevel=2)
     return colgate_stiffness_n_per_mm(settings, dt, damping_ns_per_m)
@@ -159,15 +213,19 @@ def cap_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_p
 def colgate_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_ns_per_m: float | None = None,
                                full_scale_n: float | None = None) -> float:
     """Stiffness (N/mm) of :class:`PassivityController`'s Colgate spring at period ``dt``
-    (s): ``K_c = 2 b_lo / dt`` with ``b_lo = damping_trust x`` the declared damping
-    (``damping_ns_per_m`` overrides the settings' declaration), at most one ramp step per
+    (s): ``K_c = 2 b_s / dt``, ``b_s = min(b_lo, damping_trust x`` the device damping``)``,
+    with ``b_lo`` the trusted damping
+    (:meth:`ControllerSettings.trusted_damping_ns_per_m`; ``damping_ns_per_m`` overrides the
+    settings' declaration), at most one ramp step per
     encoder count, ``s / Delta`` (:meth:`ControllerSettings.ramp_step_n`, with
     ``full_scale_n`` where no force limit is declared; no such cap with an exact encoder
     or no full scale); 0 for ``dt <= 0``. docs/runtime.md, Passivity item 0."""
-    b = settings.device_damping_ns_per_m if damping_ns_per_m is None else float(damping_ns_per_m)
-    if not dt > 0 or not b > 0:
+    b_lo = float(settings.trusted_damping_ns_per_m(None if damping_ns_per_m is None else float(damping_ns_per_m)))
+    if not dt > 0 or not b_lo > 0:
         return 0.0
-    kc = 2.0 * settings.damping_trust * b / dt
+    b_s = min(b_lo, settings.damping_trust * (settings.device_damping_ns_per_m if damping_ns_per_m is None
+                                              else float(damping_ns_per_m)))
+    kc = 2.0 * b_s / dt
     q = settings.position_resolution_mm * 1e-3
     step = settings.ramp_step_n(dt, full_scale_n)
     if q > 0.0 and step > 0.0 and kc > step / q:

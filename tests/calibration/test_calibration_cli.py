@@ -63,3 +63,39 @@ def test_replay_summary(tmp_path, capsys):
     code, out = run_json(capsys, ["replay", str(path)])
     assert code == 0 and out["n_ticks"] == 50 and out["playback_mismatches"] == 0
     assert out["roles"]["force"]["force_n"]["max"] == 0.98
+
+
+def test_calibrate_damping_write_play_fit_save_list(tmp_path, capsys):
+    """The hands-off damping calibration end to end: the excitation written, played on the
+    simulated arm (as a user plays it on theirs), the recorded run fitted and saved for a
+    serial, then listed; a GENERATED run; a held arm fails and saves nothing."""
+    from hapticsdk.calibration.damping import read_excitation_csv
+    from hapticsdk.sim.arm import ArmParams, free_arm_readings_mm
+
+    ex = tmp_path / "ex.csv"
+    code, out = run_json(capsys, ["calibrate", "damping", "--write-excitation", str(ex), "--period", "0.001"])
+    assert code == 0 and out["forces"] > 0
+    f = read_excitation_csv(ex)
+    y = free_arm_readings_mm(1e-3, ArmParams(mass_kg=0.045, damping_ns_per_m=0.3, encoder_resolution_mm=0.055), f)
+    run = tmp_path / "run.csv"
+    run.write_text("position_mm,force_n\n" + "".join(f"{float(yi)!r},{float(fi)!r}\n"
+                                                     for yi, fi in zip(y, list(f) + [0.0])))
+    cal = tmp_path / "cal"
+    code, out = run_json(capsys, ["calibrate", "damping", "--run", str(run), "--period", "0.001",
+                                  "--resolution", "0.055", "--serial", "ARM-7", "--save", str(cal)])
+    assert code == 0 and out["success"] and out["generated"] is False
+    assert 0.0 < out["trusted_damping_ns_per_m"] <= 0.3 <= out["trusted_damping_ns_per_m"] + 2 * out[
+        "worst_error_ns_per_m"]
+    assert out["saved"].endswith("damping-ARM-7.json")
+    code, out = run_json(capsys, ["calibrate", "list", "--dir", str(cal), "--serial", "damping=ARM-7"])
+    use = {u["kind"]: u for u in out["in_use"]}
+    assert use["damping"]["origin"] == "file" and use["damping"]["generated"] is False
+    code, out = run_json(capsys, ["calibrate", "damping", "--simulate", "--damping", "0.2"])
+    assert code == 0 and out["generated"] is True and out["trusted_damping_ns_per_m"] <= 0.2
+    held = tmp_path / "held.csv"
+    held.write_text("position_mm,force_n\n" + "".join(f"0.0,{float(fi)!r}\n" for fi in list(f) + [0.0]))
+    code, out = run_json(capsys, ["calibrate", "damping", "--run", str(held), "--save", str(tmp_path / "c2")])
+    assert code == 1 and not out["success"] and out["saved"] is None
+    assert not (tmp_path / "c2").exists()
+    assert main(["calibrate", "damping", "--simulate"]) == 0
+    assert "lower bound" in capsys.readouterr().out

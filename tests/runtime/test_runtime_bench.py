@@ -73,10 +73,13 @@ def test_cli_handlers(capsys):
     args = parser.parse_args(["stability", "--quick", "--duration", "3", "--json"])
     rc = args.func(args)
     out = json.loads(capsys.readouterr().out)
-    # exit status 0 exactly when the sdk controller met the energy goal in every cell
-    assert rc == (0 if out["summary"]["sdk_energy_within_bound"] == out["summary"]["cells"] else 1)
+    # exit status 0 exactly when both sdk lanes met the energy goal in every cell
+    sm = out["summary"]
+    met = sm["sdk_energy_within_bound"] == sm["declared_damping"]["sdk_energy_within_bound"] == sm["cells"]
+    assert rc == (0 if met else 1)
     assert {"cells", "summary", "mode"} <= set(out) and out["mode"] == "grid"
-    assert set(out["summary"]["controllers"]) == {"plain", "popc", "eb", "vc", "sdk"}
+    assert set(sm["controllers"]) == {"plain", "popc", "eb", "vc", "sdk", "sdk_declared"}
+    assert sm["damping_calibration"]["cells_trusted_above_true"] == 0
     args = parser.parse_args(["fidelity", "--periods", "0.001", "0.004", "--json"])
     assert args.func(args) == 0
     rows = json.loads(capsys.readouterr().out)

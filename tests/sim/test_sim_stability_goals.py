@@ -52,7 +52,7 @@ def test_drawn_cells_keep_the_bound_no_pull_and_the_ramp():
     _check_sdk(cells)
     s = summarise(cells)
     assert s["sdk_no_pull"] == s["sdk_step_within_ramp_plus_spring"] == 12
-    assert set(s["controllers"]) == {"plain", "popc", "eb", "vc", "sdk"}
+    assert set(s["controllers"]) == {"plain", "popc", "eb", "vc", "sdk", "sdk_declared"}
     assert np.isfinite(s["controllers"]["sdk"]["median_delivered_ratio"])
 
 
@@ -137,3 +137,18 @@ def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give
     assert max(e) <= 1e-4
     strict = _sdk_energy(cells, (122, 580), settings=ControllerSettings(energy_allowance_j=2e-5))
     assert all(b < a for a, b in zip(e, strict)), (e, strict)
+
+
+def test_with_a_measured_damping_the_spring_keeps_half_of_it_for_the_encoder():
+    """Seed 1 (2000 cells), cell 1935: a creep on a 0.18 mm encoder, 1 ms, true damping
+    0.57 N*s/m, measured hands off to a bound of 0.46. A spring at Colgate's limit of that
+    bound (2 b_lo / T) leaves the arm's damping little for the count crossings: arm and
+    finger settle into a 50 Hz cycle across one count that gains energy on every cycle
+    (0.134 mJ over the run). At half Colgate's limit of the fitted damping a crossing
+    gains about the spring's energy over one count (docs/runtime.md, Passivity item 0)
+    and the run stays within 0.1 mJ."""
+    cell = draw_cells(2000, seed=1)[1935]
+    assert cell["trajectory"] == "creep" and cell["resolution_mm"] > 0.15
+    c = run_cells([cell], controllers=("sdk",))[0]
+    assert c["damping_calibration"]["trusted_damping_ns_per_m"] <= cell["damping_true_ns_per_m"]
+    assert c["results"]["sdk"]["energy_to_user_j"] <= 1e-4, c["results"]["sdk"]

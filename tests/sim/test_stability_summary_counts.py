@@ -71,12 +71,13 @@ def test_the_counts_follow_the_goal_cell_by_cell(cells):
 
 
 def test_the_spring_only_share_sees_a_spent_bound_and_only_then():
-    """Seed 1, cell 30: a press-and-hold whose first-contact bounce spends the extra's
-    bound; from then on the controller can send only the Colgate spring, on most of the
-    contact ticks. With the bound removed the extra follows the wall, and the share is 0."""
+    """Seed 1 (2000 cells), cell 33: a press-and-hold whose first contact spends the
+    extra's bound; from then on the controller can send only the Colgate spring, on most
+    of the contact ticks. With the bound removed the extra follows the wall, and the share
+    is 0."""
     from hapticsdk.benchmarks.stability_random import draw_cells, run_cells
     from hapticsdk.passivity import ControllerSettings
-    cell = draw_cells(31, seed=1)[30]
+    cell = draw_cells(2000, seed=1)[33]
     assert cell["trajectory"] == "press_hold"
     on = run_cells([cell], controllers=("sdk",))[0]["results"]["sdk"]
     off = run_cells([cell], controllers=("sdk",), settings=ControllerSettings(energy_bound=False))[0]["results"]["sdk"]

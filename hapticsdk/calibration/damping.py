@@ -1,0 +1,385 @@
+"""The arm's damping, measured hands off: a lower bound the stiff-wall controller may
+credit in place of a share of the declared damping (docs/runtime.md, Passivity,
+"Measured damping").
+
+Nobody holds the stylus. The arm is driven by a force doublet pair (``+F, -F, -F, +F``,
+each for ``tau``; net impulse 0 and first moment 0, so an undamped arm ends where it
+started, at most ``F tau^2 / m`` away), repeated with rests between
+(:func:`excitation`). Its encoder readings are fitted with the exact zero-order-hold
+response of ``m y'' = F + F_0 - b y'`` (:func:`fit_damping`): ``alpha = b/m`` by a 1-D
+search, the rest (start, start velocity, ``1/m``, ``F_0/m``) by linear least squares at
+each ``alpha``. ``F_0`` takes up a constant force the arm feels on its own (gravity left
+over, a cable).
+
+The bound is a worst case, not a confidence level: ``b_lo = max(0, b_hat - e_max
+||w||_1)``. To first order the fitted damping moves by ``w . e`` when the readings move by
+``e`` (``w = J (J'J)^-1 grad b``, ``J`` the fit's Jacobian), and a reading's error is at
+most ``e_max``: half an encoder count, or the largest residual where the model explains
+the readings less well than that. Quantisation errors are not independent noise (a
+repeated run crosses the same counts at the same places), so a standard error would not
+bound them: measured, a bound of 3.09 standard errors was exceeded in 1 % to 11 % of
+simulated arms; the worst case in none (docs/runtime.md, "Measured damping"). The
+standard error is reported (``damping_se_ns_per_m``: residual variance at least
+``Delta^2/12``, inflated by the residuals' lag-1 correlation ``(1 + rho)/(1 - rho)``).
+
+What the fit does not see: Coulomb friction (a viscous fit to a Coulomb decay over-states
+the damping at speed: the residuals grow, so the bound shrinks, but it is not proved to
+stay below), a damping that changes over the workspace, a hand on the stylus. The
+simulated arms of the benchmark have none of these.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..errors import ValidationError
+
+#: Largest excursion of the hands-off run (m): 5 mm, well inside any desktop device's
+#: workspace and many counts of any encoder the SDK meets (0.001-0.2 mm).
+TRAVEL_M = 5.0e-3
+#: Share of the force limit the run uses: gentle on the arm, and far from saturation.
+FORCE_SHARE = 0.25
+#: Shortest segment of the doublet in ticks: the response within a segment is then
+#: resolved by ten readings.
+MIN_SEGMENT_TICKS = 10
+#: Doublet pairs in one run, each followed by a rest of ``4 tau`` (free decay).
+PATTERNS = 6
+
+
+def excitation(period_s: float, max_force_n: float, mass_kg: float, *, travel_m: float = TRAVEL_M
+               ) -> np.ndarray:
+    """The hands-off run's forces (N), one per period: :data:`PATTERNS` doublet pairs
+    ``+F, -F, -F, +F`` (each segment ``tau``) with rests of ``4 tau``; ``F`` at most
+    :data:`FORCE_SHARE` of the force limit and ``F tau^2 / m <= travel_m`` for the declared
+    mass ``mass_kg``; ``tau`` at least :data:`MIN_SEGMENT_TICKS` periods."""
+    for name, v in (("period_s", period_s), ("max_force_n", max_force_n), ("mass_kg", mass_kg),
+                    ("travel_m", travel_m)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValidationError(f"must be a finite number > 0, got {v!r}", field=name)
+    f = FORCE_SHARE * max_force_n
+    n = max(int(round(math.sqrt(travel_m * mass_kg / f) / period_s)), MIN_SEGMENT_TICKS)
+    tau = n * period_s   # whole ticks; the force then keeps F tau^2 / m within the travel
+    f = min(f, travel_m * mass_kg / (tau * tau))
+    one = np.concatenate([np.full(n, f), np.full(2 * n, -f), np.full(n, f), np.zeros(4 * n)])
+    return np.tile(one, PATTERNS)
+
+
+def _hg(alpha: float, dt: float) -> tuple[float, float, float]:
+    """``a = exp(-alpha T)``, ``h = (1 - a)/alpha``, ``g = (T - h)/alpha`` (series near 0)."""
+    x = alpha * dt
+    a = math.exp(-x)
+    if x < 1e-4:
+        h = dt * (1.0 - x / 2.0 + x * x / 6.0)
+        g = dt * dt * (0.5 - x / 6.0 + x * x / 24.0)
+    else:
+        h = -math.expm1(-x) / alpha
+        g = (dt - h) / alpha
+    return a, h, g
+
+
+def _basis(alpha: float, dt: float, f: np.ndarray) -> np.ndarray:
+    """Readings' model columns at ``alpha``: start, start velocity, force/m, 1/m (offset)."""
+    from scipy.signal import lfilter
+
+    a, h, g = _hg(alpha, dt)
+    n = f.size
+    u = np.stack([np.zeros(n), f, np.ones(n)])
+    # v_{k+1} = a v_k + h u_k (v_0 = 0), y_{k+1} = y_k + h v_k + g u_k
+    v = lfilter([0.0, h], [1.0, -a], u, axis=1)
+    dy = h * v + g * u
+    cols = np.zeros((n + 1, 4))
+    cols[:, 0] = 1.0
+    cols[1:, 1] = np.cumsum(h * a ** np.arange(n))   # unit start velocity, no force
+    cols[1:, 2] = np.cumsum(dy[1])
+    cols[1:, 3] = np.cumsum(dy[2])
+    return cols
+
+
+@dataclass
+class DampingFit:
+    """Result of :func:`fit_damping` (scipy.optimize style: ``x``, ``fun``, ``success``,
+    ``message``, ``nfev``).
+
+    Attributes:
+        x: ``[mass_kg, damping_ns_per_m, offset_n]``, the fitted arm.
+        fun: root-mean-square residual of the readings (m).
+        damping_se_ns_per_m: standard error of the fitted damping (N*s/m).
+        trusted_damping_ns_per_m: the lower bound ``max(0, b - worst_error_ns_per_m)`` (0
+            when the fit failed): what :class:`~hapticsdk.passivity.ControllerSettings`
+            takes as ``measured_damping_ns_per_m``.
+        worst_error_ns_per_m: the largest change of the fitted damping the readings' errors
+            can make (first order, see the module docstring).
+        residual_correlation: lag-1 correlation of the residuals (the variance's inflation
+            is ``(1 + rho)/(1 - rho)`` for ``rho > 0``).
+        readings: number of readings fitted.
+        runtime_s: wall time of the fit (s).
+    """
+
+    x: np.ndarray
+    fun: float
+    success: bool
+    message: str
+    nfev: int
+    damping_se_ns_per_m: float
+    trusted_damping_ns_per_m: float
+    worst_error_ns_per_m: float = float("nan")
+    residual_correlation: float = 0.0
+    readings: int = 0
+    runtime_s: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def mass_kg(self) -> float:
+        return float(self.x[0])
+
+    @property
+    def damping_ns_per_m(self) -> float:
+        return float(self.x[1])
+
+    @property
+    def offset_n(self) -> float:
+        return float(self.x[2])
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["x"] = [float(v) for v in self.x]
+        return d
+
+
+def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm: float = 0.0) -> DampingFit:
+    """Fit a hands-off run: ``forces_n`` (N, one per period, as applied) and the encoder
+    readings ``readings_mm`` (mm, ``len(forces_n) + 1``: before each force, then the last),
+    ``period_s`` (s), the encoder resolution ``resolution_mm`` (mm; 0 = exact). See the
+    module docstring for the model and the bound."""
+    t0 = time.perf_counter()
+    f = np.asarray(forces_n, float).ravel()
+    y = np.asarray(readings_mm, float).ravel() * 1e-3
+    if f.size < 8 or y.size != f.size + 1:
+        raise ValidationError(f"need at least 8 forces and one reading more than forces, got {f.size} and {y.size}",
+                              field="readings_mm")
+    if not (np.isfinite(f).all() and np.isfinite(y).all()):
+        raise ValidationError("forces and readings must be finite", field="readings_mm")
+    if not (math.isfinite(period_s) and period_s > 0):
+        raise ValidationError(f"must be a finite number > 0, got {period_s!r}", field="period_s")
+    if not (math.isfinite(resolution_mm) and resolution_mm >= 0):
+        raise ValidationError(f"must be a finite number >= 0, got {resolution_mm!r}", field="resolution_mm")
+    q = resolution_mm * 1e-3
+    nfev = 0
+
+    def solve(alpha: float) -> tuple[float, np.ndarray, np.ndarray]:
+        nonlocal nfev
+        nfev += 1
+        B = _basis(alpha, period_s, f)
+        c, *_ = np.linalg.lstsq(B, y, rcond=None)
+        r = y - B @ c
+        return float(r @ r), c, B
+
+    def failed(msg: str) -> DampingFit:
+        return DampingFit(x=np.full(3, np.nan), fun=float("nan"), success=False, message=msg, nfev=nfev,
+                          damping_se_ns_per_m=float("nan"), trusted_damping_ns_per_m=0.0,
+                          readings=int(y.size), runtime_s=time.perf_counter() - t0)
+
+    if np.ptp(y) < 4.0 * max(q, 1e-12):
+        return failed("the arm did not move by 4 encoder counts: nothing to fit (is it held or blocked?)")
+    dur = f.size * period_s
+    # alpha = b/m: 0, then a log grid from a decay too slow to see in the run to one within a tick
+    grid = np.concatenate([[0.0], np.geomspace(1e-2 / dur, 2.0 / period_s, 60)])
+    ss = np.array([solve(a)[0] for a in grid])
+    i = int(np.argmin(ss))
+    lo = grid[max(i - 1, 0)]
+    hi = grid[min(i + 1, grid.size - 1)]
+    alpha = float(grid[i])
+    if hi > lo:
+        from scipy.optimize import minimize_scalar
+
+        res = minimize_scalar(lambda a: solve(a)[0], bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-10 * max(hi, 1.0)})
+        if res.fun <= ss[i]:
+            alpha = float(res.x)
+    sse, c, B = solve(alpha)
+    kappa = float(c[2])
+    if not kappa > 0:
+        return failed("the fitted mass is not positive: the readings do not follow the forces")
+    # covariance of (alpha, start, v0, kappa, kappa F0): the Jacobian with d/d alpha by
+    # central differences of the model at the fitted linear coefficients
+    d_a = max(abs(alpha), 1.0 / dur) * 1e-4
+    model = lambda a: _basis(a, period_s, f) @ c  # noqa: E731
+    ja = (model(alpha + d_a) - model(max(alpha - d_a, 0.0))) / (alpha + d_a - max(alpha - d_a, 0.0))
+    J = np.column_stack([ja, B])
+    r = y - B @ c
+    dof = max(y.size - J.shape[1], 1)
+    s2 = max(sse / dof, q * q / 12.0)
+    rc = r - r.mean()
+    den = float(rc @ rc)
+    rho = float(rc[1:] @ rc[:-1] / den) if den > 0 else 0.0
+    rho = min(max(rho, 0.0), 0.999)
+    infl = (1.0 + rho) / (1.0 - rho)
+    try:
+        cov = np.linalg.inv(J.T @ J) * s2 * infl
+    except np.linalg.LinAlgError:
+        return failed("the run does not determine the damping (singular fit)")
+    b = alpha / kappa
+    g = np.zeros(J.shape[1])
+    g[0] = 1.0 / kappa
+    g[3] = -alpha / (kappa * kappa)
+    var_b = float(g @ cov @ g)
+    if not (math.isfinite(var_b) and var_b >= 0):
+        return failed("the fit's covariance is not usable")
+    se = math.sqrt(var_b)
+    # worst case: the fitted damping moves by w . e for reading errors e (linearised,
+    # w = J (J'J)^-1 g), at most e_max ||w||_1 for |e_k| <= e_max; e_max is half a count,
+    # or the largest residual where the model explains the readings less well than that
+    w = J @ np.linalg.solve(J.T @ J, g)
+    e_max = max(0.5 * q, float(np.abs(r).max()))
+    worst = e_max * float(np.abs(w).sum())
+    trusted = max(0.0, b - worst)
+    return DampingFit(x=np.array([1.0 / kappa, b, float(c[3]) / kappa]), fun=math.sqrt(sse / y.size),
+                      success=True, message="fitted", nfev=nfev, damping_se_ns_per_m=se,
+                      trusted_damping_ns_per_m=trusted, worst_error_ns_per_m=worst,
+                      residual_correlation=rho,
+                      readings=int(y.size), runtime_s=time.perf_counter() - t0)
+
+
+@dataclass
+class DampingCalibration:
+    """A saved hands-off damping measurement of one device (calibration kind
+    ``"damping"``, docs/calibration.md): what :meth:`ControllerSettings.for_device
+    <hapticsdk.passivity.ControllerSettings.for_device>` credits as the arm's damping.
+
+    Attributes:
+        trusted_damping_ns_per_m: the fit's lower bound (N*s/m), the figure credited.
+        damping_ns_per_m: the fitted damping (N*s/m).
+        worst_error_ns_per_m: the bound's margin (N*s/m).
+        mass_kg: the fitted apparent mass (kg).
+        period_s: the run's period (s).
+        resolution_mm: the encoder resolution the fit assumed (mm).
+        readings: readings fitted.
+        serial: the device's serial number (None: any device).
+        generated: True when the run was simulated, not measured.
+        source: provenance in words.
+        extra: free details.
+    """
+
+    trusted_damping_ns_per_m: float
+    damping_ns_per_m: float
+    worst_error_ns_per_m: float
+    mass_kg: float
+    period_s: float
+    resolution_mm: float
+    readings: int
+    serial: str | None = None
+    generated: bool = False
+    source: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        for name in ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "resolution_mm"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
+                raise ValidationError(f"must be a finite number >= 0, got {v!r}", field=name)
+        for name in ("mass_kg", "period_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
+                raise ValidationError(f"must be a finite number > 0, got {v!r}", field=name)
+        if self.trusted_damping_ns_per_m > self.damping_ns_per_m:
+            raise ValidationError(f"the lower bound {self.trusted_damping_ns_per_m!r} exceeds the fitted damping "
+                                  f"{self.damping_ns_per_m!r}", field="trusted_damping_ns_per_m")
+
+    @classmethod
+    def from_fit(cls, fit: DampingFit, *, period_s: float, resolution_mm: float, serial: str | None = None,
+                 generated: bool = False, source: str = "") -> "DampingCalibration":
+        """The calibration of a successful :func:`fit_damping` result."""
+        if not fit.success:
+            raise ValidationError(f"the fit failed: {fit.message}", field="fit")
+        return cls(trusted_damping_ns_per_m=fit.trusted_damping_ns_per_m,
+                   damping_ns_per_m=max(fit.damping_ns_per_m, fit.trusted_damping_ns_per_m),
+                   worst_error_ns_per_m=fit.worst_error_ns_per_m, mass_kg=fit.mass_kg, period_s=float(period_s),
+                   resolution_mm=float(resolution_mm), readings=fit.readings, serial=serial,
+                   generated=bool(generated), source=source)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = {"kind": "damping", **asdict(self)}
+        d["readings"] = int(self.readings)
+        return d
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "DampingCalibration":
+        keys = ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "mass_kg", "period_s",
+                "resolution_mm", "readings", "serial", "generated", "source", "extra")
+        return cls(**{k: data[k] for k in keys if k in data})
+
+
+def simulated_run(period_s: float, mass_kg: float, damping_ns_per_m: float, resolution_mm: float,
+                  max_force_n: float = 3.3) -> tuple[np.ndarray, np.ndarray]:
+    """A GENERATED hands-off run on the simulated arm (:func:`hapticsdk.sim.arm.free_arm_readings_mm`):
+    ``(forces_n, readings_mm)`` of :func:`excitation` sized by ``mass_kg``."""
+    from ..sim.arm import ArmParams, free_arm_readings_mm
+
+    f = excitation(period_s, max_force_n, mass_kg)
+    arm = ArmParams(mass_kg=mass_kg, damping_ns_per_m=damping_ns_per_m, max_force_n=max_force_n,
+                    encoder_resolution_mm=resolution_mm)
+    return f, free_arm_readings_mm(period_s, arm, f)
+
+
+#: Largest run or excitation CSV read (bytes): an hour at 4 kHz is about 14 M rows of a
+#: few bytes; a hands-off run is a few thousand.
+MAX_CSV_BYTES = 64 * 1024 * 1024
+
+
+def _csv_rows(path: Any, field_name: str, columns: tuple[str, ...]) -> list[dict[str, str]]:
+    import csv
+
+    from ..schemas_io import read_bytes
+
+    data = read_bytes(path, field=field_name, max_bytes=MAX_CSV_BYTES)
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise ValidationError(f"{path}: not UTF-8 text (offset {exc.start})", field=field_name) from None
+    rows = list(csv.DictReader(text.splitlines()))
+    if not rows or not set(columns) <= set(rows[0]):
+        raise ValidationError(f"{path}: needs the column(s) {', '.join(columns)} and one row at least",
+                              field=field_name)
+    return rows
+
+
+def _floats(rows: list[dict[str, str]], col: str, path: Any, field_name: str) -> np.ndarray:
+    try:
+        v = np.array([float(r[col]) for r in rows])
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"{path}: column {col}: not a number: {exc}", field=field_name) from None
+    if not np.isfinite(v).all():
+        raise ValidationError(f"{path}: column {col}: not finite", field=field_name)
+    return v
+
+
+def read_excitation_csv(path: Any) -> np.ndarray:
+    """The forces (N) of an excitation file (column ``force_n``, one row per period)."""
+    return _floats(_csv_rows(path, "excitation", ("force_n",)), "force_n", path, "excitation")
+
+
+def write_excitation_csv(path: Any, forces_n: Any) -> Any:
+    """Write :func:`excitation`'s forces to ``path`` (column ``force_n``), atomically and
+    read back with :func:`read_excitation_csv` before it replaces the file."""
+    from ..fileio import atomic_write_text
+
+    f = np.asarray(forces_n, float).ravel()
+    if not np.isfinite(f).all():
+        raise ValidationError("forces must be finite", field="forces_n")
+    return atomic_write_text(path, "force_n\n" + "".join(f"{v!r}\n" for v in f.tolist()), field="excitation",
+                             verify=read_excitation_csv)
+
+
+def read_run_csv(path: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``(forces_n, readings_mm)`` of a recorded hands-off run: columns ``position_mm`` and
+    ``force_n``, one row per period, the reading then the force applied after it (the last
+    row's force is not used)."""
+    rows = _csv_rows(path, "run", ("position_mm", "force_n"))
+    y = _floats(rows, "position_mm", path, "run")
+    f = _floats(rows[:-1], "force_n", path, "run") if len(rows) > 1 else np.zeros(0)
+    return f, y
