@@ -383,3 +383,79 @@ def read_run_csv(path: Any) -> tuple[np.ndarray, np.ndarray]:
     y = _floats(rows, "position_mm", path, "run")
     f = _floats(rows[:-1], "force_n", path, "run") if len(rows) > 1 else np.zeros(0)
     return f, y
+
+
+def measure_damping(device: Any, *, period_s: float = 1e-3, axis: int = 1, role: str = "force",
+                    mass_kg: float | None = None, max_force_n: float | None = None) -> tuple[DampingFit, np.ndarray,
+                                                                                            np.ndarray]:
+    """Run :func:`excitation` on a *simulated* force device nobody holds and fit it:
+    returns ``(fit, forces_n, readings_mm)``, the forces as the device applied them (its
+    safety layer's read-back) and its readings along ``axis`` (0, 1, 2: x, y, z; 1 is the
+    simulated Omni's normal).
+
+    The device advances in simulated time (``device.step(period_s)`` per period); its
+    class must declare ``simulated = True``. A real arm is not driven from here: a Python
+    loop cannot hold a servo period, and the fit assumes the period held. On a real arm,
+    play the forces of ``hapticsdk calibrate damping --write-excitation`` in your servo
+    loop and fit the recording (``--run``). Before the run the device is held at 0 N for
+    its safety layer's start ramp (``ramp_time_s``) plus 0.1 s; after it, on every exit
+    path, it is sent 0 N, and closed if this function opened it."""
+    from ..errors import ValidationError as _VE
+    from ..perception.dimensions import ChannelCommand
+
+    if not getattr(type(device), "simulated", False):
+        raise _VE(f"{type(device).__name__} is not a simulated device: measure_damping drives only simulated "
+                  "devices in simulated time. On a real arm, write the excitation (hapticsdk calibrate damping "
+                  "--write-excitation), play it hands off in your servo loop and fit the recording (--run)",
+                  field="device")
+    if axis not in (0, 1, 2):
+        raise _VE(f"must be 0, 1 or 2, got {axis!r}", field="axis")
+    m = mass_kg if mass_kg is not None else getattr(device, "apparent_mass_kg", None)
+    lim = getattr(device, "limits", None)
+    fm = max_force_n if max_force_n is not None else getattr(lim, "max_force_n", None)
+    if m is None or fm is None:
+        raise _VE("the device declares no apparent_mass_kg or limits.max_force_n; pass mass_kg= and max_force_n=",
+                  field="device")
+    forces = excitation(period_s, float(fm), float(m))
+    ramp = float(getattr(getattr(getattr(device, "safety", None), "settings", None), "ramp_time_s", 0.0) or 0.0)
+    settle = int(math.ceil((ramp + 0.1) / period_s))
+    e = [0.0, 0.0, 0.0]
+    opened = not device.is_open
+    applied = np.empty(forces.size)
+    readings = np.empty(forces.size + 1)
+
+    t = [0.0]   # simulated time (s): the safety layer's ramp and staleness run on it
+
+    def send(f: float) -> float:
+        e[axis] = 1.0 if f >= 0.0 else -1.0
+        device.command(ChannelCommand(role, force_n=abs(f), direction=(e[0], e[1], e[2])), now=t[0])
+        back = device.read_back()
+        if back is None or back.force_n is None:
+            return 0.0
+        # the applied force along the axis: projected where the read-back names a
+        # direction, else already the force along the device's axis (signed)
+        return float(back.force_n) * (1.0 if back.direction is None else back.direction[axis])
+
+    def step() -> None:
+        device.step(period_s)
+        t[0] += period_s
+
+    if opened:
+        device.open()
+    try:
+        for _ in range(settle):
+            send(0.0)
+            step()
+        for k, f in enumerate(forces.tolist()):
+            readings[k] = float(device.read_state().position_mm[axis])
+            applied[k] = send(f)
+            step()
+        readings[-1] = float(device.read_state().position_mm[axis])
+    finally:
+        try:
+            send(0.0)
+        finally:
+            if opened:
+                device.close()
+    res = getattr(device, "encoder_resolution_mm", 0.0) or 0.0
+    return fit_damping(applied, readings, period_s, float(res)), applied, readings

@@ -204,3 +204,86 @@ def test_run_and_excitation_files_round_trip(tmp_path):
     bad.write_text("position_mm\n1\n")
     with pytest.raises(ValidationError, match="force_n"):
         read_run_csv(bad)
+
+
+def _omni(**kw):
+    from hapticsdk.devices.actuators import create_actuator
+    return create_actuator("omni-virtual", **kw)
+
+
+def test_measured_on_the_simulated_omni_hands_off_then_rendered_with():
+    """The product path: the simulated Omni nobody holds is driven through its safety
+    layer, fitted, and the calibration's settings drive a press through the servo loop."""
+    from hapticsdk.calibration.damping import measure_damping
+    from hapticsdk.plugins import registry
+    from hapticsdk.runtime import ServoLoop
+    from hapticsdk.sim.finger import FingerParams, press_slide
+
+    free = _omni(finger=FingerParams(0.0, 0.0, 0.0))
+    fit, forces, readings = measure_damping(free)
+    true_b = free.arm.damping_ns_per_m
+    assert fit.success and 0.5 * true_b < fit.trusted_damping_ns_per_m <= true_b   # beats the declared share
+    assert not free.is_open
+    assert np.array_equal(forces, excitation(1e-3, 3.3, free.apparent_mass_kg))   # the safety layer let it through
+    cal = DampingCalibration.from_fit(fit, period_s=1e-3, resolution_mm=free.encoder_resolution_mm, generated=True,
+                                      source="test: simulated Omni, hands off")
+    tr = press_slide(depth_mm=2.0, press_s=0.3, hold_s=0.3, slide_s=0.0, release_s=0.3, rest_s=0.2)
+    dev = _omni(trajectory=tr)
+    st_ = ControllerSettings.for_device(dev, damping=cal)
+    assert st_.measured_damping_ns_per_m == cal.trusted_damping_ns_per_m
+    dims, acts = registry("dimension"), registry("actuator")
+    loop = ServoLoop(dev, [dims.load("hardness")().renderer({"GS": 1.0})],
+                     {"force": dev, "coil": acts.load("voicecoil-virtual")()}, period_s=0.001,
+                     passivity_settings=st_)
+    rep = loop.run(tr.duration_s)
+    assert loop.passivity_settings is st_
+    pen, f = rep.log["penetration_mm"], rep.log["force_n"]
+    assert dev.energy_to_user_j() <= 1e-4                 # the issue's bound
+    assert f[pen > 0].min() >= 0.0                        # never pulls
+
+
+def test_a_hand_on_the_stylus_gives_little_credit():
+    """The simulated Omni held by its default finger: the fit takes the hand for damping
+    (several N s/m), and its residuals shrink the bound to at most the truth."""
+    from hapticsdk.calibration.damping import measure_damping
+    held = _omni()
+    fit, _, _ = measure_damping(held)
+    assert fit.damping_ns_per_m > held.arm.damping_ns_per_m          # the hand is in the fit
+    assert fit.trusted_damping_ns_per_m <= held.arm.damping_ns_per_m  # and not in the bound
+
+
+def test_every_exit_of_a_measurement_leaves_the_device_at_zero_and_closed():
+    from hapticsdk.calibration.damping import measure_damping
+    from hapticsdk.sim.finger import FingerParams
+
+    dev = _omni(finger=FingerParams(0.0, 0.0, 0.0))
+    calls = [0]
+    real_step = dev.step
+
+    def failing_step(dt):
+        calls[0] += 1
+        if calls[0] == 310:   # 0.3 s of settling at 1 ms, then the first +F segment
+            raise RuntimeError("simulated fault mid-run")
+        real_step(dt)
+
+    dev.step = failing_step
+    sent = []
+    real_command = dev.command
+
+    def record(cmd, **kw):
+        sent.append(cmd.force_n)
+        return real_command(cmd, **kw)
+
+    dev.command = record
+    with pytest.raises(RuntimeError, match="mid-run"):
+        measure_damping(dev)
+    assert sent[-1] == 0.0 and not dev.is_open
+
+
+def test_a_real_device_is_not_driven_from_python():
+    from hapticsdk.calibration.damping import measure_damping
+
+    class Real:
+        simulated = False
+    with pytest.raises(ValidationError, match="write-excitation"):
+        measure_damping(Real())
