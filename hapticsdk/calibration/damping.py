@@ -164,10 +164,10 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
                               field="readings_mm")
     if not (np.isfinite(f).all() and np.isfinite(y).all()):
         raise ValidationError("forces and readings must be finite", field="readings_mm")
-    if not (math.isfinite(period_s) and period_s > 0):
-        raise ValidationError(f"must be a finite number > 0, got {period_s!r}", field="period_s")
-    if not (math.isfinite(resolution_mm) and resolution_mm >= 0):
-        raise ValidationError(f"must be a finite number >= 0, got {resolution_mm!r}", field="resolution_mm")
+    for name, v, low in (("period_s", period_s, "> 0"), ("resolution_mm", resolution_mm, ">= 0")):
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        if not (ok and (v > 0 if low == "> 0" else v >= 0)):
+            raise ValidationError(f"must be a finite number {low}, got {v!r}", field=name)
     q = resolution_mm * 1e-3
     nfev = 0
 

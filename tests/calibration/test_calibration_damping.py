@@ -287,3 +287,11 @@ def test_a_real_device_is_not_driven_from_python():
         simulated = False
     with pytest.raises(ValidationError, match="write-excitation"):
         measure_damping(Real())
+
+
+@pytest.mark.parametrize("period, res", [(0.0, 0.05), (float("nan"), 0.05), ("1e-3", 0.05), (1e-3, -0.1),
+                                         (1e-3, float("inf")), (1e-3, None), (True, 0.05)])
+def test_bad_period_or_resolution_is_named(period, res):
+    f = excitation(1e-3, 3.3, 0.045)
+    with pytest.raises(ValidationError):
+        fit_damping(f, np.zeros(f.size + 1), period, res)
