@@ -229,9 +229,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     cst = controller_state_batch(L)
     sdk = np.isin(kind, [CONTROLLERS.index(k) for k in SDK_LANES])
     s = settings or ControllerSettings()
-    # the damping each sdk lane credits: the hands-off measurement (sdk) or the declared share
-    # (sdk: the fit's lower bound, and the fitted damping as the device's; sdk_declared: the
-    # declared share, and the declared damping)
+    # the damping each sdk lane credits, and the device damping its spring takes half of:
+    # sdk, the fit's lower bound and the fit; sdk_declared, the declared share and the declaration
     b_tr = np.asarray(s.trusted_damping_ns_per_m(bd), float) * np.ones(rows.size)
     bd_ctrl = bd
     if "sdk" in controllers:
