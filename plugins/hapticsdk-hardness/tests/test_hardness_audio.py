@@ -185,7 +185,11 @@ def test_underruns_are_counted(jack):
         coil.osc.render = slow
         hold(coil, 0.2, frequency_hz=150.0, amplitude=0.3)
         assert coil.underruns - quiet >= 5
-        assert coil.describe()["underruns"] == coil.underruns
+        # the stream still runs (and still overruns) while we read: describe() reports the
+        # counter as it was between two reads of it, which only grows
+        before = coil.underruns
+        reported = coil.describe()["underruns"]
+        assert before <= reported <= coil.underruns
 
 
 def _render_cli(jack, loop, tmp_path, *args):
@@ -430,7 +434,9 @@ def test_underruns_in_the_audio_process_are_counted(jack):
             hold(coil, 0.05, frequency_hz=150.0, amplitude=0.3)
         assert coil.callbacks > calls
         assert coil.underruns - quiet >= 1
-        assert coil.describe()["underruns"] == coil.underruns
+        before = coil.underruns   # the stream runs on: the counter can grow between reads
+        reported = coil.describe()["underruns"]
+        assert before <= reported <= coil.underruns
     assert coil.underruns >= quiet + 1          # kept after close
 
 
