@@ -251,6 +251,9 @@ class LoadedCalibration:
     def source(self) -> str:
         """Human-readable provenance (file path or default, and the calibration's source)."""
         if self.calibration is None:
+            if self.kind == "damping":
+                return ("none (no damping measured for this serial: the stiff-wall controller credits half "
+                        "the declared damping)")
             return "none (no calibration file and no default)"
         if self.path is None:
             return f"default, no calibration file saved: {self.calibration.source}"

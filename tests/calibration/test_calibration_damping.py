@@ -295,3 +295,11 @@ def test_bad_period_or_resolution_is_named(period, res):
     f = excitation(1e-3, 3.3, 0.045)
     with pytest.raises(ValidationError):
         fit_damping(f, np.zeros(f.size + 1), period, res)
+
+
+def test_doctor_says_what_the_controller_credits_without_a_measurement(tmp_path):
+    got = load_calibration("damping", "NONE-1", directory=tmp_path)
+    assert got.calibration is None and got.origin == "none"
+    assert "half the declared damping" in got.source
+    save_calibration(_cal(serial="NONE-1"), tmp_path)
+    assert "half the declared" not in load_calibration("damping", "NONE-1", directory=tmp_path).source
