@@ -167,13 +167,10 @@ def measure_cell_damping(cell: dict[str, Any]) -> dict[str, Any]:
     its encoder and period; the excitation sized by the arm's mass as declared, here the
     true one): :func:`hapticsdk.calibration.damping.fit_damping` of the simulated
     readings. Returns the fit as a dict."""
-    from ..calibration.damping import excitation, fit_damping
-    from ..sim.arm import free_arm_readings_mm
+    from ..calibration.damping import fit_damping, simulated_run
     T = float(cell["period_s"])
-    arm = ArmParams(mass_kg=cell["arm_mass_kg"], damping_ns_per_m=cell["damping_true_ns_per_m"],
-                    max_force_n=FORCE_LIMIT_N, encoder_resolution_mm=cell["resolution_mm"])
-    f = excitation(T, FORCE_LIMIT_N, cell["arm_mass_kg"])
-    fit = fit_damping(f, free_arm_readings_mm(T, arm, f), T, cell["resolution_mm"])
+    f, y = simulated_run(T, cell["arm_mass_kg"], cell["damping_true_ns_per_m"], cell["resolution_mm"], FORCE_LIMIT_N)
+    fit = fit_damping(f, y, T, cell["resolution_mm"])
     return {"damping_ns_per_m": fit.damping_ns_per_m, "trusted_damping_ns_per_m": fit.trusted_damping_ns_per_m,
             "worst_error_ns_per_m": fit.worst_error_ns_per_m, "success": fit.success, "message": fit.message,
             "readings": fit.readings}
@@ -254,7 +251,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     spring_only = np.zeros(L, int)   # sdk: contact ticks with the spring alone sent, below the wall's force
     r_now = lane_ref(np.zeros(L))
     step_n = np.minimum(T / s.ramp_time_s, 1.0) * plant.fmax   # the controller's ramp step (N per tick)
-    kc = _colgate_n_per_m(np.minimum(b_tr, s.damping_trust * bd_ctrl), T, step_n, plant.res_mm * 1e-3)  # its spring
+    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd_ctrl, b_tr), T, step_n, plant.res_mm * 1e-3)  # its spring
     for k in range(int(n_ticks.max())):
         live = k < n_ticks
         t1 = (k + 1) * T

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ..argcheck import number
 from ..errors import ValidationError
 
 #: Largest excursion of the hands-off run (m): 5 mm, well inside any desktop device's
@@ -59,8 +60,7 @@ def excitation(period_s: float, max_force_n: float, mass_kg: float, *, travel_m:
     mass ``mass_kg``; ``tau`` at least :data:`MIN_SEGMENT_TICKS` periods."""
     for name, v in (("period_s", period_s), ("max_force_n", max_force_n), ("mass_kg", mass_kg),
                     ("travel_m", travel_m)):
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise ValidationError(f"must be a finite number > 0, got {v!r}", field=name)
+        number(v, name, lo=0.0, lo_open=True)
     f = FORCE_SHARE * max_force_n
     n = max(int(round(math.sqrt(travel_m * mass_kg / f) / period_s)), MIN_SEGMENT_TICKS)
     tau = n * period_s   # whole ticks; the force then keeps F tau^2 / m within the travel
@@ -131,7 +131,6 @@ class DampingFit:
     residual_correlation: float = 0.0
     readings: int = 0
     runtime_s: float = 0.0
-    extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def mass_kg(self) -> float:
@@ -164,10 +163,8 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
                               field="readings_mm")
     if not (np.isfinite(f).all() and np.isfinite(y).all()):
         raise ValidationError("forces and readings must be finite", field="readings_mm")
-    for name, v, low in (("period_s", period_s, "> 0"), ("resolution_mm", resolution_mm, ">= 0")):
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-        if not (ok and (v > 0 if low == "> 0" else v >= 0)):
-            raise ValidationError(f"must be a finite number {low}, got {v!r}", field=name)
+    number(period_s, "period_s", lo=0.0, lo_open=True)
+    number(resolution_mm, "resolution_mm", lo=0.0)
     q = resolution_mm * 1e-3
     nfev = 0
 
@@ -219,22 +216,22 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
     rho = float(rc[1:] @ rc[:-1] / den) if den > 0 else 0.0
     rho = min(max(rho, 0.0), 0.999)
     infl = (1.0 + rho) / (1.0 - rho)
-    try:
-        cov = np.linalg.inv(J.T @ J) * s2 * infl
-    except np.linalg.LinAlgError:
-        return failed("the run does not determine the damping (singular fit)")
     b = alpha / kappa
-    g = np.zeros(J.shape[1])
+    g = np.zeros(J.shape[1])   # the gradient of b = alpha / kappa
     g[0] = 1.0 / kappa
     g[3] = -alpha / (kappa * kappa)
-    var_b = float(g @ cov @ g)
+    try:
+        z = np.linalg.solve(J.T @ J, g)   # (J'J)^-1 g: the variance's and the worst case's
+    except np.linalg.LinAlgError:
+        return failed("the run does not determine the damping (singular fit)")
+    var_b = float(g @ z) * s2 * infl
     if not (math.isfinite(var_b) and var_b >= 0):
         return failed("the fit's covariance is not usable")
     se = math.sqrt(var_b)
     # worst case: the fitted damping moves by w . e for reading errors e (linearised,
     # w = J (J'J)^-1 g), at most e_max ||w||_1 for |e_k| <= e_max; e_max is half a count,
     # or the largest residual where the model explains the readings less well than that
-    w = J @ np.linalg.solve(J.T @ J, g)
+    w = J @ z
     e_max = max(0.5 * q, float(np.abs(r).max()))
     worst = e_max * float(np.abs(w).sum())
     trusted = max(0.0, b - worst)
@@ -278,14 +275,9 @@ class DampingCalibration:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        for name in ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "resolution_mm"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
-                raise ValidationError(f"must be a finite number >= 0, got {v!r}", field=name)
-        for name in ("mass_kg", "period_s"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0):
-                raise ValidationError(f"must be a finite number > 0, got {v!r}", field=name)
+        for name in ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "resolution_mm",
+                     "mass_kg", "period_s"):
+            number(getattr(self, name), name, lo=0.0, lo_open=name in ("mass_kg", "period_s"))
         if self.trusted_damping_ns_per_m > self.damping_ns_per_m:
             raise ValidationError(f"the lower bound {self.trusted_damping_ns_per_m!r} exceeds the fitted damping "
                                   f"{self.damping_ns_per_m!r}", field="trusted_damping_ns_per_m")
@@ -331,27 +323,22 @@ def simulated_run(period_s: float, mass_kg: float, damping_ns_per_m: float, reso
 MAX_CSV_BYTES = 64 * 1024 * 1024
 
 
-def _csv_rows(path: Any, field_name: str, columns: tuple[str, ...]) -> list[dict[str, str]]:
-    import csv
+def _csv_table(path: Any, field_name: str, columns: tuple[str, ...]) -> tuple[dict[str, int], list[list[str]]]:
+    """``(column -> index, rows below the header)`` of a CSV that has ``columns`` (read by
+    :func:`hapticsdk.schemas_io.read_csv_rows`: UTF-8, bounded, well-formed)."""
+    from ..schemas_io import read_csv_rows
 
-    from ..schemas_io import read_bytes
-
-    data = read_bytes(path, field=field_name, max_bytes=MAX_CSV_BYTES)
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise ValidationError(f"{path}: not UTF-8 text (offset {exc.start})", field=field_name) from None
-    rows = list(csv.DictReader(text.splitlines()))
-    if not rows or not set(columns) <= set(rows[0]):
+    _, rows = read_csv_rows(path, field=field_name, max_bytes=MAX_CSV_BYTES)
+    if len(rows) < 2 or not set(columns) <= set(rows[0]):
         raise ValidationError(f"{path}: needs the column(s) {', '.join(columns)} and one row at least",
                               field=field_name)
-    return rows
+    return {c: rows[0].index(c) for c in columns}, rows[1:]
 
 
-def _floats(rows: list[dict[str, str]], col: str, path: Any, field_name: str) -> np.ndarray:
+def _column(rows: list[list[str]], i: int, col: str, path: Any, field_name: str) -> np.ndarray:
     try:
-        v = np.array([float(r[col]) for r in rows])
-    except (TypeError, ValueError) as exc:
+        v = np.array([float(r[i]) for r in rows])
+    except (TypeError, ValueError, IndexError) as exc:
         raise ValidationError(f"{path}: column {col}: not a number: {exc}", field=field_name) from None
     if not np.isfinite(v).all():
         raise ValidationError(f"{path}: column {col}: not finite", field=field_name)
@@ -360,7 +347,8 @@ def _floats(rows: list[dict[str, str]], col: str, path: Any, field_name: str) ->
 
 def read_excitation_csv(path: Any) -> np.ndarray:
     """The forces (N) of an excitation file (column ``force_n``, one row per period)."""
-    return _floats(_csv_rows(path, "excitation", ("force_n",)), "force_n", path, "excitation")
+    at, rows = _csv_table(path, "excitation", ("force_n",))
+    return _column(rows, at["force_n"], "force_n", path, "excitation")
 
 
 def write_excitation_csv(path: Any, forces_n: Any) -> Any:
@@ -379,10 +367,9 @@ def read_run_csv(path: Any) -> tuple[np.ndarray, np.ndarray]:
     """``(forces_n, readings_mm)`` of a recorded hands-off run: columns ``position_mm`` and
     ``force_n``, one row per period, the reading then the force applied after it (the last
     row's force is not used)."""
-    rows = _csv_rows(path, "run", ("position_mm", "force_n"))
-    y = _floats(rows, "position_mm", path, "run")
-    f = _floats(rows[:-1], "force_n", path, "run") if len(rows) > 1 else np.zeros(0)
-    return f, y
+    at, rows = _csv_table(path, "run", ("position_mm", "force_n"))
+    return (_column(rows[:-1], at["force_n"], "force_n", path, "run"),
+            _column(rows, at["position_mm"], "position_mm", path, "run"))
 
 
 def measure_damping(device: Any, *, period_s: float = 1e-3, axis: int = 1, role: str = "force",

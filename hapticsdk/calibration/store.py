@@ -33,11 +33,13 @@ from .voicecoil import VoiceCoilCalibration
 
 #: Every calibration object the store reads and writes.
 Calibration = VoiceCoilCalibration | PiezoTable | DampingCalibration
+#: The class of each calibration kind (a file's ``kind`` field).
+_CLASSES: dict[str, type[VoiceCoilCalibration] | type[PiezoTable] | type[DampingCalibration]] = {"voicecoil": VoiceCoilCalibration, "piezo": PiezoTable, "damping": DampingCalibration}
 
 log = logging.getLogger(__name__)
 _WARNED: set[tuple[str, str]] = set()
 
-KINDS = ("voicecoil", "piezo", "damping")
+KINDS = tuple(_CLASSES)
 ENV_DIR = "HAPTICSDK_CALIBRATION_DIR"
 
 
@@ -60,7 +62,7 @@ def _check_kind(kind: str) -> None:
 
 def calibration_to_dict(cal: Calibration) -> dict[str, Any]:
     """The file content for ``cal`` (schema-valid)."""
-    if not isinstance(cal, (VoiceCoilCalibration, PiezoTable, DampingCalibration)):
+    if not isinstance(cal, tuple(_CLASSES.values())):
         raise ValidationError(f"not a calibration: {type(cal).__name__}", field="calibration")
     d = {"schema_version": 1, **cal.to_dict(),
          "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")}
@@ -74,11 +76,7 @@ def calibration_from_dict(data: dict[str, Any], *, source: str = "") -> Calibrat
     from ..schemas_io import validate
 
     validate(data, "calibration", source=source)
-    if data["kind"] == "voicecoil":
-        return VoiceCoilCalibration.from_dict(data)
-    if data["kind"] == "damping":
-        return DampingCalibration.from_dict(data)
-    return PiezoTable.from_dict(data)
+    return _CLASSES[data["kind"]].from_dict(data)
 
 
 #: largest calibration file read (bytes); a measured piezo table is a few kB
@@ -207,9 +205,7 @@ def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, Calibrat
 
 
 def _kind_of(cal: Calibration) -> str:
-    if isinstance(cal, VoiceCoilCalibration):
-        return "voicecoil"
-    return "damping" if isinstance(cal, DampingCalibration) else "piezo"
+    return next(k for k, c in _CLASSES.items() if isinstance(cal, c))
 
 
 def list_calibrations(directory: str | Path | None = None) -> list[CalibrationEntry]:

@@ -25,7 +25,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
 
 def _colgate_n_per_m(b_lo: Any, dt: Any, step_n: Any, q_m: Any) -> np.ndarray:
     """The Colgate spring's stiffness (N/m) per cell: ``2 b_lo / dt`` for the spring's damping
-    ``b_lo`` (:func:`spring_damping`), at most one ramp step
+    ``b_lo`` (:meth:`ControllerSettings.spring_damping_ns_per_m`), at most one ramp step
     ``step_n`` per encoder count ``q_m`` (m) where both are > 0 (docs/runtime.md, Passivity
     item 0; :class:`PassivityController` computes the same in floats)."""
     kc = 2.0 * np.asarray(b_lo, float) / dt
@@ -104,7 +104,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         full = np.broadcast_to(np.asarray(fm, float), x.shape)
     depth = np.maximum(-x * 1e-3, 0.0)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
-    kc = _colgate_n_per_m(np.minimum(b_lo, s.damping_trust * bd), dt, step, q)   # the spring's damping
+    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd, b_lo), dt, step, q)
     spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(kc * depth, fw), 0.0)
     if fm is not None:
         spring = np.minimum(spring, full)

@@ -209,12 +209,13 @@ class PassivityController:
         depth = -x_mm * 1e-3
         spring = 0.0
         kf = 0.0
-        # its damping: half the device's damping (the measured fit, else the declaration),
-        # at most the trusted lower bound (docs/runtime.md, Passivity item 0)
-        b_s = s.damping_trust * s.device_damping_ns_per_m
-        if b_s > b_lo:
-            b_s = b_lo
-        if f_wall > 0.0 and depth > 0.0 and b_s > 0.0:
+        if f_wall > 0.0 and depth > 0.0:
+            # its damping b_s: half the device's damping (the measured fit, else the
+            # declaration), at most the trusted lower bound (item 0;
+            # ControllerSettings.spring_damping_ns_per_m, inline: only in contact)
+            b_s = s.damping_trust * s.device_damping_ns_per_m
+            if b_s > b_lo:
+                b_s = b_lo
             kc = 2.0 * b_s / dt
             if q > 0.0 and kc > step / q:
                 kc = step / q   # one count of the spring within one ramp step (item 0)

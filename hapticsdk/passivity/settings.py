@@ -79,10 +79,8 @@ class ControllerSettings:
             _check_nonneg(name, getattr(self, name))
         if not (0.0 <= float(self.damping_trust) <= 1.0):
             raise ValidationError(f"must be in [0, 1], got {self.damping_trust!r}", field="damping_trust")
-        if self.measured_damping_ns_per_m is not None and not (
-                math.isfinite(self.measured_damping_ns_per_m) and self.measured_damping_ns_per_m >= 0):
-            raise ValidationError(f"must be None or a finite number >= 0 (N*s/m), got "
-                                  f"{self.measured_damping_ns_per_m!r}", field="measured_damping_ns_per_m")
+        if self.measured_damping_ns_per_m is not None:
+            _check_nonneg("measured_damping_ns_per_m", self.measured_damping_ns_per_m)
         if self.max_force_n is not None and not (math.isfinite(self.max_force_n) and self.max_force_n > 0):
             raise ValidationError(f"must be a finite number > 0 (N), got {self.max_force_n!r}", field="max_force_n")
         if self.device_mass_kg is not None and not (math.isfinite(self.device_mass_kg) and self.device_mass_kg > 0):
@@ -134,6 +132,17 @@ class ControllerSettings:
         b = self.device_damping_ns_per_m if declared_ns_per_m is None else declared_ns_per_m
         return self.damping_trust * b
 
+    def spring_damping_ns_per_m(self, device_ns_per_m: Any = None, trusted_ns_per_m: Any = None) -> Any:
+        """The Colgate spring's damping ``b_s = min(b_lo, damping_trust x b_dev)`` (N*s/m;
+        docs/runtime.md, Passivity item 0): ``b_dev`` the device's damping
+        (``device_ns_per_m`` overrides the settings'), ``b_lo`` the trusted damping
+        (``trusted_ns_per_m`` overrides :meth:`trusted_damping_ns_per_m`). Numbers or
+        arrays; :class:`PassivityController` computes the same inline on its tick."""
+        import numpy as np
+        b_dev = self.device_damping_ns_per_m if device_ns_per_m is None else device_ns_per_m
+        b_lo = self.trusted_damping_ns_per_m(b_dev) if trusted_ns_per_m is None else trusted_ns_per_m
+        return np.minimum(b_lo, self.damping_trust * np.asarray(b_dev, float))
+
     def ramp_step_n(self, dt: float, full_scale_n: float | None = None) -> float:
         """The ramp's own step (N per tick) at period ``dt``: ``F_max dt / ramp_time_s``,
         at most ``F_max`` (``full_scale_n`` when the device declares no limit)."""
@@ -162,12 +171,9 @@ def _measured_damping(device: Any, damping: Any, directory: Any) -> tuple[float 
         if loaded.origin != "file":
             return None, None
         damping = loaded.calibration
-    v = getattr(damping, "trusted_damping_ns_per_m", damping)
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v >= 0):
-        raise ValidationError(f"must be a DampingCalibration or a finite number >= 0 (N*s/m), got {damping!r}",
-                              field="damping")
+    bound = _check_nonneg("damping", getattr(damping, "trusted_damping_ns_per_m", damping))
     fit = getattr(damping, "damping_ns_per_m", None)
-    return float(v), (float(fit) if fit is not None else None)
+    return bound, (float(fit) if fit is not None else None)
 
 
 #: Settings of the 0.1 controller (stiffness cap, observers, dither damper, felt floor,
@@ -220,11 +226,9 @@ def colgate_stiffness_n_per_mm(settings: ControllerSettings, dt: float, damping_
     encoder count, ``s / Delta`` (:meth:`ControllerSettings.ramp_step_n`, with
     ``full_scale_n`` where no force limit is declared; no such cap with an exact encoder
     or no full scale); 0 for ``dt <= 0``. docs/runtime.md, Passivity item 0."""
-    b_lo = float(settings.trusted_damping_ns_per_m(None if damping_ns_per_m is None else float(damping_ns_per_m)))
-    if not dt > 0 or not b_lo > 0:
+    b_s = float(settings.spring_damping_ns_per_m(None if damping_ns_per_m is None else float(damping_ns_per_m)))
+    if not dt > 0 or not b_s > 0:
         return 0.0
-    b_s = min(b_lo, settings.damping_trust * (settings.device_damping_ns_per_m if damping_ns_per_m is None
-                                              else float(damping_ns_per_m)))
     kc = 2.0 * b_s / dt
     q = settings.position_resolution_mm * 1e-3
     step = settings.ramp_step_n(dt, full_scale_n)

@@ -263,20 +263,12 @@ def free_arm_readings_mm(period_s: float, arm: ArmParams, forces_n: Any, y0_mm: 
     """Encoder readings (mm) of an arm nobody holds, driven by ``forces_n`` (N, one per
     period, held under a zero-order hold and saturated at the force limit), starting at
     rest at ``y0_mm``: the reading before each force is applied, then the last one
-    (``len(forces_n) + 1`` readings). Exact: ``expm`` of the arm's own 2x2 system
-    ``m y'' = F - b y'`` (the hands-off run of :mod:`hapticsdk.calibration.damping`)."""
-    f = np.clip(np.asarray(forces_n, float), -arm.max_force_n, arm.max_force_n)
-    a = np.zeros((3, 3))
-    a[0, 1] = 1.0
-    a[1, 1] = -arm.damping_ns_per_m / arm.mass_kg
-    a[1, 2] = 1.0 / arm.mass_kg
-    p = expm(a * float(period_s))
-    y = np.empty(f.size + 1)
-    yk, vk = float(y0_mm) * 1e-3, 0.0
-    p00, p01, p02, p11, p12 = (float(p[0, 0]), float(p[0, 1]), float(p[0, 2]), float(p[1, 1]),
-                               float(p[1, 2]))
-    y[0] = yk
-    for k, fk in enumerate(f.tolist()):
-        yk, vk = p00 * yk + p01 * vk + p02 * fk, p11 * vk + p12 * fk
-        y[k + 1] = yk
-    return readings_mm(y, np.full(y.size, float(arm.encoder_resolution_mm)))
+    (``len(forces_n) + 1`` readings). :class:`ArmSim` with a finger of no mass, stiffness
+    or damping (the hands-off run of :mod:`hapticsdk.calibration.damping`)."""
+    sim = ArmSim(arm, FingerParams(0.0, 0.0, 0.0), float(period_s), y0_mm)
+    dt = float(period_s)
+    y = [sim.measured_mm()]
+    for fk in np.asarray(forces_n, float).tolist():
+        sim.step(dt, fk, 0.0, 0.0)
+        y.append(sim.measured_mm())
+    return np.array(y)
