@@ -134,17 +134,21 @@ class DampingFit:
 
     @property
     def mass_kg(self) -> float:
+        """Fitted moving mass m (kg), ``x[0]``."""
         return float(self.x[0])
 
     @property
     def damping_ns_per_m(self) -> float:
+        """Fitted damping b (N s/m), ``x[1]``: the estimate, not the bound the controller trusts."""
         return float(self.x[1])
 
     @property
     def offset_n(self) -> float:
+        """Fitted constant force F0 (N), ``x[2]``: gravity and cable pull the run saw."""
         return float(self.x[2])
 
     def to_dict(self) -> dict[str, Any]:
+        """Every field as plain JSON values (``x`` as a list)."""
         d = asdict(self)
         d["x"] = [float(v) for v in self.x]
         return d
@@ -295,12 +299,14 @@ class DampingCalibration:
                    generated=bool(generated), source=source)
 
     def to_dict(self) -> dict[str, Any]:
+        """The stored form (``kind`` ``"damping"``), as the calibration schema describes it."""
         d = {"kind": "damping", **asdict(self)}
         d["readings"] = int(self.readings)
         return d
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "DampingCalibration":
+        """Inverse of :meth:`to_dict` (``kind`` and unknown keys are ignored; the store validates first)."""
         keys = ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "mass_kg", "period_s",
                 "resolution_mm", "readings", "serial", "generated", "source", "extra")
         return cls(**{k: data[k] for k in keys if k in data})
