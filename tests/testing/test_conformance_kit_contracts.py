@@ -15,7 +15,7 @@ from hapticsdk.perception.dimensions import ChannelCommand, Constraint, Dimensio
 from hapticsdk.perception.features import Feature, FeatureSpace
 from hapticsdk.perception.models import MLPModel, PerceptionModel
 from hapticsdk.plugins import registry
-from hapticsdk.testing import check_actuator, check_device, check_dimension, check_model
+from hapticsdk.testing import check, check_actuator, check_device, check_dimension, check_model
 from kit_variants import ForceArm, dishonest, never
 
 
@@ -128,7 +128,9 @@ def test_correct_actuators_conform():
     (RaisingCloseCoil, "template"), (RaisingCloseCoil, "close"), (PlateNoLimits, "limits-declared"),
 ])
 def test_each_broken_actuator_is_caught_by_its_rule(cls, rule):
-    v = check_actuator(cls)
+    # the coil that is slow by design runs its own rule only (every other rule's commands
+    # would cost 3 ms each); the others run the whole kit
+    v = check("actuator", cls, rules=[rule]) if cls is SlowCoil else check_actuator(cls)
     assert rule in broken(v), v
     assert any(x.rule == rule and x.plugin == cls.name for x in v)
 

@@ -339,7 +339,9 @@ def test_correct_arm_conforms():
 
 @pytest.mark.parametrize("cls, rule", ACTUATOR_VARIANTS, ids=[f"{c.__name__}-{r}" for c, r in ACTUATOR_VARIANTS])
 def test_each_broken_actuator_is_caught_by_its_rule(cls, rule):
-    v = check_actuator(cls)
+    # a plate that is slow by design runs its own rule only: every other rule's commands
+    # would cost 3 ms each (15 s here); those rules run on the correct plates above
+    v = check("actuator", cls, rules=[rule]) if cls is SlowCommandPlate else check_actuator(cls)
     assert rule in rules_of(v), format_report(v)
     assert all(x.plugin == cls.name for x in v)
 
