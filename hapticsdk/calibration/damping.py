@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ..argcheck import number
+from ..argcheck import number, number_array
 from ..errors import ValidationError
 
 #: Largest excursion of the hands-off run (m): 5 mm, well inside any desktop device's
@@ -160,8 +160,8 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
     ``period_s`` (s), the encoder resolution ``resolution_mm`` (mm; 0 = exact). See the
     module docstring for the model and the bound."""
     t0 = time.perf_counter()
-    f = np.asarray(forces_n, float).ravel()
-    y = np.asarray(readings_mm, float).ravel() * 1e-3
+    f = number_array(forces_n, "forces_n", ndim=(1,), finite=False)
+    y = number_array(readings_mm, "readings_mm", ndim=(1,), finite=False) * 1e-3
     if f.size < 8 or y.size != f.size + 1:
         raise ValidationError(f"need at least 8 forces and one reading more than forces, got {f.size} and {y.size}",
                               field="readings_mm")
@@ -285,6 +285,13 @@ class DampingCalibration:
         if self.trusted_damping_ns_per_m > self.damping_ns_per_m:
             raise ValidationError(f"the lower bound {self.trusted_damping_ns_per_m!r} exceeds the fitted damping "
                                   f"{self.damping_ns_per_m!r}", field="trusted_damping_ns_per_m")
+        # the bound is the fit less its margin (fit_damping: max(0, b - worst)); a bound
+        # above that was not produced by a fit (an edited file), and the controller would
+        # credit damping that nothing measured. Rounding of a stored decimal is allowed.
+        top = max(0.0, self.damping_ns_per_m - self.worst_error_ns_per_m)
+        if self.trusted_damping_ns_per_m > top + 1e-9 * max(1.0, self.damping_ns_per_m):
+            raise ValidationError(f"the lower bound {self.trusted_damping_ns_per_m!r} exceeds the fitted damping less "
+                                  f"its margin, {top!r}: not a fit's bound", field="trusted_damping_ns_per_m")
 
     @classmethod
     def from_fit(cls, fit: DampingFit, *, period_s: float, resolution_mm: float, serial: str | None = None,
@@ -309,6 +316,11 @@ class DampingCalibration:
         """Inverse of :meth:`to_dict` (``kind`` and unknown keys are ignored; the store validates first)."""
         keys = ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "mass_kg", "period_s",
                 "resolution_mm", "readings", "serial", "generated", "source", "extra")
+        if not isinstance(data, dict):
+            raise ValidationError(f"must be a mapping, got {type(data).__name__}", field="damping")
+        missing = [k for k in keys[:7] if k not in data]
+        if missing:
+            raise ValidationError(f"missing {', '.join(missing)}", field="damping")
         return cls(**{k: data[k] for k in keys if k in data})
 
 

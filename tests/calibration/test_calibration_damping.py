@@ -328,3 +328,47 @@ def test_a_run_s_last_force_may_be_left_empty(tmp_path):
     p.write_text("position_mm,force_n\n0.0,0.5\n0.1,-0.5\n0.3,\n")
     f, y = read_run_csv(p)
     assert f.tolist() == [0.5, -0.5] and y.tolist() == [0.0, 0.1, 0.3]
+
+
+def test_a_bound_above_the_fit_less_its_margin_is_refused():
+    """A fit's bound is the fit less its margin (``max(0, b - worst)``): a bound between
+    the two was not produced by a fit, and the controller would credit damping nothing
+    measured."""
+    _cal(trusted=0.4)   # 0.45 - 0.05, up to rounding
+    with pytest.raises(ValidationError, match="not a fit's bound"):
+        _cal(trusted=0.42)
+
+
+def test_an_edited_damping_file_is_skipped_and_not_credited(tmp_path):
+    """A saved calibration whose bound was raised by hand (the fit and margin left as
+    they were) fails validation: the store skips it and names it, and the controller
+    credits the declared share as with no file."""
+    import json
+    p = save_calibration(_cal(), tmp_path)
+    data = json.loads(p.read_text())
+    data["trusted_damping_ns_per_m"] = 0.44
+    p.write_text(json.dumps(data))
+    got = load_calibration("damping", "OMNI-1", directory=tmp_path)
+    assert got.calibration is None and str(p) in got.skipped
+    cs = ControllerSettings.for_device(_Dev("OMNI-1"), directory=tmp_path)
+    assert cs.measured_damping_ns_per_m is None
+    assert cs.trusted_damping_ns_per_m() == pytest.approx(0.5 * _Dev.damping_ns_per_m)
+
+
+@pytest.mark.parametrize("data, match", [
+    ({"trusted_damping_ns_per_m": 0.1}, "missing damping_ns_per_m"),
+    ([0.1, 0.2], "mapping"),
+])
+def test_from_dict_names_what_is_wrong(data, match):
+    with pytest.raises(ValidationError, match=match):
+        DampingCalibration.from_dict(data)
+
+
+@pytest.mark.parametrize("forces, readings", [
+    (["a"] * 20, np.zeros(21)),
+    (np.zeros((2, 20)), np.zeros((2, 21))),
+    (None, np.zeros(21)),
+])
+def test_a_run_that_is_not_numbers_is_named(forces, readings):
+    with pytest.raises(ValidationError):
+        fit_damping(forces, readings, 1e-3, 0.055)
