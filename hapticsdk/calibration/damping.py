@@ -62,7 +62,12 @@ def excitation(period_s: float, max_force_n: float, mass_kg: float, *, travel_m:
                     ("travel_m", travel_m)):
         number(v, name, lo=0.0, lo_open=True)
     f = FORCE_SHARE * max_force_n
-    n = max(int(round(math.sqrt(travel_m * mass_kg / f) / period_s)), MIN_SEGMENT_TICKS)
+    ticks = math.sqrt(travel_m * mass_kg / f) / period_s
+    if not 8 * PATTERNS * ticks <= MAX_RUN_TICKS:
+        raise ValidationError(f"the run would take {8 * PATTERNS * ticks:.3g} periods, more than the {MAX_RUN_TICKS} "
+                              f"a run file can hold (period {period_s!r} s, mass {mass_kg!r} kg, force limit "
+                              f"{max_force_n!r} N)", field="period_s")
+    n = max(int(round(ticks)), MIN_SEGMENT_TICKS)
     tau = n * period_s   # whole ticks; the force then keeps F tau^2 / m within the travel
     f = min(f, travel_m * mass_kg / (tau * tau))
     one = np.concatenate([np.full(n, f), np.full(2 * n, -f), np.full(n, f), np.zeros(4 * n)])
@@ -339,6 +344,10 @@ def simulated_run(period_s: float, mass_kg: float, damping_ns_per_m: float, reso
 #: Largest run or excitation CSV read (bytes): an hour at 4 kHz is about 14 M rows of a
 #: few bytes; a hands-off run is a few thousand.
 MAX_CSV_BYTES = 64 * 1024 * 1024
+#: Longest run (periods) :func:`excitation` makes: the most rows a run file of
+#: :data:`MAX_CSV_BYTES` holds at two floats per row (``repr`` takes at most 24 characters,
+#: plus a comma and a newline: 50 bytes), so the SDK can read back every run it asks for.
+MAX_RUN_TICKS = MAX_CSV_BYTES // 50
 
 
 def _csv_table(path: Any, field_name: str, columns: tuple[str, ...]) -> tuple[dict[str, int], list[list[str]]]:

@@ -372,3 +372,19 @@ def test_from_dict_names_what_is_wrong(data, match):
 def test_a_run_that_is_not_numbers_is_named(forces, readings):
     with pytest.raises(ValidationError):
         fit_damping(forces, readings, 1e-3, 0.055)
+
+
+@pytest.mark.parametrize("period, force, mass", [(1e-300, 3.3, 0.045), (1e-3, 3.3, 1e300), (1e-3, 1e-300, 0.045)])
+def test_a_run_longer_than_a_run_file_holds_is_named(period, force, mass):
+    """The excitation's length follows from the period, force limit and mass; a run the
+    SDK could not read back from its own run file is refused by name (was an internal
+    ValueError from numpy, or memory exhausted)."""
+    with pytest.raises(ValidationError, match="a run file can hold"):
+        excitation(period, force, mass)
+
+
+def test_the_longest_run_s_file_reads_back(tmp_path):
+    """:data:`MAX_RUN_TICKS` rows of the widest floats fit the reader's byte limit."""
+    from hapticsdk.calibration.damping import MAX_CSV_BYTES, MAX_RUN_TICKS
+    widest = repr(-1.2345678901234567e-300)
+    assert MAX_RUN_TICKS * (2 * len(widest) + 2) <= MAX_CSV_BYTES
