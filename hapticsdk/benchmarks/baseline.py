@@ -233,6 +233,8 @@ def run_baseline(ref: str, seconds: float = 10.0, rounds: int = 3, period_s: flo
                  progress: Any = None) -> dict[str, Any]:
     """The tick of ``ref`` and of this code, ``rounds`` interleaved pairs (see the module
     doc); returns :func:`summarise` plus the commit, the settings and the machine."""
+    from ..scene.limits import check_seconds
+    check_seconds(seconds, "seconds")   # before any child (whose timeout follows from it)
     commit, before, after, old, new = _interleaved(ref, rounds, lambda t: run_child(t, seconds, period_s),
                                                    progress)
     out = summarise(old, new)
@@ -296,6 +298,8 @@ def run_live_baseline(ref: str, isolation: str = "process", load: str = "python-
                       rounds: int = 2, period_s: float = 0.001, record: str = "none",
                       progress: Any = None) -> dict[str, Any]:
     """``bench live`` of ``ref`` and of this code, interleaved (:func:`_interleaved`)."""
+    from ..scene.limits import check_seconds
+    check_seconds(seconds, "seconds")   # before any child (whose timeout follows from it)
     commit, before, after, old, new = _interleaved(
         ref, rounds, lambda t: run_live_child(t, isolation, load, seconds, period_s, record), progress)
     out = summarise_live(old, new)

@@ -154,6 +154,8 @@ def run_reference(app_load: str = "python-thread", seconds: float = 5.0, period_
     import multiprocessing as mp
 
     from ..runtime.stats import jitter_stats
+    from ..scene.limits import check_seconds
+    check_seconds(seconds, "seconds")
     ctx = mp.get_context("spawn")
     rx, tx = ctx.Pipe(duplex=False)
     stop = threading.Event()
@@ -225,11 +227,11 @@ def run_session(isolation: str = "process", app_load: str = "python-thread", sec
     import tempfile
     from pathlib import Path
     from ..runtime.session import Session
+    from ..scene.limits import check_seconds
     from ..sim.finger import press_slide
+    check_seconds(seconds, "seconds")   # before building a trajectory that long
     cycle = press_slide(depth_mm=2.0, press_s=0.2, hold_s=0.1, slide_s=1.5, release_s=0.2, rest_s=0.1)
-    tr = cycle
-    while tr.duration_s < seconds + 60.0:
-        tr = tr.then(cycle, gap_s=0.01)
+    tr = cycle.repeated(lambda d: d < seconds + 60.0, gap_s=0.01)
     stop = threading.Event()
     th = threading.Thread(target=_load, args=(app_load, stop), daemon=True)
     state_us: list[float] = []

@@ -109,15 +109,27 @@ QUICK_GRID = {
 }
 
 
+def check_cell_duration(duration_s: Any) -> float:
+    """A fixed-grid cell's length (s): at least 3 s (one press/slide/tap cycle, then 1 s of
+    release) and at most the longest render, :data:`hapticsdk.scene.limits.MAX_SECONDS`
+    (24 h); else ValidationError."""
+    from ..argcheck import number
+    from ..scene.limits import MAX_SECONDS
+    v = number(duration_s, "duration_s")
+    if not 3.0 <= v <= MAX_SECONDS:
+        raise ValidationError(f"a stability cell needs >= 3 s (one press/slide/tap cycle, then 1 s of release) and "
+                              f"at most {MAX_SECONDS:g} s (24 h), got {duration_s!r}", field="duration_s")
+    return v
+
+
 def matrix_trajectory(duration_s: float = 10.0) -> Trajectory:
     """Press/slide/tap cycles (finger reference 5 mm deep) until 1 s before the end, then
     the finger rests 2 mm above the surface."""
     cycle = press_slide(depth_mm=5.0, approach_mm=2.0, press_s=0.3, hold_s=0.1, slide_s=0.5,
                         release_s=0.3, rest_s=0.1).then(
         taps(n=3, depth_mm=4.0, approach_mm=2.0, down_s=0.03, up_s=0.03, dwell_s=0.05, pause_s=0.1), gap_s=0.01)
-    tr = cycle
-    while tr.duration_s + cycle.duration_s < duration_s - 1.0:
-        tr = tr.then(cycle, gap_s=0.01)
+    check_cell_duration(duration_s)
+    tr = cycle.repeated(lambda d: d + cycle.duration_s < duration_s - 1.0, gap_s=0.01)
     end = tr.duration_s
     knots = list(zip(tr.t, tr.x, tr.y)) + [(max(duration_s, end + 1.0), float(tr.x[-1]), 2.0)]
     return Trajectory(knots, name="stability-matrix")
@@ -349,9 +361,7 @@ def run_matrix(grid: dict[str, Any] | None = None, *, arm: ArmParams | None = No
     servo ticks of all runs."""
     g: dict[str, Any] = dict(DEFAULT_GRID)
     g.update(grid or {})
-    if not float(g["duration_s"]) >= 3.0:
-        raise ValidationError("a stability cell needs >= 3 s (one press/slide/tap cycle, then 1 s of release)",
-                              field="duration_s")
+    check_cell_duration(g["duration_s"])
     t0 = time.perf_counter()
     cells: list[dict[str, Any]] = []
     from ..progress import report

@@ -43,9 +43,7 @@ def build_scene(seconds: float, period_s: float = 0.001) -> tuple[Any, list, dic
     dims = registry("dimension")
     acts = registry("actuator")
     cycle = press_slide(depth_mm=3.0, press_s=0.3, hold_s=0.1, slide_s=1.0, release_s=0.3, rest_s=0.2)
-    tr = cycle
-    while tr.duration_s < seconds:
-        tr = tr.then(cycle, gap_s=0.01)
+    tr = cycle.repeated(lambda d: d < seconds, gap_s=0.01)
     dev = acts.load("omni-virtual")(trajectory=tr, finger="stiff")
     renderers = [dims.load("hardness")().renderer({"GS": MATERIAL["GS"]})]
     actuators: dict[str, Any] = {"force": dev, "coil": acts.load("voicecoil-virtual")()}
@@ -73,6 +71,8 @@ def run_timing(seconds: float = 60.0, *, realtime: bool = False, load: bool = Fa
         rt: OS options of the servo thread (:class:`RealtimeSettings` or its fields).
         declared_rt_machine: judge the jitter limits (otherwise ``jitter_limits_met`` is None).
     """
+    from ..scene.limits import check_seconds
+    check_seconds(seconds, "seconds")   # before building a trajectory that long
     rt_settings = RealtimeSettings.coerce(rt)
     before = machine_now()
     dev, renderers, actuators = build_scene(seconds, period_s)

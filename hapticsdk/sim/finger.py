@@ -21,7 +21,7 @@ from __future__ import annotations
 
 from bisect import bisect_right
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -74,7 +74,7 @@ class Trajectory:
     ``(t_s, x_mm, y_mm, z_mm)`` for a 3-D path (z: across the sliding direction; 0 for
     3-column knots). :meth:`at` gives (x, y) as always; :meth:`at3` adds z."""
 
-    def __init__(self, knots: Sequence[Sequence[float]], *, name: str = "trajectory") -> None:
+    def __init__(self, knots: "Sequence[Sequence[float]] | np.ndarray", *, name: str = "trajectory") -> None:
         k = np.asarray(knots, float)
         if k.ndim != 2 or k.shape[1] not in (3, 4) or k.shape[0] < 2:
             raise ValidationError("knots must be >= 2 rows of (t_s, x_mm, y_mm) or (t_s, x_mm, y_mm, z_mm)",
@@ -167,6 +167,24 @@ class Trajectory:
             knots = list(zip(self.t, self.x, self.y)) + [
                 (t0 + t, x, y) for t, x, y in zip(other.t, other.x, other.y)]
         return Trajectory(knots, name=f"{self.name}+{other.name}")
+
+    def repeated(self, more: Callable[[float], bool], gap_s: float = 0.0) -> "Trajectory":
+        """This path, then copies of it (each ``gap_s`` after the last one ends) while
+        ``more(duration so far)`` holds: the same knots as chaining :meth:`then`, built in
+        one pass (chaining copies every knot again per copy: quadratic in their number)."""
+        cols = [self.t, self.x, self.y] + ([self.z] if self.has_z else [])
+        last = float(self.t[-1])
+        offsets = [0.0]
+        dur = last
+        while more(dur):
+            t0 = dur + max(gap_s, 1e-9)
+            offsets.append(t0)
+            dur = t0 + last
+        if len(offsets) == 1:
+            return self
+        rows = np.concatenate([np.column_stack([off + cols[0]] + cols[1:]) for off in offsets])
+        name = "+".join([self.name] * len(offsets)) if len(offsets) <= 8 else f"{self.name} x {len(offsets)}"
+        return Trajectory(rows, name=name)
 
 
 def press_slide(*, depth_mm: float = 2.0, approach_mm: float = 2.0, press_s: float = 0.5,

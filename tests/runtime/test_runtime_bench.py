@@ -101,3 +101,32 @@ def test_stability_rejects_too_short_cells():
     from hapticsdk.errors import ValidationError
     with pytest.raises(ValidationError):
         run_matrix(dict(QUICK_GRID, duration_s=1.0))
+
+
+@pytest.mark.parametrize("argv, field", [
+    (["bench", "stability", "--duration", "1e-300"], "duration_s"),
+    (["bench", "stability", "--duration", "2.5"], "duration_s"),
+    (["bench", "stability", "--duration", "1e300"], "duration_s"),
+    (["bench", "timing", "--seconds", "1e300"], "seconds"),
+    (["bench", "timing", "--seconds", "1e300", "--baseline", "HEAD"], "seconds"),
+    (["bench", "live", "--seconds", "1e300"], "seconds"),
+    (["bench", "live", "--seconds", "1e300", "--baseline", "HEAD"], "seconds"),
+])
+def test_a_benchmark_length_out_of_range_is_named_before_any_work(argv, field, capsys):
+    """A run length below a cell's one cycle or above the longest render (24 h) is a named
+    error (exit 2) before any trajectory is built or child started: a 1e300 s cell built
+    its trajectory forever, the baselines' child timeouts overflowed (internal error), and
+    the fixed grid took a 1e-300 s cell without the 3 s check ``run_matrix`` has."""
+    from hapticsdk.cli import main
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{field}:" in err and "internal error" not in err
+
+
+def test_a_day_long_grid_cell_s_trajectory_is_built_in_one_pass():
+    """The fixed grid's trajectory for the longest cell allowed (24 h, 54 000 cycles): the
+    knots of chaining ``then`` built in one pass (chaining copies every knot per cycle)."""
+    from hapticsdk.benchmarks.stability import matrix_trajectory
+    from hapticsdk.scene.limits import MAX_SECONDS
+    tr = matrix_trajectory(MAX_SECONDS)
+    assert tr.duration_s == MAX_SECONDS and tr.t.size > 800_000

@@ -3,6 +3,9 @@ integrators, energy bookkeeping, trajectories and the kinematic probe."""
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import settings as hsettings
+from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
@@ -171,3 +174,22 @@ def test_virtual_probe_follows_trajectory_and_ignores_force():
 def test_virtual_probe_entry_point():
     from hapticsdk.plugins import registry
     assert registry("actuator").load("probe-virtual") is VirtualProbe
+
+
+@hsettings(max_examples=40, deadline=None)
+@given(press=st.floats(0.05, 1.0), slide=st.floats(0.01, 2.0), gap=st.floats(0.0, 0.1),
+       copies=st.floats(0.0, 12.0), z=st.booleans())
+def test_repeated_is_chained_then(press, slide, gap, copies, z):
+    """``Trajectory.repeated`` gives exactly the knots of chaining ``then`` (same floats),
+    for paths with and without a z column."""
+    cycle = press_slide(press_s=press, slide_s=slide)
+    if z:
+        cycle = Trajectory(np.column_stack([cycle.t, cycle.x, cycle.y, cycle.x * 0.5]))
+    until = copies * cycle.duration_s
+    chained = cycle
+    while chained.duration_s < until:
+        chained = chained.then(cycle, gap_s=gap)
+    got = cycle.repeated(lambda d: d < until, gap_s=gap)
+    for a in ("t", "x", "y", "z"):
+        assert np.array_equal(getattr(got, a), getattr(chained, a)), a
+    assert got.has_z == chained.has_z
