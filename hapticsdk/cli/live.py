@@ -8,14 +8,14 @@ from typing import Any
 
 def register(sub: Any) -> None:
     """Add ``view`` to the ``hapticsdk`` command."""
-    from .argtypes import nonneg_float
+    from .argtypes import bounded_int, nonneg_float, positive_float
 
     p = sub.add_parser("view", help="run a live session on a scene and show it in the browser (127.0.0.1)")
     p.add_argument("scene", metavar="SCENE", help="scene JSON file")
-    p.add_argument("--port", type=int, default=0, help="port on 127.0.0.1 (0: one the OS picks)")
+    p.add_argument("--port", type=bounded_int(0, 65535), default=0, help="port on 127.0.0.1 (0: one the OS picks)")
     p.add_argument("--seconds", type=nonneg_float, default=None,
                    help="stop after this many seconds (default: at Ctrl-C)")
-    p.add_argument("--speed", type=nonneg_float, default=40.0, metavar="MM_S",
+    p.add_argument("--speed", type=positive_float, default=40.0, metavar="MM_S",
                    help="speed of the simulated finger walking over the objects (mm/s)")
     p.add_argument("--record", metavar="RUN.npz|RUN.h5", help="also record every tick to this file (.h5 needs hapticsdk[h5])")
     p.set_defaults(func=cmd_view)
@@ -31,7 +31,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     from ..sim.finger import walk_over
 
     scene = Scene.load(args.scene)
-    finger = walk_over(scene, press_depth_mm=1.5, speed_mm_s=args.speed or 40.0)
+    finger = walk_over(scene, press_depth_mm=1.5, speed_mm_s=args.speed)
     with Session(scene, trajectory=finger, record=args.record) as s:
         url = s.open_view(args.port)
         print(f"live view of {scene.name!r}: {url}  (simulated finger over {len(scene.objects)} objects, "

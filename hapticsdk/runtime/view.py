@@ -158,7 +158,9 @@ class ViewServer:
     (the session closes it with itself)."""
 
     def __init__(self, session: Any, port: int = 0) -> None:
-        self.httpd = _Server(("127.0.0.1", int(port)), _Handler)
+        from ..argcheck import number
+        port = int(number(port, "port", lo=0, hi=65535, integer=True))   # a TCP port
+        self.httpd = _Server(("127.0.0.1", port), _Handler)
         self.httpd.session = session  # type: ignore[attr-defined]
         self.httpd.static = scene_summary(session)  # type: ignore[attr-defined]
         self.httpd.stopping = threading.Event()  # type: ignore[attr-defined]

@@ -111,6 +111,7 @@ def test_stability_rejects_too_short_cells():
     (["bench", "timing", "--seconds", "1e300", "--baseline", "HEAD"], "seconds"),
     (["bench", "live", "--seconds", "1e300"], "seconds"),
     (["bench", "live", "--seconds", "1e300", "--baseline", "HEAD"], "seconds"),
+    (["bench", "stability", "--random", "1000000000"], "random"),
 ])
 def test_a_benchmark_length_out_of_range_is_named_before_any_work(argv, field, capsys):
     """A run length below a cell's one cycle or above the longest render (24 h) is a named

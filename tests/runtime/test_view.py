@@ -173,3 +173,24 @@ def test_a_frame_with_non_finite_numbers_is_strict_json():
     back = json.loads(_json(frame), parse_constant=refuse)
     assert back == {"t": None, "trace": [1.0, None, None], "timing": {"p99_us": None, "ticks": 3},
                     "pair": [2.5, None]}
+
+
+@pytest.mark.parametrize("port", [-1, 65536, 99999, 1.5, "80", True])
+def test_a_port_that_is_not_a_tcp_port_is_named(port):
+    """``open_view(port)`` / ``ViewServer``: a TCP port is a whole number 0..65535; 99999
+    was an internal OverflowError from ``bind()`` (``hapticsdk view --port 99999``)."""
+    from hapticsdk.errors import ValidationError
+    from hapticsdk.runtime.view import ViewServer
+    with pytest.raises(ValidationError, match="port"):
+        ViewServer(None, port)
+
+
+@pytest.mark.parametrize("argv, field", [(["--port", "99999"], "--port"), (["--speed", "0"], "--speed")])
+def test_view_cli_names_a_bad_port_or_speed(argv, field, capsys):
+    """``--speed 0`` was silently the default 40 mm/s; now refused like any other
+    non-positive speed."""
+    from hapticsdk.cli import main
+    scene = Path(__file__).resolve().parents[2] / "examples" / "scenes" / "desk-spatial.json"
+    assert main(["view", str(scene), "--seconds", "0.1", *argv]) == 2
+    err = capsys.readouterr().err
+    assert f"{field}:" in err and "internal error" not in err
