@@ -37,7 +37,8 @@ Two tools:
     sends the largest extra, within one ramp step of the last, whose plan "hold, then
     ramp to 0" keeps ``U`` within ``E0 = min(F_max Delta / 2, energy_allowance_j)``.
 
-  The output lies between 0 and the wall's force: a unilateral wall never pulls.
+  The output is >= 0 (a unilateral wall never pulls), at most the device's declared force
+  limit, and at most the wall's force except while the extra ramps down on a release.
 
 Sign conventions: ``x`` is the probe position along the surface normal (mm, y axis,
 inside the material at x < 0); ``F`` is the force on the probe along +x (N, "pushing the

@@ -127,6 +127,9 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     if s.energy_bound:
         lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
+    if fm is not None:
+        # the extra yields where spring + extra would pass the device's limit (see the scalar tick)
+        a = np.where((sg > 0.0) & (spring + a > full), full - spring, a)
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring
     state["kf"] = np.where(spring > 0.0, spring / np.where(depth > 0.0, depth, 1.0), 0.0)

@@ -268,6 +268,11 @@ class PassivityController:
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (self._still if self._still > 2 else 2))
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
+        if fm is not None and sg > 0.0 and spring + a > fm:
+            # the spring rose by more than the extra's ramp gives way (a reading that jumped
+            # several counts): the extra yields at once where the sum would pass the device's
+            # limit (holding less is never active); the total stays at the limit, no step down
+            a = fm - spring
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a

@@ -407,3 +407,27 @@ def test_the_whole_force_rises_by_at_most_one_ramp_step(b, dt, res, fmax, k, see
         pc.commit(f)
         controller_commit_batch(bs, np.array([f]))
         last = f
+
+
+@hsettings(max_examples=30, deadline=None)
+@given(b=st.floats(0.05, 5.0), dt=st.floats(2.5e-4, 1e-2), res=st.floats(1e-3, 0.2), fmax=st.floats(0.5, 12.0),
+       k=st.floats(0.05, 50.0), seed=st.integers(0, 2**31 - 1))
+def test_the_output_never_exceeds_the_declared_force_limit(b, dt, res, fmax, k, seed):
+    """A reading that jumps many counts into the wall within one tick (a fast tap) raises
+    the Colgate spring by more than the extra's ramp gives way; the extra then yields at
+    once so that spring + extra stays within the device's declared limit (it went to
+    spring + extra, up to twice the limit). Scalar and batch alike."""
+    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+                            device_mass_kg=0.05)
+    rng = np.random.default_rng(seed)
+    # hold near the surface (the extra ramps up), then jumps of up to 3 mm per tick
+    xs = np.concatenate([np.full(100, -res), -rng.uniform(0.0, 3.0, 100)])
+    pc = PassivityController(cs)
+    bs = controller_state_batch(1)
+    for x in xs:
+        fw = k * max(-x, 0.0)
+        f = pc.step(float(x), dt, fw)
+        g = controller_step_batch(bs, np.array([x]), dt, np.array([fw]), True, cs)[0]
+        assert 0.0 <= f <= fmax * (1 + 1e-12) and 0.0 <= g <= fmax * (1 + 1e-12)
+        pc.commit(f)
+        controller_commit_batch(bs, np.array([g]))
