@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -319,14 +319,14 @@ class DampingCalibration:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "DampingCalibration":
         """Inverse of :meth:`to_dict` (``kind`` and unknown keys are ignored; the store validates first)."""
-        keys = ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "mass_kg", "period_s",
-                "resolution_mm", "readings", "serial", "generated", "source", "extra")
         if not isinstance(data, dict):
             raise ValidationError(f"must be a mapping, got {type(data).__name__}", field="damping")
-        missing = [k for k in keys[:7] if k not in data]
+        own = fields(cls)
+        missing = [f.name for f in own if f.default is MISSING and f.default_factory is MISSING
+                   and f.name not in data]
         if missing:
             raise ValidationError(f"missing {', '.join(missing)}", field="damping")
-        return cls(**{k: data[k] for k in keys if k in data})
+        return cls(**{f.name: data[f.name] for f in own if f.name in data})
 
 
 def simulated_run(period_s: float, mass_kg: float, damping_ns_per_m: float, resolution_mm: float,

@@ -121,15 +121,14 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     target = target - spring
     p = sg * f1
     lo = np.where(p - step >= 0.0, p - step, np.minimum(p + step, 0.0))
+    if fm is not None:
+        lo = np.minimum(lo, full - spring)   # not past the device's limit (see the scalar tick)
     rise = np.maximum(spring - state["spring"], 0.0)   # the whole force rises by at most s (item 3)
     hi = np.maximum(np.minimum(p + step - rise, target), lo)
     a = hi
     if s.energy_bound:
         lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
-    if fm is not None:
-        # the extra yields where spring + extra would pass the device's limit (see the scalar tick)
-        a = np.where((sg > 0.0) & (spring + a > full), full - spring, a)
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring
     state["kf"] = np.where(spring > 0.0, spring / np.where(depth > 0.0, depth, 1.0), 0.0)

@@ -250,6 +250,11 @@ class PassivityController:
         lo = p - step
         if lo < 0.0:
             lo = 0.0 if p + step >= 0.0 else p + step
+        if fm is not None and lo > fm - spring:
+            # but not past the device's limit: where the spring rose by more than the ramp
+            # gives way (a reading that jumped several counts), the extra yields at once
+            # (holding less is never active; the total stays at the limit, no step down)
+            lo = fm - spring
         # and the whole force rises by at most that step: the extra gives way to the spring's
         # rise (item 3)
         hi = p + step
@@ -268,11 +273,6 @@ class PassivityController:
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (self._still if self._still > 2 else 2))
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
-        if fm is not None and sg > 0.0 and spring + a > fm:
-            # the spring rose by more than the extra's ramp gives way (a reading that jumped
-            # several counts): the extra yields at once where the sum would pass the device's
-            # limit (holding less is never active); the total stays at the limit, no step down
-            a = fm - spring
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a

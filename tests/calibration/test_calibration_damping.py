@@ -388,3 +388,25 @@ def test_the_longest_run_s_file_reads_back(tmp_path):
     from hapticsdk.calibration.damping import MAX_CSV_BYTES, MAX_RUN_TICKS
     widest = repr(-1.2345678901234567e-300)
     assert MAX_RUN_TICKS * (2 * len(widest) + 2) <= MAX_CSV_BYTES
+
+
+@pytest.mark.parametrize("share", [0.9, 1.1, 2.0])
+def test_the_run_length_limit_holds_at_its_edge(share):
+    """A run ``share`` times the longest a run file holds: below it the excitation is made
+    and fits the file; above it, it is refused by name."""
+    from hapticsdk.calibration.damping import FORCE_SHARE, MAX_RUN_TICKS, PATTERNS, TRAVEL_M
+    segment_s = math.sqrt(TRAVEL_M * 0.045 / (FORCE_SHARE * 3.3))   # one segment's length
+    period = segment_s / (share * MAX_RUN_TICKS / (8 * PATTERNS))
+    if share < 1.0:
+        assert excitation(period, 3.3, 0.045).size <= MAX_RUN_TICKS
+    else:
+        with pytest.raises(ValidationError, match="a run file can hold"):
+            excitation(period, 3.3, 0.045)
+
+
+def test_from_dict_takes_a_record_without_its_optional_fields():
+    """``serial``, ``generated``, ``source`` and ``extra`` have defaults; a record without
+    them is read (only the measured figures are required)."""
+    d = {k: v for k, v in _cal().to_dict().items() if k not in ("serial", "generated", "source", "extra")}
+    got = DampingCalibration.from_dict(d)
+    assert got.serial is None and got.extra == {} and got.trusted_damping_ns_per_m == _cal().trusted_damping_ns_per_m
