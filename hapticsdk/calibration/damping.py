@@ -164,6 +164,10 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
     readings ``readings_mm`` (mm, ``len(forces_n) + 1``: before each force, then the last),
     ``period_s`` (s), the encoder resolution ``resolution_mm`` (mm; 0 = exact). See the
     module docstring for the model and the bound."""
+    # scipy's modules are imported here, lazily (not at the calibration package's import,
+    # which a render pays) and before the clock: runtime_s is the fit's, not the import's
+    import scipy.optimize  # noqa: F401
+    import scipy.signal  # noqa: F401
     t0 = time.perf_counter()
     f = number_array(forces_n, "forces_n", ndim=(1,), finite=False)
     y = number_array(readings_mm, "readings_mm", ndim=(1,), finite=False) * 1e-3
