@@ -410,3 +410,71 @@ def test_from_dict_takes_a_record_without_its_optional_fields():
     d = {k: v for k, v in _cal().to_dict().items() if k not in ("serial", "generated", "source", "extra")}
     got = DampingCalibration.from_dict(d)
     assert got.serial is None and got.extra == {} and got.trusted_damping_ns_per_m == _cal().trusted_damping_ns_per_m
+
+
+def test_the_standard_error_follows_correlated_reading_noise():
+    """Reading errors that are correlated from tick to tick (a slow drift, a vibration
+    slower than the period) carry less information than independent ones: the fit
+    inflates its variance by ``(1 + rho) / (1 - rho)`` for the residuals' lag-one
+    correlation ``rho``. Under AR(1) noise with rho = 0.9 the reported standard error
+    still matches the spread of 60 refits (band as for independent noise above; without
+    the inflation the ratio would be about 1/sqrt(19), 0.23)."""
+    T, m, b = 5e-3, 0.02, 1.0
+    f = excitation(T, 3.3, m)
+    y0 = free_arm_readings_mm(T, ArmParams(mass_kg=m, damping_ns_per_m=b, encoder_resolution_mm=0.0), f)
+    rng = np.random.default_rng(1)
+    rho, sd = 0.9, 0.01
+
+    def ar1(n):
+        e = np.empty(n)
+        e[0] = rng.normal(0.0, sd)
+        for k in range(1, n):
+            e[k] = rho * e[k - 1] + rng.normal(0.0, sd * math.sqrt(1.0 - rho * rho))
+        return e
+    fits = [fit_damping(f, y0 + ar1(y0.size), T, 0.0) for _ in range(60)]
+    assert all(r.success for r in fits)
+    assert np.median([r.residual_correlation for r in fits]) > 0.7
+    spread = np.std([r.damping_ns_per_m for r in fits], ddof=1)
+    assert 0.7 < np.median([r.damping_se_ns_per_m for r in fits]) / spread < 1.4
+
+
+def test_the_fit_reports_the_mass_the_damping_and_a_constant_force():
+    """``x = [mass, damping, offset force]``: on an exact run (no encoder) of an arm that
+    also feels a constant force the run does not command (gravity, a cable), the fit
+    recovers all three. The model is the arm's exact zero-order-hold response, so what is
+    left is the search's tolerance on ``b/m`` (1e-10 relative) and rounding: 1e-6 leaves
+    room for both."""
+    T, m, b, f0 = 2e-3, 0.06, 0.4, 0.05
+    f = excitation(T, 3.3, m)
+    y = free_arm_readings_mm(T, ArmParams(mass_kg=m, damping_ns_per_m=b, encoder_resolution_mm=0.0), f + f0)
+    fit = fit_damping(f, y, T, 0.0)
+    assert fit.success, fit.message
+    assert fit.x == pytest.approx([m, b, f0], rel=1e-6)
+    assert fit.mass_kg == pytest.approx(m, rel=1e-6) and fit.damping_ns_per_m == pytest.approx(b, rel=1e-6)
+
+
+def test_the_response_s_small_decay_series_meets_its_exact_form():
+    """The response's coefficients near ``alpha T = 0`` come from a series below 1e-4 and
+    from ``expm1`` above. At the switch both must give the same numbers: the series'
+    error there is below (1e-4)^3 / 24, about 4e-14, and the exact form's is rounding over
+    the cancellation in ``T - h`` (about 1e-16 / 5e-5 = 2e-12), so 1e-10 relative is far
+    above both and far below a wrong term of the series (x^2 / 12 = 8e-10 for ``g``'s
+    last term, x / 3 for a sign)."""
+    from hapticsdk.calibration.damping import _hg
+
+    dt = 1e-3
+    below = _hg(1e-4 * (1 - 1e-9) / dt, dt)   # the series
+    above = _hg(1e-4 * (1 + 1e-9) / dt, dt)   # expm1
+    assert below == pytest.approx(above, rel=1e-10, abs=0.0), (below, above)
+
+
+@pytest.mark.parametrize("n, ok", [(7, False), (8, True)])
+def test_a_run_of_eight_forces_is_the_shortest_taken(n, ok):
+    """At least 8 forces (and one reading more): 8 is taken, 7 is named."""
+    f = np.tile([1.0, -1.0], 8)[:n]
+    y = np.concatenate([[0.0], np.cumsum(np.cumsum(f))]) * 0.01
+    if ok:
+        assert isinstance(fit_damping(f, y, 1e-3, 0.0).message, str)
+    else:
+        with pytest.raises(ValidationError, match="at least 8 forces"):
+            fit_damping(f, y, 1e-3, 0.0)

@@ -115,17 +115,14 @@ ACTUATOR_VARIANTS = [(EchoCoil, "output-follows-command"), (WriterCoil, "close")
 def test_broken_actuators_are_caught_by_their_rule(cls, rule):
     v = check("actuator", cls)
     assert rules_of(v) == {rule}, format_report(v)
+    if cls is FlushStallCoil:   # the stall's report names the restart gap and the call
+        assert "restart_after_s 50 ms" in format_report(v) and "call 64 " in format_report(v), format_report(v)
 
 
 @pytest.mark.parametrize("cls", [LagCoil, JoiningWriterCoil])
 def test_correct_actuators_conform(cls):
     v = check("actuator", cls)
     assert v == [], format_report(v)
-
-
-def test_the_stall_report_names_the_restart_gap():
-    v = check("actuator", FlushStallCoil, rules=["timing"])
-    assert "restart_after_s 50 ms" in format_report(v) and "call 64 " in format_report(v), format_report(v)
 
 
 def test_the_leak_report_names_the_thread():

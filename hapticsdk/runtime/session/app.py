@@ -276,6 +276,12 @@ class Session:
                 cmd_r, self._cmd = mp.Pipe(duplex=False)
                 self._done, done_w = mp.Pipe(duplex=False)
                 _grow_pipe(self._cmd)
+                # one interpreter: warm up before the servo thread starts. Beside a
+                # running servo thread the warm-up's numpy calls (a table build, with a
+                # cold cache) wait for the interpreter's lock after each call: next to a
+                # simulated-time servo, which runs flat out, that took a cold build from
+                # 1.3 s to over 3 minutes; next to a realtime one it delays the ticks
+                self._warm()
                 self._servo_holder: list = []
                 self._thread = threading.Thread(target=_servo_main,
                                                 args=(spec, cmd_r, None, done_w, self._mv, self._servo_holder),
@@ -284,7 +290,8 @@ class Session:
             self._hb_stop = threading.Event()
             self._hb = threading.Thread(target=self._heartbeat, name="hapticsdk-heartbeat", daemon=True)
             self._hb.start()
-            self._warm()
+            if isolation == "process":
+                self._warm()   # in the application while the servo process starts
             deadline = time.monotonic() + start_timeout_s
             while self._mv[_STATUS] == _STARTING:
                 if not self._servo_alive():
