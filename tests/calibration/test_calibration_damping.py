@@ -18,6 +18,7 @@ from hapticsdk.errors import ValidationError
 from hapticsdk.passivity import ControllerSettings
 from hapticsdk.passivity.settings import colgate_stiffness_n_per_mm
 from hapticsdk.sim.arm import ArmParams, free_arm_readings_mm
+from hapticsdk.sim.finger import FingerParams
 
 hyp = pytest.importorskip("hypothesis", reason="hypothesis (the test extra) is not installed")
 from hypothesis import given, settings, strategies as st  # noqa: E402
@@ -478,3 +479,37 @@ def test_a_run_of_eight_forces_is_the_shortest_taken(n, ok):
     else:
         with pytest.raises(ValidationError, match="at least 8 forces"):
             fit_damping(f, y, 1e-3, 0.0)
+
+
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_the_measurement_drives_its_axis_alone(axis):
+    """``measure_damping(device, axis=k)`` pushes along axis ``k`` only, both ways: every
+    command's direction is the unit vector of that axis, +1 or -1, and 0 on the others."""
+    from hapticsdk.calibration.damping import measure_damping
+
+    dev = _omni(finger=FingerParams(0.0, 0.0, 0.0))
+    seen = []
+    real = dev.command
+
+    def spy(cmd, *a, **kw):
+        if cmd.force_n:
+            seen.append(tuple(cmd.direction))
+        return real(cmd, *a, **kw)
+    dev.command = spy
+    measure_damping(dev, axis=axis)
+    signs = {d[axis] for d in seen}
+    assert signs == {1.0, -1.0}, signs
+    assert all(d[k] == 0.0 for d in seen for k in range(3) if k != axis)
+
+
+def test_a_run_must_move_four_counts():
+    """Below 4 encoder counts of travel the readings say nothing about the damping: 3
+    counts are named, 5 are fitted."""
+    q = 0.055
+    f = excitation(1e-3, 3.3, 0.045)
+    shape = np.concatenate([[0.0], np.cumsum(np.cumsum(f))])
+    shape /= np.ptp(shape)
+    three = fit_damping(f, np.round(3 * q * shape / q) * q, 1e-3, q)
+    assert not three.success and "did not move by 4 encoder counts" in three.message
+    five = fit_damping(f, np.round(5 * q * shape / q) * q, 1e-3, q)
+    assert "did not move" not in five.message
