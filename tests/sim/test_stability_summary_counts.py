@@ -84,3 +84,26 @@ def test_the_spring_only_share_sees_a_spent_bound_and_only_then():
     assert on["spring_only_share"] > 0.5
     assert off["spring_only_share"] == 0.0
     assert off["delivered_ratio"] > on["delivered_ratio"]
+
+
+def test_the_calibration_summary_counts_and_medians():
+    """``summarise(...)["damping_calibration"]`` on hand-made cells: the calibrated cells,
+    those whose bound is above the true damping (the property the controller relies on),
+    the failed fits, and the medians over the cells with damping of the bound and of the
+    declared share (``DAMPING_TRUST`` x declared), each over the true damping."""
+    from hapticsdk.benchmarks.stability_random import _damping_summary
+    from hapticsdk.passivity.settings import DAMPING_TRUST
+
+    def cal(trusted, true, declared, ok=True):
+        return {"damping_calibration": {"trusted_damping_ns_per_m": trusted, "success": ok},
+                "damping_true_ns_per_m": true, "damping_declared_ns_per_m": declared}
+    cells = [cal(0.4, 0.5, 1.0), cal(0.6, 0.5, 0.5), cal(0.0, 0.0, 0.0, ok=False), cal(0.9, 1.0, 0.5),
+             {"damping_true_ns_per_m": 1.0, "damping_declared_ns_per_m": 1.0}]   # not calibrated
+    s = _damping_summary(cells)
+    assert s["cells_calibrated"] == 4
+    assert s["cells_trusted_above_true"] == 1
+    assert s["calibrations_failed"] == 1
+    assert s["median_trusted_over_true"] == 0.9            # 0.8, 1.2, 0.9 (the b = 0 cell has no ratio)
+    assert s["median_declared_share_over_true"] == 1.0 * DAMPING_TRUST   # 2.0, 1.0, 0.5
+    empty = _damping_summary([])
+    assert empty["cells_calibrated"] == 0 and empty["median_trusted_over_true"] != empty["median_trusted_over_true"]
