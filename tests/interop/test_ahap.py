@@ -266,3 +266,42 @@ def test_the_latest_time_read_still_fits_the_position_field(kind):
     assert ends and max(ends) <= 2 ** 31 - 1
     with pytest.raises(FormatError):
         parse_ahap(ahap(event(MAX_TIME_S + 1.0 / TIMESCALE, kind=kind, dur=dur)))
+
+
+def test_a_curve_that_starts_late_interpolates_between_its_own_points():
+    """Control points are relative to the curve's Time: a curve at 0.5 s with points at
+    0 and 0.4 s runs from 0.5 to 0.9 s, linear between them (halfway at 0.7 s), held
+    before and after; the envelope of a full-intensity event follows it."""
+    doc = ahap(event(0.0, dur=1.5, intensity=1.0, sharpness=0.5),
+               curve("HapticIntensityControl", 0.5, [(0.0, 1.0), (0.2, 0.6), (0.4, 0.2)]))
+    pat = parse_ahap(doc)
+    c = pat.controls[0]
+    assert c.points == [(0.5, 1.0), (0.7, 0.6), (0.9, 0.2)]
+    for t, v in ((0.6, 0.8), (0.8, 0.4), (0.85, 0.3), (0.4, 1.0), (1.2, 0.2)):
+        assert c.value(t) == pytest.approx(v, abs=1e-12), t
+        assert pat.control("HapticIntensityControl", t) == pytest.approx(v if t >= 0.5 else 1.0, abs=1e-12), t
+    x = synth(doc)
+    t = np.arange(x.size) / FS
+    around = (t > 0.795) & (t < 0.805)
+    assert np.max(np.abs(x[around])) == pytest.approx(0.4, abs=0.01)
+
+
+def test_without_a_control_intensity_is_as_given_and_sharpness_unshifted():
+    """Before any control change the intensity control is 1 (a multiplier) and the
+    sharpness control 0 (an offset)."""
+    pat = parse_ahap(ahap(event(0.0, dur=1.0, intensity=0.7, sharpness=0.3)))
+    assert pat.control("HapticIntensityControl", 0.5) == 1.0
+    assert pat.control("HapticSharpnessControl", 0.5) == 0.0
+    kfs = to_haptic_file(pat).perceptions[0].channels[0].bands[0].effects[0].keyframes
+    assert all(k.amplitude_modulation == pytest.approx(0.7) for k in kfs if k.amplitude_modulation is not None)
+
+
+def test_the_summary_counts_controls_per_parameter():
+    from hapticsdk.interop.ahap import summary
+    doc = ahap(event(0.0, dur=1.0, intensity=0.7),
+               curve("HapticIntensityControl", 0.0, [(0.0, 1.0), (1.0, 0.5)]),
+               curve("HapticIntensityControl", 0.5, [(0.0, 0.5), (0.5, 1.0)]),
+               curve("HapticSharpnessControl", 0.0, [(0.0, 0.0), (1.0, 0.5)]))
+    s = summary(parse_ahap(doc))
+    assert s["controls"] == {"HapticIntensityControl": 2, "HapticSharpnessControl": 1}
+    assert s["events"] == {"HapticTransient": 0, "HapticContinuous": 1}

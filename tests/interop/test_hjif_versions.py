@@ -268,3 +268,44 @@ def test_a_timeline_effect_reads_as_composite_and_is_reported(build):
     path = "perceptions[0].channels[0].bands[0].effects[2]"
     assert h.perceptions[0].channels[0].bands[0].effects[2].effect_type == "Composite"
     assert "'Timeline'" in {c["path"]: c["change"] for c in h.format_version.changes}[f"{path}.effect_type"]
+
+
+@pytest.mark.parametrize("field, ok, bad", [
+    ("relative_position", [0, 2 ** 31 - 1], [-1, 2 ** 31, 1.5, True, "3"]),
+    ("amplitude_modulation", [-1.0, 1.0, 0, 0.25], [-1.0000001, 1.0000001, -1.5, 2, "1", False]),
+    ("frequency_modulation", [0.0, 65535.0, 90], [-0.5, 65535.5, 70000, "90", True]),
+])
+def test_a_keyframe_is_reordered_only_with_every_field_in_the_parser_s_range(field, ok, bad):
+    """Out-of-order keyframes are rewritten only when each field is of the type and range
+    the parser accepts (position an int in 0..2^31-1, amplitude -1..1, frequency
+    0..65535 Hz), so that a bad value is still named at its path as written. The ranges'
+    ends are in, one step past them out."""
+    from hapticsdk.interop.hjif_versions import _valid_keyframe
+    assert all(_valid_keyframe({field: v}) for v in ok)
+    assert not any(_valid_keyframe({field: v}) for v in bad)
+    assert _valid_keyframe({})
+
+
+def test_the_reference_reading_keeps_amplitudes_within_one():
+    """The rewrite of out-of-order keyframes (``_reference_reading``) extrapolates each
+    segment's value back to its start to find steps (``2 a - b``); an amplitude there
+    stays in -1..1 where rounding puts it just outside. The two lists are such cases, one
+    on each side (found by a random search with the clamp removed: -1.0000000000000002,
+    and its mirror image), then drawn lists with amplitudes at the ends of the range."""
+    from hapticsdk.interop.hjif_versions import _reference_reading
+    low = [{"relative_position": 642, "amplitude_modulation": -0.48346927314974275},
+           {"relative_position": 48, "amplitude_modulation": -1.0},
+           {"relative_position": 642, "amplitude_modulation": -1.0},
+           {"relative_position": 863, "amplitude_modulation": -0.3907261491718934}]
+    high = [dict(k, amplitude_modulation=-k["amplitude_modulation"]) for k in low]
+    rng = np.random.default_rng(4)
+    drawn = []
+    for _ in range(200):
+        n = int(rng.integers(2, 7))
+        drawn.append([{"relative_position": int(p), "amplitude_modulation": float(a)}
+                      for p, a in zip(rng.integers(0, 1000, n), rng.choice([-1.0, 1.0, 0.3, -0.3], n))])
+    for kfs in [low, high, *drawn]:
+        out = _reference_reading(kfs)
+        assert all(-1.0 <= k["amplitude_modulation"] <= 1.0 for k in out), (kfs, out)
+    assert min(k["amplitude_modulation"] for k in _reference_reading(low)) == -1.0
+    assert max(k["amplitude_modulation"] for k in _reference_reading(high)) == 1.0
