@@ -203,3 +203,49 @@ def test_after_the_last_frequency_keyframe_the_frequency_is_held_with_continuous
     cyc = np.where(t <= 0.2, 100 * t + 0.5 * (100 / 0.2) * t * t, 30.0 + 200.0 * (t - 0.2))
     inside = t <= 0.5
     np.testing.assert_allclose(x[inside], 0.5 * np.sin(2 * np.pi * cyc[inside]), atol=1e-9)
+
+
+@pytest.mark.parametrize("name, at, want", [
+    ("Sine", [0.0, 0.25, 0.5, 0.75], [0.0, 1.0, 0.0, -1.0]),
+    ("Square", [0.1, 0.4, 0.6, 0.9, 1.1], [1.0, 1.0, -1.0, -1.0, 1.0]),
+    ("Triangle", [0.0, 0.25, 0.5, 0.75, 1.0], [0.0, 1.0, 0.0, -1.0, 0.0]),
+    ("SawToothUp", [0.0, 0.25, 0.49, 0.51, 0.75], [0.0, 0.5, 0.98, -0.98, -0.5]),
+    ("SawToothDown", [0.0, 0.25, 0.49, 0.51, 0.75], [0.0, -0.5, -0.98, 0.98, 0.5]),
+])
+def test_each_base_signal_has_its_shape_and_stays_within_one(name, at, want):
+    """Values at marked phases (cycles) of each base signal, and the range over a dense
+    grid of phases."""
+    from hapticsdk.interop.hjif_synth import base_signal
+    assert base_signal(name, np.array(at)) == pytest.approx(want, abs=1e-12)
+    dense = base_signal(name, np.linspace(-3.0, 3.0, 100_001))
+    assert dense.min() >= -1.0 and dense.max() <= 1.0 and dense.max() - dense.min() > 1.99
+
+
+def test_frequency_breakpoints_insert_the_crossings_of_the_band():
+    """A ramp from 50 to 250 Hz over 100 ticks, clamped to 100..200 Hz: the crossings at
+    ticks 25 and 75 are breakpoints, so the clamped curve is exactly piecewise linear; a
+    ramp down crosses in the other order."""
+    from hapticsdk.interop.hjif_model import Effect, Keyframe
+    from hapticsdk.interop.hjif_synth import frequency_breakpoints
+
+    def eff(points):
+        return Effect(effect_type="Basis", position=0, keyframes=[Keyframe(relative_position=p, frequency_modulation=f)
+                                                   for p, f in points])
+    xs, fs = frequency_breakpoints(eff([(0, 50.0), (100, 250.0)]), 100.0, 200.0)
+    assert xs.tolist() == [0.0, 25.0, 75.0, 100.0] and fs.tolist() == [100.0, 100.0, 200.0, 200.0]
+    xs, fs = frequency_breakpoints(eff([(0, 250.0), (100, 50.0)]), 200.0, 100.0)   # bounds in either order
+    assert xs.tolist() == [0.0, 25.0, 75.0, 100.0] and fs.tolist() == [200.0, 200.0, 100.0, 100.0]
+    xs, fs = frequency_breakpoints(eff([(0, 120.0), (100, 180.0)]), 100.0, 200.0)   # inside: no cut
+    assert xs.tolist() == [0.0, 100.0] and fs.tolist() == [120.0, 180.0]
+
+
+def test_the_reported_peak_frequency_is_refined_between_bins():
+    """``spectrum_peak_hz``: a 97.3 Hz sine over 1 s at 8 kHz (1 Hz bins) is found within
+    0.05 Hz, a twentieth of a bin: the parabola through the log magnitudes of the peak
+    bin and its neighbours (Hann window) is accurate to a few hundredths of a bin, where
+    the peak bin alone is off by 0.3 Hz."""
+    from hapticsdk.interop.hjif_synth import spectrum_peak_hz
+    fs = 8000.0
+    t = np.arange(int(fs)) / fs
+    for f in (97.3, 211.8, 64.5):
+        assert spectrum_peak_hz(np.sin(2 * np.pi * f * t + 0.4), fs) == pytest.approx(f, abs=0.05)

@@ -270,3 +270,31 @@ def test_default_actuator_has_the_safety_layer_on():
         act.safety.observe(state())
         first = act.command(ChannelCommand("f", force_n=3.0), now=0.0)
     assert first.force_n == 0.0  # ramp starts at zero by default
+
+
+def test_a_clock_that_goes_back_during_the_start_ramp_restarts_it_from_there():
+    """The start ramp reads the time it began; a ``now`` before it (a clock stepped back)
+    restarts the ramp at that ``now``, so the ramp still takes its whole time from there
+    and never jumps ahead (nor stays at 0 until the old start comes round again)."""
+    lay = SafetyLayer(ActuatorLimits(max_force_n=3.3), ramp_time_s=0.1, start_max_force_n=None)
+    lay.reset(0.0)
+    assert lay.filter(ChannelCommand("f", force_n=2.0), 10.0).force_n == 0.0    # the ramp starts at 10 s
+    assert lay.filter(ChannelCommand("f", force_n=2.0), 10.05).force_n == pytest.approx(1.0)
+    assert lay.filter(ChannelCommand("f", force_n=2.0), 5.0).force_n == 0.0     # back to 5 s: restarted there
+    assert lay.phase == "ramping"
+    assert lay.filter(ChannelCommand("f", force_n=2.0), 5.05).force_n == pytest.approx(1.0)
+    assert lay.filter(ChannelCommand("f", force_n=2.0), 5.1).force_n == pytest.approx(2.0)
+    assert lay.phase == "running"
+
+
+@pytest.mark.parametrize("field", ["max_force_n", "max_stiffness_n_per_mm", "max_amplitude",
+                                   "max_force_rate_n_per_tick"])
+def test_a_small_declared_limit_is_taken_and_a_negative_one_named(field):
+    """Each ``max_*`` limit may be any finite number >= 0: a small one (a 0.5 N coil) is
+    taken as declared, 0 is taken, below 0 is named."""
+    from hapticsdk.devices.safety import declared_limits
+    assert declared_limits(ActuatorLimits(**{field: 0.5}))[field] == 0.5
+    assert declared_limits(ActuatorLimits(**{field: 0.0}))[field] == 0.0
+    with pytest.raises(ValidationError) as ei:
+        declared_limits(ActuatorLimits(**{field: -0.1}))
+    assert ei.value.field == f"limits.{field}"
