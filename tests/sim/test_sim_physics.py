@@ -193,3 +193,15 @@ def test_repeated_is_chained_then(press, slide, gap, copies, z):
     for a in ("t", "x", "y", "z"):
         assert np.array_equal(getattr(got, a), getattr(chained, a)), a
     assert got.has_z == chained.has_z
+
+
+@pytest.mark.parametrize("period", [0.0, -1e-3, float("nan"), float("inf")])
+def test_a_period_that_is_not_a_positive_number_is_named(period):
+    """The exact zero-order-hold step needs a period > 0: 0 (a step that goes nowhere),
+    negative, NaN and infinite periods are named, not returned as a matrix."""
+    from hapticsdk.errors import ValidationError
+    from hapticsdk.sim.arm import ArmParams, transition_matrices
+    from hapticsdk.sim.finger import FingerParams
+    with pytest.raises(ValidationError) as ei:
+        transition_matrices(period, [ArmParams()], [FingerParams()])
+    assert ei.value.field == "period_s"
