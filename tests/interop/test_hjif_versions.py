@@ -309,3 +309,34 @@ def test_the_reference_reading_keeps_amplitudes_within_one():
         assert all(-1.0 <= k["amplitude_modulation"] <= 1.0 for k in out), (kfs, out)
     assert min(k["amplitude_modulation"] for k in _reference_reading(low)) == -1.0
     assert max(k["amplitude_modulation"] for k in _reference_reading(high)) == 1.0
+
+
+def test_the_rewritten_keyframes_read_as_the_reference_reads_the_originals():
+    """``_reference_reading``'s contract: its sorted keyframes, read the usual way (linear
+    between keyframes; at equal positions the later one from there on), give at every
+    position of the effect's span the amplitude and frequency the reference reader takes
+    from the keyframes in file order (``_reading``). Checked on drawn out-of-order lists,
+    at each tick and a third of the way into each (so a wrong value just after a step
+    shows), away from the keyframes' own positions where the reading may step."""
+    from hapticsdk.interop.hjif_versions import _reading, _reference_reading
+    rng = np.random.default_rng(7)
+    checked = 0
+    for _ in range(150):
+        n = int(rng.integers(2, 7))
+        kfs = [{"relative_position": int(p), "amplitude_modulation": float(a), "frequency_modulation": float(f)}
+               for p, a, f in zip(rng.integers(0, 200, n), rng.uniform(-1, 1, n), rng.uniform(50, 300, n))]
+        out = _reference_reading(kfs)
+        span = float(kfs[-1]["relative_position"])
+        xp = np.array([k["relative_position"] for k in out], float)
+        stops = set(xp.tolist())
+        for key in ("amplitude_modulation", "frequency_modulation"):
+            fp = np.array([k[key] for k in out])
+            for x in np.arange(0.0, span, 1.0 / 3.0):
+                if x in stops:
+                    continue
+                j = int(np.searchsorted(xp, x, side="right"))   # after every keyframe at or before x
+                got = fp[j - 1] if j == len(xp) else fp[j - 1] + (fp[j] - fp[j - 1]) * (x - xp[j - 1]) / (xp[j] - xp[j - 1])
+                want = _reading(kfs, key, x, 1.0 if key == "amplitude_modulation" else None)
+                assert got == pytest.approx(want, rel=1e-9, abs=1e-9), (kfs, out, key, x)
+                checked += 1
+    assert checked > 10_000
