@@ -435,3 +435,22 @@ def test_the_output_never_exceeds_the_declared_force_limit(b, dt, res, fmax, k, 
         assert 0.0 <= f <= fmax * (1 + 1e-12) and 0.0 <= g <= fmax * (1 + 1e-12)
         pc.commit(f)
         controller_commit_batch(bs, np.array([g]))
+
+
+def test_the_settings_state_the_allowance_and_credit_nothing_undeclared():
+    """``ControllerSettings.energy_budget_j``: ``E0 = min(F_max Delta / 2, energy_allowance_j)``
+    (docs/runtime.md, Passivity item 6), with ``full_scale_n`` standing in for an
+    undeclared force limit. Settings that declare no damping credit none: the Colgate
+    spring is 0."""
+    from hapticsdk.passivity import ControllerSettings, colgate_stiffness_n_per_mm
+    omni = ControllerSettings(max_force_n=3.3, position_resolution_mm=0.055)
+    assert omni.energy_budget_j(1e-3) == pytest.approx(3.3 * 0.055e-3 / 2, rel=1e-12, abs=0.0)
+    coarse = ControllerSettings(max_force_n=3.3, position_resolution_mm=0.2)
+    assert coarse.energy_budget_j(1e-3) == pytest.approx(1e-4, rel=1e-12, abs=0.0)   # capped at 0.1 mJ
+    strict = ControllerSettings(max_force_n=3.3, position_resolution_mm=0.055, energy_allowance_j=5e-5)
+    assert strict.energy_budget_j(1e-3) == pytest.approx(5e-5, rel=1e-12, abs=0.0)
+    free = ControllerSettings(position_resolution_mm=0.01)
+    assert free.energy_budget_j(1e-3, full_scale_n=2.0) == pytest.approx(1e-5, rel=1e-12, abs=0.0)
+    bare = ControllerSettings(max_force_n=3.3, position_resolution_mm=0.055)
+    assert bare.device_damping_ns_per_m == 0.0 and bare.trusted_damping_ns_per_m() == 0.0
+    assert colgate_stiffness_n_per_mm(bare, 1e-3) == 0.0
