@@ -420,9 +420,8 @@ def test_the_standard_error_follows_correlated_reading_noise():
     correlation ``rho``. Under AR(1) noise with rho = 0.9 the reported standard error
     still matches the spread of 60 refits (band as for independent noise above; without
     the inflation the ratio would be about 1/sqrt(19), 0.23)."""
-    T, m, b = 5e-3, 0.02, 1.0
-    f = excitation(T, 3.3, m)
-    y0 = free_arm_readings_mm(T, ArmParams(mass_kg=m, damping_ns_per_m=b, encoder_resolution_mm=0.0), f)
+    T = 5e-3
+    f, y0 = simulated_run(T, 0.02, 1.0, 0.0)
     rng = np.random.default_rng(1)
     rho, sd = 0.9, 0.01
 
@@ -520,9 +519,8 @@ def test_the_fit_reports_its_residual_and_its_own_time():
     deviation on a noisy run (10 um of white noise, some 480 readings: the RMS is known to
     about 3 %, so 15 % is five of those), about 0 on an exact one. ``runtime_s`` is the
     fit's own time, >= 0 and well below a minute, for a fit and for a run it refuses."""
-    T, m, b = 5e-3, 0.02, 1.0
-    f = excitation(T, 3.3, m)
-    y0 = free_arm_readings_mm(T, ArmParams(mass_kg=m, damping_ns_per_m=b, encoder_resolution_mm=0.0), f)
+    T = 5e-3
+    f, y0 = simulated_run(T, 0.02, 1.0, 0.0)
     noisy = fit_damping(f, y0 + np.random.default_rng(2).normal(0.0, 0.01, y0.size), T, 0.0)
     assert noisy.fun == pytest.approx(1e-5, rel=0.15)
     assert fit_damping(f, y0, T, 0.0).fun < 1e-9

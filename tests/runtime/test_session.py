@@ -182,7 +182,7 @@ def _exited(pid: int) -> bool:
     orphans on its own schedule: about 1 s on some container inits) has not reaped yet."""
     try:
         with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().rsplit(")", 1)[1].split()[0] == "Z"
+            return fh.read().rsplit(")", 1)[1].split()[0] in ("Z", "X")
     except (FileNotFoundError, ProcessLookupError):
         return True
 
