@@ -1,7 +1,7 @@
 """End to end ``hapticsdk render S7`` (3 s simulated, defaults): CPU and wall time of the
 whole process, optionally side by side with a git ref.
 
-    OMP_NUM_THREADS=1 python bench/bench_render_s7.py [--runs 8] [--baseline REF]
+    python bench/bench_render_s7.py [--runs 8] [--baseline REF]
 
 Each run is a fresh ``python -m hapticsdk render S7`` of this interpreter; its CPU time is
 the child's user + sys (``os.wait4`` rusage), its wall time ``time.perf_counter`` around
@@ -14,7 +14,10 @@ run after the first does. With ``--baseline REF`` the files of ``REF`` are expor
 both see the same load; the report gives min and median of each and the ratio of the
 medians (and of the minima). Also printed: an empty ``python -c pass`` of the same
 interpreter (the bare reference: interpreter start-up alone), measured the same way in the
-same run. Not measured: realtime rendering, other materials, a cold disk cache, the first run
+same run. The children get this process's environment as it is: each tree sizes its
+BLAS / OpenMP thread pools as it would on a user's machine (run it with
+``OMP_NUM_THREADS=1`` to compare one-thread pools only; before 2026-11-28 the children got
+that by default, which hid the old code's spinning OpenBLAS worker). Not measured: realtime rendering, other materials, a cold disk cache, the first run
 after an install (an empty SDK cache folder).
 """
 
@@ -60,7 +63,7 @@ def main() -> None:
     try:
         envs = {}
         for name, tree in trees:
-            env = _child_env(tree)
+            env = _child_env(tree, one_pool_thread=False)   # as users run it: the tree sizes its pools
             env.pop("PYTHONDONTWRITEBYTECODE", None)
             if tree is not None:
                 env["HAPTICSDK_BASELINE_TREE"] = str(tree)

@@ -136,9 +136,14 @@ def exported_tree(repo: Path, commit: str) -> Iterator[Path]:
         yield Path(tmp)
 
 
-def _child_env(tree: Path | None) -> dict[str, str]:
+def _child_env(tree: Path | None, one_pool_thread: bool = True) -> dict[str, str]:
+    """The environment of a measured child: this one's, importing from ``tree``; with
+    ``one_pool_thread``, ``OMP_NUM_THREADS=1`` unless set (a measurement of one call in
+    one thread). A measurement of a command as users run it passes ``False``, so each
+    tree sizes its BLAS pools as it would on their machines."""
     env = dict(os.environ)
-    env.setdefault("OMP_NUM_THREADS", "1")
+    if one_pool_thread:
+        env.setdefault("OMP_NUM_THREADS", "1")
     if tree is not None:
         plugins = tree / "plugins"
         srcs = [str(p / "src") for p in sorted(plugins.iterdir()) if (p / "src").is_dir()] if plugins.is_dir() else []

@@ -395,7 +395,15 @@ def run() -> NoReturn:
     that are part of a reference cycle when the process exits do not run, which Python
     never promises anyway. :func:`main` itself, called in-process (tests, scripts), does
     not freeze.
+
+    Before :func:`main`, the BLAS / OpenMP thread pools are held to one thread unless the
+    environment sets one of ``OPENBLAS_NUM_THREADS``, ``OMP_NUM_THREADS``,
+    ``MKL_NUM_THREADS``, ``BLIS_NUM_THREADS`` (:func:`hapticsdk.threadpools.default_one_thread`:
+    the SDK's arrays are too small for a second thread to shorten a call, and an idle
+    OpenBLAS worker spins: 0.2 s of CPU of a ``render S7`` that needs 0.27 s).
     """
+    from ..threadpools import default_one_thread
+    default_one_thread()
     code = main()
     import gc
     gc.freeze()

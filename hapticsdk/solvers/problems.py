@@ -75,6 +75,12 @@ def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.n
             # a plain float in 0..1 is what check_intensity returns for it (NaN fails both)
             row.append(v if type(v) is float and 0.0 <= v <= 1.0 else check_intensity(v, f"targets.{d}"))
         return np.array(row, float), dims
+    if isinstance(targets, (str, bytes)):
+        # a material's name is not a row of intensities (numpy would read "S7" as one
+        # string element, and the message below would be about columns)
+        raise ValidationError(f"targets must be intensities ({{dimension: 0..1}}), not the name {targets!r}; for a "
+                              f"library material use load_library().get(name).intensities, or render(name)",
+                              field="targets")
     if dimensions is None:
         raise ValidationError("array targets need dimensions=[...] naming their columns", field="dimensions")
     dims = tuple(dimensions)

@@ -96,3 +96,19 @@ def test_repeated_targets_each_solved(fx, model):
     # the GA is stochastic with a fixed budget: nearly all copies succeed, each honestly scored
     r = GASolver().solve(p, seed=3)
     assert r.success.mean() >= 0.9 and np.allclose(fx.closed_loop(p, r.x)[0], r.error)
+
+
+@pytest.mark.parametrize("name", ["S7", b"S7", "hardness 0.8, roughness 0.3"])
+@pytest.mark.parametrize("dimensions", [None, ["hardness", "roughness"]])
+def test_a_material_name_is_not_taken_for_intensities(name, dimensions):
+    """hs.solve takes intensities; a name (what render() and scenes take) is refused with a
+    pointer to the library, with or without dimensions, before any model is loaded. (Before,
+    "S7" without dimensions was told to name its array's columns, and with them numpy
+    read it as one string.)"""
+    import hapticsdk as hs
+    with pytest.raises(ValidationError) as ei:
+        hs.solve(name, dimensions=dimensions)
+    assert ei.value.field == "targets"
+    assert "load_library().get(name).intensities" in str(ei.value) and repr(name) in str(ei.value)
+    lib = hs.load_library()
+    assert hs.solve(lib.get("S7").intensities, seed=1).success   # the way the message points to

@@ -26,69 +26,10 @@ from .protocol import (
 )
 from .pipe import _CommandReader
 from .shipping import _load_renderers
+from ...threadpools import one_thread as _one_pool_thread
+from ...threadpools import one_thread_environment as _pool_env_one_thread
 
 _log = logging.getLogger(__name__)
-
-
-#: BLAS / OpenMP thread-pool setters tried on every already-loaded library (first found wins)
-_POOL_SETTERS = ("openblas_set_num_threads", "openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
-                 "scipy_openblas_set_num_threads64_", "MKL_Set_Num_Threads", "bli_thread_set_num_threads",
-                 "omp_set_num_threads")
-_POOL_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
-
-
-def _pool_env_one_thread() -> None:
-    """BLAS / OpenMP libraries loaded from now on start one thread (environment)."""
-    for k in _POOL_ENV:
-        os.environ[k] = "1"
-
-
-def _one_pool_thread() -> str:
-    """Limit the BLAS / OpenMP thread pools of this process (the servo process) to one
-    thread; returns what was done (for the servo's summary).
-
-    Why: a BLAS call the servo makes every tick (the simulated arm's exact step calls
-    ``scipy.linalg.expm`` for each measured period) hands work to the pool's worker
-    thread, which then busy-waits for the next job, and with one job per millisecond it
-    never goes to sleep: it kept a whole CPU busy (measured with ``perf``:
-    ``blas_thread_server``), so on a 2-CPU machine with a busy application thread the
-    servo thread itself waited for a CPU for milliseconds. The environment variables
-    cover libraries loaded from now on; libraries already loaded (the spawn start method
-    imports the application's main module, and with it numpy, before the servo runs)
-    get their ``*_set_num_threads(1)``. Only libraries already in the process are
-    touched (``RTLD_NOLOAD``): no native code is loaded by this."""
-    _pool_env_one_thread()
-    if not sys.platform.startswith("linux"):
-        return f"environment only ({', '.join(_POOL_ENV)} = 1; loaded libraries not inspected on {sys.platform})"
-    import ctypes
-    try:
-        with open("/proc/self/maps", encoding="utf-8", errors="replace") as fh:
-            paths = sorted({ln.split(None, 5)[5].strip() for ln in fh if len(ln.split(None, 5)) == 6})
-    except OSError as exc:
-        return f"environment only (/proc/self/maps: {exc})"
-    done = []
-    for p in paths:
-        base = os.path.basename(p)
-        low = base.lower()
-        if ".so" not in low or not any(k in low for k in ("blas", "mkl", "blis", "omp", "lapack")):
-            continue
-        try:
-            lib = ctypes.CDLL(p, mode=os.RTLD_NOLOAD | os.RTLD_LOCAL)
-        except OSError:
-            continue
-        for sym in _POOL_SETTERS:
-            fn = getattr(lib, sym, None)
-            if fn is None:
-                continue
-            try:
-                fn.argtypes = [ctypes.c_int]
-                fn.restype = None
-                fn(1)
-                done.append(f"{base}: {sym}(1)")
-            except Exception as exc:  # noqa: BLE001 - reported, never fatal
-                done.append(f"{base}: {sym} failed: {exc}")
-            break
-    return "; ".join(done) if done else "no thread pool loaded (environment set for later ones)"
 
 
 #: a command's build waits at most this many ticks for a slack long enough for it
