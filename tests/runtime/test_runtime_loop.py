@@ -123,6 +123,9 @@ def test_bad_renderer_outputs_never_raise():
     n = np.arange(1, rep.ticks + 1) % 5
     assert ev["renderer_error"] == np.sum(n == 0)
     assert ev["nonfinite_command"] == np.sum(n == 1) + np.sum(n == 4)
+    # a vibration command with a non-finite frequency or amplitude is silence, not the
+    # last amplitude and not full scale
+    assert (rep.log["vib.amplitude"][n == 4] == 0.0).all() and (rep.log["vib.amplitude"][n == 3] > 0.0).all()
     assert ev["negative_force"] == np.sum(n == 2)
     assert ev["clamp"] >= 100  # frequency clamped by the safety layer
     assert (rep.log["force_n"] >= 0).all()
@@ -227,6 +230,26 @@ def test_realtime_on_the_machine_clock_paces():
     assert np.all(t >= k * T - 1e-9), (t - k * T).min()
     assert rep.jitter is not None and rep.jitter["periods"] == rep.ticks - 1
     assert {"p50_us", "p99_us", "p999_us", "max_us", "missed_tick_rate"} <= set(rep.jitter)
+
+
+@pytest.mark.parametrize("seconds", [0, 0.0, -1.0, math.nan, math.inf, -math.inf, "1", None])
+def test_a_run_length_that_is_not_a_positive_number_is_refused(seconds):
+    """start(seconds) / run(seconds): a length that is not a finite number > 0 is a named
+    ValidationError before any device opens (None is start()'s "until finish()", which
+    run() does not take)."""
+    probe = VirtualProbe()
+    loop = ServoLoop(probe, [Spring(1.0)])
+    if seconds is None:
+        loop.start(None)   # the open-ended run is start()'s alone
+        assert loop.tick()
+        loop.finish()
+        return
+    with pytest.raises(ValidationError) as ei:
+        loop.start(seconds)
+    assert ei.value.field == "seconds"
+    with pytest.raises(ValidationError):
+        loop.run(seconds)
+    assert not loop._running
 
 
 def test_loop_validates_its_setup():

@@ -56,6 +56,34 @@ def test_hit_tester_single_plane_reproduces_the_version_1_loop():
     assert all(i.object == "plane" and i.normal == (0.0, 1.0, 0.0) for i in r2.inputs)
 
 
+def test_the_stiff_wall_controller_of_a_spatial_object_reads_its_penetration():
+    """In a spatial scene the stiff-wall controller of the object in contact reads the
+    position along that object's normal, -penetration, on every contact tick, the first
+    object (index 0) included; out of contact with every object it holds the last one
+    (a jump of the nearest object's distance is no motion)."""
+    box = Box((30.0, 20.0, 30.0), pose=Pose((0.0, -20.0, 0.0)))   # top face at y = 0
+    ball = Sphere(5.0, pose=Pose((60.0, 0.0, 0.0)))
+    loop = ServoLoop(VirtualProbe(trajectory=press_slide()), (), objects=[("box", [Spring(1.0)]), ("ball", [Spring(1.0)])],
+                     hit_tester=HitTester([("box", box), ("ball", ball)]))
+    loop.start(2.0)
+    pc = [s.pc for s in loop._slots if s.is_force][0]
+    assert pc is not None
+    contact = held = 0
+    last = None
+    balls = 0
+    while loop.tick():
+        if loop.last_index >= 0:   # the nearest object (either), its distance along its normal
+            assert pc._q1 == -loop.last_penetration_mm
+            contact += loop.last_index == 0 and loop.last_penetration_mm > 0.0
+            balls += loop.last_index == 1 and loop.last_penetration_mm > 0.0
+            last = pc._q1
+        elif last is not None:
+            assert pc._q1 == last   # held outside
+            held += 1
+    loop.finish()
+    assert contact > 500 and balls > 10 and held > 10
+
+
 def test_log_is_a_bounded_ring():
     """A very long run does not preallocate its whole log (issue 13 item 8): the window
     holds at most log_seconds of ticks, and the newest ones."""
