@@ -280,3 +280,55 @@ def test_atomic_savez_refuses_an_array_of_objects(tmp_path):
     with pytest.raises(FileWriteError, match="'tags'"):
         atomic_savez(tmp_path / "a.npz", x=np.zeros(3), tags=np.array([{"k": 1}, None], dtype=object))
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX permission bits")
+@pytest.mark.parametrize("old_mode", [0o600, 0o640, 0o664, 0o755])
+def test_a_replaced_file_keeps_its_permissions_and_a_new_one_follows_the_umask(tmp_path, old_mode):
+    """mkstemp makes its file 0600; the replacement gets the permission bits of the file
+    it replaces (a user's 0640 stays readable by the group, a private 0600 stays
+    private), and a new file 0644 less the process's umask, as open() would make it."""
+    from hapticsdk.fileio import atomic_write_bytes
+    old = tmp_path / "kept.bin"
+    old.write_bytes(b"old")
+    os.chmod(old, old_mode)
+    atomic_write_bytes(old, b"new")
+    assert old.read_bytes() == b"new" and (os.stat(old).st_mode & 0o777) == old_mode
+    mask = os.umask(0o027)
+    try:
+        new = tmp_path / "fresh.bin"
+        atomic_write_bytes(new, b"x")
+        assert (os.stat(new).st_mode & 0o777) == 0o644 & ~0o027
+    finally:
+        os.umask(mask)
+
+
+def test_the_output_check_names_a_directory_and_a_dangling_link(tmp_path):
+    """check_output_path: a directory is refused by name; with overwrite=False a symbolic
+    link whose target does not exist is refused too (writing would create the target
+    through it), and atomic_writer refuses a directory before creating a temporary file."""
+    from hapticsdk.fileio import atomic_write_bytes, check_output_path
+    d = tmp_path / "adir"
+    d.mkdir()
+    with pytest.raises(FileWriteError, match="is a directory"):
+        check_output_path(d)
+    with pytest.raises(FileWriteError, match="is a directory"):
+        atomic_write_bytes(d, b"x")
+    assert sorted(os.listdir(tmp_path)) == ["adir"]
+    link = tmp_path / "link.json"
+    link.symlink_to(tmp_path / "nowhere.json")
+    with pytest.raises(FileWriteError, match="exists already"):
+        check_output_path(link, overwrite=False)
+    assert check_output_path(link) == link   # overwriting is allowed: the link is replaced
+
+
+def test_a_refused_json_or_npz_names_the_path_when_no_field_is_given(tmp_path):
+    from hapticsdk.fileio import atomic_savez, atomic_write_json
+    p = tmp_path / "doc.json"
+    with pytest.raises(FileWriteError) as ei:
+        atomic_write_json(p, {"x": float("nan")})
+    assert ei.value.field == str(p) and not p.exists()
+    q = tmp_path / "a.npz"
+    with pytest.raises(FileWriteError) as ei:
+        atomic_savez(q, a=np.array([object()], dtype=object))
+    assert ei.value.field == str(q) and not q.exists()

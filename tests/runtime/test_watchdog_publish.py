@@ -51,3 +51,39 @@ def test_stats_answers_while_the_lock_is_stuck():
     finally:
         release.set()
         th.join(10.0)
+
+
+def test_a_failing_safe_state_write_is_retried_on_the_doubling_schedule_then_trips_once():
+    """The n-th retry of a failing write comes min(RETRY_MAX_S, deadline x 2^(n-1)) after
+    the failure before it (module docs): with a 0.3 s deadline, 0.3 s, then 0.6 s. A thread
+    is never early, so each gap is at least its delay; the first is also below the next
+    step of the schedule (0.6 s: 300 ms of slack for a busy machine's scheduler, where a
+    retry one deadline late would come at 0.9 s). The third write succeeds: one trip, two
+    failures counted, and the watchdog is quiet until fed again."""
+    from hapticsdk.runtime.watchdog import RETRY_MAX_S
+    calls: list[float] = []
+    done = threading.Event()
+
+    def on_expire():
+        calls.append(time.monotonic())
+        if len(calls) < 3:
+            raise OSError("link down")
+        done.set()
+
+    deadline = 0.3
+    assert RETRY_MAX_S >= 2 * deadline   # the schedule below is not capped
+    wd = CommandWatchdog(on_expire, deadline_s=deadline, lock=threading.RLock(), name="watchdog retry-test")
+    t0 = time.monotonic()
+    wd.start()
+    try:
+        assert done.wait(20.0), f"the write was tried {len(calls)} times"
+        time.sleep(0.05)
+        st = wd.stats()
+    finally:
+        wd.stop()
+    first, g1, g2 = calls[0] - t0, calls[1] - calls[0], calls[2] - calls[1]
+    assert first >= deadline
+    assert deadline <= g1 < 2 * deadline, (g1, g2)
+    assert g2 >= 2 * deadline, (g1, g2)
+    assert st["trips"] == 1 and st["failures"] == 2 and st["last_error"] == "OSError: link down"
+    assert not wd.armed and len(calls) == 3
