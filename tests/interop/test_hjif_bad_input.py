@@ -185,3 +185,73 @@ def spy_create(monkeypatch):
     real = acts.create_actuator
     monkeypatch.setattr(acts, "create_actuator", lambda name, **kw: made.append(name) or real(name, **kw))
     return made
+
+
+KF1 = B1 + ["effects", 0, "keyframes", 1]
+E0 = B0 + ["effects", 0]
+U32, I31 = 2 ** 32 - 1, 2 ** 31 - 1
+# (where, the last value accepted, the first refused), at both ends of each ranged field
+RANGES = [
+    (["level"], 0, -1), (["level"], 255, 256),
+    (["timescale"], 1, 0),
+    (C0 + ["body_part_mask"], 0, -1), (C0 + ["body_part_mask"], U32, U32 + 1),
+    (C0 + ["mixing_coefficient"], 0.0, -1e-9),
+    (B1 + ["lower_frequency_limit"], 0, -1), (B0 + ["upper_frequency_limit"], 65535, 65536),
+    (E0 + ["position"], 0, -1), (E0 + ["position"], I31, I31 + 1),
+    (KF1 + ["relative_position"], 0, -1),
+    # keyframe 2 may share keyframe 1's position (100); one before it is rewritten as the
+    # reference decoders read it (test_hjif_versions.py), so the refusal here is the range's
+    (B1 + ["effects", 0, "keyframes", 2, "relative_position"], 100, -1),
+    (B1 + ["effects", 0, "keyframes", 2, "relative_position"], I31, I31 + 1),
+    (KF1 + ["amplitude_modulation"], -1.0, -1.0000001), (KF1 + ["amplitude_modulation"], 1.0, 1.0000001),
+    (B1 + ["effects", 0, "keyframes", 0, "frequency_modulation"], 0.0, -1e-9),
+    (B1 + ["effects", 0, "keyframes", 0, "frequency_modulation"], 65535.0, 65535.5),
+    (E0 + ["phase"], 2 * 3.141592653589793, 7.0), (E0 + ["phase"], -2 * 3.141592653589793, -7.0),
+    (P0 + ["effect_library", 0, "id"], 0, -1),
+    (["syncs"], [{"timestamp": 0, "timescale": 1}], [{"timestamp": -1}]),
+]
+
+
+def _field_of(where):
+    out = ""
+    for k in where:
+        out += f"[{k}]" if isinstance(k, int) else (f".{k}" if out else k)
+    return out
+
+
+@pytest.mark.parametrize("where,ok,bad", RANGES, ids=[f"{_field_of(w)}={b}" for w, _, b in RANGES])
+def test_a_ranged_field_is_read_at_its_ends_and_refused_one_step_beyond(where, ok, bad):
+    """Each ranged field of the format at both ends: the end itself parses (and reads back
+    as given), one step beyond is a FormatError naming that field."""
+    if where[-1] == "id" and "effect_library" in where:
+        # the library effect's id and the reference to it move together
+        def both(v):
+            return lambda d: (_set(where, v)(d), _set(B0 + ["effects", 1, "id"], v)(d))
+        good, wrong = both(ok), both(bad)
+    else:
+        good, wrong = _set(where, ok), _set(where, bad)
+    h = parse_hjif(mutated(good))
+    assert h is not None
+    with pytest.raises(FormatError) as ei:
+        parse_hjif(mutated(wrong))
+    assert ei.value.field.startswith(_field_of(where)) or _field_of(where).startswith(ei.value.field), \
+        (ei.value.field, str(ei.value))
+
+
+@pytest.mark.parametrize("key,ok,bad,field", [
+    ("direction", {"X": 127, "Y": -128, "Z": 0}, {"X": 128, "Y": 0, "Z": 0}, "direction.X"),
+    ("direction", {"X": 0, "Y": -128, "Z": 0}, {"X": 0, "Y": -129, "Z": 0}, "direction.Y"),
+    ("actuator_resolution", {"X": 1, "Y": 1, "Z": 127}, {"X": 1, "Y": 1, "Z": 200}, "actuator_resolution.Z"),
+    ("actuator_target", [{"X": 0, "Y": 0, "Z": 0}], [{"X": 0, "Y": 0, "Z": 0}, {"X": 300, "Y": 0, "Z": 0}],
+     "actuator_target[1].X"),
+    ("body_part_target", ["Palm", "Index"], ["Palm", 3], "body_part_target[1]"),
+    ("vertices", [0, 5, 9], [0, "5"], "vertices[1]"),
+])
+def test_a_channels_optional_geometry_is_checked_and_kept(key, ok, bad, field):
+    """The channel's optional placement fields (vectors of -128..127 per axis, lists of
+    body parts or vertex indices) are checked and kept as given in ``extra``."""
+    h = parse_hjif(mutated(_set(C0 + [key], ok)))
+    assert h.perceptions[0].channels[0].extra[key] == ok
+    with pytest.raises(FormatError) as ei:
+        parse_hjif(mutated(_set(C0 + [key], bad)))
+    assert ei.value.field == f"{CH0}.{field}", str(ei.value)
