@@ -145,14 +145,15 @@ def _matmul(a: Matrix3, b: Matrix3) -> Matrix3:
 def _rotation_to(n: Sequence[float]) -> Matrix3:
     """The smallest rotation taking +y to the unit vector ``n``."""
     nx, ny, nz = n
-    if ny > 1.0 - 1e-12:
-        return _IDENTITY
-    if ny < -1.0 + 1e-12:  # half turn about x
-        return ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))
-    # axis = y x n = (nz, 0, -nx), angle = acos(ny): Rodrigues
-    ax, az = nz, -nx
-    s = math.sqrt(ax * ax + az * az)
-    ax, az = ax / s, az / s
+    # axis = y x n = (nz, 0, -nx), sin(angle) = its length, cos(angle) = ny: Rodrigues.
+    # Only a normal exactly along y has no axis; any other, however close to y, is
+    # rotated to exactly (a threshold on ny snapped normals within 1.4e-6 rad of y to it)
+    s = math.hypot(nz, nx)
+    if s == 0.0:
+        if ny > 0.0:
+            return _IDENTITY
+        return ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))   # half turn about x
+    ax, az = nz / s, -nx / s
     c, si = ny, s
     t = 1.0 - c
     return ((c + ax * ax * t, -az * si, ax * az * t),
