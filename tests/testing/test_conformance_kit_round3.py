@@ -858,3 +858,24 @@ def test_every_rule_has_a_broken_variant():
     missing = [(k, r) for k, rules in RULES.items() for r in rules
                if (k, r) not in here and (k, r) not in COVERED_ELSEWHERE]
     assert not missing, missing
+
+
+@pytest.mark.parametrize("times, caught", [(9.0, False), (11.0, True)])
+def test_force_plausibility_is_caught_just_above_its_factor_and_not_below(installed, times, caught):
+    """The rule's edge: a force up to FORCE_PLAUSIBILITY_FACTOR (10) x the actuator's
+    declared limit within 3 mm is a stiff material (the safety layer clamps it); above is
+    a unit or formula error. 9 x passes this rule and 11 x is caught, so the factor is
+    the documented decade, not any multiple."""
+    from hapticsdk.testing.conformance import FORCE_PLAUSIBILITY_FACTOR
+    assert 9.0 < FORCE_PLAUSIBILITY_FACTOR < 11.0
+    Npl = type("NPlate", (Plate,), {"name": "kit-plate-n", "limits": ActuatorLimits(
+        max_amplitude=0.45, amplitude_unit="N", settle_time_s=Plate.limits.settle_time_s)})
+    registry("actuator").register("kit-plate-n", Npl)
+    try:
+        base = {"default_actuators": {"adhesion": "kit-plate-n"},
+                "roles": {"adhesion": RoleSpec("friction", {"amplitude": "newton"})}}
+        peak = times * 0.45
+        d = _dim(**base, renderer_kw={"make": lambda inp, x: [ChannelCommand("adhesion", amplitude=peak * (0.5 + x))]})   # peak at the middle feature (x = 0.5), where the rule samples
+        assert ("renderer-commands" in rules_of(check_dimension(d))) is caught
+    finally:
+        registry("actuator").unregister("kit-plate-n")
