@@ -6,6 +6,8 @@ rule; the correct variants conform (no false positive)."""
 
 from __future__ import annotations
 
+import contextlib
+
 import sys
 import types
 from typing import Any, ClassVar
@@ -650,20 +652,27 @@ def test_500_newtons_on_a_role_not_named_force_is_caught(installed):
     assert check_dimension(_dim(**_force_role(2.0))) == []
 
 
-def test_a_force_in_newtons_on_an_amplitude_field_is_checked_too(installed):
-    """A plate whose amplitude is a force (unit "newton") gets the plausibility rule."""
+@contextlib.contextmanager
+def _newton_plate():
+    """A plate whose amplitude is a force of at most 0.45 N, installed as "kit-plate-n";
+    yields the dimension attributes that send role "adhesion" to it in newtons."""
     Npl = type("NPlate", (Plate,), {"name": "kit-plate-n", "limits": ActuatorLimits(
         max_amplitude=0.45, amplitude_unit="N", settle_time_s=Plate.limits.settle_time_s)})
     registry("actuator").register("kit-plate-n", Npl)
     try:
-        base = {"default_actuators": {"adhesion": "kit-plate-n"},
-                "roles": {"adhesion": RoleSpec("friction", {"amplitude": "newton"})}}
+        yield {"default_actuators": {"adhesion": "kit-plate-n"},
+               "roles": {"adhesion": RoleSpec("friction", {"amplitude": "newton"})}}
+    finally:
+        registry("actuator").unregister("kit-plate-n")
+
+
+def test_a_force_in_newtons_on_an_amplitude_field_is_checked_too(installed):
+    """A plate whose amplitude is a force (unit "newton") gets the plausibility rule."""
+    with _newton_plate() as base:
         big = _dim(**base, renderer_kw={"make": lambda inp: [ChannelCommand("adhesion", amplitude=40.0)]})
         ok = _dim(**base, renderer_kw={"make": lambda inp, x: [ChannelCommand("adhesion", amplitude=0.4 * (0.5 + x))]})
         assert "renderer-commands" in rules_of(check_dimension(big))
         assert check_dimension(ok) == []
-    finally:
-        registry("actuator").unregister("kit-plate-n")
 
 
 def test_a_feature_unit_clash_with_an_installed_dimension_is_caught(installed):
@@ -868,14 +877,7 @@ def test_force_plausibility_is_caught_just_above_its_factor_and_not_below(instal
     the documented decade, not any multiple."""
     from hapticsdk.testing.conformance import FORCE_PLAUSIBILITY_FACTOR
     assert 9.0 < FORCE_PLAUSIBILITY_FACTOR < 11.0
-    Npl = type("NPlate", (Plate,), {"name": "kit-plate-n", "limits": ActuatorLimits(
-        max_amplitude=0.45, amplitude_unit="N", settle_time_s=Plate.limits.settle_time_s)})
-    registry("actuator").register("kit-plate-n", Npl)
-    try:
-        base = {"default_actuators": {"adhesion": "kit-plate-n"},
-                "roles": {"adhesion": RoleSpec("friction", {"amplitude": "newton"})}}
+    with _newton_plate() as base:
         peak = times * 0.45
         d = _dim(**base, renderer_kw={"make": lambda inp, x: [ChannelCommand("adhesion", amplitude=peak * (0.5 + x))]})   # peak at the middle feature (x = 0.5), where the rule samples
         assert ("renderer-commands" in rules_of(check_dimension(d))) is caught
-    finally:
-        registry("actuator").unregister("kit-plate-n")
