@@ -7,7 +7,6 @@ rule; the correct variants conform (no false positive)."""
 from __future__ import annotations
 
 import contextlib
-
 import sys
 import types
 from typing import Any, ClassVar
