@@ -31,7 +31,10 @@ def test_a_pool_variable_the_user_set_leaves_all_of_them_alone(name):
     assert env == {name: "4"}
 
 
-def _run_capturing_environment(monkeypatch):
+def _run_capturing_environment(monkeypatch, env):
+    """cli.run() with ``env`` as the process environment (a copy: what run() sets must not
+    reach the other tests' subprocesses)."""
+    monkeypatch.setattr(os, "environ", env)
     seen: dict[str, str | None] = {}
 
     def fake_main(argv=None):
@@ -45,18 +48,25 @@ def _run_capturing_environment(monkeypatch):
     return seen
 
 
+def _environment_without_pools() -> dict[str, str]:
+    return {k: v for k, v in os.environ.items() if k not in POOL_ENV}
+
+
 def test_the_command_sets_the_pools_before_it_runs(monkeypatch):
-    for k in POOL_ENV:
-        monkeypatch.delenv(k, raising=False)
-    assert _run_capturing_environment(monkeypatch) == {k: "1" for k in POOL_ENV}
+    assert _run_capturing_environment(monkeypatch, _environment_without_pools()) == {k: "1" for k in POOL_ENV}
 
 
 def test_the_command_keeps_a_users_pool_size(monkeypatch):
-    for k in POOL_ENV:
-        monkeypatch.delenv(k, raising=False)
-    monkeypatch.setenv("OMP_NUM_THREADS", "3")
-    seen = _run_capturing_environment(monkeypatch)
+    env = {**_environment_without_pools(), "OMP_NUM_THREADS": "3"}
+    seen = _run_capturing_environment(monkeypatch, env)
     assert seen == {k: ("3" if k == "OMP_NUM_THREADS" else None) for k in POOL_ENV}
+
+
+def test_running_the_command_in_a_test_leaves_this_process_environment_alone(monkeypatch):
+    before = {k: os.environ.get(k) for k in POOL_ENV}
+    _run_capturing_environment(monkeypatch, _environment_without_pools())
+    monkeypatch.undo()
+    assert {k: os.environ.get(k) for k in POOL_ENV} == before
 
 
 # the command as a user runs it; at exit (after the command has loaded numpy and solved)
@@ -71,8 +81,7 @@ run()
 
 
 def _threads(extra_env: dict[str, str]) -> int:
-    env = {k: v for k, v in os.environ.items() if k not in POOL_ENV}
-    env.update(extra_env)
+    env = {**_environment_without_pools(), **extra_env}
     out = subprocess.run([sys.executable, "-c", _PROBE], capture_output=True, text=True, env=env, timeout=300,
                          check=False)
     assert out.returncode == 0, out.stderr[-2000:]
