@@ -153,7 +153,12 @@ def _rotation_to(n: Sequence[float]) -> Matrix3:
         if ny > 0.0:
             return _IDENTITY
         return ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))   # half turn about x
-    ax, az = nz / s, -nx / s
+    # the axis's direction scaled by its larger component first: (nz, -nx) / s loses the
+    # direction when both are subnormal (5e-324 / 7e-324 rounds to 1)
+    m = max(abs(nx), abs(nz))
+    ax, az = nz / m, -nx / m
+    k = math.hypot(ax, az)
+    ax, az = ax / k, az / k
     c, si = ny, s
     t = 1.0 - c
     return ((c + ax * ax * t, -az * si, ax * az * t),

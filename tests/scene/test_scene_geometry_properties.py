@@ -121,6 +121,8 @@ def test_a_plane_patch_is_a_slab_of_its_thickness_below_its_face(pose, hx, hz, t
 @example(1e-9, -0.5, 0.0)    # and near -y to -y
 @example(0.0, 1.0, 0.0)
 @example(0.0, -1.0, 0.0)
+@example(5e-324, -1.0, 5e-324)   # found by hypothesis: a subnormal axis lost its direction
+@example(5e-324, 1.0, 0.0)
 def test_a_plane_patch_faces_the_normal_it_was_given(nx, ny, nz):
     n = np.array([nx, ny, nz])
     if np.linalg.norm(n) < 0.1:
@@ -160,7 +162,10 @@ def test_the_surface_height_of_a_sphere_is_on_its_upper_half(px, py, pz, r, fx, 
     s = Sphere(r, pose=Pose((px, py, pz)))
     x, z = px + fx * r, pz + fz * r
     y = s.surface_y(x, z)
-    if fx * fx + fz * fz > 1.0:
+    r2 = fx * fx + fz * fz
+    if abs(r2 - 1.0) < 1e-9:
+        return   # on the rim: rounding of x - px decides, either answer is right
+    if r2 > 1.0:
         assert y is None
         return
     assert y is not None and y >= py
