@@ -148,18 +148,17 @@ def _rotation_to(n: Sequence[float]) -> Matrix3:
     # axis = y x n = (nz, 0, -nx), sin(angle) = its length, cos(angle) = ny: Rodrigues.
     # Only a normal exactly along y has no axis; any other, however close to y, is
     # rotated to exactly (a threshold on ny snapped normals within 1.4e-6 rad of y to it)
-    s = math.hypot(nz, nx)
-    if s == 0.0:
+    m = max(abs(nx), abs(nz))
+    if m == 0.0:
         if ny > 0.0:
             return _IDENTITY
         return ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 0.0, -1.0))   # half turn about x
-    # the axis's direction scaled by its larger component first: (nz, -nx) / s loses the
-    # direction when both are subnormal (5e-324 / 7e-324 rounds to 1)
-    m = max(abs(nx), abs(nz))
+    # the axis scaled by its larger component before it is normalised: (nz, -nx) divided
+    # by its subnormal length loses its direction (5e-324 / 7e-324 rounds to 1)
     ax, az = nz / m, -nx / m
     k = math.hypot(ax, az)
     ax, az = ax / k, az / k
-    c, si = ny, s
+    c, si = ny, m * k
     t = 1.0 - c
     return ((c + ax * ax * t, -az * si, ax * az * t),
             (az * si, c, -ax * si),

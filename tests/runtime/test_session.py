@@ -296,9 +296,9 @@ _POOL_PROBE = r"""
 import os, sys, threading, time
 import numpy as np
 import scipy.linalg as sl
-from hapticsdk.runtime.session.servo import _one_pool_thread
+from hapticsdk.threadpools import one_thread
 if sys.argv[1] == "limit":
-    print(_one_pool_thread(), file=sys.stderr)
+    print(one_thread(), file=sys.stderr)
 def cpu():
     out = {}
     for t in os.listdir("/proc/self/task"):
@@ -324,7 +324,7 @@ def test_one_pool_thread_stops_a_spinning_blas_worker(mode):
     """What the servo process does to its BLAS pools: scipy's OpenBLAS, fed one small
     matrix exponential per millisecond, keeps a worker thread busy-waiting between the
     calls (it used about as much CPU as the calling thread, or more); after
-    _one_pool_thread() the calls run in the calling thread and the helpers stay idle.
+    hapticsdk.threadpools.one_thread() the calls run in the calling thread and the helpers stay idle.
     ``as-is`` checks that this machine shows the hazard at all (else the test could
     not fail); both runs take 1 s."""
     out = subprocess.run([sys.executable, "-c", _POOL_PROBE, mode], capture_output=True, text=True, timeout=120,

@@ -26,8 +26,7 @@ from .protocol import (
 )
 from .pipe import _CommandReader
 from .shipping import _load_renderers
-from ...threadpools import one_thread as _one_pool_thread
-from ...threadpools import one_thread_environment as _pool_env_one_thread
+from ...threadpools import one_thread, one_thread_environment
 
 _log = logging.getLogger(__name__)
 
@@ -669,7 +668,7 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
         # the servo process runs one Python thread of its own; a plugin's thread (a
         # transport reader) hands the interpreter lock back within 50 us
         sys.setswitchinterval(5e-5)
-        _pool_env_one_thread()  # pools loaded while building: one thread from the start
+        one_thread_environment()  # pools loaded while building: one thread from the start
     servo = _Servo(spec, mv, cmd_conn, thread_mode)
     if holder is not None:
         holder.append(servo)  # thread isolation: the application may inspect its servo
@@ -680,7 +679,7 @@ def _servo_main(spec: dict[str, Any], cmd_conn: Any, shm_name: str | None, done_
             try:
                 servo.build()
                 if not thread_mode:
-                    servo.pools = _one_pool_thread()  # after build(): scipy.linalg is loaded by now
+                    servo.pools = one_thread()  # after build(): scipy.linalg is loaded by now
                 servo.loop.start(None)
                 servo.start_recording()
                 servo.run()
