@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ValidationError
 from .plan import _HIST, _SCALES, affordable_force
 from .settings import ControllerSettings
 
@@ -46,11 +47,20 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     per cell and override ``settings``; ``trusted_damping_ns_per_m`` (per cell or one
     number) is the damping credited in place of the settings' (a measured lower bound,
     :meth:`ControllerSettings.trusted_damping_ns_per_m`). Cells where ``on`` is False pass
-    the wall force through. Call :func:`controller_commit_batch` after."""
+    the wall force through. Call :func:`controller_commit_batch` after. A period that is not
+    > 0 (or NaN) in any cell raises :class:`~hapticsdk.errors.ValidationError` (field
+    ``dt``), a reading that is not finite likewise (field ``x_mm``)."""
     s = settings or ControllerSettings()
     x = np.asarray(x_mm, float)
     fw = np.nan_to_num(np.asarray(f_wall, float), nan=0.0, posinf=0.0, neginf=0.0)
     dt = np.broadcast_to(np.asarray(dt, float), x.shape)
+    if not (dt > 0.0).all():
+        # a period of 0 divides the damping credit by 0 (an infinite credit) and NaN
+        # poisons the state; the servo's scalar controller sends 0 N on such a tick
+        raise ValidationError(f"the period must be > 0 s in every cell, got {dt[~(dt > 0.0)][0]!r}", field="dt")
+    if not np.isfinite(x).all():
+        raise ValidationError(f"the readings must be finite numbers (mm), got {x[~np.isfinite(x)][0]!r}",
+                              field="x_mm")
     bd = np.asarray(s.device_damping_ns_per_m if damping_ns_per_m is None else damping_ns_per_m, float)
     q = np.asarray(s.position_resolution_mm if resolution_mm is None else resolution_mm, float) * 1e-3
     fm = s.max_force_n if max_force_n is None else max_force_n

@@ -9,6 +9,8 @@ from typing import Any
 from .plan import _HIST, _affordable_scalar
 from .settings import ControllerSettings
 
+_INF = math.inf
+
 
 class _WindowMax:
     """The values of the reading ring's last ``_HIST`` ticks and their largest, kept as the
@@ -81,6 +83,11 @@ class PassivityController:
     tick, charged to the same bound, and once the bound is spent only the spring is
     left (the force never drops below it while the stylus is inside). With no wall force
     and no output, credit is dropped (``U <- max(U, 0)``); a debt is kept.
+
+    **A tick without a period or a reading** (``dt`` 0, negative or NaN: a clock that
+    stalled; a position that is NaN or infinite) books nothing and returns 0 N, the safe
+    output: the ramp step and the damping credit need a period, the book a position. The
+    next tick with both books the whole span since the last reading.
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
@@ -116,7 +123,9 @@ class PassivityController:
         s = self.settings
         if f_wall != f_wall or f_wall in (math.inf, -math.inf):
             f_wall = 0.0
-        if not self._started or not dt > 0:
+        if not self._started or not dt > 0 or not -_INF < x_mm < _INF:
+            if not -_INF < x_mm < _INF:
+                return 0.0           # a reading that is not a number: nothing to book, no force
             if not self._started:
                 self._q1 = self._q2 = x_mm
                 self._hist = [x_mm] * _HIST

@@ -1,0 +1,244 @@
+"""The passivity controller's book ``U`` against hand motions that no benchmark draws
+(issue 23, item 1: "for *any* motion of the hand").
+
+No plant here: hypothesis chooses the true position of the stylus on every tick (dwells,
+steps of a fraction of a count, jumps of millimetres, reversals) and the reading's error
+within half a count, and the test computes the energy the device hands the user from
+those true positions alone, with this file's own sums:
+
+* the motor's work ``sum_k F_k (y_(k+1) - y_k)`` of the forces actually held (the
+  zero-order hold: the force applied at tick k acts over the interval to tick k+1);
+* less the least a viscous damper ``b`` takes over an interval of length T whatever the
+  motion within it, ``b (y_(k+1) - y_k)^2 / T`` (Cauchy-Schwarz: the constant speed is the
+  cheapest way to cover the interval's displacement).
+
+Properties (docs/runtime.md, Passivity, items 0 and 1; "What 'by construction' covers"):
+
+* **No damping, any encoder**: the Colgate spring is 0 (``2 b / T`` with b = 0), so the
+  whole force is the energy-bounded extra, and its true energy is at most
+  ``U + (Delta/2) |X|`` on every tick, ``X`` the extra held over the last interval
+  (summation by parts: the reading's error is at most ``Delta/2``). For any motion and
+  any force the safety layer lets through.
+* **Damping, exact readings**: with the damping as declared (the true one equal to the
+  declaration) or as measured (the true one at least the measurement's lower bound and
+  equal to the fit), the spring and the extra share the damper, and the whole energy is
+  at most ``U`` on every tick (the spring's own encoder term of item 0 is 0 here: exact
+  readings).
+
+The tolerance is float rounding of these sums: 1e-9 of the largest term summed, plus
+1e-15 J.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+hyp = pytest.importorskip("hypothesis", reason="hypothesis (the test extra) is not installed")
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+from hapticsdk.passivity import (ControllerSettings, PassivityController, controller_commit_batch,  # noqa: E402
+                                 controller_state_batch, controller_step_batch)
+
+
+def _lu(lo: float, hi: float) -> st.SearchStrategy[float]:
+    return st.floats(math.log(lo), math.log(hi)).map(math.exp)
+
+
+#: one tick's motion (mm): still, within a count, a few counts, or a jump of millimetres,
+#: either way (the count is drawn with the case; these are multiples of it or absolute)
+_MOVES = st.one_of(st.just(0.0), st.floats(-1.0, 1.0), st.floats(-6.0, 6.0), st.floats(-2000.0, 2000.0))
+
+
+@st.composite
+def _motion(draw: st.DrawFn, exact: bool) -> dict:
+    res = 0.0 if exact else draw(_lu(0.001, 0.2))
+    n = draw(st.integers(20, 160))
+    # with exact readings the spring is in play: the stylus starts outside the wall, where
+    # the spring holds no energy (started inside, it would rightly hand back what it holds)
+    start = draw(st.floats(0.0, 2.0) if exact else st.floats(-3.0, 2.0))
+    # moves in counts (or in 0.01 mm where the readings are exact), the big ones capped at 10 mm
+    unit = res if res else 0.01
+    steps = [max(-10.0, min(10.0, m * unit)) for m in draw(st.lists(_MOVES, min_size=n, max_size=n))]
+    y = np.concatenate([[start], start + np.cumsum(steps)])
+    # the reading's error, within half a count (its extremes drawn often: the adversary's)
+    e = np.array(draw(st.lists(st.one_of(st.sampled_from((-0.5, 0.5)), st.floats(-0.5, 0.5)),
+                               min_size=n + 1, max_size=n + 1))) * res
+    # the share of the command the safety layer lets through (a clamp never raises it)
+    share = np.array(draw(st.lists(st.one_of(st.just(1.0), st.floats(0.0, 1.0)), min_size=n + 1,
+                                   max_size=n + 1)))
+    return {"res": res, "y": y, "e": e, "share": share,
+            "T": draw(_lu(0.25e-3, 10e-3)), "K": draw(_lu(0.01, 1000.0)),
+            "fmax": draw(st.sampled_from((None, 3.3))) or None, "mass": draw(st.sampled_from((None, 0.02, 0.045, 0.1)))}
+
+
+def _run(case: dict, cs: ControllerSettings, b_true: float, batch: bool) -> list[tuple[float, float, float, float]]:
+    """(true energy, U, the extra held over the last interval, the largest term summed)
+    after each tick's booking, through the servo's scalar controller or the benchmark's
+    vectorised one (one cell)."""
+    if batch:
+        stt = controller_state_batch(1)
+
+        def step(q: float, T: float, fw: float) -> tuple[float, float, float]:
+            f = controller_step_batch(stt, np.array([q]), T, np.array([fw]), True, cs)
+            return float(f[0]), float(stt["energy"][0]), float(stt["f1"][0])
+
+        def commit(f: float) -> None:
+            controller_commit_batch(stt, np.array([f]))
+    else:
+        c = PassivityController(cs)
+
+        def step(q: float, T: float, fw: float) -> tuple[float, float, float]:
+            f = c.step(q, T, fw)
+            return f, c.energy_j, c._f1
+
+        commit = c.commit
+    y, e, share, T, K = case["y"], case["e"], case["share"], case["T"], case["K"]
+    out = []
+    w = 0.0
+    scale = 0.0
+    held = 0.0
+    for k in range(len(y)):
+        if k:
+            dy = (y[k] - y[k - 1]) * 1e-3
+            w += held * dy - b_true * dy * dy / T
+            scale = max(scale, abs(held * dy), b_true * dy * dy / T)
+        q = float(y[k] + e[k])
+        f, u, x_held = step(q, T, K * max(-q, 0.0))
+        out.append((w, u, x_held, scale))
+        held = f * float(share[k])
+        commit(held)
+    return out
+
+
+def _assert_bound(rows: list[tuple[float, float, float, float]], half_count_m: float) -> None:
+    for k, (w, u, x_held, scale) in enumerate(rows):
+        tol = 1e-15 + 1e-9 * scale * (k + 1)
+        assert w <= u + half_count_m * abs(x_held) + tol, (k, w, u, x_held)
+
+
+def _settings(case: dict, **kw) -> ControllerSettings:
+    return ControllerSettings(position_resolution_mm=case["res"], max_force_n=case["fmax"],
+                              device_mass_kg=case["mass"], **kw)
+
+
+@settings(max_examples=120, deadline=None, derandomize=True, database=None)
+@given(_motion(exact=False), st.booleans())
+def test_without_damping_the_book_bounds_the_energy_of_any_motion(case, batch):
+    cs = _settings(case, device_damping_ns_per_m=0.0)
+    rows = _run(case, cs, 0.0, batch)
+    _assert_bound(rows, 0.5 * case["res"] * 1e-3)
+
+
+@settings(max_examples=120, deadline=None, derandomize=True, database=None)
+@given(_motion(exact=True), _lu(0.01, 2.0), st.booleans())
+def test_with_the_declared_damping_true_the_book_bounds_the_whole_energy_of_any_motion(case, b, batch):
+    cs = _settings(case, device_damping_ns_per_m=b)
+    rows = _run(case, cs, b, batch)
+    _assert_bound(rows, 0.0)
+
+
+@settings(max_examples=120, deadline=None, derandomize=True, database=None)
+@given(_motion(exact=True), _lu(0.01, 2.0), st.floats(0.3, 1.0), st.booleans())
+def test_with_a_measured_damping_the_book_bounds_the_whole_energy_of_any_motion(case, fit, share, batch):
+    """The fit is the true damping and the measurement's bound is below it (as the
+    calibration guarantees); the device's damping is the fit."""
+    cs = _settings(case, device_damping_ns_per_m=fit, measured_damping_ns_per_m=share * fit)
+    rows = _run(case, cs, fit, batch)
+    _assert_bound(rows, 0.0)
+
+
+# -- the controller's small rules, each broken once in a mutant that the tests above let by --
+
+def _press_and_release(c: PassivityController, K: float, T: float, depth_mm: float = 1.0,
+                       ticks: int = 60) -> list[float]:
+    """Slowly in to ``depth_mm`` and out again to 1 mm outside (exact readings), each
+    tick's force applied as sent; returns the forces."""
+    xs = np.concatenate([np.linspace(1.0, -depth_mm, ticks), np.linspace(-depth_mm, 1.0, ticks)])
+    out = []
+    for x in xs:
+        f = c.step(float(x), T, K * max(-x, 0.0))
+        c.commit(f)
+        out.append(f)
+    return out
+
+
+def test_credit_is_dropped_between_contacts_and_the_next_press_starts_afresh():
+    """docs/runtime.md, Passivity item 7: with no wall force and no output, credit is
+    dropped (``U <- max(U, 0)``), so a press that ended in credit leaves ``U = 0``, and the
+    same press again is rendered exactly as the first (the credit neither carried nor
+    turned into a debt)."""
+    cs = ControllerSettings(device_damping_ns_per_m=0.0, position_resolution_mm=0.0, max_force_n=3.3,
+                            device_mass_kg=0.045)
+    c = PassivityController(cs)
+    first = _press_and_release(c, K=0.5, T=1e-3)
+    # the hand pressed in against the force and came out slower than it went in: credit
+    assert max(first) > 0.1
+    assert c.energy_j == 0.0
+    for _ in range(5):           # a few free ticks outside
+        c.commit(c.step(1.0, 1e-3, 0.0))
+    assert c.energy_j == 0.0
+    second = _press_and_release(c, K=0.5, T=1e-3)
+    assert second == first
+    # the benchmark's vectorised controller keeps the same rule
+    stt = controller_state_batch(1)
+    xs = np.concatenate([np.linspace(1.0, -1.0, 60), np.linspace(-1.0, 1.0, 60), np.full(5, 1.0)])
+    for x in xs:
+        q = np.array([x])
+        controller_commit_batch(stt, controller_step_batch(stt, q, 1e-3, 0.5 * np.maximum(-q, 0.0), True, cs))
+    assert stt["energy"][0] == 0.0
+
+
+def test_a_tick_without_a_period_or_a_reading_books_nothing_and_sends_no_force():
+    """A tick whose measured period is 0, negative or NaN (a clock that stalled or broke),
+    or whose reading is NaN or infinite, cannot be booked (the damping credit and the ramp step need a period): the servo's
+    controller books nothing and sends 0 N, the safe output, instead of holding a force it
+    cannot account for; the next tick with a period books the whole span since the last
+    reading and the extra ramps up again from 0. The vectorised controller refuses such a
+    period by name (a dt of 0 there gave an infinite credit)."""
+    from hapticsdk.errors import ValidationError
+    cs = ControllerSettings(device_damping_ns_per_m=0.5, position_resolution_mm=0.01, max_force_n=3.3,
+                            device_mass_kg=0.045)
+    c = PassivityController(cs)
+    f = 0.0
+    for x in np.linspace(0.5, -0.5, 40):
+        f = c.step(float(x), 1e-3, 1.0 * max(-x, 0.0))
+        c.commit(f)
+    assert f > 0.1
+    u = c.energy_j
+    for dt in (0.0, -1e-3, float("nan")):
+        assert c.step(-0.6, dt, 0.6) == 0.0
+        assert c.energy_j == u
+    for x in (float("nan"), float("inf"), -float("inf")):    # no reading: likewise
+        assert c.step(x, 1e-3, 0.6) == 0.0
+        assert c.energy_j == u
+    c.commit(0.0)
+    g = c.step(-0.6, 1e-3, 0.6)
+    assert 0.0 < g <= cs.ramp_step_n(1e-3) + 2 * 0.5 / 1e-3 * 0.6e-3 * cs.damping_trust + 1e-12
+    stt = controller_state_batch(2)
+    for dt in (0.0, -1e-3, float("nan"), np.array([1e-3, 0.0])):
+        with pytest.raises(ValidationError) as ei:
+            controller_step_batch(stt, np.array([0.1, 0.1]), dt, np.array([0.0, 0.0]), True, cs)
+        assert ei.value.field == "dt"
+    with pytest.raises(ValidationError) as ei:
+        controller_step_batch(stt, np.array([0.1, float("nan")]), 1e-3, np.array([0.0, 0.0]), True, cs)
+    assert ei.value.field == "x_mm"
+
+
+def test_a_wall_rendered_in_full_reports_no_active_tick():
+    """``active_ticks`` counts the ticks below the wall's force, ``withheld_n_ticks`` their
+    shortfall: a wall under the Colgate spring of the trusted damping (0.2 N/mm against
+    2 x 0.25 / 1 ms = 0.5 N/mm) is the spring alone, sent in full, and reports neither."""
+    cs = ControllerSettings(device_damping_ns_per_m=0.5, position_resolution_mm=0.0, max_force_n=3.3,
+                            device_mass_kg=0.045)
+    c = PassivityController(cs)
+    out = _press_and_release(c, K=0.2, T=1e-3)
+    assert max(out) == pytest.approx(0.2, rel=1e-9)
+    rep = c.report()
+    assert rep["active_ticks"] == 0 and rep["withheld_n_ticks"] == 0.0
+    # a wall above it is withheld somewhere, and that is counted
+    c2 = PassivityController(cs)
+    _press_and_release(c2, K=50.0, T=1e-3)
+    assert c2.report()["active_ticks"] > 0 and c2.report()["withheld_n_ticks"] > 0.0
