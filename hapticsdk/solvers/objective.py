@@ -356,16 +356,15 @@ class SolveProblem:
             err += abs(I[o] - T[j])
         if not self.constraints:
             return err, err, 0.0, I, []
-        cols = self.columns(G)
         form = self.penalty
         pc: list[float] = []
         pen = 0.0
         if self._base_formulas:
+            # the row as plain floats: each constraint's bound and value without numpy
+            # (Constraint.bound_and_value_one; the same numbers as on a one-row batch)
+            row = dict(zip(model.feature_names, G[0].tolist()))
             for c in self.constraints:
-                bnd, val = c.bound_and_value(cols)
-                # the first (only) value, as _first, for the usual (1,) arrays without a call
-                b = float(bnd[0]) if type(bnd) is np.ndarray and bnd.shape == (1,) else _first(bnd)
-                v = float(val[0]) if type(val) is np.ndarray and val.shape == (1,) else _first(val)
+                b, v = c.bound_and_value_one(row)
                 if v < b:     # a NaN row counts as met, as in evaluate
                     nv = (b - v) / (abs(b) or 1.0)
                     pen += nv if form == "normalised" else b * b - v * v
@@ -374,6 +373,7 @@ class SolveProblem:
                 pc.append(nv)
             viol = max(pc)
         else:
+            cols = self.columns(G)
             for c in self.constraints:
                 pen += _first(c.penalty(cols, form))
                 pc.append(_first(c.violation(cols)))

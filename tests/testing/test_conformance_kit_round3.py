@@ -530,6 +530,11 @@ _Vec = constraint("vec", "kit.x", lambda x: (np.full_like(x, 0.2), x), "x >= 0.2
 _RowDependent = constraint("batchy", "kit.x", lambda x: (np.full_like(x, float(x.mean())), x),
                            "Penalty depends on the batch (its mean), so rows and batch disagree.")
 _Never = never()
+# a float path for one row that agrees with the array path, and one that does not (0.3
+# where the array path says 0.2: a one-target solve would judge its answers by the wrong
+# bound)
+_VecOneRow = type("VecOneRow", (_Vec,), {"_bound_and_value_one": lambda self, row: (0.2, row["kit.x"])})
+_WrongOneRow = type("WrongOneRow", (_Vec,), {"_bound_and_value_one": lambda self, row: (0.3, row["kit.x"])})
 
 
 class _R(DimensionRenderer):
@@ -604,6 +609,7 @@ DIMENSION_VARIANTS = [
     ({"cons": (_Loop,)}, "constraints-cost"),
     ({"cons": (_LoopList,)}, "constraints-cost"),
     ({"cons": (_RowDependent,)}, "constraints-vectorised"),
+    ({"cons": (_WrongOneRow,)}, "constraints-one-row"),
     ({"cons": (_Never,)}, "constraints-feasible"),
     ({"roles": {}}, "roles-declared"),
     ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "1"})}}, "roles-declared"),
@@ -631,6 +637,7 @@ DIMENSION_VARIANTS = [
 
 def test_the_correct_dimension_conforms(installed):
     assert check_dimension(StickDim) == []
+    assert check_dimension(_dim(cons=(_VecOneRow,))) == []      # a float path that agrees
     # the same unit spelled out is no clash
     assert check_dimension(_dim(roles={"adhesion": RoleSpec("friction", {"amplitude": "volt"})})) == []
 

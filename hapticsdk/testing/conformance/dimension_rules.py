@@ -1,5 +1,6 @@
 """The rules of the ``dimension`` kind (``RULES['dimension']``): class, features, roles, the
-constraints (vectorised, their cost against a per-row reference, feasible), the model
+constraints (vectorised, their one-row float path against their array path, their cost
+against a per-row reference, feasible), the model
 match, the renderer (its commands, bad input, determinism under moved clocks, timing and
 its growth over a run), and the force a renderer commands against its actuator's limit."""
 
@@ -356,6 +357,33 @@ def _dimension_rules(ctx: _Ctx) -> None:
                                            err_msg=f"constraint {c.name!r}: batch and row-by-row penalties differ")
             json.dumps(c.describe())
 
+    def r_one_row() -> None:
+        # a constraint's float path (Constraint._bound_and_value_one) is what a one-target
+        # solve judges its answer by: it must give the array path's numbers, row by row
+        d = holder["d"]
+        space = d.feature_space()
+        # 64 rows drawn in the bounds, and the corners: all lower, all upper, alternating
+        lo, hi = np.asarray(space.lower, float), np.asarray(space.upper, float)
+        odd = np.arange(len(lo)) % 2 == 1
+        X = np.vstack([space.random(64, np.random.default_rng(1)), lo, hi, np.where(odd, lo, hi), np.where(odd, hi, lo)])
+        for c in d.constraints():
+            if type(c)._bound_and_value_one is Constraint._bound_and_value_one:
+                continue      # no float path: the base runs the array path on one row
+            for x in X:
+                cols = {n: x[i:i + 1] for i, n in enumerate(space.names)}
+                row = dict(zip(space.names, x.tolist()))
+                b, v = (np.asarray(a, float).reshape(-1)[0] for a in c.bound_and_value(cols))
+                b1, v1 = c.bound_and_value_one(row)
+                # equal, both NaN, or within 1e-12 relative: IEEE arithmetic rounds a float as it
+                # rounds a one-element array, so the same operations give the same bits; a
+                # formula written in another order may differ in its last units, a wrong one
+                # by far more
+                same = all((p == q) or (p != p and q != q) or abs(p - q) <= 1e-12 * max(abs(p), abs(q))
+                           for p, q in ((b, b1), (v, v1)))
+                assert same, (f"constraint {c.name!r}: its one-row float path gives (bound, value) = ({b1!r}, {v1!r}) "
+                              f"at {row}, its array path ({b!r}, {v!r}): _bound_and_value_one must compute what "
+                              f"_bound_and_value computes for that row (a one-target solve judges its answer by it)")
+
     def mid() -> dict[str, float]:
         d = holder["d"]
         return {f.name: 0.5 * (f.lower + f.upper) for f in d.features}
@@ -554,8 +582,8 @@ def _dimension_rules(ctx: _Ctx) -> None:
                  f"limit {COST_FACTOR:g} x): evaluate whole columns with array operations, not row by row")
 
     _run_rules(ctx, [("class", r_class), ("features", r_features), ("roles-declared", r_roles),
-                     ("constraints-vectorised", r_constraints), ("constraints-cost", r_cost),
-                     ("constraints-feasible", r_feasible),
+                     ("constraints-vectorised", r_constraints), ("constraints-one-row", r_one_row),
+                     ("constraints-cost", r_cost), ("constraints-feasible", r_feasible),
                      ("model-match", r_model_match), ("renderer", r_renderer), ("renderer-commands", r_commands),
                      ("renderer-bad-input", r_renderer_bad), ("determinism", r_determinism), ("timing", r_timing)],
                always=("class",), stop_after=("class", "features"))

@@ -26,7 +26,7 @@ RULES: dict[str, tuple[str, ...]] = {
                "privileged-options", "lifecycle", "close", "bad-input", "limits-enforced", "safe-stop", "read-back",
                "output-follows-command", "reopen", "instances", "servo-loop", "determinism", "timing", "state"),
     "dimension": ("import", "plugin-api-declared", "class", "features", "roles-declared", "constraints-vectorised",
-                  "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
+                  "constraints-one-row", "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
                   "renderer-bad-input", "determinism", "timing"),
     "model": ("import", "plugin-api-declared", "shapes", "model-dimensions", "vectorised", "determinism",
               "bad-input", "jacobian", "metadata", "responds"),

@@ -10,6 +10,8 @@ the Omni's limit never goes to the arm.
 
 from __future__ import annotations
 
+import math
+
 from typing import Any, ClassVar, Mapping
 
 import numpy as np
@@ -51,6 +53,11 @@ class WorkConstraint(Constraint):
         wv = np.divide(self.mf_n ** 2, q, out=np.full(gs.shape, np.inf), where=gs > 0)
         return wv, w
 
+    def _bound_and_value_one(self, row: Mapping[str, float]) -> tuple[float, float]:
+        gs = row["GS"]
+        # the same operations as above: MF^2 / (2 GS) where GS > 0, +inf elsewhere (NaN too)
+        return (self.mf_n ** 2 / (gs * 2.0) if gs > 0 else math.inf), row["W"]
+
 
 class PressForceConstraint(Constraint):
     """W <= F_max^2 / (2 GS): the pressing force implied by stiffness and work,
@@ -74,6 +81,11 @@ class PressForceConstraint(Constraint):
         w = np.asarray(cols["W"], float)
         w_max = self.f_max_n ** 2 / (2.0 * np.maximum(gs, 1e-12))
         return w, w_max
+
+    def _bound_and_value_one(self, row: Mapping[str, float]) -> tuple[float, float]:
+        gs = row["GS"]
+        # np.maximum(gs, 1e-12): a NaN stays NaN
+        return row["W"], self.f_max_n ** 2 / (2.0 * (1e-12 if gs < 1e-12 else gs))
 
 
 class HardnessRenderer(DimensionRenderer):

@@ -54,6 +54,10 @@ class PowerConstraint(Constraint):
         pf = np.multiply(a, a)     # (a * a) * df, as ufunc calls (no operator dispatch)
         return np.multiply(pf, self.df_hz, out=pf if type(pf) is np.ndarray else None), np.asarray(cols["P"], float)
 
+    def _bound_and_value_one(self, row: Mapping[str, float]) -> tuple[float, float]:
+        a = row["AFpeak"]
+        return a * a * self.df_hz, row["P"]      # (a * a) * df, as above
+
     def describe(self) -> dict:
         d = super().describe()
         d["df_hz"] = self.df_hz
