@@ -73,8 +73,6 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         else np.asarray(trusted_damping_ns_per_m, float)
     u = state["energy"] + f1 * dq + 0.5 * q * np.abs(f1 - state["f2"])
     ex = np.maximum(np.abs(dq) - q, 0.0)
-    b_x = np.maximum(b_lo - 0.5 * state["kf"] * dt, 0.0)
-    u = u - b_x * ex * ex / dt
     ahead = 0.5 * (x - q2) * 1e-3
     hist = state["hist"]
     hist[:, ~started] = x[~started]
@@ -114,10 +112,19 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         full = np.broadcast_to(np.asarray(fm, float), x.shape)
     depth = np.maximum(-x * 1e-3, 0.0)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
-    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd, b_lo), dt, step, q)
+    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd, b_lo), dt if s.period_s is None else s.period_s, step, q)
     spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(kc * depth, fw), 0.0)
     if fm is not None:
         spring = np.minimum(spring, full)
+    # the damping credited to the extra: b_lo less the spring's need, its secant stiffness
+    # at the interval's start, or its full slope K_c on an interval entering from outside
+    # (the scalar tick's rule)
+    ks = np.where((state["kf"] == 0.0) & (spring > 0.0), kc, state["kf"])
+    b_x = b_lo - 0.5 * ks * dt
+    # a deficit (a late tick: the spring needs more than b_lo) is charged with the largest
+    # displacement the readings allow
+    big = np.abs(dq) + q
+    u = u - b_x * np.where(b_x > 0.0, ex * ex, np.where(b_x < 0.0, big * big, 0.0)) / dt
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
     e0 = np.minimum(full * 0.5 * q, s.energy_allowance_j)
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)

@@ -45,8 +45,9 @@ class PassivityController:
     (N); send the returned force; then call :meth:`commit` with the force the device
     actually applied (after its safety clamp).
 
-    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = min(2 b_s / dt, s /
-    Delta)``, ``b_s = min(b_lo, damping_trust x device damping)``: ``b_lo`` the trusted
+    **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = min(2 b_s / T, s /
+    Delta)`` (``T`` the servo's period, ``settings.period_s``, else each measured
+    ``dt``), ``b_s = min(b_lo, damping_trust x device damping)``: ``b_lo`` the trusted
     damping (the measured lower bound where the settings carry one, else
     ``damping_trust x declared damping``), the device damping the declared one or, after
     a hands-off measurement, the fitted one. So the spring is passive under the
@@ -67,8 +68,9 @@ class PassivityController:
 
     (ZOH pairing: the extra held over an interval times that interval's reading change;
     summation by parts bounds its true work by this plus ``Delta/2`` per unit of change,
-    plus ``Delta/2 |X|`` at the end; ``b_x = b_lo - K_f dt / 2`` is the damping the spring
-    of secant stiffness ``K_f`` leaves, which dissipates at least ``b_x dy^2 / dt`` per
+    plus ``Delta/2 |X|`` at the end; ``b_x = b_lo - K_s dt / 2`` is the damping the spring
+    leaves, ``K_s`` its secant stiffness at the interval's start, or ``K_c`` on an
+    interval entering the wall from outside; it dissipates at least ``b_x dy^2 / dt`` per
     interval with ``|dy| >= |dq| - Delta``). It sends the largest extra, between 0 and
     ``F_wall - P``, within one ramp step ``s`` of the last, whose plan "hold it one tick,
     then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = min(F_max Delta / 2,
@@ -140,13 +142,9 @@ class PassivityController:
             b_lo = s.damping_trust * s.device_damping_ns_per_m
         # the extra above the spring: ZOH-paired work plus half a count of reading error
         # per newton of change (summation by parts); the damping the Colgate spring does
-        # not need (b_lo - K_f T / 2) is credited
+        # not need is credited below, once this tick's spring is known
         u = self.energy_j + f1 * dq + h * abs(f1 - self._f2)
         ex = abs(dq) - q
-        if ex > 0.0:
-            b_x = b_lo - 0.5 * self._kf * dt
-            if b_x > 0.0:
-                u -= b_x * ex * ex / dt
         ahead = 0.5 * (x_mm - self._q2) * 1e-3
         # the change of the per-tick motion beyond what quantisation alone makes (2 counts),
         # read over spans of 1-16 ticks (_SCALES, unrolled: this is the servo tick)
@@ -218,6 +216,7 @@ class PassivityController:
         depth = -x_mm * 1e-3
         spring = 0.0
         kf = 0.0
+        kc = 0.0
         if f_wall > 0.0 and depth > 0.0:
             # its damping b_s: half the device's damping (the measured fit, else the
             # declaration), at most the trusted lower bound (item 0;
@@ -225,7 +224,7 @@ class PassivityController:
             b_s = s.damping_trust * s.device_damping_ns_per_m
             if b_s > b_lo:
                 b_s = b_lo
-            kc = 2.0 * b_s / dt
+            kc = 2.0 * b_s / (s.period_s or dt)   # sized on the servo's period where declared
             if q > 0.0 and kc > step / q:
                 kc = step / q   # one count of the spring within one ramp step (item 0)
             spring = kc * depth
@@ -235,6 +234,22 @@ class PassivityController:
             spring = fm
         if spring > 0.0:
             kf = spring / depth
+        # the damping credited to the extra, b_x = b_lo - K_s T / 2: the spring held over
+        # the interval needs K_s T / 2 of it, K_s its secant stiffness at the interval's
+        # start; an interval that enters the wall from outside (no spring at its start)
+        # needs the spring's full slope K_c. An interval longer than the one the spring was
+        # sized for (a late tick) can need more than b_lo: the deficit is charged, with the
+        # largest displacement the readings allow (docs/runtime.md, Passivity item 1)
+        ks = self._kf
+        if ks == 0.0 and spring > 0.0:
+            ks = kc
+        b_x = b_lo - 0.5 * ks * dt
+        if b_x > 0.0:
+            if ex > 0.0:
+                u -= b_x * ex * ex / dt
+        elif b_x < 0.0:
+            ex = abs(dq) + q
+            u -= b_x * ex * ex / dt
         rise = spring - self._spring   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf

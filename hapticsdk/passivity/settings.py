@@ -58,6 +58,12 @@ class ControllerSettings:
             out of the bound, which is conservative.)
         energy_bound: False removes the energy bound (the output then follows the wall
             through the ramp only): for tests that must see the bound matter.
+        period_s: the servo's nominal period (s) the Colgate spring is sized on, ``K_c =
+            2 b_s / period_s``. None (the default): each tick's measured period, which in
+            a servo with jitter makes the spring's stiffness change while it is
+            compressed (a rise stores energy nobody paid for); the servo loop sets its own
+            period here. An interval longer than the period the spring was sized on is
+            charged to the bound either way (docs/runtime.md, Passivity item 1).
         energy_allowance_j: the most energy (J) the extra's bound may hand the user
             (:data:`ENERGY_ALLOWANCE_J`): the allowance is ``min(F_max Delta / 2, this)``.
             A requirement, not a fitted constant: lower it for a stricter bound (with a
@@ -73,6 +79,7 @@ class ControllerSettings:
     device_mass_kg: float | None = None
     energy_bound: bool = True
     energy_allowance_j: float = ENERGY_ALLOWANCE_J
+    period_s: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("device_damping_ns_per_m", "position_resolution_mm"):
@@ -90,6 +97,9 @@ class ControllerSettings:
                                   field="device_mass_kg")
         if not (math.isfinite(self.ramp_time_s) and self.ramp_time_s > 0):
             raise ValidationError(f"must be a finite number > 0 (s), got {self.ramp_time_s!r}", field="ramp_time_s")
+        if self.period_s is not None and not (isinstance(self.period_s, (int, float))
+                                              and math.isfinite(self.period_s) and self.period_s > 0):
+            raise ValidationError(f"must be None or a finite number > 0 (s), got {self.period_s!r}", field="period_s")
         if not (math.isfinite(self.energy_allowance_j) and self.energy_allowance_j >= 0):
             raise ValidationError(f"must be a finite number >= 0 (J), got {self.energy_allowance_j!r}",
                                   field="energy_allowance_j")

@@ -79,7 +79,7 @@ import struct
 import sys
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
@@ -357,7 +357,10 @@ class ServoLoop:
         max_position_mm, max_speed_mm_s: readings beyond these are "huge" (unsafe).
         max_accel_mm_s2: a velocity change faster than this is a spike (held).
         max_catchup_ticks: realtime: how far behind the loop may run before it re-anchors.
-        passivity_settings: :class:`~hapticsdk.passivity.ControllerSettings`.
+        passivity_settings: :class:`~hapticsdk.passivity.ControllerSettings` (default: the
+            device's, :meth:`~hapticsdk.passivity.ControllerSettings.for_device`). Without a
+            ``period_s`` the loop uses a copy with its own period (``passivity_settings``
+            holds it).
         drop_unmapped_roles: ignore commands for roles with no actuator (counted as
             ``role_conflict``) instead of refusing to build the loop.
         cpu_time: also measure each tick's on-CPU time of the servo thread (default on;
@@ -458,6 +461,11 @@ class ServoLoop:
         if passivity_settings is None:
             # the energy bound from what the device declares (mass, damping, encoder, force limit)
             passivity_settings = ControllerSettings.for_device(device)
+        if passivity_settings.period_s is None:
+            # the Colgate spring sized on this loop's period, not on each measured one (a
+            # jittery stiffness stores energy while compressed): a copy, the caller's
+            # settings object is left as it was
+            passivity_settings = replace(passivity_settings, period_s=self.period_s)
         self.passivity_settings = passivity_settings
         #: contact gate hysteresis (mm): contact begins at penetration > 0 and ends at
         #: penetration <= -one encoder count of the device (0 for an exact position;

@@ -259,3 +259,23 @@ def test_loop_validates_its_setup():
         ServoLoop(VirtualProbe(), [Spring(1)], period_s=0.0)
     with pytest.raises(ValidationError):
         ServoLoop(VirtualProbe(), [Spring(1)]).run(-1)
+
+
+def test_the_stiff_wall_spring_is_sized_on_the_loops_period():
+    """The loop hands its stiff-wall controllers settings that carry its own period
+    (``ControllerSettings.period_s``): the Colgate spring is sized on it, not on each
+    measured interval, whose jitter would change the spring's stiffness while it is
+    compressed (docs/runtime.md, Passivity item 1). The caller's settings object is left as
+    it was; settings that declare a period keep it."""
+    from hapticsdk.passivity import ControllerSettings
+    mine = ControllerSettings(device_damping_ns_per_m=0.5, position_resolution_mm=0.01, max_force_n=3.3)
+    loop = ServoLoop(VirtualProbe(), [Spring(1.0)], period_s=0.0005, passivity_settings=mine)
+    assert loop.passivity_settings.period_s == 0.0005
+    assert mine.period_s is None
+    assert loop.passivity_settings.device_damping_ns_per_m == 0.5     # the rest as given
+    assert ServoLoop(VirtualProbe(), [Spring(1.0)]).passivity_settings.period_s == 0.001   # the device's own
+    declared = ControllerSettings(device_damping_ns_per_m=0.5, period_s=0.002)
+    assert ServoLoop(VirtualProbe(), [Spring(1.0)], passivity_settings=declared).passivity_settings is declared
+    with pytest.raises(ValidationError) as ei:
+        ControllerSettings(period_s=0.0)
+    assert ei.value.field == "period_s"

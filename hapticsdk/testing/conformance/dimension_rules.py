@@ -365,7 +365,8 @@ def _dimension_rules(ctx: _Ctx) -> None:
         # 64 rows drawn in the bounds, and the corners: all lower, all upper, alternating
         lo, hi = np.asarray(space.lower, float), np.asarray(space.upper, float)
         odd = np.arange(len(lo)) % 2 == 1
-        X = np.vstack([space.random(64, np.random.default_rng(1)), lo, hi, np.where(odd, lo, hi), np.where(odd, hi, lo)])
+        X = np.vstack([space.random(64, np.random.default_rng(1)), lo, hi,
+                       np.where(odd, lo, hi), np.where(odd, hi, lo)])
         for c in d.constraints():
             if type(c)._bound_and_value_one is Constraint._bound_and_value_one:
                 continue      # no float path: the base runs the array path on one row
