@@ -40,6 +40,31 @@ def _check_mass(mass_kg: Any) -> np.ndarray:
     return m
 
 
+def _check_arrays(**named: tuple[Any, str]) -> list[np.ndarray]:
+    """Each ``name=(value, rule)`` as a float array, checked (ValidationError naming it):
+    ``"finite"``, ``">=0"``, ``">0"`` (finite too) or ``"ticks"`` (a whole number >= 0).
+    A nonsensical wall (a negative period, a NaN stiffness) gets no number, not a margin
+    that reads as passive."""
+    out = []
+    for name, (value, rule) in named.items():
+        try:
+            a = np.asarray(value, float)
+        except (TypeError, ValueError):
+            raise ValidationError(f"must be a number or an array of numbers, got {value!r}", field=name) from None
+        if isinstance(value, bool) or a.dtype == object or a.size == 0:
+            raise ValidationError(f"must be a number or an array of numbers, got {value!r}", field=name)
+        if not np.all(np.isfinite(a)):
+            raise ValidationError(f"must be finite, got {value!r}", field=name)
+        if rule == ">=0" and not np.all(a >= 0):
+            raise ValidationError(f"must be >= 0, got {value!r}", field=name)
+        if rule == ">0" and not np.all(a > 0):
+            raise ValidationError(f"must be > 0, got {value!r}", field=name)
+        if rule == "ticks" and not (np.all(a >= 0) and np.all(a == np.floor(a))):
+            raise ValidationError(f"must be a whole number of ticks >= 0, got {value!r}", field=name)
+        out.append(a)
+    return out
+
+
 def mass_correction(b: Any, T: Any, d: Any, mass_kg: Any) -> Any:
     """Ratio ``f = K_crit(ZOH eigenvalues) / K_crit(Colgate)`` for a device of mass m (-).
 
@@ -81,8 +106,8 @@ def mass_correction(b: Any, T: Any, d: Any, mass_kg: Any) -> Any:
         ``f >= 1`` (-); arrays broadcast.
     """
     m = _check_mass(mass_kg)
-    dl = np.maximum(np.asarray(b, float), 0.0) * np.asarray(T, float) / m
-    d = np.asarray(d, float)
+    b, T, d = _check_arrays(b=(b, ">=0"), T=(T, ">0"), d=(d, "ticks"))
+    dl = b * T / m
     dl, d = np.broadcast_arrays(dl, d)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         a = np.tanh(0.5 * dl)
@@ -121,10 +146,11 @@ def passivity_margin(K: Any, B: Any, b: Any, T: Any, d: Any = 0, *, mass_kg: Any
         Positive: passive without the hand. The critical stiffness is
         ``K_crit = (b - |B|) / (T (1/2 + d))``.
     """
-    K = np.asarray(K, float) * 1000.0
-    aB = np.abs(np.asarray(B, float))
-    load = K * np.asarray(T, float) * (0.5 + np.asarray(d, float)) + aB
-    b_eff = np.asarray(b, float)
+    K, B, b, T, d = _check_arrays(K=(K, ">=0"), B=(B, "finite"), b=(b, ">=0"), T=(T, ">0"), d=(d, "ticks"))
+    K = K * 1000.0
+    aB = np.abs(B)
+    load = K * T * (0.5 + d) + aB
+    b_eff = b
     if mass_kg is not None:
         b_eff = aB + (b_eff - aB) * mass_correction(b, T, d, mass_kg)
     out = np.asarray(b_eff - load)
@@ -138,7 +164,8 @@ def critical_stiffness(b: float, T: float, d: int = 0, B: float = 0.0, *, mass_k
     :func:`mass_correction` ``f(b T / m, d)``, the ZOH eigenvalue stability limit of the
     uncoupled device (exact for d = 0, second order in ``b T / m`` for d >= 1).
     """
-    k = max(float(b) - abs(float(B)), 0.0) / (float(T) * (0.5 + float(d))) / 1000.0
+    _, b, T, d, B = _check_wall(0.0, b, T, d, B)
+    k = max(b - abs(B), 0.0) / (T * (0.5 + d)) / 1000.0
     if mass_kg is None:
         return k
     return k * float(mass_correction(b, T, d, mass_kg))
@@ -214,6 +241,8 @@ def _zoh_device(m: float, b: float, T: float) -> tuple[np.ndarray, np.ndarray]:
 def spectral_radius(K: float, m: float, b: float, T: float, d: int = 0) -> float:
     """Largest eigenvalue magnitude of the device ``m x'' + b x' = F`` (SI) with the wall
     ``F_n = -K x_{n-d}`` (K in N/mm) under a zero-order hold. < 1: asymptotically stable."""
+    K, b, T, d, _ = _check_wall(K, b, T, d, 0.0)
+    m = float(_check_mass(m))
     Phi, G = _zoh_device(m, b, T)
     n = 2 + d
     A = np.zeros((n, n))
@@ -233,6 +262,8 @@ def spectral_radius(K: float, m: float, b: float, T: float, d: int = 0) -> float
 def critical_stiffness_eig(m: float, b: float, T: float, d: int = 0, *, rtol: float = 1e-6) -> float:
     """Stability limit K (N/mm) of the ZOH-discretised device + delayed wall, by bisection
     on the spectral radius (independent of :func:`passivity_margin`)."""
+    _, b, T, d, _ = _check_wall(0.0, b, T, d, 0.0)
+    m = float(_check_mass(m))
     lo, hi = 0.0, max(critical_stiffness(b, T, d) * 4.0, 1e-6)
     while spectral_radius(hi, m, b, T, d) < 1.0:
         hi *= 2.0

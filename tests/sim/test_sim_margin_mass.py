@@ -178,3 +178,41 @@ def test_classify_wall_still_labels_valid_walls():
     assert classify_wall(0.9, 0.5, 0.001)["label"] == "passive"
     assert classify_wall(1.1, 0.5, 0.001)["label"] != "passive"
     assert classify_wall(0.0, 0.0, 0.001, 2)["margin_ns_per_m"] == 0.0
+
+
+_GOOD = {"K": 1.0, "B": 0.0, "b": 0.5, "T": 1e-3, "d": 0, "m": 0.045}
+#: per argument, values that describe no wall: each must be refused by name, never turned
+#: into a number (a negative period gave a margin of +500 N s/m, which reads as passive)
+_BAD = {"K": [-1.0, float("nan"), float("inf")], "B": [float("nan"), float("inf")],
+        "b": [-0.1, float("nan")], "T": [0.0, -1e-3, float("nan"), float("inf")], "d": [-1, 0.5],
+        "m": [0.0, -0.045, float("nan")]}
+
+
+@pytest.mark.parametrize("arg, value", [(a, v) for a, vs in _BAD.items() for v in vs])
+def test_every_wall_function_refuses_a_nonsensical_argument_by_name(arg, value):
+    from hapticsdk.errors import ValidationError
+    from hapticsdk.passivity import critical_stiffness_eig, spectral_radius
+    p = dict(_GOOD, **{arg: value})
+    calls = {
+        "passivity_margin": (lambda: passivity_margin(p["K"], p["B"], p["b"], p["T"], p["d"]), "KBbTd"),
+        "passivity_margin, an array": (lambda: passivity_margin(np.array([0.5, p["K"]]), p["B"], p["b"],
+                                                                np.array([1e-3, p["T"]]), p["d"]), "KBbTd"),
+        "passivity_margin, mass": (lambda: passivity_margin(p["K"], p["B"], p["b"], p["T"], p["d"],
+                                                            mass_kg=p["m"]), "KBbTdm"),
+        "critical_stiffness": (lambda: critical_stiffness(p["b"], p["T"], p["d"], p["B"]), "BbTd"),
+        "critical_stiffness, mass": (lambda: critical_stiffness(p["b"], p["T"], p["d"], p["B"], mass_kg=p["m"]),
+                                     "BbTdm"),
+        "mass_correction": (lambda: mass_correction(p["b"], p["T"], p["d"], p["m"]), "bTdm"),
+        "classify_wall": (lambda: classify_wall(p["K"], p["b"], p["T"], p["d"], p["B"]), "KBbTd"),
+        "spectral_radius": (lambda: spectral_radius(p["K"], p["m"], p["b"], p["T"], p["d"]), "KbTdm"),
+        "critical_stiffness_eig": (lambda: critical_stiffness_eig(p["m"], p["b"], p["T"], p["d"]), "bTdm"),
+    }
+    field = "mass_kg" if arg == "m" else arg
+    for name, (call, reads) in calls.items():
+        if arg not in reads:
+            continue
+        with pytest.raises(ValidationError) as ei:
+            call()
+        assert ei.value.field == field, name
+    # the same calls with the good values give numbers
+    assert passivity_margin(**{k: _GOOD[k] for k in "KBbTd"}) == pytest.approx(0.0, abs=1e-12)
