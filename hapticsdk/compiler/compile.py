@@ -319,7 +319,7 @@ def _device_summary(r: Any, targets: Mapping[str, float], kept: Sequence[str], c
     the accuracy it stops at), or when the target is missed by more than that tolerance
     and it is the dimension's device constraint with the least relative slack (what held
     the answer back). Both figures are in the result."""
-    cols = {k: np.array([float(v)]) for k, v in r.x_dict.items()}
+    row = {k: float(v) for k, v in r.x_dict.items()}
     pred = dict(r.intensities)
     rtol = float(tolerance)
     active: list[str] = []
@@ -329,7 +329,7 @@ def _device_summary(r: Any, targets: Mapping[str, float], kept: Sequence[str], c
         for c in device.get(d, ()):
             desc = c.describe()
             try:
-                b, v = (float(np.asarray(a)[0]) for a in c.bound_and_value(cols))
+                b, v = c.bound_and_value_one(row)
                 slack = (v - b) / max(abs(b), abs(v), 1e-12)   # relative to the larger side
                 desc.update(bound=b, value=v, relative_slack=slack)
                 if slack <= rtol and c.name not in active:

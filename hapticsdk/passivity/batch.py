@@ -123,8 +123,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     b_x = b_lo - 0.5 * ks * dt
     # a deficit (a late tick: the spring needs more than b_lo) is charged with the largest
     # displacement the readings allow
-    big = np.abs(dq) + q
-    u = u - b_x * np.where(b_x > 0.0, ex * ex, np.where(b_x < 0.0, big * big, 0.0)) / dt
+    ex = np.where(b_x < 0.0, np.abs(dq) + q, ex)
+    u = u - b_x * ex * ex / dt
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
     e0 = np.minimum(full * 0.5 * q, s.energy_allowance_j)
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)

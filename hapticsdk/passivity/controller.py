@@ -244,11 +244,9 @@ class PassivityController:
         if ks == 0.0 and spring > 0.0:
             ks = kc
         b_x = b_lo - 0.5 * ks * dt
-        if b_x > 0.0:
-            if ex > 0.0:
-                u -= b_x * ex * ex / dt
-        elif b_x < 0.0:
-            ex = abs(dq) + q
+        if b_x < 0.0:
+            ex = abs(dq) + q         # the deficit: the largest displacement the readings allow
+        if ex > 0.0:
             u -= b_x * ex * ex / dt
         rise = spring - self._spring   # the spring's change since the last tick
         self._spring = spring

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..argcheck import number_array
 from ..errors import ValidationError
 from ..linalg import expm
 from ..special import gammainc2
@@ -47,11 +48,8 @@ def _check_arrays(**named: tuple[Any, str]) -> list[np.ndarray]:
     that reads as passive."""
     out = []
     for name, (value, rule) in named.items():
-        try:
-            a = np.asarray(value, float)
-        except (TypeError, ValueError):
-            raise ValidationError(f"must be a number or an array of numbers, got {value!r}", field=name) from None
-        if isinstance(value, bool) or a.dtype == object or a.size == 0:
+        a = number_array(value, name, finite=False)   # numbers only (no bool, no string)
+        if a.size == 0:
             raise ValidationError(f"must be a number or an array of numbers, got {value!r}", field=name)
         if not np.all(np.isfinite(a)):
             raise ValidationError(f"must be finite, got {value!r}", field=name)

@@ -10,6 +10,7 @@ import warnings
 from dataclasses import dataclass
 from typing import Any
 
+from ..argcheck import number
 from ..errors import ValidationError
 from .margin import _check_nonneg
 
@@ -97,9 +98,8 @@ class ControllerSettings:
                                   field="device_mass_kg")
         if not (math.isfinite(self.ramp_time_s) and self.ramp_time_s > 0):
             raise ValidationError(f"must be a finite number > 0 (s), got {self.ramp_time_s!r}", field="ramp_time_s")
-        if self.period_s is not None and not (isinstance(self.period_s, (int, float))
-                                              and math.isfinite(self.period_s) and self.period_s > 0):
-            raise ValidationError(f"must be None or a finite number > 0 (s), got {self.period_s!r}", field="period_s")
+        if self.period_s is not None:
+            number(self.period_s, "period_s", lo=0.0, lo_open=True)
         if not (math.isfinite(self.energy_allowance_j) and self.energy_allowance_j >= 0):
             raise ValidationError(f"must be a finite number >= 0 (J), got {self.energy_allowance_j!r}",
                                   field="energy_allowance_j")

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..perception.dimensions import Constraint, PENALTY_FORMS
+from ..perception.dimensions import Constraint, PENALTY_FORMS, _one as _first
 from ..errors import ModelError, ValidationError
 from ..perception.features import FeatureSpace
 from ..perception.models import PerceptionModel
@@ -514,11 +514,6 @@ class EvalBuffers(_PenaltyBuffers):
         if self.last_viol is not None:
             return self.last_viol.reshape(-1)[idx]
         return _violations(self.B[:, idx], self.V[:, idx], self.short[:, idx])[1]
-
-
-def _first(a: Any) -> float:
-    """The first (only) value of a one-row constraint result (array, numpy or Python scalar)."""
-    return float(a[0]) if getattr(a, "ndim", 0) else float(a)
 
 
 def _plain_predict(model: PerceptionModel) -> bool:

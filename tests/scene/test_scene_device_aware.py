@@ -73,6 +73,21 @@ def test_a_smaller_piezo_gain_binds_the_amplitude(lra):
     assert mp.device["capabilities"]["roughness"]["vibration"]["max_drive"] == 25.0
 
 
+def test_each_described_device_constraint_is_met_with_its_value_above_its_bound(lra):
+    """``device["constraints"]``: every device constraint the solved features meet reads
+    ``value >= bound`` (the constraint's own direction), with the relative slack of that
+    pair; one that does not bind has a clear margin (bound and value swapped would read as
+    violated)."""
+    mp = _plan("lra-virtual", TARGET).material()
+    described = [c for c in mp.device["constraints"] if "bound" in c]
+    assert described
+    for c in described:
+        assert c["value"] >= c["bound"] - 1e-9 * max(abs(c["bound"]), 1.0), c
+        assert c["relative_slack"] == pytest.approx(
+            (c["value"] - c["bound"]) / max(abs(c["bound"]), abs(c["value"]), 1e-12), rel=1e-12, abs=1e-15)
+    assert max(c["relative_slack"] for c in described) > 0.01
+
+
 def test_rendering_on_the_lra_uses_its_own_table_and_band(lra):
     plan = _plan("lra-virtual", TARGET)
     mp = plan.material()
@@ -105,3 +120,4 @@ def test_the_solution_family_follows_the_device_band_not_the_constraints_name():
                           data_support=True, extra_constraints=(DeviceBandConstraint(lo, "low", "test"),))
         for s in solution_sets(p):
             assert len(s) and s.X[:, list(s.names).index("Fpeak")].min() >= lo - 1e-6, (lo, s.reached)
+
