@@ -7,7 +7,7 @@ per chunk extrapolates to the whole batch."""
 import sys, time
 import numpy as np
 import hapticsdk as hs
-from hapticsdk import solvers
+from hapticsdk.solvers import base as solvers_base
 
 def rss():
     d = {}
@@ -20,7 +20,7 @@ def rss():
 n = int(sys.argv[1]) if len(sys.argv) > 1 else 10**6
 rng = np.random.default_rng(0)
 T = rng.uniform(0.05, 0.95, size=(n, 2))
-orig = solvers._BatchData.add
+orig = solvers_base._BatchData.add
 done = [0]
 t0 = time.perf_counter()
 def add(self, sub, x, *a, **k):
@@ -29,7 +29,7 @@ def add(self, sub, x, *a, **k):
     r = rss()
     print(f"{done[0]:8d} targets  RSS {r['VmRSS']:7.1f} MB  HWM {r['VmHWM']:7.1f} MB  {time.perf_counter() - t0:7.1f} s",
           flush=True)
-solvers._BatchData.add = add
+solvers_base._BatchData.add = add
 print("before solve", rss(), "targets array MB", T.nbytes / 2**20, flush=True)
 res = hs.solve(T, dimensions=["hardness", "roughness"], seed=1)
 print("done", rss(), flush=True)
