@@ -10,6 +10,8 @@ import warnings
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from ..argcheck import number
 from ..errors import ValidationError
 from .margin import _check_nonneg
@@ -32,6 +34,11 @@ ENERGY_ALLOWANCE_J = 1.0e-4
 @dataclass
 class ControllerSettings:
     """Declared device parameters of :class:`PassivityController` (nothing tuned).
+
+    Each field is checked where it is set (construction, ``dataclasses.replace``, or an
+    assignment, which takes effect at the controller's next tick) and stored as a plain
+    float (``energy_bound`` as a bool): a value the tick could not use (a string, a bool
+    for a number, NaN, infinity, out of range) is a ``ValidationError`` naming the field.
 
     Attributes:
         device_damping_ns_per_m: physical viscous damping of the device (N*s/m): the
@@ -82,27 +89,14 @@ class ControllerSettings:
     energy_allowance_j: float = ENERGY_ALLOWANCE_J
     period_s: float | None = None
 
-    def __post_init__(self) -> None:
-        for name in ("device_damping_ns_per_m", "position_resolution_mm"):
-            _check_nonneg(name, getattr(self, name))
-        if not (0.0 <= float(self.damping_trust) <= 1.0):
-            raise ValidationError(f"must be in [0, 1], got {self.damping_trust!r}", field="damping_trust")
-        if self.measured_damping_ns_per_m is not None:
-            _check_nonneg("measured_damping_ns_per_m", self.measured_damping_ns_per_m)
-        if self.max_force_n is not None and not (math.isfinite(self.max_force_n) and self.max_force_n > 0):
-            raise ValidationError(f"must be a finite number > 0 (N), got {self.max_force_n!r}", field="max_force_n")
-        if self.device_mass_kg is not None and not (math.isfinite(self.device_mass_kg) and self.device_mass_kg > 0):
-            # the plan's free-arm terms divide by it: 0, a negative or a NaN mass would make
-            # a held force look free of cost (None leaves those terms out)
-            raise ValidationError(f"must be None or a finite number > 0 (kg), got {self.device_mass_kg!r}",
-                                  field="device_mass_kg")
-        if not (math.isfinite(self.ramp_time_s) and self.ramp_time_s > 0):
-            raise ValidationError(f"must be a finite number > 0 (s), got {self.ramp_time_s!r}", field="ramp_time_s")
-        if self.period_s is not None:
-            number(self.period_s, "period_s", lo=0.0, lo_open=True)
-        if not (math.isfinite(self.energy_allowance_j) and self.energy_allowance_j >= 0):
-            raise ValidationError(f"must be a finite number >= 0 (J), got {self.energy_allowance_j!r}",
-                                  field="energy_allowance_j")
+    def __setattr__(self, name: str, value: Any) -> None:
+        # every field is checked where it is set, at construction (the dataclass's
+        # ``__init__`` sets each one), by ``dataclasses.replace`` and by a later
+        # assignment alike, and stored as a plain float (or bool): the servo tick reads
+        # these fields with no checks of its own, so a string, a bool or a NaN taken here
+        # would fail there, on a device that is driving
+        check = _FIELDS.get(name)
+        object.__setattr__(self, name, value if check is None else check(value, name))
 
     @classmethod
     def for_device(cls, device: Any, *, damping: Any = None, directory: Any = None) -> "ControllerSettings":
@@ -148,7 +142,6 @@ class ControllerSettings:
         (``device_ns_per_m`` overrides the settings'), ``b_lo`` the trusted damping
         (``trusted_ns_per_m`` overrides :meth:`trusted_damping_ns_per_m`). Numbers or
         arrays; :class:`PassivityController` computes the same inline on its tick."""
-        import numpy as np
         b_dev = self.device_damping_ns_per_m if device_ns_per_m is None else device_ns_per_m
         b_lo = self.trusted_damping_ns_per_m(b_dev) if trusted_ns_per_m is None else trusted_ns_per_m
         return np.minimum(b_lo, self.damping_trust * np.asarray(b_dev, float))
@@ -167,6 +160,49 @@ class ControllerSettings:
         (docs/runtime.md, Passivity item 6)."""
         fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
         return min(fs * 0.5 * self.position_resolution_mm * 1e-3, self.energy_allowance_j)
+
+
+def _nonneg(value: Any, name: str) -> float:
+    return number(value, name, lo=0.0)
+
+
+def _positive_or_none(value: Any, name: str) -> float | None:
+    return None if value is None else number(value, name, lo=0.0, lo_open=True)
+
+
+def _positive(value: Any, name: str) -> float:
+    return number(value, name, lo=0.0, lo_open=True)
+
+
+def _nonneg_or_none(value: Any, name: str) -> float | None:
+    return None if value is None else number(value, name, lo=0.0)
+
+
+def _share(value: Any, name: str) -> float:
+    return number(value, name, lo=0.0, hi=1.0)
+
+
+def _flag(value: Any, name: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValidationError(f"must be True or False, got {type(value).__name__} {value!r:.80}", field=name)
+    return bool(value)
+
+
+#: the check of each field of :class:`ControllerSettings` (its value as the tick reads it)
+_FIELDS = {
+    "device_damping_ns_per_m": _nonneg,
+    "damping_trust": _share,
+    "position_resolution_mm": _nonneg,
+    "measured_damping_ns_per_m": _nonneg_or_none,
+    # the plan's free-arm terms divide by the mass: 0, a negative or a NaN mass would
+    # make a held force look free of cost (None leaves those terms out)
+    "max_force_n": _positive_or_none,
+    "ramp_time_s": _positive,
+    "device_mass_kg": _positive_or_none,
+    "energy_bound": _flag,
+    "energy_allowance_j": _nonneg,
+    "period_s": _positive_or_none,
+}
 
 
 def _measured_damping(device: Any, damping: Any, directory: Any) -> tuple[float | None, float | None]:

@@ -263,6 +263,18 @@ def test_settings_validated_and_reported():
     assert rep["settings"]["ramp_time_s"] == 0.2 and rep["settings"]["stale_after_s"] == 0.001
 
 
+@pytest.mark.parametrize("value", ["False", "", None, 0, 1, 1.0, [True]])
+def test_the_amplitude_ramp_switch_takes_only_a_bool(value):
+    """``ramp_amplitude`` switches a safeguard: a truthy string, a 0 or a None a caller
+    meant as something else is refused by name, not read by its truth value."""
+    with pytest.raises(ValidationError) as ei:
+        SafetySettings(ramp_amplitude=value)
+    assert ei.value.field == "safety.ramp_amplitude"
+    with pytest.raises(ValidationError):
+        SafetyLayer(LIMITS, ramp_amplitude=value)
+    assert SafetySettings(ramp_amplitude=np.bool_(True)).ramp_amplitude
+
+
 def test_default_actuator_has_the_safety_layer_on():
     act = RecordingActuator()
     assert isinstance(act.safety, SafetyLayer)

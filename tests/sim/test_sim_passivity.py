@@ -292,6 +292,79 @@ def test_a_mass_that_would_make_held_force_free_is_refused(mass):
     assert ControllerSettings(device_mass_kg=None).device_mass_kg is None
 
 
+_SETTING_FIELDS = {   # field: (what it accepts besides a finite number, its lower end, open, upper end)
+    "device_damping_ns_per_m": (False, 0.0, False, None),
+    "damping_trust": (False, 0.0, False, 1.0),
+    "position_resolution_mm": (False, 0.0, False, None),
+    "measured_damping_ns_per_m": (True, 0.0, False, None),
+    "max_force_n": (True, 0.0, True, None),
+    "ramp_time_s": (False, 0.0, True, None),
+    "device_mass_kg": (True, 0.0, True, None),
+    "energy_allowance_j": (False, 0.0, False, None),
+    "period_s": (True, 0.0, True, None),
+}
+
+
+@pytest.mark.parametrize("field", sorted(_SETTING_FIELDS))
+@pytest.mark.parametrize("how", ["init", "assign", "replace"])
+def test_every_settings_field_refuses_what_the_tick_cannot_use(field, how):
+    """The tick reads the settings with no checks of its own, so each field is checked
+    where it is set: at construction, by ``dataclasses.replace`` and by an assignment
+    (which takes effect mid-run). A string (even one that reads as a number), a bool, a
+    NaN, an infinity, a complex number, a list, a number beyond a float, or a value
+    outside the field's range is a ValidationError naming the field, and the settings
+    keep their old value; a numpy scalar is stored as a plain float."""
+    import dataclasses
+    from hapticsdk.errors import ValidationError
+
+    none_ok, lo, lo_open, hi = _SETTING_FIELDS[field]
+    bad = ["0.5", True, False, float("nan"), float("inf"), -float("inf"), 1 + 0j, [0.5], 10 ** 400, lo - 1.0]
+    if lo_open:
+        bad.append(lo)
+    if hi is not None:
+        bad.append(hi + 0.5)
+    if not none_ok:
+        bad.append(None)
+    base = ControllerSettings(max_force_n=3.3, device_mass_kg=0.05, period_s=1e-3, measured_damping_ns_per_m=0.2)
+    for value in bad:
+        s = dataclasses.replace(base)
+        with pytest.raises(ValidationError) as err:
+            if how == "init":
+                ControllerSettings(**{field: value})
+            elif how == "assign":
+                setattr(s, field, value)
+            else:
+                dataclasses.replace(s, **{field: value})
+        assert err.value.field == field, value
+        assert s == base
+    good = np.float32(0.5)
+    s = dataclasses.replace(base)
+    if how == "init":
+        s = ControllerSettings(**{field: good})
+    elif how == "assign":
+        setattr(s, field, good)
+    else:
+        s = dataclasses.replace(s, **{field: good})
+    assert type(getattr(s, field)) is float and getattr(s, field) == 0.5
+
+
+@pytest.mark.parametrize("value", [1, "yes", None, 1.0, np.float64(1.0)])
+def test_the_energy_bound_switch_takes_only_a_bool(value):
+    """``energy_bound`` switches the extra's bound off: only True or False (or a numpy
+    bool) do that, never a 1, a string or None that a caller meant as something else."""
+    import dataclasses
+    from hapticsdk.errors import ValidationError
+
+    with pytest.raises(ValidationError) as err:
+        ControllerSettings(energy_bound=value)
+    assert err.value.field == "energy_bound"
+    s = ControllerSettings()
+    with pytest.raises(ValidationError):
+        s.energy_bound = value
+    assert s.energy_bound is True
+    assert dataclasses.replace(s, energy_bound=np.bool_(False)).energy_bound is False
+
+
 def _hold_at(pc, dts, depth_mm=-0.5, f_wall=50.0):
     out = []
     for dt in dts:
