@@ -19,7 +19,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
     return {"energy": z.copy(), "q1": z.copy(), "q2": z.copy(), "f1": z.copy(), "f2": z.copy(),
             "out": z.copy(), "app1": z.copy(), "app2": z.copy(), "app3": z.copy(), "started": np.zeros(n, bool),
             "overdrawn": z.copy(), "still": z.copy(),
-            "spring": z.copy(), "kf": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
+            "spring": z.copy(), "kf": z.copy(), "kc": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
             "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
             "hp": np.zeros(1, int)}
 
@@ -112,7 +112,11 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         full = np.broadcast_to(np.asarray(fm, float), x.shape)
     depth = np.maximum(-x * 1e-3, 0.0)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
-    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd, b_lo), dt if s.period_s is None else s.period_s, step, q)
+    tn = dt if s.period_s is None else s.period_s      # the spring's period (the scalar tick's rule)
+    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd, b_lo), tn, full * np.minimum(tn / s.ramp_time_s, 1.0), q)
+    if s.period_s is not None:
+        # never stiffer while compressed
+        kc = np.where((state["kc"] > 0.0) & (kc > state["kc"]), state["kc"], kc)
     spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(kc * depth, fw), 0.0)
     if fm is not None:
         spring = np.minimum(spring, full)
@@ -149,6 +153,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring
     state["kf"] = np.where(spring > 0.0, spring / np.where(depth > 0.0, depth, 1.0), 0.0)
+    state["kc"] = np.where(spring > 0.0, kc, 0.0)
     out = np.where(started & ~idle, spring + sg * a, 0.0)
     state["out"] = out
     state["started"] = np.ones_like(started)

@@ -47,7 +47,8 @@ class PassivityController:
 
     **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = min(2 b_s / T, s /
     Delta)`` (``T`` the servo's period, ``settings.period_s``, else each measured
-    ``dt``), ``b_s = min(b_lo, damping_trust x device damping)``: ``b_lo`` the trusted
+    ``dt``; with the period declared, ``K_c`` never rises while the spring is
+    compressed), ``b_s = min(b_lo, damping_trust x device damping)``: ``b_lo`` the trusted
     damping (the measured lower bound where the settings carry one, else
     ``damping_trust x declared damping``), the device damping the declared one or, after
     a hands-off measurement, the fitted one. So the spring is passive under the
@@ -93,7 +94,7 @@ class PassivityController:
     """
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
-                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_full", "_jw", "_j3w",
+                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_kc", "_full", "_jw", "_j3w",
                  "_a1", "_a2", "_a3")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
@@ -118,6 +119,7 @@ class PassivityController:
         self._still = 0             # ticks since the reading last changed
         self._spring = 0.0          # the Colgate spring sent this tick (N)
         self._kf = 0.0              # its secant stiffness (N/m)
+        self._kc = 0.0              # its stiffness K_c while compressed (N/m), else 0
         self._full = 0.0            # full scale without a declared force limit: the largest force so far
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
@@ -224,9 +226,20 @@ class PassivityController:
             b_s = s.damping_trust * s.device_damping_ns_per_m
             if b_s > b_lo:
                 b_s = b_lo
-            kc = 2.0 * b_s / (s.period_s or dt)   # sized on the servo's period where declared
-            if q > 0.0 and kc > step / q:
-                kc = step / q   # one count of the spring within one ramp step (item 0)
+            tn = s.period_s or dt   # sized on the servo's period where declared
+            kc = 2.0 * b_s / tn
+            if q > 0.0:
+                # one count of the spring within one ramp step (item 0), the step at the
+                # same period
+                sp = full * (tn / s.ramp_time_s if tn < s.ramp_time_s else 1.0)
+                if kc > sp / q:
+                    kc = sp / q
+            if s.period_s is not None and self._kc > 0.0 and kc > self._kc:
+                # and never stiffer while compressed: a rise of K_c stores (dK/2) d^2 that
+                # no motion paid for (a full scale that grows without a declared limit, a
+                # setting assigned mid-contact); without a declared period the spring
+                # follows each measured one, as documented on ControllerSettings.period_s
+                kc = self._kc
             spring = kc * depth
             if spring > f_wall:
                 spring = f_wall
@@ -251,6 +264,7 @@ class PassivityController:
         rise = spring - self._spring   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf
+        self._kc = kc   # 0 where the spring is 0 (out of the wall, or no damping)
         c_m = dt * dt / (2.0 * m) if m else 0.0
         e0 = full * h
         if e0 > s.energy_allowance_j:

@@ -67,11 +67,15 @@ class ControllerSettings:
         energy_bound: False removes the energy bound (the output then follows the wall
             through the ramp only): for tests that must see the bound matter.
         period_s: the servo's nominal period (s) the Colgate spring is sized on, ``K_c =
-            2 b_s / period_s``. None (the default): each tick's measured period, which in
-            a servo with jitter makes the spring's stiffness change while it is
-            compressed (a rise stores energy nobody paid for); the servo loop sets its own
-            period here. An interval longer than the period the spring was sized on is
-            charged to the bound either way (docs/runtime.md, Passivity item 1).
+            min(2 b_s / period_s, s(period_s) / Delta)`` (``s`` the ramp step), and with
+            it declared the spring never stiffens while compressed (a full scale that
+            grows without a declared force limit, or a setting assigned mid-contact,
+            takes effect at the next contact). None (the default): each tick's measured
+            period, which in a servo with jitter makes the spring's stiffness change
+            while it is compressed (a rise stores energy nobody paid for); the servo loop
+            sets its own period here. An interval longer than the period the spring was
+            sized on is charged to the bound either way (docs/runtime.md, Passivity
+            items 0 and 1).
         energy_allowance_j: the most energy (J) the extra's bound may hand the user
             (:data:`ENERGY_ALLOWANCE_J`): the allowance is ``min(F_max Delta / 2, this)``.
             A requirement, not a fitted constant: lower it for a stricter bound (with a

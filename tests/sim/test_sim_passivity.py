@@ -365,6 +365,60 @@ def test_the_energy_bound_switch_takes_only_a_bool(value):
     assert dataclasses.replace(s, energy_bound=np.bool_(False)).energy_bound is False
 
 
+@hsettings(max_examples=100, deadline=None, derandomize=True, database=None)
+@given(b=st.floats(0.05, 3.0), T=st.floats(2.5e-4, 1e-2), res=st.floats(1e-3, 0.2), fmax=st.floats(0.5, 12.0),
+       depth=st.floats(0.05, 5.0), jitter=st.lists(st.floats(0.5, 3.0), min_size=1, max_size=8))
+def test_with_a_declared_period_the_spring_keeps_its_stiffness_through_jitter(b, T, res, fmax, depth, jitter):
+    """With the servo's period declared (``period_s``), the Colgate spring of a press held
+    at one reading is ``min(2 b_s / T, s(T) / Delta) x depth`` (``s(T)`` the ramp step at
+    the declared period) before, during and after intervals of any measured length: a
+    spring sized on each measured interval changes its stiffness while compressed (a rise
+    stores energy no motion paid for), and one that may only fall would ratchet down
+    after an early tick. The wall equals the spring here (``F_wall`` = that force), so the
+    force sent is the spring's alone."""
+    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+                            period_s=T)
+    b_s = cs.damping_trust * b
+    k = min(2 * b_s / T, fmax * min(T / cs.ramp_time_s, 1.0) / (res * 1e-3))
+    f_spring = min(k * depth * 1e-3, fmax)
+    pc = PassivityController(cs)
+    pc.step(0.0, T, 0.0)
+    pc.commit(0.0)
+    for dt in [T] + [dt_ * T for dt_ in jitter] + [T, T]:
+        f = pc.step(-depth, dt, f_spring)
+        pc.commit(f)
+        assert f == pytest.approx(f_spring, rel=1e-12, abs=1e-15), dt / T
+
+
+def test_without_a_declared_limit_the_spring_does_not_stiffen_while_compressed():
+    """Without a declared force limit the full scale is the largest force so far, and the
+    spring's cap (one ramp step per count) follows it. With the servo's period declared,
+    the spring of a press does not stiffen while it is compressed: a press that deepens
+    the wall's force (and so the full scale) keeps the stiffness it had, and after the
+    release the next press starts from the grown full scale."""
+    T, res, b, K = 2.5e-4, 0.17, 1.0, 1.0          # K: a 1 N/mm wall; the cap binds (2 b_s / T = 4 N/mm)
+    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, period_s=T, energy_bound=False)
+    pc = PassivityController(cs)
+    pc.step(0.0, T, 0.0)
+    pc.commit(0.0)
+
+    def spring_at(depth, f_wall=None):   # the force sent on a press into a wall of K N/mm (or f_wall)
+        f = pc.step(-depth, T, K * depth if f_wall is None else f_wall)
+        pc.commit(f)
+        return f
+    f0 = spring_at(0.4)                               # contact: full scale 0.4 N
+    k0 = 0.4 * min(T / cs.ramp_time_s, 1.0) / (res * 1e-3)   # its cap, N/m
+    assert f0 == pytest.approx(min(k0 * 0.4e-3, 0.4), rel=1e-12)
+    spring_at(10.0)                                   # the wall's force, and the full scale, to 10 N
+    assert pc._spring == pytest.approx(k0 * 10e-3, rel=1e-12)   # the stiffness of the contact's start
+    for _ in range(40):                               # release; out of the wall
+        pc.step(1.0, T, 0.0)
+        pc.commit(0.0)
+    spring_at(0.4, 10.0)                              # a press into a 10 N wall
+    k1 = 10.0 * min(T / cs.ramp_time_s, 1.0) / (res * 1e-3)  # the next press: the grown full scale's cap
+    assert pc._spring == pytest.approx(min(k1, 2 * 0.5 * b / T) * 0.4e-3, rel=1e-12)
+
+
 def _hold_at(pc, dts, depth_mm=-0.5, f_wall=50.0):
     out = []
     for dt in dts:
