@@ -256,9 +256,13 @@ def sine_fit(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """(frequency Hz, amplitude) of a steady sine: frequency from the rising zero
     crossings (linear interpolation between samples): whole cycles over their total time,
     leaving out cycles more than 20 % off the median (a gap of silence: a dropout, the
-    end of a contact); amplitude from the RMS over the cycles (x sqrt 2)."""
-    s = y < 0.0          # strictly negative, then >= 0: the step y[i+1] - y[i] is > 0
-    idx = np.nonzero(s[:-1] & ~s[1:])[0]
+    end of a contact, the device's own silence when its commands stop coming); amplitude
+    from the RMS over the same cycles (x sqrt 2), so a gap lowers neither."""
+    # strictly negative, then strictly positive: the step y[i+1] - y[i] is > 0, and the
+    # edges of a silence (exact zeros, of either sign) are no crossings (a crossing into
+    # a gap made a short cycle that the 20 % rule kept); a crossing through a sample
+    # that is exactly 0 is missed, which makes one long cycle that the rule leaves out
+    idx = np.nonzero((y[:-1] < 0.0) & (y[1:] > 0.0))[0]
     if idx.size < 3:
         return float("nan"), float("nan")
     frac = -y[idx] / (y[idx + 1] - y[idx])
@@ -268,7 +272,11 @@ def sine_fit(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     if not keep.any():
         return float("nan"), float("nan")
     f = int(keep.sum()) / float(per[keep].sum())
-    seg = y[idx[0] + 1: idx[-1] + 1]
+    # cycle i is y[idx[i] + 1 : idx[i + 1] + 1]; the samples of the kept cycles
+    edge = np.zeros(y.size + 1, int)
+    np.add.at(edge, idx[:-1][keep] + 1, 1)
+    np.add.at(edge, idx[1:][keep] + 1, -1)
+    seg = y[np.cumsum(edge)[:-1] > 0]
     return float(f), float(np.sqrt(2.0 * np.mean(seg * seg)))
 
 
