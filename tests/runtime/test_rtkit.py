@@ -51,13 +51,24 @@ RULE = """polkit.addRule(function(action, subject) {
 """
 
 
+#: held while the modes of ``_traversable`` are changed: two test runs on one machine
+#: (two checkouts, one interpreter under /root) each restored /root's mode while the
+#: other's ``nobody`` was still importing from under it
+_TRAVERSE_LOCK = Path(tempfile.gettempdir()) / "hapticsdk-tests-traversable.lock"
+
+
 @contextlib.contextmanager
 def _traversable(paths):
     """For the test's duration, let others *traverse* (o+x, never read or list) the
     directories above ``paths`` that forbid it (a Python under /root, a virtual
     environment in a 0700 temporary directory), so that ``nobody`` can run this very
-    interpreter and import the packages under test; restored afterwards."""
+    interpreter and import the packages under test; restored afterwards. Serialised
+    across processes (an exclusive lock on a file in the temporary directory): another
+    run's restore cannot take the way away while this one's child runs."""
+    import fcntl
     changed = []
+    lock = open(_TRAVERSE_LOCK, "a")
+    fcntl.flock(lock, fcntl.LOCK_EX)
     try:
         for p in paths:
             d = Path(p)
@@ -69,8 +80,11 @@ def _traversable(paths):
                         changed.append((a, mode & 0o7777))
         yield
     finally:
-        for a, mode in reversed(changed):
-            os.chmod(a, mode)
+        try:
+            for a, mode in reversed(changed):
+                os.chmod(a, mode)
+        finally:
+            lock.close()   # releases the lock
 
 
 class Bus:
