@@ -11,6 +11,8 @@ Rules (docs/safety.md, "Named errors"):
 
 * a number is an ``int`` / ``float`` / numpy real, never a ``bool`` or a string
   (``"0.5"`` is refused: a string that happens to parse is a bug in the caller);
+* a switch (``flag``) is ``True`` or ``False`` (or a numpy bool), never a ``1``, a string
+  or ``None`` read by its truth value (``"no"`` is true);
 * an array of numbers is checked element by element, and the first bad element is named
   by its index;
 * a device serial number is at most :data:`MAX_SERIAL_CHARS` characters with no control
@@ -29,7 +31,7 @@ import numpy as np
 from .checks import is_number
 from .errors import ValidationError
 
-__all__ = ["number", "number_array", "serial_number", "figure_path", "call_with_options", "MAX_SERIAL_CHARS", "FIGURE_FORMATS"]
+__all__ = ["number", "flag", "number_array", "serial_number", "figure_path", "call_with_options", "MAX_SERIAL_CHARS", "FIGURE_FORMATS"]
 
 #: longest device serial number accepted: a USB string descriptor is at most 255 bytes,
 #: 2 of them header, the rest UTF-16 code units: (255 - 2) // 2 = 126
@@ -62,6 +64,13 @@ def number(value: Any, field: str, *, lo: float | None = None, hi: float | None 
     if hi is not None and (v > hi or (hi_open and v == hi)):
         raise ValidationError(f"must be {'<' if hi_open else '<='} {hi:g}, got {value!r}", field=field)
     return v
+
+
+def flag(value: Any, field: str) -> bool:
+    """``value`` as a bool, when it is ``True`` or ``False`` (or a numpy bool)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValidationError(f"must be True or False, got {type(value).__name__} {value!r:.80}", field=field)
+    return bool(value)
 
 
 _NUMBER_TYPES = frozenset((int, float, np.float64, np.float32, np.int64, np.int32))

@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from ..argcheck import flag
 from ..perception.dimensions import ChannelCommand
 from ..errors import ValidationError
 
@@ -96,10 +97,8 @@ class SafetySettings:
                 raise ValidationError(f"must be None or a number >= 0, got {v!r}", field=f"safety.{name}")
         if not 0.0 <= self.velocity_knee < 1.0:
             raise ValidationError(f"must be in [0, 1), got {self.velocity_knee!r}", field="safety.velocity_knee")
-        if not isinstance(self.ramp_amplitude, (bool, np.bool_)):
-            # a switch of a safeguard: only True or False, never a truthy string or None
-            raise ValidationError(f"must be True or False, got {self.ramp_amplitude!r:.80}",
-                                  field="safety.ramp_amplitude")
+        # a switch of a safeguard: only True or False, never a truthy string or None
+        flag(self.ramp_amplitude, "safety.ramp_amplitude")
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as a dict (every field, SI units as named)."""

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..argcheck import number
+from ..argcheck import flag, number
 from ..errors import ValidationError
 from .margin import _check_nonneg
 
@@ -186,12 +186,6 @@ def _share(value: Any, name: str) -> float:
     return number(value, name, lo=0.0, hi=1.0)
 
 
-def _flag(value: Any, name: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise ValidationError(f"must be True or False, got {type(value).__name__} {value!r:.80}", field=name)
-    return bool(value)
-
-
 #: the check of each field of :class:`ControllerSettings` (its value as the tick reads it)
 _FIELDS = {
     "device_damping_ns_per_m": _nonneg,
@@ -203,7 +197,7 @@ _FIELDS = {
     "max_force_n": _positive_or_none,
     "ramp_time_s": _positive,
     "device_mass_kg": _positive_or_none,
-    "energy_bound": _flag,
+    "energy_bound": flag,
     "energy_allowance_j": _nonneg,
     "period_s": _positive_or_none,
 }

@@ -47,6 +47,58 @@ def _shm():
 
 
 
+_BAD_SESSION_ARGS = [
+    ("period_s", "0.001"), ("period_s", True), ("period_s", float("nan")), ("period_s", 0.0), ("period_s", 5.0),
+    ("period_s", [0.001]),
+    ("ramp_s", "0.1"), ("ramp_s", True), ("ramp_s", -0.1), ("ramp_s", 6.0),
+    ("heartbeat_timeout_s", "1"), ("heartbeat_timeout_s", True), ("heartbeat_timeout_s", float("inf")),
+    ("heartbeat_timeout_s", 0.0),
+    ("log_seconds", "1"), ("log_seconds", True), ("log_seconds", 0.0), ("log_seconds", float("nan")),
+    ("start_timeout_s", "1"), ("start_timeout_s", True), ("start_timeout_s", float("nan")), ("start_timeout_s", 0.0),
+    ("realtime", "no"), ("realtime", 0), ("realtime", None),
+    ("refine", "no"), ("refine", 1),
+    ("view", "yes"), ("view", -1), ("view", 70000), ("view", 2.5),
+    ("actuator_options", "x"), ("actuator_options", {"force": 3}), ("actuator_options", {"nosuch": {}}),
+]
+
+
+@pytest.mark.parametrize("name,value", _BAD_SESSION_ARGS, ids=lambda v: repr(v)[:20])
+def test_session_arguments_are_checked_before_a_servo_starts(name, value, monkeypatch):
+    """Every argument of ``Session`` is checked before the servo starts, a bad one a
+    ValidationError naming it: a string that reads as a number, a bool for a number, a
+    switch given as ``"no"`` (true by its truth value: a realtime servo the caller turned
+    off), a port out of range, options for a role the scene does not have (a typo's
+    options were dropped in silence). Before, several opened a session or raised
+    TypeError/ValueError from inside."""
+    from hapticsdk.errors import ValidationError
+    from hapticsdk.runtime.session import app
+
+    started = []
+    monkeypatch.setattr(app.threading.Thread, "start", lambda self: started.append(self.name))
+    with pytest.raises(ValidationError) as ei:
+        Session(PAD, isolation="thread", **{name: value})
+    assert ei.value.field == name, ei.value
+    assert "hapticsdk-servo" not in started
+
+
+def test_live_calls_check_their_arguments(wait):
+    """``set_material``'s ``ramp_s`` and ``refine`` and ``pause``'s switch: the same checks
+    as the constructor's, on a running session (which carries on)."""
+    from hapticsdk.errors import ValidationError
+    with Session(PAD, isolation="thread", realtime=False) as s:
+        for kw in ({"ramp_s": "0.1"}, {"ramp_s": True}, {"ramp_s": 9.0}, {"refine": "no"}):
+            with pytest.raises(ValidationError) as ei:
+                s.set_material("pad", {"hardness": 0.7}, **kw)
+            assert ei.value.field == next(iter(kw))
+        for v in ("no", 1, None):
+            with pytest.raises(ValidationError) as ei:
+                s.pause(v)
+            assert ei.value.field == "on"
+        assert s.set_material("pad", {"hardness": 0.7}, ramp_s=0.1, refine=False).success
+        s.pause(True)
+        s.pause(False)
+
+
 def test_thread_session_contacts_state_events_and_switch(wait):
     """Two boxes, the finger slides from one to the other: contact events name the
     objects in order, state() follows the probe, set_material switches the material in

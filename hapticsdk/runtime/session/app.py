@@ -158,15 +158,26 @@ class Session:
                  record: "str | Path | None" = None, view: "bool | int" = False) -> None:
         from ...compiler import compile_scene
         from ...scene import Scene
+        from ...argcheck import flag, number
+        from ...scene.limits import check_period
         if isolation not in ISOLATIONS:
             raise ValidationError(f"isolation must be one of {list(ISOLATIONS)}, got {isolation!r}",
                                   field="isolation")
-        if not (isinstance(ramp_s, (int, float)) and math.isfinite(ramp_s) and 0 <= ramp_s <= 5):
-            raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
-        if heartbeat_timeout_s is not None and not (
-                isinstance(heartbeat_timeout_s, (int, float)) and 2 * HEARTBEAT_PERIOD_S <= heartbeat_timeout_s):
-            raise ValidationError(f"heartbeat_timeout_s must be >= {2 * HEARTBEAT_PERIOD_S} s or None",
-                                  field="heartbeat_timeout_s")
+        # every argument checked here, before a process starts (a string that reads as a
+        # number, a bool for a number or a switch given as "no" are the caller's bugs)
+        ramp_s = number(ramp_s, "ramp_s", lo=0.0, hi=5.0)
+        if heartbeat_timeout_s is not None:   # None: only the parent-process check (documented)
+            heartbeat_timeout_s = number(heartbeat_timeout_s, "heartbeat_timeout_s", lo=2 * HEARTBEAT_PERIOD_S)
+        if period_s is not None:
+            period_s = check_period(number(period_s, "period_s"), "period_s")
+        log_seconds = number(log_seconds, "log_seconds", lo=0.0, lo_open=True)
+        start_timeout_s = number(start_timeout_s, "start_timeout_s", lo=0.0, lo_open=True)
+        realtime = flag(realtime, "realtime")
+        refine = flag(refine, "refine")
+        if view is not None and not isinstance(view, bool):
+            view = int(number(view, "view", lo=0, hi=65535, integer=True))   # a port
+        from ..render import _check_app_options
+        actuator_options = _check_app_options(actuator_options)
         from ..recorder import check_record_path
         if rt is not None:
             from ..clock import RealtimeSettings
@@ -218,13 +229,16 @@ class Session:
                 # as render_plan: the plan's options (never a privileged one: a scene file
                 # may not name a library or an output file), then the user's device
                 # configuration and environment, then the application's
-                opts = _actuator_options(registry("actuator").load(name), name, role, mp_,
-                                         dict(actuator_options or {}))
+                opts = _actuator_options(registry("actuator").load(name), name, role, mp_, actuator_options)
                 if role in devices and devices[role][0] != name:
                     raise ValidationError(f"role {role!r} is mapped to {devices[role][0]!r} and {name!r} by "
                                           f"two materials; a session opens one actuator per role",
                                           field=f"scene.devices.{role}")
                 devices.setdefault(role, (name, opts))
+        unknown = sorted(set(actuator_options) - set(devices))
+        if unknown:
+            raise ValidationError(f"roles {unknown} are not roles of this scene (it has {sorted(devices)})",
+                                  field="actuator_options")
         self.devices = {r: n for r, (n, _) in devices.items()}
         self._roles = list(devices)  # the servo numbers a clamp's actuator by this order
         self._names: dict[int, str] = {}
@@ -588,9 +602,10 @@ class Session:
         label, targets = self._targets(material, "material")
         feats, source, res = self._answer(targets)
         self._check_roles(feats, "material")
-        ramp = self.ramp_s if ramp_s is None else float(ramp_s)
-        if not (math.isfinite(ramp) and 0 <= ramp <= 5):
-            raise ValidationError(f"ramp_s must be in [0, 5] s, got {ramp_s!r}", field="ramp_s")
+        from ...argcheck import flag, number
+        ramp = self.ramp_s if ramp_s is None else number(ramp_s, "ramp_s", lo=0.0, hi=5.0)
+        if refine is not None:
+            refine = flag(refine, "refine")
         handle = self._send_material(oid, feats, ramp)
         self._materials[object] = label
         ints = getattr(res, "intensities", None)
@@ -795,6 +810,8 @@ class Session:
     def pause(self, on: bool = True) -> None:
         """Pause (True) or resume (False): while paused no renderer runs, force 0 and
         vibration amplitude 0 are sent; the probe is still read."""
+        from ...argcheck import flag
+        on = flag(on, "on")
         self._check()
         self._mv[_PAUSE] = 1.0 if on else 0.0
 
