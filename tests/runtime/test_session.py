@@ -7,6 +7,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -286,6 +287,45 @@ def test_hung_application_heartbeat_timeout_stops_the_servo(wait):
             assert wait(lambda: s.state() is None, 10.0)
         assert "no heartbeat" in str(ei.value)
         assert set(s._summary["stopped"]) >= {"omni-virtual", "voicecoil-virtual"}
+
+
+def test_a_start_up_that_starves_the_heartbeat_does_not_stop_the_servo(monkeypatch, wait):
+    """The session's own start-up work in the application (the warm-up's table build,
+    while the servo process starts) can hold the interpreter lock: on a busy machine it
+    starved the heartbeat thread for 254 ms and the servo, already running, stopped for
+    want of a heartbeat (examples/live_session.py under load). Here the heartbeat thread
+    writes nothing while the warm-up runs, three times the timeout: the servo watches the
+    heartbeat only once ``Session()`` has returned, and then does (a hang stops it)."""
+    from hapticsdk.runtime.session.protocol import _HEARTBEAT, _RUNNING, _STATUS, HEARTBEAT_PERIOD_S
+    warming = threading.Event()
+    real_warm = Session._warm
+
+    def slow_warm(self):
+        warming.set()
+        real_warm(self)
+        deadline = time.monotonic() + 60.0
+        while self._mv[_STATUS] != _RUNNING and time.monotonic() < deadline:   # the servo is up
+            time.sleep(0.005)
+        time.sleep(0.3)     # and runs, three heartbeat timeouts without a heartbeat
+        warming.clear()
+
+    def starved_heartbeat(self):   # Session._heartbeat, writing nothing while the warm-up runs
+        while not self._hb_stop.wait(HEARTBEAT_PERIOD_S):
+            if not warming.is_set():
+                try:
+                    self._mv[_HEARTBEAT] = time.monotonic()
+                except (ValueError, TypeError):
+                    return
+
+    monkeypatch.setattr(Session, "_warm", slow_warm)
+    monkeypatch.setattr(Session, "_heartbeat", starved_heartbeat)
+    with Session(PAD, trajectory=SLIDE, heartbeat_timeout_s=0.1) as s:
+        ticks = s.state().ticks
+        assert wait(lambda: s.state().ticks > ticks + 20)
+        s._hb_stop.set()  # then a hang: the servo stops
+        with pytest.raises(ServoProcessDied) as ei:
+            assert wait(lambda: s.state() is None, 10.0)
+        assert "no heartbeat" in str(ei.value)
 
 
 def test_state_is_never_torn(wait):

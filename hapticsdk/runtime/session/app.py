@@ -21,7 +21,7 @@ from ...errors import HapticSDKError, ServoProcessDied, SessionError, Validation
 from ...fileio import check_output_path
 from .protocol import (
     CLAMP_FIELDS, EVENT_KINDS, HEARTBEAT_PERIOD_S, SessionEvent, SessionState, _ACK0, _ACK_CAP,
-    _ACK_REC, _Buffer, _EV0, _EV_CAP, _EV_REC, _EV_W, _FAILED, _HEARTBEAT, _PAUSE, _PUB, _RUNNING,
+    _ACK_REC, _Buffer, _EV0, _EV_CAP, _EV_REC, _EV_W, _FAILED, _HB_ARMED, _HEARTBEAT, _PAUSE, _PUB, _RUNNING,
     _STARTING, _STATUS, _STOP, _STOPPED, _T, _VIB0, _VIB_N, _read_state, _state_from
 )
 from .pipe import _grow_pipe
@@ -314,6 +314,10 @@ class Session:
                     raise SessionError(f"the servo did not start within {start_timeout_s} s")
                 time.sleep(0.002)
             self._check()
+            # from here on the servo watches the heartbeat (a fresh one first): the
+            # start-up above may have starved the heartbeat thread on a busy machine
+            self._mv[_HEARTBEAT] = time.monotonic()
+            self._mv[_HB_ARMED] = 1.0
             if view is not False and view is not None:
                 url = self.open_view(0 if view is True else int(view))
                 _log.info("hapticsdk live view: %s", url)

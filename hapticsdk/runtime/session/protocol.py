@@ -33,6 +33,11 @@ _new_tuple = tuple.__new__
 (_T, _PX, _PY, _PZ, _VX, _VY, _VZ, _F, _OBJ, _PEN, _TICKS, _OVERRUNS, _SKIPPED, _RERR, _CLAMPS,
  _TICK_US, _TICK_MAX_US, _MISSED, _PUB, _NEAR, _PAUSED_S, _SWITCHES, _SWITCHED_AT) = range(1, 24)
 _HEARTBEAT, _STOP, _PAUSE, _STATUS, _PID, _REASON, _READY = range(32, 39)
+#: 1 once ``Session()`` has returned: the servo watches the heartbeat from then on. The
+#: session's own start-up in the application (the warm-up's table build, which can hold
+#: the interpreter lock for long stretches) is not a hung application; the servo
+#: watches the application's process throughout
+_HB_ARMED = 39
 #: vibration channels for the live view (outside the seqlock: a view frame may mix two
 #: ticks): up to two (role index, frequency Hz, amplitude) triples, role index -1 unused
 _VIB0, _VIB_N = 25, 2

@@ -19,7 +19,7 @@ from typing import Any, Mapping
 from ...errors import HapticSDKError
 from .protocol import (
     CLAMP_FIELDS, CLAMP_REPORT_S, Slots, _ACK0, _ACK_CAP, _ACK_REC, _CLAMPS, _CLAMP_INDEX, _EV0,
-    _EV_CAP, _EV_REC, _EV_W, _F, _FAILED, _HEARTBEAT, _KIND, _MISSED, _NEAR, _OBJ, _OVERRUNS,
+    _EV_CAP, _EV_REC, _EV_W, _F, _FAILED, _HB_ARMED, _HEARTBEAT, _KIND, _MISSED, _NEAR, _OBJ, _OVERRUNS,
     _PAUSE, _PAUSED_S, _PEN, _PID, _PUB, _PX, _PY, _PZ, _READY, _REASON, _RERR, _RUNNING, _SEQ,
     _SEQ_END, _SKIPPED, _STATUS, _STOP, _STOPPED, _STOP_REASONS, _SWITCHED_AT, _SWITCHES, _T,
     _TICKS, _TICK_MAX_US, _TICK_US, _VIB0, _VIB_N, _VX, _VY, _VZ, _attach
@@ -589,7 +589,7 @@ class _Servo:
                 if cl != clamps_seen or self._clamp_live:
                     self._clamp_events()
                     clamps_seen = cl
-                if watch and hb_timeout is not None:
+                if watch and hb_timeout is not None and mv[_HB_ARMED] != 0.0:
                     age = mono() - mv[_HEARTBEAT]
                     if age > hb_timeout:
                         self.reason = "heartbeat"
