@@ -135,7 +135,7 @@ def intensity(text: str) -> float:
     from ..errors import ValidationError
 
     try:
-        return check_intensity(str(text), "intensity")
+        return check_intensity(str(text).strip(), "intensity", text=True)
     except ValidationError as exc:
         # the option's name is added by the parser; keep only the reason
         raise argparse.ArgumentTypeError(str(exc).split(": ", 1)[-1]) from None

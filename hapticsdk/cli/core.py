@@ -135,7 +135,7 @@ def _targets(args: argparse.Namespace) -> dict[str, float]:
         if "=" not in item:
             raise ValidationError(f"expected DIM=VALUE, got {item!r}", field="target")
         k, v = item.split("=", 1)
-        targets[k.strip()] = check_intensity(v, f"targets.{k.strip()}")
+        targets[k.strip()] = check_intensity(v.strip(), f"targets.{k.strip()}", text=True)
     return targets
 
 

@@ -15,6 +15,7 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
+from ..checks import is_number
 from ..errors import ValidationError
 from .features import Feature, FeatureSpace
 
@@ -335,17 +336,25 @@ def undeclared_fields(cmd: ChannelCommand, spec: RoleSpec) -> list[str]:
     return [f for f in COMMAND_FIELDS if getattr(cmd, f) is not None and f not in spec.fields]
 
 
-def check_intensity(value: object, field: str) -> float:
+def check_intensity(value: object, field: str, *, text: bool = False) -> float:
     """Return ``value`` as a float in [0, 1] or raise :class:`ValidationError` naming ``field``.
 
-    ``value`` is a number or the text of one (command-line arguments); ``True`` and
-    ``False`` are refused (a bool is not an intensity)."""
-    if isinstance(value, (bool, np.bool_)):
-        raise ValidationError(f"intensity must be a number, got {value!r}", field=field)
+    ``value`` is a real number (``hapticsdk.argcheck``'s rule: ``True`` and ``False``
+    are refused, a bool is not an intensity, and so is a string); with ``text=True``
+    (command-line arguments) it may be the text of a number."""
+    if text and isinstance(value, str):
+        try:
+            value = float(value)
+        except ValueError:
+            raise ValidationError(f"intensity must be a number, got {value!r:.80}", field=field) from None
+    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "fiu":
+        value = value.item()
+    if not is_number(value):
+        raise ValidationError(f"intensity must be a number, got {value!r:.80}", field=field)
     try:
         v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ValidationError(f"intensity must be a number, got {value!r}", field=field) from None
+    except OverflowError:   # an int beyond the float range
+        raise ValidationError(f"intensity {value!r:.40} outside 0..1", field=field) from None
     if not np.isfinite(v):
         raise ValidationError("intensity is NaN or infinite", field=field)
     if not 0.0 <= v <= 1.0:

@@ -101,11 +101,14 @@ class SolveProblem:
         unset = [n for n in model_in if n not in self.space and n not in self.fixed]
         if unset:
             raise ValidationError(f"model inputs {unset} are neither searched nor fixed", field="fixed")
-        for n, v in self.fixed.items():
-            if not np.isfinite(v):
-                raise ValidationError("fixed value is NaN or infinite", field=f"fixed.{n}")
+        # plain floats: a string, a bool, None or an int beyond the float range is named
+        self.fixed = {n: number(v, f"fixed.{n}") for n, v in self.fixed.items()}
+        self.penalty_weight = number(self.penalty_weight, "penalty_weight", lo=0.0)
         self.constraints = tuple(self.constraints)
-        for c in self.constraints:
+        for i, c in enumerate(self.constraints):
+            if not isinstance(c, Constraint):
+                raise ValidationError(f"must be a Constraint, got {type(c).__name__} {c!r:.60}",
+                                      field=f"constraints[{i}]")
             absent = [f for f in c.features if f not in model_in]
             if absent:
                 raise ValidationError(f"constraint {c.name!r} reads features {absent} that the model "

@@ -10,13 +10,13 @@ constraints. ``solve(...)`` then resolves ``method=`` through the solver table, 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any, Sequence, overload
 
 import numpy as np
 
 from ..checks import MAX_SEED, check_seed
-from ..perception.dimensions import PerceptionDimension, check_intensity
+from ..perception.dimensions import Constraint, PerceptionDimension, check_intensity
 from ..errors import ModelError, ValidationError
 from ..perception.features import FeatureSpace
 from ..perception.models import CompositeModel, PerceptionModel
@@ -56,12 +56,21 @@ def load_model(spec: str | PerceptionModel) -> PerceptionModel:
     return model
 
 
+def _dimension_names(dimensions: Any) -> tuple[str, ...]:
+    """``dimensions=`` as a tuple of names: a list or tuple, not one name (a string would
+    be read as its letters) nor a number."""
+    if isinstance(dimensions, (str, bytes)) or not isinstance(dimensions, Iterable):
+        raise ValidationError(f"must be a list of dimension names, got {type(dimensions).__name__} "
+                              f"{dimensions!r:.60}", field="dimensions")
+    return tuple(dimensions)
+
+
 def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.ndarray, tuple[str, ...]]:
     if isinstance(targets, Mapping):
         if not targets:
             raise ValidationError("no targets given", field="targets")
         if dimensions:   # the mapping's keys must be exactly these names (else they are)
-            dims = tuple(dimensions)
+            dims = _dimension_names(dimensions)
             extra = [k for k in targets if k not in dims]
             missing = [d for d in dims if d not in targets]
             if extra or missing:
@@ -83,7 +92,7 @@ def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.n
                               field="targets")
     if dimensions is None:
         raise ValidationError("array targets need dimensions=[...] naming their columns", field="dimensions")
-    dims = tuple(dimensions)
+    dims = _dimension_names(dimensions)
     from ..argcheck import number_array
     T = number_array(targets, "targets", ndim=(1, 2), finite=False)  # a string is named by its index
     return T, dims
@@ -137,6 +146,18 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
     if absent:
         raise ModelError(f"model {mdl.name!r} does not read features {absent} that dimensions "
                          f"{list(dims)} contribute; its inputs are {model_inputs}")
+    if fixed is not None and not isinstance(fixed, Mapping):
+        raise ValidationError(f"must be an object {{feature: value}}, got {type(fixed).__name__}", field="fixed")
+    if not isinstance(data_support, (bool, np.bool_)):
+        raise ValidationError(f"must be True or False, got {data_support!r:.60}", field="data_support")
+    if isinstance(extra_constraints, (str, bytes)) or not isinstance(extra_constraints, Iterable):
+        raise ValidationError(f"must be a list of Constraint objects, got {type(extra_constraints).__name__}",
+                              field="extra_constraints")
+    extra_constraints = tuple(extra_constraints)
+    for i, c in enumerate(extra_constraints):
+        if not isinstance(c, Constraint):
+            raise ValidationError(f"must be a Constraint, got {type(c).__name__} {c!r:.60}",
+                                  field=f"extra_constraints[{i}]")
     pinned = dict(fixed or {})
     for n in pinned:
         if n not in model_inputs:
@@ -303,6 +324,9 @@ def _problem_for(targets: Any, build_kw: dict[str, Any]) -> SolveProblem:
 def _solver_for(method: str, options: Mapping[str, Any] | None) -> Solver:
     """``get_solver(method, **options)``, reusing an instance for the same settings
     (solvers keep no state between calls besides their options)."""
+    if options is not None and not isinstance(options, Mapping):
+        raise ValidationError(f"must be an object of solver options, got {type(options).__name__}",
+                              field="options")
     opts = dict(options or {})
     try:
         key = (method, registry("solver").load(method), _hashable(opts))
