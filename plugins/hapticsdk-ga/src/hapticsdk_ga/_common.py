@@ -6,11 +6,14 @@ name says ``u`` (unit coordinates, ``u = (x - lower) / span``, 0 for a degenerat
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any, Literal, overload
 
 import numpy as np
 
+from hapticsdk.argcheck import number
+from hapticsdk.checks import is_number
 from hapticsdk.errors import ValidationError
 from hapticsdk.solvers import CONSTRAINT_TOL, EvalBuffers, SolveProblem
 
@@ -138,24 +141,21 @@ def check_int(opts: dict, key: str, lo: int, hi: int | None = None, *, allow_non
 
 
 def check_fraction(opts: dict, key: str, lo: float = 0.0, hi: float = 1.0) -> float:
-    v = opts[key]
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValidationError(f"must be a number, got {v!r}", field=f"options.{key}") from None
-    if not (np.isfinite(f) and lo <= f <= hi):
-        raise ValidationError(f"must be in [{lo:g}, {hi:g}], got {v!r}", field=f"options.{key}")
-    return f
+    """Option ``key``: a finite number in ``lo..hi`` (a string or a bool is not one)."""
+    return number(opts[key], f"options.{key}", lo=lo, hi=hi)
 
 
 def check_budget(opts: dict, key: str = "time_budget_s") -> float | None:
+    """Option ``key``: seconds > 0 (infinite: no budget) or None."""
     v = opts.get(key)
     if v is None:
         return None
+    if not is_number(v):
+        raise ValidationError(f"must be a number of seconds or None, got {v!r:.60}", field=f"options.{key}")
     try:
         f = float(v)
-    except (TypeError, ValueError):
-        raise ValidationError(f"must be a number of seconds or None, got {v!r}", field=f"options.{key}") from None
+    except OverflowError:   # an int beyond the float range: as long as infinity
+        f = math.inf
     if not (f > 0):
         raise ValidationError(f"must be > 0 s, got {v!r}", field=f"options.{key}")
     return f
@@ -167,13 +167,14 @@ def target_error(opts: dict, problem: SolveProblem) -> float:
     v = opts.get("target_error")
     if v is None:
         return float(problem.tolerance)
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValidationError(f"must be a number or None, got {v!r}", field="options.target_error") from None
-    if not (np.isfinite(f) and f >= 0):
-        raise ValidationError(f"must be >= 0, got {v!r}", field="options.target_error")
-    return f
+    return check_target_error(v)
+
+
+def check_target_error(v: Any) -> float:
+    """A ``target_error`` option: a finite number >= 0."""
+    if not is_number(v):
+        raise ValidationError(f"must be a number or None, got {v!r:.60}", field="options.target_error")
+    return number(v, "options.target_error", lo=0.0)
 
 
 class Clock:

@@ -34,6 +34,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import os
 import time
 from pathlib import Path
 from typing import Any, ClassVar
@@ -319,6 +320,11 @@ class AmortisedSolver(Solver):
         opts = {"grid": check_int(o, "grid", 2, 2001),
                 "build_samples": check_int(o, "build_samples", 16, 10_000_000),
                 "build_iter": check_int(o, "build_iter", 1, 10_000)}
+        if not isinstance(o["cache"], (bool, np.bool_)):
+            raise ValidationError(f"must be True or False, got {o['cache']!r:.60}", field="options.cache")
+        if o["cache_dir"] is not None and not isinstance(o["cache_dir"], (str, os.PathLike)):
+            raise ValidationError(f"must be a directory path or None, got {type(o['cache_dir']).__name__}",
+                                  field="options.cache_dir")
         mkey = ("amortised", tuple(sorted(opts.items())), bool(o["cache"]), o["cache_dir"])
         hit: tuple[dict[str, Any], tuple] = (opts, mkey)
         if key is not None:

@@ -15,10 +15,13 @@ default (scipy's polish is a finite-difference L-BFGS-B, not batched). Degenerat
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
 
+from hapticsdk.argcheck import number
+from hapticsdk.checks import is_number
 from hapticsdk.errors import ValidationError
 from hapticsdk.solvers import SolveProblem, Solver, SolverOutput, Trace
 
@@ -27,16 +30,20 @@ from .ga import MAX_GENERATIONS, MAX_POPULATION
 
 
 def _mutation_range(v: Any) -> tuple[float, float]:
-    if isinstance(v, (int, float)):
-        lo = hi = float(v)
+    if is_number(v):
+        lo = hi = number(v, "options.mutation")
     else:
-        try:
-            lo, hi = (float(a) for a in v)
-        except (TypeError, ValueError):
-            raise ValidationError(f"must be a number or (lo, hi), got {v!r}", field="options.mutation") from None
+        if isinstance(v, (str, bytes)) or not isinstance(v, (tuple, list)) or len(v) != 2:
+            raise ValidationError(f"must be a number or (lo, hi), got {v!r:.60}", field="options.mutation")
+        lo, hi = (number(a, f"options.mutation[{i}]") for i, a in enumerate(v))
     if not (0 <= lo <= hi <= 2):
         raise ValidationError(f"must lie in [0, 2] with lo <= hi, got {v!r}", field="options.mutation")
     return lo, hi
+
+
+#: the strategies scipy's differential_evolution knows
+SCIPY_STRATEGIES = ("best1bin", "best1exp", "best2bin", "best2exp", "currenttobest1bin", "currenttobest1exp",
+                    "rand1bin", "rand1exp", "rand2bin", "rand2exp", "randtobest1bin", "randtobest1exp")
 
 
 class DESolver(Solver):
@@ -156,6 +163,17 @@ class ScipyDESolver(Solver):
         o = self.options
         check_int(o, "popsize", 1, 10_000)
         check_int(o, "maxiter", 0, MAX_GENERATIONS)
+        # every option scipy receives is checked here: scipy takes recombination=nan or
+        # tol=-1 without a word, and polish="no" is true
+        f_lo, f_hi = _mutation_range(o["mutation"])
+        mutation: float | tuple[float, float] = f_lo if is_number(o["mutation"]) else (f_lo, f_hi)
+        recombination = check_fraction(o, "recombination")
+        tol = check_fraction(o, "tol", 0.0, math.inf)
+        if o["strategy"] not in SCIPY_STRATEGIES:
+            raise ValidationError(f"unknown strategy {o['strategy']!r:.60}; valid: {list(SCIPY_STRATEGIES)}",
+                                  field="options.strategy")
+        if not isinstance(o["polish"], (bool, np.bool_)):
+            raise ValidationError(f"must be True or False, got {o['polish']!r:.60}", field="options.polish")
         goal = target_error(o, problem)
         clock = Clock(check_budget(o))
         ev = Evaluator(problem)
@@ -199,8 +217,8 @@ class ScipyDESolver(Solver):
                 continue
             res = differential_evolution(
                 fun, bounds=list(zip(lower[free], upper[free])), popsize=o["popsize"], maxiter=o["maxiter"],
-                mutation=o["mutation"], recombination=o["recombination"], strategy=o["strategy"],
-                tol=o["tol"], polish=o["polish"], vectorized=True, updating="deferred",
+                mutation=mutation, recombination=recombination, strategy=o["strategy"],
+                tol=tol, polish=bool(o["polish"]), vectorized=True, updating="deferred",
                 rng=np.random.default_rng(int(seeds[i])), callback=make_cb(i, base))
             X = base.copy()
             X[free] = res.x

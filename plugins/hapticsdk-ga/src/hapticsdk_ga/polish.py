@@ -27,13 +27,15 @@ from __future__ import annotations
 
 from typing import Any, Callable, ClassVar
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from hapticsdk.errors import ValidationError
 from hapticsdk.solvers import CONSTRAINT_TOL, SolveProblem, Solver, SolverOutput, Trace
 
-from ._common import (Clock, check_budget, check_fraction, check_int, constraint_shortfalls, merge_options,
-                      rank_key, sample_cloud, solved_mask, violation_from)
+from ._common import (Clock, check_budget, check_fraction, check_int, check_target_error, constraint_shortfalls,
+                      merge_options, rank_key, sample_cloud, solved_mask, violation_from)
 
 #: upper limits of the size options (they bound a mistyped value, not a sensible one)
 MAX_ITER = 100_000
@@ -422,10 +424,11 @@ class PolishSolver(Solver):
              n_starts: int) -> SolverOutput:
         o = self.options
         max_iter = check_int(o, "max_iter", 0, MAX_ITER)
-        goal = float(o["target_error"])
-        if not (np.isfinite(goal) and goal >= 0):
-            raise ValidationError("must be >= 0", field="options.target_error")
-        damping = check_fraction(o, "damping", 0.0, 1e6)
+        goal = check_target_error(o["target_error"])
+        if o["ga_options"] is not None and not isinstance(o["ga_options"], Mapping):
+            raise ValidationError(f"must be an object of GA options or None, got {o['ga_options']!r:.60}",
+                                  field="options.ga_options")
+        damping = check_fraction(o, "damping", 1e-12, 1e6)   # the floor the updates keep: 0 leaves a held feature singular
         ftol = check_fraction(o, "ftol", 0.0, 1.0)
         margin = check_fraction(o, "constraint_margin", 0.0, 1.0)
         weight = check_fraction(o, "constraint_weight", 1e-12, 1e12)
