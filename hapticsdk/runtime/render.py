@@ -216,8 +216,13 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
                           "period_s" if period_s is not None else "plan.settings.servo.period_s")
     from ..devices.device_options import check_data_settings
     check_data_settings(plan.settings, field="plan.settings")  # safety is not data
-    if passivity is not None and not isinstance(passivity, bool):
-        raise ValidationError(f"passivity must be True or False, got {passivity!r}", field="passivity")
+    # every flag a bool: realtime="no" is true, and would pace a render the caller meant unpaced
+    for flag, value in (("passivity", passivity), ("realtime", realtime)):
+        if value is not None and not isinstance(value, bool):
+            raise ValidationError(f"{flag} must be True or False, got {value!r:.60}", field=flag)
+    for flag, value in (("hooks", hooks), ("raise_on_fault", raise_on_fault)):
+        if not isinstance(value, bool):
+            raise ValidationError(f"{flag} must be True or False, got {value!r:.60}", field=flag)
     passivity = True if passivity is None else passivity
 
     from ..plugins import manager, registry

@@ -19,7 +19,6 @@ imports the runtime (was ``hapticsdk.runtime.limits`` before 0.2, a deprecated s
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from ..errors import ValidationError
@@ -31,17 +30,10 @@ MAX_SECONDS = 86400.0
 
 
 def _number(value: Any, field: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        try:
-            if isinstance(value, bool):
-                raise TypeError
-            value = float(value)
-        except (TypeError, ValueError):
-            raise ValidationError(f"must be a number of seconds, got {value!r}", field=field) from None
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValidationError(f"must be finite, got {value!r}", field=field)
-    return v
+    # hapticsdk.argcheck's rule: a string ("0.001"), a bool or an int beyond the float
+    # range is no number of seconds
+    from ..argcheck import number
+    return number(value, field)
 
 
 def check_period(value: Any, field: str = "servo.period_s") -> float:

@@ -71,6 +71,82 @@ def _merge(base: Mapping[str, Any], over: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _check_names(value: Any, field: str) -> None:
+    """``None`` or a list of dimension names (a string is one name, not a list of letters)."""
+    if value is None:
+        return
+    if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
+        raise ValidationError(f"must be a list of dimension names, got {type(value).__name__} {value!r:.60}",
+                              field=field)
+    for i, n in enumerate(value):
+        if not isinstance(n, str) or not n:
+            raise ValidationError(f"must be a dimension name, got {n!r:.60}", field=f"{field}[{i}]")
+
+
+def _check_settings(settings: Mapping[str, Any]) -> None:
+    """The merged settings, checked as ``schemas/scene.schema.json`` checks a file's (a scene
+    built in code gets no schema): every key known, every group an object, every number a
+    finite number in range (an int beyond the float range included), every flag a bool;
+    the error names the field (``scene.settings.solver.tolerance``)."""
+    from ..argcheck import number
+    from ..checks import check_seed
+    from .limits import check_period
+
+    where = "scene.settings"
+    for key, default in DEFAULT_SETTINGS.items():
+        if isinstance(default, Mapping):
+            group = settings[key]
+            if not isinstance(group, Mapping):
+                raise ValidationError(f"must be an object, got {type(group).__name__} {group!r:.60}",
+                                      field=f"{where}.{key}")
+            if key != "renderer_options":
+                unknown = sorted(map(str, set(group) - set(default)))
+                if unknown:
+                    raise ValidationError(f"unknown setting(s) {unknown}; valid: {sorted(default)}",
+                                          field=f"{where}.{key}")
+    unknown = sorted(map(str, set(settings) - set(DEFAULT_SETTINGS)))
+    if unknown:
+        raise ValidationError(f"unknown setting(s) {unknown}; valid: {sorted(DEFAULT_SETTINGS)}", field=where)
+
+    def flag(value: Any, field: str) -> None:
+        if not isinstance(value, (bool, np.bool_)):
+            raise ValidationError(f"must be true or false, got {value!r:.60}", field=f"{where}.{field}")
+
+    def name(value: Any, field: str) -> None:
+        if not isinstance(value, str) or not value:
+            raise ValidationError(f"must be a non-empty string, got {value!r:.60}", field=f"{where}.{field}")
+
+    imp, sol, servo = settings["importance"], settings["solver"], settings["servo"]
+    flag(imp["enabled"], "importance.enabled")
+    name(imp["model"], "importance.model")
+    number(imp["threshold_percent"], f"{where}.importance.threshold_percent")
+    if not isinstance(imp["thresholds"], Mapping):
+        raise ValidationError(f"must be an object (dimension -> %), got {type(imp['thresholds']).__name__}",
+                              field=f"{where}.importance.thresholds")
+    for d, v in imp["thresholds"].items():
+        number(v, f"{where}.importance.thresholds.{d}")
+    name(sol["method"], "solver.method")
+    check_seed(sol["seed"], f"{where}.solver.seed")
+    if not isinstance(sol["options"], Mapping):
+        raise ValidationError(f"must be an object of solver options, got {type(sol['options']).__name__}",
+                              field=f"{where}.solver.options")
+    number(sol["tolerance"], f"{where}.solver.tolerance", lo=0.0, lo_open=True)
+    if sol["penalty"] not in ("paper", "normalised"):
+        raise ValidationError(f"must be 'paper' or 'normalised', got {sol['penalty']!r:.60}",
+                              field=f"{where}.solver.penalty")
+    flag(sol["data_support"], "solver.data_support")
+    if settings["model"] is not None:
+        name(settings["model"], "model")
+    check_period(servo["period_s"], f"{where}.servo.period_s")
+    flag(servo["realtime"], "servo.realtime")
+    flag(servo["passivity"], "servo.passivity")
+    _check_names(settings["dimensions"], f"{where}.dimensions")
+    for role, opts in settings["renderer_options"].items():
+        if not isinstance(opts, Mapping):
+            raise ValidationError(f"must be an object of renderer options, got {type(opts).__name__}",
+                                  field=f"{where}.renderer_options.{role}")
+
+
 @dataclass
 class DeviceSpec:
     """The actuator serving one channel role: plugin name and keyword options."""
@@ -169,23 +245,30 @@ class Scene:
     name: str = "scene"
 
     def __post_init__(self) -> None:
+        if isinstance(self.objects, (str, bytes, Mapping)) or not isinstance(self.objects, Sequence):
+            raise ValidationError(f"must be a list of SceneObject, got {type(self.objects).__name__}",
+                                  field="scene.objects")
         if not self.objects:
             raise ValidationError("a scene needs at least one object", field="scene.objects")
+        for i, o in enumerate(self.objects):
+            if not isinstance(o, SceneObject):
+                raise ValidationError(f"expected a SceneObject, got {o!r:.60}", field=f"scene.objects[{i}]")
+            if not isinstance(o.name, str) or not o.name:
+                raise ValidationError(f"must be a non-empty string, got {o.name!r:.60}", field=f"scene.objects[{i}].name")
+            _check_names(o.dimensions, f"scene.objects[{i}].dimensions")
+        if not isinstance(self.devices, Mapping):
+            raise ValidationError(f"must be an object (role -> actuator), got {type(self.devices).__name__}",
+                                  field="scene.devices")
         self.devices = {r: DeviceSpec.parse(v, r) for r, v in dict(self.devices).items()}
+        if not isinstance(self.settings or {}, Mapping):
+            raise ValidationError(f"must be an object, got {type(self.settings).__name__}", field="scene.settings")
         self.settings = _merge(DEFAULT_SETTINGS, self.settings or {})
-        thr = self.settings["importance"]["threshold_percent"]
-        if not isinstance(thr, (int, float)) or not np.isfinite(thr):
-            raise ValidationError(f"threshold must be a finite number (%), got {thr!r}",
-                                  field="scene.settings.importance.threshold_percent")
-        from .limits import check_period
-        check_period(self.settings["servo"]["period_s"], "scene.settings.servo.period_s")
+        _check_settings(self.settings)
         names = [o.name for o in self.objects]
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
             raise ValidationError(f"duplicate object names {dup}", field="scene.objects")
         for i, o in enumerate(self.objects):
-            if not isinstance(o, SceneObject):
-                raise ValidationError(f"expected a SceneObject, got {o!r}", field=f"scene.objects[{i}]")
             if not isinstance(o.geometry, Shape) or not isinstance(o.pose, Pose):
                 o._coerce_geometry(f"scene.objects[{i}]")
         self._check_bounds()
@@ -271,8 +354,12 @@ class Scene:
         ``settings`` override :data:`DEFAULT_SETTINGS` keys (``importance=``, ``solver=``,
         ``servo=`` ...)."""
         if seed is not None:
-            settings = _merge({"solver": {}}, settings)
-            settings["solver"]["seed"] = int(seed)
+            from ..checks import check_seed
+            solver = settings.get("solver", {})
+            if not isinstance(solver, Mapping):
+                raise ValidationError(f"must be an object, got {type(solver).__name__} {solver!r:.60}",
+                                      field="scene.settings.solver")
+            settings = {**settings, "solver": {**solver, "seed": check_seed(seed)}}
         if isinstance(material, str):
             mat: str | dict[str, Any] = material
             name = material
@@ -285,9 +372,11 @@ class Scene:
         else:
             raise ValidationError(f"expected a material name or intensities, got {material!r}",
                                   field="material")
-        return cls(objects=[SceneObject(name="object", material=mat,
-                                        dimensions=list(dimensions) if dimensions else None)],
-                   devices=dict(devices or {}), settings=settings, name=name)
+        # dimensions and devices as given (a string is not a list of names): checked by the scene
+        dims: Any = list(dimensions) if isinstance(dimensions, (list, tuple)) else dimensions
+        devs: Any = dict(devices) if isinstance(devices, Mapping) else ({} if devices is None else devices)
+        return cls(objects=[SceneObject(name="object", material=mat, dimensions=dims if dims != [] else None)],
+                   devices=devs, settings=settings, name=name)
 
     def hit_tester(self) -> HitTester:
         """A fresh :class:`~hapticsdk.scene.geometry.HitTester` over the objects, in order
