@@ -291,6 +291,11 @@ class DampingCalibration:
         for name in ("trusted_damping_ns_per_m", "damping_ns_per_m", "worst_error_ns_per_m", "resolution_mm",
                      "mass_kg", "period_s"):
             number(getattr(self, name), name, lo=0.0, lo_open=name in ("mass_kg", "period_s"))
+        # a count of readings is a whole number >= 1 (the schema's rule; "1", True, 1e308 are not)
+        if number(self.readings, "readings", lo=1, integer=True) > 2 ** 53:
+            raise ValidationError(f"must be a whole number of readings, got {self.readings!r}", field="readings")
+        if not isinstance(self.generated, (bool, np.bool_)):
+            raise ValidationError(f"must be True or False, got {self.generated!r:.60}", field="generated")
         if self.trusted_damping_ns_per_m > self.damping_ns_per_m:
             raise ValidationError(f"the lower bound {self.trusted_damping_ns_per_m!r} exceeds the fitted damping "
                                   f"{self.damping_ns_per_m!r}", field="trusted_damping_ns_per_m")

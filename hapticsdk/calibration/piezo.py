@@ -214,6 +214,7 @@ class PiezoTable:
             raise CalibrationError("not a piezo table (kind must be 'piezo')")
         from ..argcheck import number_array
         from ..errors import ValidationError
+        from .voicecoil import calibration_flag
         missing = [k for k in ("frequencies_hz", "voltages_v", "acceleration_m_s2") if k not in data]
         if missing:
             raise CalibrationError(f"piezo table misses key {missing[0]!r} "
@@ -224,7 +225,7 @@ class PiezoTable:
         except ValidationError as exc:
             raise CalibrationError(f"piezo table: {exc}") from None
         return cls(frequencies_hz=cols["frequencies_hz"], voltages_v=cols["voltages_v"],
-                   acceleration=cols["acceleration_m_s2"], generated=bool(data.get("generated", False)),
+                   acceleration=cols["acceleration_m_s2"], generated=calibration_flag(data, "generated"),
                    source=str(data.get("source", "")), serial=data.get("serial"))
 
 

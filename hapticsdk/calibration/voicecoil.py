@@ -12,8 +12,9 @@ The calibration holds only for the amplifier gain and mounting it was measured w
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any, Mapping, cast
 
 import numpy as np
 
@@ -37,10 +38,23 @@ def check_amplifier_gain(gain: Any) -> float | None:
 
     if gain is None:
         return None
-    if not is_number(gain) or not np.isfinite(float(gain)) or not 0 < float(gain) <= MAX_AMPLIFIER_GAIN:
+    try:
+        g = float(gain) if is_number(gain) else math.nan
+    except OverflowError:   # an int beyond the float range
+        g = math.inf
+    if not np.isfinite(g) or not 0 < g <= MAX_AMPLIFIER_GAIN:
         raise CalibrationError(f"voice-coil calibration: amplifier_gain must be a finite number in "
                                f"(0, {MAX_AMPLIFIER_GAIN:g}] or null, got {gain!r}")
     return float(gain)
+
+
+def calibration_flag(data: Mapping[str, Any], key: str) -> bool:
+    """``data[key]`` (default False) when it is a bool: ``"false"`` or ``0`` in a
+    calibration's ``generated`` is not a flag (``bool("false")`` is True)."""
+    v = data.get(key, False)
+    if not isinstance(v, (bool, np.bool_)):
+        raise CalibrationError(f"{key} must be true or false, got {v!r:.60}")
+    return bool(v)
 
 
 @dataclass(frozen=True)
@@ -78,8 +92,11 @@ class VoiceCoilCalibration:
                 is_number(v) for v in (*self.coefficients, *self.frequency_range_hz)):
             raise CalibrationError(f"voice-coil calibration: coefficients (a, b, c) and frequency_range_hz "
                                    f"(lo, hi) must be numbers, got {self.coefficients!r}, {self.frequency_range_hz!r}")
-        a, b, c = (float(v) for v in self.coefficients)
-        lo, hi = (float(v) for v in self.frequency_range_hz)
+        try:
+            a, b, c = (float(v) for v in self.coefficients)
+            lo, hi = (float(v) for v in self.frequency_range_hz)
+        except OverflowError:   # an int beyond the float range
+            a = b = c = lo = hi = math.nan
         if not all(np.isfinite([a, b, c, lo, hi])) or not 0 < lo < hi:
             raise CalibrationError(f"invalid voice-coil calibration {self.coefficients} on {self.frequency_range_hz}")
         if hi > MAX_FREQUENCY_HZ:
@@ -87,7 +104,12 @@ class VoiceCoilCalibration:
                                    f"{MAX_FREQUENCY_HZ:g} Hz (not a vibrotactile drive frequency)")
         check_amplifier_gain(self.amplifier_gain)
         f = np.linspace(lo, hi, 256)
-        if np.any(np.diff(self.gs_coil(f)) <= 0):
+        with np.errstate(over="ignore", invalid="ignore"):
+            gs = self.gs_coil(f)
+        if not np.isfinite(gs).all():   # coefficients of 1e308: an infinite stiffness is no curve
+            raise CalibrationError(f"voice-coil calibration: the curve is not finite over its frequency range "
+                                   f"(coefficients {self.coefficients}, range {self.frequency_range_hz} Hz)")
+        if np.any(np.diff(gs) <= 0):
             raise CalibrationError("voice-coil calibration must increase over its frequency range "
                                    f"(coefficients {self.coefficients}, range {self.frequency_range_hz} Hz)")
 
@@ -160,15 +182,17 @@ class VoiceCoilCalibration:
         """Inverse of :meth:`to_dict` (unknown keys such as ``schema_version`` ignored)."""
         if not isinstance(data, dict) or data.get("kind", "voicecoil") != "voicecoil":
             raise CalibrationError("not a voice-coil calibration (kind must be 'voicecoil')")
+        from ..argcheck import number
         try:
             ci = data.get("confidence_intervals")
-            return cls(coefficients=cast("tuple[float, float, float]", tuple(float(v) for v in data["coefficients"])),
-                       frequency_range_hz=cast("tuple[float, float]",
-                                               tuple(float(v) for v in data["frequency_range_hz"])),
+            # the numbers as given ("1" and True are no coefficient): __post_init__ checks them
+            return cls(coefficients=cast("tuple[float, float, float]", tuple(data["coefficients"])),
+                       frequency_range_hz=cast("tuple[float, float]", tuple(data["frequency_range_hz"])),
                        source=str(data.get("source", "")),
-                       confidence_intervals=cast(Any, tuple(tuple(float(v) for v in c) for c in ci)) if ci else None,
+                       confidence_intervals=cast(Any, tuple(tuple(number(v, "confidence_intervals") for v in c)
+                                                            for c in ci)) if ci else None,
                        extra=dict(data.get("extra") or {}), serial=data.get("serial"),
-                       generated=bool(data.get("generated", False)),
+                       generated=calibration_flag(data, "generated"),
                        amplifier_gain=data.get("amplifier_gain"), mounting=str(data.get("mounting") or ""))
         except (KeyError, TypeError, ValueError) as exc:
             raise CalibrationError(f"voice-coil calibration: bad or missing field ({exc})") from None
