@@ -185,6 +185,7 @@ def _read_part(part: Path) -> tuple[dict[str, Any], np.ndarray]:
             header = json.loads(fh.read(h))
     except (OSError, ValueError) as exc:
         raise RecordingError(f"{part}: unreadable recording stream ({exc})", field="record") from None
+    header = layout.check_header(header, part)
     width = len(header["columns"])
     off = 16 + h
     n = max(os.path.getsize(part) - off, 0) // (8 * width)

@@ -168,9 +168,11 @@ def read_part_header(part: Path) -> tuple[dict[str, Any], int]:
     h5py = h5py_module()
     with _open_part(h5py, part) as f:
         try:
-            header = json.loads(f.attrs["stream_header_json"])
+            header = layout.check_header(json.loads(f.attrs["stream_header_json"]), part)
             rows = int(f["rows"][0])
             shortest = min(f[name].shape[0] for name in layout.stored(header["columns"], header["roles"]))
+        except RecordingError:   # the header's own check names the field
+            raise
         except (KeyError, ValueError) as exc:
             raise RecordingError(f"{part}: not a hapticsdk HDF5 recording ({exc})", field="record") from None
     return header, min(rows, shortest)

@@ -51,3 +51,40 @@ def take(a: Any, idx: tuple[int, ...]) -> Any:
     """The array ``idx`` (from :func:`stored`) of the rows ``a``: a view (a slice of the
     columns, never a copy, so a memory-mapped stream stays on disk)."""
     return a[:, idx[0]] if len(idx) == 1 else a[:, idx[0]:idx[-1] + 1]
+
+
+def check_header(header: Any, part: Any) -> dict[str, Any]:
+    """The header of a recording stream (``.part``, both writers), checked before its
+    fields are used: an object whose ``roles`` are distinct names, whose ``columns`` are
+    :func:`columns` of them, whose ``period_s`` is a number of seconds > 0 and whose
+    ``objects`` map object ids (whole numbers) to names. A stream left by a crash may be
+    damaged anywhere: each defect raises :class:`~hapticsdk.errors.RecordingError` naming
+    the file and the field (``record.columns``), not a ``KeyError`` or ``ZeroDivisionError``."""
+    from collections.abc import Mapping
+
+    from ..argcheck import number
+    from ..errors import RecordingError, ValidationError
+
+    def bad(what: str, key: str) -> RecordingError:
+        return RecordingError(f"{part}: damaged recording stream header: {what}", field=f"record.{key}")
+
+    if not isinstance(header, Mapping):
+        raise bad(f"must be an object, got {type(header).__name__}", "header")
+    for key in ("columns", "roles", "period_s"):
+        if key not in header:
+            raise bad(f"no {key!r}", key)
+    roles = header["roles"]
+    if not isinstance(roles, list) or not all(isinstance(r, str) and r for r in roles) or len(set(roles)) != len(roles):
+        raise bad(f"roles must be a list of distinct names, got {roles!r:.80}", "roles")
+    if header["columns"] != columns(roles):
+        raise bad(f"columns {header['columns']!r:.80} are not those of roles {roles}", "columns")
+    try:
+        number(header["period_s"], "period_s", lo=0.0, lo_open=True)
+    except ValidationError as exc:
+        raise bad(f"period_s {exc.reason}", "period_s") from None
+    objects = header.get("objects", {})
+    if not isinstance(objects, Mapping) or not all(
+            isinstance(k, str) and k.lstrip("-").isdigit() and isinstance(v, str) for k, v in objects.items()):
+        raise bad(f"objects must map object ids to names, got {objects!r:.80}", "objects")
+    return dict(header)
+
