@@ -47,7 +47,10 @@ def check_number(value: Any, field: str, *, minimum: float | None = None, maximu
     """
     if not is_number(value):
         raise error(f"must be a number, got {value!r}", field=field)
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:   # an int beyond the float range (JSON reads 1 followed by 400 zeros as one)
+        raise error(f"must be finite, got {value!r:.40}", field=field) from None
     u = f" {unit}" if unit else ""
     if not math.isfinite(v):
         raise error(f"must be finite, got {v!r}", field=field)

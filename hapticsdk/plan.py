@@ -31,6 +31,15 @@ PLAN_VERSION = 1
 FALLBACK_SENSOR = "probe-virtual"
 
 
+def _float(value: Any, field: str) -> float:
+    """``float(value)``; an int beyond the float range (JSON's ``1`` and 400 zeros, which
+    the schema takes as a number) raises :class:`ValidationError` naming ``field``."""
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValidationError(f"must be finite, got {value!r:.40}", field=field) from None
+
+
 @dataclass
 class DroppedDimension:
     """A dimension a material's intensities name but the plan does not render.
@@ -86,7 +95,8 @@ class DroppedDimension:
                    threshold_percent=d.get("threshold_percent"),
                    importance_model=d.get("importance_model"),
                    replacement=dict(d["replacement"]) if d.get("replacement") else None,
-                   loss_interval_percent=[float(v) for v in iv] if iv is not None else None,
+                   loss_interval_percent=[_float(v, f"dropped.{d['dimension']}.loss_interval_percent")
+                                          for v in iv] if iv is not None else None,
                    confidence=d.get("confidence"), n_solutions=d.get("n_solutions"),
                    extrapolated_fraction=d.get("extrapolated_fraction"))
 
@@ -176,12 +186,14 @@ class MaterialPlan:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "MaterialPlan":
         """Rebuild a material's plan from :meth:`to_dict`'s output."""
-        return cls(name=d["name"], targets={k: float(v) for k, v in d["targets"].items()},
+        def floats(group: str) -> dict[str, float]:
+            return {k: _float(v, f"plan.materials.{d['name']}.{group}.{k}") for k, v in d.get(group, {}).items()}
+
+        return cls(name=d["name"], targets=floats("targets"),
                    dimensions=list(d["dimensions"]),
                    dropped=[DroppedDimension.from_dict(x) for x in d.get("dropped", [])],
-                   features={k: float(v) for k, v in d.get("features", {}).items()},
-                   pinned_features={k: float(v) for k, v in d.get("pinned_features", {}).items()},
-                   importance_features={k: float(v) for k, v in d.get("importance_features", {}).items()},
+                   features=floats("features"), pinned_features=floats("pinned_features"),
+                   importance_features=floats("importance_features"),
                    importance={k: dict(v) for k, v in d.get("importance", {}).items()},
                    role_contracts={k: dict(v) for k, v in d.get("role_contracts", {}).items()},
                    device=dict(d.get("device", {})),

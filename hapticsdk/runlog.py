@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, Mapping, cast
@@ -445,6 +446,15 @@ def narrowed_limits(base: ActuatorLimits, header: Any) -> ActuatorLimits:
     return ActuatorLimits(**out)
 
 
+def _finite_number(value: Any) -> bool:
+    """A finite real number (not a bool; an int beyond the float range is not finite)."""
+    from .checks import is_number
+    try:
+        return is_number(value) and math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 def recorded_settings(header: Any) -> Any:
     """The :class:`~hapticsdk.devices.safety.SafetySettings` recorded in a run-file header, checked
     as data: every value must be a number (never a bool; ``ramp_amplitude`` a bool,
@@ -452,7 +462,6 @@ def recorded_settings(header: Any) -> Any:
     :class:`RecordingError` naming the field. Unknown keys are ignored. They are applied
     as recorded, so a replay reproduces the run sample for sample; the playback device
     is simulated, and its force limits stay those of the device class (:func:`narrowed_limits`)."""
-    from .checks import is_number
     from .devices.safety import SafetySettings
 
     base = "runlog.header_json.device.safety_settings"
@@ -466,9 +475,8 @@ def recorded_settings(header: Any) -> Any:
         if key == "ramp_amplitude":
             if not isinstance(value, bool):
                 raise RecordingError(f"must be true or false, got {value!r}", field=f"{base}.{key}")
-        elif not (value is None and key.startswith("start_")) and not (
-                is_number(value) and np.isfinite(float(value))):
-            raise RecordingError(f"must be a finite number, got {value!r}", field=f"{base}.{key}")
+        elif not (value is None and key.startswith("start_")) and not _finite_number(value):
+            raise RecordingError(f"must be a finite number, got {value!r:.60}", field=f"{base}.{key}")
         out[key] = value
     try:
         return SafetySettings(**out)

@@ -140,7 +140,11 @@ def check_data_options(cls: Any, actuator: str, role: str, options: Mapping[str,
         if key not in options:
             continue
         v = options[key]
-        ok = (is_number(v) and is_number(ceiling) and math.isfinite(float(v)) and float(v) <= float(ceiling))
+        try:
+            fv = float(v) if is_number(v) else math.nan
+        except OverflowError:   # an int beyond the float range: no finite number, refused below
+            fv = math.nan
+        ok = is_number(ceiling) and math.isfinite(fv) and fv <= float(ceiling)
         if not ok:
             _refuse(actuator, role, key, field,
                     f"raises the energy or voltage the device can deliver ({what}); a scene or plan file may "
