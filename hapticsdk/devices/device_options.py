@@ -55,7 +55,7 @@ ENV_CONFIG = "HAPTICSDK_DEVICE_CONFIG"
 MAX_CONFIG_BYTES = 1 << 20
 
 __all__ = ["ENV_OPTIONS", "ENV_CONFIG", "PrivilegedOptionError", "privileged_options",
-           "check_data_options", "check_data_settings", "PRIVILEGED_SETTINGS", "energy_option_ceilings", "device_config_path", "trusted_options", "parse_device_option",
+           "check_data_options", "check_data_settings", "check_data_model", "PRIVILEGED_SETTINGS", "energy_option_ceilings", "device_config_path", "trusted_options", "parse_device_option",
            "WHERE_TO_SET", "parse_device"]
 
 #: the sentence every refusal ends with
@@ -193,6 +193,22 @@ def check_data_settings(settings: Any, *, field: str) -> None:
 
 
 _ABSENT = object()
+
+
+def check_data_model(settings: Any, *, field: str) -> None:
+    """Raise :class:`PrivilegedOptionError` when ``settings`` (a scene's ``settings``
+    object, read from a file) name a model *file* (``"model": "x.onnx"``, or any path),
+    which compiling the scene would read: a file somebody hands you chooses no file to
+    read. A model plugin's name (``"default"``) is data; a path is given from the
+    application's code (``hs.solve(..., model=PATH)``, ``Scene(..., settings={"model":
+    PATH})``). (Rendering a plan reads no model: a plan's ``settings.model`` is a record.)"""
+    model = settings.get("model") if isinstance(settings, Mapping) else None
+    if isinstance(model, str) and (model.lower().endswith(".onnx") or "/" in model or "\\" in model):
+        raise PrivilegedOptionError(
+            f"a scene file names no model file to read, got {model!r:.80}: give a model plugin's name "
+            f"(hapticsdk plugins lists them), or pass the path from the application's code "
+            f"(hs.solve(..., model=PATH), Scene(..., settings={{'model': PATH}}))", field=f"{field}.model",
+            option="model")
 
 
 def device_config_path() -> Path:

@@ -299,12 +299,13 @@ class Scene:
         the infinite plane y = 0. Version 2: objects may have ``geometry`` and ``pose``
         (checked: positive sizes, unit quaternions and normals, finite numbers; errors
         name the field, e.g. ``scene.objects[2].geometry.radius_mm``)."""
-        from ..devices.device_options import check_data_settings
+        from ..devices.device_options import check_data_model, check_data_settings
         from ..schemas_io import validate
         shapes: dict[int, Shape] = {}
         if isinstance(data, Mapping):
             # safety is not data: before the schema, so the error names the field and says why
             check_data_settings(data.get("settings"), field="scene.settings")
+            check_data_model(data.get("settings"), field="scene.settings")   # files are data
             version = data.get("schema_version", 1)
             if isinstance(version, bool) or version not in SCHEMA_VERSIONS:
                 raise ValidationError(f"unknown scene schema_version {version!r}; this hapticsdk reads "
