@@ -412,6 +412,26 @@ def _check_role(owner: str, role: str, rspec: RoleSpec | None, actuator: str,
                               f"an actuator of that kind", field=f"scene.devices.{role}")
 
 
+def _check_solver_options(settings: Mapping[str, Any]) -> None:
+    """Refuse a scene's solver options that name a file or folder (the solver class's
+    ``privileged_options``, e.g. ``amortised``'s ``cache_dir``, where tables are read and
+    written): a scene chooses no file; code passes them to ``hs.solve``. An unknown
+    method is left to the solve, which names it."""
+    from ..plugins import registry
+    opts = settings["solver"].get("options") or {}
+    method = settings["solver"].get("method")
+    if not opts or not isinstance(method, str) or method not in registry("solver"):
+        return
+    priv = getattr(registry("solver").load(method), "privileged_options", None) or {}
+    for key in sorted(k for k in opts if k in priv):
+        from ..devices.device_options import PrivilegedOptionError
+        raise PrivilegedOptionError(
+            f"option {key!r} of solver {method!r} is privileged ({priv[key]}); a scene may not set it (a "
+            f"file you open must not choose files to read or write): pass it from the application's code "
+            f"(hs.solve(..., method={method!r}, options={{{key!r}: ...}}))",
+            field=f"scene.settings.solver.options.{key}", option=key)
+
+
 def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     """Compile a scene (object, dict, or path of a JSON file) into a render plan."""
     from ..plugins import registry
@@ -420,6 +440,7 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
     elif isinstance(scene, Mapping):
         scene = Scene.from_dict(scene)
     settings = scene.settings
+    _check_solver_options(settings)
     mats = _resolve_materials(scene)
 
     # dimensions named by any material: imported (they are used)

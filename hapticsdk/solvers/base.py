@@ -58,6 +58,10 @@ class Solver(ABC):
     #: generator (~8-40 us, a large part of a one-target lookup call) and hands ``_solve``
     #: a shared, unused one
     uses_rng: ClassVar[bool] = True
+    #: options that name a file or folder to read or write (option -> what it names): a
+    #: scene refuses them in ``settings.solver.options`` (a file somebody hands you chooses
+    #: no file; :func:`hapticsdk.compiler.compile_scene`); code passes them to ``hs.solve``
+    privileged_options: ClassVar[dict[str, str]] = {}
 
     def __init__(self, **options: Any) -> None:
         unknown = [k for k in options if k not in self.default_options]

@@ -300,6 +300,7 @@ class AmortisedSolver(Solver):
 
     name: ClassVar[str] = "amortised"
     uses_rng: ClassVar[bool] = False     # deterministic: lookup + LM steps
+    privileged_options: ClassVar[dict[str, str]] = {"cache_dir": "a folder whose tables are read and written"}
     default_options: ClassVar[dict[str, Any]] = {
         "grid": 101, "polish_steps": 1, "build_samples": 20000, "build_iter": 15,
         "cache": True, "cache_dir": None,
