@@ -24,14 +24,17 @@ Rules (docs/safety.md, "Named errors"):
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .checks import is_number
 from .errors import ValidationError
 
-__all__ = ["number", "flag", "number_array", "serial_number", "figure_path", "call_with_options", "MAX_SERIAL_CHARS", "FIGURE_FORMATS"]
+if TYPE_CHECKING:
+    from pathlib import Path
+
+__all__ = ["number", "flag", "number_array", "serial_number", "file_path", "figure_path", "call_with_options", "MAX_SERIAL_CHARS", "FIGURE_FORMATS"]
 
 #: longest device serial number accepted: a USB string descriptor is at most 255 bytes,
 #: 2 of them header, the rest UTF-16 code units: (255 - 2) // 2 = 126
@@ -143,6 +146,22 @@ def serial_number(value: Any, field: str = "serial") -> str | None:
     if any(ord(c) < 32 or ord(c) == 127 for c in value):
         raise ValidationError("must not contain control characters", field=field)
     return value
+
+
+def file_path(value: Any, field: str = "path") -> "Path":
+    """A path argument of a reader or writer: a non-empty ``str`` or ``os.PathLike``
+    (``None``, a number, a list or ``bytes`` raise :class:`ValidationError` naming
+    ``field`` instead of ``TypeError`` from the operating system layer)."""
+    import os
+    from pathlib import Path
+
+    try:
+        text = os.fspath(value)
+    except TypeError:
+        raise ValidationError(f"must be a file path, got {type(value).__name__} {value!r:.60}", field=field) from None
+    if not isinstance(text, str) or not text:
+        raise ValidationError(f"must be a file path, got {value!r:.60}", field=field)
+    return Path(text)
 
 
 def figure_path(value: Any, field: str = "path") -> str:

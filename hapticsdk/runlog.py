@@ -305,7 +305,11 @@ def load_run(path: str | Path) -> RunLog:
     """Read a run file written by :class:`RunRecorder` / :meth:`RunLog.save` (``.npz``),
     or a live session's HDF5 recording (``.h5`` / ``.hdf5``, needs h5py).
     Raises :class:`RecordingError` naming the file and the missing/broken field."""
-    p = Path(path)
+    from .argcheck import file_path
+    try:
+        p = file_path(path, "runlog")
+    except ValidationError as exc:
+        raise RecordingError(exc.reason, field="runlog") from None
     if not p.is_file():
         raise RecordingError(f"run file not found: {p}", field="runlog")
     if p.suffix.lower() in (".h5", ".hdf5"):  # a live recording in HDF5 (hapticsdk[h5])

@@ -71,7 +71,11 @@ def read_bytes(path: str | Path, *, field: str, error: type[ValidationError] = V
     import os
     import stat
 
-    p = Path(path)
+    from .argcheck import file_path
+    try:
+        p = file_path(path, field)
+    except ValidationError as exc:
+        raise error(exc.reason, field=field) from None
     try:
         st = os.stat(p)
     except FileNotFoundError:
@@ -228,8 +232,8 @@ def read_json(path: str | Path, *, field: str, error: type[ValidationError] = Va
     more than ``max_bytes``, text that is not UTF-8, nesting deeper than ``max_depth``
     (checked before parsing, so 5000 nested brackets cannot exhaust the stack), invalid
     JSON, and ``NaN`` / ``Infinity`` (not JSON numbers)."""
+    text = read_text(path, field=field, error=error, max_bytes=max_bytes)
     p = Path(path)
-    text = read_text(p, field=field, error=error, max_bytes=max_bytes)
     return parse_json(text, p, field=field, error=error, max_depth=max_depth)
 
 

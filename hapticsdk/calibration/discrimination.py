@@ -42,7 +42,11 @@ def read_commented_csv(path: str | Path, what: str) -> tuple[Path, list[str], li
     from ..errors import ValidationError
     from ..schemas_io import read_csv_rows
 
-    p = Path(path)
+    from ..argcheck import file_path
+    try:
+        p = file_path(path, what)
+    except ValidationError as exc:
+        raise CalibrationError(f"{what}: {exc.reason}") from None
     if not p.exists():
         raise CalibrationError(f"{what} file not found: {p}")
     try:  # the shared reader: regular UTF-8 file of bounded size, well-formed CSV

@@ -118,7 +118,8 @@ def _from_file(p: Path) -> tuple[Calibration, str]:
 
 def read_calibration(path: str | Path) -> Calibration:
     """Read one calibration file (errors name the file and the field)."""
-    return _from_file(Path(path))[0]
+    from ..argcheck import file_path
+    return _from_file(file_path(path, "calibration"))[0]
 
 
 def save_calibration(cal: Calibration, directory: str | Path | None = None, *,
@@ -130,7 +131,8 @@ def save_calibration(cal: Calibration, directory: str | Path | None = None, *,
     serial_number(data.get("serial"), "calibration.serial")  # it becomes part of a file name
     calibration_from_dict(data)  # never write a file we could not read back
     if path is None:
-        d = Path(directory) if directory is not None else calibration_dir()
+        from ..argcheck import file_path
+        d = file_path(directory, "directory") if directory is not None else calibration_dir()
         serial = data.get("serial") or "any"
         # ASCII letters, digits and -_. only: at most 126 bytes, within every file system's name limit
         safe = "".join(ch if (ch.isascii() and ch.isalnum()) or ch in "-_." else "_" for ch in str(serial))

@@ -439,6 +439,9 @@ def compile_scene(scene: Scene | Mapping[str, Any] | str | Path) -> RenderPlan:
         scene = Scene.load(scene)
     elif isinstance(scene, Mapping):
         scene = Scene.from_dict(scene)
+    elif not isinstance(scene, Scene):
+        raise ValidationError(f"must be a Scene, its dict or a scene file's path, got {type(scene).__name__} "
+                              f"{scene!r:.60}", field="scene")
     settings = scene.settings
     _check_solver_options(settings)
     mats = _resolve_materials(scene)

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from ..errors import FormatError
+from ..errors import FormatError, ValidationError
 from ..schemas_io import json_depth
 from .hjif_versions import VersionReport, normalise
 
@@ -371,7 +371,11 @@ def read_bounded(path: str | os.PathLike[str], *, max_bytes: int, kind: str) -> 
     """``(name, bytes)`` of a regular file of at most ``max_bytes`` bytes: refused from its
     size before reading, and never more than ``max_bytes + 1`` bytes read (a file that
     grows while being read is refused too). ``kind`` names the format in the message."""
-    p = Path(os.fspath(path))
+    from ..argcheck import file_path
+    try:
+        p = file_path(path, "path")
+    except ValidationError as exc:
+        raise FormatError(exc.reason, field="path") from None
     name = str(p)
     try:
         size = p.stat().st_size

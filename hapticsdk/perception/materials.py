@@ -120,7 +120,8 @@ def load_library(path: str | Path | None = None, *, with_plugins: bool = False) 
     With ``with_plugins`` the ``hapticsdk_materials`` hook of every installed plugin adds
     its materials; a plugin whose entries are invalid is reported by name and skipped.
     """
-    p = Path(path) if path is not None else DEFAULT_LIBRARY
+    from ..argcheck import file_path
+    p = file_path(path, "library") if path is not None else DEFAULT_LIBRARY
     data = load_json(p, "materials")
     gen = bool(data.get("generated", False))
     lib = MaterialLibrary([_material(e, str(p.name), gen) for e in data["materials"]],

@@ -239,8 +239,12 @@ def load_recording(path: "str | Path") -> Any:
     """The :class:`~hapticsdk.runlog.RunLog` of a recording: ``path`` itself, or, when
     only its stream is left (a session cut short), the stream's complete rows (the
     ``.npz`` is written from them first)."""
+    from ..argcheck import file_path
     from ..runlog import load_run
-    p = Path(path)
+    try:
+        p = file_path(path, "runlog")
+    except ValidationError as exc:
+        raise RecordingError(exc.reason, field="runlog") from None
     if p.name.endswith(".part"):
         p = recover(p)
     elif not p.exists() and part_path(p).exists():

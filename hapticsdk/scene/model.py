@@ -340,7 +340,8 @@ class Scene:
     def load(cls, path: str | Path) -> "Scene":
         """Read and validate a scene JSON file (``schemas/scene.schema.json``)."""
         from ..schemas_io import read_json
-        p = Path(path)
+        from ..argcheck import file_path
+        p = file_path(path, "scene")
         data = read_json(p, field="scene")
         if isinstance(data, dict) and "name" not in data:
             data["name"] = p.stem
