@@ -287,6 +287,8 @@ class RenderPlan:
         against ``schemas/plan.schema.json`` first (errors name the JSON path), and its
         feature values against their ranges (:func:`check_plan_features`)."""
         if validate:
+            from .schemas_io import check_depth
+            check_depth(d, "plan")   # as read_json bounds a file: 5000 levels exhaust no stack
             if isinstance(d, Mapping):  # safety is not data: named before the schema's message
                 from .devices.device_options import check_data_settings
                 check_data_settings(d.get("settings"), field="plan.settings")

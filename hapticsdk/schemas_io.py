@@ -145,6 +145,27 @@ def read_csv_rows(path: str | Path, *, field: str, error: type[ValidationError] 
     return notes, rows
 
 
+def check_depth(data: Any, field: str, *, max_depth: int = MAX_JSON_DEPTH) -> None:
+    """Refuse data built in memory (a dict given to ``Scene.from_dict``, a plan's dict)
+    nested deeper than ``max_depth`` -- the bound :func:`read_json` puts on a file -- with
+    a :class:`ValidationError` naming the path where it goes too deep; a walk without
+    recursion, so neither 5000 levels nor a dict that holds itself exhaust the stack."""
+    from collections.abc import Mapping
+
+    stack: list[tuple[Any, int, str]] = [(data, 0, "")]
+    while stack:
+        node, depth, path = stack.pop()
+        if isinstance(node, Mapping):
+            items: Any = ((f"{path}.{k}", v) for k, v in node.items())
+        elif isinstance(node, (list, tuple)):
+            items = ((f"{path}[{i}]", v) for i, v in enumerate(node))
+        else:
+            continue
+        if depth >= max_depth:
+            raise ValidationError(f"nested more than {max_depth} levels deep", field=f"{field}{path[:200]}")
+        stack.extend((v, depth + 1, p) for p, v in items)
+
+
 def json_depth(text: str) -> int:
     """Deepest nesting of ``[`` / ``{`` in JSON ``text`` (brackets inside strings ignored);
     linear time, no recursion."""

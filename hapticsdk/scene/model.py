@@ -259,9 +259,12 @@ class Scene:
         if not isinstance(self.devices, Mapping):
             raise ValidationError(f"must be an object (role -> actuator), got {type(self.devices).__name__}",
                                   field="scene.devices")
+        from ..schemas_io import check_depth
+        check_depth(self.devices, "scene.devices")
         self.devices = {r: DeviceSpec.parse(v, r) for r, v in dict(self.devices).items()}
         if not isinstance(self.settings or {}, Mapping):
             raise ValidationError(f"must be an object, got {type(self.settings).__name__}", field="scene.settings")
+        check_depth(self.settings, "scene.settings")   # before _merge copies it (recursively)
         self.settings = _merge(DEFAULT_SETTINGS, self.settings or {})
         _check_settings(self.settings)
         names = [o.name for o in self.objects]
@@ -300,7 +303,8 @@ class Scene:
         (checked: positive sizes, unit quaternions and normals, finite numbers; errors
         name the field, e.g. ``scene.objects[2].geometry.radius_mm``)."""
         from ..devices.device_options import check_data_model, check_data_settings
-        from ..schemas_io import validate
+        from ..schemas_io import check_depth, validate
+        check_depth(data, "scene")   # as read_json bounds a file: 5000 levels exhaust no stack
         shapes: dict[int, Shape] = {}
         if isinstance(data, Mapping):
             # safety is not data: before the schema, so the error names the field and says why
