@@ -223,6 +223,11 @@ def render_plan(plan: RenderPlan | Mapping[str, Any], *, seconds: float, materia
     for flag, value in (("hooks", hooks), ("raise_on_fault", raise_on_fault)):
         if not isinstance(value, bool):
             raise ValidationError(f"{flag} must be True or False, got {value!r:.60}", field=flag)
+    if recorder is not None and not callable(getattr(recorder, "record", None)):
+        # the servo calls recorder.record(t, state, sent) every tick and counts a failure as
+        # a renderer error: an object without it recorded nothing, without a word
+        raise ValidationError(f"recorder must have a record(t, state, sent) method (e.g. "
+                              f"hapticsdk.runlog.RunRecorder), got {type(recorder).__name__}", field="recorder")
     passivity = True if passivity is None else passivity
 
     from ..plugins import manager, registry

@@ -124,3 +124,16 @@ def test_good_scene_in_code_still_builds():
                             importance={"thresholds": {"hardness": 5}}, servo={"realtime": False})
     assert sc.settings["solver"]["seed"] == 3 and sc.objects[0].dimensions == ["hardness"]
     assert Scene.for_material("S7", dimensions=[]).objects[0].dimensions is None
+
+
+@pytest.mark.parametrize("recorder", ["run.npz", 5, object()])
+def test_render_plan_recorder_must_record(recorder):
+    # the servo called recorder.record every tick and counted each failure as a renderer
+    # error: a path or an object without record() recorded nothing, without a word
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.runtime.render import render_plan
+
+    plan = compile_scene(Scene.for_material("S7", solver={"method": "polish"}))
+    with pytest.raises(ValidationError) as exc:
+        render_plan(plan, seconds=0.01, recorder=recorder)
+    assert exc.value.field == "recorder"
