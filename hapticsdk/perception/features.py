@@ -58,9 +58,9 @@ class Feature:
     def __post_init__(self) -> None:
         if not self.name or not isinstance(self.name, str):
             raise ValidationError("feature name must be a non-empty string", field="feature.name")
-        lo, hi = float(self.lower), float(self.upper)
-        if not (np.isfinite(lo) and np.isfinite(hi)):
-            raise ValidationError("bounds must be finite", field=f"feature.{self.name}")
+        from ..argcheck import number   # "1", True, None and 10**400 are no bound
+        lo = number(self.lower, f"feature.{self.name}.lower")
+        hi = number(self.upper, f"feature.{self.name}.upper")
         if lo > hi:
             raise ValidationError(f"lower bound {lo} > upper bound {hi}", field=f"feature.{self.name}")
         object.__setattr__(self, "lower", lo)

@@ -69,11 +69,23 @@ def _meta(raw: dict[str, str], key: str, where: str) -> Any:
 def _number(value: Any, key: str, where: str, *, positive: bool = False) -> float:
     """A metadata value that must be a finite number (not a bool, not a string); raises
     :class:`ModelError` naming the file and the key ``hapticsdk.<key>``."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or (
-            positive and value <= 0):
+    v = _finite(value)
+    if v is None or (positive and v <= 0):
         raise ModelError(f"{where}: metadata {PREFIX + key!r} must be a finite number"
-                         f"{' > 0' if positive else ''}, got {value!r}")
-    return float(value)
+                         f"{' > 0' if positive else ''}, got {value!r:.60}")
+    return v
+
+
+def _finite(value: Any) -> float | None:
+    """``value`` as a float when it is a finite int or float (not a bool; an int beyond the
+    float range, which JSON metadata can hold, is not finite), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        v = float(value)
+    except OverflowError:
+        return None
+    return v if np.isfinite(v) else None
 
 
 #: layout of the cached model descriptions (bumped when it changes)
@@ -206,8 +218,7 @@ class OnnxModel(PerceptionModel):
         feats, dims, defaults = meta["features"], meta["dimensions"], meta["feature_defaults"]
         if "hapticsdk.constraint_context" in raw:  # optional: data facts for constraints
             ctx = _meta(raw, "constraint_context", where)
-            if not isinstance(ctx, dict) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
-                                                    and np.isfinite(v) for v in ctx.values()):
+            if not isinstance(ctx, dict) or not all(_finite(v) is not None for v in ctx.values()):
                 raise ModelError(f"{where}: metadata 'hapticsdk.constraint_context' must map names to numbers")
             meta["constraint_context"] = ctx
         if not isinstance(feats, list) or not feats or not all(
