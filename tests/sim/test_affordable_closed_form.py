@@ -169,3 +169,100 @@ def test_a_budget_one_ulp_under_hi_s_cost_needs_no_bisection(monkeypatch, least)
     tol = (hi - lo) * 2.0 ** -(_BISECT - 1) + 1e-12 * (np.abs(hi) + s)
     assert np.all(np.abs(out - ref) <= tol)
     assert np.all((plan_cost_j(out, p, d, cm, s, c) <= A) | (out == lo))
+
+
+@pytest.mark.parametrize("least", [0.0, -3.0])
+def test_a_budget_spent_to_hi_on_the_rising_side_answers_half_a_resolution_under_it(least):
+    """A force held at its last answer spends the budget to the edge: with ``hi`` one ulp over
+    the budget where the cost rises at ``hi``, only the root's rounding puts it at ``hi``,
+    and the answer is half a bisection resolution under it (docs/runtime.md, Passivity:
+    "the answer is half a resolution under the end"). So where the force half a
+    resolution under ``hi`` fits, no answer lies lower, beyond the root's own rounding (a
+    root that rounding left an ulp over the budget steps back half a resolution from
+    where it landed; the same 1e-12 of the force scale as the tests above allow it); nor is
+    any answer above ``hi`` or over the budget."""
+    from hapticsdk.passivity import plan
+
+    A, lo, hi, p, d, cm, s, c = _typical(20000, 3, least)
+    A = np.nextafter(plan_cost_j(hi, p, d, cm, s, c), -np.inf)
+    out = affordable_force(A, lo, hi, p, d, cm, s, c)
+    P = plan._pieces(p, d, c)
+    rising = plan._piece_slope(hi, P, cm, s) > 0.0
+    half = hi - 0.5 * (hi - lo) * 2.0 ** -_BISECT
+    room = rising & (hi > lo) & (half >= lo) & (plan_cost_j(half, p, d, cm, s, c) <= A)
+    assert room.sum() > 1000          # the case is common on the tick's own sizes
+    assert np.all(out[room] <= hi[room])
+    assert np.all(plan_cost_j(out[room], p[room], d[room], cm[room], s[room], c[room]) <= A[room])
+    rounding = 1e-12 * (np.abs(hi) + s)
+    assert np.all(out[room] >= half[room] - rounding[room])
+    for k in np.flatnonzero(room)[:500]:
+        args = [float(v[k]) for v in (A, lo, hi, p, d, cm, s, c)]
+        assert _affordable_scalar(*args) >= half[k] - rounding[k]
+
+
+@pytest.mark.parametrize("least", [0.0, -3.0])
+def test_a_budget_spent_exactly_to_hi_answers_hi(least):
+    """``hi`` when it fits, and fitting is a cost at most the budget: with the budget exactly
+    the cost of ``hi`` (as the same function computes it) the answer is ``hi`` itself, in
+    the vectorised and in the scalar form (docs/runtime.md, Passivity: "`hi` when it
+    fits")."""
+    A, lo, hi, p, d, cm, s, c = _typical(2000, 7, least)
+    A = plan_cost_j(hi, p, d, cm, s, c)
+    assert np.array_equal(affordable_force(A, lo, hi, p, d, cm, s, c), hi)
+    for k in range(2000):
+        args = [float(v[k]) for v in (A, lo, hi, p, d, cm, s, c)]
+        assert _affordable_scalar(*args) == args[2], k
+
+
+@pytest.mark.parametrize("least, above", [(0.0, False), (-3.0, False), (0.0, True)])
+def test_where_lo_does_not_fit_and_the_cost_rises_from_it_no_root_is_needed(monkeypatch, least, above):
+    """The servo's most common case is settled before the roots (docs/runtime.md, Passivity:
+    "Before the roots, one test settles the servo's most common case"): where ``lo`` does
+    not fit and the cost rises from it, nothing fits, since the cost only rises further;
+    the scalar form answers ``lo`` without a root, the piece walk or the bisection. Drawn
+    with the budget one ulp under the cost of ``lo`` (``lo`` just does not fit), on the
+    tick's own sizes, with a held force >= 0 (the fast path) and below 0, and with the
+    range above the held force (``lo > p``: the fast path's piece from ``p`` up)."""
+    from hapticsdk.passivity import plan
+
+    A, lo, hi, p, d, cm, s, c = _typical(4000, 13, least)
+    if above:
+        lo = p + np.random.default_rng(14).uniform(0.0, 1.0, p.size) * s
+        hi = np.maximum(hi, lo + s)
+    A = np.nextafter(plan_cost_j(lo, p, d, cm, s, c), -np.inf)
+    rising = (hi > lo) & (plan._piece_slope(lo, plan._pieces(p, d, c), cm, s) > 0.0)
+    assert rising.sum() > 1000
+    calls = []
+    for name in ("_root_force", "_nothing_fits_scalar", "_bisect_scalar", "_checked_scalar"):
+        real = getattr(plan, name)
+        monkeypatch.setattr(plan, name, lambda *a, _n=name, _r=real: calls.append(_n) or _r(*a))
+    for k in np.flatnonzero(rising):
+        args = [float(v[k]) for v in (A, lo, hi, p, d, cm, s, c)]
+        assert plan._affordable_scalar(*args) == args[1], k
+        assert not calls, (k, calls)
+
+
+@pytest.mark.parametrize("least", [0.0, -3.0])
+def test_nothing_fits_is_declared_only_when_no_piece_has_room(least):
+    """The closed form's "nothing fits" is checked at each piece's minimiser within
+    ``[lo, hi]`` (docs/runtime.md, Passivity: ""nothing fits" must hold at each piece's
+    minimiser too"): asked directly, the check answers ``lo`` only where no force in
+    ``[lo, hi]`` fits (by a dense grid), and hands every other case to the bisection,
+    whose answer fits; the pieces below the top one are checked as well."""
+    from hapticsdk.passivity import plan
+
+    A, lo, hi, p, d, cm, s, c = _typical(3000, 17, least)
+    grid = np.linspace(0.0, 1.0, 201)
+    below_top = 0
+    for k in range(3000):
+        args = [float(v[k]) for v in (A, lo, hi, p, d, cm, s, c)]
+        xs = lo[k] + grid * (hi[k] - lo[k])
+        fits = plan_cost_j(xs, p[k], d[k], cm[k], s[k], c[k]) <= A[k]
+        out = plan._nothing_fits_scalar(*args)
+        if out == lo[k] and not fits[0]:
+            assert not fits.any(), k
+        else:
+            assert out == plan._bisect_scalar(*args)
+            assert float(plan_cost_j(out, p[k], d[k], cm[k], s[k], c[k])) <= A[k]
+            below_top += out < max(p[k], 0.0)
+    assert below_top > 100           # answers on a piece under the top one
