@@ -241,6 +241,30 @@ def test_scalar_controller_equals_batch():
     assert pc.report()["energy_bound_j"] == pytest.approx(bs["energy"][0], abs=1e-9)
 
 
+@pytest.mark.parametrize("fmax", [3.3, None])
+def test_a_wall_or_applied_force_that_is_not_a_number_is_taken_as_0_n_by_both_forms(fmax):
+    """The batch runs the scalar controller's law tick by tick (module docstring of
+    ``hapticsdk.passivity.batch``), also on a wall force or an applied force that is NaN,
+    +inf or -inf, which the scalar one takes as 0 N: the same outputs and the same book
+    on a press whose wall and device report such values now and then."""
+    st = ControllerSettings(device_damping_ns_per_m=0.3, position_resolution_mm=0.055, device_mass_kg=0.05,
+                            max_force_n=fmax)
+    rng = np.random.default_rng(2)
+    xs = np.round(np.cumsum(rng.normal(-0.01, 0.05, 400)) / 0.055) * 0.055
+    bad = (np.nan, np.inf, -np.inf)
+    pc = PassivityController(st)
+    bs = controller_state_batch(1)
+    for k, x in enumerate(xs):
+        fw = 2.3 * max(-x, 0.0) if k % 5 else bad[(k // 5) % 3]
+        a = pc.step(float(x), 1e-3, fw)
+        b = controller_step_batch(bs, np.array([x]), 1e-3, np.array([fw]), True, st)[0]
+        assert a == pytest.approx(b, abs=1e-9), k
+        fa = min(a, 3.3) if k % 7 else bad[(k // 7) % 3]
+        pc.commit(fa)
+        controller_commit_batch(bs, np.array([fa]))
+    assert pc.report()["energy_bound_j"] == pytest.approx(bs["energy"][0], abs=1e-12)
+
+
 @pytest.mark.parametrize("batch", [False, True])
 def test_release_without_a_declared_force_limit_reaches_zero(batch):
     """With no force limit declared, a wall that goes to 0 (a pause, a release) is ramped
