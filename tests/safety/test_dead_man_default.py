@@ -40,3 +40,20 @@ def test_backends_take_it_and_an_explicit_value_wins(cls, gap):
     layer = SafetyLayer(cls.limits, settings=SafetySettings(restart_after_s=gap))
     assert cls(safety=layer).command_timeout_s == pytest.approx(gap)
     assert cls(safety=SafetyLayer(cls.limits), command_timeout_s=0.01).command_timeout_s == 0.01
+
+
+@pytest.mark.parametrize("at_most", [1.0, 0.25])
+def test_an_explicit_deadline_up_to_and_at_the_cap_is_taken(at_most):
+    """An explicit ``command_timeout_s`` is any number in ``(0, at_most]`` (the cap itself
+    included); 0, a negative value, one above the cap or one that is not a number is named."""
+    from hapticsdk.devices.actuators import ActuatorLimits
+    from hapticsdk.devices.safety import command_timeout_s
+    from hapticsdk.errors import ValidationError
+    layer = SafetyLayer(ActuatorLimits(max_force_n=1.0))
+    assert command_timeout_s(layer, at_most, at_most=at_most) == at_most
+    assert command_timeout_s(layer, at_most / 2, at_most=at_most) == at_most / 2
+    assert command_timeout_s(layer, 5.0, at_most=None) == 5.0
+    for bad in (0.0, -0.1, at_most * 1.5, "0.5", [0.5]):
+        with pytest.raises(ValidationError) as ei:
+            command_timeout_s(layer, bad, at_most=at_most)
+        assert ei.value.field == "options.command_timeout_s"

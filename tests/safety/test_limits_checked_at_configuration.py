@@ -107,3 +107,16 @@ def test_a_nan_frequency_still_reaches_the_actuators_own_check():
     lay = SafetyLayer(ActuatorLimits(frequency_range_hz=(30.0, 120.0), max_amplitude=1.0))
     out = lay.filter(ChannelCommand("v", frequency_hz=NAN, amplitude=0.5), now=0.0)
     assert math.isnan(out.frequency_hz)
+
+
+def test_the_edges_of_each_declared_range_are_taken():
+    """Each range is closed at its ends (``declared_limits``): ``min_amplitude`` may equal
+    ``max_amplitude`` (an actuator with one amplitude), a frequency band may be a single
+    frequency, and ``max_*`` may be 0."""
+    d = declared_limits(ActuatorLimits(max_amplitude=2.0, min_amplitude=2.0, frequency_range_hz=(60.0, 60.0),
+                                       max_force_n=0.0))
+    assert (d["min_amplitude"], d["max_amplitude"], d["frequency_range_hz"], d["max_force_n"]) == \
+        (2.0, 2.0, (60.0, 60.0), 0.0)
+    lay = SafetyLayer(ActuatorLimits(max_amplitude=2.0, min_amplitude=2.0), ramp_time_s=0.0,
+                      start_max_force_n=None, start_max_penetration_mm=None)
+    assert lay.filter(ChannelCommand("v", frequency_hz=60.0, amplitude=0.5), now=0.0).amplitude == 2.0

@@ -310,3 +310,95 @@ def test_a_small_declared_limit_is_taken_and_a_negative_one_named(field):
     with pytest.raises(ValidationError) as ei:
         declared_limits(ActuatorLimits(**{field: -0.1}))
     assert ei.value.field == f"limits.{field}"
+
+
+def test_a_start_gate_at_zero_is_taken_and_holds_while_there_is_any_depth_or_force():
+    """The start gate's thresholds are None or any number >= 0 (``SafetySettings``); 0 is
+    the strictest gate: force is held at zero while the probe is deeper than 0 mm or the
+    command exceeds 0 N (docs/safety.md, start gate), and released at the surface with a
+    zero command."""
+    s = SafetySettings(start_max_penetration_mm=0.0, start_max_force_n=0.0, ramp_time_s=0.0)
+    assert (s.start_max_penetration_mm, s.start_max_force_n) == (0.0, 0.0)
+    lay = SafetyLayer(LIMITS, settings=s)
+    lay.reset(0.0)
+    lay.observe(state(pen_mm=0.1))
+    assert lay.filter(ChannelCommand("f", force_n=0.0), 0.0).force_n == 0.0
+    assert lay.phase == "waiting"                       # any depth holds it
+    lay.observe(state(pen_mm=0.0))
+    assert lay.filter(ChannelCommand("f", force_n=0.2), 0.001).force_n == 0.0
+    assert lay.phase == "waiting"                       # any force holds it
+    assert lay.events["start_hold_ticks"] == 2
+    lay.filter(ChannelCommand("f", force_n=0.0), 0.002)
+    assert lay.phase == "running"                       # at the surface, nothing commanded
+    assert lay.filter(ChannelCommand("f", force_n=0.2), 0.003).force_n == pytest.approx(0.2)
+
+
+def test_a_command_exactly_at_a_limit_passes_untouched_and_is_not_counted():
+    """A limit is counted when it bites, once per command it changes (``hits``: "limit name
+    -> number of commands it clamped"): a force exactly at the force limit or at the
+    stiffness cap ``k_max x penetration + offset``, an amplitude exactly at either end of
+    its range, a frequency at a band edge and a force change exactly the rate limit pass
+    as they are and count nothing (the values are exact in binary, so equal means equal)."""
+    lim = ActuatorLimits(max_force_n=6.0, max_stiffness_n_per_mm=2.0, frequency_range_hz=(30.0, 120.0),
+                         max_amplitude=25.0, min_amplitude=0.5, max_force_rate_n_per_tick=4.0)
+    lay = running_layer(lim, stiffness_offset_n=1.0)
+    lay.observe(state(pen_mm=1.5))                      # cap 2.0 x 1.5 + 1.0 = 4.0 N
+    assert lay.filter(ChannelCommand("f", force_n=4.0), 0.001).force_n == 4.0     # a 4 N step: the rate limit
+    assert lay.filter(ChannelCommand("f", force_n=-4.0), 0.002).force_n == 0.0    # -8 N step: clamped to 4
+    assert lay.hits == {"max_force_rate_n_per_tick": 1}
+    lay.observe(state(pen_mm=2.5))                      # cap 6.0 N, the force limit too
+    assert lay.filter(ChannelCommand("f", force_n=-4.0), 0.003).force_n == -4.0
+    assert lay.filter(ChannelCommand("f", force_n=0.0), 0.004).force_n == 0.0
+    assert lay.filter(ChannelCommand("f", force_n=4.0), 0.005).force_n == 4.0
+    assert lay.filter(ChannelCommand("f", force_n=6.0), 0.006).force_n == 6.0
+    for amp, freq in ((0.5, 30.0), (25.0, 120.0)):
+        out = lay.filter(ChannelCommand("v", frequency_hz=freq, amplitude=amp), 0.007)
+        assert (out.frequency_hz, out.amplitude) == (freq, amp)
+    assert lay.hits == {"max_force_rate_n_per_tick": 1}
+
+
+def test_at_exactly_the_declared_speed_the_force_limit_is_zero_and_counted_but_no_fault():
+    """The force limit shrinks linearly from the knee and reaches 0 at ``max_velocity_mm_s``
+    (docs/safety.md); a fault is only *above* it. At exactly that speed a command is
+    clamped to 0 N by the shrinking limit, which counts as that limit's hit for the
+    command, and the layer keeps running (no fault, no gate)."""
+    lay = running_layer(ActuatorLimits(max_force_n=3.0, max_velocity_mm_s=400.0), start_max_force_n=None)
+    lay.observe(state(speed=400.0))
+    assert lay.filter(ChannelCommand("f", force_n=2.0), 0.001).force_n == 0.0
+    assert lay.hits == {"max_velocity_mm_s": 1}
+    assert lay.events["faults"] == 0 and lay.phase == "running"
+
+
+def test_the_defaults_are_those_docs_safety_md_states():
+    """Every field of ``SafetySettings`` has the default the settings table of
+    docs/safety.md gives (a number with its unit, ``False``), so a changed default is a
+    changed document too."""
+    import re
+    from dataclasses import fields
+    from pathlib import Path
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "safety.md").read_text()
+    rows = dict(re.findall(r"^\| `(\w+)` \| ([^|]+?) \|", doc, flags=re.M))
+    defaults = SafetySettings()
+    for f in fields(SafetySettings):
+        stated = rows[f.name].split()[0]
+        value = getattr(defaults, f.name)
+        assert (value is False) if stated == "False" else value == float(stated), (f.name, stated, value)
+
+
+def test_at_the_knee_speed_the_full_force_passes_untouched_for_any_declaration():
+    """The force limit shrinks only *above* ``velocity_knee x max_velocity_mm_s``
+    (docs/safety.md): at exactly the knee speed a command at the declared force limit
+    passes as it is and counts nothing, for 300 seeded declarations (limits in 0.1-10 N at
+    1 mN, top speeds in 50-1000 mm/s at 0.1 mm/s, four knees), whatever the rounding of
+    the shrinking limit's own formula would give there."""
+    rng = np.random.default_rng(24)
+    for _ in range(300):
+        fmax = round(float(rng.uniform(0.1, 10.0)), 3)
+        vmax = round(float(rng.uniform(50.0, 1000.0)), 1)
+        knee = float(rng.choice([0.25, 0.3, 0.5, 0.7]))
+        lay = running_layer(ActuatorLimits(max_force_n=fmax, max_velocity_mm_s=vmax), start_max_force_n=None,
+                            velocity_knee=knee)
+        lay.observe(state(speed=knee * vmax))
+        for t, f in ((0.001, fmax), (0.002, -fmax)):
+            assert lay.filter(ChannelCommand("f", force_n=f), t).force_n == f, (fmax, vmax, knee)
+        assert lay.hits == {}, (fmax, vmax, knee)
