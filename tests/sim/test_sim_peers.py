@@ -101,3 +101,51 @@ def test_commit_is_what_the_next_sample_holds():
     peers.commit(st, np.array([1.0, 2.0, 0.5]))
     assert np.array_equal(st["f1"], [1.0, 2.0, 0.5]) and np.array_equal(st["out"], [1.0, 2.0, 0.5])
     assert st["out"] is not st["f1"]
+
+
+def test_energy_bounding_starts_from_zero_on_the_first_tick():
+    """The first tick books no motion (``dx = 0``), so energy bounding's per-sample limit
+    ``2 b |dx| / T`` is 0 there and its force stays at its start, 0 N, whatever the wall
+    asks; the next tick moves toward the wall within the limit of that tick's motion."""
+    rng = np.random.default_rng(5)
+    T, K, b = _draw(rng)
+    st = peers.state(N)
+    x = rng.uniform(-3.0, -0.5, N)                     # every lane inside the wall
+    pen = -x
+    kind = np.full(N, peers.PEERS.index("eb"))
+    assert np.array_equal(peers.step(kind, st, x, T, K * pen, K, pen, b), np.zeros(N))
+    peers.commit(st, np.zeros(N))
+    out = peers.step(kind, st, x - 0.1, T, K * (pen + 0.1), K, pen + 0.1, b)
+    assert np.all(np.abs(out) <= 2.0 * b * 0.1e-3 / T * (1 + 1e-12))
+
+
+def test_the_virtual_coupling_of_a_wall_without_stiffness_or_damping_gives_nothing():
+    """``F = K K_c / (K + K_c) x penetration`` is 0 where either spring is 0, also where
+    both are (a wall of 0 N/mm on a device declaring no damping): 0 N, not NaN."""
+    st = peers.state(4)
+    K = np.array([0.0, 0.0, 2.0, 0.0])
+    b = np.array([0.0, 0.5, 0.0, 0.0])
+    pen = np.array([1.0, 1.0, 1.0, 0.0])
+    out = peers.step(np.full(4, peers.PEERS.index("vc")), st, -pen, np.full(4, 1e-3), K * pen, K, pen, b)
+    assert np.array_equal(out, np.zeros(4))
+
+
+def test_popc_damps_at_every_speed_including_one_metre_per_second():
+    """The damper acts wherever the observed energy is negative and the stylus moved,
+    at any speed: lanes moving 0.25, 0.5, 1, 2 and 4 mm in a 1 ms sample (1 m/s exactly
+    among them, all exact in binary) with a held force that gave energy are damped by
+    exactly their deficit, ``(F_wall - F) dx = -E``."""
+    dx_mm = np.array([0.25, 0.5, 1.0, 2.0, 4.0])
+    n = dx_mm.size
+    st = peers.state(n)
+    T = np.full(n, 1e-3)
+    K, b = np.full(n, 1.0), np.full(n, 0.5)
+    kind = np.full(n, peers.PEERS.index("popc"))
+    x0 = np.full(n, -5.0)
+    peers.step(kind, st, x0, T, -x0 * K, K, -x0, b)
+    peers.commit(st, np.full(n, 2.0))                   # pushing out while the stylus moves out
+    x1 = x0 + dx_mm
+    out = peers.step(kind, st, x1, T, -x1 * K, K, -x1, b)
+    E = -2.0 * dx_mm * 1e-3
+    assert st["E"] == pytest.approx(E, rel=1e-12, abs=0.0)
+    assert (-x1 * K - out) * dx_mm * 1e-3 == pytest.approx(-E, rel=1e-9, abs=0.0)
