@@ -53,7 +53,10 @@ def test_an_explicit_deadline_up_to_and_at_the_cap_is_taken(at_most):
     assert command_timeout_s(layer, at_most, at_most=at_most) == at_most
     assert command_timeout_s(layer, at_most / 2, at_most=at_most) == at_most / 2
     assert command_timeout_s(layer, 5.0, at_most=None) == 5.0
-    for bad in (0.0, -0.1, at_most * 1.5, "0.5", [0.5]):
+    for bad in (0.0, -0.1, at_most * 1.5, "0.5", [0.5], True, float("nan")):
         with pytest.raises(ValidationError) as ei:
             command_timeout_s(layer, bad, at_most=at_most)
         assert ei.value.field == "options.command_timeout_s"
+    for bad in (True, float("nan"), float("inf")):   # without a cap too: True is no 1 s deadline
+        with pytest.raises(ValidationError):
+            command_timeout_s(layer, bad, at_most=None)
