@@ -13,7 +13,6 @@ from typing import Any
 import numpy as np
 
 from ..argcheck import flag, number
-from ..errors import ValidationError
 from .margin import _check_nonneg
 
 

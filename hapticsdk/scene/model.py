@@ -30,8 +30,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
-import numpy as np
-
 from ..errors import ValidationError
 from .geometry import HitTester, PlanePatch, Pose, Shape, shape_from_dict
 
@@ -88,6 +86,7 @@ def _check_settings(settings: Mapping[str, Any]) -> None:
     built in code gets no schema): every key known, every group an object, every number a
     finite number in range (an int beyond the float range included), every flag a bool;
     the error names the field (``scene.settings.solver.tolerance``)."""
+    from .. import argcheck
     from ..argcheck import number
     from ..checks import check_seed
     from .limits import check_period
@@ -109,8 +108,7 @@ def _check_settings(settings: Mapping[str, Any]) -> None:
         raise ValidationError(f"unknown setting(s) {unknown}; valid: {sorted(DEFAULT_SETTINGS)}", field=where)
 
     def flag(value: Any, field: str) -> None:
-        if not isinstance(value, (bool, np.bool_)):
-            raise ValidationError(f"must be true or false, got {value!r:.60}", field=f"{where}.{field}")
+        argcheck.flag(value, f"{where}.{field}")
 
     def name(value: Any, field: str) -> None:
         if not isinstance(value, str) or not value:
