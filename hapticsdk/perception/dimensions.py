@@ -9,6 +9,7 @@ plugins (entry-point group ``hapticsdk.dimensions``); the core knows none of the
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar, Mapping
@@ -342,20 +343,23 @@ def check_intensity(value: object, field: str, *, text: bool = False) -> float:
     ``value`` is a real number (``hapticsdk.argcheck``'s rule: ``True`` and ``False``
     are refused, a bool is not an intensity, and so is a string); with ``text=True``
     (command-line arguments) it may be the text of a number."""
-    if text and isinstance(value, str):
+    if type(value) is float:   # the common case (a one-target solve's): nothing to convert
+        v = value
+    else:
+        if text and isinstance(value, str):
+            try:
+                value = float(value)
+            except ValueError:
+                raise ValidationError(f"intensity must be a number, got {value!r:.80}", field=field) from None
+        if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "fiu":
+            value = value.item()
+        if not is_number(value):
+            raise ValidationError(f"intensity must be a number, got {value!r:.80}", field=field)
         try:
-            value = float(value)
-        except ValueError:
-            raise ValidationError(f"intensity must be a number, got {value!r:.80}", field=field) from None
-    if isinstance(value, np.ndarray) and value.ndim == 0 and value.dtype.kind in "fiu":
-        value = value.item()
-    if not is_number(value):
-        raise ValidationError(f"intensity must be a number, got {value!r:.80}", field=field)
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except OverflowError:   # an int beyond the float range
-        raise ValidationError(f"intensity {value!r:.40} outside 0..1", field=field) from None
-    if not np.isfinite(v):
+            v = float(value)  # type: ignore[arg-type]
+        except OverflowError:   # an int beyond the float range
+            raise ValidationError(f"intensity {value!r:.40} outside 0..1", field=field) from None
+    if not math.isfinite(v):
         raise ValidationError("intensity is NaN or infinite", field=field)
     if not 0.0 <= v <= 1.0:
         raise ValidationError(f"intensity {v:g} outside 0..1", field=field)
