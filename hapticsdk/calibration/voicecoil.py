@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Mapping, cast
 
 import numpy as np
 
-from ..errors import CalibrationError
+from ..errors import CalibrationError, ValidationError
 
 PAPER_COEFFICIENTS = (0.00012, 0.01, -0.3045)
 PAPER_RANGE_HZ = (30.0, 120.0)
@@ -51,10 +51,11 @@ def check_amplifier_gain(gain: Any) -> float | None:
 def calibration_flag(data: Mapping[str, Any], key: str) -> bool:
     """``data[key]`` (default False) when it is a bool: ``"false"`` or ``0`` in a
     calibration's ``generated`` is not a flag (``bool("false")`` is True)."""
-    v = data.get(key, False)
-    if not isinstance(v, (bool, np.bool_)):
-        raise CalibrationError(f"{key} must be true or false, got {v!r:.60}")
-    return bool(v)
+    from ..argcheck import flag
+    try:
+        return flag(data.get(key, False), key)
+    except ValidationError as exc:   # a calibration's own error, with the field in its text
+        raise CalibrationError(f"{key} {exc.reason}") from None
 
 
 @dataclass(frozen=True)

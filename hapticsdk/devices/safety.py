@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..argcheck import flag
+from ..argcheck import flag, number
 from ..perception.dimensions import ChannelCommand
 from ..errors import ValidationError
 
@@ -116,12 +116,8 @@ def command_timeout_s(safety: Any, value: Any = None, *, at_most: float | None =
     :class:`~hapticsdk.errors.ValidationError` naming ``options.command_timeout_s``."""
     if value is None:
         return default_command_timeout_s(safety)
-    # a number (never a bool: True is no deadline of 1 s), nan and inf refused by the range
-    if not (isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0
-            and (at_most is None or value <= at_most) and math.isfinite(value)):
-        raise ValidationError(f"must be in (0, {at_most:g}] s" if at_most is not None else "must be a finite number > 0 s",
-                              field="options.command_timeout_s")
-    return float(value)
+    # a finite number (never a bool: True is no deadline of 1 s)
+    return number(value, "options.command_timeout_s", lo=0.0, lo_open=True, hi=at_most)
 
 
 def default_command_timeout_s(safety: Any) -> float:
