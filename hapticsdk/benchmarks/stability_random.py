@@ -28,7 +28,8 @@ Per cell and controller: ``energy_to_user_j`` (max over time of the energy given
 finger), ``delivered_ratio`` (over the contact ticks, i.e. reading inside the wall:
 ``sum min(F+, F_target) / sum F_target`` with ``F_target = min(K pen, 3.3 N)``; force
 beyond the wall's law, e.g. a damper's, is not counted as delivered), ``max_force_step_n``
-(largest change of the applied force between two ticks, all ticks), ``min_contact_force_n``
+(largest change of the applied force between two ticks, all ticks; ``max_force_rise_n`` and
+``max_force_fall_n`` the largest rise and the largest fall alone), ``min_contact_force_n``
 (most negative applied force on a contact tick; 0 if none); for ``sdk`` and ``sdk_declared`` also
 ``ramp_step_n`` (the controller's own step at that period) and ``bound_shortfall_j``
 (largest ``true energy - U - (Delta/2) |F|`` over the ticks: <= 0 when the controller's
@@ -46,7 +47,10 @@ bound in that cell), counted over the cells that have such a peer
 against the best such peer that also kept the force-shape goals the SDK is held to, never
 pulling and no step beyond the SDK's ramp step (``sdk_delivered_vs_best_shaped_peer`` of
 ``cells_with_a_shaped_peer``). A cell with no such peer counts in neither.
-``sdk_spring_only_over_half`` counts the cells whose ``spring_only_share`` exceeds 1/2.
+``sdk_spring_only_over_half`` counts the cells whose ``spring_only_share`` exceeds 1/2;
+``sdk_rise_within_ramp`` the cells whose largest rise is within the ramp step (the force
+rises by at most one ramp step a tick; it falls by up to that plus the Colgate spring's
+fall as the reading moves out: docs/runtime.md, Passivity item 3, says why).
 """
 
 from __future__ import annotations
@@ -251,6 +255,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     given = np.zeros(L)
     asked = np.zeros(L)
     dmax = np.zeros(L)
+    rmax = np.zeros(L)      # largest rise of the applied force between two ticks
+    fmax_fall = np.zeros(L)   # largest fall
     dspring = np.zeros(L)   # sdk: largest step beyond the Colgate spring (K_c |dq|)
     x_last = None
     fneg = np.zeros(L)
@@ -292,6 +298,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         spring_only += tl & sdk & held_back
         fneg = np.minimum(fneg, np.where(tl, f, 0.0))
         dmax = np.maximum(dmax, np.where(live, np.abs(f - f_last), 0.0))
+        rmax = np.maximum(rmax, np.where(live, f - f_last, 0.0))
+        fmax_fall = np.maximum(fmax_fall, np.where(live, f_last - f, 0.0))
         if x_last is not None:
             beyond = np.abs(f - f_last) - kc * np.abs(x - x_last) * 1e-3
             dspring = np.maximum(dspring, np.where(live & sdk, beyond, 0.0))
@@ -308,7 +316,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         for j, name in enumerate(controllers):
             ln = i * nc + j
             d[name] = {"energy_to_user_j": float(e_max[ln]), "delivered_ratio": float(ratio[ln]),
-                       "max_force_step_n": float(dmax[ln]), "min_contact_force_n": float(fneg[ln]),
+                       "max_force_step_n": float(dmax[ln]), "max_force_rise_n": float(rmax[ln]),
+                       "max_force_fall_n": float(fmax_fall[ln]), "min_contact_force_n": float(fneg[ln]),
                        "contact_ticks": int(contact[ln])}
             if name in SDK_LANES:
                 d[name]["ramp_step_n"] = float(step[ln])
@@ -363,6 +372,7 @@ def cell_verdicts(cell: dict[str, Any], lane: str = "sdk") -> dict[str, Any]:
     mine = me["delivered_ratio"]
     return {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
             "step_ok": _within_ramp(me["max_force_step_n"], me["ramp_step_n"]),
+            "rise_ok": _within_ramp(me.get("max_force_rise_n", me["max_force_step_n"]), me["ramp_step_n"]),
             "step_ok_plus_spring": _within_ramp(me.get("max_step_beyond_spring_n", me["max_force_step_n"]),
                                                 me["ramp_step_n"]),
             "delivered_ok": _at_least(mine, best), "best_passive_peer_ratio": max(best) if best else float("nan"),
@@ -376,6 +386,7 @@ def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, int]:
             "sdk_no_pull": sum(x["no_pull"] for x in v),
             "sdk_step_within_ramp": sum(x["step_ok"] for x in v),
             "sdk_step_within_ramp_plus_spring": sum(x["step_ok_plus_spring"] for x in v),
+            "sdk_rise_within_ramp": sum(x["rise_ok"] for x in v),
             "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] is True for x in v),
             "cells_with_a_passive_peer": sum(x["delivered_ok"] is not None for x in v),
             "sdk_delivered_vs_best_shaped_peer": sum(x["delivered_ok_shaped"] is True for x in v),
