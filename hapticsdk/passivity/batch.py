@@ -21,7 +21,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
             "overdrawn": z.copy(), "still": z.copy(),
             "spring": z.copy(), "kf": z.copy(), "kc": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
             "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
-            "hp": np.zeros(1, int)}
+            "hp": np.zeros(1, int), "sent": z.copy(), "pending": np.zeros(1, bool)}
 
 
 def _colgate_n_per_m(b_lo: Any, dt: Any, step_n: Any, q_m: Any) -> np.ndarray:
@@ -47,9 +47,14 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     per cell and override ``settings``; ``trusted_damping_ns_per_m`` (per cell or one
     number) is the damping credited in place of the settings' (a measured lower bound,
     :meth:`ControllerSettings.trusted_damping_ns_per_m`). Cells where ``on`` is False pass
-    the wall force through. Call :func:`controller_commit_batch` after. A period that is not
+    the wall force through. Call :func:`controller_commit_batch` after (without it, the next
+    step takes the forces this one returned as applied). A period that is not
     > 0 (or NaN) in any cell raises :class:`~hapticsdk.errors.ValidationError` (field
     ``dt``), a reading that is not finite likewise (field ``x_mm``)."""
+    pending = state.get("pending")
+    if pending is not None and pending[0]:
+        # no commit since the last step: the forces it returned are taken as applied
+        controller_commit_batch(state, state["sent"])
     s = settings or ControllerSettings()
     x = np.asarray(x_mm, float)
     fw = np.nan_to_num(np.asarray(f_wall, float), nan=0.0, posinf=0.0, neginf=0.0)
@@ -157,11 +162,17 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     out = np.where(started & ~idle, spring + sg * a, 0.0)
     state["out"] = out
     state["started"] = np.ones_like(started)
-    return np.where(on, out, fw)
+    sent = np.where(on, out, fw)
+    if pending is not None:
+        state["sent"] = sent.copy()
+        pending[0] = True
+    return sent
 
 
 def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray) -> None:
     """Record the forces actually applied over the coming interval (N)."""
+    if "pending" in state:
+        state["pending"][0] = False
     f = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
     state["f2"] = state["f1"]
     state["app3"] = state["app2"]

@@ -43,7 +43,9 @@ class PassivityController:
     Per tick call :meth:`step` with the measured position (mm, along the normal, the
     surface at 0, inside at x < 0), the measured period ``dt`` (s) and the wall's force
     (N); send the returned force; then call :meth:`commit` with the force the device
-    actually applied (after its safety clamp).
+    actually applied (after its safety clamp). A step with no commit since the last one
+    takes the force the last step returned as applied: a caller that never calls
+    :meth:`commit` gets the book of a device that applies what it is sent.
 
     **The Colgate spring** ``P = min(F_wall, K_c depth)``, ``K_c = min(2 b_s / T, s /
     Delta)`` (``T`` the servo's period, ``settings.period_s``, else each measured
@@ -95,7 +97,7 @@ class PassivityController:
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_kc", "_full", "_jw", "_j3w",
-                 "_a1", "_a2", "_a3")
+                 "_a1", "_a2", "_a3", "_sent", "_pending")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -121,20 +123,29 @@ class PassivityController:
         self._kf = 0.0              # its secant stiffness (N/m)
         self._kc = 0.0              # its stiffness K_c while compressed (N/m), else 0
         self._full = 0.0            # full scale without a declared force limit: the largest force so far
+        self._sent = 0.0            # the force the last step returned
+        self._pending = False       # a step returned a force that no commit has recorded yet
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
+        if self._pending:
+            # no commit since the last step: the force it returned is taken as applied
+            self.commit(self._sent)
+        self._pending = True
         s = self.settings
         if f_wall != f_wall or f_wall in (math.inf, -math.inf):
             f_wall = 0.0
         if not self._started or not dt > 0 or not -_INF < x_mm < _INF:
             if not -_INF < x_mm < _INF:
+                self._sent = 0.0
                 return 0.0           # a reading that is not a number: nothing to book, no force
             if not self._started:
                 self._q1 = self._q2 = x_mm
                 self._hist = [x_mm] * _HIST
                 self._started = True
-            return 0.0 if not dt > 0 else self._out
+            r = 0.0 if not dt > 0 else self._out
+            self._sent = r
+            return r
         dq = (x_mm - self._q1) * 1e-3
         q = s.position_resolution_mm * 1e-3
         h = 0.5 * q
@@ -271,6 +282,7 @@ class PassivityController:
             e0 = s.energy_allowance_j
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
+            self._sent = 0.0
             return 0.0
         self.energy_j = u
         if u - e0 > self.overdrawn_j:
@@ -314,10 +326,14 @@ class PassivityController:
             self.withheld_n_ticks += target - a
         out = spring + sg * a
         self._out = out
+        self._sent = out
         return out
 
     def commit(self, f_applied: float) -> None:
-        """Record the force the device actually held over the coming interval (N)."""
+        """Record the force the device actually held over the coming interval (N). Without
+        a commit before the next :meth:`step`, that step takes the force the last one
+        returned as applied."""
+        self._pending = False
         if f_applied != f_applied or f_applied in (math.inf, -math.inf):
             f_applied = 0.0
         self._f2 = self._f1

@@ -307,3 +307,37 @@ def test_a_wall_rendered_in_full_reports_no_active_tick():
     c2 = PassivityController(cs)
     _press_and_release(c2, K=50.0, T=1e-3)
     assert c2.report()["active_ticks"] > 0 and c2.report()["withheld_n_ticks"] > 0.0
+
+
+def _returned(case: dict, cs: ControllerSettings, batch: bool, commit_each: bool) -> list[tuple[float, float]]:
+    """(force returned, U) per tick of the case's readings, with each returned force
+    committed as applied, or with no commit at all."""
+    stt = controller_state_batch(1)
+    c = PassivityController(cs)
+    out = []
+    periods = case["T"] * case["jitter"]
+    for k, (y, e) in enumerate(zip(case["y"], case["e"])):
+        q = float(y + e)
+        fw = case["K"] * max(-q, 0.0)
+        if batch:
+            f = float(controller_step_batch(stt, np.array([q]), float(periods[k]), np.array([fw]), True, cs)[0])
+            u = float(stt["energy"][0])
+            if commit_each:
+                controller_commit_batch(stt, np.array([f]))
+        else:
+            f = c.step(q, float(periods[k]), fw)
+            u = c.energy_j
+            if commit_each:
+                c.commit(f)
+        out.append((f, u))
+    return out
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@given(_motion(exact=False), st.booleans())
+def test_a_step_without_a_commit_takes_the_force_it_returned_as_applied(case, batch):
+    """A caller that never calls ``commit`` (an independent simulator, a device that
+    applies what it is sent) gets the same forces and the same book as one that commits
+    each returned force: before, the book took the extra as 0 and never saw its work."""
+    cs = _settings(case, device_damping_ns_per_m=0.0)
+    assert _returned(case, cs, batch, commit_each=False) == _returned(case, cs, batch, commit_each=True)
