@@ -21,7 +21,7 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
             "overdrawn": z.copy(), "still": z.copy(),
             "spring": z.copy(), "kf": z.copy(), "kc": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
             "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
-            "hp": np.zeros(1, int), "sent": z.copy(), "pending": np.zeros(1, bool)}
+            "hp": np.zeros(1, int), "sent": z.copy(), "pending": np.zeros(1, bool), "anchor": z.copy()}
 
 
 def _colgate_n_per_m(b_lo: Any, dt: Any, step_n: Any, q_m: Any) -> np.ndarray:
@@ -118,13 +118,23 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     depth = np.maximum(-x * 1e-3, 0.0)
     step = full * np.minimum(dt / s.ramp_time_s, 1.0)
     tn = dt if s.period_s is None else s.period_s      # the spring's period (the scalar tick's rule)
-    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd, b_lo), tn, full * np.minimum(tn / s.ramp_time_s, 1.0), q)
+    sp = full * np.minimum(tn / s.ramp_time_s, 1.0)   # the ramp step at the spring's period
+    kc = _colgate_n_per_m(s.spring_damping_ns_per_m(bd, b_lo), tn, sp, q)
     if s.period_s is not None:
         # never stiffer while compressed
         kc = np.where((state["kc"] > 0.0) & (kc > state["kc"]), state["kc"], kc)
-    spring = np.where((fw > 0.0) & (depth > 0.0), np.minimum(kc * depth, fw), 0.0)
+    # the spring K_c (depth - o) and its anchor o (the scalar tick's rule): the anchor
+    # follows the reading out where the reading is above it, and moves in where the
+    # spring's rise is held to one ramp step
+    incontact = (fw > 0.0) & (depth > 0.0)
+    o = np.where(incontact, np.minimum(state.get("anchor", 0.0), depth), 0.0)
+    spring = np.where(incontact, np.minimum(kc * (depth - o), fw), 0.0)
     if fm is not None:
         spring = np.minimum(spring, full)
+    lim = state["spring"] + sp
+    held = (spring > lim) & (kc > 0.0)
+    spring = np.where(held, lim, spring)
+    o = np.where(held, depth - spring / np.where(held, kc, 1.0), o)
     # the damping credited to the extra: b_lo less the spring's need, its secant stiffness
     # at the interval's start, or its full slope K_c on an interval entering from outside
     # (the scalar tick's rule)
@@ -157,7 +167,9 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring
-    state["kf"] = np.where(spring > 0.0, spring / np.where(depth > 0.0, depth, 1.0), 0.0)
+    if "anchor" in state:
+        state["anchor"] = np.where(started & ~idle, o, 0.0)   # a first reading books nothing (the scalar tick's rule)
+    state["kf"] = np.where(spring > 0.0, np.where(o == 0.0, spring / np.where(depth > 0.0, depth, 1.0), kc), 0.0)
     state["kc"] = np.where(spring > 0.0, kc, 0.0)
     out = np.where(started & ~idle, spring + sg * a, 0.0)
     state["out"] = out

@@ -97,7 +97,7 @@ class PassivityController:
 
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_kc", "_full", "_jw", "_j3w",
-                 "_a1", "_a2", "_a3", "_sent", "_pending")
+                 "_a1", "_a2", "_a3", "_sent", "_pending", "_o")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -122,6 +122,7 @@ class PassivityController:
         self._spring = 0.0          # the Colgate spring sent this tick (N)
         self._kf = 0.0              # its secant stiffness (N/m)
         self._kc = 0.0              # its stiffness K_c while compressed (N/m), else 0
+        self._o = 0.0               # its anchor: the depth (m) at which it is 0
         self._full = 0.0            # full scale without a declared force limit: the largest force so far
         self._sent = 0.0            # the force the last step returned
         self._pending = False       # a step returned a force that no commit has recorded yet
@@ -230,6 +231,7 @@ class PassivityController:
         spring = 0.0
         kf = 0.0
         kc = 0.0
+        o = 0.0
         if f_wall > 0.0 and depth > 0.0:
             # its damping b_s: half the device's damping (the measured fit, else the
             # declaration), at most the trusted lower bound (item 0;
@@ -239,10 +241,10 @@ class PassivityController:
                 b_s = b_lo
             tn = s.period_s or dt   # sized on the servo's period where declared
             kc = 2.0 * b_s / tn
+            sp = full * (tn / s.ramp_time_s if tn < s.ramp_time_s else 1.0)   # the ramp step at that period
             if q > 0.0:
                 # one count of the spring within one ramp step (item 0), the step at the
                 # same period
-                sp = full * (tn / s.ramp_time_s if tn < s.ramp_time_s else 1.0)
                 if kc > sp / q:
                     kc = sp / q
             if s.period_s is not None and self._kc > 0.0 and kc > self._kc:
@@ -251,13 +253,29 @@ class PassivityController:
                 # setting assigned mid-contact); without a declared period the spring
                 # follows each measured one, as documented on ControllerSettings.period_s
                 kc = self._kc
-            spring = kc * depth
+            # the spring is K_c (depth - o), o its anchor: 0 at first, moved in where the
+            # spring's rise is held to one ramp step (below), and following the reading
+            # out where the reading is above it (the spring then stays at 0)
+            o = self._o
+            if o > depth:
+                o = depth
+            spring = kc * (depth - o)
             if spring > f_wall:
                 spring = f_wall
-        if fm is not None and spring > fm:
-            spring = fm
+            if fm is not None and spring > fm:
+                spring = fm
+            if spring > self._spring + sp and kc > 0.0:
+                # a reading that jumped several counts in one tick: the spring rises by one
+                # ramp step (at its own period, like its cap) and its anchor moves in to
+                # match. Moving the anchor in while compressed takes stored energy out
+                # (K_c (depth - o)^2 / 2 falls), so the spring stays passive (item 0)
+                spring = self._spring + sp
+                o = depth - spring / kc
+        self._o = o
         if spring > 0.0:
-            kf = spring / depth
+            # its secant stiffness, or K_c where the anchor has moved in (a spring that is 0
+            # above the surface has a secant below its slope)
+            kf = spring / depth if o == 0.0 else kc
         # the damping credited to the extra, b_x = b_lo - K_s T / 2: the spring held over
         # the interval needs K_s T / 2 of it, K_s its secant stiffness at the interval's
         # start; an interval that enters the wall from outside (no spring at its start)
@@ -275,7 +293,7 @@ class PassivityController:
         rise = spring - self._spring   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf
-        self._kc = kc   # 0 where the spring is 0 (out of the wall, or no damping)
+        self._kc = kc if spring > 0.0 else 0.0   # 0 where the spring is 0 (out of the wall, no damping, at its anchor)
         c_m = dt * dt / (2.0 * m) if m else 0.0
         e0 = full * h
         if e0 > s.energy_allowance_j:

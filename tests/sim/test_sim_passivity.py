@@ -399,7 +399,9 @@ def test_with_a_declared_period_the_spring_keeps_its_stiffness_through_jitter(b,
     spring sized on each measured interval changes its stiffness while compressed (a rise
     stores energy no motion paid for), and one that may only fall would ratchet down
     after an early tick. The wall equals the spring here (``F_wall`` = that force), so the
-    force sent is the spring's alone."""
+    force sent is the spring's alone. The press comes in one count a tick at the declared
+    period: the spring then rises by at most one ramp step a tick (its cap), so its anchor
+    stays at the surface."""
     cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             period_s=T)
     b_s = cs.damping_trust * b
@@ -408,6 +410,8 @@ def test_with_a_declared_period_the_spring_keeps_its_stiffness_through_jitter(b,
     pc = PassivityController(cs)
     pc.step(0.0, T, 0.0)
     pc.commit(0.0)
+    for n in range(1, int(depth / res) + 1):
+        pc.commit(pc.step(-n * res, T, min(k * n * res * 1e-3, fmax)))
     for dt in [T] + [dt_ * T for dt_ in jitter] + [T, T]:
         f = pc.step(-depth, dt, f_spring)
         pc.commit(f)
@@ -430,17 +434,20 @@ def test_without_a_declared_limit_the_spring_does_not_stiffen_while_compressed()
         f = pc.step(-depth, T, K * depth if f_wall is None else f_wall)
         pc.commit(f)
         return f
+    # (the stiffness K_c is read from the controller: a press of several counts in one tick
+    # raises the spring by one ramp step, its anchor moving in, so the force alone does not
+    # show the stiffness)
     f0 = spring_at(0.4)                               # contact: full scale 0.4 N
     k0 = 0.4 * min(T / cs.ramp_time_s, 1.0) / (res * 1e-3)   # its cap, N/m
-    assert f0 == pytest.approx(min(k0 * 0.4e-3, 0.4), rel=1e-12)
+    assert pc._kc == pytest.approx(k0, rel=1e-12) and 0.0 < f0 <= 0.4
     spring_at(10.0)                                   # the wall's force, and the full scale, to 10 N
-    assert pc._spring == pytest.approx(k0 * 10e-3, rel=1e-12)   # the stiffness of the contact's start
+    assert pc._kc == pytest.approx(k0, rel=1e-12)     # the stiffness of the contact's start
     for _ in range(40):                               # release; out of the wall
         pc.step(1.0, T, 0.0)
         pc.commit(0.0)
     spring_at(0.4, 10.0)                              # a press into a 10 N wall
     k1 = 10.0 * min(T / cs.ramp_time_s, 1.0) / (res * 1e-3)  # the next press: the grown full scale's cap
-    assert pc._spring == pytest.approx(min(k1, 2 * 0.5 * b / T) * 0.4e-3, rel=1e-12)
+    assert pc._kc == pytest.approx(min(k1, 2 * 0.5 * b / T), rel=1e-12)
 
 
 def _hold_at(pc, dts, depth_mm=-0.5, f_wall=50.0):
@@ -514,7 +521,8 @@ def test_one_count_of_the_colgate_spring_is_within_one_ramp_step(b, dt, res, fma
     step, and the spring's gain per crossing, ``(K_c Delta)^2 T / 4b``, is at most
     ``s^2 T / 4b``. With no allowance and the hand at rest the extra stays 0 and the
     output is the spring alone; the scalar controller, the batch and
-    ``colgate_stiffness_n_per_mm`` agree."""
+    ``colgate_stiffness_n_per_mm`` agree. The wall appears around the resting stylus, so
+    the spring rises by at most one ramp step (its anchor moves in, item 0)."""
     cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             energy_allowance_j=0.0)
     s = fmax * min(dt / cs.ramp_time_s, 1.0)
@@ -529,7 +537,7 @@ def test_one_count_of_the_colgate_spring_is_within_one_ramp_step(b, dt, res, fma
         f = controller_step_batch(bs, np.array([-depth]), dt, np.array([1e6]), True, cs)[0]
         controller_commit_batch(bs, np.array([f]))
         assert a == f
-    assert a == pytest.approx(min(kc * depth * 1e-3, fmax), rel=1e-12)
+    assert a == pytest.approx(min(kc * depth * 1e-3, fmax, s), rel=1e-12)
 
 
 @hsettings(max_examples=50, deadline=None)
@@ -605,3 +613,55 @@ def test_the_settings_state_the_allowance_and_credit_nothing_undeclared():
     bare = ControllerSettings(max_force_n=3.3, position_resolution_mm=0.055)
     assert bare.device_damping_ns_per_m == 0.0 and bare.trusted_damping_ns_per_m() == 0.0
     assert colgate_stiffness_n_per_mm(bare, 1e-3) == 0.0
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_reading_that_jumps_many_counts_raises_the_force_by_one_ramp_step_a_tick(batch):
+    """A reading that jumps 200 counts into the wall in one tick (a fast tap on a fine
+    encoder): the Colgate spring rises by one ramp step and its anchor moves in, so the
+    force sent rises by at most ``s`` a tick on its way to the wall's force (item 0 and
+    item 3). On the way out the spring is 0 from its anchor on (never a pull), and a later
+    press that comes in one count a tick gets the whole spring ``K_c x depth`` again (the
+    anchor follows the reading out of the wall). Here ``K_c = 2 x 0.5 x 1 N s/m / 1 ms = 1
+    N/mm`` (under its cap of one ramp step a count, 0.66 N / 0.01 mm), the ramp step ``s``
+    is 3.3 N x 1 ms / 5 ms = 0.66 N, and the wall is the spring's own law (1 N/mm), so
+    whatever rises above the spring is the extra's ramp (its energy bound is switched off
+    to show the ramp alone)."""
+    T = 1e-3
+    cs = ControllerSettings(device_damping_ns_per_m=1.0, position_resolution_mm=0.01, max_force_n=3.3,
+                            period_s=T, energy_bound=False)
+    s = 3.3 * T / cs.ramp_time_s
+    if batch:
+        st_ = controller_state_batch(1)
+
+        def tick(x_mm):
+            f = float(controller_step_batch(st_, np.array([x_mm]), T, np.array([max(-x_mm, 0.0)]), True, cs)[0])
+            controller_commit_batch(st_, np.array([f]))
+            return f
+    else:
+        pc = PassivityController(cs)
+
+        def tick(x_mm):
+            f = pc.step(x_mm, T, max(-x_mm, 0.0))
+            pc.commit(f)
+            return f
+    forces = [tick(0.5), tick(0.5)] + [tick(-2.0) for _ in range(6)]
+    rises = np.diff(forces)
+    assert rises.max() <= s * (1 + 1e-12)
+    assert forces[2] == pytest.approx(s, rel=1e-12)             # the spring's one step
+    assert forces[-1] == pytest.approx(2.0, rel=1e-12)          # then the wall's 2 N
+    def spring():
+        return float(st_["spring"][0]) if batch else pc._spring
+    # out one count a tick to 0.5 mm, above the anchor (2 - 0.66 = 1.34 mm): the spring is 0
+    # there, never a pull, and the anchor follows the reading out; back in by 0.2 mm, the
+    # spring is K_c x 0.2 mm from where the anchor was left
+    part = [tick(-2.0 + 0.01 * k) for k in range(1, 151)]
+    assert min(part) >= 0.0 and spring() == 0.0
+    again = [tick(-0.5 - 0.01 * k) for k in range(1, 21)]
+    assert min(again) >= 0.0 and spring() == pytest.approx(0.2, rel=1e-9)
+    out = [tick(-0.7 + 0.01 * k) for k in range(1, 120)]        # out one count a tick, past the surface
+    assert min(out) >= 0.0 and out[-1] == 0.0
+    back = [tick(-0.01 * k) for k in range(1, 51)]             # a slow press to 0.5 mm
+    # the force is the spring alone, K_c x depth from the surface (the extra would fill in
+    # for a spring anchored deeper: read the spring itself)
+    assert back[-1] == pytest.approx(0.5, rel=1e-9) and spring() == pytest.approx(0.5, rel=1e-9)
