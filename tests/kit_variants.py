@@ -14,7 +14,9 @@ from typing import Any, Callable, ClassVar, Iterator
 import numpy as np
 
 from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
-from hapticsdk.perception.dimensions import ChannelCommand, Constraint
+from hapticsdk.errors import ValidationError
+from hapticsdk.perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
+from hapticsdk.perception.features import Feature
 
 #: the plugin API the test plugins are written for
 API = ">=1.2,<2"
@@ -97,6 +99,26 @@ class LagCoil(Actuator):
 
     def _read_back(self) -> ChannelCommand:
         return ChannelCommand("vibration", frequency_hz=self.drive_f, amplitude=self.out_a)
+
+
+def coil_dimension(name: str, feature: str, renderer_cls: type, model: str) -> type[PerceptionDimension]:
+    """A correct dimension ``name`` with one render feature ``feature`` (0..1) on the
+    lagging coil (role ``buzz``, vibration in V), rendered by ``renderer_cls(x)`` (a
+    subclass swaps ``renderer_cls``), its default model ``model``."""
+    def constraints(self: PerceptionDimension, **context: Any) -> list:
+        return []
+
+    def renderer(self: Any, features: Any, **options: Any) -> DimensionRenderer:
+        x = features.get(feature)
+        if x is None or not np.isfinite(x):
+            raise ValidationError(f"{feature} needed", field=f"features.{feature}")
+        return self.renderer_cls(float(x))
+    return type(f"CoilDim_{name}", (PerceptionDimension,), {
+        "__doc__": f"{name}: vibration on the lagging coil.", "hapticsdk_api": API, "name": name,
+        "features": (Feature(feature, "1", 0.0, 1.0),), "render_features": (feature,),
+        "default_actuators": {"buzz": LagCoil.name},
+        "roles": {"buzz": RoleSpec("vibration", {"frequency_hz": "Hz", "amplitude": "V"})},
+        "default_model": model, "renderer_cls": renderer_cls, "constraints": constraints, "renderer": renderer})
 
 
 def registered(regs: Any) -> Iterator[None]:

@@ -28,14 +28,13 @@ from typing import Any, ClassVar
 import numpy as np
 import pytest
 
-from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, PerceptionDimension, RoleSpec
-from hapticsdk.errors import ValidationError
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.perception.features import Feature, FeatureSpace
 from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_dimension
 from hapticsdk.testing.conformance import format_report
-from kit_variants import API, LagCoil, registered, rules_of
+from kit_variants import LagCoil, coil_dimension, registered, rules_of
 
 # ---------------------------------------------------------------------------
 # actuators
@@ -209,24 +208,7 @@ class InUseModel(PerceptionModel):
         return 0.5 * (1 + np.tanh(2 * X[:, :1] - 1))
 
 
-class UseDim(PerceptionDimension):
-    hapticsdk_api = API
-    name = "kit-use"
-    features = (Feature("kit-use.x", "1", 0.0, 1.0),)
-    render_features = ("kit-use.x",)
-    default_actuators: ClassVar[dict[str, str]] = {"buzz": "kit-lag-coil"}
-    roles: ClassVar[dict[str, RoleSpec]] = {"buzz": RoleSpec("vibration", {"frequency_hz": "Hz", "amplitude": "V"})}
-    default_model = "kit-use-model"
-    renderer_cls: ClassVar[type] = Buzz
-
-    def constraints(self, **context: Any) -> list:
-        return []
-
-    def renderer(self, features: Any, **options: Any) -> DimensionRenderer:
-        x = features.get("kit-use.x")
-        if x is None or not np.isfinite(x):
-            raise ValidationError("kit-use.x needed", field="features.kit-use.x")
-        return self.renderer_cls(float(x))
+UseDim = coil_dimension("kit-use", "kit-use.x", Buzz, "kit-use-model")
 
 
 def _dim(renderer: type) -> type:

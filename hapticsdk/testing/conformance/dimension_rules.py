@@ -15,10 +15,12 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from ...devices.actuators import ActuatorLimits
+from ...devices.safety import SafetySettings
 from ...errors import ValidationError
 from ...perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
 from ...perception.features import Feature, FeatureSpace
 from ...perception.models import PerceptionModel
+from .actuator_drive import STALL_RUN_S
 from .runner import _Ctx, _run_rules
 from .timing import KIT_PERIOD_S, TICK_BUDGET, TIMING_CALLS, _fastest, _perf_counter, _sim_advance
 from .values import _finite, _refuses
@@ -139,6 +141,66 @@ def _tick_unchanged(r: DimensionRenderer, inp: TickInput) -> list[ChannelCommand
 
 _TICKS = _tick_inputs()
 
+#: penetrations (mm) and speeds (mm/s) of the ``renderer`` rule's sweep: the kit's ticks
+#: stop at 3 mm and 400 mm/s, but the servo loop hands a renderer what the device
+#: measures, bounded by nothing the renderer can rely on (a stylus pushed through a thin
+#: wall, a fast flick, an encoder glitch); the safety layer limits what reaches the
+#: actuator, not what the renderer is asked. Decades from 1 um to 1 m and from 1 um/s to
+#: 100 m/s, each sign, on each axis
+SWEEP_PENETRATIONS_MM = tuple(float(10.0 ** e) for e in range(-3, 4))
+SWEEP_SPEEDS_MM_S = (0.0,) + tuple(float(10.0 ** e) for e in range(-3, 6))
+#: servo time (s) of the ``renderer`` rule's long run: one renderer ticked through the
+#: kit's ticks and the sweep in turn, every command checked (a command that turns
+#: non-finite only after more ticks than this goes unseen)
+RENDER_RUN_S = 8.0
+
+
+def _sweep_inputs() -> list[TickInput]:
+    """Ticks at every penetration of :data:`SWEEP_PENETRATIONS_MM` (and as far out of
+    contact) with the speed along each axis, both signs, at every speed of
+    :data:`SWEEP_SPEEDS_MM_S`; read-only velocity arrays, times 1 ms apart."""
+    out: list[TickInput] = []
+    for pen in SWEEP_PENETRATIONS_MM + tuple(-p for p in SWEEP_PENETRATIONS_MM):
+        for speed in SWEEP_SPEEDS_MM_S:
+            for axis in range(3):
+                for sign in (1.0, -1.0):
+                    v = np.zeros(3)
+                    v[axis] = sign * speed
+                    v.flags.writeable = False
+                    out.append(TickInput(t=len(out) * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=pen,
+                                         velocity_mm_s=v, in_contact=pen > 0))
+    return out
+
+
+_SWEEP = _sweep_inputs()
+
+
+def _check_commands(cmds: Any, inp: TickInput, r: DimensionRenderer, specs: Mapping[str, Any], where: str) -> None:
+    """The ``renderer`` rule's checks of what one tick returned (``where`` says which tick)."""
+    assert isinstance(cmds, list), "tick() must return a list of ChannelCommand"
+    for c in cmds:
+        assert isinstance(c, ChannelCommand), f"tick() returned {c!r}"
+        assert c.role in r.roles, f"tick() commanded role {c.role!r} not in roles {r.roles}"
+        for k in ("force_n", "frequency_hz", "amplitude"):
+            assert _finite(getattr(c, k)), f"tick() returned {k}={getattr(c, k)!r} {where}"
+        if c.amplitude is not None:
+            assert c.amplitude >= 0, f"negative amplitude {c.amplitude} {where}"
+    if not inp.in_contact:
+        for c in cmds:
+            assert not c.force_n, f"force {c.force_n} N commanded out of contact {where}"
+            spec = specs.get(c.role)
+            assert not (getattr(spec, "channel", None) == "vibration" and c.amplitude), \
+                (f"amplitude {c.amplitude:g} commanded on the vibration role {c.role!r} out of contact "
+                 f"{where}: nothing touches the surface, "
+                 f"so nothing may vibrate; the loop sends amplitude 0 on it away from every object")
+
+
+def _where(inp: TickInput, feats: Mapping[str, float], k: int | None = None) -> str:
+    """Which tick: penetration, velocity, features (and its index in a run)."""
+    at = f"at tick {k + 1} of a run, " if k is not None else ""
+    return (f"({at}penetration {inp.penetration_mm:g} mm, velocity {np.asarray(inp.velocity_mm_s).tolist()} mm/s, "
+            f"{dict(feats)})")
+
 
 def _commands_of(d: PerceptionDimension, feats: Mapping[str, float]) -> list[Any]:
     """The commands of a new renderer of ``feats`` over the kit's ticks, as values."""
@@ -227,6 +289,22 @@ def _grows(points: list[tuple[float, float]]) -> bool:
     :data:`GROWTH_EXPONENT`."""
     costs = [c for _, c in points]
     return costs[-1] >= GROWTH_FACTOR * costs[0] and _growth_exponent(points) >= GROWTH_EXPONENT
+
+
+def _tick_stalls(r: DimensionRenderer, limit_s: float) -> list[tuple[int, float]]:
+    """(index, wall s) of the ticks of a run of :data:`STALL_RUN_S` of the kit's ticks
+    (simulated time advancing) that took longer than ``limit_s``: as the actuators'
+    ``timing`` rule times every ``command()``."""
+    out = []
+    for k in range(int(round(STALL_RUN_S / KIT_PERIOD_S))):
+        inp = _run_inputs(k)
+        t0 = _perf_counter()
+        r.tick(inp)
+        d = _perf_counter() - t0
+        if d > limit_s:
+            out.append((k, d))
+        _sim_advance(KIT_PERIOD_S)
+    return out
 
 
 def _cost_growth(make: Callable[[], DimensionRenderer]) -> list[tuple[float, float]]:
@@ -405,24 +483,22 @@ def _dimension_rules(ctx: _Ctx) -> None:
             for role in r.roles:
                 assert role in d.default_actuators, f"renderer role {role!r} has no default actuator"
             for inp in _tick_inputs(read_only=True):
-                cmds = _tick_unchanged(r, inp)
-                assert isinstance(cmds, list), "tick() must return a list of ChannelCommand"
-                for c in cmds:
-                    assert isinstance(c, ChannelCommand), f"tick() returned {c!r}"
-                    assert c.role in r.roles, f"tick() commanded role {c.role!r} not in roles {r.roles}"
-                    for k in ("force_n", "frequency_hz", "amplitude"):
-                        assert _finite(getattr(c, k)), f"tick() returned {k}={getattr(c, k)!r} for {feats}"
-                    if c.amplitude is not None:
-                        assert c.amplitude >= 0, f"negative amplitude {c.amplitude}"
-                if not inp.in_contact:
-                    for c in cmds:
-                        assert not c.force_n, f"force {c.force_n} N commanded out of contact"
-                        spec = specs.get(c.role)
-                        assert not (getattr(spec, "channel", None) == "vibration" and c.amplitude), \
-                            (f"amplitude {c.amplitude:g} commanded on the vibration role {c.role!r} out of contact "
-                             f"(penetration {inp.penetration_mm:g} mm, {feats}): nothing touches the surface, "
-                             f"so nothing may vibrate; the loop sends amplitude 0 on it away from every object")
+                _check_commands(_tick_unchanged(r, inp), inp, r, specs, _where(inp, feats))
             json.dumps(r.describe(), default=str)
+        # beyond the kit's ticks: every penetration and speed of the sweep, then a long
+        # run of one renderer (a state that goes bad after many ticks: a filter that
+        # diverges, a counter that overflows a table)
+        feats = mid()
+        r = d.renderer(feats)
+        for inp in _SWEEP:
+            _check_commands(_tick_unchanged(r, inp), inp, r, specs, _where(inp, feats))
+        r = d.renderer(feats)
+        mixed = _TICKS + _SWEEP
+        for k in range(int(round(RENDER_RUN_S / KIT_PERIOD_S))):
+            base = mixed[k % len(mixed)]
+            inp = TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
+                            velocity_mm_s=base.velocity_mm_s, in_contact=base.in_contact)
+            _check_commands(r.tick(inp), inp, r, specs, _where(inp, feats, k))
 
     def r_renderer_bad() -> None:
         d = holder["d"]
@@ -559,6 +635,21 @@ def _dimension_rules(ctx: _Ctx) -> None:
         assert best <= TICK_BUDGET * KIT_PERIOD_S, \
             (f"tick() takes at least {best * 1e3:.3f} ms (fastest of {TIMING_CALLS} or more calls); a {KIT_PERIOD_S * 1e3:g} ms "
              f"servo period allows {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms per renderer")
+        # the worst tick: one that blocks longer than the safety layer's restart gap
+        # makes the loop miss that many periods and the next command a restart; seen in
+        # two runs on new renderers (a preempted tick does not recur at the same place)
+        limit = float(SafetySettings().restart_after_s)
+        runs = [_tick_stalls(d.renderer(mid()), limit)]
+        if runs[0]:
+            runs.append(_tick_stalls(d.renderer(mid()), limit))
+            if runs[1]:
+                raise AssertionError(
+                    f"tick() blocked for up to {max(w for _, w in runs[0]) * 1e3:.0f} ms (first at tick "
+                    f"{runs[0][0][0] + 1} of a run of {STALL_RUN_S / KIT_PERIOD_S:.0f}; {len(runs[0])} and "
+                    f"{len(runs[1])} ticks over the limit in two runs), longer than the safety layer's "
+                    f"restart_after_s {limit * 1e3:g} ms: the servo loop misses that many periods and the next "
+                    f"command restarts the output from zero; never block in tick() (no sleep, I/O or lock "
+                    f"waits: hand slow work to another thread)")
         # and keeps that cost over a long run: a cost that grows with the run's length
         # passes the budget at some length (a render may last 24 h)
         pts = _cost_growth(lambda: d.renderer(mid()))

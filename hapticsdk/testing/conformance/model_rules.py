@@ -32,6 +32,12 @@ RESPONSE_MIN = float(SolveProblem.tolerance)
 #: random points of the box ``responds`` evaluates besides its landmarks (an output that
 #: moves only inside a region under ~1/256 of the box may pass unseen)
 RESPONSE_SAMPLES = 256
+#: rows of the ``vectorised`` rule's large batch: a population solver evaluates its whole
+#: population (and its Jacobian rows) in one call, 100 to 10^5 rows for the GA, and the
+#: dimension rules time constraints on batches of this size; its first rows must give
+#: what they give in a batch of 33 and row by row (an output that depends on the batch's
+#: size above this is not seen)
+VECTORISED_ROWS = 10_000
 
 
 def _landmarks(m: PerceptionModel) -> list[tuple[str, np.ndarray]]:
@@ -95,9 +101,22 @@ def _model_rules(ctx: _Ctx) -> None:
     def r_vectorised() -> None:
         m = holder["m"]
         X = inputs(33, 1)
+        X0 = X.copy()
         Y = m.predict(X)
+        assert np.array_equal(X, X0), \
+            ("predict() changed its input array in place: the caller's array (a solver's population, "
+             "a scene's features) is not the model's to write; compute on a copy")
         rows = np.concatenate([m.predict(X[i:i + 1]) for i in range(X.shape[0])])
         np.testing.assert_allclose(Y, rows, rtol=1e-4, atol=1e-5, err_msg="batch and row-by-row predictions differ")
+        # a large batch (a solver's population) gives the same rows, finite and in 0..1
+        big = np.concatenate([X, inputs(VECTORISED_ROWS - X.shape[0], 3)])
+        Yb = m.predict(big)
+        np.testing.assert_allclose(Yb[:X.shape[0]], Y, rtol=1e-4, atol=1e-5,
+                                   err_msg=f"a batch of {VECTORISED_ROWS} rows and a batch of {X.shape[0]} give "
+                                           f"different predictions for the same rows")
+        assert np.isfinite(Yb).all() and (Yb >= -INTENSITY_TOL).all() and (Yb <= 1 + INTENSITY_TOL).all(), \
+            (f"in a batch of {VECTORISED_ROWS} rows, intensities non-finite or outside 0..1 "
+             f"(min {np.nanmin(Yb):.6g}, max {np.nanmax(Yb):.6g})")
 
     def r_determinism() -> None:
         m = holder["m"]

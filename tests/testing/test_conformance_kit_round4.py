@@ -1,0 +1,145 @@
+"""Kit rules widened after an external round of broken plugins (round 4), each broken
+variant passed by the kit before:
+
+* ``renderer``: a command that turns non-finite or negative only beyond the kit's own
+  ticks (deeper than 3 mm, faster than 400 mm/s: the sweep of penetrations and speeds),
+  or only after many ticks of one renderer (the long run);
+* ``timing`` (dimension): a tick that now and then blocks longer than the safety layer's
+  restart gap (the fastest of 25 ticks hid it);
+* ``vectorised`` (model): predictions that change with the batch's size above the 33 rows
+  the rule compared, and a ``predict`` that writes into the caller's array.
+
+The correct variants conform."""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Callable, ClassVar
+
+import numpy as np
+import pytest
+
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import PerceptionModel
+from hapticsdk.plugins import registry
+from hapticsdk.testing import check, check_dimension, check_model
+from hapticsdk.testing.conformance import format_report
+from kit_variants import API, LAG_COIL_MAX_V, LagCoil, coil_dimension, registered, rules_of
+
+Amp = Callable[[Any, float, int], float]
+
+
+class _Coil(DimensionRenderer):
+    """Vibration at 100 Hz in contact, amplitude ``amp(inp, x, k)`` (tick ``k`` of this
+    renderer), 0 out of contact; a broken variant swaps ``amp``."""
+    roles = ("buzz",)
+    amp: ClassVar[Amp]
+
+    def __init__(self, x: float) -> None:
+        self.x, self.k = x, 0
+
+    def tick(self, inp):
+        self.k += 1
+        a = type(self).amp(inp, self.x, self.k) if inp.in_contact else 0.0
+        return [ChannelCommand("buzz", frequency_hz=100.0, amplitude=a)]
+
+
+def _good(inp: Any, x: float, k: int) -> float:
+    return 0.5 * LAG_COIL_MAX_V * (0.2 + 0.8 * x) * min(1.0, abs(inp.penetration_mm))
+
+
+_Coil.amp = staticmethod(_good)
+#: a correct dimension: vibration on the lagging coil, its amplitude saturating with depth
+BuzzDim = coil_dimension("kit-buzz", "kit.b", _Coil, "kit-buzz-model")
+
+
+class BuzzModel(PerceptionModel):
+    """A correct model of kit-buzz; ``_out`` is what broken variants change."""
+    hapticsdk_api = API
+
+    def __init__(self) -> None:
+        space = FeatureSpace((Feature("kit.b", "1", 0.0, 1.0),))
+        super().__init__(space.names, ("kit-buzz",), feature_space=space, name="kit-buzz-model")
+
+    def _predict(self, X):
+        return self._out(X, 0.5 * (1 + np.tanh(X[:, :1] - 0.5)))
+
+    def _out(self, X, y):
+        return y
+
+
+@pytest.fixture
+def installed():
+    yield from registered([(registry("actuator"), "kit-lag-coil", LagCoil), (registry("dimension"), "kit-buzz", BuzzDim),
+                           (registry("model"), "kit-buzz-model", BuzzModel)])
+
+
+def _buzz(amp: Amp) -> type:
+    coil = type("BrokenCoil", (_Coil,), {"amp": staticmethod(amp)})
+    return type("BrokenBuzz", (BuzzDim,), {"renderer_cls": coil})
+
+
+def _stall_every_300(inp: Any, x: float, k: int) -> float:
+    if k % 300 == 0:
+        time.sleep(0.06)     # > restart_after_s (50 ms)
+    return _good(inp, x, k)
+
+
+DIMENSION_VARIANTS = [
+    # NaN only deeper than the kit's ticks (3 mm): a 1/(depth - 4 mm) in the formula
+    (lambda inp, x, k: _good(inp, x, k) / (4.0 - inp.penetration_mm) if inp.penetration_mm < 4 else float("nan"),
+     "renderer", "amplitude=nan"),
+    # negative amplitude only deeper than 3 mm
+    (lambda inp, x, k: -1.0 if inp.penetration_mm > 5 else _good(inp, x, k), "renderer", "negative amplitude"),
+    # non-finite only faster than the kit's ticks (400 mm/s)
+    (lambda inp, x, k: _good(inp, x, k) * (1.0 if np.abs(inp.velocity_mm_s).max() < 500 else float("inf")),
+     "renderer", "amplitude=inf"),
+    # NaN only after 5000 ticks of one renderer (a diverging state)
+    (lambda inp, x, k: float("nan") if k > 5000 else _good(inp, x, k), "renderer", "of a run"),
+    (_stall_every_300, "timing", "blocked"),
+]
+
+
+def test_the_correct_dimension_and_model_conform(installed):
+    assert check_dimension(BuzzDim) == []
+    assert check_model(BuzzModel) == []
+
+
+@pytest.mark.parametrize("amp, rule, why", DIMENSION_VARIANTS,
+                         ids=["nan-deep", "negative-deep", "inf-fast", "nan-after-5000", "tick-stall"])
+def test_each_broken_dimension_is_caught_by_its_rule(installed, amp, rule, why):
+    # the stalling renderer runs its own rule only: its sleeps would cost seconds elsewhere
+    v = check("dimension", _buzz(amp), rules=[rule]) if rule == "timing" else check_dimension(_buzz(amp))
+    assert rule in rules_of(v), format_report(v)
+    assert why in format_report(v)
+
+
+class _SizeModel(BuzzModel):
+    def _out(self, X, y):
+        return np.clip(y + 0.3, 0, 1) if X.shape[0] > 1000 else y      # a large batch reads another path
+
+
+class _OutOfRangeInLargeBatches(BuzzModel):
+    def _out(self, X, y):
+        if X.shape[0] > 1000:
+            y = y.copy()
+            y[-1] = 1.5          # the batch's rows beyond the compared ones
+        return y
+
+
+class _WritesInput(BuzzModel):
+    def _out(self, X, y):
+        X -= 0.0 * X + 1e-3       # normalises in place: the caller's array
+        return y
+
+
+@pytest.mark.parametrize("factory, rule, why", [
+    (_SizeModel, "vectorised", "batch of 10000 rows"),
+    (_OutOfRangeInLargeBatches, "vectorised", "outside 0..1"),
+    (_WritesInput, "vectorised", "changed its input array"),
+], ids=["batch-size", "range-in-large-batch", "writes-input"])
+def test_each_broken_model_is_caught_by_its_rule(installed, factory, rule, why):
+    v = check_model(factory)
+    assert rule in rules_of(v), format_report(v)
+    assert why in format_report(v)
