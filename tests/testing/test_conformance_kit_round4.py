@@ -7,7 +7,9 @@ variant passed by the kit before:
 * ``timing`` (dimension): a tick that now and then blocks longer than the safety layer's
   restart gap (the fastest of 25 ticks hid it);
 * ``vectorised`` (model): predictions that change with the batch's size above the 33 rows
-  the rule compared, and a ``predict`` that writes into the caller's array.
+  the rule compared, and a ``predict`` that writes into the caller's array;
+* ``reopen`` (actuator): an instance whose ``stop()`` or ``close()`` works in its first
+  open only (a latch or a handle that ``_open`` does not reset).
 
 The correct variants conform."""
 
@@ -142,4 +144,40 @@ class _WritesInput(BuzzModel):
 def test_each_broken_model_is_caught_by_its_rule(installed, factory, rule, why):
     v = check_model(factory)
     assert rule in rules_of(v), format_report(v)
+    assert why in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# actuators: one instance's second life (reopen)
+# ---------------------------------------------------------------------------
+
+class StopLatchCoil(LagCoil):
+    """Stops once per instance: a "stopped" latch that ``_open`` does not reset."""
+    name: ClassVar[str] = "kit-lag-coil-latch"
+    latched = False          # set on the instance by the first stop, never reset
+
+    def _stop(self) -> None:
+        if not self.latched:
+            self.latched = True
+            self.drive_a = 0.0
+
+
+class CloseOnceCoil(LagCoil):
+    """Releases its handle once per instance: a second ``_close`` (after a reopen) fails."""
+    name: ClassVar[str] = "kit-lag-coil-close-once"
+    released = False         # set on the instance by the first close, never reset
+
+    def _close(self) -> None:
+        if self.released:
+            raise OSError("handle already released")
+        self.released = True
+
+
+@pytest.mark.parametrize("cls, why", [(StopLatchCoil, "after stop() in the second open"),
+                                      (CloseOnceCoil, "failed while closing after the second open")],
+                         ids=["stop-latch", "close-once"])
+def test_an_instance_broken_in_its_second_life_is_caught_by_reopen(cls, why):
+    assert check("actuator", LagCoil, rules=["reopen"]) == []
+    v = check("actuator", cls, rules=["reopen"])
+    assert "reopen" in rules_of(v), format_report(v)
     assert why in format_report(v)

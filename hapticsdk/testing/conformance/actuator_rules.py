@@ -371,15 +371,25 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             _alternate_once(a, t)
 
     def r_reopen() -> None:
+        # one instance opened, driven, stopped and closed twice: its second life keeps
+        # the contracts of the first (no stale output, stop() stops, close() does not
+        # fail), so a latch or handle that open() does not reset is seen
         a = ctx.make()
-        a.open()
-        _drive(a, _normal_commands(a)[:4])
-        a.close()
-        a.open()
-        try:
-            _rest_after(a, "after close() and open() again (stale output)")
-        finally:
-            a.close()
+        for life in ("first", "second"):
+            a.open()
+            try:
+                if life == "second":
+                    _rest_after(a, "after close() and open() again (stale output)")
+                _drive(a, _normal_commands(a)[:4])
+                _hold(a, max(_normal_commands(a), key=_drive_size), 0.0)
+                assert a.stop() is True, f"stop() returned False in the {life} open of one instance"
+                _rest_after(a, f"after stop() in the {life} open of one instance (close() and open() "
+                               f"must leave stop() working)")
+            finally:
+                a.close()
+            err = getattr(a, "close_error", None)
+            assert err is None, (f"the backend failed while closing after the {life} open of one instance: "
+                                 f"{type(err).__name__}: {err} (an instance must close again after open())")
 
     def r_instances() -> None:
         a, b = ctx.make(), ctx.make()
