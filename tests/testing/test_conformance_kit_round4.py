@@ -9,13 +9,16 @@ variant passed by the kit before:
 * ``vectorised`` (model): predictions that change with the batch's size above the 33 rows
   the rule compared, and a ``predict`` that writes into the caller's array;
 * ``reopen`` (actuator): an instance whose ``stop()`` or ``close()`` works in its first
-  open only (a latch or a handle that ``_open`` does not reset).
+  open only (a latch or a handle that ``_open`` does not reset);
+* ``hookimpls``: a hook that takes nothing answering what its hookspec does not say (a
+  dict for a list, a material the schema refuses, features as one string).
 
 The correct variants conform."""
 
 from __future__ import annotations
 
 import time
+import types
 from typing import Any, Callable, ClassVar
 
 import numpy as np
@@ -180,4 +183,38 @@ def test_an_instance_broken_in_its_second_life_is_caught_by_reopen(cls, why):
     assert check("actuator", LagCoil, rules=["reopen"]) == []
     v = check("actuator", cls, rules=["reopen"])
     assert "reopen" in rules_of(v), format_report(v)
+    assert why in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# hook modules: answers of the wrong type
+# ---------------------------------------------------------------------------
+
+_MATERIAL = {"name": "kit-m", "intensities": {"hardness": 0.3, "roughness": 0.6}}
+
+
+def _hooks(hook: str, answer: Any) -> types.ModuleType:
+    from hapticsdk.hookspecs import hookimpl
+    mod = types.ModuleType("kit_hooks_answers")
+    mod.hapticsdk_api = API   # type: ignore[attr-defined]
+    impl = hookimpl(lambda: answer)
+    impl.__name__ = hook
+    setattr(mod, hook, impl)
+    return mod
+
+
+def test_hooks_answering_what_their_hookspec_says_conform():
+    assert check("hooks", _hooks("hapticsdk_materials", [_MATERIAL])) == []
+    assert check("hooks", _hooks("hapticsdk_dimension_info",
+                                 [{"name": "kit", "description": "d", "features": ["a"]}])) == []
+
+
+@pytest.mark.parametrize("hook, answer, why", [
+    ("hapticsdk_materials", _MATERIAL, "not a list"),                                   # one dict, not a list
+    ("hapticsdk_materials", [{"name": "kit-m"}], "invalid material"),                   # no intensities
+    ("hapticsdk_dimension_info", [{"name": "kit", "description": "d", "features": "a,b"}], "each entry is"),
+], ids=["materials-dict", "materials-invalid", "dimension-info-features-str"])
+def test_a_hook_answering_the_wrong_type_is_caught(hook, answer, why):
+    v = check("hooks", _hooks(hook, answer))
+    assert rules_of(v) == {"hookimpls"}, format_report(v)
     assert why in format_report(v)

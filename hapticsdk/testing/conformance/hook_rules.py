@@ -1,9 +1,42 @@
 """The rule of the ``hooks`` kind: every ``@hookimpl`` of a hook module names a hook of
-:mod:`hapticsdk.hookspecs` and takes only that hook's arguments."""
+:mod:`hapticsdk.hookspecs` and takes only that hook's arguments; the hooks that take
+nothing answer what their hookspec says."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from .runner import _Ctx, _run_rules
+
+
+def _check_materials(answer: Any) -> None:
+    """``hapticsdk_materials``' answer: a list of material dicts, each valid as the core's
+    ``load_library(with_plugins=True)`` validates it."""
+    from ...perception.materials import _material
+    from ...schemas_io import validate
+    assert isinstance(answer, list), \
+        f"hapticsdk_materials returned {type(answer).__name__}, not a list of material dicts"
+    for e in answer:
+        assert isinstance(e, dict), f"hapticsdk_materials returned an entry {e!r}, not a dict"
+        try:
+            validate({"schema_version": 1, "generated": bool(e.get("generated", False)), "source": "kit",
+                      "materials": [e]}, "materials", source="hapticsdk_materials")
+            _material(e, "kit", False)
+        except Exception as exc:  # noqa: BLE001 - the core skips the plugin for any of them
+            raise AssertionError(f"hapticsdk_materials returned an invalid material {e.get('name')!r}: {exc} "
+                                 f"(load_library(with_plugins=True) skips the plugin)") from None
+
+
+def _check_dimension_info(answer: Any) -> None:
+    """``hapticsdk_dimension_info``' answer: a list of ``{"name", "description",
+    "features": [names]}``."""
+    assert isinstance(answer, list), \
+        f"hapticsdk_dimension_info returned {type(answer).__name__}, not a list of dicts"
+    for e in answer:
+        ok = (isinstance(e, dict) and isinstance(e.get("name"), str) and isinstance(e.get("description"), str)
+              and isinstance(e.get("features"), list) and all(isinstance(f, str) for f in e["features"]))
+        assert ok, (f"hapticsdk_dimension_info returned {e!r}: each entry is "
+                    f'{{"name": str, "description": str, "features": [str, ...]}}')
 
 
 def _hooks_rules(ctx: _Ctx) -> None:
@@ -26,5 +59,11 @@ def _hooks_rules(ctx: _Ctx) -> None:
             allowed = set(inspect.signature(spec).parameters) - {"self"}
             extra = set(inspect.signature(f).parameters) - allowed
             assert not extra, f"{n} takes {sorted(extra)}, which the hook does not pass (it passes {sorted(allowed)})"
+        # the hooks that take nothing are called, and their answers must be what the
+        # hookspec says (the core skips a plugin whose answer is not, at run time)
+        if "hapticsdk_materials" in impls:
+            _check_materials(impls["hapticsdk_materials"]())
+        if "hapticsdk_dimension_info" in impls:
+            _check_dimension_info(impls["hapticsdk_dimension_info"]())
 
     _run_rules(ctx, [("hookimpls", r_hookimpls)])
