@@ -157,18 +157,35 @@ class Registry:
         self._loaded: dict[str, Any] = {}
         self._local: dict[str, Any] = {}
         self._infos: dict[str, PluginInfo] = {}  # distribution metadata read once per name
+        #: names that more than one installed entry point provides, with different targets
+        self._clashes: dict[str, list[Any]] = {}
 
     def _table(self) -> dict[str, metadata.EntryPoint]:
         if self._eps is None:
-            self._eps = {}
+            eps: dict[str, metadata.EntryPoint] = {}
+            clashes: dict[str, list[Any]] = {}
             for ep in _entry_points(self.group):
-                self._eps.setdefault(ep.name, ep)
+                have = eps.setdefault(ep.name, ep)
+                if have is not ep and have.value != ep.value:
+                    # two distributions (or one, twice) give the name different objects:
+                    # which one the scan met first is an accident of the install order
+                    clashes.setdefault(ep.name, [have]).append(ep)
+            self._clashes = clashes
+            self._eps = eps
         return self._eps
+
+    def clashes(self) -> dict[str, list[PluginInfo]]:
+        """Names that more than one installed entry point of this kind provides with
+        different objects: name -> what each provides. Such a name does not load (see
+        :meth:`load`); ``hapticsdk doctor`` lists them."""
+        self._table()
+        return {name: [_info(self.kind, ep) for ep in eps] for name, eps in self._clashes.items()}
 
     def refresh(self) -> None:
         """Forget the cached table (after installing or removing a distribution)."""
         _forget_scan()
         self._eps = None
+        self._clashes = {}
         self._loaded.clear()
         self._infos.clear()
 
@@ -206,13 +223,23 @@ class Registry:
                 f"no {self.kind} named {name!r}; installed: {', '.join(valid) if valid else '(none)'}"
                 f"{install_hint(self.kind, name)}",
                 plugin=name, kind=self.kind)
+        if name in self._clashes:
+            which = "; ".join(f"{i.distribution} {i.version} ({i.value})" for i in self.clashes()[name])
+            raise PluginError(
+                f"{self.kind} name {name!r} is provided by more than one installed plugin: {which}. The SDK does "
+                f"not pick one (the first found depends on the install order). Uninstall all but one, or register "
+                f"the one you want in-process: hapticsdk.plugins.registry({self.kind!r}).register({name!r}, obj)",
+                plugin=name, kind=self.kind)
         return table[name]
 
     def __contains__(self, name: str) -> bool:
         return name in self._local or name in self._table()
 
     def load(self, name: str) -> Any:
-        """Import and return the object behind ``name`` (cached)."""
+        """Import and return the object behind ``name`` (cached). An in-process
+        registration wins; a name that more than one installed plugin gives different
+        objects raises :class:`~hapticsdk.errors.PluginError` naming them
+        (:meth:`clashes`)."""
         if not isinstance(name, str) or not name:
             raise UnknownPluginError(f"{self.kind} name must be a non-empty string, got {name!r}",
                                      plugin=str(name), kind=self.kind)
