@@ -59,7 +59,10 @@ class PassivityController:
     encoder's count crossings damping of their own; one count of it is at most one ramp
     step ``s``. It
     follows the reading at once (a spring, not a ramp: a ramp on a spring lags it, and a
-    lagging spring gives energy). The extra gives way to its rise, so the force rises
+    lagging spring gives energy), from its anchor ``o``: ``K_c (depth - o)``, ``o`` 0 at
+    first; where a reading jumps several counts the spring rises by one ramp step and
+    ``o`` moves in to match (stored energy kept back, never handed over), where the
+    reading is above ``o`` it follows the reading out, and out of the wall it is 0. The extra gives way to its rise, so the force rises
     by at most ``s`` per tick while the spring's own rise is within ``s``, and falls by
     at most ``s`` plus the spring's fall ``K_c |dq|``.
 
