@@ -74,7 +74,8 @@ def check_backends() -> tuple[dict[str, dict[str, Any]], dict[str, type]]:
         try:
             cls = reg.load(name)
         except Exception as exc:
-            entry["reason"] = f"plugin failed to import: {_error_text(exc)}"
+            what = "name clash" if name in reg.clashes() else "plugin failed to import"
+            entry["reason"] = f"{what}: {_error_text(exc)}"
             table[name] = entry
             continue
         entry["simulated"] = bool(getattr(cls, "simulated", False))

@@ -359,16 +359,22 @@ class PluginManager:
             self.pm.register(plugin, name=name)
 
     def _load_ep(self, ep: metadata.EntryPoint) -> None:
-        if ep.name in self._done:
+        # once per target: hook modules add to each other, so two plugins that chose one
+        # name are both registered (the second under its target too), never one dropped
+        key = f"{ep.name}={ep.value}"
+        if key in self._done:
             return
-        self._done.add(ep.name)
+        self._done.add(key)
         try:
             mod = ep.load()
             if not ep.value.startswith("hapticsdk."):
                 from .plugin_api import check_plugin_api
                 info = _info("hooks", ep)
                 check_plugin_api(mod, name=ep.name, distribution=f"{info.distribution} {info.version}")
-            self.pm.register(mod, name=f"hooks:{ep.name}")
+            name = f"hooks:{ep.name}"
+            if self.pm.has_plugin(name):
+                name = f"hooks:{ep.name}:{ep.value}"
+            self.pm.register(mod, name=name)
         except Exception as exc:
             self.failures[ep.name] = f"{type(exc).__name__}: {exc}"
             log.warning("hapticsdk hook plugin %r failed to load: %s", ep.name, exc)

@@ -54,3 +54,41 @@ def test_an_in_process_registration_decides(reg):
     reg.unregister("clash-arm")
     with pytest.raises(PluginError, match="more than one"):
         reg.load("clash-arm")
+
+
+def test_two_hook_modules_under_one_name_both_contribute(tmp_path, monkeypatch):
+    """Hook modules add to each other (every implementation is called), so two plugins
+    that chose one hook name are both registered; before, the second was dropped
+    without a word. The same target seen twice, or loaded twice, registers once."""
+    import sys
+
+    for mod, material in (("clash_hooks_a", "A1"), ("clash_hooks_b", "B1")):
+        (tmp_path / f"{mod}.py").write_text(
+            "from hapticsdk.hookspecs import hookimpl\n\n"
+            "@hookimpl\n"
+            f"def hapticsdk_materials():\n    return [{{'name': '{material}', 'intensities': {{'hardness': 0.5}}}}]\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    group = GROUPS["hooks"]
+    eps = [metadata.EntryPoint(name="shared", value="hapticsdk.clash_hooks_a", group=group),
+           metadata.EntryPoint(name="shared", value="clash_hooks_b", group=group),
+           metadata.EntryPoint(name="shared", value="clash_hooks_b", group=group)]
+    # the first under the core's prefix skips the plugin-API check, as a first-party module would
+    sys.modules["hapticsdk.clash_hooks_a"] = __import__("clash_hooks_a")
+    monkeypatch.setattr(plugins, "_entry_points", lambda g: list(eps) if g == group else [])
+    try:
+        pm = plugins.PluginManager().load_all().load_all()
+        got = sorted(m["name"] for ms in pm.call_safely("hapticsdk_materials") for m in ms)
+        assert got == ["A1", "B1"] and not pm.failures
+    finally:
+        for m in ("hapticsdk.clash_hooks_a", "clash_hooks_a", "clash_hooks_b"):
+            sys.modules.pop(m, None)
+
+
+def test_the_doctor_names_a_clash_as_one(reg, monkeypatch):
+    from hapticsdk import doctor
+
+    monkeypatch.setattr(plugins, "registry", lambda kind: reg)
+    table, classes = doctor.check_backends()
+    assert table["clash-arm"]["reason"].startswith("name clash: ")
+    assert "vendor_a.arm:Arm" in table["clash-arm"]["reason"] and not table["clash-arm"]["available"]
+    assert table["solo-arm"]["reason"].startswith("plugin failed to import: ")
