@@ -186,6 +186,27 @@ def test_an_instance_broken_in_its_second_life_is_caught_by_reopen(cls, why):
     assert why in format_report(v)
 
 
+class ReadBackGoesBadCoil(LagCoil):
+    """Its read-back turns NaN after 200 reads (a counter that overflows a table): the
+    servo loop's read-back then raises. The kit read back a handful of times."""
+    name: ClassVar[str] = "kit-lag-coil-readback-200"
+    reads = 0
+
+    def _read_back(self) -> ChannelCommand:
+        self.reads += 1
+        rb = super()._read_back()
+        if self.reads > 200:
+            rb = ChannelCommand(rb.role, force_n=rb.force_n, frequency_hz=rb.frequency_hz, amplitude=float("nan"))
+        return rb
+
+
+def test_a_read_back_that_goes_bad_after_many_reads_is_caught_by_read_back_rule():
+    assert check("actuator", LagCoil, rules=["read-back"]) == []
+    v = check("actuator", ReadBackGoesBadCoil, rules=["read-back"])
+    assert rules_of(v) == {"read-back"}, format_report(v)
+    assert "read_back() failed after" in format_report(v) and "nan" in format_report(v)
+
+
 # ---------------------------------------------------------------------------
 # hook modules: answers of the wrong type
 # ---------------------------------------------------------------------------

@@ -333,6 +333,23 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             a.stop()
             _assert_rest(a, a.read_back(), "after stop()")
         _assert_rest(a, a.read_back(), "after close()")
+        # read back after every command of a long run (as a servo that checks its output
+        # does): a read-back that goes bad only after many reads (a counter, a buffer that
+        # fills) raises in the servo loop; here it is named. The core refuses a non-finite
+        # or failed read-back (DeviceError)
+        a = ctx.make()
+        with a:
+            cmds = _normal_commands(a)
+            t = 0.0
+            for i in range(int(round(STALL_RUN_S / KIT_PERIOD_S))):
+                t += KIT_PERIOD_S
+                a.command(cmds[i % len(cmds)], now=t)
+                _advance(a)
+                try:
+                    a.read_back()
+                except DeviceError as exc:
+                    raise AssertionError(f"read_back() failed after {i + 1} commands of a run, each read back: "
+                                         f"{exc}") from None
 
     def r_follows() -> None:
         a = ctx.make()
