@@ -276,16 +276,27 @@ def test_application_death_stops_the_servo(sig, wait):
             p.kill()
 
 
+def _hang(s) -> ServoProcessDied:
+    """The application hangs: its heartbeat thread ends and nothing calls the API (a
+    call is a heartbeat too). Waits for the servo to stop, reading the status slot only,
+    and returns the error the next call raises."""
+    from hapticsdk.runtime.session.protocol import _RUNNING, _STATUS
+    s._hb_stop.set()
+    deadline = time.monotonic() + 10.0
+    while s._mv[_STATUS] == _RUNNING and time.monotonic() < deadline:
+        time.sleep(0.05)
+    with pytest.raises(ServoProcessDied) as ei:
+        s.state()
+    return ei.value
+
+
 def test_hung_application_heartbeat_timeout_stops_the_servo(wait):
-    """An application that is alive but hung (its heartbeat thread no longer runs):
-    after heartbeat_timeout_s the servo stops every actuator and exits; the next call
-    says why."""
+    """An application that is alive but hung (its heartbeat thread no longer runs, no
+    call of the API): after heartbeat_timeout_s the servo stops every actuator and
+    exits; the next call says why."""
     with Session(PAD, trajectory=SLIDE, heartbeat_timeout_s=0.1) as s:
         assert wait(lambda: s.state().ticks > 20)
-        s._hb_stop.set()  # the heartbeat thread ends: as if the application hung
-        with pytest.raises(ServoProcessDied) as ei:
-            assert wait(lambda: s.state() is None, 10.0)
-        assert "no heartbeat" in str(ei.value)
+        assert "no heartbeat" in str(_hang(s))
         assert set(s._summary["stopped"]) >= {"omni-virtual", "voicecoil-virtual"}
 
 
@@ -322,10 +333,38 @@ def test_a_start_up_that_starves_the_heartbeat_does_not_stop_the_servo(monkeypat
     with Session(PAD, trajectory=SLIDE, heartbeat_timeout_s=0.1) as s:
         ticks = s.state().ticks
         assert wait(lambda: s.state().ticks > ticks + 20)
-        s._hb_stop.set()  # then a hang: the servo stops
-        with pytest.raises(ServoProcessDied) as ei:
-            assert wait(lambda: s.state() is None, 10.0)
-        assert "no heartbeat" in str(ei.value)
+        assert "no heartbeat" in str(_hang(s))   # then a hang: the servo stops
+
+
+def test_a_busy_application_thread_calling_the_api_is_alive(monkeypatch):
+    """A call of the session's API is a heartbeat: an application thread that calls
+    ``state()`` in a tight loop can starve the heartbeat thread for longer than the timeout
+    on a loaded machine (258 ms under two CPU-bound processes, which stopped the servo in
+    ``test_state_alloc``). Here the heartbeat thread writes nothing at all once the session
+    has started; calling ``state()`` for ten timeouts keeps the servo running, and stopping
+    the calls is a hang that stops it."""
+    from hapticsdk.runtime.session.protocol import _RUNNING, _STATUS, HEARTBEAT_PERIOD_S
+    started = threading.Event()
+
+    def silent_heartbeat(self):   # Session._heartbeat, silent after the start
+        while not self._hb_stop.wait(HEARTBEAT_PERIOD_S):
+            if started.is_set():
+                continue
+            try:
+                self._mv[_HEARTBEAT] = time.monotonic()
+            except (ValueError, TypeError):
+                return
+
+    from hapticsdk.runtime.session.protocol import _HEARTBEAT
+    monkeypatch.setattr(Session, "_heartbeat", silent_heartbeat)
+    with Session(PAD, trajectory=SLIDE, heartbeat_timeout_s=0.1) as s:
+        started.set()
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            s.state()
+            time.sleep(0.001)
+        assert s._mv[_STATUS] == _RUNNING and s.state().ticks > 0
+        assert "no heartbeat" in str(_hang(s))   # no calls: a hang
 
 
 def test_state_is_never_torn(wait):

@@ -102,8 +102,11 @@ def test_clamp_events_name_the_actuator_the_limit_and_the_value(wait):
     ev += [e for e in s.events() if e.kind == "clamp"]   # the last report, written at the stop
     total = s._summary["report"]["events"]["clamp"]
     assert ev and all((e.actuator, e.field) == ("force", "max_force_n") for e in ev)
-    # the value is the force actually sent: never above the limit
-    assert all(0 < e.value <= limit + 1e-12 for e in ev)
+    # the value is the force actually sent: never above the limit. It is the last
+    # command's at the report, so it can be 0 where the safety layer's envelope was at 0
+    # then (a servo that stalled past restart_after_s on a loaded machine restarts its
+    # ramp from 0: seen once under two CPU-bound processes); the largest is the limit
+    assert all(0 <= e.value <= limit + 1e-12 for e in ev), [e.value for e in ev]
     assert max(e.value for e in ev) == pytest.approx(limit)  # once the start ramp is over
     # every clamped tick once
     assert sum(e.count for e in ev) == total

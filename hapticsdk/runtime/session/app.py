@@ -397,6 +397,10 @@ class Session:
         status = mv[_STATUS]
         if status == _RUNNING:
             now = time.monotonic()
+            # a call of the API is a heartbeat too: the application's thread is running. A
+            # busy thread that calls state() in a tight loop may starve the heartbeat
+            # thread for longer than the timeout on a loaded machine
+            mv[_HEARTBEAT] = now
             if now - mv[_PUB] < 0.02 or now - self._alive_checked < 0.02:
                 # the servo published within 20 ms (it does every tick), or the process
                 # was checked (a waitpid) less than 20 ms ago
@@ -692,6 +696,7 @@ class Session:
             self._check()
             raise SessionError("the servo's state is being written and never settled")
         now = time.monotonic()
+        mv[_HEARTBEAT] = now   # a call is a heartbeat (see _check)
         # _check()'s fast path on the values just read (one clock read, no call): a running
         # servo that published within 20 ms, or whose process was checked within 20 ms
         if not (mv[_STATUS] == _RUNNING and (now - vals[_PUB] < 0.02 or now - self._alive_checked < 0.02)):
