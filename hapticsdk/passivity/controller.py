@@ -57,14 +57,13 @@ class PassivityController:
     zero-order hold for the trusted damping (Colgate & Schenkel's ``b > K T / 2``), and
     with a measured damping it sits at half Colgate's limit of the fit, which leaves the
     encoder's count crossings damping of their own; one count of it is at most one ramp
-    step ``s``. It
-    follows the reading at once (a spring, not a ramp: a ramp on a spring lags it, and a
-    lagging spring gives energy), from its anchor ``o``: ``K_c (depth - o)``, ``o`` 0 at
-    first; where a reading jumps several counts the spring rises by one ramp step and
-    ``o`` moves in to match (stored energy kept back, never handed over), where the
-    reading is above ``o`` it follows the reading out, and out of the wall it is 0. The extra gives way to its rise, so the force rises
-    by at most ``s`` per tick while the spring's own rise is within ``s``, and falls by
-    at most ``s`` plus the spring's fall ``K_c |dq|``.
+    step ``s``. It follows the reading at once (a spring, not a ramp: a ramp on a spring
+    lags it, and a lagging spring gives energy), from its anchor ``o``: ``K_c (depth -
+    o)``, ``o`` 0 at first; where a reading jumps several counts the spring rises by one
+    ramp step and ``o`` moves in to match (stored energy kept back, never handed over),
+    where the reading is above ``o`` it follows the reading out, and out of the wall it is
+    0. The extra gives way to the spring's rise, so the force rises by at most ``s`` per
+    tick, and falls by at most ``s`` plus the spring's fall ``K_c |dq|``.
 
     **The extra** ``X = F - P`` carries the rest of the wall. The controller keeps ``U``,
     an *upper bound* of the energy the extra has given the user, from the readings ``q``
