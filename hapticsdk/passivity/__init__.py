@@ -29,7 +29,9 @@ Two tools:
     the trusted device damping ``b_lo``, or half the fitted one where the damping was
     measured hands off (the other half covers the encoder's count crossings), as a
     function of the depth below the surface. It is a spring,
-    continuous in depth and zero at the surface: no relay, no threshold;
+    continuous in depth and zero at the surface: no relay, no threshold. It rises by
+    at most one ramp step a tick: where a reading jumps several counts, its anchor (the
+    depth where it is 0) moves in, which keeps stored energy back;
   - the **extra** above it (the rest of the wall's force), bounded by energy: the
     controller books ``U``, an upper bound of the energy the extra has given the user,
     from the readings and the held forces alone (ZOH pairing plus the encoder's
