@@ -224,7 +224,7 @@ class Registry:
                 f"{install_hint(self.kind, name)}",
                 plugin=name, kind=self.kind)
         if name in self._clashes:
-            which = "; ".join(f"{i.distribution} {i.version} ({i.value})" for i in self.clashes()[name])
+            which = "; ".join(f"{i.distribution} {i.version} ({i.value})" for i in (_info(self.kind, ep) for ep in self._clashes[name]))
             raise PluginError(
                 f"{self.kind} name {name!r} is provided by more than one installed plugin: {which}. The SDK does "
                 f"not pick one (the first found depends on the install order). Uninstall all but one, or register "

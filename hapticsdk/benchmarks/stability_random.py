@@ -254,7 +254,6 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     e_max = np.zeros(L)
     given = np.zeros(L)
     asked = np.zeros(L)
-    dmax = np.zeros(L)
     rmax = np.zeros(L)      # largest rise of the applied force between two ticks
     fmax_fall = np.zeros(L)   # largest fall
     dspring = np.zeros(L)   # sdk: largest step beyond the Colgate spring (K_c |dq|)
@@ -297,7 +296,6 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         contact += tl
         spring_only += tl & sdk & held_back
         fneg = np.minimum(fneg, np.where(tl, f, 0.0))
-        dmax = np.maximum(dmax, np.where(live, np.abs(f - f_last), 0.0))
         rmax = np.maximum(rmax, np.where(live, f - f_last, 0.0))
         fmax_fall = np.maximum(fmax_fall, np.where(live, f_last - f, 0.0))
         if x_last is not None:
@@ -316,7 +314,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         for j, name in enumerate(controllers):
             ln = i * nc + j
             d[name] = {"energy_to_user_j": float(e_max[ln]), "delivered_ratio": float(ratio[ln]),
-                       "max_force_step_n": float(dmax[ln]), "max_force_rise_n": float(rmax[ln]),
+                       "max_force_step_n": float(max(rmax[ln], fmax_fall[ln])), "max_force_rise_n": float(rmax[ln]),
                        "max_force_fall_n": float(fmax_fall[ln]), "min_contact_force_n": float(fneg[ln]),
                        "contact_ticks": int(contact[ln])}
             if name in SDK_LANES:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -424,22 +424,24 @@ def _threads_left(before: set[threading.Thread]) -> list[threading.Thread]:
 STALL_RUN_S = 1.0
 
 
-def _stalls(act: Actuator, limit_s: float) -> list[tuple[int, float]]:
-    """(index, wall s) of the commands of a run of :data:`STALL_RUN_S` of kit ticks
-    (the normal commands in turn, simulated time advancing) that took longer than
-    ``limit_s``."""
+def _command_run(act: Actuator) -> Iterator[tuple[int, float]]:
+    """A run of :data:`STALL_RUN_S` of kit ticks: the normal commands in turn, simulated
+    time advancing; yields (index, wall s of that ``command()``) after each command."""
     cmds = _normal_commands(act)
-    out = []
     t = 0.0
     for i in range(int(round(STALL_RUN_S / KIT_PERIOD_S))):
         t += KIT_PERIOD_S
         t0 = _perf_counter()
         act.command(cmds[i % len(cmds)], now=t)
         d = _perf_counter() - t0
-        if d > limit_s:
-            out.append((i, d))
         _advance(act)
-    return out
+        yield i, d
+
+
+def _stalls(act: Actuator, limit_s: float) -> list[tuple[int, float]]:
+    """(index, wall s) of the commands of :func:`_command_run` that took longer than
+    ``limit_s``."""
+    return [(i, d) for i, d in _command_run(act) if d > limit_s]
 
 
 class _StillProbe(HapticDevice):

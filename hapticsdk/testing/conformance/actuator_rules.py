@@ -16,6 +16,7 @@ from ...devices.actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevic
 from ...errors import DeviceError, PluginError, ValidationError
 from ...perception.dimensions import ChannelCommand
 from .actuator_drive import (STALL_RUN_S, THREAD_GRACE_S, _Spy, _advance, _alternate_once, _assert_matches,
+                             _command_run,
                              _assert_rest, _drive, _drive_size, _edge_commands, _full_scale, _hold, _hold_both,
                              _in_servo_loop, _kinematics_error, _normal_commands, _over_limit_commands,
                              _reached_at_write, _reports_output, _rest_after, _sensed_run, _settle_ticks,
@@ -339,12 +340,7 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         # or failed read-back (DeviceError)
         a = ctx.make()
         with a:
-            cmds = _normal_commands(a)
-            t = 0.0
-            for i in range(int(round(STALL_RUN_S / KIT_PERIOD_S))):
-                t += KIT_PERIOD_S
-                a.command(cmds[i % len(cmds)], now=t)
-                _advance(a)
+            for i, _ in _command_run(a):
                 try:
                     a.read_back()
                 except DeviceError as exc:
