@@ -38,13 +38,36 @@ class MonotonicClock:
     otherwise be slept (a live session's servo reads its command pipe there, so a
     command is taken up within one sleep of arriving); the wait then goes on from
     wherever ``serve`` left the clock, and returns at once if it used up the time.
+
+    ``busy_share`` (optional, 0 < share <= 1): the largest share of each interval from
+    one return of :meth:`wait_until` to its next deadline that the thread may spend on
+    the CPU, its own work (the tick) and the spin together; the spin is cut to what is
+    left. Default (None): :func:`rt_busy_share` of the waiting thread, read at its first
+    wait: no cap at normal priority; under ``SCHED_FIFO`` / ``SCHED_RR``, half the
+    real-time bandwidth the kernel grants. A real-time thread that spins through more
+    than that bandwidth is throttled: stopped for the rest of the kernel's period (at
+    4 kHz, a 200 us spin after a 20 us tick is 88 % of every period; the servo stopped
+    for 30-50 ms once a second). :meth:`reset` reads it again (a new run).
     """
 
     simulated = False
 
-    def __init__(self, spin_s: float = 200e-6, serve: Callable[[], None] | None = None) -> None:
+    def __init__(self, spin_s: float = 200e-6, serve: Callable[[], None] | None = None,
+                 busy_share: float | None = None) -> None:
         self.spin_s = float(spin_s)
         self.serve = serve
+        if busy_share is not None and not (isinstance(busy_share, (int, float)) and not isinstance(busy_share, bool)
+                                           and 0.0 < busy_share <= 1.0):
+            raise ValidationError(f"busy_share must be in (0, 1] or None, got {busy_share!r}", field="busy_share")
+        self._busy_share_set = None if busy_share is None else float(busy_share)
+        self.reset()
+
+    def reset(self) -> None:
+        """Start afresh: the busy share is read again at the next wait (the thread's
+        scheduling policy may have changed), and the first wait has no interval yet."""
+        self.busy_share: float | None = self._busy_share_set
+        self._resolved = self._busy_share_set is not None
+        self._t_ret: float | None = None
 
     def now(self) -> float:
         """Current time (s) of :func:`time.perf_counter`."""
@@ -52,11 +75,23 @@ class MonotonicClock:
 
     def wait_until(self, deadline: float) -> None:
         """Return at ``deadline`` (s, on :meth:`now`'s clock): sleep while far from it
-        (calling ``serve`` before each sleep), then spin the last ``spin_s``; returns at
-        once when already past.
+        (calling ``serve`` before each sleep), then spin the last ``spin_s``, less
+        where the busy share would be exceeded; returns at once when already past.
         """
         pc = time.perf_counter
         spin = self.spin_s
+        if not self._resolved:
+            self.busy_share = rt_busy_share()
+            self._resolved = True
+        share = self.busy_share
+        t_ret = self._t_ret
+        if share is not None and t_ret is not None:
+            # on the CPU since the last return: the tick; what the share leaves of this
+            # interval is the most the spin may take
+            now = pc()
+            left = share * (deadline - t_ret) - (now - t_ret)
+            if left < spin:
+                spin = left if left > 0.0 else 0.0
         serve = self.serve
         while True:
             remaining = deadline - pc()
@@ -70,9 +105,55 @@ class MonotonicClock:
             time.sleep((remaining - spin) * 0.5 if remaining > 2 * spin else remaining - spin)
         while pc() < deadline:
             pass
+        self._t_ret = pc()
 
     def work(self, tick: int, seconds: float) -> None:
         """Real time already passed while the tick computed."""
+
+
+#: The share of the kernel's real-time bandwidth a paced real-time thread takes at most
+#: (:func:`rt_busy_share`): half, the other half left to the other real-time tasks of
+#: the CPU (the threaded interrupt handlers run at ``SCHED_FIFO`` 50 and share the same
+#: bandwidth) and to the sleeps' own system calls. docs/runtime.md, "Real-time scheduling".
+RT_BANDWIDTH_SHARE = 0.5
+
+#: Linux's default real-time bandwidth, ``sched_rt_runtime_us / sched_rt_period_us``
+#: (950 000 / 1 000 000), where ``/proc`` does not tell.
+_RT_BANDWIDTH_DEFAULT = 0.95
+_RT_RUNTIME = "/proc/sys/kernel/sched_rt_runtime_us"
+_RT_PERIOD = "/proc/sys/kernel/sched_rt_period_us"
+
+
+def rt_bandwidth() -> float:
+    """The share of each period of the kernel's real-time throttling that real-time tasks
+    may run (``/proc/sys/kernel/sched_rt_runtime_us`` over ``sched_rt_period_us``): 1.0
+    where throttling is off (runtime ``-1``), Linux's default 0.95 where ``/proc`` does
+    not tell."""
+    try:
+        with open(_RT_RUNTIME) as f:
+            runtime = int(f.read().strip())
+        with open(_RT_PERIOD) as f:
+            period = int(f.read().strip())
+    except (OSError, ValueError):
+        return _RT_BANDWIDTH_DEFAULT
+    if runtime < 0 or period <= 0:
+        return 1.0
+    return min(runtime / period, 1.0)
+
+
+def rt_busy_share() -> float | None:
+    """The busy share of :class:`MonotonicClock` for the calling thread: None (no cap) at
+    normal priority or where the policy cannot be read; under ``SCHED_FIFO`` or
+    ``SCHED_RR``, :data:`RT_BANDWIDTH_SHARE` x :func:`rt_bandwidth` (0.475 with Linux's
+    defaults)."""
+    rt = {getattr(os, "SCHED_FIFO", None), getattr(os, "SCHED_RR", None)} - {None}
+    try:
+        policy = os.sched_getscheduler(0)
+    except (AttributeError, OSError):
+        return None
+    if policy not in rt:
+        return None
+    return RT_BANDWIDTH_SHARE * rt_bandwidth()
 
 
 class SimulatedClock:

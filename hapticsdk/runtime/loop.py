@@ -719,6 +719,8 @@ class ServoLoop:
         self._k = 0
         self._t_prev = 0.0
         if self.realtime:
+            if isinstance(self.clock, MonotonicClock):
+                self.clock.reset()   # its busy share follows the policy just applied
             self._t_origin = self.clock.now()
             self._deadline = self._t_origin
         self._running = True
