@@ -46,7 +46,8 @@ Delay accounting: the force computed from the state of tick ``n`` is held from t
 ``delay_ticks`` adds ``d`` more ticks for tests of the delay law.
 
 Memory: the per-tick log is a ring buffer holding the last ``log_seconds`` (default
-60 s, at most :data:`MAX_LOG_TICKS` ticks) of ticks, whatever the duration (``report.log`` is that window, oldest first);
+60 s, at most :data:`MAX_LOG_TICKS` ticks) of ticks, whatever the duration (``report.log`` is that window, oldest first),
+written through once by :meth:`ServoLoop.start` so that no tick waits for a fresh page;
 counts, the overrun total and the maximum tick time cover the whole run, the percentiles
 the window. A recorder (``recorder=``, e.g. :class:`hapticsdk.runlog.RunRecorder`)
 streams every tick to a run file.
@@ -674,6 +675,11 @@ class ServoLoop:
         ncol = _NCOL + 3 * len(slots) + 3
         self._ncol = ncol
         self._log = np.zeros((cap, ncol))
+        # every page of the ring written now, before the first tick: np.zeros maps pages
+        # that the kernel fills on first touch, and numpy asks for huge pages on large
+        # arrays, so a tick that first touched a 2 MB page waited for the kernel to find
+        # and zero one (2-6 ms at 4 kHz on a 24 MB ring, once a second or so)
+        self._log.fill(0.0)
         #: the ring as one flat run of doubles: the row's pack_into (a byte offset) and the
         #: three late stores (an index) both write through it
         self._log_mv: memoryview[float] = self._log.data.cast("B").cast("d")
