@@ -512,7 +512,8 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
         if "servo_rss_slope_kb_per_min" in rec:
             parts.append(f"recording ({rec.get('format')}): servo RSS {rec['servo_rss_kb_first']}->"
                          f"{rec['servo_rss_kb_last']} kB "
-                         f"({rec['servo_rss_slope_kb_per_min']:+.0f} kB/min)")
+                         f"({rec['servo_rss_slope_kb_per_min']:+.0f} kB/min over this run; the simulated "
+                         f"actuators' 60 s waveform windows fill first: bench/bench_live_rss.py for an hour)")
         if r.get("view_frames_per_s"):
             parts.append(f"view {r['view_frames_per_s']:.1f} frames/s")
         if parts:
