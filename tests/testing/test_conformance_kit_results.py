@@ -194,6 +194,23 @@ class _RewritesTargets(GoodSolver):
         return out
 
 
+class _NfevZero(GoodSolver):
+    """Evaluates the problem as :class:`GoodSolver` does but reports ``nfev=0`` (a counter
+    kept on the wrong object, never added to the output)."""
+
+    def _solve(self, problem, rng, trace):
+        out = super()._solve(problem, rng, trace)
+        return SolverOutput(out.x, nfev=0, nit=out.nit)
+
+
+class _BatchUnseeded(GoodSolver):
+    """Seeded for one target, but the batch path draws from a generator of its own, seeded
+    from the OS: a batch is not reproducible from its seed."""
+
+    def _solve(self, problem, rng, trace):
+        return super()._solve(problem, rng if problem.n_targets == 1 else np.random.default_rng(), trace)
+
+
 SOLVER_VARIANTS = {
     # an honest override still bypasses the template
     "solve-overridden": (_Overrides, {"template"}),
@@ -213,6 +230,8 @@ SOLVER_VARIANTS = {
     "targets-rewritten": (_RewritesTargets, {"result"}),
     "ignores-constraints": (_NoConstraints, {"constraints"}),
     "weak-penalty": (_WeakPenalty, {"constraints"}),
+    "nfev-zero": (_NfevZero, {"result"}),
+    "batch-unseeded": (_BatchUnseeded, {"determinism"}),
 }
 
 
@@ -220,7 +239,8 @@ SOLVER_VARIANTS = {
 SOLVER_WHY = {"scipy-fields-missing": "lacks ['fun', 'message', 'nfev']", "time-missing": "lacks ['time_s']",
               "error-understated": "error ", "fun-understated": "fun ", "success-flipped": "success ",
               "violation-hidden": "constraint_violation 0.0, but", "solve-overridden": "overrides ['solve']",
-              "targets-rewritten": "but the model at the returned x gives"}
+              "targets-rewritten": "but the model at the returned x gives",
+              "nfev-zero": "nfev 0, but the model computed", "batch-unseeded": "for a batch of 2 targets"}
 
 
 def test_the_correct_solver_conforms():

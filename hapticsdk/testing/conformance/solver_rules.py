@@ -131,10 +131,26 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def key(targets: Any, seed: int) -> tuple[str, int]:
         return repr(np.asarray(targets, float).tolist()), seed
 
+    # how many rows the model computed while each solve ran
+    rows: dict[tuple[str, int], int] = {}
+
     def solve(targets: Any, seed: int) -> Any:
         k = key(targets, seed)
         if k not in solved:
-            solved[k] = make().solve(reference_problem(np.array(targets, float)), seed=seed)
+            problem = reference_problem(np.array(targets, float))
+            model = problem.model
+            counted = [0]
+            predict = model._predict
+
+            def counting(X: np.ndarray) -> np.ndarray:
+                counted[0] += len(X)
+                return predict(X)
+            model._predict = counting  # type: ignore[method-assign]
+            try:
+                solved[k] = make().solve(problem, seed=seed)
+            finally:
+                del model._predict
+            rows[k] = counted[0]
         return solved[k]
 
     def at_x(targets: Any, seed: int) -> tuple[float, float, float]:
@@ -157,6 +173,16 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
         assert len(batch) == len(T), f"a batch of {len(T)} targets gave {len(batch)} results"
         for i, r in enumerate(batch):
             _judge_result(r, reference_problem(T[i]), f"batch target {i}")
+        for asked, seed in ((np.array((0.4, 0.75)), 0), (np.array(ACTIVE_TARGETS), 0), (T, 1)):
+            k = key(asked, seed)
+            res = solved[k]
+            # the core evaluates each answer once (one row per target) after _solve: rows
+            # beyond that are the solver's own evaluations, which nfev counts
+            own = rows[k] - (len(res) if isinstance(res, list) else 1)
+            for r in (res if isinstance(res, list) else [res]):
+                assert own <= 0 or int(r["nfev"]) >= 1, \
+                    (f"target {asked.tolist()}: nfev {r['nfev']!r}, but the model computed {own} "
+                     f"rows for the solve (nfev counts the objective's evaluations)")
 
     def r_constraints() -> None:
         p = reference_problem(ACTIVE_TARGETS)
@@ -193,6 +219,10 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
         a = make().solve(reference_problem(), seed=11)
         b = make().solve(reference_problem(), seed=11)
         np.testing.assert_array_equal(a.x, b.x, err_msg="the same seed gave different answers")
+        T = np.array([[0.3, 0.7], [0.6, 0.8]])
+        a = make().solve(reference_problem(T), seed=11)
+        b = make().solve(reference_problem(T), seed=11)
+        np.testing.assert_array_equal(a.x, b.x, err_msg="the same seed gave different answers for a batch of 2 targets")
 
     def r_batch() -> None:
         T = np.array([[0.3, 0.7], [0.6, 0.8], [0.5, 0.75]])
