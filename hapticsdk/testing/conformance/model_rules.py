@@ -35,9 +35,21 @@ RESPONSE_SAMPLES = 256
 #: rows of the ``vectorised`` rule's large batch: a population solver evaluates its whole
 #: population (and its Jacobian rows) in one call, 100 to 10^5 rows for the GA, and the
 #: dimension rules time constraints on batches of this size; its first rows must give
-#: what they give in a batch of 33 and row by row (an output that depends on the batch's
-#: size above this is not seen)
+#: what they give in a batch of 33 and row by row, and every row what it gives in pieces
+#: of the batch of every power of two (an output that depends on the batch's size above
+#: this is not seen)
 VECTORISED_ROWS = 10_000
+
+
+def _piece_sizes(n: int) -> list[int]:
+    """Lengths of consecutive pieces of ``n`` rows: every power of two that fits, then the
+    rest (``vectorised`` predicts its large batch in them)."""
+    sizes: list[int] = []
+    size = 1
+    while sum(sizes) + size <= n:
+        sizes.append(size)
+        size *= 2
+    return sizes + ([n - sum(sizes)] if n > sum(sizes) else [])
 
 
 def _landmarks(m: PerceptionModel) -> list[tuple[str, np.ndarray]]:
@@ -117,6 +129,15 @@ def _model_rules(ctx: _Ctx) -> None:
         assert np.isfinite(Yb).all() and (Yb >= -INTENSITY_TOL).all() and (Yb <= 1 + INTENSITY_TOL).all(), \
             (f"in a batch of {VECTORISED_ROWS} rows, intensities non-finite or outside 0..1 "
              f"(min {np.nanmin(Yb):.6g}, max {np.nanmax(Yb):.6g})")
+        # and in pieces of every power of two up to it (1, 2, 4, ... 4096 rows, then the
+        # rest): each row gives what it gives in the whole batch, whatever batch it is in
+        start = 0
+        for size in _piece_sizes(VECTORISED_ROWS):
+            Yp = m.predict(big[start:start + size])
+            np.testing.assert_allclose(Yp, Yb[start:start + size], rtol=1e-4, atol=1e-5,
+                                       err_msg=f"rows {start}..{start + size - 1} give different predictions in a "
+                                               f"batch of {size} rows than in the batch of {VECTORISED_ROWS}")
+            start += size
 
     def r_determinism() -> None:
         m = holder["m"]
