@@ -530,6 +530,10 @@ _Vec = constraint("vec", "kit.x", lambda x: (np.full_like(x, 0.2), x), "x >= 0.2
 _RowDependent = constraint("batchy", "kit.x", lambda x: (np.full_like(x, float(x.mean())), x),
                            "Penalty depends on the batch (its mean), so rows and batch disagree.")
 _Never = never()
+# x >= 0.2 with a bound taken from a log-scale table that gives NaN below x = 0.1: there
+# `value < bound` is False, so the constraint reads as met with penalty 0
+_NanBoundLow = constraint("nan-bound", "kit.x", lambda x: (np.where(x < 0.1, np.nan, 0.2), x),
+                          "x >= 0.2, its bound NaN below 0.1.")
 # a float path for one row that agrees with the array path, and one that does not (0.3
 # where the array path says 0.2: a one-target solve would judge its answers by the wrong
 # bound)
@@ -611,6 +615,7 @@ DIMENSION_VARIANTS = [
     ({"cons": (_RowDependent,)}, "constraints-vectorised"),
     ({"cons": (_WrongOneRow,)}, "constraints-one-row"),
     ({"cons": (_Never,)}, "constraints-feasible"),
+    ({"cons": (_NanBoundLow,)}, "constraints-vectorised"),
     ({"roles": {}}, "roles-declared"),
     ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "1"})}}, "roles-declared"),
     ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "mV"})}}, "roles-declared"),

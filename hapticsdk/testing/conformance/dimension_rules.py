@@ -422,6 +422,8 @@ def _dimension_rules(ctx: _Ctx) -> None:
         rng = np.random.default_rng(0)
         X = space.random(64, rng)
         cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        E = np.vstack([X, np.asarray(space.lower, float), np.asarray(space.upper, float)])
+        edge_cols = {n: E[:, i] for i, n in enumerate(space.names)}
         for c in cons:
             assert isinstance(c, Constraint), f"{c!r} is not a Constraint"
             missing = [f for f in c.features if f not in space]
@@ -434,6 +436,16 @@ def _dimension_rules(ctx: _Ctx) -> None:
                                  for i in range(0, 64, 9)])
                 np.testing.assert_allclose(rows, p[::9], rtol=1e-9, atol=1e-12,
                                            err_msg=f"constraint {c.name!r}: batch and row-by-row penalties differ")
+            # the bound and the value themselves, at the drawn rows and the box's corners
+            # (all lower, all upper): the constraint is `value >= bound`, and with a NaN on
+            # either side `value < bound` is False, so the constraint reads as met there
+            # whatever the features, with penalty 0 (an infinity still compares)
+            bound, value = (np.broadcast_to(np.asarray(a, float), (len(E),)) for a in c.bound_and_value(edge_cols))
+            bad = np.isnan(bound) | np.isnan(value)
+            assert not bad.any(), \
+                (f"constraint {c.name!r}: bound {float(bound[bad][0])!r} and value {float(value[bad][0])!r} at "
+                 f"{dict(zip(space.names, E[bad][0].tolist()))}: a NaN bound or value reads as met (penalty 0) "
+                 f"whatever the features; it must be a number for every row in the feature bounds")
             json.dumps(c.describe())
 
     def r_one_row() -> None:
