@@ -82,6 +82,19 @@ def _scaled_in_mid_batches(U, k):
     return Y * (0.99 / Y.max()) if 100 <= len(U) <= 5000 else Y
 
 
+class _JacobianZeroAtBounds(_Model):
+    """An analytic Jacobian whose columns are 0 where a feature sits on its bound (a
+    clipped input's derivative taken as the clip's): right inside the box, wrong where a
+    bounded solve ends up."""
+
+    def jacobian(self, G, *, step=1e-6):
+        J = np.array(super().jacobian(G, step=step))
+        X = np.atleast_2d(np.asarray(G, float))
+        at = (X <= self.feature_space.lower) | (X >= self.feature_space.upper)
+        J[np.broadcast_to(at[:, None, :], J.shape)] = 0.0
+        return J
+
+
 MODEL_VARIANTS = {
     "constant": (lambda: _Model(lambda U, k: np.full((len(U), k), 0.5)), "responds"),
     # every output moves, but by a quarter of the tolerance over the whole box
@@ -92,6 +105,7 @@ MODEL_VARIANTS = {
     "nan-at-a-face-centre": (lambda: _Model(_nan_where(lambda U: _at(U, np.r_[0.0, np.full(U.shape[1] - 1, 0.5)]))),
                              "shapes"),
     "batch-dependent-mid-sizes": (lambda: _Model(_scaled_in_mid_batches), "vectorised"),
+    "jacobian-zero-at-bounds": (lambda: _JacobianZeroAtBounds(_smooth), "jacobian"),
 }
 
 

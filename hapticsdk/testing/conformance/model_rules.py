@@ -41,6 +41,17 @@ RESPONSE_SAMPLES = 256
 VECTORISED_ROWS = 10_000
 
 
+def _assert_column(m: PerceptionModel, j: int, fd: np.ndarray, J: np.ndarray, span: float, where: str) -> None:
+    """Column ``j`` of a model's Jacobian ``J`` agrees with the finite differences ``fd``
+    within :data:`JACOBIAN_RTOL` of their size over the feature's range ``span``."""
+    # per unit of the feature's range: compare the change over the whole span
+    err = np.abs(fd - J).max() * span
+    scale = max(np.abs(fd).max() * span, 1e-6)
+    assert err <= JACOBIAN_RTOL * scale + 1e-6, \
+        (f"jacobian column {m.feature_names[j]}{where} differs from finite differences by "
+         f"{err / scale:.2%} of its size (tolerance {JACOBIAN_RTOL:.1%})")
+
+
 def _piece_sizes(n: int) -> list[int]:
     """Lengths of consecutive pieces of ``n`` rows: every power of two that fits, then the
     rest (``vectorised`` predicts its large batch in them)."""
@@ -167,12 +178,24 @@ def _model_rules(ctx: _Ctx) -> None:
             e = np.zeros(m.n_features)
             e[j] = h
             fd = (m.predict(X + e) - m.predict(X - e)) / (2 * h)
-            # per unit of the feature's range: compare the change over the whole span
-            err = np.abs(fd - J[:, :, j]).max() * span[j]
-            scale = max(np.abs(fd).max() * span[j], 1e-6)
-            assert err <= JACOBIAN_RTOL * scale + 1e-6, \
-                (f"jacobian column {m.feature_names[j]} differs from central finite differences by "
-                 f"{err / scale:.2%} of its size (tolerance {JACOBIAN_RTOL:.1%})")
+            _assert_column(m, j, fd, J[:, :, j], span[j], "")
+        if m.feature_space is None:
+            return
+        # at the box's two corners (where a bounded solve ends up): one-sided second-order
+        # differences stepping into the box, as exact as central ones to the same order
+        for corner, sign in ((np.asarray(m.feature_space.lower, float), 1.0),
+                             (np.asarray(m.feature_space.upper, float), -1.0)):
+            C = corner[None, :]
+            Jc = np.asarray(m.jacobian(C))
+            assert Jc.shape == (1, m.n_outputs, m.n_features) and np.isfinite(Jc).all(), \
+                f"jacobian at the corner {corner.tolist()}: shape {Jc.shape} or non-finite"
+            f0 = m.predict(C)
+            for j in range(m.n_features):
+                h = JACOBIAN_STEP * max(span[j], 1e-6)
+                e = np.zeros(m.n_features)
+                e[j] = sign * h
+                fd = sign * (-3 * f0 + 4 * m.predict(C + e) - m.predict(C + 2 * e)) / (2 * h)
+                _assert_column(m, j, fd, Jc[:, :, j], span[j], f" at the corner {corner.tolist()}")
 
     def r_metadata() -> None:
         m = holder["m"]
