@@ -96,6 +96,7 @@ from .stats import PREEMPT_THRESHOLD_S, jitter_stats, preemption_stats, tick_sta
 _log = logging.getLogger(__name__)
 
 _NAN = float("nan")
+_new = object.__new__
 
 #: event counters every report carries (0 when nothing happened)
 EVENT_KEYS = ("nonfinite_state", "huge_state", "velocity_spike", "renderer_error", "nonfinite_command",
@@ -920,13 +921,23 @@ class ServoLoop:
             f0 = self._vf0 = self._vf0 + a * (w0 - self._vf0)
             f1 = self._vf1 = self._vf1 + a * (w1 - self._vf1)
             f2 = self._vf2 = self._vf2 + a * (w2 - self._vf2)
-            # positional, in TickInput's field order (t, dt, penetration_mm, velocity_mm_s,
-            # in_contact, normal, object, velocity_filtered_mm_s, speed_step_mm_s,
-            # velocity_floats_mm_s): a keyword call costs ~0.3 us more at 1 kHz. Every
-            # renderer of the object gets this one input; its velocity array (read-only)
-            # is built on the first read
-            inp = _LoopInput(t, dt, pen_in, None, in_contact, normal, o.name, (f0, f1, f2),  # type: ignore[arg-type]
-                             self._v_step, (w0, w1, w2))
+            # Every renderer of the object gets this one input; its velocity array
+            # (read-only) is built on the first read. Its fields are stored here as
+            # TickInput's __init__ stores them, in its order (the array as the unbuilt
+            # _va, which the velocity_mm_s setter stores): the same object without the
+            # call through the class, which runs __init__ and the setter in frames of
+            # their own (~1.7k instructions a tick; tests/runtime/test_tick_fast_paths.py)
+            inp = _new(_LoopInput)
+            inp.t = t
+            inp.dt = dt
+            inp.penetration_mm = pen_in
+            inp._va = None
+            inp.in_contact = in_contact
+            inp.normal = normal
+            inp.object = o.name
+            inp.velocity_filtered_mm_s = (f0, f1, f2)
+            inp.speed_step_mm_s = self._v_step
+            inp.velocity_floats_mm_s = (w0, w1, w2)
             if o.sw is None:
                 self._render(o.renderers, inp, forces, vib, events)
             elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):

@@ -4,7 +4,8 @@
   once per run, instead of ``act.command(cmd, now=t)``; same checks, same safety layer,
   same backend call; a class or an instance that replaces ``command`` is still called.
 * The loop's ``TickInput`` carries the velocity as floats (``velocity_floats_mm_s``) and
-  builds its ``velocity_mm_s`` array only when a renderer reads it.
+  builds its ``velocity_mm_s`` array only when a renderer reads it; the loop stores its
+  fields itself, in the order of ``TickInput.__init__``: the object the constructor makes.
 
 The run-level test renders the benchmark's scene (hardness + roughness on the simulated
 Omni, voice coil and piezo) twice from the same start: once as the loop runs, once with
@@ -217,3 +218,39 @@ def test_the_fast_paths_send_every_backend_the_same_commands_as_the_public_paths
     vx = fast.log["velocity_mm_s"][on, 0]
     f = np.clip(np.clip(rough.fpeak_hz * np.abs(vx) / rough.v_ref_mm_s, rough.f_lo, rough.f_hi), lo, hi)
     assert np.array_equal(fast.log["vibration.frequency_hz"][on], f)
+
+
+class _Keeps(DimensionRenderer):
+    """Keeps each input and its fields as the loop handed it (before anything read it)."""
+    roles = ("force",)
+
+    def __init__(self):
+        self.seen = []
+
+    def tick(self, inp):
+        self.seen.append((inp, list(vars(inp).items())))
+        return [ChannelCommand("force", 0.3 * inp.penetration_mm if inp.in_contact else 0.0)]
+
+
+@pytest.mark.parametrize("where", ["plane", "spatial"])
+def test_the_loop_input_is_the_object_its_constructor_makes(where):
+    """The loop stores the input's fields itself, in the order TickInput's __init__ stores
+    them (the array as the unbuilt ``_va``): a new object per tick, equal field by field
+    and in order to what ``_LoopInput(...)`` makes of the same values."""
+    from hapticsdk.runtime.loop import _LoopInput
+    assert not hasattr(TickInput, "__post_init__") and "__slots__" not in vars(TickInput)
+    keeps = _Keeps()
+    if where == "plane":
+        loop = ServoLoop(VirtualProbe(trajectory=press_slide()), [keeps], passivity=False)
+    else:
+        tr = Trajectory([(0.0, -30.0, 5.0), (0.2, -10.0, -1.0), (0.6, 30.0, -1.0), (1.0, 30.0, 5.0)])
+        loop = ServoLoop(VirtualProbe(trajectory=tr), (), passivity=False, objects=[("ball", [keeps])],
+                         hit_tester=HitTester([("ball", Sphere(20.0, pose=Pose((0.0, -19.0, 0.0))))]))
+    loop.run(1.0)
+    assert len(keeps.seen) > 150 and len({id(inp) for inp, _ in keeps.seen}) == len(keeps.seen)
+    for inp, items in keeps.seen:
+        d = dict(items)
+        made = _LoopInput(d["t"], d["dt"], d["penetration_mm"], None, d["in_contact"], d["normal"], d["object"],
+                          d["velocity_filtered_mm_s"], d["speed_step_mm_s"], d["velocity_floats_mm_s"])
+        assert type(inp) is _LoopInput and items == list(vars(made).items())
+        assert repr(inp) == repr(made) and np.array_equal(inp.velocity_mm_s, made.velocity_mm_s)
