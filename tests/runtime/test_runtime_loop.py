@@ -133,6 +133,30 @@ def test_bad_renderer_outputs_never_raise():
     assert rep.fault is None
 
 
+class _Plus(DimensionRenderer):
+    """A spring plus one more force command each tick: ``extra``."""
+    roles = ("force",)
+
+    def __init__(self, extra):
+        self.extra = extra
+
+    def tick(self, inp):
+        return [ChannelCommand("force", force_n=max(inp.penetration_mm, 0.0)),
+                ChannelCommand("force", force_n=self.extra)]
+
+
+@pytest.mark.parametrize("extra", [math.inf, -math.inf, math.nan, float("-nan"), 1e308])
+def test_a_non_finite_force_is_counted_and_contributes_nothing(extra):
+    probe = VirtualProbe(trajectory=press_slide())
+    plain = ServoLoop(VirtualProbe(trajectory=press_slide()), [Spring(1.0)], passivity=False).run(0.5)
+    rep = ServoLoop(probe, [_Plus(extra)], passivity=False).run(0.5)
+    if extra == 1e308:   # finite: no such count (the start gate holds a force that large)
+        assert rep.events["nonfinite_command"] == 0 and rep.fault is None
+    else:
+        assert rep.events["nonfinite_command"] == rep.ticks
+        assert np.array_equal(rep.log["force_n"], plain.log["force_n"])
+
+
 def test_negative_stiffness_request_is_refused_outside_the_tick():
     from hapticsdk_hardness.dimension import HardnessRenderer
     with pytest.raises(ValidationError):
