@@ -220,7 +220,7 @@ class _Slot:
     """Per-role bookkeeping."""
 
     __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd", "send", "log_n", "log_f",
-                 "log_a")
+                 "log_a", "f_in", "v_in")
     #: what the role was sent, by tick: (cap,) views of the loop's log ring (set by start)
     log_n: np.ndarray
     log_f: np.ndarray
@@ -230,6 +230,10 @@ class _Slot:
         self.role = role
         self.act = act
         self.is_force = is_force
+        #: what the renderers commanded this tick, read (and reset) when the role is sent:
+        #: the sum of the force commands (N), the vibration command (None: none)
+        self.f_in = 0.0
+        self.v_in: ChannelCommand | None = None
         self.pc: PassivityController | None = None
         self.pending: deque | None = None
         #: first of this role's three log columns (force_n, frequency_hz, amplitude)
@@ -782,6 +786,9 @@ class ServoLoop:
                 self._stop_all()
             except BaseException as stop_exc:  # noqa: BLE001 - the original exception wins
                 _log.error("stopping after %s: %s", type(exc).__name__, stop_exc)
+            # what this tick's renderers commanded and no role was sent is dropped (a tick
+            # that ends normally sends it all): the next tick starts from none
+            self._drop_rendered()
             raise
 
     def _set_fault(self, exc: BaseException, device: str | None) -> None:
@@ -905,8 +912,6 @@ class ServoLoop:
         for obs in self._observers:
             obs.observe(obs_state)
         # ---- 3. render ------------------------------------------------
-        forces: dict[str, float] = {}
-        vib: dict[str, ChannelCommand] = {}
         if idx >= 0 and not self.paused:
             o = self._objs[idx]
             if direction is None:
@@ -944,9 +949,12 @@ class ServoLoop:
             inp.speed_step_mm_s = self._v_step
             inp.velocity_floats_mm_s = (w0, w1, w2)
             if o.sw is None:
-                self._render(o.renderers, inp, forces, vib, events)
-            elif self._law(o.renderers, o.sw, inp, forces, vib, events, t):
-                o.sw = None   # the switch is over: the new law alone
+                self._render(o.renderers, inp, events)
+            else:
+                over, forces, vib = self._law(o.renderers, o.sw, inp, events, t)
+                self._give(forces, vib)
+                if over:
+                    o.sw = None   # the switch is over: the new law alone
         # ---- 4. passivity + send --------------------------------------
         if bad or (ht is not None and idx < 0):
             # a spatial scene out of contact: the distance to the nearest object jumps
@@ -970,7 +978,8 @@ class ServoLoop:
         for s in self._slots:
             cmd = s.cmd
             if s.is_force:
-                f = forces.get(s.role, 0.0)
+                f = s.f_in
+                s.f_in = 0.0
                 if s.pending is not None:
                     s.pending.append(f)
                     f = s.pending.popleft()
@@ -983,8 +992,9 @@ class ServoLoop:
                 cmd.force_n = f
                 cmd.direction = direction
             else:
-                c = vib.get(s.role)
+                c = s.v_in
                 if c is not None:
+                    s.v_in = None
                     cmd = c
                 else:
                     last = s.act.last_command
@@ -1057,10 +1067,39 @@ class ServoLoop:
         self._k = k + 1
         return self._k < self._n_max
 
-    def _law(self, renderers: list, sw: _Switch, inp: TickInput, forces: dict, vib: dict, events: dict,
-             t: float) -> bool:
-        """Render ``renderers`` with the material switch ``sw`` in progress; return True
-        when the switch is over (the new law alone from now on).
+    def _take(self) -> tuple[dict[str, float], dict[str, ChannelCommand]]:
+        """What the slots hold from the renderers (every force role's sum, each vibration
+        command rendered), as ``(forces, vib)`` by role; the slots are emptied."""
+        forces: dict[str, float] = {}
+        vib: dict[str, ChannelCommand] = {}
+        for s in self._slots:
+            if s.is_force:
+                forces[s.role] = s.f_in
+                s.f_in = 0.0
+            elif s.v_in is not None:
+                vib[s.role] = s.v_in
+                s.v_in = None
+        return forces, vib
+
+    def _give(self, forces: dict[str, float], vib: dict[str, ChannelCommand]) -> None:
+        """Put ``forces`` and ``vib`` (by role; a role not there: none) in the slots."""
+        for s in self._slots:
+            if s.is_force:
+                s.f_in = forces.get(s.role, 0.0)
+            else:
+                s.v_in = vib.get(s.role)
+
+    def _drop_rendered(self) -> None:
+        """Empty every slot of what the renderers commanded (a tick that ended early)."""
+        for s in self._slots:
+            s.f_in = 0.0
+            s.v_in = None
+
+    def _law(self, renderers: list, sw: _Switch, inp: TickInput, events: dict,
+             t: float) -> tuple[bool, dict[str, float], dict[str, ChannelCommand]]:
+        """Render ``renderers`` with the material switch ``sw`` in progress; return
+        ``(over, forces, vib)``: True when the switch is over (the new law alone from now
+        on), and the commands by role (the slots are left empty).
 
         First tick of the switch: both laws are rendered at the same input and, under the
         ``"passive"`` rule, each force role whose new force ``F_new`` exceeds the old one
@@ -1078,7 +1117,8 @@ class ServoLoop:
         roles cross-fade their amplitude over the same ramp at the new frequency. The
         ``"cross-fade"`` rule (for comparison only; not passive when stiffening)
         cross-fades every force role."""
-        self._render(renderers, inp, forces, vib, events)
+        self._render(renderers, inp, events)
+        forces, vib = self._take()
         first = sw.offset is None
         if first:
             da = 0.0
@@ -1091,9 +1131,12 @@ class ServoLoop:
         v_old: dict[str, ChannelCommand] = {}
         if sw.old is not None and (first or a < 1.0):
             if sw.old_sw is None:
-                self._render(sw.old, inp, f_old, v_old, events)
-            elif self._law(sw.old, sw.old_sw, inp, f_old, v_old, events, t):
-                sw.old_sw = None
+                self._render(sw.old, inp, events)
+                f_old, v_old = self._take()
+            else:
+                old_over, f_old, v_old = self._law(sw.old, sw.old_sw, inp, events, t)
+                if old_over:
+                    sw.old_sw = None
         if first:
             held: dict[str, float] = {}
             fade = []
@@ -1145,12 +1188,16 @@ class ServoLoop:
                 am = a * ((cn.amplitude or 0.0) if cn is not None else 0.0) + b * (
                     (co.amplitude or 0.0) if co is not None else 0.0)
                 vib[role] = ChannelCommand(role, frequency_hz=fr, amplitude=am)
-            return False
+            return False, forces, vib
         sw.old = None
         sw.old_sw = None
-        return not offset
+        return not offset, forces, vib
 
-    def _render(self, renderers: list, inp: TickInput, forces: dict, vib: dict, events: dict) -> None:
+    def _render(self, renderers: list, inp: TickInput, events: dict) -> None:
+        """Run ``renderers`` on ``inp``; each role's commands go to its slot (``f_in``: the
+        sum of the forces, ``v_in``: the vibration command), checked and counted: a
+        renderer that raises, a non-finite value, a negative force, a role with no
+        actuator or a second vibration command of a role are counted in ``events``."""
         by_role = self._by_role
         for r in renderers:
             try:
@@ -1173,16 +1220,16 @@ class ServoLoop:
                     if f < 0.0:
                         events["negative_force"] += 1
                         f = 0.0
-                    forces[c.role] = forces.get(c.role, 0.0) + f
+                    slot.f_in += f
                 else:
                     fr, am = c.frequency_hz, c.amplitude
                     if (fr is not None and not _isfinite(fr)) or (am is not None and not _isfinite(am)):
                         events["nonfinite_command"] += 1
                         c = ChannelCommand(c.role, frequency_hz=None, amplitude=0.0)
-                    if c.role in vib:
+                    if slot.v_in is not None:
                         events["role_conflict"] += 1
                         continue
-                    vib[c.role] = c
+                    slot.v_in = c
 
     def _window(self, a: np.ndarray, n: int) -> np.ndarray:
         """The logged ticks of ``a`` (a column or columns of the log ring), oldest first

@@ -157,6 +157,60 @@ def test_a_non_finite_force_is_counted_and_contributes_nothing(extra):
         assert np.array_equal(rep.log["force_n"], plain.log["force_n"])
 
 
+class _Steady(DimensionRenderer):
+    """1 N and a 100 Hz tone every tick."""
+    roles = ("force", "vib")
+
+    def tick(self, inp):
+        return [ChannelCommand("force", force_n=1.0), ChannelCommand("vib", frequency_hz=100.0, amplitude=0.2)]
+
+
+class _Interrupts(DimensionRenderer):
+    """Raises KeyboardInterrupt (it leaves the tick: only Exception is a renderer error)
+    on its ``at``-th tick, after the renderer before it rendered."""
+    roles = ("force",)
+
+    def __init__(self, at):
+        self.at, self.n = at, 0
+
+    def tick(self, inp):
+        self.n += 1
+        if self.n == self.at:
+            raise KeyboardInterrupt
+        return []
+
+
+def test_a_tick_that_ends_early_leaves_nothing_rendered_to_the_next():
+    """The renderers' commands wait in the roles' slots until the roles are sent; a tick
+    that ends before (an exception that leaves it) drops them: the next tick sends what
+    its own renderers commanded, no more (each tick starts from none)."""
+    from hapticsdk.devices.actuators import ActuatorLimits
+    from hapticsdk.devices.safety import SafetyLayer
+    from recorders import RecordingActuator
+
+    class Force(RecordingActuator):
+        name, channel = "test-early-force", "force"
+
+    class Vib(RecordingActuator):
+        name, channel = "test-early-vib", "vibration"
+        limits = ActuatorLimits(frequency_range_hz=(30.0, 300.0), max_amplitude=1.0)
+
+    free = {"ramp_time_s": 0.0, "start_max_force_n": None, "start_max_penetration_mm": None}
+    force, vib = Force(safety=SafetyLayer(Force.limits, **free)), Vib(safety=SafetyLayer(Vib.limits, **free))
+    loop = ServoLoop(VirtualProbe(), [_Steady(), _Interrupts(5)], {"force": force, "vib": vib}, passivity=False)
+    loop.start(1.0)
+    with pytest.raises(KeyboardInterrupt):
+        while loop.tick():
+            pass
+    assert loop.ticks == 4
+    for _ in range(3):
+        assert loop.tick()
+    assert [c.force_n for c in force.sent] == [1.0] * 7
+    assert [(c.frequency_hz, c.amplitude) for c in vib.sent] == [(100.0, 0.2)] * 7
+    assert loop.events["role_conflict"] == 0
+    loop.finish()
+
+
 def test_negative_stiffness_request_is_refused_outside_the_tick():
     from hapticsdk_hardness.dimension import HardnessRenderer
     with pytest.raises(ValidationError):
