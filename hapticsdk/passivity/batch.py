@@ -161,6 +161,10 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         lo = np.minimum(lo, full - spring)   # not past the device's limit (see the scalar tick)
     rise = np.maximum(spring - state["spring"], 0.0)   # the whole force rises by at most s (item 3)
     hi = np.maximum(np.minimum(p + step - rise, target), lo)
+    # and falls by at most s where the book affords it: the extra takes up what the spring
+    # gave up this tick, never above what it held (the scalar tick's rule, item 7)
+    fall = np.maximum(state["spring"] - spring, 0.0)
+    hi = np.where(p > 0.0, np.maximum(hi, np.minimum(p - step + fall, p)), hi)
     a = hi
     if s.energy_bound:
         lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)

@@ -63,7 +63,9 @@ class PassivityController:
     ramp step and ``o`` moves in to match (stored energy kept back, never handed over),
     where the reading is above ``o`` it follows the reading out, and out of the wall it is
     0. The extra gives way to the spring's rise, so the force rises by at most ``s`` per
-    tick, and falls by at most ``s`` plus the spring's fall ``K_c |dq|``.
+    tick; on a release it takes up the spring's fall (never above what it held) where the
+    plan affords it, so the force falls by at most ``s``, else by at most ``s`` plus the
+    spring's fall ``K_c |dq|``.
 
     **The extra** ``X = F - P`` carries the rest of the wall. The controller keeps ``U``,
     an *upper bound* of the energy the extra has given the user, from the readings ``q``
@@ -332,6 +334,14 @@ class PassivityController:
             hi = target
         if hi < lo:
             hi = lo
+        if rise < 0.0 < p:
+            # and falls by at most that step where the book affords it: the extra takes up
+            # what the spring gave up this tick, never above what it held (item 7)
+            hold = p - step - rise
+            if hold > p:
+                hold = p
+            if hold > hi:
+                hi = hold
         a = hi
         if s.energy_bound and hi > lo:
             # the arm's motion over the next tick: the last two ticks' mean, its reading
