@@ -2,7 +2,8 @@
 outputs do not move over its feature box (``responds``), non-finite intensities at the
 box's landmarks (``shapes``: centre, face centres, declared defaults), a solver that
 replaces the core's template (``template``), a result whose fields are missing or whose
-claims differ from the model at its ``x`` (``result``), and a solver that ignores a
+claims differ from the model at its ``x``, or whose trace does not mean what its fields say
+(``result``), and a solver that ignores a
 constraint that is active at the unconstrained optimum (``constraints``). Each broken
 variant is caught by its rule; the correct ones conform."""
 
@@ -234,6 +235,30 @@ class _BatchUnseeded(GoodSolver):
         return super()._solve(problem, rng if problem.n_targets == 1 else np.random.default_rng(), trace)
 
 
+class _TraceEdited(GoodSolver):
+    """Solves as :class:`GoodSolver` does, then spoils the trace it recorded with
+    ``spoil(trace)``: what a convergence plot of the result shows."""
+
+    def _solve(self, problem, rng, trace):
+        out = super()._solve(problem, rng, trace)
+        type(self).spoil(trace)
+        return out
+
+
+def _trace(name, spoil):
+    return type(name, (_TraceEdited,), {"spoil": staticmethod(spoil)})
+
+
+def _countdown(trace):
+    """nfev recorded as the evaluations left, not those so far (it falls)."""
+    trace.nfev[:] = [max(trace.nfev) * (len(trace.nfev) - i) for i in range(len(trace.nfev))]
+
+
+def _nan_best(trace):
+    """The last iteration's best error recorded as NaN (a 0/0 in the solver's own error)."""
+    trace.best_error[-1] = trace.best_error[-1] * np.nan
+
+
 SOLVER_VARIANTS = {
     # an honest override still bypasses the template
     "solve-overridden": (_Overrides, {"template"}),
@@ -255,6 +280,9 @@ SOLVER_VARIANTS = {
     "weak-penalty": (_WeakPenalty, {"constraints"}),
     "nfev-zero": (_NfevZero, {"result"}),
     "batch-unseeded": (_BatchUnseeded, {"determinism"}),
+    "trace-nfev-falls": (_trace("Countdown", _countdown), {"result"}),
+    "trace-best-error-nan": (_trace("NanBest", _nan_best), {"result"}),
+    "trace-nfev-above-total": (_trace("Above", lambda t: t.nfev.__setitem__(-1, 10 ** 9)), {"result"}),
 }
 
 
@@ -263,7 +291,9 @@ SOLVER_WHY = {"scipy-fields-missing": "lacks ['fun', 'message', 'nfev']", "time-
               "error-understated": "error ", "fun-understated": "fun ", "success-flipped": "success ",
               "violation-hidden": "constraint_violation 0.0, but", "solve-overridden": "overrides ['solve']",
               "targets-rewritten": "but the model at the returned x gives",
-              "nfev-zero": "nfev 0, but the model computed", "batch-unseeded": "for a batch of 2 targets"}
+              "nfev-zero": "nfev 0, but the model computed", "batch-unseeded": "for a batch of 2 targets",
+              "trace-nfev-falls": "never falls", "trace-best-error-nan": "best_error nan",
+              "trace-nfev-above-total": "the trace counts 1000000000 evaluations"}
 
 
 def test_the_correct_solver_conforms():

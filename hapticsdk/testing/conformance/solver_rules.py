@@ -118,6 +118,34 @@ def _judge_result(res: Any, problem: SolveProblem, where: str) -> tuple[float, f
     return fit, err, viol
 
 
+def _judge_trace(res: Any, where: str) -> None:
+    """The trace ``res`` carries (a result's per-target rows, or a batch's) is what its
+    fields mean: ``nfev`` the evaluations so far, a count that never falls and never
+    exceeds the result's total ``nfev``; ``best_error`` (a sum of absolute intensity
+    errors) and ``constraint_violation`` (0 when met) finite and >= 0 in every row.
+    Nothing else is asked of it: a solver may record its best by formula (6), so its
+    best error may rise while the penalty falls."""
+    trace = res.get("trace") if isinstance(res, Mapping) else getattr(res, "trace", None)
+    if trace is None:
+        return   # a result without a trace is judged by RESULT_FIELDS (it is not one of them)
+    total = res["nfev"] if isinstance(res, Mapping) else getattr(res, "nfev", None)
+    last = 0
+    for i, row in enumerate(trace):
+        n = row["nfev"]
+        assert isinstance(n, (int, np.integer)) and not isinstance(n, bool) and last <= n, \
+            (f"{where}: trace row {i} has nfev {n!r} after {last} (nfev in a trace counts the evaluations so "
+             f"far: it never falls)")
+        last = int(n)
+        for k in ("best_error", "constraint_violation"):
+            v = row[k]
+            assert _finite(v) and v is not None and float(v) >= 0.0, \
+                (f"{where}: trace row {i} has {k} {v!r} (an error or a violation is a finite number >= 0; "
+                 f"Trace.record takes the best error per target and its violation)")
+    assert total is None or last <= int(total), \
+        (f"{where}: the trace counts {last} evaluations, but the result's nfev is {total} (nfev in a trace "
+         f"counts the evaluations so far, at most all of them)")
+
+
 def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def make() -> Solver:
         return ctx.obj(**dict(options))
@@ -183,6 +211,12 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
                 assert own <= 0 or int(r["nfev"]) >= 1, \
                     (f"target {asked.tolist()}: nfev {r['nfev']!r}, but the model computed {own} "
                      f"rows for the solve (nfev counts the objective's evaluations)")
+        # what the trace of each says (after the totals: a total that is wrong is named as such)
+        for asked, seed in ((np.array((0.4, 0.75)), 0), (np.array(ACTIVE_TARGETS), 0)):
+            _judge_trace(solved[key(asked, seed)], f"target {asked.tolist()}")
+        for i, r in enumerate(batch):
+            _judge_trace(r, f"batch target {i}")
+        _judge_trace(batch, "the batch's trace")
 
     def r_constraints() -> None:
         p = reference_problem(ACTIVE_TARGETS)
