@@ -11,7 +11,8 @@ variant passed by the kit before:
 * ``reopen`` (actuator): an instance whose ``stop()`` or ``close()`` works in its first
   open only (a latch or a handle that ``_open`` does not reset);
 * ``hookimpls``: a hook that takes nothing answering what its hookspec does not say (a
-  dict for a list, a material the schema refuses, features as one string).
+  dict for a list, a material the schema refuses, features as one string, a material
+  name given twice or taken by the shipped library).
 
 The correct variants conform."""
 
@@ -26,6 +27,7 @@ import pytest
 
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.materials import load_library
 from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_dimension, check_model
@@ -212,6 +214,8 @@ def test_a_read_back_that_goes_bad_after_many_reads_is_caught_by_read_back_rule(
 # ---------------------------------------------------------------------------
 
 _MATERIAL = {"name": "kit-m", "intensities": {"hardness": 0.3, "roughness": 0.6}}
+#: the name of a shipped material, in lower case (names are unique case-insensitive)
+_SHIPPED = next(iter(load_library())).name.lower()
 
 
 def _hooks(hook: str, answer: Any) -> types.ModuleType:
@@ -234,7 +238,11 @@ def test_hooks_answering_what_their_hookspec_says_conform():
     ("hapticsdk_materials", _MATERIAL, "not a list"),                                   # one dict, not a list
     ("hapticsdk_materials", [{"name": "kit-m"}], "invalid material"),                   # no intensities
     ("hapticsdk_dimension_info", [{"name": "kit", "description": "d", "features": "a,b"}], "each entry is"),
-], ids=["materials-dict", "materials-invalid", "dimension-info-features-str"])
+    # names the core refuses when it adds them to the library: its other materials go too
+    ("hapticsdk_materials", [_MATERIAL, {**_MATERIAL, "name": "KIT-M"}], "an earlier material of this answer"),
+    ("hapticsdk_materials", [{**_MATERIAL, "name": _SHIPPED}], "the shipped library already has"),
+], ids=["materials-dict", "materials-invalid", "dimension-info-features-str", "materials-name-twice",
+        "materials-name-shipped"])
 def test_a_hook_answering_the_wrong_type_is_caught(hook, answer, why):
     v = check("hooks", _hooks(hook, answer))
     assert rules_of(v) == {"hookimpls"}, format_report(v)

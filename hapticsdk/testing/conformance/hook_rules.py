@@ -25,6 +25,18 @@ def _check_materials(answer: Any) -> None:
         except Exception as exc:  # noqa: BLE001 - the core skips the plugin for any of them
             raise AssertionError(f"hapticsdk_materials returned an invalid material {e.get('name')!r}: {exc} "
                                  f"(load_library(with_plugins=True) skips the plugin)") from None
+    # the core adds a plugin's materials to the shipped library one by one, and a name taken
+    # (case-insensitive, as MaterialLibrary looks names up) stops it there: the plugin is
+    # reported as failed and its materials from that one on are missing
+    from ...perception.materials import load_library
+    taken = {m.name.lower(): "the shipped library" for m in load_library()}
+    for e in answer:
+        key = str(e["name"]).lower()
+        assert key not in taken, \
+            (f"hapticsdk_materials returned a material named {e['name']!r}, a name {taken[key]} already has "
+             f"(names are unique, case-insensitive): load_library(with_plugins=True) refuses it and skips the "
+             f"plugin's materials from there on")
+        taken[key] = "an earlier material of this answer"
 
 
 def _check_dimension_info(answer: Any) -> None:
