@@ -12,7 +12,7 @@ variant passed by the kit before:
   open only (a latch or a handle that ``_open`` does not reset);
 * ``hookimpls``: a hook that takes nothing answering what its hookspec does not say (a
   dict for a list, a material the schema refuses, features as one string, a material
-  name given twice or taken by the shipped library).
+  name given twice or taken by the shipped library, a NaN intensity or an infinite feature).
 
 The correct variants conform."""
 
@@ -241,8 +241,11 @@ def test_hooks_answering_what_their_hookspec_says_conform():
     # names the core refuses when it adds them to the library: its other materials go too
     ("hapticsdk_materials", [_MATERIAL, {**_MATERIAL, "name": "KIT-M"}], "an earlier material of this answer"),
     ("hapticsdk_materials", [{**_MATERIAL, "name": _SHIPPED}], "the shipped library already has"),
+    # numbers JSON cannot hold: a NaN passes the schema's 0..1, an infinity its "number"
+    ("hapticsdk_materials", [{**_MATERIAL, "intensities": {"hardness": float("nan")}}], "intensities['hardness'] = nan"),
+    ("hapticsdk_materials", [{**_MATERIAL, "features": {"GS": float("inf")}}], "features['GS'] = inf"),
 ], ids=["materials-dict", "materials-invalid", "dimension-info-features-str", "materials-name-twice",
-        "materials-name-shipped"])
+        "materials-name-shipped", "materials-intensity-nan", "materials-feature-inf"])
 def test_a_hook_answering_the_wrong_type_is_caught(hook, answer, why):
     v = check("hooks", _hooks(hook, answer))
     assert rules_of(v) == {"hookimpls"}, format_report(v)

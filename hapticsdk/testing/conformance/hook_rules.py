@@ -4,6 +4,7 @@ nothing answer what their hookspec says."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 from .runner import _Ctx, _run_rules
@@ -18,6 +19,14 @@ def _check_materials(answer: Any) -> None:
         f"hapticsdk_materials returned {type(answer).__name__}, not a list of material dicts"
     for e in answer:
         assert isinstance(e, dict), f"hapticsdk_materials returned an entry {e!r}, not a dict"
+        # the format is JSON, whose numbers are finite: a NaN passes the schema's 0..1 (every
+        # comparison with it is False) and an infinity its "number", and neither is a value
+        for part in ("intensities", "features"):
+            vals = e.get(part)
+            for k, v in (vals.items() if isinstance(vals, dict) else ()):
+                assert not isinstance(v, float) or math.isfinite(v), \
+                    (f"hapticsdk_materials returned material {e.get('name')!r} with {part}[{k!r}] = {v!r}: a "
+                     f"material file is JSON, whose numbers are finite (an intensity lies in 0..1)")
         try:
             validate({"schema_version": 1, "generated": bool(e.get("generated", False)), "source": "kit",
                       "materials": [e]}, "materials", source="hapticsdk_materials")
