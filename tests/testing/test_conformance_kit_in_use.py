@@ -221,14 +221,16 @@ def installed():
                            (registry("model"), "kit-use-model", InUseModel)])
 
 
-DIMENSION_VARIANTS = [(HourlyDrift, "determinism"), (DayOfYear, "determinism"), (MedianOfAll, "timing"),
-                      (BandTable, "renderer")]
+#: the rules each variant breaks: a history of every tick costs more per tick (timing) and
+#: holds more memory (renderer) the longer the run
+DIMENSION_VARIANTS = [(HourlyDrift, {"determinism"}), (DayOfYear, {"determinism"}),
+                      (MedianOfAll, {"timing", "renderer"}), (BandTable, {"renderer"})]
 
 
-@pytest.mark.parametrize("renderer, rule", DIMENSION_VARIANTS, ids=[r.__name__ for r, _ in DIMENSION_VARIANTS])
-def test_broken_dimensions_are_caught_by_their_rule(installed, renderer, rule):
+@pytest.mark.parametrize("renderer, rules", DIMENSION_VARIANTS, ids=[r.__name__ for r, _ in DIMENSION_VARIANTS])
+def test_broken_dimensions_are_caught_by_their_rule(installed, renderer, rules):
     v = check_dimension(_dim(renderer))
-    assert rules_of(v) == {rule}, format_report(v)
+    assert rules_of(v) == rules, format_report(v)
 
 
 @pytest.mark.parametrize("renderer", [Buzz, MedianOfLast])

@@ -4,6 +4,8 @@ variant passed by the kit before:
 * ``renderer``: a command that turns non-finite or negative only beyond the kit's own
   ticks (deeper than 3 mm, faster than 400 mm/s: the sweep of penetrations and speeds),
   or only after many ticks of one renderer (the long run);
+* ``renderer``: a renderer that keeps something of every tick (its memory grows with
+  the run);
 * ``timing`` (dimension): a tick that now and then blocks longer than the safety layer's
   restart gap (the fastest of 25 ticks hid it);
 * ``vectorised`` (model): predictions that change with the batch's size above the 33 rows
@@ -18,6 +20,7 @@ The correct variants conform."""
 
 from __future__ import annotations
 
+import collections
 import time
 import types
 from typing import Any, Callable, ClassVar
@@ -120,6 +123,35 @@ def test_each_broken_dimension_is_caught_by_its_rule(installed, amp, rule, why):
     v = check("dimension", _buzz(amp), rules=[rule]) if rule == "timing" else check_dimension(_buzz(amp))
     assert rule in rules_of(v), format_report(v)
     assert why in format_report(v)
+
+
+class _History(_Coil):
+    """A correct :class:`_Coil` that also keeps the depth of its last ``keep`` ticks (a
+    smoothing window); ``keep=None`` keeps every tick's (a history that grows per tick)."""
+    keep: ClassVar[int | None] = None
+
+    def __init__(self, x: float) -> None:
+        super().__init__(x)
+        self.depths: Any = [] if self.keep is None else collections.deque(maxlen=self.keep)
+
+    def tick(self, inp):
+        self.depths.append(float(inp.penetration_mm))
+        return super().tick(inp)
+
+
+def _history(keep: int | None) -> type:
+    coil = type("HistoryCoil", (_History,), {"keep": keep})
+    return type("HistoryBuzz", (BuzzDim,), {"renderer_cls": coil})
+
+
+@pytest.mark.parametrize("keep, caught", [(None, True), (500, False), (6000, False)],
+                         ids=["every-tick", "bounded-0.5s", "bounded-6s"])
+def test_a_renderer_whose_memory_grows_every_tick_is_caught_by_renderer_rule(installed, keep, caught):
+    """A history of every tick fails; the same window bounded (half a second, or six
+    seconds, which has stopped growing by the last two points) conforms."""
+    v = check("dimension", _history(keep), rules=["renderer"])
+    assert (rules_of(v) == {"renderer"}) is caught, format_report(v)
+    assert ("holds more memory the longer it runs" in format_report(v)) is caught
 
 
 class _SizeModel(BuzzModel):

@@ -340,6 +340,44 @@ def _cost_growth(make: Callable[[], DimensionRenderer]) -> list[tuple[float, flo
     return list(zip(GROWTH_POINTS_S, best))
 
 
+#: servo time (s) at which the ``renderer`` rule reads the memory a renderer holds: after
+#: the first second (state bounded in time, a filter or a buffer of up to 1 s, is full by
+#: then) and every 2 s after, to 9 s
+MEMORY_POINTS_S = (1.0, 3.0, 5.0, 7.0, 9.0)
+#: a renderer whose memory grows over every interval of :data:`MEMORY_POINTS_S` by this
+#: many bytes per tick of the interval or more fails: at one byte a tick a render of
+#: ``hapticsdk.scene.limits.MAX_SECONDS`` (24 h) at 1 kHz holds 86 MB more at its end, and
+#: a Python object kept per tick (a float in a list) takes 30 or more. The first-party
+#: renderers hold the same memory at every point but for a few dozen bytes an interval
+#: (0.016 B per tick); a bounded buffer that fills before the last interval passes
+MEMORY_GROWTH_BYTES_PER_TICK = 1.0
+
+
+def _memory_growth(make: Callable[[], DimensionRenderer]) -> list[int]:
+    """The memory (bytes, ``tracemalloc``) one renderer from ``make`` holds at each of
+    :data:`MEMORY_POINTS_S` of a run through the kit's ticks (started and stopped here,
+    unless the process already traces)."""
+    import tracemalloc
+    own = not tracemalloc.is_tracing()
+    if own:
+        tracemalloc.start()
+    try:
+        r = make()
+        held = [0] * len(MEMORY_POINTS_S)
+        k = 0
+        for i, at in enumerate(MEMORY_POINTS_S):
+            while k < int(round(at / KIT_PERIOD_S)):
+                r.tick(_run_inputs(k))
+                _sim_advance(KIT_PERIOD_S)
+                k += 1
+            held[i] = tracemalloc.get_traced_memory()[0]
+        del r
+        return held
+    finally:
+        if own:
+            tracemalloc.stop()
+
+
 def _assert_follows_features(d: PerceptionDimension, mid: Mapping[str, float]) -> None:
     """A renderer's commands change with what it renders: each of ``render_features`` (all
     features together when the dimension declares none) set to its declared lower bound,
@@ -512,6 +550,19 @@ def _dimension_rules(ctx: _Ctx) -> None:
             inp = TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
                             velocity_mm_s=base.velocity_mm_s, in_contact=base.in_contact)
             _check_commands(r.tick(inp), inp, r, specs, _where(inp, feats, k))
+        # and holds bounded memory: what it keeps per tick outgrows any machine within a
+        # render (which may last 24 h)
+        held = _memory_growth(lambda: d.renderer(feats))
+        steps = np.diff(held)
+        per_tick = steps / (np.diff(MEMORY_POINTS_S) / KIT_PERIOD_S)
+        ticks = (MEMORY_POINTS_S[-1] - MEMORY_POINTS_S[0]) / KIT_PERIOD_S
+        grown = held[-1] - held[0]
+        assert not (per_tick >= MEMORY_GROWTH_BYTES_PER_TICK).all(), \
+            (f"one renderer holds more memory the longer it runs: "
+             f"{', '.join(f'+{b} B by {at:g} s' for at, b in zip(MEMORY_POINTS_S[1:], np.cumsum(steps)))} "
+             f"(after {MEMORY_POINTS_S[0]:g} s; {grown / ticks:.3g} B per tick): a 24 h render at 1 kHz "
+             f"would hold {grown / ticks * 86.4e6 / 1e6:.3g} MB more; keep bounded state (a running sum, a "
+             f"fixed-size buffer), not a history of every tick")
 
     def r_renderer_bad() -> None:
         d = holder["d"]
