@@ -351,3 +351,34 @@ def test_the_lost_write_part_leaves_the_safety_settings_as_they_were():
     with a:
         _alternate_once(a, 0.0)
         assert a.safety.settings == before
+
+
+# ---------------------------------------------------------------------------
+# state: the encoder count a device declares
+# ---------------------------------------------------------------------------
+
+def _encoder(base: type, q: Any) -> type:
+    """``base`` (quantising its position with ``encoder_resolution_mm``) keeping its true
+    count for its physics but declaring ``q``."""
+    true_q = base.encoder_resolution_mm
+
+    def _position(self: Any) -> float:
+        return float(np.round(self.y / true_q) * true_q)
+    return type(f"{base.__name__}Encoder", (base,), {"encoder_resolution_mm": q, "_position": _position})
+
+
+@pytest.mark.parametrize("q", [0.0, 0.05, np.float32(0.05), None], ids=["0", "0.05", "float32", "none"])
+def test_a_declared_encoder_count_that_is_a_number_conforms(q):
+    v = check_device(_encoder(MovingArm, q))
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("base, q", [(MovingArm, float("nan")), (MovingArm, float("inf")), (MovingArm, "0.05"),
+                                     (MetresPerSecondArm, float("nan"))],
+                         ids=["nan", "inf", "text", "nan-hiding-m-per-s"])
+def test_a_declared_encoder_count_that_is_no_number_is_caught_by_state_rule(base, q):
+    """A NaN count made the loop's speed step NaN and the kit's kinematics bounds NaN, and
+    every comparison with them passed: a velocity in m/s went unseen behind it."""
+    v = check("device", _encoder(base, q), rules=["state"])
+    assert rules_of(v) == {"state"}, format_report(v)
+    assert "declares encoder_resolution_mm" in format_report(v)

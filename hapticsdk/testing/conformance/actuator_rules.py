@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 import threading
 from typing import Any, Callable, cast
 
@@ -210,6 +211,15 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
 
     def r_state() -> None:
         a = ctx.make()
+        # the encoder count it declares sizes the loop's speed step (TickInput.speed_step_mm_s,
+        # a renderer's gate hysteresis) and the kit's own kinematics bounds: a position
+        # quantum, a finite number of mm >= 0 (0 or None: an exact position). A NaN turns
+        # both into NaN, and every comparison with them passes
+        q_said = getattr(a, "encoder_resolution_mm", None)
+        assert q_said is None or (isinstance(q_said, numbers.Real) and not isinstance(q_said, bool)
+                                  and math.isfinite(q_said) and float(q_said) >= 0.0), \
+            (f"declares encoder_resolution_mm {q_said!r}: a position quantum is a finite number of mm >= 0 (0 "
+             f"or None for an exact position); the servo loop sizes its speed step from it")
         with a:
             st = a.read_state()
             for k in ("position_mm", "velocity_mm_s", "force_n"):
