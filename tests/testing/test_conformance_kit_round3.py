@@ -534,6 +534,18 @@ _Never = never()
 # `value < bound` is False, so the constraint reads as met with penalty 0
 _NanBoundLow = constraint("nan-bound", "kit.x", lambda x: (np.where(x < 0.1, np.nan, 0.2), x),
                           "x >= 0.2, its bound NaN below 0.1.")
+
+
+def _round_in_place(x):
+    """x >= 0.2 on x rounded to its table's 0.01 grid in place (np.round(..., out=x)): the
+    write lands in the solver's candidates."""
+    np.round(x, 2, out=x)
+    return np.full_like(x, 0.2), x
+
+
+_WritesColumn = constraint("writes-column", "kit.x", _round_in_place, "x >= 0.2, rounding x in place.")
+_WritesColumnFixed = constraint("rounds-a-copy", "kit.x", lambda x: (np.full_like(x, 0.2), np.round(x, 2)),
+                                "x >= 0.2, rounding a copy of x.")
 # a float path for one row that agrees with the array path, and one that does not (0.3
 # where the array path says 0.2: a one-target solve would judge its answers by the wrong
 # bound)
@@ -616,6 +628,7 @@ DIMENSION_VARIANTS = [
     ({"cons": (_WrongOneRow,)}, "constraints-one-row"),
     ({"cons": (_Never,)}, "constraints-feasible"),
     ({"cons": (_NanBoundLow,)}, "constraints-vectorised"),
+    ({"cons": (_WritesColumn,)}, "constraints-vectorised"),
     ({"roles": {}}, "roles-declared"),
     ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "1"})}}, "roles-declared"),
     ({"roles": {"adhesion": RoleSpec("friction", {"amplitude": "mV"})}}, "roles-declared"),
@@ -643,6 +656,7 @@ DIMENSION_VARIANTS = [
 def test_the_correct_dimension_conforms(installed):
     assert check_dimension(StickDim) == []
     assert check_dimension(_dim(cons=(_VecOneRow,))) == []      # a float path that agrees
+    assert check_dimension(_dim(cons=(_WritesColumnFixed,))) == []   # rounds a copy, not its column
     # the same unit spelled out is no clash
     assert check_dimension(_dim(roles={"adhesion": RoleSpec("friction", {"amplitude": "volt"})})) == []
 

@@ -459,9 +459,9 @@ def _dimension_rules(ctx: _Ctx) -> None:
         space = d.feature_space()
         rng = np.random.default_rng(0)
         X = space.random(64, rng)
-        cols = {n: X[:, i] for i, n in enumerate(space.names)}
+        cols = {n: X[:, i].copy() for i, n in enumerate(space.names)}    # what the constraints are handed
         E = np.vstack([X, np.asarray(space.lower, float), np.asarray(space.upper, float)])
-        edge_cols = {n: E[:, i] for i, n in enumerate(space.names)}
+        edge_cols = {n: E[:, i].copy() for i, n in enumerate(space.names)}
         for c in cons:
             assert isinstance(c, Constraint), f"{c!r} is not a Constraint"
             missing = [f for f in c.features if f not in space]
@@ -484,6 +484,15 @@ def _dimension_rules(ctx: _Ctx) -> None:
                 (f"constraint {c.name!r}: bound {float(bound[bad][0])!r} and value {float(value[bad][0])!r} at "
                  f"{dict(zip(space.names, E[bad][0].tolist()))}: a NaN bound or value reads as met (penalty 0) "
                  f"whatever the features; it must be a number for every row in the feature bounds")
+            # a constraint reads its columns: the solvers hand it views of their candidates
+            # (SolveProblem.columns: up to 64 rows) and of the answers they report, so a
+            # write lands in what they search and return
+            for what, given, kept in (("drawn rows", cols, X), ("the box's corners", edge_cols, E)):
+                changed = [n for i, n in enumerate(space.names)
+                           if not np.array_equal(given[n], kept[:, i], equal_nan=True)]
+                assert not changed, \
+                    (f"constraint {c.name!r} wrote into its feature columns {changed} ({what}): the columns "
+                     f"are views of a solver's candidates and answers; read them, never write")
             json.dumps(c.describe())
 
     def r_one_row() -> None:
