@@ -9,7 +9,8 @@ variant passed by the kit before:
 * ``timing`` (dimension): a tick that now and then blocks longer than the safety layer's
   restart gap (the fastest of 25 ticks hid it);
 * ``vectorised`` (model): predictions that change with the batch's size above the 33 rows
-  the rule compared, and a ``predict`` that writes into the caller's array;
+  the rule compared, a ``predict`` that writes into the caller's array, and one that keeps
+  something of every batch (its memory grows with the calls);
 * ``reopen`` (actuator): an instance whose ``stop()`` or ``close()`` works in its first
   open only (a latch or a handle that ``_open`` does not reset);
 * ``hookimpls``: a hook that takes nothing answering what its hookspec does not say (a
@@ -173,15 +174,42 @@ class _WritesInput(BuzzModel):
         return y
 
 
+class _KeepsBatches(BuzzModel):
+    """Keeps every batch's intensities (an unbounded cache, or a debug history)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.seen: list[np.ndarray] = []
+
+    def _out(self, X, y):
+        self.seen.append(y.copy())
+        return y
+
+
+class _CachesLast100(_KeepsBatches):
+    """Correct: keeps the intensities of its last 100 batches only (a bounded cache)."""
+
+    def _out(self, X, y):
+        y = super()._out(X, y)
+        del self.seen[:-100]
+        return y
+
+
 @pytest.mark.parametrize("factory, rule, why", [
     (_SizeModel, "vectorised", "batch of 10000 rows"),
     (_OutOfRangeInLargeBatches, "vectorised", "outside 0..1"),
     (_WritesInput, "vectorised", "changed its input array"),
-], ids=["batch-size", "range-in-large-batch", "writes-input"])
+    (_KeepsBatches, "vectorised", "holds more memory the more it is called"),
+], ids=["batch-size", "range-in-large-batch", "writes-input", "keeps-every-batch"])
 def test_each_broken_model_is_caught_by_its_rule(installed, factory, rule, why):
     v = check_model(factory)
     assert rule in rules_of(v), format_report(v)
     assert why in format_report(v)
+
+
+def test_a_model_with_a_bounded_cache_conforms(installed):
+    v = check_model(_CachesLast100)
+    assert v == [], format_report(v)
 
 
 # ---------------------------------------------------------------------------

@@ -41,6 +41,43 @@ RESPONSE_SAMPLES = 256
 VECTORISED_ROWS = 10_000
 
 
+#: the ``vectorised`` rule's memory run: a new batch of :data:`MEMORY_BATCH_ROWS` rows
+#: for each of ``MEMORY_CALLS[-1]`` calls of ``predict()``, the memory the process holds
+#: (``tracemalloc``) read after each of these calls; the first reading follows 100 calls
+#: (a bounded cache, ``functools.lru_cache(maxsize=100)``, is full by then)
+MEMORY_CALLS = (100, 300, 500, 700, 900)
+MEMORY_BATCH_ROWS = 64
+#: a model whose memory grows over every interval of :data:`MEMORY_CALLS` by this many
+#: bytes per row predicted or more fails: a solve evaluates 10^5 to 10^7 rows (a GA's
+#: populations, an amortised solver's training set), so at one byte a row it keeps up to
+#: 10 MB more per solve, for as long as the model lives; a row kept (its features, a
+#: float each) takes 8 bytes a feature or more. The first-party models hold the same
+#: memory at every reading
+MEMORY_BYTES_PER_ROW = 1.0
+
+
+def _predict_memory(m: PerceptionModel, pool: np.ndarray) -> list[int]:
+    """The memory (bytes) held after each of :data:`MEMORY_CALLS` calls of ``m.predict``
+    on consecutive batches of :data:`MEMORY_BATCH_ROWS` rows of ``pool`` (``tracemalloc``,
+    started and stopped here unless the process already traces)."""
+    import tracemalloc
+    own = not tracemalloc.is_tracing()
+    if own:
+        tracemalloc.start()
+    try:
+        held = [0] * len(MEMORY_CALLS)
+        k = 0
+        for i, calls in enumerate(MEMORY_CALLS):
+            while k < calls:
+                m.predict(pool[k * MEMORY_BATCH_ROWS:(k + 1) * MEMORY_BATCH_ROWS])
+                k += 1
+            held[i] = tracemalloc.get_traced_memory()[0]
+        return held
+    finally:
+        if own:
+            tracemalloc.stop()
+
+
 def _assert_column(m: PerceptionModel, j: int, fd: np.ndarray, J: np.ndarray, span: float, where: str) -> None:
     """Column ``j`` of a model's Jacobian ``J`` agrees with the finite differences ``fd``
     within :data:`JACOBIAN_RTOL` of their size over the feature's range ``span``."""
@@ -149,6 +186,15 @@ def _model_rules(ctx: _Ctx) -> None:
                                        err_msg=f"rows {start}..{start + size - 1} give different predictions in a "
                                                f"batch of {size} rows than in the batch of {VECTORISED_ROWS}")
             start += size
+        # and keeps nothing per call: a solve calls it thousands of times
+        held = _predict_memory(m, inputs(MEMORY_CALLS[-1] * MEMORY_BATCH_ROWS, 7))
+        per_row = np.diff(held) / (np.diff(MEMORY_CALLS) * MEMORY_BATCH_ROWS)
+        assert not (per_row >= MEMORY_BYTES_PER_ROW).all(), \
+            (f"predict() holds more memory the more it is called: "
+             f"{', '.join(f'+{b} B by call {c}' for c, b in zip(MEMORY_CALLS[1:], np.cumsum(np.diff(held))))} "
+             f"(after call {MEMORY_CALLS[0]}, batches of {MEMORY_BATCH_ROWS} rows; "
+             f"{(held[-1] - held[0]) / ((MEMORY_CALLS[-1] - MEMORY_CALLS[0]) * MEMORY_BATCH_ROWS):.3g} B per row): "
+             f"a solve predicts 10^5 to 10^7 rows; keep no history of the batches (a cache must be bounded)")
 
     def r_determinism() -> None:
         m = holder["m"]
