@@ -53,10 +53,15 @@ def _play(hjif, extra, env_opts=None):
 @needs_posix
 @pytest.mark.parametrize("how", ["flag", "env"])
 def test_play_reaches_the_serial_piezo(hjif, tmp_path, how):
+    # a reply budget of 0.5 s, not the board's 0.05 s: the emulated bridge answers from a
+    # thread of this test process, on a machine that may have more runnable processes than
+    # cores (the same budget as test_stop_signals and test_servo_death_standby)
     if how == "flag":
-        code, out, err, peak, emu = _play(hjif, ["--device-option", "piezo-serial.port={port}"])
+        code, out, err, peak, emu = _play(hjif, ["--device-option", "piezo-serial.port={port}",
+                                                 "--device-option", "piezo-serial.timeout=0.5"])
     else:
-        code, out, err, peak, emu = _play(hjif, [], env_opts=lambda port: {"piezo-serial": {"port": port}})
+        code, out, err, peak, emu = _play(hjif, [], env_opts=lambda port: {"piezo-serial": {"port": port,
+                                                                                            "timeout": 0.5}})
     assert code == 0, err[-800:]
     rep = json.loads(out)
     assert rep["actuators"]["piezo-serial"]["active_ticks"] > 0

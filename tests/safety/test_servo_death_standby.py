@@ -50,7 +50,10 @@ def test_sigkill_of_the_servo_serial_bridge(tmp_path, monkeypatch):
     monkeypatch.setenv("HAPTICSDK_CACHE_DIR", str(tmp_path / "cache"))
     emu = emulation.SerialBridgeEmulator(watchdog_s=0).start()  # no bridge watchdog: only the host
     s = Session({**SCENE, "devices": {"vibration": {"actuator": "piezo-serial"}}},
-                actuator_options={"vibration": {"port": emu.port}}, refine=False)
+                # the emulator answers from a thread of this process: on a busy machine its
+                # reply can take longer than a bridge's 0.05 s default (the servo's open then
+                # failed its PING, 4 attempts, with three CPU-bound processes beside the suite)
+                actuator_options={"vibration": {"port": emu.port, "timeout": 0.5}}, refine=False)
     try:
         seen = _kill_while_playing(s, emu.drv)
         rep = s.servo_death_report
