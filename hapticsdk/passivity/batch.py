@@ -42,7 +42,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
                           max_force_n: "np.ndarray | float | None" = None,
                           mass_kg: "np.ndarray | float | None" = None,
                           trusted_damping_ns_per_m: "np.ndarray | float | None" = None) -> np.ndarray:
-    """Vectorised :class:`PassivityController` over many independent cells (same law).
+    """Vectorised :class:`PassivityController` over many independent cells (same law;
+    forces equal to the scalar controller's to rounding, about 1e-8 N, not bit for bit).
     ``dt``, ``damping_ns_per_m`` (declared), ``resolution_mm`` and ``max_force_n`` may be
     per cell and override ``settings``; ``trusted_damping_ns_per_m`` (per cell or one
     number) is the damping credited in place of the settings' (a measured lower bound,
