@@ -22,6 +22,7 @@ from ...perception.dimensions import ChannelCommand, Constraint, DimensionRender
 from ...perception.features import Feature, FeatureSpace
 from ...perception.models import PerceptionModel
 from .actuator_drive import STALL_RUN_S
+from .memory import _traced_after
 from .runner import _Ctx, _run_rules
 from .timing import KIT_PERIOD_S, TICK_BUDGET, TIMING_CALLS, _fastest, _perf_counter, _sim_advance
 from .values import _finite, _refuses
@@ -355,27 +356,13 @@ MEMORY_GROWTH_BYTES_PER_TICK = 1.0
 
 def _memory_growth(make: Callable[[], DimensionRenderer]) -> list[int]:
     """The memory (bytes, ``tracemalloc``) one renderer from ``make`` holds at each of
-    :data:`MEMORY_POINTS_S` of a run through the kit's ticks (started and stopped here,
-    unless the process already traces)."""
-    import tracemalloc
-    own = not tracemalloc.is_tracing()
-    if own:
-        tracemalloc.start()
-    try:
-        r = make()
-        held = [0] * len(MEMORY_POINTS_S)
-        k = 0
-        for i, at in enumerate(MEMORY_POINTS_S):
-            while k < int(round(at / KIT_PERIOD_S)):
-                r.tick(_run_inputs(k))
-                _sim_advance(KIT_PERIOD_S)
-                k += 1
-            held[i] = tracemalloc.get_traced_memory()[0]
-        del r
-        return held
-    finally:
-        if own:
-            tracemalloc.stop()
+    :data:`MEMORY_POINTS_S` of a run through the kit's ticks."""
+    r = make()
+
+    def step(k: int) -> None:
+        r.tick(_run_inputs(k))
+        _sim_advance(KIT_PERIOD_S)
+    return _traced_after([int(round(at / KIT_PERIOD_S)) for at in MEMORY_POINTS_S], step)
 
 
 def _assert_follows_features(d: PerceptionDimension, mid: Mapping[str, float]) -> None:

@@ -13,6 +13,7 @@ from ...errors import ValidationError
 from ...perception.features import Feature, FeatureSpace
 from ...perception.models import PerceptionModel
 from ...solvers import SolveProblem
+from .memory import _traced_after
 from .runner import _Ctx, _run_rules
 from .values import _refuses
 
@@ -57,25 +58,9 @@ MEMORY_BYTES_PER_ROW = 1.0
 
 
 def _predict_memory(m: PerceptionModel, pool: np.ndarray) -> list[int]:
-    """The memory (bytes) held after each of :data:`MEMORY_CALLS` calls of ``m.predict``
-    on consecutive batches of :data:`MEMORY_BATCH_ROWS` rows of ``pool`` (``tracemalloc``,
-    started and stopped here unless the process already traces)."""
-    import tracemalloc
-    own = not tracemalloc.is_tracing()
-    if own:
-        tracemalloc.start()
-    try:
-        held = [0] * len(MEMORY_CALLS)
-        k = 0
-        for i, calls in enumerate(MEMORY_CALLS):
-            while k < calls:
-                m.predict(pool[k * MEMORY_BATCH_ROWS:(k + 1) * MEMORY_BATCH_ROWS])
-                k += 1
-            held[i] = tracemalloc.get_traced_memory()[0]
-        return held
-    finally:
-        if own:
-            tracemalloc.stop()
+    """The memory (bytes, ``tracemalloc``) held after each of :data:`MEMORY_CALLS` calls of
+    ``m.predict`` on consecutive batches of :data:`MEMORY_BATCH_ROWS` rows of ``pool``."""
+    return _traced_after(MEMORY_CALLS, lambda k: m.predict(pool[k * MEMORY_BATCH_ROWS:(k + 1) * MEMORY_BATCH_ROWS]))
 
 
 def _assert_column(m: PerceptionModel, j: int, fd: np.ndarray, J: np.ndarray, span: float, where: str) -> None:
