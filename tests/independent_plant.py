@@ -270,13 +270,19 @@ def energy_tolerance_j() -> None:
     """
 
 
+def declared_mass_kg(cell: dict[str, Any]) -> float:
+    """The arm's mass the cell declares to the controller (kg; the true one where it
+    declares none)."""
+    return float(cell.get("arm_mass_declared_kg", cell["arm_mass_kg"]))
+
+
 def sdk_settings(cell: dict[str, Any], lane: str) -> Any:
     """The scalar controller's settings for the benchmark's ``sdk`` lane (the damping fit
     and its lower bound, from the cell's ``damping_calibration``) or ``sdk_declared`` lane
     (the declaration only, half of it trusted); the declared resolution, limit and mass."""
     from hapticsdk.passivity import ControllerSettings
     kw: dict[str, Any] = dict(position_resolution_mm=cell["resolution_mm"], max_force_n=FORCE_LIMIT_N,
-                              device_mass_kg=cell["arm_mass_kg"])
+                              device_mass_kg=declared_mass_kg(cell))
     if lane == "sdk":
         cal = cell["damping_calibration"]
         fit = cal["damping_ns_per_m"]
@@ -288,7 +294,7 @@ def sdk_settings(cell: dict[str, Any], lane: str) -> Any:
 
 
 def run_cell(cell: dict[str, Any], lane: str, *, log: bool = False, controller: str = "scalar",
-             substeps: int = 1) -> dict[str, Any]:
+             substeps: int = 1, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """One cell with ``lane`` ``"plain"`` (the wall ``K x pen`` of the reading, no
     controller), ``"sdk"`` or ``"sdk_declared"``: the SDK controller, ``controller="scalar"``
     (:class:`~hapticsdk.passivity.PassivityController`: ``step`` then ``commit`` of the
@@ -302,7 +308,8 @@ def run_cell(cell: dict[str, Any], lane: str, *, log: bool = False, controller: 
     per-tick forces and references. ``substeps`` > 1 advances the plant in that many equal
     parts of each tick under the tick's held force, the reference linear within each part
     only (so the hand's path follows its kinks and sine within a tick), and adds
-    ``energy_within_ticks_j``, the largest energy at the parts' ends."""
+    ``energy_within_ticks_j``, the largest energy at the parts' ends. ``overrides``: fields
+    of the controller's settings set apart from the lane's (e.g. ``mass_trust``)."""
     from hapticsdk.passivity import controller_commit_batch, controller_step_batch
     T = float(cell["period_s"])
     res = float(cell["resolution_mm"])
@@ -319,16 +326,19 @@ def run_cell(cell: dict[str, Any], lane: str, *, log: bool = False, controller: 
     batch = None
     if lane != "plain":
         settings = sdk_settings(cell, lane)
+        if overrides:
+            import dataclasses
+            settings = dataclasses.replace(settings, **overrides)
         if controller == "scalar":
             from hapticsdk.passivity import PassivityController
             ctl = PassivityController(settings)
         else:
             from hapticsdk.passivity import ControllerSettings, controller_state_batch
             b_lo = settings.trusted_damping_ns_per_m()
-            batch = (controller_state_batch(1), ControllerSettings(),
+            batch = (controller_state_batch(1), ControllerSettings(**(overrides or {})),
                      dict(damping_ns_per_m=np.array([settings.device_damping_ns_per_m]),
                           resolution_mm=np.array([res]), max_force_n=np.array([FORCE_LIMIT_N]),
-                          mass_kg=np.array([float(cell["arm_mass_kg"])]),
+                          mass_kg=np.array([declared_mass_kg(cell)]),
                           trusted_damping_ns_per_m=np.array([b_lo])))
     e_max = e_fin_max = gap = e_sub = 0.0
     given = asked = 0.0

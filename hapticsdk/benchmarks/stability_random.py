@@ -11,7 +11,8 @@ normal axis of an arm (mass, true damping, encoder, 3.3 N force limit) held by a
   0.3-1 mm at 5-40 Hz), plain sliding (depth drifting), slow creep (1-5 mm/s);
 * finger: mass 3-50 g, stiffness 50-2000 N/m, damping 0.1-5 N*s/m (log-uniform; a band
   around the presets of :data:`hapticsdk.sim.finger.FINGERS`, generated, not measured);
-* period 0.25-10 ms, encoder 0.001-0.2 mm, arm mass 0.02-0.1 kg (log-uniform);
+* period 0.25-10 ms, encoder 0.001-0.2 mm, arm mass 0.02-0.1 kg (log-uniform), declared
+  at 0.5x-2x the true mass (log-uniform factor; the controller is told the declared mass);
 * true damping 0 (a quarter of the cells) or 0.05-1 N*s/m, declared at 0.5x-2x the true
   value (log-uniform factor);
 * stiffness 0.01-10^4 N/mm (log-uniform).
@@ -115,6 +116,9 @@ def draw_cells(n: int, seed: int) -> list[dict[str, Any]]:
         "bump_mm": rng.uniform(0.3, 1.0, n), "bump_hz": rng.uniform(5.0, 40.0, n),
         "drift_mm": rng.uniform(-1.0, 1.0, n), "creep_mm_s": rng.uniform(1.0, 5.0, n),
     }
+    # drawn after the rest, so that a seed's other parameters are those it drew before the
+    # mass was declared apart from the truth (0.2.x)
+    cols["arm_mass_declared_kg"] = cols["arm_mass_kg"] * _lu(rng, 0.5, 2.0, n)
     for i in range(n):
         c: dict[str, Any] = {k: float(v[i]) for k, v in cols.items()}
         c["trajectory"] = KINDS[int(kind[i])]
@@ -122,6 +126,13 @@ def draw_cells(n: int, seed: int) -> list[dict[str, Any]]:
             c["depth_mm"] = min(c["depth_mm"], 1.5)
         cells.append(c)
     return cells
+
+
+def declared_mass_kg(cell: dict[str, Any]) -> float:
+    """The arm's mass a cell declares to the controller (kg): ``arm_mass_declared_kg``, or
+    the true ``arm_mass_kg`` in a cell that declares none (the fixed grid, cells drawn
+    before 0.2.x)."""
+    return float(cell.get("arm_mass_declared_kg", cell["arm_mass_kg"]))
 
 
 class _Ref:
@@ -249,6 +260,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         fit = np.array([c["damping_calibration"]["damping_ns_per_m"] for c in cells])[rows]
         b_tr = np.where(on_sdk, meas, b_tr)
         bd_ctrl = np.where(on_sdk, np.nan_to_num(fit), bd)
+    m_decl = np.array([declared_mass_kg(c) for c in cells])[rows]   # what the controller is told
     lane_ref = _Ref([cells[int(i)] for i in rows], knots)
     n_ticks = np.ceil(dur / T).astype(int)
     e_max = np.zeros(L)
@@ -276,7 +288,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         fw = np.where(touching, K * pen, 0.0)
         f_peer = P.step(kind, pst, x, T, fw, K, pen, bd)
         f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd_ctrl, resolution_mm=plant.res_mm,
-                                      max_force_n=plant.fmax, mass_kg=plant.m, trusted_damping_ns_per_m=b_tr)
+                                      max_force_n=plant.fmax, mass_kg=m_decl, trusted_damping_ns_per_m=b_tr)
         f_cmd = np.where(sdk, f_sdk, f_peer)
         tgt = np.minimum(fw, plant.fmax)   # the wall's force the device can give
         # the extra held at 0 (the output is the Colgate spring) while the wall asks for more

@@ -90,7 +90,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         d2 = np.abs(x - 2.0 * hist[hp - span] + hist[hp - 2 * span]) * 1e-3 - 2.0 * q
         np.maximum(jerk, d2 / (span * span), out=jerk)
     np.maximum(jerk, 0.0, out=jerk)
-    m = s.device_mass_kg if mass_kg is None else mass_kg
+    m = s.trusted_mass_kg(mass_kg)   # mass_trust x the declared mass (None: none declared)
     if m is not None:
         # the largest change of motion the readings allow (2 counts above the second
         # difference), up to what the held force's change over the last two ticks gives

@@ -188,8 +188,9 @@ class PassivityController:
         if d > jerk:
             jerk = d
         jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
-        m = s.device_mass_kg
+        m = s.device_mass_kg   # ControllerSettings.trusted_mass_kg, inline (tick)
         if m:
+            m *= s.mass_trust
             # the largest change of motion the readings allow (2 counts above the second
             # difference), up to what the held force's change over the last two ticks
             # gives the free arm (docs/runtime.md, Passivity item 5)

@@ -23,6 +23,13 @@ RAMP_TIME_S = 5.0e-3
 #: taken as known within a factor of two (the stated uncertainty of a declaration, the
 #: 0.5x-2x band the randomised benchmark draws), so the true damping is at least half of it.
 DAMPING_TRUST = 0.5
+#: Share of the declared apparent mass the controller takes as the arm's: a declared mass
+#: is taken as known within a factor of two, as the damping is (the apparent mass of a
+#: linkage changes over its workspace and with the grip, and a hand-written declaration can
+#: be off), so the true mass is at least half of it. The plan's free-arm terms divide by the
+#: mass, and a lighter arm moves further under the same force: half the declaration is
+#: the conservative side (docs/runtime.md, Passivity item 5).
+MASS_TRUST = 0.5
 #: Default of ``ControllerSettings.energy_allowance_j`` (J): the most energy the extra's
 #: bound may hand the user over a contact, the SDK's passivity specification (0.1 mJ: a
 #: 10 g fingertip at 0.14 m/s). It caps the encoder allowance ``F_max Delta / 2``, which
@@ -61,8 +68,12 @@ class ControllerSettings:
             ``dF`` pushes it ``dF T^2 / 2m`` further within the tick, which the plan's cost
             counts, and a change ``dF`` of the held force changes its motion by up to
             ``dF T^2 / m`` per tick, which the plan's prediction counts. None: neither is
-            counted; otherwise a finite number > 0. (The kinetic energy it stores is left
-            out of the bound, which is conservative.)
+            counted; otherwise a finite number > 0. Only ``mass_trust`` times it is
+            taken as the arm's mass. (The kinetic energy it stores is left out of the
+            bound, which is conservative.)
+        mass_trust: share of the declared mass taken as a lower bound of the true apparent
+            mass (:data:`MASS_TRUST`, 1/2: a declaration is trusted to a factor 2), in
+            (0, 1].
         energy_bound: False removes the energy bound (the output then follows the wall
             through the ramp only): for tests that must see the bound matter.
         period_s: the servo's nominal period (s) the Colgate spring is sized on, ``K_c =
@@ -88,6 +99,7 @@ class ControllerSettings:
     max_force_n: float | None = None
     ramp_time_s: float = RAMP_TIME_S
     device_mass_kg: float | None = None
+    mass_trust: float = MASS_TRUST
     energy_bound: bool = True
     energy_allowance_j: float = ENERGY_ALLOWANCE_J
     period_s: float | None = None
@@ -139,6 +151,15 @@ class ControllerSettings:
         b = self.device_damping_ns_per_m if declared_ns_per_m is None else declared_ns_per_m
         return self.damping_trust * b
 
+    def trusted_mass_kg(self, declared_kg: Any = None) -> Any:
+        """The arm's mass the plan's free-arm terms use (kg): ``mass_trust`` times the
+        declared mass (``declared_kg``, a number or an array, overrides the settings'), a
+        lower bound of the true apparent mass; None where no mass is declared."""
+        m = self.device_mass_kg if declared_kg is None else declared_kg
+        if m is None:
+            return None
+        return self.mass_trust * (np.asarray(m, float) if np.ndim(m) else float(m))
+
     def spring_damping_ns_per_m(self, device_ns_per_m: Any = None, trusted_ns_per_m: Any = None) -> Any:
         """The Colgate spring's damping ``b_s = min(b_lo, damping_trust x b_dev)`` (N*s/m;
         docs/runtime.md, Passivity item 0): ``b_dev`` the device's damping
@@ -185,6 +206,10 @@ def _share(value: Any, name: str) -> float:
     return number(value, name, lo=0.0, hi=1.0)
 
 
+def _positive_share(value: Any, name: str) -> float:
+    return number(value, name, lo=0.0, hi=1.0, lo_open=True)
+
+
 #: the check of each field of :class:`ControllerSettings` (its value as the tick reads it)
 _FIELDS = {
     "device_damping_ns_per_m": _nonneg,
@@ -196,6 +221,7 @@ _FIELDS = {
     "max_force_n": _positive_or_none,
     "ramp_time_s": _positive,
     "device_mass_kg": _positive_or_none,
+    "mass_trust": _positive_share,
     "energy_bound": flag,
     "energy_allowance_j": _nonneg,
     "period_s": _positive_or_none,

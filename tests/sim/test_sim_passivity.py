@@ -324,6 +324,7 @@ _SETTING_FIELDS = {   # field: (what it accepts besides a finite number, its low
     "max_force_n": (True, 0.0, True, None),
     "ramp_time_s": (False, 0.0, True, None),
     "device_mass_kg": (True, 0.0, True, None),
+    "mass_trust": (False, 0.0, True, 1.0),
     "energy_allowance_j": (False, 0.0, False, None),
     "period_s": (True, 0.0, True, None),
 }
@@ -624,6 +625,34 @@ def test_a_drawn_release_falls_within_the_ramp_where_the_book_affords_it(index):
     assert r["max_force_rise_n"] <= r["ramp_step_n"] * (1 + 1e-9)
     assert r["energy_to_user_j"] <= 1e-4
     assert r["min_contact_force_n"] >= 0.0
+
+
+@pytest.mark.parametrize("controller", ["batch", "scalar"])
+def test_an_arm_lighter_than_declared_stays_within_the_energy_goal(controller):
+    """The plan's free-arm terms divide by the arm's mass, and a lighter arm moves further
+    under the same force: the controller takes half the declared mass (``mass_trust``,
+    docs/runtime.md, Passivity item 2a). Seed 101's cell 45 of ``draw_cells(2000, 101)``
+    (a press and hold at 7.1 ms on a 0.045 mm encoder, no damping) with its mass declared
+    at twice the true one, the edge of the band the benchmark draws: taking the
+    declaration at face value puts more than 0.1 mJ into the hand (0.14 mJ, checked here
+    too, so the cell keeps exercising the rule); with half of it, the energy stays within
+    the goal. The vectorised controller through the benchmark's plant, the scalar one
+    (the servo's) through the independent simulator of ``tests/independent_plant.py``."""
+    import independent_plant as ip
+    from hapticsdk.benchmarks.stability_random import draw_cells, run_cells
+
+    cell = dict(draw_cells(2000, 101)[45])
+    cell["arm_mass_declared_kg"] = 2.0 * cell["arm_mass_kg"]
+
+    def energy(**overrides):   # the controller's default settings, or with overrides
+        if controller == "batch":
+            return run_cells([cell], controllers=("sdk",), settings=ControllerSettings(
+                **overrides))[0]["results"]["sdk"]["energy_to_user_j"]
+        cell["damping_calibration"] = run_cells([cell], controllers=("sdk",))[0]["damping_calibration"]
+        return ip.run_cell(cell, "sdk", controller="scalar", overrides=overrides)["energy_to_user_j"]
+
+    assert energy(mass_trust=1.0) > 1e-4
+    assert energy() <= 1e-4
 
 
 @hsettings(max_examples=30, deadline=None)

@@ -1,8 +1,9 @@
 """Property-based tests of the passivity controller (issue 23): the energy bound is the
 property.
 
-Hypothesis draws whole batches of cells (trajectory, finger, period, encoder, arm mass,
-true damping and the damping declared at 0.5x-2x of it, wall stiffness) from the region
+Hypothesis draws whole batches of cells (trajectory, finger, period, encoder, arm mass and
+the mass declared at 0.5x-2x of it, true damping and the damping declared at 0.5x-2x of
+it, wall stiffness) from the region
 the controller's guarantee is stated for in docs/runtime.md, runs them through the exact
 zero-order-hold plant (:mod:`hapticsdk.sim.plant`, energy from the raw state, not from the
 controller) and checks, per cell:
@@ -49,10 +50,11 @@ def _lu(lo, hi):
 @st.composite
 def cell(draw):
     b = draw(st.one_of(st.just(0.0), _lu(0.05, 1.0)))
+    m = draw(_lu(0.02, 0.1))
     return {
         "trajectory": draw(st.sampled_from(KINDS[:5])),
         "stiffness_n_per_mm": draw(_lu(0.01, 1e4)), "period_s": draw(_lu(*PERIOD_S)),
-        "resolution_mm": draw(_lu(*RESOLUTION_MM)), "arm_mass_kg": draw(_lu(0.02, 0.1)),
+        "resolution_mm": draw(_lu(*RESOLUTION_MM)), "arm_mass_kg": m,
         "damping_true_ns_per_m": b, "damping_declared_ns_per_m": b * draw(_lu(0.5, 2.0)),
         "finger_mass_kg": draw(_lu(0.003, 0.05)), "finger_stiffness_n_per_m": draw(_lu(50.0, 2000.0)),
         "finger_damping_ns_per_m": draw(_lu(0.1, 5.0)), "depth_mm": draw(st.floats(0.5, 4.0)),
@@ -62,7 +64,7 @@ def cell(draw):
         "tap_pause_s": draw(st.floats(0.05, 0.1)), "bump_mm": draw(st.floats(0.3, 1.0)),
         "bump_hz": draw(st.floats(5.0, 40.0)), "drift_mm": draw(st.floats(-1.0, 1.0)),
         "creep_mm_s": draw(st.floats(3.0, 5.0)),
-    }
+    } | {"arm_mass_declared_kg": m * draw(_lu(0.5, 2.0))}
 
 
 def _bound(c):
