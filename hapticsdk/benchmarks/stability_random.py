@@ -188,12 +188,13 @@ class _Ref:
 
 def measure_cell_damping(cell: dict[str, Any]) -> dict[str, Any]:
     """The hands-off damping calibration on a cell's own arm (its true mass and damping,
-    its encoder and period; the excitation sized by the arm's mass as declared, here the
-    true one): :func:`hapticsdk.calibration.damping.fit_damping` of the simulated
-    readings. Returns the fit as a dict."""
+    its encoder and period; the excitation sized by the arm's mass as declared,
+    :func:`declared_mass_kg`): :func:`hapticsdk.calibration.damping.fit_damping` of the
+    simulated readings. Returns the fit as a dict."""
     from ..calibration.damping import fit_damping, simulated_run
     T = float(cell["period_s"])
-    f, y = simulated_run(T, cell["arm_mass_kg"], cell["damping_true_ns_per_m"], cell["resolution_mm"], FORCE_LIMIT_N)
+    f, y = simulated_run(T, cell["arm_mass_kg"], cell["damping_true_ns_per_m"], cell["resolution_mm"], FORCE_LIMIT_N,
+                         declared_mass_kg=declared_mass_kg(cell))
     fit = fit_damping(f, y, T, cell["resolution_mm"])
     return {"damping_ns_per_m": fit.damping_ns_per_m, "trusted_damping_ns_per_m": fit.trusted_damping_ns_per_m,
             "worst_error_ns_per_m": fit.worst_error_ns_per_m, "success": fit.success, "message": fit.message,

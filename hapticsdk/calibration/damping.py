@@ -339,12 +339,14 @@ class DampingCalibration:
 
 
 def simulated_run(period_s: float, mass_kg: float, damping_ns_per_m: float, resolution_mm: float,
-                  max_force_n: float = 3.3) -> tuple[np.ndarray, np.ndarray]:
-    """A GENERATED hands-off run on the simulated arm (:func:`hapticsdk.sim.arm.free_arm_readings_mm`):
-    ``(forces_n, readings_mm)`` of :func:`excitation` sized by ``mass_kg``."""
+                  max_force_n: float = 3.3, *, declared_mass_kg: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """A GENERATED hands-off run on the simulated arm (:func:`hapticsdk.sim.arm.free_arm_readings_mm`)
+    of mass ``mass_kg``: ``(forces_n, readings_mm)`` of :func:`excitation` sized by
+    ``declared_mass_kg`` (the mass the device declares; default ``mass_kg``), as a run on a
+    device is sized by its declaration."""
     from ..sim.arm import ArmParams, free_arm_readings_mm
 
-    f = excitation(period_s, max_force_n, mass_kg)
+    f = excitation(period_s, max_force_n, mass_kg if declared_mass_kg is None else declared_mass_kg)
     arm = ArmParams(mass_kg=mass_kg, damping_ns_per_m=damping_ns_per_m, max_force_n=max_force_n,
                     encoder_resolution_mm=resolution_mm)
     return f, free_arm_readings_mm(period_s, arm, f)

@@ -530,3 +530,17 @@ def test_the_fit_reports_its_residual_and_its_own_time():
     assert not still.success
     for r in (noisy, still):
         assert 0.0 <= r.runtime_s < 60.0
+
+
+def test_a_simulated_run_is_sized_by_the_declared_mass():
+    """A run on a device is sized by the mass it declares, and the arm moves as its true
+    mass makes it: ``simulated_run(..., declared_mass_kg=)`` plays the excitation of the
+    declaration on the true arm (the randomised stability benchmark declares each arm's
+    mass at 0.5x-2x the truth); without it, the true mass sizes the run."""
+    f, y = simulated_run(1e-3, 0.05, 0.5, 0.01, declared_mass_kg=0.1)
+    assert np.array_equal(f, excitation(1e-3, 3.3, 0.1))
+    arm = ArmParams(mass_kg=0.05, damping_ns_per_m=0.5, max_force_n=3.3, encoder_resolution_mm=0.01)
+    assert np.array_equal(y, free_arm_readings_mm(1e-3, arm, f))
+    f0, _ = simulated_run(1e-3, 0.05, 0.5, 0.01)
+    assert np.array_equal(f0, excitation(1e-3, 3.3, 0.05))
+    assert not np.array_equal(f, f0)
