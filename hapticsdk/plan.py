@@ -268,9 +268,16 @@ class RenderPlan:
 
     def to_json(self, **kw: Any) -> str:
         """The plan as JSON text (indent 2 unless ``kw`` says otherwise; ``kw`` goes to
-        :func:`json.dumps`).
+        :func:`json.dumps`). A NaN or infinite number anywhere in the plan raises
+        :class:`ValidationError` naming its path: :meth:`load` would refuse such a file.
         """
-        return json.dumps(self.to_dict(), **{"indent": 2, **kw})
+        from .schemas_io import non_finite_at
+        d = self.to_dict()
+        bad = non_finite_at(d)
+        if bad is not None:
+            raise ValidationError(f"{bad[1]} is not a finite number; a plan file cannot hold it",
+                                  field=f"plan{bad[0]}")
+        return json.dumps(d, **{"indent": 2, **kw})
 
     def save(self, path: str | Path) -> Path:
         """Write the plan JSON atomically (temporary file, fsync, rename: a reader or a

@@ -9,6 +9,8 @@ instance with ``jsonschema`` and turns the first error into a
 from __future__ import annotations
 
 import json
+import math
+import sys
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -42,6 +44,12 @@ def validate(instance: Any, name: str, *, source: str = "") -> None:
     import jsonschema
 
     schema = load_schema(name)
+    # before the schema: every comparison with NaN is False, so a NaN passes "minimum" and
+    # "maximum", and inf passes "number" (none of the SDK's formats has a non-finite field)
+    bad = non_finite_at(instance)
+    if bad is not None:
+        where = f"{source}: " if source else ""
+        raise ValidationError(f"{where}{bad[1]} is not a finite number", field=f"{name}{bad[0]}")
     cls = jsonschema.validators.validator_for(schema)
     # the deepest error is the most specific one: report it first
     errors = sorted(cls(schema).iter_errors(instance), key=lambda e: -len(e.absolute_path))
@@ -51,6 +59,37 @@ def validate(instance: Any, name: str, *, source: str = "") -> None:
         field = f"{name}{path}" if path else name
         where = f"{source}: " if source else ""
         raise ValidationError(f"{where}{err.message}", field=field)
+
+
+def non_finite_at(data: Any) -> tuple[str, str] | None:
+    """``(path, value)`` of the first number in ``data`` (nested dicts and lists, as parsed
+    JSON or built in memory) that is not finite: a NaN or infinite float (``json`` reads
+    ``1e400`` as ``inf`` and ``NaN`` as NaN), or an integer too large for a float (any
+    float() of it overflows). ``None`` when every number is finite. The path is as
+    :func:`validate` names fields (``.objects[0].intensities.hardness``); the walk is
+    iterative, as :func:`check_depth`'s, so depth and width cost no stack."""
+    from collections.abc import Mapping
+
+    import numpy as np
+
+    stack: list[tuple[Any, str]] = [(data, "")]
+    while stack:
+        node, where = stack.pop()
+        if isinstance(node, (float, np.floating)):
+            if not math.isfinite(node):
+                return where, repr(float(node))
+        elif isinstance(node, (int, np.integer)) and not isinstance(node, bool):
+            if abs(int(node)) > _FLOAT_MAX_INT:
+                return where, f"an integer of {len(str(abs(int(node))))} digits"
+        elif isinstance(node, Mapping):
+            stack.extend((v, f"{where}.{k}") for k, v in reversed(list(node.items())))
+        elif isinstance(node, (list, tuple)):
+            stack.extend((v, f"{where}[{i}]") for i, v in reversed(list(enumerate(node))))
+    return None
+
+
+#: the largest integer a float holds without overflow (``int(sys.float_info.max)``)
+_FLOAT_MAX_INT = int(sys.float_info.max)
 
 
 #: largest JSON file the SDK reads (bytes); scenes, plans and calibrations are far smaller

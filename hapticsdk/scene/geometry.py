@@ -40,7 +40,6 @@ the probe leaves the old object, instead of flickering. Benchmark:
 from __future__ import annotations
 
 import math
-import numbers
 from abc import ABC, abstractmethod
 from bisect import bisect_left
 from typing import Any, ClassVar, Mapping, Sequence
@@ -65,12 +64,10 @@ _IDENTITY: Matrix3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 # -- validation helpers -------------------------------------------------------
 def _number(v: Any, field: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, numbers.Real):
-        raise ValidationError(f"expected a number, got {v!r}", field=field)
-    f = float(v)
-    if not math.isfinite(f):
-        raise ValidationError(f"must be a finite number, got {v!r}", field=field)
-    return f
+    # the shared check (hapticsdk.checks): also an int beyond the float range (JSON reads
+    # a 1 followed by 400 zeros as one), which float() refuses with an OverflowError
+    from ..checks import check_number
+    return check_number(v, field)
 
 
 def _positive(v: Any, field: str) -> float:

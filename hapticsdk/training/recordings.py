@@ -30,6 +30,7 @@ and trial and whose ``field`` names the offending column or manifest key.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
@@ -37,7 +38,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from ..errors import RecordingError
-from ..schemas_io import load_schema, read_json
+from ..schemas_io import load_schema, non_finite_at, read_json
 
 #: Columns of one trial file, in file order.
 COLUMNS: tuple[str, ...] = ("time_s", "force_n", "displacement_mm", "acc_x", "acc_y",
@@ -59,6 +60,10 @@ def validate_json(doc: Any, schema_name: str, *, source: str) -> None:
     """Validate ``doc`` against ``schemas/<schema_name>``; raise RecordingError naming the path."""
     import jsonschema
 
+    bad = non_finite_at(doc)   # NaN passes "minimum"/"maximum", inf passes "number"
+    if bad is not None:
+        raise RecordingError(f"{source}: {bad[1]} is not a finite number",
+                             field=".".join(re.findall(r"[^.\[\]]+", bad[0])) or "(root)")
     schema = load_schema(schema_name.removesuffix(".schema.json"))
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(doc), key=lambda e: list(e.absolute_path))

@@ -4,10 +4,10 @@ and no value is silently made up: "1" or True is not a coefficient, "false" is n
 flag (bool("false") is True), 1e308 coefficients give no infinite curve, 1e308 is no
 count of readings."""
 
-import copy
 import json
 
 import pytest
+from json_leaves import replaced as _bad
 
 from hapticsdk.calibration import PiezoTable, VoiceCoilCalibration
 from hapticsdk.calibration.damping import DampingCalibration
@@ -20,15 +20,6 @@ DAMPING = dict(trusted_damping_ns_per_m=0.5, damping_ns_per_m=1.0, worst_error_n
 
 def _piezo():
     return PiezoTable(frequencies_hz=[50.0, 100.0], voltages_v=[10.0, 50.0], acceleration=[[1.0, 5.0], [2.0, 10.0]])
-
-
-def _bad(base, path, value):
-    d = copy.deepcopy(base)
-    cur = d
-    for k in path[:-1]:
-        cur = cur[k]
-    cur[path[-1]] = value
-    return d
 
 
 VC_CASES = [(("coefficients", 0), v) for v in ("1", True, 10 ** 400, 1e308, -1e308)] + \
