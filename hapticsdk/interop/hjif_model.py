@@ -492,8 +492,13 @@ def _get(obj: Mapping[str, Any], key: str, path: str, kind: str, *, required: bo
         want = {"int": "an integer", "number": "a number", "str": "a string", "list": "an array",
                 "dict": "an object"}[kind]
         raise FormatError(f"must be {want}, got {_type_name(v)}", field=where)
-    if kind == "number" and not math.isfinite(v):
-        raise FormatError("must be finite", field=where)
+    if kind == "number":
+        try:   # an int beyond the float range (JSON reads 1 followed by 400 zeros as one) overflows
+            finite = math.isfinite(v)
+        except OverflowError:
+            finite = False
+        if not finite:
+            raise FormatError("must be finite", field=where)
     return v
 
 
@@ -545,7 +550,9 @@ def _parse_current(doc: Any) -> HapticFile:
     level = _range(_get(root, "level", "", "int"), "level", 0, 255)
     date = _get(root, "date", "", "str")
     description = _get(root, "description", "", "str")
-    timescale = _range(_get(root, "timescale", "", "int", required=False), "timescale", 1, None)
+    # a uint32 as the file's other counts: times are divided by it (an int of 400 digits
+    # overflowed float() there)
+    timescale = _range(_get(root, "timescale", "", "int", required=False), "timescale", 1, 2 ** 32 - 1)
     avatars_raw = _get(root, "avatars", "", "list")
     perceptions_raw = _get(root, "perceptions", "", "list")
     syncs_raw = _get(root, "syncs", "", "list")
@@ -564,7 +571,7 @@ def _parse_current(doc: Any) -> HapticFile:
         s = _obj(s, path)
         syncs.append(Sync(timestamp=_range(_get(s, "timestamp", path, "int"), f"{path}.timestamp", 0),
                           timescale=_range(_get(s, "timescale", path, "int", required=False),
-                                           f"{path}.timescale", 1)))
+                                           f"{path}.timescale", 1, 2 ** 32 - 1)))
     return HapticFile(version=version, profile=profile, level=level, date=date, description=description,
                       perceptions=perceptions, avatars=avatars, syncs=syncs, timescale=timescale)
 

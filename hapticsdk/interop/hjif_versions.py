@@ -50,6 +50,7 @@ with a :class:`~hapticsdk.errors.FormatError` naming the JSON path.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -255,7 +256,15 @@ def _valid_keyframe(k: dict[str, Any]) -> bool:
 
 # ---------------------------------------------------------------- the reference's reading
 def _num(v: Any) -> float | None:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else None
+    """``v`` as a float when it is a finite JSON number, else ``None`` (an int beyond the
+    float range, which float() refuses with an OverflowError, is not one)."""
+    if not isinstance(v, (int, float)) or isinstance(v, bool):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
 
 
 def _ref_line(t0: float, a0: float, t1: float, a1: float, x: float) -> float:
