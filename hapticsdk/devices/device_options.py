@@ -227,7 +227,19 @@ def device_config_path() -> Path:
 def _by_actuator(data: Any, source: str) -> dict[str, dict[str, Any]]:
     if not isinstance(data, Mapping) or not all(isinstance(v, Mapping) for v in data.values()):
         raise ValidationError("expected a JSON object: actuator name -> {option: value}", field=source)
+    _refuse_non_finite(data, source)
     return {str(k): dict(v) for k, v in data.items()}
+
+
+def _refuse_non_finite(value: Any, field: str) -> None:
+    """A NaN, an infinity (``json`` reads ``NaN``, ``Infinity`` and ``1e400``) or an
+    integer beyond the float range in trusted options raises :class:`ValidationError`
+    naming its path: as in every SDK file, no option is a non-finite number, whether or
+    not the actuator plugin checks its own options."""
+    from ..schemas_io import non_finite_at
+    bad = non_finite_at(value)
+    if bad is not None:
+        raise ValidationError(f"{bad[1]} is not a finite number", field=f"{field}{bad[0]}")
 
 
 #: the last device configuration file read: ``{"key": (path, inode, mtime_ns, size), "by_actuator": ...}``
@@ -303,6 +315,7 @@ def parse_device_option(text: str) -> tuple[str, str, Any]:
         value: Any = json.loads(raw)
     except (ValueError, RecursionError):
         value = raw
+    _refuse_non_finite(value, f"device-option {role.strip()}.{key.strip()}")
     return role.strip(), key.strip(), value
 
 
