@@ -300,6 +300,13 @@ class RenderPlan:
                 from .devices.device_options import check_data_settings
                 check_data_settings(d.get("settings"), field="plan.settings")
             validate_plan_dict(d)
+            settings = d.get("settings", {})
+            if isinstance(settings, Mapping):
+                # the schema leaves settings open; the renderer reads them as the scene's
+                # settings, so they are checked as those are (renderer_options: True failed
+                # in the renderer with a TypeError)
+                from .scene.model import DEFAULT_SETTINGS, _check_settings, _merge
+                _check_settings(_merge(DEFAULT_SETTINGS, settings), where="plan.settings")
         api = str(d.get("plugin_api_version", PLUGIN_API_VERSION))
         if _parse_version(api)[0] != _parse_version(PLUGIN_API_VERSION)[0]:
             raise ValidationError(f"plan compiled for plugin API {api}, this core provides "

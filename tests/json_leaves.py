@@ -8,17 +8,21 @@ from typing import Any, Iterator
 Path = tuple[Any, ...]
 
 
-def number_leaves(data: Any, path: Path = ()) -> Iterator[tuple[Path, Any]]:
-    """Every ``(path, value)`` of a number (not a bool) in nested dicts and lists, in
-    document order; ``path`` holds keys and indices."""
+def nodes(data: Any, path: Path = ()) -> Iterator[tuple[Path, Any]]:
+    """Every ``(path, value)`` in nested dicts and lists, the whole document (``()``)
+    first, in document order; ``path`` holds keys and indices."""
+    yield path, data
     if isinstance(data, dict):
         for k, v in data.items():
-            yield from number_leaves(v, (*path, k))
+            yield from nodes(v, (*path, k))
     elif isinstance(data, list):
         for i, v in enumerate(data):
-            yield from number_leaves(v, (*path, i))
-    elif isinstance(data, (int, float)) and not isinstance(data, bool):
-        yield path, data
+            yield from nodes(v, (*path, i))
+
+
+def number_leaves(data: Any) -> Iterator[tuple[Path, Any]]:
+    """Every ``(path, value)`` of a number (not a bool) in ``data``, in document order."""
+    return ((p, v) for p, v in nodes(data) if isinstance(v, (int, float)) and not isinstance(v, bool))
 
 
 def dotted(path: Path) -> str:

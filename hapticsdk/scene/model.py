@@ -81,17 +81,17 @@ def _check_names(value: Any, field: str) -> None:
             raise ValidationError(f"must be a dimension name, got {n!r:.60}", field=f"{field}[{i}]")
 
 
-def _check_settings(settings: Mapping[str, Any]) -> None:
+def _check_settings(settings: Mapping[str, Any], where: str = "scene.settings") -> None:
     """The merged settings, checked as ``schemas/scene.schema.json`` checks a file's (a scene
-    built in code gets no schema): every key known, every group an object, every number a
+    built in code gets no schema; a plan's settings, which its schema leaves open, are the
+    scene's settings merged): every key known, every group an object, every number a
     finite number in range (an int beyond the float range included), every flag a bool;
-    the error names the field (``scene.settings.solver.tolerance``)."""
+    the error names the field (``scene.settings.solver.tolerance``, ``where`` first)."""
     from .. import argcheck
     from ..argcheck import number
     from ..checks import check_seed
     from .limits import check_period
 
-    where = "scene.settings"
     for key, default in DEFAULT_SETTINGS.items():
         if isinstance(default, Mapping):
             group = settings[key]
