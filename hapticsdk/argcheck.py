@@ -161,6 +161,8 @@ def file_path(value: Any, field: str = "path") -> "Path":
         raise ValidationError(f"must be a file path, got {type(value).__name__} {value!r:.60}", field=field) from None
     if not isinstance(text, str) or not text:
         raise ValidationError(f"must be a file path, got {value!r:.60}", field=field)
+    if "\x00" in text:   # the operating system's calls raise ValueError on it
+        raise ValidationError(f"must not contain a NUL character, got {text!r:.60}", field=field)
     return Path(text)
 
 

@@ -236,6 +236,9 @@ class RenderPlan:
             raise ValidationError("the plan has no materials", field="plan.materials")
         if name is None:
             return next(iter(self.materials.values()))
+        if not isinstance(name, str):
+            raise ValidationError(f"must be a material or object name, got {type(name).__name__} {name!r:.60}",
+                                  field="material")
         if name not in self.materials:
             for mp in self.materials.values():
                 if name in mp.objects:

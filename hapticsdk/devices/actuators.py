@@ -682,7 +682,11 @@ def servo_sender(act: Actuator) -> Any:
 
 
 def create_actuator(name: str, **options: Any) -> Actuator:
-    """Instantiate the actuator plugin registered as ``name`` (lazy import)."""
+    """Instantiate the actuator plugin registered as ``name`` (lazy import). An option the
+    class does not take, or one whose value it fails on with ``TypeError`` / ``ValueError``
+    (a plugin that does not check it), raises :class:`ValidationError` naming the option
+    (:func:`hapticsdk.argcheck.call_with_options`)."""
+    from ..argcheck import call_with_options
     from ..plugins import registry
     cls = registry("actuator").load(name)
-    return cls(**options)
+    return call_with_options(cls, options=options, field="options")  # type: ignore[no-any-return]

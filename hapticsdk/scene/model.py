@@ -379,7 +379,9 @@ class Scene:
         # dimensions and devices as given (a string is not a list of names): checked by the scene
         dims: Any = list(dimensions) if isinstance(dimensions, (list, tuple)) else dimensions
         devs: Any = dict(devices) if isinstance(devices, Mapping) else ({} if devices is None else devices)
-        return cls(objects=[SceneObject(name="object", material=mat, dimensions=dims if dims != [] else None)],
+        if isinstance(dims, list) and not dims:
+            dims = None
+        return cls(objects=[SceneObject(name="object", material=mat, dimensions=dims)],
                    devices=devs, settings=settings, name=name)
 
     def hit_tester(self) -> HitTester:

@@ -10,6 +10,7 @@ constraints. ``solve(...)`` then resolves ``method=`` through the solver table, 
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Iterable, Mapping
 from typing import Any, Sequence, overload
 
@@ -62,7 +63,12 @@ def _dimension_names(dimensions: Any) -> tuple[str, ...]:
     if isinstance(dimensions, (str, bytes)) or not isinstance(dimensions, Iterable):
         raise ValidationError(f"must be a list of dimension names, got {type(dimensions).__name__} "
                               f"{dimensions!r:.60}", field="dimensions")
-    return tuple(dimensions)
+    names = tuple(dimensions)
+    for i, n in enumerate(names):   # a name is looked up in dicts: a list or an array is none
+        if not isinstance(n, str) or not n:
+            raise ValidationError(f"must be a dimension name, got {type(n).__name__} {n!r:.60}",
+                                  field=f"dimensions[{i}]")
+    return names
 
 
 def _targets_array(targets: Any, dimensions: Sequence[str] | None) -> tuple[np.ndarray, tuple[str, ...]]:
@@ -248,6 +254,11 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
     """
     if not (seed is None or (type(seed) is int and 0 <= seed <= MAX_SEED)):
         check_seed(seed)  # before any work: seed='abc' or -1 is bad input, not a solver failure
+    if build_kw:
+        unknown = sorted(set(build_kw) - _BUILD_ARGS)
+        if unknown:   # build_problem would raise TypeError on the keyword
+            raise ValidationError(f"unknown argument(s) {unknown}; solve takes method, seed, options and "
+                                  f"build_problem's {sorted(_BUILD_ARGS)}", field=unknown[0])
     problem = _problem_for(targets, build_kw)
     res = _solver_for(method, options).solve(problem, seed=seed)
     # what the numbers are measured against: the model and its training data
@@ -265,6 +276,8 @@ def solve(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *, method: 
 #: values, ...): a later call with the same setup reuses the model, the feature space, the
 #: constraints and the solvers' per-setup caches, and validates only its targets
 _PROBLEMS: dict[tuple, SolveProblem] = {}
+#: the keyword arguments :func:`solve` passes on to :func:`build_problem`
+_BUILD_ARGS = frozenset(inspect.signature(build_problem).parameters) - {"targets"}
 _SOLVERS: dict[tuple, Solver] = {}
 _MAX_CACHED = 64
 _PLAIN = frozenset((str, int, float, bool, type(None)))
@@ -303,6 +316,7 @@ def _problem_for(targets: Any, build_kw: dict[str, Any]) -> SolveProblem:
 
     try:
         key = setup_key()
+        hash(key)       # a dimension given as a list or an array: no caching either
     except TypeError:   # an unhashable option value: no caching
         return build_problem(targets, **build_kw)
     except Exception:   # an unknown plugin etc.: build_problem raises the proper error
@@ -328,8 +342,12 @@ def _solver_for(method: str, options: Mapping[str, Any] | None) -> Solver:
         raise ValidationError(f"must be an object of solver options, got {type(options).__name__}",
                               field="options")
     opts = dict(options or {})
+    for k in opts:   # they become keyword arguments: get_solver(method, **opts)
+        if not isinstance(k, str) or not k:
+            raise ValidationError(f"option names must be non-empty strings, got {k!r:.60}", field="options")
     try:
         key = (method, registry("solver").load(method), _hashable(opts))
+        hash(key)
     except TypeError:
         return get_solver(method, **opts)
     except Exception:   # unknown method: get_solver raises the proper error
