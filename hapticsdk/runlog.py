@@ -353,6 +353,11 @@ def _runlog_from_arrays(p: Path, data: dict[str, np.ndarray]) -> RunLog:
     if header.get("format") != FORMAT or header.get("version") != VERSION:
         raise RecordingError(f"{p}: format {header.get('format')!r} v{header.get('version')!r}, "
                              f"expected {FORMAT!r} v{VERSION}", field="runlog.header_json")
+    period = header.get("period_s")
+    if period is not None and not (_finite_number(period) and float(period) > 0):
+        # playback steps by it: a 401-digit int, a list or NaN failed there (OverflowError, TypeError)
+        raise RecordingError(f"{p}: period_s must be a finite number of seconds > 0 or null, got {period!r:.60}",
+                             field="runlog.header_json.period_s")
     for key in ("t", "state_t", "position_mm", "velocity_mm_s", "device_force_n", "buttons"):
         if key not in data:
             raise RecordingError(f"{p}: array {key!r} missing", field=f"runlog.{key}")
@@ -365,6 +370,15 @@ def _runlog_from_arrays(p: Path, data: dict[str, np.ndarray]) -> RunLog:
     for key in ("state_t", "buttons"):
         if data[key].shape != (n,):
             raise RecordingError(f"{p}: {key} has shape {data[key].shape}, expected ({n},)", field=f"runlog.{key}")
+    b = data["buttons"]
+    if b.dtype.kind == "f":
+        # cast to int64, a NaN, an inf or 1e308 becomes an arbitrary button mask
+        ok = np.isfinite(b) & (np.abs(b) < 2.0 ** 63)
+        ok[ok] &= b[ok] == np.round(b[ok])
+        if not ok.all():
+            i = int(np.argmin(ok))
+            raise RecordingError(f"{p}: buttons must be whole numbers (a bit mask), got {b[i]!r} at tick {i}",
+                                 field="runlog.buttons")
     for key in ("position_mm", "velocity_mm_s", "device_force_n"):
         if data[key].shape != (n, 3):
             raise RecordingError(f"{p}: {key} has shape {data[key].shape}, expected ({n}, 3)", field=f"runlog.{key}")
