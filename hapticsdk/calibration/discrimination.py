@@ -280,10 +280,21 @@ def fit_psychometric(springs_n_per_mm: Any, stiffer: Any, *, frequency_hz: float
     n = np.bincount(inv, minlength=k.size).astype(float)
     y = np.bincount(inv, weights=a_all, minlength=k.size)
     lo, hi = pse_range if pse_range is not None else (0.0, 1.5 * float(k.max()))
+    try:
+        ok = bool(np.isfinite(lo) and np.isfinite(hi) and float(hi) > float(lo))
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:   # a NaN or infinite bound: a NaN grid, then an IndexError
+        raise CalibrationError(f"level {frequency_hz:g} Hz: the PSE search range {lo!r:.30}..{hi!r:.30} N/mm "
+                               f"is not a finite interval (springs {float(k.min()):g}..{float(k.max()):g} N/mm)")
     mu_grid = np.linspace(lo, hi, 541)
     ll = _loglik(mu_grid[:, None], _SIGMA_GRID[None, :], k, n, y)  # (n_mu, n_sigma)
     prof = ll.max(axis=1)
     best = float(prof.max())
+    if not np.isfinite(best):   # springs so large (1e308 N/mm) that the likelihood overflows
+        raise CalibrationError(f"level {frequency_hz:g} Hz: the answers' likelihood is not finite anywhere in "
+                               f"the PSE range {lo:g}..{hi:g} N/mm (springs {float(k.min()):g}.."
+                               f"{float(k.max()):g} N/mm)")
     # local refinement from the grid optimum (PSE kept inside the search range)
     i, j = np.unravel_index(int(np.argmax(ll)), ll.shape)
 
