@@ -45,12 +45,20 @@ def figure_file(text: str) -> str:
     return _from_check(figure_path, "figure_file")(text)
 
 
+#: largest magnitude of a whole-number argument: what an int64 holds (seeds, counts, CPU
+#: indices all go to numpy or the operating system, which take no more)
+MAX_INT = 2 ** 63 - 1
+
+
 def _int(text: str) -> int:
     s = str(text).strip()
     try:
-        return int(s, 10)
+        v = int(s, 10)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r:.60}") from None
+    if abs(v) > MAX_INT:   # a 401-digit seed reached numpy; a 401-digit CPU index the OS
+        raise argparse.ArgumentTypeError(f"must be within -2**63+1..2**63-1, got a number of {len(str(abs(v)))} digits")
+    return v
 
 
 def _float(text: str) -> float:
@@ -151,9 +159,9 @@ def int_list(text: str) -> list[int]:
         if not s:
             raise argparse.ArgumentTypeError(f"empty item in {text!r}")
         try:
-            v = int(s, 10)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a whole number: {s!r} in {text!r}") from None
+            v = _int(s)
+        except argparse.ArgumentTypeError as exc:
+            raise argparse.ArgumentTypeError(f"{exc} in {text!r:.60}") from None
         if v < 1:
             raise argparse.ArgumentTypeError(f"items must be >= 1, got {v}")
         out.append(v)

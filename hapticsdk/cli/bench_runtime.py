@@ -39,7 +39,7 @@ def register_bench(bench_sub: Any) -> None:
     p.add_argument("--seconds", type=positive_float, default=10.0, help="run length per load (default 10 s)")
     p.add_argument("--period", type=positive_float, default=None, metavar="S",
                    help="servo period in s (default the scene's, 0.001; 0.00025 = 4 kHz, the rate of DHD arms)")
-    p.add_argument("--pin-cpu", type=int, default=None, metavar="N",
+    p.add_argument("--pin-cpu", type=nonneg_int, default=None, metavar="N",
                    help="pin the servo thread to CPU N (reported if refused)")
     p.add_argument("--fifo-priority", type=_fifo_priority, default=argparse.SUPPRESS, metavar="P",
                    help="the servo's SCHED_FIFO priority: 1..99, 'auto' (where the OS allows it; the default of "
