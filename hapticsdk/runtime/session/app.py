@@ -495,6 +495,9 @@ class Session:
             return SwitchHandle(self, seq, sent_at)
 
     def _object_id(self, name: str) -> int:
+        if not isinstance(name, str):   # a list or a dict as a name failed to hash (TypeError)
+            raise ValidationError(f"must be an object's name, got {type(name).__name__} {name!r:.60}",
+                                  field="object")
         if name not in self._ids:
             raise ValidationError(f"no object {name!r}; objects: {sorted(self._ids)}", field="object")
         return self._ids[name]
@@ -795,6 +798,8 @@ class Session:
 
     def off_event(self, kind: str, callback: Any) -> bool:
         """Remove a callback given to :meth:`on_event`; True when it was registered."""
+        if not isinstance(kind, str):   # looked up in a dict: a list failed to hash (TypeError)
+            raise ValidationError(f"kind must be one of {list(EVENT_KINDS)} or '*', got {kind!r:.60}", field="kind")
         return self._dispatcher.remove(kind, callback)
 
     def events(self) -> list[SessionEvent]:
