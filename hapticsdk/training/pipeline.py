@@ -169,6 +169,13 @@ def _read_trial_features(path: Path) -> FeatureTable:
     if bad.any():
         r, c = np.argwhere(bad)[0]
         raise RecordingError(f"{path}: NaN/Inf at row {r + 1}", field=FEATURE_NAMES[c])
+    # the spectrum's resolution bounds the roughness constraint (P >= AFpeak^2 df) and goes
+    # into the model file: a NaN made that bound NaN, read as met everywhere
+    bad_df = ~(np.isfinite(df) & (df > 0))
+    if bad_df.any():
+        r = int(np.argmax(bad_df))
+        raise RecordingError(f"{path}: df_hz must be a finite number of Hz > 0, got {df[r]!r} at row {r + 1}",
+                             field="df_hz")
     return FeatureTable(samples=[r[ix["sample"]] for r in body], trials=trials, X=X, df_hz=df)
 
 
@@ -189,6 +196,10 @@ def load_table(path: Path | str) -> TrainingTable:
         doc = read_json(p / DATASET_NAME, field="file", error=RecordingError)
         if not isinstance(doc, dict):
             raise RecordingError(f"{p / DATASET_NAME}: expected a JSON object", field="file")
+        from ..schemas_io import non_finite_at
+        bad = non_finite_at(doc)   # no schema checks this file: 1e400 (read as inf) is refused here
+        if bad is not None:
+            raise RecordingError(f"{p / DATASET_NAME}: {bad[1]} is not a finite number", field=bad[0].lstrip("."))
         files = doc.get("files") or {}
         if not isinstance(files, dict):
             raise RecordingError(f"{p / DATASET_NAME}: 'files' must be an object", field="files")
