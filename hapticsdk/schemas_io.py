@@ -50,6 +50,10 @@ def validate(instance: Any, name: str, *, source: str = "") -> None:
     if bad is not None:
         where = f"{source}: " if source else ""
         raise ValidationError(f"{where}{bad[1]} is not a finite number", field=f"{name}{bad[0]}")
+    key = _non_string_key_at(instance)
+    if key is not None:   # JSON keys are strings; a dict built in code may hold None or 1
+        where = f"{source}: " if source else ""
+        raise ValidationError(f"{where}key {key[1]!r:.60} is not a string", field=f"{name}{key[0]}")
     cls = jsonschema.validators.validator_for(schema)
     # the deepest error is the most specific one: report it first
     errors = sorted(cls(schema).iter_errors(instance), key=lambda e: -len(e.absolute_path))
@@ -82,6 +86,24 @@ def non_finite_at(data: Any) -> tuple[str, str] | None:
             if abs(int(node)) > _FLOAT_MAX_INT:
                 return where, f"an integer of {len(str(abs(int(node))))} digits"
         elif isinstance(node, Mapping):
+            stack.extend((v, f"{where}.{k}") for k, v in reversed(list(node.items())))
+        elif isinstance(node, (list, tuple)):
+            stack.extend((v, f"{where}[{i}]") for i, v in reversed(list(enumerate(node))))
+    return None
+
+
+def _non_string_key_at(data: Any) -> tuple[str, Any] | None:
+    """``(path of the object, key)`` of the first key in ``data`` that is not a string
+    (iterative, as :func:`non_finite_at`)."""
+    from collections.abc import Mapping
+
+    stack: list[tuple[Any, str]] = [(data, "")]
+    while stack:
+        node, where = stack.pop()
+        if isinstance(node, Mapping):
+            for k in node:
+                if not isinstance(k, str):
+                    return where, k
             stack.extend((v, f"{where}.{k}") for k, v in reversed(list(node.items())))
         elif isinstance(node, (list, tuple)):
             stack.extend((v, f"{where}[{i}]") for i, v in reversed(list(enumerate(node))))

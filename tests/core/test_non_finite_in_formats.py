@@ -21,7 +21,7 @@ import json
 from pathlib import Path
 
 import pytest
-from json_leaves import dotted, number_leaves, replaced
+from json_leaves import dotted, nodes, number_leaves, replaced
 
 from hapticsdk.errors import RecordingError, ValidationError
 from hapticsdk.schemas_io import non_finite_at, schema_dir, validate
@@ -189,3 +189,25 @@ def test_the_ratings_writer_refuses_nan(tmp_path):
     with pytest.raises(RecordingError, match="not a finite number"):
         write_ratings(tmp_path / "ratings.json", ratings)
     assert not (tmp_path / "ratings.json").exists()
+
+
+@pytest.mark.parametrize("name, make", INSTANCES, ids=[f"{n}{i}" for i, (n, _) in enumerate(INSTANCES)])
+def test_a_key_that_is_not_a_string_is_refused_by_its_path(name, make):
+    """JSON keys are strings; a dict built in code may hold None, 1 or NaN as a key (a
+    scene's ``devices`` then named a role ``None`` that compiled and was ignored)."""
+    data = make()
+    objects = [p for p, v in nodes(data) if isinstance(v, dict)]
+    assert objects
+    for path in objects:
+        for key in (None, 1):
+            grown = {**_at(data, path), key: 0.5}
+            d = replaced(data, path, grown) if path else grown
+            with pytest.raises(ValidationError, match="is not a string") as exc:
+                validate(d, name)
+            assert exc.value.field == f"{name}{dotted(path)}", (path, key)
+
+
+def _at(data, path):
+    for k in path:
+        data = data[k]
+    return data
