@@ -137,7 +137,12 @@ class PassivityController:
             # no commit since the last step: the force it returned is taken as applied
             self.commit(self._sent)
         self._pending = True
-        s = self.settings
+        # the constants derived from the settings: once per configuration (a field set on
+        # the settings drops them; ControllerSettings._derive_tick_constants)
+        c = self.settings._tick_consts
+        if c is None:
+            c = self.settings._derive_tick_constants()
+        q, h, c2, b_lo, b_s, m, fm, ramp_time, period, allowance, energy_bound, kc_p, sp_p, e0_p = c
         if f_wall != f_wall or f_wall in (math.inf, -math.inf):
             f_wall = 0.0
         if not self._started or not dt > 0 or not -_INF < x_mm < _INF:
@@ -152,12 +157,7 @@ class PassivityController:
             self._sent = r
             return r
         dq = (x_mm - self._q1) * 1e-3
-        q = s.position_resolution_mm * 1e-3
-        h = 0.5 * q
         f1 = self._f1
-        b_lo = s.measured_damping_ns_per_m   # ControllerSettings.trusted_damping_ns_per_m, inline (tick)
-        if b_lo is None:
-            b_lo = s.damping_trust * s.device_damping_ns_per_m
         # the extra above the spring: ZOH-paired work plus half a count of reading error
         # per newton of change (summation by parts); the damping the Colgate spring does
         # not need is credited below, once this tick's spring is known
@@ -172,7 +172,6 @@ class PassivityController:
             hp = 0
         self._hp = hp
         hist[hp] = x_mm
-        c2 = 2.0 * s.position_resolution_mm
         d1 = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2])   # this tick's second difference (mm)
         jerk = d1 - c2
         d = (abs(x_mm - 2.0 * hist[hp - 2] + hist[hp - 4]) - c2) * 0.25
@@ -188,9 +187,7 @@ class PassivityController:
         if d > jerk:
             jerk = d
         jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
-        m = s.device_mass_kg   # ControllerSettings.trusted_mass_kg, inline (tick)
-        if m:
-            m *= s.mass_trust
+        if m:   # the trusted mass (ControllerSettings.trusted_mass_kg)
             # the largest change of motion the readings allow (2 counts above the second
             # difference), up to what the held force's change over the last two ticks
             # gives the free arm (docs/runtime.md, Passivity item 5)
@@ -222,7 +219,6 @@ class PassivityController:
         # the Colgate spring: the wall up to the stiffness its damping makes passive
         # (K_c = 2 b_s / T, at most one ramp step per count), as a function of the depth
         # below the surface x = 0
-        fm = s.max_force_n
         if fm is None:
             # no declared limit: the largest force seen so far is the full scale (a fixed
             # step, so a ramp to 0 ends; a scale that followed the output would shrink
@@ -231,7 +227,7 @@ class PassivityController:
             self._full = full
         else:
             full = fm
-        step = full * (dt / s.ramp_time_s if dt < s.ramp_time_s else 1.0)
+        step = full * (dt / ramp_time if dt < ramp_time else 1.0)
         depth = -x_mm * 1e-3
         spring = 0.0
         kf = 0.0
@@ -241,18 +237,19 @@ class PassivityController:
             # its damping b_s: half the device's damping (the measured fit, else the
             # declaration), at most the trusted lower bound (item 0;
             # ControllerSettings.spring_damping_ns_per_m, inline: only in contact)
-            b_s = s.damping_trust * s.device_damping_ns_per_m
-            if b_s > b_lo:
-                b_s = b_lo
-            tn = s.period_s or dt   # sized on the servo's period where declared
-            kc = 2.0 * b_s / tn
-            sp = full * (tn / s.ramp_time_s if tn < s.ramp_time_s else 1.0)   # the ramp step at that period
-            if q > 0.0:
-                # one count of the spring within one ramp step (item 0), the step at the
-                # same period
-                if kc > sp / q:
-                    kc = sp / q
-            if s.period_s is not None and self._kc > 0.0 and kc > self._kc:
+            if kc_p is not None:
+                # period and force limit declared: K_c and s derived with the settings
+                kc, sp = kc_p, sp_p
+            else:
+                tn = period or dt   # sized on the servo's period where declared
+                kc = 2.0 * b_s / tn
+                sp = full * (tn / ramp_time if tn < ramp_time else 1.0)   # the ramp step at that period
+                if q > 0.0:
+                    # one count of the spring within one ramp step (item 0), the step at the
+                    # same period
+                    if kc > sp / q:
+                        kc = sp / q
+            if period is not None and self._kc > 0.0 and kc > self._kc:
                 # and never stiffer while compressed: a rise of K_c stores (dK/2) d^2 that
                 # no motion paid for (a full scale that grows without a declared limit, a
                 # setting assigned mid-contact); without a declared period the spring
@@ -300,9 +297,12 @@ class PassivityController:
         self._kf = kf
         self._kc = kc if spring > 0.0 else 0.0   # 0 where the spring is 0 (out of the wall, no damping, at its anchor)
         c_m = dt * dt / (2.0 * m) if m else 0.0
-        e0 = full * h
-        if e0 > s.energy_allowance_j:
-            e0 = s.energy_allowance_j
+        if e0_p is not None:
+            e0 = e0_p
+        else:
+            e0 = full * h
+            if e0 > allowance:
+                e0 = allowance
         if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
             self.energy_j = u if u > 0.0 else 0.0
             self._sent = 0.0
@@ -344,7 +344,7 @@ class PassivityController:
             if hold > hi:
                 hi = hold
         a = hi
-        if s.energy_bound and hi > lo:
+        if energy_bound and hi > lo:
             # the arm's motion over the next tick: the last two ticks' mean, its reading
             # error (half a count; Delta/n after n > 2 ticks at one reading), 1.5 x the
             # largest change of motion of the window carried through the ramp (with what a

@@ -8,7 +8,7 @@ import functools
 import math
 import warnings
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -103,6 +103,9 @@ class ControllerSettings:
     energy_bound: bool = True
     energy_allowance_j: float = ENERGY_ALLOWANCE_J
     period_s: float | None = None
+    #: the tick's constants derived from the fields (:meth:`_derive_tick_constants`), None
+    #: until derived and again after a field is set (not a field: per instance, not compared)
+    _tick_consts: ClassVar["tuple | None"] = None
 
     def __setattr__(self, name: str, value: Any) -> None:
         # every field is checked where it is set, at construction (the dataclass's
@@ -112,6 +115,49 @@ class ControllerSettings:
         # would fail there, on a device that is driving
         check = _FIELDS.get(name)
         object.__setattr__(self, name, value if check is None else check(value, name))
+        # and the constants the tick derives from the fields are derived again (on the
+        # controller's next step): a field assigned takes effect at once, as before
+        object.__setattr__(self, "_tick_consts", None)
+
+    def _derive_tick_constants(self) -> tuple:
+        """The constants :meth:`PassivityController.step` derives from these fields, derived
+        once per configuration (kept until a field is set, which drops them) instead of on
+        every tick, each by the same operations in the same order as the step made them
+        (bit-identical): ``(q, h, c2, b_lo, b_s, m, fm, ramp_time_s, period_s, allowance,
+        energy_bound, kc_p, sp_p, e0_p)``: the resolution in m and its half, two counts in
+        mm, the trusted damping and the spring's damping (N*s/m), the trusted mass (kg or
+        None), the force limit, and, where both ``period_s`` and ``max_force_n`` are
+        declared, the spring's stiffness cap and ramp step at that period and the energy
+        allowance (else None: the step derives them from the tick's full scale and
+        period)."""
+        q = self.position_resolution_mm * 1e-3
+        h = 0.5 * q
+        c2 = 2.0 * self.position_resolution_mm
+        b_lo = self.measured_damping_ns_per_m
+        if b_lo is None:
+            b_lo = self.damping_trust * self.device_damping_ns_per_m
+        b_s = self.damping_trust * self.device_damping_ns_per_m
+        if b_s > b_lo:
+            b_s = b_lo
+        m = self.device_mass_kg
+        if m:
+            m *= self.mass_trust
+        fm = self.max_force_n
+        rt = self.ramp_time_s
+        tn = self.period_s
+        allowance = self.energy_allowance_j
+        kc_p = sp_p = e0_p = None
+        if tn is not None and fm is not None:
+            kc_p = 2.0 * b_s / tn
+            sp_p = fm * (tn / rt if tn < rt else 1.0)
+            if q > 0.0 and kc_p > sp_p / q:
+                kc_p = sp_p / q
+            e0_p = fm * h
+            if e0_p > allowance:
+                e0_p = allowance
+        c = (q, h, c2, b_lo, b_s, m, fm, rt, tn, allowance, self.energy_bound, kc_p, sp_p, e0_p)
+        object.__setattr__(self, "_tick_consts", c)
+        return c
 
     @classmethod
     def for_device(cls, device: Any, *, damping: Any = None, directory: Any = None) -> "ControllerSettings":
