@@ -37,7 +37,6 @@ from typing import Any
 import numpy as np
 
 from ..argcheck import flag, number
-from .actuators import SensedState
 from ..perception.dimensions import ChannelCommand
 from ..errors import ValidationError
 
@@ -328,16 +327,9 @@ class SafetyLayer:
                                 f = math.copysign(cap, f)
                 kmax = self._kmax
                 if kmax is not None:
-                    pen: Any
-                    if type(st) is SensedState:
-                        # the loop's states (exactly this class, whose penetration_mm is
-                        # -py): read from the float, not through the property's frame; a
-                        # subclass (the loop's contact-frame state) keeps its own property
-                        pen = -st.py
-                    else:
-                        pen = getattr(st, "penetration_mm", None)
-                        if pen is None:
-                            pen = -np.asarray(st.position_mm, float)[1]
+                    pen = getattr(st, "penetration_mm", None)
+                    if pen is None:
+                        pen = -np.asarray(st.position_mm, float)[1]
                     pen = float(pen)
                     if pen < 0.0:  # noqa: PLR1730 -- max(pen, 0.0) without the call; NaN and -0.0 pass as before
                         pen = 0.0
