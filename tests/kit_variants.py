@@ -1,7 +1,8 @@
 """Builders shared by the conformance-kit tests (``tests/testing``) and the scene tests
 (``tests/scene``): a force device that reports the force its motors give (and the same
 declaring its read-back the output), a voice coil whose output lags its drive, one-line
-constraints (``x >= bound``) whose bound and value a test supplies, correct or broken, and
+constraints (``x >= bound``) whose bound and value a test supplies, correct or broken, a
+correct solver (``GoodSolver``, which the broken solver variants subclass), and
 ``rules_of`` (the rules a kit result names).
 
 Importable as ``kit_variants`` through ``tests/conftest.py`` (the suite runs with
@@ -17,6 +18,7 @@ from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState, H
 from hapticsdk.errors import ValidationError
 from hapticsdk.perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
 from hapticsdk.perception.features import Feature
+from hapticsdk.solvers import Solver, SolverOutput
 
 #: the plugin API the test plugins are written for
 API = ">=1.2,<2"
@@ -159,3 +161,24 @@ def constraint(name: str, feature: str,
 def never(name: str = "never", feature: str = "kit.x") -> type[Constraint]:
     """``x >= x + 1``: no feature vector satisfies it."""
     return constraint(name, feature, lambda x: (x + 1.0, x), "x >= x + 1: never")
+
+
+class GoodSolver(Solver):
+    """A correct solver: seeded random search of formula (6), shrinking around the best."""
+    hapticsdk_api = API
+    name = "kit-results-solver"
+    default_options: ClassVar[dict[str, Any]] = {"n": 600, "rounds": 8}
+
+    def _solve(self, problem, rng, trace):
+        n, m = self.options["n"], problem.n_targets
+        lo, hi = problem.space.lower, problem.space.upper
+        best = np.repeat(((lo + hi) / 2)[None, :], m, axis=0)
+        width = hi - lo
+        for _ in range(self.options["rounds"]):
+            X = problem.clip(best[:, None, :] + (rng.random((m, n, len(lo))) - 0.5) * width)
+            X[:, 0, :] = best
+            f = problem.evaluate(X)
+            best = X[np.arange(m), np.argmin(f, axis=1)]
+            trace.record(n * m, f.min(axis=1))
+            width = width / 2
+        return SolverOutput(best, nfev=n * m * self.options["rounds"], nit=self.options["rounds"])

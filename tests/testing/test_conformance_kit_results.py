@@ -9,7 +9,7 @@ variant is caught by its rule; the correct ones conform."""
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 import pytest
@@ -20,7 +20,7 @@ from hapticsdk.solvers import SolveProblem, Solver, SolverOutput
 from hapticsdk.testing import check_model, check_solver
 from hapticsdk.testing.conformance import (ACTIVE_OPTIMUM, ACTIVE_TARGETS, RESPONSE_MIN, format_report,
                                            reference_problem)
-from kit_variants import API, rules_of
+from kit_variants import API, GoodSolver, rules_of
 
 
 # ---------------------------------------------------------------------------
@@ -140,27 +140,6 @@ def test_responds_names_the_flat_output():
 # ---------------------------------------------------------------------------
 # solvers
 # ---------------------------------------------------------------------------
-
-class GoodSolver(Solver):
-    """A correct solver: seeded random search of formula (6), shrinking around the best."""
-    hapticsdk_api = API
-    name = "kit-results-solver"
-    default_options: ClassVar[dict[str, Any]] = {"n": 600, "rounds": 8}
-
-    def _solve(self, problem, rng, trace):
-        n, m = self.options["n"], problem.n_targets
-        lo, hi = problem.space.lower, problem.space.upper
-        best = np.repeat(((lo + hi) / 2)[None, :], m, axis=0)
-        width = hi - lo
-        for _ in range(self.options["rounds"]):
-            X = problem.clip(best[:, None, :] + (rng.random((m, n, len(lo))) - 0.5) * width)
-            X[:, 0, :] = best
-            f = problem.evaluate(X)
-            best = X[np.arange(m), np.argmin(f, axis=1)]
-            trace.record(n * m, f.min(axis=1))
-            width = width / 2
-        return SolverOutput(best, nfev=n * m * self.options["rounds"], nit=self.options["rounds"])
-
 
 class _Overrides(GoodSolver):
     """Overrides the public ``solve`` and edits what the core returned with ``edit``."""

@@ -14,7 +14,8 @@ plugin-api-declared):
   instances, servo-loop, determinism, timing.
 * ``device`` (an actuator that senses): the actuator rules plus state (for a simulated
   device also: its clock advances as it is stepped, and its position changes as its
-  velocity says, within one declared encoder count).
+  velocity says, within one declared encoder count; the states it gave keep what they said
+  when read).
 * ``dimension``: class, features, roles-declared, constraints-vectorised,
   constraints-cost, constraints-feasible, model-match, renderer, renderer-commands,
   renderer-bad-input, determinism, timing.

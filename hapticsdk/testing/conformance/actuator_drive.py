@@ -267,11 +267,14 @@ def _assert_matches(act: Actuator, sent: ChannelCommand | None, rb: ChannelComma
 #: its half and its double (the realtime loop steps by the measured period)
 STATE_STEPS_S = (KIT_PERIOD_S, 0.5 * KIT_PERIOD_S, 2.0 * KIT_PERIOD_S)
 
-def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int
+def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int,
+                kept: list[tuple[int, Any, dict[str, np.ndarray]]] | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Drive an open simulated device with ``cmd`` for ``n_on`` steps, then stop it and
     step ``n_off`` more, reading the state before the first step and after each:
-    ``(dt (n,), t (n+1,), position (n+1, 3), velocity (n+1, 3))``."""
+    ``(dt (n,), t (n+1,), position (n+1, 3), velocity (n+1, 3))``, copies of what each
+    state said when it was read. ``kept``, when given, receives ``(reading, state, its
+    arrays as read)`` for every reading (:func:`_stale_states` compares them later)."""
     n = n_on + n_off
     dts = np.array([STATE_STEPS_S[i % len(STATE_STEPS_S)] for i in range(n)])
     ts, xs, vs = [], [], []
@@ -279,8 +282,13 @@ def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int
     def read() -> None:
         st = a.read_state()
         ts.append(float(st.t))
-        xs.append(np.asarray(st.position_mm, float).reshape(3))
-        vs.append(np.asarray(st.velocity_mm_s, float).reshape(3))
+        # copies: a state whose arrays the device keeps writing would otherwise show
+        # every reading as the last one (and still moving as its velocity says)
+        xs.append(np.array(st.position_mm, float).reshape(3))
+        vs.append(np.array(st.velocity_mm_s, float).reshape(3))
+        if kept is not None:
+            kept.append((len(ts) - 1, st, {k: np.array(getattr(st, k), float)
+                                           for k in ("position_mm", "velocity_mm_s", "force_n")}))
     read()
     t = 0.0
     for i in range(n):
@@ -292,6 +300,20 @@ def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int
         t += float(dts[i])
         read()
     return dts, np.array(ts), np.array(xs), np.array(vs)
+
+
+def _stale_states(kept: list[tuple[int, Any, dict[str, np.ndarray]]]) -> str | None:
+    """The first state of ``kept`` (:func:`_sensed_run`) whose arrays no longer say what
+    they said when it was read, as a message; None when every one still does."""
+    for i, st, said in kept:
+        for k, v in said.items():
+            now = np.asarray(getattr(st, k), float)
+            if not np.array_equal(now, v):
+                return (f"the state read at reading {i} of {len(kept)} now says {k} {now.tolist()}, but said "
+                        f"{v.tolist()} when it was read: read_state() hands out arrays the device goes on "
+                        f"writing (a state is a reading at its time t: a recording, a filter or the loop's "
+                        f"last reading keeps it); return copies or read-only arrays")
+    return None
 
 
 def _kinematics_error(dts: np.ndarray, xs: np.ndarray, vs: np.ndarray, q: float) -> str | None:

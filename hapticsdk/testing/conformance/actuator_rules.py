@@ -21,7 +21,7 @@ from .actuator_drive import (STALL_RUN_S, THREAD_GRACE_S, _Spy, _advance, _alter
                              _assert_rest, _drive, _drive_size, _edge_commands, _full_scale, _hold, _hold_both,
                              _in_servo_loop, _kinematics_error, _normal_commands, _over_limit_commands,
                              _reached_at_write, _reports_output, _rest_after, _sensed_run, _settle_ticks,
-                             _stalls, _startable_commands, _takes_option, _threads_left, _tol)
+                             _stale_states, _stalls, _startable_commands, _takes_option, _threads_left, _tol)
 from .runner import _Ctx, _run_rules
 from .timing import COMMAND_BUDGET, KIT_PERIOD_S, TIMING_CALLS, _fastest, _sim_advance
 from .values import _finite, _refuses
@@ -240,8 +240,11 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         with b:
             big = _startable_commands(b)[-1]
             n_on = _settle_ticks(b, ramp=True) + 100
-            dts, ts, xs, vs = _sensed_run(b, big, n_on, n_on)
+            kept: list[tuple[int, Any, dict[str, np.ndarray]]] = []
+            dts, ts, xs, vs = _sensed_run(b, big, n_on, n_on, kept)
             q = float(getattr(b, "encoder_resolution_mm", 0.0) or 0.0)
+        stale = _stale_states(kept)
+        assert stale is None, stale
         assert (np.diff(ts) >= 0).all(), "device time went backwards while stepped"
         assert ts[-1] > ts[0], (f"device time stayed at {ts[0]:g} s over {len(dts)} steps of "
                                 f"{float(np.sum(dts)):g} s in all (step(dt) advances simulated time)")

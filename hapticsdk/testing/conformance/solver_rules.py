@@ -146,6 +146,34 @@ def _judge_trace(res: Any, where: str) -> None:
          f"counts the evaluations so far, at most all of them)")
 
 
+def _problem_snapshot(problem: SolveProblem) -> dict[str, Any]:
+    """What a caller sets on a :class:`SolveProblem` (and may solve again with, or hand to
+    another solver), as copies: the targets, dimensions, fixed inputs, constraints (the
+    objects), penalty form and weight, tolerance, starting points, and the searched
+    features' names and bounds."""
+    return {"targets": np.array(problem.targets, float), "dimensions": tuple(problem.dimensions),
+            "fixed": dict(problem.fixed), "constraints": [id(c) for c in problem.constraints],
+            "penalty": problem.penalty, "penalty_weight": problem.penalty_weight, "tolerance": problem.tolerance,
+            "x0": None if problem.x0 is None else np.array(problem.x0, float),
+            "space": (tuple(problem.space.names), np.array(problem.space.lower, float),
+                      np.array(problem.space.upper, float))}
+
+
+def _problem_changes(before: Mapping[str, Any], after: Mapping[str, Any]) -> list[str]:
+    """The fields of :func:`_problem_snapshot` that differ between ``before`` and ``after``,
+    each as ``field: before -> after``."""
+    def same(a: Any, b: Any) -> bool:
+        if isinstance(a, tuple) and isinstance(b, tuple):
+            return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+        if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+            return a is not None and b is not None and np.array_equal(a, b)
+        return bool(a == b)
+
+    def short(v: Any) -> str:
+        return np.array2string(v, precision=4, threshold=6) if isinstance(v, np.ndarray) else repr(v)
+    return [f"{k}: {short(before[k])} -> {short(after[k])}" for k in before if not same(before[k], after[k])]
+
+
 def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
     def make() -> Solver:
         return ctx.obj(**dict(options))
@@ -161,6 +189,8 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
 
     # how many rows the model computed while each solve ran
     rows: dict[tuple[str, int], int] = {}
+    # what each solve changed in the problem it was handed (the caller's object)
+    changed: dict[tuple[str, int], list[str]] = {}
 
     def solve(targets: Any, seed: int) -> Any:
         k = key(targets, seed)
@@ -174,11 +204,13 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
                 counted[0] += len(X)
                 return predict(X)
             model._predict = counting  # type: ignore[method-assign]
+            before = _problem_snapshot(problem)
             try:
                 solved[k] = make().solve(problem, seed=seed)
             finally:
                 del model._predict
             rows[k] = counted[0]
+            changed[k] = _problem_changes(before, _problem_snapshot(problem))
         return solved[k]
 
     def at_x(targets: Any, seed: int) -> tuple[float, float, float]:
@@ -211,6 +243,20 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
                 assert own <= 0 or int(r["nfev"]) >= 1, \
                     (f"target {asked.tolist()}: nfev {r['nfev']!r}, but the model computed {own} "
                      f"rows for the solve (nfev counts the objective's evaluations)")
+                # each evaluation of the objective is a row the model computes (the problem
+                # is new to the solve, so nothing was computed for it before): a count above
+                # the rows is evaluations that never happened
+                assert int(r["nfev"]) <= max(own, 0), \
+                    (f"target {asked.tolist()}: nfev {r['nfev']!r}, but the model computed only {max(own, 0)} "
+                     f"rows for the solve besides the core's own evaluation of the answer (nfev counts the "
+                     f"objective's evaluations, each a row of the model; it cannot exceed them)")
+            # the problem is the caller's: solved again, or by another solver, it must be
+            # what the caller set (a solver's working copy is SolveProblem.with_targets' or
+            # its own)
+            assert not changed[k], \
+                (f"target {asked.tolist()}: solve() changed the problem it was handed ({'; '.join(changed[k])}): "
+                 f"the problem is the caller's, who may solve it again or with another solver; change a "
+                 f"copy (problem.with_targets(problem.targets) is a shallow one) instead")
         # what the trace of each says (after the totals: a total that is wrong is named as such)
         for asked, seed in ((np.array((0.4, 0.75)), 0), (np.array(ACTIVE_TARGETS), 0)):
             _judge_trace(solved[key(asked, seed)], f"target {asked.tolist()}")
@@ -257,6 +303,16 @@ def _solver_rules(ctx: _Ctx, options: Mapping[str, Any]) -> None:
         a = make().solve(reference_problem(T), seed=11)
         b = make().solve(reference_problem(T), seed=11)
         np.testing.assert_array_equal(a.x, b.x, err_msg="the same seed gave different answers for a batch of 2 targets")
+        # one instance solving again (a caller keeps a solver for a session): the same
+        # seed gives the same answer as the first solve, nothing carried over from it
+        one = make()
+        first = one.solve(reference_problem(), seed=11)
+        one.solve(reference_problem((0.6, 0.8)), seed=5)
+        again = one.solve(reference_problem(), seed=11)
+        np.testing.assert_array_equal(first.x, again.x,
+                                      err_msg=("one solver instance gave a different answer for the same problem and "
+                                               "seed after solving another (state kept between solves, e.g. a warm "
+                                               "start from the last answer); a seed must fix the answer"))
 
     def r_batch() -> None:
         T = np.array([[0.3, 0.7], [0.6, 0.8], [0.5, 0.75]])

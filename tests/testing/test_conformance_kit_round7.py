@@ -1,0 +1,158 @@
+"""Kit rules widened after round 7 of broken plugins, each broken variant passed by the
+kit before:
+
+* ``result`` (solver): a solver that changes the problem it was handed (raises its
+  penalty weight, widens its tolerance, leaves its answer on it as ``x0``), and one whose
+  ``nfev`` counts more evaluations than the model computed;
+* ``determinism`` (solver): one instance that carries something from one solve to the next
+  (a warm start from its last answer), so the same seed gives another answer the second
+  time;
+* ``state`` (device): a simulated device whose ``read_state()`` hands out the arrays it
+  goes on writing, so a state read earlier changes as the device moves (and the kit's own
+  kinematics check, which kept the arrays, saw every reading as the last one).
+
+The correct variants conform."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import numpy as np
+import pytest
+
+from hapticsdk.devices.actuators import DeviceState
+from hapticsdk.plugins import registry
+from hapticsdk.solvers import SolverOutput
+from hapticsdk.testing import check_device, check_solver
+from hapticsdk.testing.conformance import format_report
+from kit_variants import GoodSolver, OutputArm, rules_of
+
+
+# ---------------------------------------------------------------------------
+# solvers
+# ---------------------------------------------------------------------------
+
+class _PenaltyRaised(GoodSolver):
+    """Weighs the constraints ten times harder by setting ``penalty_weight`` on the
+    caller's problem (the answer is feasible, so its ``fun`` is as the kit computes it)."""
+
+    def _solve(self, problem, rng, trace):
+        problem.penalty_weight = 10.0
+        return super()._solve(problem, rng, trace)
+
+
+class _ToleranceWidened(GoodSolver):
+    """Widens the caller's tolerance to 0.05 'so that success means something'."""
+
+    def _solve(self, problem, rng, trace):
+        problem.tolerance = max(problem.tolerance, 0.05)
+        return super()._solve(problem, rng, trace)
+
+
+class _LeavesWarmStart(GoodSolver):
+    """Leaves its answer on the caller's problem as ``x0``, for the next solve to start from."""
+
+    def _solve(self, problem, rng, trace):
+        out = super()._solve(problem, rng, trace)
+        problem.x0 = np.array(out.x)
+        return out
+
+
+class _NfevInflated(GoodSolver):
+    """Reports nfev as evaluations times 1000 (a counter incremented per row of a
+    population that is already counted in rows)."""
+
+    def _solve(self, problem, rng, trace):
+        out = super()._solve(problem, rng, trace)
+        return SolverOutput(out.x, nfev=out.nfev * 1000, nit=out.nit)
+
+
+class _InstanceWarmStart(GoodSolver):
+    """Keeps its last answer on the instance and averages the next answer of the same
+    shape with it (a warm start): a second solve of one problem with one seed differs."""
+
+    def _solve(self, problem, rng, trace):
+        out = super()._solve(problem, rng, trace)
+        prev, self._prev = getattr(self, "_prev", None), out
+        if prev is not None and prev.x.shape == out.x.shape:
+            return SolverOutput(0.5 * (prev.x + out.x), nfev=out.nfev, nit=out.nit)
+        return out
+
+
+SOLVER_VARIANTS = {
+    "penalty-weight-raised": (_PenaltyRaised, "result", "penalty_weight: 1.0 -> 10.0"),
+    "tolerance-widened": (_ToleranceWidened, "result", "tolerance: 0.02 -> 0.05"),
+    "warm-start-left-on-problem": (_LeavesWarmStart, "result", "x0: None -> "),
+    "nfev-inflated": (_NfevInflated, "result", "but the model computed only"),
+    "instance-warm-start": (_InstanceWarmStart, "determinism", "one solver instance gave a different answer"),
+}
+
+
+@pytest.mark.parametrize("name", list(SOLVER_VARIANTS))
+def test_each_broken_solver_is_caught_by_its_rule(name):
+    cls, rule, why = SOLVER_VARIANTS[name]
+    v = check_solver(cls)
+    assert rules_of(v) == {rule}, format_report(v)
+    assert why in format_report(v)
+
+
+def test_a_solver_that_works_on_a_copy_of_the_problem_conforms():
+    """Changing a copy (``with_targets``: a shallow one, its own attributes) is fine."""
+    class OwnCopy(GoodSolver):
+        def _solve(self, problem, rng, trace):
+            mine = problem.with_targets(problem.targets)
+            mine.penalty_weight = 1.0
+            return super()._solve(mine, rng, trace)
+    v = check_solver(OwnCopy)
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("name", ["amortised", "de", "de-scipy", "ga", "ga-polish", "polish"])
+def test_first_party_solvers_keep_the_problem_nfev_and_seed(name):
+    if name not in registry("solver"):
+        pytest.skip(f"solver {name!r} not installed (hapticsdk-ga)")
+    v = check_solver(name)
+    assert v == [], format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# devices
+# ---------------------------------------------------------------------------
+
+class _MovingArm(OutputArm):
+    """A correct simulated arm that moves: velocity 10 mm/s per N of its force along y,
+    position integrating it; each state is a copy of its arrays."""
+    name: ClassVar[str] = "kit-arm-moving"
+
+    def _open(self) -> None:
+        super()._open()
+        self.pos, self.vel = np.zeros(3), np.zeros(3)
+
+    def _step(self, dt: float) -> None:
+        super()._step(dt)
+        self.vel[1] = 10.0 * self.f
+        self.pos += self.vel * dt
+
+    def _read_state(self) -> DeviceState:
+        return DeviceState(t=self.t, position_mm=self.pos.copy(), velocity_mm_s=self.vel.copy(),
+                           force_n=np.array([0.0, self.f, 0.0]))
+
+
+class _AliasedState(_MovingArm):
+    """Hands out its working arrays: a state read earlier changes as the arm moves."""
+    name: ClassVar[str] = "kit-arm-aliased-state"
+
+    def _read_state(self) -> DeviceState:
+        return DeviceState(t=self.t, position_mm=self.pos, velocity_mm_s=self.vel,
+                           force_n=np.array([0.0, self.f, 0.0]))
+
+
+def test_a_moving_device_with_its_own_state_arrays_conforms():
+    v = check_device(_MovingArm)
+    assert v == [], format_report(v)
+
+
+def test_a_state_that_changes_after_it_was_read_is_caught():
+    v = check_device(_AliasedState)
+    assert rules_of(v) == {"state"}, format_report(v)
+    assert "read_state() hands out arrays the device goes on writing" in format_report(v)
