@@ -2,8 +2,8 @@
 (``tests/scene``): a force device that reports the force its motors give (and the same
 declaring its read-back the output), a voice coil whose output lags its drive, one-line
 constraints (``x >= bound``) whose bound and value a test supplies, correct or broken, a
-correct solver (``GoodSolver``, which the broken solver variants subclass), and
-``rules_of`` (the rules a kit result names).
+correct solver (``GoodSolver``, which the broken solver variants subclass), a model of a
+coil dimension (``BuzzModel``), and ``rules_of`` (the rules a kit result names).
 
 Importable as ``kit_variants`` through ``tests/conftest.py`` (the suite runs with
 ``--import-mode=importlib``, which puts no test folder on ``sys.path``)."""
@@ -17,7 +17,8 @@ import numpy as np
 from hapticsdk.devices.actuators import Actuator, ActuatorLimits, DeviceState, HapticDevice
 from hapticsdk.errors import ValidationError
 from hapticsdk.perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, RoleSpec
-from hapticsdk.perception.features import Feature
+from hapticsdk.perception.features import Feature, FeatureSpace
+from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.solvers import Solver, SolverOutput
 
 #: the plugin API the test plugins are written for
@@ -182,3 +183,19 @@ class GoodSolver(Solver):
             trace.record(n * m, f.min(axis=1))
             width = width / 2
         return SolverOutput(best, nfev=n * m * self.options["rounds"], nit=self.options["rounds"])
+
+
+class BuzzModel(PerceptionModel):
+    """A correct model of kit-buzz (a dimension of :func:`coil_dimension` with feature
+    ``kit.b``); ``_out`` is what broken variants change."""
+    hapticsdk_api = API
+
+    def __init__(self) -> None:
+        space = FeatureSpace((Feature("kit.b", "1", 0.0, 1.0),))
+        super().__init__(space.names, ("kit-buzz",), feature_space=space, name="kit-buzz-model")
+
+    def _predict(self, X):
+        return self._out(X, 0.5 * (1 + np.tanh(X[:, :1] - 0.5)))
+
+    def _out(self, X, y):
+        return y

@@ -30,13 +30,11 @@ import numpy as np
 import pytest
 
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
-from hapticsdk.perception.features import Feature, FeatureSpace
 from hapticsdk.perception.materials import load_library
-from hapticsdk.perception.models import PerceptionModel
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_dimension, check_model
 from hapticsdk.testing.conformance import format_report
-from kit_variants import API, LAG_COIL_MAX_V, LagCoil, coil_dimension, registered, rules_of
+from kit_variants import API, LAG_COIL_MAX_V, BuzzModel, LagCoil, coil_dimension, registered, rules_of
 
 Amp = Callable[[Any, float, int], float]
 
@@ -63,21 +61,6 @@ def _good(inp: Any, x: float, k: int) -> float:
 _Coil.amp = staticmethod(_good)
 #: a correct dimension: vibration on the lagging coil, its amplitude saturating with depth
 BuzzDim = coil_dimension("kit-buzz", "kit.b", _Coil, "kit-buzz-model")
-
-
-class BuzzModel(PerceptionModel):
-    """A correct model of kit-buzz; ``_out`` is what broken variants change."""
-    hapticsdk_api = API
-
-    def __init__(self) -> None:
-        space = FeatureSpace((Feature("kit.b", "1", 0.0, 1.0),))
-        super().__init__(space.names, ("kit-buzz",), feature_space=space, name="kit-buzz-model")
-
-    def _predict(self, X):
-        return self._out(X, 0.5 * (1 + np.tanh(X[:, :1] - 0.5)))
-
-    def _out(self, X, y):
-        return y
 
 
 @pytest.fixture

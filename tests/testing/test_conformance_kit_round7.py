@@ -7,6 +7,11 @@ kit before:
 * ``determinism`` (solver): one instance that carries something from one solve to the next
   (a warm start from its last answer), so the same seed gives another answer the second
   time;
+* ``determinism`` (dimension): renderers that share state (a contact timer in a class
+  attribute), so two renderers alive at once (a scene with two materials of the
+  dimension) give other commands than each alone;
+* ``renderer-commands`` (dimension): an amplitude a unit slip makes 1000 x its default
+  actuator's ``max_amplitude`` (mV sent as V), which the safety layer clamps;
 * ``state`` (device): a simulated device whose ``read_state()`` hands out the arrays it
   goes on writing, so a state read earlier changes as the device moves (and the kit's own
   kinematics check, which kept the arrays, saw every reading as the last one).
@@ -21,11 +26,13 @@ import numpy as np
 import pytest
 
 from hapticsdk.devices.actuators import DeviceState
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.plugins import registry
 from hapticsdk.solvers import SolverOutput
-from hapticsdk.testing import check_device, check_solver
+from hapticsdk.testing import check_device, check_dimension, check_solver
 from hapticsdk.testing.conformance import format_report
-from kit_variants import GoodSolver, OutputArm, rules_of
+from kit_variants import (LAG_COIL_MAX_V, BuzzModel, GoodSolver, LagCoil, OutputArm, coil_dimension, registered,
+                          rules_of)
 
 
 # ---------------------------------------------------------------------------
@@ -156,3 +163,78 @@ def test_a_state_that_changes_after_it_was_read_is_caught():
     v = check_device(_AliasedState)
     assert rules_of(v) == {"state"}, format_report(v)
     assert "read_state() hands out arrays the device goes on writing" in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# dimensions
+# ---------------------------------------------------------------------------
+
+class _Onset(DimensionRenderer):
+    """A correct renderer: 100 Hz on the lagging coil, its amplitude rising with depth and
+    doubled at the onset of a contact, the extra decaying over 30 ms of contact (timed by
+    ``dt``); 0 out of contact."""
+    roles = ("buzz",)
+
+    def __init__(self, x: float) -> None:
+        self.x, self.clock = x, [0.0]
+
+    def tick(self, inp):
+        if not inp.in_contact:
+            self.clock[0] = 0.0
+            return [ChannelCommand("buzz", frequency_hz=100.0, amplitude=0.0)]
+        self.clock[0] += inp.dt
+        a = 0.25 * LAG_COIL_MAX_V * (0.2 + 0.8 * self.x) * min(1.0, abs(inp.penetration_mm))
+        return [ChannelCommand("buzz", frequency_hz=100.0,
+                               amplitude=a * self.scale * (1.0 + float(np.exp(-self.clock[0] / 0.03))))]
+
+    scale: ClassVar[float] = 1.0
+
+
+class _SharedOnset(_Onset):
+    """Keeps its contact timer in a class attribute (a list meant as a default, changed in
+    place): two renderers alive at once advance and reset one timer."""
+    clock_shared: ClassVar[list[float]] = [0.0]
+
+    def __init__(self, x: float) -> None:
+        super().__init__(x)
+        self.clock = self.clock_shared
+
+
+class _MilliVolt(_Onset):
+    """Computes its amplitude in mV and sends it as the V its role declares."""
+    scale: ClassVar[float] = 1000.0
+
+
+def _dim(renderer):
+    return coil_dimension("kit-buzz", "kit.b", renderer, "kit-buzz-model")
+
+
+@pytest.fixture
+def installed():
+    yield from registered([(registry("actuator"), "kit-lag-coil", LagCoil),
+                           (registry("dimension"), "kit-buzz", _dim(_Onset)),
+                           (registry("model"), "kit-buzz-model", BuzzModel)])
+
+
+def test_the_correct_onset_renderer_conforms(installed):
+    v = check_dimension(_dim(_Onset))
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("renderer, rule, why", [
+    (_SharedOnset, "determinism", "two renderers ticked in turn"),
+    (_MilliVolt, "renderer-commands", "more than 10 x the 2 V its actuator declares"),
+], ids=["shared-contact-timer", "amplitude-in-mV"])
+def test_each_broken_dimension_is_caught_by_its_rule(installed, renderer, rule, why):
+    v = check_dimension(_dim(renderer))
+    assert rules_of(v) == {rule}, format_report(v)
+    assert why in format_report(v)
+
+
+@pytest.mark.parametrize("name", ["hardness", "roughness", "warmth"])
+def test_first_party_dimensions_keep_renderers_apart_and_amplitudes_plausible(name):
+    if name not in registry("dimension"):
+        pytest.skip(f"dimension {name!r} not installed")
+    from hapticsdk.testing import check
+    v = check("dimension", name, rules=["determinism", "renderer-commands"])
+    assert v == [], format_report(v)

@@ -30,7 +30,10 @@ from .values import _finite, _refuses
 
 #: a renderer's force in contact may exceed its default actuator's max_force_n (which
 #: the safety layer clamps) up to this factor at penetrations <= 3 mm; a multiple of it
-#: is a unit or formula error, not a stiff material
+#: is a unit or formula error, not a stiff material. The same factor bounds an amplitude
+#: in any other unit against the actuator's max_amplitude in that unit (a decade: a
+#: renderer may drive into saturation on purpose, while a slip of a unit prefix, mV for
+#: V, is a factor of 1000)
 FORCE_PLAUSIBILITY_FACTOR = 10.0
 
 
@@ -54,6 +57,24 @@ def _force_limit(d: Any, role: str, spec: Any) -> tuple[str | None, float | None
         return field, lim.max_force_n if lim.max_force_n is not None else \
             (lim.max_amplitude if is_force_unit(lim.amplitude_unit) else None)
     return field, lim.max_amplitude if is_force_unit(lim.amplitude_unit) else lim.max_force_n
+
+
+def _amplitude_limit(d: Any, role: str, spec: Any) -> float | None:
+    """The largest amplitude the default actuator of ``role`` declares (``max_amplitude``)
+    when the role's amplitude is not a force (:func:`_force_limit` judges those) and is in
+    the actuator's amplitude unit; None otherwise (no amplitude, no default actuator, or
+    units the kit cannot compare)."""
+    from ...perception.features import same_unit
+    from ...plugins import registry
+    from ...units import is_force_unit
+    unit = dict(getattr(spec, "fields", {}) or {}).get("amplitude")
+    name = d.default_actuators.get(role)
+    if unit is None or is_force_unit(unit) or name is None or name not in registry("actuator"):
+        return None
+    lim = getattr(registry("actuator").load(name), "limits", ActuatorLimits())
+    if lim.max_amplitude is None or not lim.amplitude_unit or not same_unit(unit, lim.amplitude_unit):
+        return None
+    return float(lim.max_amplitude)
 
 
 #: rows of the constraint-cost rule's batch, and the limit: one ``penalty`` batch may take
@@ -208,6 +229,27 @@ def _commands_of(d: PerceptionDimension, feats: Mapping[str, float]) -> list[Any
     """The commands of a new renderer of ``feats`` over the kit's ticks, as values."""
     r = d.renderer(dict(feats))
     return [[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)] for i in _tick_inputs()]
+
+
+def _commands_side_by_side(d: PerceptionDimension, a: Mapping[str, float], b: Mapping[str, float]
+                           ) -> tuple[list[Any], list[Any]]:
+    """The commands (as :func:`_commands_of`) of two new renderers, of ``a`` and of ``b``,
+    both alive and ticked in turn over the kit's ticks, as the servo loop ticks the
+    renderers of a scene."""
+    ra, rb = d.renderer(dict(a)), d.renderer(dict(b))
+    out: tuple[list[Any], list[Any]] = ([], [])
+    for i in _tick_inputs():
+        for r, o in ((ra, out[0]), (rb, out[1])):
+            o.append([(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)])
+    return out
+
+
+def _first_difference(got: list[Any], want: list[Any]) -> str:
+    """Where two lists of per-tick commands (:func:`_commands_of`) first differ, as text."""
+    for k, (g, w) in enumerate(zip(got, want)):
+        if g != w:
+            return f"{g} at tick {k + 1} against {w}"
+    return f"{len(got)} ticks against {len(want)}"
 
 
 #: epochs (s) the dimension ``determinism`` rule sets the process clocks to while a
@@ -572,6 +614,17 @@ def _dimension_rules(ctx: _Ctx) -> None:
         d = holder["d"]
         outs = [_commands_of(d, mid()) for _ in range(2)]
         assert outs[0] == outs[1], "two renderers of the same features gave different commands"
+        # two renderers alive at once (a scene with two materials of this dimension: the loop
+        # ticks each every tick): each gives what a renderer of its features gives alone
+        other = {f.name: float(f.lower) for f in d.features}
+        both = _commands_side_by_side(d, mid(), other)
+        alone = (outs[0], _commands_of(d, other))
+        for which, feats, got, want in (("first", mid(), both[0], alone[0]), ("second", other, both[1], alone[1])):
+            assert got == want, \
+                (f"two renderers ticked in turn (a scene with two materials of this dimension) gave other "
+                 f"commands than each alone: the {which}, at {dict(feats)}, gave {_first_difference(got, want)}; "
+                 f"renderers share state (a class attribute or module global changed in place, e.g. a filter "
+                 f"state or a contact timer): keep state on the instance")
         for e in CLOCK_EPOCHS_S:
             assert _commands_at_epoch(d, mid(), e) == outs[0], \
                 (f"the same features and ticks gave other commands with the process clocks (time.time, "
@@ -661,6 +714,7 @@ def _dimension_rules(ctx: _Ctx) -> None:
         seen: set[str] = set()
         specs = declared_roles(d)
         forces = {role: _force_limit(d, role, specs.get(role)) for role in r.roles}
+        amps = {role: _amplitude_limit(d, role, specs.get(role)) for role in r.roles}
         for inp in _tick_inputs():
             if not inp.in_contact:
                 continue
@@ -677,6 +731,16 @@ def _dimension_rules(ctx: _Ctx) -> None:
                     assert abs(v) <= FORCE_PLAUSIBILITY_FACTOR * fmax, \
                         (f"commands {v:g} N on role {c.role!r} ({field}) at {inp.penetration_mm:g} mm, more than "
                          f"{FORCE_PLAUSIBILITY_FACTOR:g} x the {fmax:g} N its actuator declares")
+                # an amplitude in another unit (V, a temperature, a drive share) by the same
+                # factor: the safety layer clamps it, and a multiple of it is a unit error (mV
+                # for V), which flattens the amplitude at the actuator's maximum
+                amax = amps.get(c.role)
+                if c.amplitude is not None and amax is not None and inp.penetration_mm <= 3.0:
+                    unit = dict(spec.fields)["amplitude"] if spec is not None else ""
+                    assert abs(c.amplitude) <= FORCE_PLAUSIBILITY_FACTOR * amax, \
+                        (f"commands amplitude {c.amplitude:g} {unit} on role {c.role!r} at {inp.penetration_mm:g} mm, "
+                         f"more than {FORCE_PLAUSIBILITY_FACTOR:g} x the {amax:g} {unit} its actuator declares "
+                         f"(max_amplitude): a unit error? The safety layer clamps it to {amax:g} {unit}")
         silent = [ro for ro in r.roles if ro not in seen]
         assert not silent, f"the renderer sends nothing on role(s) {silent} while in contact"
         _assert_follows_features(d, mid())
