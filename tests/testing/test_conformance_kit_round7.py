@@ -12,6 +12,9 @@ kit before:
   dimension) give other commands than each alone;
 * ``renderer-commands`` (dimension): an amplitude a unit slip makes 1000 x its default
   actuator's ``max_amplitude`` (mV sent as V), which the safety layer clamps;
+* ``hookimpls``: ``hapticsdk_dimension_info`` describing an installed dimension with
+  features other than those it declares (a feature renamed in the dimension and not in
+  the hook);
 * ``state`` (device): a simulated device whose ``read_state()`` hands out the arrays it
   goes on writing, so a state read earlier changes as the device moves (and the kit's own
   kinematics check, which kept the arrays, saw every reading as the last one).
@@ -237,4 +240,53 @@ def test_first_party_dimensions_keep_renderers_apart_and_amplitudes_plausible(na
         pytest.skip(f"dimension {name!r} not installed")
     from hapticsdk.testing import check
     v = check("dimension", name, rules=["determinism", "renderer-commands"])
+    assert v == [], format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# hook modules
+# ---------------------------------------------------------------------------
+
+def _info_hooks(answer):
+    import types
+    from hapticsdk.hookspecs import hookimpl
+    from kit_variants import API
+    mod = types.ModuleType("kit_hooks_info")
+    mod.hapticsdk_api = API   # type: ignore[attr-defined]
+    impl = hookimpl(lambda: answer)
+    impl.__name__ = "hapticsdk_dimension_info"
+    mod.hapticsdk_dimension_info = impl   # type: ignore[attr-defined]
+    return mod
+
+
+def _hardness_features():
+    if "hardness" not in registry("dimension"):
+        pytest.skip("the hardness dimension is not installed")
+    return [f.name for f in registry("dimension").load("hardness")().features]
+
+
+def test_dimension_info_with_the_installed_features_conforms():
+    feats = _hardness_features()
+    from hapticsdk.testing import check
+    entry = {"name": "hardness", "description": "d", "features": list(reversed(feats))}   # order is free
+    assert check("hooks", _info_hooks([entry])) == []
+    # a dimension that is not installed is not judged
+    assert check("hooks", _info_hooks([{"name": "kit-absent", "description": "d", "features": ["a"]}])) == []
+
+
+def test_dimension_info_that_lies_about_an_installed_dimension_is_caught():
+    feats = _hardness_features()
+    from hapticsdk.testing import check
+    entry = {"name": "hardness", "description": "d", "features": feats[:-1] + ["stiffness"]}
+    v = check("hooks", _info_hooks([entry]))
+    assert rules_of(v) == {"hookimpls"}, format_report(v)
+    assert "but the installed dimension declares" in format_report(v)
+
+
+@pytest.mark.parametrize("name", ["hardness", "warmth"])
+def test_the_shipped_hook_modules_conform(name):
+    if name not in registry("hooks"):
+        pytest.skip(f"hook module {name!r} not installed")
+    from hapticsdk.testing import check
+    v = check("hooks", name)
     assert v == [], format_report(v)

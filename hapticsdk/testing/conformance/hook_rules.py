@@ -50,7 +50,8 @@ def _check_materials(answer: Any) -> None:
 
 def _check_dimension_info(answer: Any) -> None:
     """``hapticsdk_dimension_info``' answer: a list of ``{"name", "description",
-    "features": [names]}``."""
+    "features": [names]}``, the features of an installed dimension of that name the ones it
+    declares."""
     assert isinstance(answer, list), \
         f"hapticsdk_dimension_info returned {type(answer).__name__}, not a list of dicts"
     for e in answer:
@@ -58,6 +59,21 @@ def _check_dimension_info(answer: Any) -> None:
               and isinstance(e.get("features"), list) and all(isinstance(f, str) for f in e["features"]))
         assert ok, (f"hapticsdk_dimension_info returned {e!r}: each entry is "
                     f'{{"name": str, "description": str, "features": [str, ...]}}')
+    # the hook describes dimensions without importing them: where the dimension it names is
+    # installed, its features are the ones that dimension declares (a caller builds feature
+    # vectors, forms or scene entries from them); a dimension not installed is not judged
+    from ...plugins import registry
+    reg = registry("dimension")
+    for e in answer:
+        if e["name"] not in reg:
+            continue
+        obj = reg.load(e["name"])
+        dim = obj() if isinstance(obj, type) else obj
+        declared = [f.name for f in getattr(dim, "features", ())]
+        assert sorted(e["features"]) == sorted(declared), \
+            (f"hapticsdk_dimension_info describes dimension {e['name']!r} with features {e['features']}, but the "
+             f"installed dimension declares {declared}: the hook stands for the dimension without importing it, "
+             f"so its callers build features from it; list the features the dimension declares")
 
 
 def _hooks_rules(ctx: _Ctx) -> None:
