@@ -17,7 +17,9 @@ kit before:
   the hook);
 * ``state`` (device): a simulated device whose ``read_state()`` hands out the arrays it
   goes on writing, so a state read earlier changes as the device moves (and the kit's own
-  kinematics check, which kept the arrays, saw every reading as the last one).
+  kinematics check, which kept the arrays, saw every reading as the last one), and
+  simulated devices whose physics is shared between instances (a second instance moves
+  when the first is driven).
 
 The correct variants conform."""
 
@@ -155,6 +157,35 @@ class _AliasedState(_MovingArm):
     def _read_state(self) -> DeviceState:
         return DeviceState(t=self.t, position_mm=self.pos, velocity_mm_s=self.vel,
                            force_n=np.array([0.0, self.f, 0.0]))
+
+
+class _SharedPhysics(_MovingArm):
+    """Keeps its simulated motion in class-level arrays (reset by ``open()``): a second
+    instance open beside it moves when the first is driven."""
+    name: ClassVar[str] = "kit-arm-shared-physics"
+    _pos: ClassVar[np.ndarray] = np.zeros(3)
+    _vel: ClassVar[np.ndarray] = np.zeros(3)
+
+    def _open(self) -> None:
+        super()._open()
+        self._pos[:] = 0.0
+        self._vel[:] = 0.0
+        self.pos, self.vel = self._pos, self._vel
+
+
+def test_devices_sharing_their_physics_are_caught():
+    v = check_device(_SharedPhysics)
+    assert rules_of(v) == {"state"}, format_report(v)
+    assert "a second instance senses the first's motion" in format_report(v)
+
+
+@pytest.mark.parametrize("name", ["omni-virtual", "playback-virtual", "probe-virtual"])
+def test_first_party_simulated_devices_keep_their_states_and_physics_apart(name):
+    if name not in registry("actuator"):
+        pytest.skip(f"device {name!r} not installed")
+    from hapticsdk.testing import check
+    v = check("device", name, rules=["state"])
+    assert v == [] and "state" not in v.notes, format_report(v)
 
 
 def test_a_moving_device_with_its_own_state_arrays_conforms():

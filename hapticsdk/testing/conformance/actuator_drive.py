@@ -302,6 +302,37 @@ def _sensed_run(a: HapticDevice, cmd: ChannelCommand, n_on: int, n_off: int,
     return dts, np.array(ts), np.array(xs), np.array(vs)
 
 
+def _second_states(make: Any, cmd: ChannelCommand, n: int, drive_first: bool) -> list[list[float]] | str:
+    """Two new instances of a simulated device open at once, both stepped for ``n`` kit
+    ticks, the first sent ``cmd`` every tick when ``drive_first`` (else nothing): the
+    second's state (t, position, velocity) after each step, as plain floats. A text (why)
+    when the second instance cannot open while the first is open (one device, one port)."""
+    a, b = make(), make()
+    with a:
+        try:
+            b.open()
+        except Exception as exc:   # noqa: BLE001 - one device, one port: nothing to compare
+            b.close()
+            return f"{type(exc).__name__}: {exc}"
+        try:
+            out: list[list[float]] = []
+            t = 0.0
+            for _ in range(n):
+                if drive_first:
+                    a.command(cmd, now=t)
+                _advance(a)
+                step = getattr(b, "step", None)
+                if callable(step):
+                    step(KIT_PERIOD_S)
+                t += KIT_PERIOD_S
+                st = b.read_state()
+                out.append([float(st.t)] + np.asarray(st.position_mm, float).tolist()
+                           + np.asarray(st.velocity_mm_s, float).tolist())
+            return out
+        finally:
+            b.close()
+
+
 def _stale_states(kept: list[tuple[int, Any, dict[str, np.ndarray]]]) -> str | None:
     """The first state of ``kept`` (:func:`_sensed_run`) whose arrays no longer say what
     they said when it was read, as a message; None when every one still does."""

@@ -21,7 +21,8 @@ from .actuator_drive import (STALL_RUN_S, THREAD_GRACE_S, _Spy, _advance, _alter
                              _assert_rest, _drive, _drive_size, _edge_commands, _full_scale, _hold, _hold_both,
                              _in_servo_loop, _kinematics_error, _normal_commands, _over_limit_commands,
                              _reached_at_write, _reports_output, _rest_after, _sensed_run, _settle_ticks,
-                             _stale_states, _stalls, _startable_commands, _takes_option, _threads_left, _tol)
+                             _second_states, _stale_states, _stalls, _startable_commands, _takes_option,
+                             _threads_left, _tol)
 from .runner import _Ctx, _run_rules
 from .timing import COMMAND_BUDGET, KIT_PERIOD_S, TIMING_CALLS, _fastest, _sim_advance
 from .values import _finite, _refuses
@@ -250,6 +251,28 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                                 f"{float(np.sum(dts)):g} s in all (step(dt) advances simulated time)")
         why = _kinematics_error(np.diff(ts), xs, vs, q)
         assert why is None, why
+        # two simulated devices open at once keep separate physics: what the second senses
+        # does not change when the first is driven (compared with two runs where the first
+        # is left alone, which must agree with each other: a simulation that is not
+        # reproducible cannot be compared, and is noted)
+        idle = [_second_states(ctx.make, big, n_on, False) for _ in range(2)]
+        if any(isinstance(r, str) for r in idle):
+            ctx.note("state", f"a second instance could not open while the first was open "
+                     f"({next(r for r in idle if isinstance(r, str))}); the states of two instances were not compared")
+            return
+        if idle[0] != idle[1]:
+            ctx.note("state", "the sensed state of a second instance differs between two identical runs (a "
+                     "simulation that is not reproducible); the states of two instances were not compared")
+            return
+        driven = _second_states(ctx.make, big, n_on, True)
+        alone = cast(list, idle[0])
+        if isinstance(driven, list) and driven != alone:
+            at = next(i for i, (x, y) in enumerate(zip(driven, alone)) if x != y)
+            raise AssertionError(
+                f"a second instance senses the first's motion: stepped beside a first instance that was driven with "
+                f"{big}, its state after step {at + 1} is {driven[at]} (t, position, velocity), beside an idle one "
+                f"{alone[at]}: the two share their physics (a class attribute or module global); keep the "
+                f"simulated state on the instance")
 
     def r_template() -> None:
         over = [m for m in ("open", "close", "command", "stop", "read_back")
