@@ -250,10 +250,13 @@ _CHI2_95_HALF = 1.9207294103470618  # 0.5 * chi2.ppf(0.95, df=1)
 def _loglik(mu: np.ndarray, sigma: np.ndarray, k: np.ndarray, n: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Binomial log-likelihood summed over springs; broadcasts ``mu``/``sigma`` grids."""
     from scipy import special
-    z = (k - mu[..., None]) / sigma[..., None]
-    lp = special.log_ndtr(z)
-    lq = special.log_ndtr(-z)
-    return np.sum(y * lp + (n - y) * lq, axis=-1)
+    # springs near the float range overflow here (inf, then 0 x inf = NaN): the caller
+    # names a likelihood that is not finite anywhere, so numpy's warnings add nothing
+    with np.errstate(over="ignore", invalid="ignore"):
+        z = (k - mu[..., None]) / sigma[..., None]
+        lp = special.log_ndtr(z)
+        lq = special.log_ndtr(-z)
+        return np.sum(y * lp + (n - y) * lq, axis=-1)
 
 
 def fit_psychometric(springs_n_per_mm: Any, stiffer: Any, *, frequency_hz: float = float("nan"),
