@@ -34,6 +34,19 @@ def is_number(value: Any) -> bool:
     return isinstance(value, numbers.Real)
 
 
+def finite_float(value: Any) -> float | None:
+    """``value`` as a float when it is a finite int or float (not a bool), else None: NaN,
+    an infinity, an int beyond the float range (JSON can hold one; float() of it raises
+    OverflowError) and any other type give None. For readers of JSON numbers."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        v = float(value)
+    except OverflowError:
+        return None
+    return v if math.isfinite(v) else None
+
+
 def check_number(value: Any, field: str, *, minimum: float | None = None, maximum: float | None = None,
                  exclusive_minimum: float | None = None, exclusive_maximum: float | None = None,
                  unit: str = "", error: type[ValidationError] = ValidationError) -> float:

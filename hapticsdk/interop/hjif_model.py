@@ -48,6 +48,7 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
+from ..checks import finite_float
 from ..errors import FormatError, ValidationError
 from ..schemas_io import json_depth
 from .hjif_versions import VersionReport, normalise
@@ -492,13 +493,9 @@ def _get(obj: Mapping[str, Any], key: str, path: str, kind: str, *, required: bo
         want = {"int": "an integer", "number": "a number", "str": "a string", "list": "an array",
                 "dict": "an object"}[kind]
         raise FormatError(f"must be {want}, got {_type_name(v)}", field=where)
-    if kind == "number":
-        try:   # an int beyond the float range (JSON reads 1 followed by 400 zeros as one) overflows
-            finite = math.isfinite(v)
-        except OverflowError:
-            finite = False
-        if not finite:
-            raise FormatError("must be finite", field=where)
+    # (an int beyond the float range, which JSON can hold, is not finite either)
+    if kind == "number" and finite_float(v) is None:
+        raise FormatError("must be finite", field=where)
     return v
 
 

@@ -50,10 +50,10 @@ with a :class:`~hapticsdk.errors.FormatError` naming the JSON path.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..checks import finite_float
 from ..errors import FormatError
 from .budget import MAX_REORDER_KEYFRAMES, ContentBudgetError
 
@@ -255,16 +255,7 @@ def _valid_keyframe(k: dict[str, Any]) -> bool:
 
 
 # ---------------------------------------------------------------- the reference's reading
-def _num(v: Any) -> float | None:
-    """``v`` as a float when it is a finite JSON number, else ``None`` (an int beyond the
-    float range, which float() refuses with an OverflowError, is not one)."""
-    if not isinstance(v, (int, float)) or isinstance(v, bool):
-        return None
-    try:
-        f = float(v)
-    except OverflowError:
-        return None
-    return f if math.isfinite(f) else None
+_num = finite_float   # a finite JSON number as a float, else None
 
 
 def _ref_line(t0: float, a0: float, t1: float, a1: float, x: float) -> float:

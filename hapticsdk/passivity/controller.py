@@ -7,7 +7,7 @@ import math
 from typing import Any
 
 from .plan import _HIST, _affordable_scalar
-from .settings import ControllerSettings
+from .settings import ControllerSettings, _spring_stiffness_and_step
 
 _INF = math.inf
 
@@ -241,14 +241,8 @@ class PassivityController:
                 # period and force limit declared: K_c and s derived with the settings
                 kc, sp = kc_p, sp_p
             else:
-                tn = period or dt   # sized on the servo's period where declared
-                kc = 2.0 * b_s / tn
-                sp = full * (tn / ramp_time if tn < ramp_time else 1.0)   # the ramp step at that period
-                if q > 0.0:
-                    # one count of the spring within one ramp step (item 0), the step at the
-                    # same period
-                    if kc > sp / q:
-                        kc = sp / q
+                # sized on the servo's period where declared; the ramp step at that period
+                kc, sp = _spring_stiffness_and_step(b_s, period or dt, full, ramp_time, q)
             if period is not None and self._kc > 0.0 and kc > self._kc:
                 # and never stiffer while compressed: a rise of K_c stores (dK/2) d^2 that
                 # no motion paid for (a full scale that grows without a declared limit, a

@@ -133,28 +133,17 @@ class ControllerSettings:
         q = self.position_resolution_mm * 1e-3
         h = 0.5 * q
         c2 = 2.0 * self.position_resolution_mm
-        b_lo = self.measured_damping_ns_per_m
-        if b_lo is None:
-            b_lo = self.damping_trust * self.device_damping_ns_per_m
-        b_s = self.damping_trust * self.device_damping_ns_per_m
-        if b_s > b_lo:
-            b_s = b_lo
-        m = self.device_mass_kg
-        if m:
-            m *= self.mass_trust
+        b_lo = float(self.trusted_damping_ns_per_m())
+        b_s = float(self.spring_damping_ns_per_m(None, b_lo))
+        m = self.trusted_mass_kg()
         fm = self.max_force_n
         rt = self.ramp_time_s
         tn = self.period_s
         allowance = self.energy_allowance_j
         kc_p = sp_p = e0_p = None
         if tn is not None and fm is not None:
-            kc_p = 2.0 * b_s / tn
-            sp_p = fm * (tn / rt if tn < rt else 1.0)
-            if q > 0.0 and kc_p > sp_p / q:
-                kc_p = sp_p / q
-            e0_p = fm * h
-            if e0_p > allowance:
-                e0_p = allowance
+            kc_p, sp_p = _spring_stiffness_and_step(b_s, tn, fm, rt, q)
+            e0_p = self.energy_budget_j(tn)
         c = (q, h, c2, b_lo, b_s, m, fm, rt, tn, allowance, self.energy_bound, kc_p, sp_p, e0_p)
         object.__setattr__(self, "_tick_consts", c)
         return c
@@ -229,7 +218,21 @@ class ControllerSettings:
         of an allowance, capped by the energy a contact may hand the user
         (docs/runtime.md, Passivity item 6)."""
         fs = self.max_force_n if self.max_force_n is not None else (full_scale_n or 0.0)
-        return min(fs * 0.5 * self.position_resolution_mm * 1e-3, self.energy_allowance_j)
+        # the controllers' own order of operations: F_max x (half the resolution in m)
+        return min(fs * (0.5 * (self.position_resolution_mm * 1e-3)), self.energy_allowance_j)
+
+
+def _spring_stiffness_and_step(b_s: float, period_s: float, full_scale_n: float, ramp_time_s: float,
+                              resolution_m: float) -> tuple[float, float]:
+    """``(K_c, s)`` of the Colgate spring at ``period_s`` (N/m, N per tick): ``K_c = 2 b_s /
+    T``, at most one ramp step ``s = F T / ramp_time`` (at most ``F``) per encoder count
+    (docs/runtime.md, Passivity item 0); the scalar controller's rule, derived once per
+    configuration where the period and the limit are declared, else on its tick."""
+    kc = 2.0 * b_s / period_s
+    sp = full_scale_n * (period_s / ramp_time_s if period_s < ramp_time_s else 1.0)
+    if resolution_m > 0.0 and kc > sp / resolution_m:
+        kc = sp / resolution_m
+    return kc, sp
 
 
 def _nonneg(value: Any, name: str) -> float:

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from hapticsdk.checks import finite_float
 from hapticsdk.errors import HapticSDKError, ModelError
 from hapticsdk.perception.features import FeatureSpace
 from hapticsdk.perception.models import MLPModel, PerceptionModel
@@ -76,16 +77,7 @@ def _number(value: Any, key: str, where: str, *, positive: bool = False) -> floa
     return v
 
 
-def _finite(value: Any) -> float | None:
-    """``value`` as a float when it is a finite int or float (not a bool; an int beyond the
-    float range, which JSON metadata can hold, is not finite), else None."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        return None
-    try:
-        v = float(value)
-    except OverflowError:
-        return None
-    return v if np.isfinite(v) else None
+_finite = finite_float   # a finite int or float as a float (JSON metadata), else None
 
 
 #: layout of the cached model descriptions (bumped when it changes)
