@@ -22,8 +22,8 @@ Controllers per cell: ``plain``, ``popc``, ``eb``, ``vc`` (:mod:`hapticsdk.sim.p
 the declared damping at face value), ``sdk`` (:class:`~hapticsdk.passivity.PassivityController`
 with the damping measured hands off on the cell's own arm, :func:`measure_cell_damping`:
 the fit's lower bound trusted and the fit as the device's damping; the declared
-resolution and force limit) and ``sdk_declared`` (the same controller with the declared
-damping only, trusted at ``damping_trust``).
+resolution and force limit) and ``sdk_declared`` (the same controller on a device never
+calibrated: ``declared_damping_trust`` of the declared damping, none by default).
 
 Per cell and controller: ``energy_to_user_j`` (max over time of the energy given to the
 finger), ``delivered_ratio`` (over the contact ticks, i.e. reading inside the wall:
@@ -63,7 +63,7 @@ import numpy as np
 
 from ..passivity import ControllerSettings, controller_commit_batch, controller_state_batch, controller_step_batch
 from ..passivity.batch import _colgate_n_per_m
-from ..passivity.settings import DAMPING_TRUST
+from ..passivity.settings import DECLARED_DAMPING_TRUST
 from ..sim import peers as P
 from ..sim.arm import ArmParams
 from ..sim.finger import FINGERS, FingerParams
@@ -72,7 +72,8 @@ from ..sim.plant import PlantBatch
 CONTROLLERS = (*P.PEERS, "sdk", "sdk_declared")
 #: The SDK controller's lanes: ``sdk`` credits the damping measured hands off on the
 #: cell's own arm (:mod:`hapticsdk.calibration.damping`), ``sdk_declared`` only the share
-#: ``damping_trust`` of the declared damping (a device never calibrated).
+#: ``declared_damping_trust`` of the declared damping (a device never calibrated; none by
+#: default).
 SDK_LANES = ("sdk", "sdk_declared")
 PASSIVE_PEERS = ("popc", "eb", "vc")
 KINDS = ("press_hold", "tap", "bumpy_slide", "plain_slide", "creep", "knots")
@@ -252,7 +253,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     sdk = np.isin(kind, [CONTROLLERS.index(k) for k in SDK_LANES])
     s = settings or ControllerSettings()
     # the damping each sdk lane credits, and the device damping its spring takes half of:
-    # sdk, the fit's lower bound and the fit; sdk_declared, the declared share and the declaration
+    # sdk, the fit's lower bound and the fit; sdk_declared, the declared share (none by default) and the declaration
     b_tr = np.asarray(s.trusted_damping_ns_per_m(bd), float) * np.ones(rows.size)
     bd_ctrl = bd
     if "sdk" in controllers:
@@ -414,7 +415,8 @@ def _damping_summary(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
             "cells_trusted_above_true": sum(d["trusted_damping_ns_per_m"] > b for d, b, _ in cal),
             "calibrations_failed": sum(not d["success"] for d, _, _ in cal),
             "median_trusted_over_true": float(np.median([p[0] for p in pos])) if pos else float("nan"),
-            "median_declared_share_over_true": float(np.median([p[1] for p in pos])) * DAMPING_TRUST
+            "median_declared_over_true": float(np.median([p[1] for p in pos])) if pos else float("nan"),
+            "median_declared_share_over_true": float(np.median([p[1] for p in pos])) * DECLARED_DAMPING_TRUST
             if pos else float("nan")}
 
 

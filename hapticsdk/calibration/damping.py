@@ -1,5 +1,5 @@
 """The arm's damping, measured hands off: a lower bound the stiff-wall controller may
-credit in place of a share of the declared damping (docs/runtime.md, Passivity,
+credit in place of the declared damping, which it does not credit by default (docs/runtime.md, Passivity,
 "Measured damping").
 
 Nobody holds the stylus. The arm is driven by a force doublet pair (``+F, -F, -F, +F``,

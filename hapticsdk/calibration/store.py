@@ -13,7 +13,7 @@ file in the directory is considered; its ``kind`` and ``serial`` fields decide.
 with that kind and serial; a file with that kind and no serial (``"serial": null``,
 any device); the default (voice coil: the paper's formula (7); piezo: the ``default``
 the caller passes, e.g. a plugin's generated table; damping: none, the controller then
-credits a share of the declared damping). The answer says which was used,
+credits none of the declared damping by default). The answer says which was used,
 for ``hapticsdk doctor``'s "calibrations in use".
 """
 
@@ -250,8 +250,8 @@ class LoadedCalibration:
         """Human-readable provenance (file path or default, and the calibration's source)."""
         if self.calibration is None:
             if self.kind == "damping":
-                return ("none (no damping measured for this serial: the stiff-wall controller credits half "
-                        "the declared damping)")
+                return ("none (no damping measured for this serial: the stiff-wall controller credits none of "
+                        "the declared damping; measure it hands off with hapticsdk calibrate damping)")
             return "none (no calibration file and no default)"
         if self.path is None:
             return f"default, no calibration file saved: {self.calibration.source}"

@@ -167,7 +167,7 @@ def _lanes_text(s: dict[str, Any], n: int) -> str:
     cal = s.get("damping_calibration", {})
     return (f"\n  (sdk: the damping measured hands off on each cell's arm, its bound above the true damping in "
             f"{cal.get('cells_trusted_above_true', 'n/a')}/{cal.get('cells_calibrated', n)} cells, median "
-            f"{cal.get('median_trusted_over_true', float('nan')):.3f} of it; sdk_declared: half the declared damping, "
+            f"{cal.get('median_trusted_over_true', float('nan')):.3f} of it; sdk_declared: the default share of the declared damping, "
             f"median {cal.get('median_declared_share_over_true', float('nan')):.3f} of it)\n"
             f"sdk_declared: energy within {s['energy_bound_j'] * 1e3:g} mJ in {d['sdk_energy_within_bound']}/{n}; never pulls in {d['sdk_no_pull']}/{n}; "
             f"steps within the ramp in {d['sdk_step_within_ramp']}/{n} (rises in {d['sdk_rise_within_ramp']}/{n}; "

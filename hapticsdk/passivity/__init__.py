@@ -54,11 +54,11 @@ from .margin import (PASSIVE, STABLE_BY_ASSUMPTION, classify_wall, critical_stif
                      mass_correction, passivity_margin, spectral_radius)
 from .observers import naive_observer_energy, zoh_observer_energy
 from .plan import _HIST, _SCALES, _affordable_scalar, _ramp_sum, affordable_force, plan_cost_j  # noqa: F401
-from .settings import (DAMPING_TRUST, DEPRECATED_SETTINGS, ENERGY_ALLOWANCE_J, MASS_TRUST, RAMP_TIME_S, ControllerSettings,
+from .settings import (DAMPING_TRUST, DECLARED_DAMPING_TRUST, DEPRECATED_SETTINGS, ENERGY_ALLOWANCE_J, MASS_TRUST, RAMP_TIME_S, ControllerSettings,
                        cap_stiffness_n_per_mm, colgate_stiffness_n_per_mm)
 
 __all__ = ["PASSIVE", "STABLE_BY_ASSUMPTION", "mass_correction", "passivity_margin", "critical_stiffness",
-           "classify_wall", "spectral_radius", "critical_stiffness_eig", "RAMP_TIME_S", "DAMPING_TRUST", "MASS_TRUST",
+           "classify_wall", "spectral_radius", "critical_stiffness_eig", "RAMP_TIME_S", "DAMPING_TRUST", "DECLARED_DAMPING_TRUST", "MASS_TRUST",
            "ENERGY_ALLOWANCE_J", "ControllerSettings", "DEPRECATED_SETTINGS", "cap_stiffness_n_per_mm",
            "colgate_stiffness_n_per_mm", "plan_cost_j", "affordable_force", "PassivityController",
            "controller_state_batch", "controller_step_batch", "controller_commit_batch", "zoh_observer_energy",

@@ -52,7 +52,7 @@ class PassivityController:
     ``dt``; with the period declared, ``K_c`` never rises while the spring is
     compressed), ``b_s = min(b_lo, damping_trust x device damping)``: ``b_lo`` the trusted
     damping (the measured lower bound where the settings carry one, else
-    ``damping_trust x declared damping``), the device damping the declared one or, after
+    ``declared_damping_trust x declared damping``, none by default), the device damping the declared one or, after
     a hands-off measurement, the fitted one. So the spring is passive under the
     zero-order hold for the trusted damping (Colgate & Schenkel's ``b > K T / 2``), and
     with a measured damping it sits at half Colgate's limit of the fit, which leaves the

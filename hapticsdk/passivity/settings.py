@@ -19,10 +19,20 @@ from .margin import _check_nonneg
 #: Ramp time (s) of a full-scale force change: a change spread over at least 5 ms is
 #: free of clicks (reference goal 11, the same bound as the vibration gate's ramp).
 RAMP_TIME_S = 5.0e-3
-#: Share of the declared device damping the controller credits: a declared damping is
-#: taken as known within a factor of two (the stated uncertainty of a declaration, the
-#: 0.5x-2x band the randomised benchmark draws), so the true damping is at least half of it.
+#: Share of the device's damping the Colgate spring takes, ``b_s = min(b_lo, DAMPING_TRUST
+#: x b_dev)``: a damping is known within a factor of two (a fit's spread, the stated
+#: uncertainty of a declaration, the 0.5x-2x band the randomised benchmark draws), so the
+#: true damping is at least half of it; the other half pays the encoder's terms
+#: (docs/runtime.md, Passivity items 0 and 2). Also the share of a declaration a caller
+#: may choose to credit (``declared_damping_trust=DAMPING_TRUST``).
 DAMPING_TRUST = 0.5
+#: Share of a declared, unmeasured damping the controller credits: none. A declaration is
+#: a number somebody wrote, not a measurement of the arm; one of 0.5 N s/m on an arm with
+#: none turns every credited joule into energy for the hand (up to 110 mJ over seed 1's
+#: drawn cells with half of it credited, docs/runtime.md, Passivity item 2). The damping
+#: is credited as far as it is measured hands off (``measured_damping_ns_per_m``,
+#: :mod:`hapticsdk.calibration.damping`).
+DECLARED_DAMPING_TRUST = 0.0
 #: Share of the declared apparent mass the controller takes as the arm's: a declared mass
 #: is taken as known within a factor of two, as the damping is (the apparent mass of a
 #: linkage changes over its workspace and with the grip, and a hand-written declaration can
@@ -49,15 +59,21 @@ class ControllerSettings:
     Attributes:
         device_damping_ns_per_m: physical viscous damping of the device (N*s/m): the
             declared one, or the fitted one after a hands-off measurement
-            (:meth:`for_device` with a damping calibration). Only ``damping_trust`` times
-            it is credited, or ``measured_damping_ns_per_m`` where set; the Colgate spring
-            takes at most ``damping_trust`` times it.
-        damping_trust: share of the declared damping taken as a lower bound of the true
-            damping (:data:`DAMPING_TRUST`, 1/2: a declaration is trusted to a factor 2).
+            (:meth:`for_device` with a damping calibration). ``measured_damping_ns_per_m``
+            is credited where set, else ``declared_damping_trust`` times it (none by
+            default); the Colgate spring takes at most ``damping_trust`` times it.
+        damping_trust: the Colgate spring's share of the device's damping
+            (:data:`DAMPING_TRUST`, 1/2: a damping is known to a factor 2, and the rest
+            pays the encoder's terms).
+        declared_damping_trust: share of the declared damping credited where none was
+            measured (:data:`DECLARED_DAMPING_TRUST`, 0: a declaration is not a
+            measurement). ``DAMPING_TRUST`` credits half of it, as 0.2.0 did: a
+            declaration more than twice the true damping then hands the user energy.
         measured_damping_ns_per_m: a lower bound of the true damping (N*s/m) measured on
             this device, hands off (:func:`hapticsdk.calibration.damping.measure_damping`,
-            its ``trusted_damping_ns_per_m``). None (the default): ``damping_trust`` times
-            the declared damping is credited; otherwise this is credited instead.
+            its ``trusted_damping_ns_per_m``). None (the default):
+            ``declared_damping_trust`` times the declared damping is credited; otherwise
+            this is credited instead.
         position_resolution_mm: encoder resolution Delta (mm); 0 = exact positions.
         max_force_n: force limit of the device (N), the full scale of the ramp. None:
             the largest of the wall's forces and the outputs so far is the full scale.
@@ -94,6 +110,7 @@ class ControllerSettings:
 
     device_damping_ns_per_m: float = 0.0
     damping_trust: float = DAMPING_TRUST
+    declared_damping_trust: float = DECLARED_DAMPING_TRUST
     position_resolution_mm: float = 0.0
     measured_damping_ns_per_m: float | None = None
     max_force_n: float | None = None
@@ -162,7 +179,8 @@ class ControllerSettings:
           ``"damping"`` calibration saved for exactly that serial in the calibration
           directory (``directory``, default :func:`hapticsdk.calibration.calibration_dir`);
           a file for any device (no serial) is not used: a damping belongs to one arm;
-        * else none: ``damping_trust`` times the declared damping is credited."""
+        * else none: ``declared_damping_trust`` times the declared damping is credited
+          (none by default)."""
         def num(v: Any) -> float | None:
             try:
                 f = float(v)
@@ -179,12 +197,12 @@ class ControllerSettings:
 
     def trusted_damping_ns_per_m(self, declared_ns_per_m: Any = None) -> Any:
         """The damping the controller credits (N*s/m): the measured lower bound where one is
-        set, else ``damping_trust`` times the declared damping (``declared_ns_per_m``, a
-        number or an array, overrides the settings' declaration)."""
+        set, else ``declared_damping_trust`` times the declared damping (none by default;
+        ``declared_ns_per_m``, a number or an array, overrides the settings' declaration)."""
         if self.measured_damping_ns_per_m is not None:
             return self.measured_damping_ns_per_m
         b = self.device_damping_ns_per_m if declared_ns_per_m is None else declared_ns_per_m
-        return self.damping_trust * b
+        return self.declared_damping_trust * b
 
     def trusted_mass_kg(self, declared_kg: Any = None) -> Any:
         """The arm's mass the plan's free-arm terms use (kg): ``mass_trust`` times the
@@ -263,6 +281,7 @@ def _positive_share(value: Any, name: str) -> float:
 _FIELDS = {
     "device_damping_ns_per_m": _nonneg,
     "damping_trust": _share,
+    "declared_damping_trust": _share,
     "position_resolution_mm": _nonneg,
     "measured_damping_ns_per_m": _nonneg_or_none,
     # the plan's free-arm terms divide by the mass: 0, a negative or a NaN mass would

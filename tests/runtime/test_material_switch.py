@@ -243,7 +243,10 @@ def test_live_benchmark_reports_the_switch_figures():
     assert sw["max_force_step_n"] == max(sw["soft_to_stiff_step_n"], sw["stiff_to_soft_step_n"])
     assert max(sw["energy_j"], sw["energy_off_j"], sw["energy_stiff_to_soft_j"]) <= ENERGY_TOL_J
     assert sw["energy_cross_fade_off_j"] > 10 * ENERGY_TOL_J
-    assert 0 < sw["energy_back_after_switch_j"] < sw["energy_put_in_j"] < sw["energy_back_after_cross_fade_j"]
+    # the passive switch hands back less than the finger put in, and less than the
+    # cross-fade does (with the controller on, which bounds what the cross-fade adds)
+    assert 0 < sw["energy_back_after_switch_j"] < sw["energy_put_in_j"]
+    assert sw["energy_back_after_switch_j"] < sw["energy_back_after_cross_fade_j"]
 
 
 def test_switches_of_an_untouched_object_do_not_pile_up():

@@ -19,9 +19,11 @@ Properties (docs/runtime.md, Passivity, items 0 and 1; "What 'by construction' c
   ``U + (Delta/2) |X|`` on every tick, ``X`` the extra held over the last interval
   (summation by parts: the reading's error is at most ``Delta/2``). For any motion and
   any force the safety layer lets through.
+* **A declared damping, its defaults**: none of it is credited, so any declaration on
+  an arm with any true damping from none up to it keeps the undamped bound above.
 * **Damping, exact readings** (the controller told a count of 0 or of 0.001-0.2 mm, the
-  readings without error): with the damping as declared (the true one anywhere from
-  the half the controller trusts up to the declaration) or as measured (the true one at
+  readings without error): with the damping as declared and credited at half by the
+  caller's choice (the true one anywhere from that half up to the declaration) or as measured (the true one at
   least the measurement's lower bound and equal to the fit), the spring and the extra
   share the damper, and the whole energy is
   at most ``U`` on every tick (the spring's own encoder term of item 0 is 0 here: exact
@@ -45,7 +47,7 @@ import pytest
 hyp = pytest.importorskip("hypothesis", reason="hypothesis (the test extra) is not installed")
 from hypothesis import example, given, settings, strategies as st  # noqa: E402
 
-from hapticsdk.passivity import (ControllerSettings, PassivityController, controller_commit_batch,  # noqa: E402
+from hapticsdk.passivity import (DAMPING_TRUST, ControllerSettings, PassivityController, controller_commit_batch,  # noqa: E402
                                  controller_state_batch, controller_step_batch)
 
 
@@ -202,11 +204,27 @@ _ANCHORED = {"res": 0.0, "T": math.exp(-7.0), "K": 1.0, "fmax": None, "mass": No
 @example(_ANCHORED, 1.0, 0.5, False)
 @example(_ANCHORED, 1.0, 0.5, True)
 def test_with_the_declared_damping_the_book_bounds_the_whole_energy_of_any_motion(case, b, share, batch):
-    """The true damping anywhere in the band the controller trusts a declaration for:
-    from half the declared value (``DAMPING_TRUST``) up to the declared value."""
-    cs = _settings(case, device_damping_ns_per_m=b)
+    """A caller who credits a declaration (``declared_damping_trust=DAMPING_TRUST``), the
+    true damping anywhere in the band that share is safe for: from half the declared value
+    up to the declared value."""
+    cs = _settings(case, device_damping_ns_per_m=b, declared_damping_trust=DAMPING_TRUST)
     rows = _run(case, cs, share * b, batch)
     _assert_bound(rows, 0.0)
+
+
+@settings(max_examples=120, deadline=None, derandomize=True, database=None)
+@given(_motion(exact=False), _lu(0.01, 5.0), st.one_of(st.just(0.0), st.floats(0.0, 1.0)), st.booleans())
+@example(_ENTER, 0.5, 0.0, False)
+@example(_ENTER, 0.5, 0.0, True)
+def test_any_declared_damping_leaves_the_bound_of_an_undamped_arm(case, b_decl, share, batch):
+    """With its defaults the controller credits none of a declared damping (nothing
+    measured): a declaration anywhere from 0.01 to 5 N s/m on an arm whose true damping
+    is anywhere from none to the declaration (the issue's 0.5 declared on an arm with
+    none) keeps the undamped arm's bound, ``U + (Delta/2)|X|``, for any motion. A damper
+    only takes energy, so the true damping enters the sum as what it is."""
+    cs = _settings(case, device_damping_ns_per_m=b_decl)
+    rows = _run(case, cs, share * b_decl, batch)
+    _assert_bound(rows, 0.5 * case["res"] * 1e-3)
 
 
 @settings(max_examples=120, deadline=None, derandomize=True, database=None)
@@ -305,8 +323,8 @@ def test_a_wall_rendered_in_full_reports_no_active_tick():
     """``active_ticks`` counts the ticks below the wall's force, ``withheld_n_ticks`` their
     shortfall: a wall under the Colgate spring of the trusted damping (0.2 N/mm against
     2 x 0.25 / 1 ms = 0.5 N/mm) is the spring alone, sent in full, and reports neither."""
-    cs = ControllerSettings(device_damping_ns_per_m=0.5, position_resolution_mm=0.0, max_force_n=3.3,
-                            device_mass_kg=0.045)
+    cs = ControllerSettings(device_damping_ns_per_m=0.5, declared_damping_trust=DAMPING_TRUST,
+                            position_resolution_mm=0.0, max_force_n=3.3, device_mass_kg=0.045)
     c = PassivityController(cs)
     out = _press_and_release(c, K=0.2, T=1e-3)
     assert max(out) == pytest.approx(0.2, rel=1e-9)

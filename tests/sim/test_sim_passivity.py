@@ -10,7 +10,7 @@ from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 import pytest
 
-from hapticsdk.passivity import (PASSIVE, STABLE_BY_ASSUMPTION, ControllerSettings, PassivityController,
+from hapticsdk.passivity import (DAMPING_TRUST, PASSIVE, STABLE_BY_ASSUMPTION, ControllerSettings, PassivityController,
                                  classify_wall, controller_commit_batch, controller_state_batch,
                                  controller_step_batch, critical_stiffness, critical_stiffness_eig,
                                  colgate_stiffness_n_per_mm, naive_observer_energy, passivity_margin, spectral_radius,
@@ -297,8 +297,8 @@ def test_old_controller_settings_warn_and_are_ignored():
     returns the Colgate spring's stiffness, 2 b_lo / T (N/mm)."""
     from hapticsdk.passivity import cap_stiffness_n_per_mm, colgate_stiffness_n_per_mm
     with pytest.warns(DeprecationWarning, match="felt_force_n, stiffness_cap"):
-        old = ControllerSettings(stiffness_cap=False, felt_force_n=0.6, device_damping_ns_per_m=0.5)
-    assert old == ControllerSettings(device_damping_ns_per_m=0.5)
+        old = ControllerSettings(stiffness_cap=False, felt_force_n=0.6, declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=0.5)
+    assert old == ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=0.5)
     with pytest.warns(DeprecationWarning, match="no stiffness cap"):
         k = cap_stiffness_n_per_mm(old, 1e-3)
     assert k == colgate_stiffness_n_per_mm(old, 1e-3) == pytest.approx(2 * 0.25 / 1e-3 / 1000)
@@ -403,7 +403,7 @@ def test_with_a_declared_period_the_spring_keeps_its_stiffness_through_jitter(b,
     force sent is the spring's alone. The press comes in one count a tick at the declared
     period: the spring then rises by at most one ramp step a tick (its cap), so its anchor
     stays at the surface."""
-    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+    cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             period_s=T)
     b_s = cs.damping_trust * b
     k = min(2 * b_s / T, fmax * min(T / cs.ramp_time_s, 1.0) / (res * 1e-3))
@@ -426,7 +426,7 @@ def test_without_a_declared_limit_the_spring_does_not_stiffen_while_compressed()
     the wall's force (and so the full scale) keeps the stiffness it had, and after the
     release the next press starts from the grown full scale."""
     T, res, b, K = 2.5e-4, 0.17, 1.0, 1.0          # K: a 1 N/mm wall; the cap binds (2 b_s / T = 4 N/mm)
-    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, period_s=T, energy_bound=False)
+    cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, position_resolution_mm=res, period_s=T, energy_bound=False)
     pc = PassivityController(cs)
     pc.step(0.0, T, 0.0)
     pc.commit(0.0)
@@ -465,10 +465,10 @@ def test_a_settings_field_assigned_mid_run_takes_effect():
     next tick: the output obeys the new force limit, and equals that of a controller
     given the new settings object at the same tick (a controller that kept constants
     derived at construction would fail this)."""
-    a_set = ControllerSettings(device_damping_ns_per_m=0.4, position_resolution_mm=0.01, max_force_n=3.3,
+    a_set = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=0.4, position_resolution_mm=0.01, max_force_n=3.3,
                                device_mass_kg=0.05, energy_bound=False)
     a = PassivityController(a_set)
-    b = PassivityController(ControllerSettings(device_damping_ns_per_m=0.4, position_resolution_mm=0.01,
+    b = PassivityController(ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=0.4, position_resolution_mm=0.01,
                                                max_force_n=3.3, device_mass_kg=0.05, energy_bound=False))
     assert _hold_at(a, [1e-3] * 30) == _hold_at(b, [1e-3] * 30)
     assert a.step(-0.5, 1e-3, 50.0) == pytest.approx(3.3)   # held at the limit
@@ -476,7 +476,7 @@ def test_a_settings_field_assigned_mid_run_takes_effect():
     b.step(-0.5, 1e-3, 50.0)
     b.commit(3.3)
     a_set.max_force_n = 1.0
-    b.settings = ControllerSettings(device_damping_ns_per_m=0.4, position_resolution_mm=0.01, max_force_n=1.0,
+    b.settings = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=0.4, position_resolution_mm=0.01, max_force_n=1.0,
                                     device_mass_kg=0.05, energy_bound=False)
     fa, fb = _hold_at(a, [1e-3] * 30), _hold_at(b, [1e-3] * 30)
     assert fa == fb
@@ -494,7 +494,7 @@ def test_the_spring_and_the_ramp_follow_a_changing_period(dt1, dt2, depth):
     spring rose by (the whole force rises by at most ``s``), never below the last extra
     less ``s`` nor below 0, and the sum at most F_max."""
     b, fm = 0.3, 1000.0
-    pc = PassivityController(ControllerSettings(device_damping_ns_per_m=b, max_force_n=fm, energy_bound=False))
+    pc = PassivityController(ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, max_force_n=fm, energy_bound=False))
     pc.step(0.0, dt1, 0.0)   # the first call takes the position
     pc.commit(0.0)
     blo = b * pc.settings.damping_trust
@@ -524,7 +524,7 @@ def test_one_count_of_the_colgate_spring_is_within_one_ramp_step(b, dt, res, fma
     output is the spring alone; the scalar controller, the batch and
     ``colgate_stiffness_n_per_mm`` agree. The wall appears around the resting stylus, so
     the spring rises by at most one ramp step (its anchor moves in, item 0)."""
-    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+    cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             energy_allowance_j=0.0)
     s = fmax * min(dt / cs.ramp_time_s, 1.0)
     kc = min(2 * cs.damping_trust * b / dt, s / (res * 1e-3))   # N/m, from the derivation
@@ -549,7 +549,7 @@ def test_the_whole_force_rises_by_at_most_one_ramp_step(b, dt, res, fmax, k, see
     count per tick (the spring's cap then keeps its own rise within ``s``) the force sent
     rises by at most one ramp step ``s`` per tick, the spring included (item 3). Presses
     into walls from 0.05 to 50 N/mm, the energy bound on; the batch sends the same."""
-    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+    cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             device_mass_kg=0.05)
     s = fmax * min(dt / cs.ramp_time_s, 1.0)
     rng = np.random.default_rng(seed)
@@ -588,7 +588,7 @@ def test_where_the_extra_is_not_bounded_the_whole_force_falls_by_at_most_one_ram
     step a tick, the spring included, even where the wall's law falls faster; and on a
     faster release the extra rises above what it held only within the wall's law. With the energy bound off, so that the interval
     alone decides; the batch sends the same."""
-    cs = ControllerSettings(device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
+    cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             device_mass_kg=0.05, energy_bound=False)
     s = fmax * min(dt / cs.ramp_time_s, 1.0)
     pc = PassivityController(cs)
@@ -715,7 +715,7 @@ def test_a_reading_that_jumps_many_counts_raises_the_force_by_one_ramp_step_a_ti
     whatever rises above the spring is the extra's ramp (its energy bound is switched off
     to show the ramp alone)."""
     T = 1e-3
-    cs = ControllerSettings(device_damping_ns_per_m=1.0, position_resolution_mm=0.01, max_force_n=3.3,
+    cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=1.0, position_resolution_mm=0.01, max_force_n=3.3,
                             period_s=T, energy_bound=False)
     s = 3.3 * T / cs.ramp_time_s
     if batch:

@@ -92,7 +92,7 @@ def test_the_calibration_summary_counts_and_medians():
     the failed fits, and the medians over the cells with damping of the bound and of the
     declared share (``DAMPING_TRUST`` x declared), each over the true damping."""
     from hapticsdk.benchmarks.stability_random import _damping_summary
-    from hapticsdk.passivity.settings import DAMPING_TRUST
+    from hapticsdk.passivity.settings import DECLARED_DAMPING_TRUST
 
     def cal(trusted, true, declared, ok=True):
         return {"damping_calibration": {"trusted_damping_ns_per_m": trusted, "success": ok},
@@ -104,6 +104,7 @@ def test_the_calibration_summary_counts_and_medians():
     assert s["cells_trusted_above_true"] == 1
     assert s["calibrations_failed"] == 1
     assert s["median_trusted_over_true"] == 0.9            # 0.8, 1.2, 0.9 (the b = 0 cell has no ratio)
-    assert s["median_declared_share_over_true"] == 1.0 * DAMPING_TRUST   # 2.0, 1.0, 0.5
+    assert s["median_declared_over_true"] == 1.0                         # 2.0, 1.0, 0.5
+    assert s["median_declared_share_over_true"] == 1.0 * DECLARED_DAMPING_TRUST
     empty = _damping_summary([])
     assert empty["cells_calibrated"] == 0 and empty["median_trusted_over_true"] != empty["median_trusted_over_true"]
