@@ -472,6 +472,13 @@ class ServoLoop:
         if passivity_settings is None:
             # the energy bound from what the device declares (mass, damping, encoder, force limit)
             passivity_settings = ControllerSettings.for_device(device)
+            if (passivity_settings.measured_damping_ns_per_m is None
+                    and passivity_settings.trusted_damping_ns_per_m() == 0.0
+                    and passivity_settings.device_damping_ns_per_m > 0.0):
+                _log.info("%s declares a damping of %g N s/m, which the stiff-wall controller does not credit until "
+                          "it is measured hands off (hapticsdk calibrate damping; docs/runtime.md, Passivity item 2): "
+                          "a stiff wall is what the energy bound allows an undamped arm",
+                          getattr(device, "label", type(device).__name__), passivity_settings.device_damping_ns_per_m)
         if passivity_settings.period_s is None:
             # the Colgate spring sized on this loop's period, not on each measured one (a
             # jittery stiffness stores energy while compressed): a copy, the caller's

@@ -153,6 +153,27 @@ def test_an_impact_at_half_a_metre_a_second_stays_passive(kind, damping, source)
     assert r["delivered"] > 0, r
 
 
+
+def test_the_loop_says_when_a_declared_damping_is_not_credited(caplog):
+    """The default controller credits none of a declared damping; the loop says so once,
+    at INFO, naming the way to a measurement, and says nothing once one is given."""
+    import logging
+    from hapticsdk_hardness.omni import OmniVirtual
+
+    with caplog.at_level(logging.INFO, logger="hapticsdk.runtime.loop"):
+        dev = OmniVirtual(trajectory=PRESS, damping_ns_per_m=0.5)
+        ServoLoop(dev, [RawSpring(1.0)], {"force": dev}, period_s=1e-3)
+    said = [r.getMessage() for r in caplog.records if "not credit" in r.getMessage()]
+    assert len(said) == 1 and "0.5 N s/m" in said[0] and "calibrate damping" in said[0]
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="hapticsdk.runtime.loop"):
+        dev = OmniVirtual(trajectory=PRESS, damping_ns_per_m=0.5)
+        ServoLoop(dev, [RawSpring(1.0)], {"force": dev}, period_s=1e-3,
+                  passivity_settings=ControllerSettings.for_device(dev, damping=measured_damping(0.5)))
+        dev = OmniVirtual(trajectory=PRESS, damping_ns_per_m=0.0)
+        ServoLoop(dev, [RawSpring(1.0)], {"force": dev}, period_s=1e-3)
+    assert not [r for r in caplog.records if "not credit" in r.getMessage()]
+
 if __name__ == "__main__":
     print("simulated Omni (generated data), medium finger, 50 N/mm; energy to the finger (largest over the run), "
           "delivered = sum F / sum min(K pen, 3.3 N) over contact ticks, K_c the Colgate spring")
