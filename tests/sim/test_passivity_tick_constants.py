@@ -60,7 +60,8 @@ def test_a_field_set_mid_contact_takes_effect_at_the_next_step():
     assert max(_press(fresh, 400)) <= 1.0
 
 
-@pytest.mark.parametrize("kw", [{}, {"measured_damping_ns_per_m": 0.3}, {"device_mass_kg": None},
+@pytest.mark.parametrize("kw", [{}, {"measured_damping_ns_per_m": 0.3}, {"declared_damping_trust": 0.5},
+                                {"declared_damping_trust": 0.5, "position_resolution_mm": 0.0}, {"device_mass_kg": None},
                                 {"max_force_n": None}, {"period_s": None}, {"position_resolution_mm": 0.0},
                                 {"period_s": 0.01, "max_force_n": 3.3}, {"energy_allowance_j": 1e-6}])
 def test_derived_constants_equal_the_settings_own_formulas(kw):

@@ -319,6 +319,7 @@ def test_a_mass_that_would_make_held_force_free_is_refused(mass):
 _SETTING_FIELDS = {   # field: (what it accepts besides a finite number, its lower end, open, upper end)
     "device_damping_ns_per_m": (False, 0.0, False, None),
     "damping_trust": (False, 0.0, False, 1.0),
+    "declared_damping_trust": (False, 0.0, False, 1.0),
     "position_resolution_mm": (False, 0.0, False, None),
     "measured_damping_ns_per_m": (True, 0.0, False, None),
     "max_force_n": (True, 0.0, True, None),
