@@ -10,7 +10,7 @@ from hypothesis import settings as hsettings
 from hypothesis import strategies as st
 import pytest
 
-from hapticsdk.passivity import (DAMPING_TRUST, PASSIVE, STABLE_BY_ASSUMPTION, ControllerSettings, PassivityController,
+from hapticsdk.passivity import (DAMPING_TRUST, DECLARED_DAMPING_TRUST, PASSIVE, STABLE_BY_ASSUMPTION, ControllerSettings, PassivityController,
                                  classify_wall, controller_commit_batch, controller_state_batch,
                                  controller_step_batch, critical_stiffness, critical_stiffness_eig,
                                  colgate_stiffness_n_per_mm, naive_observer_energy, passivity_margin, spectral_radius,
@@ -150,7 +150,7 @@ def test_controller_keeps_an_active_wall_passive_without_steps(K):
     within the controller's allowance (0 here: E0 = s Delta / 2 = 0 without quantisation;
     1 nJ for float sums), no pull, no step beyond the extra's ramp (3.3 N x 1 ms / 5 ms)
     plus the Colgate spring's own change, K_c |dx| with K_c = 2 b_lo / T."""
-    st = ControllerSettings(device_damping_ns_per_m=0.5, **SET)
+    st = ControllerSettings(device_damping_ns_per_m=0.5, declared_damping_trust=DAMPING_TRUST, **SET)
     e, x, f = _press(K, on=True, settings=st)
     assert e <= 1e-9
     assert f.min() >= 0.0
@@ -161,7 +161,8 @@ def test_controller_keeps_an_active_wall_passive_without_steps(K):
 
 def test_active_wall_gives_energy_without_the_bound():
     """The same 2.3 x 2b/T press with the energy bound removed (ramp only) gives energy."""
-    st = ControllerSettings(device_damping_ns_per_m=0.5, energy_bound=False, **SET)
+    st = ControllerSettings(device_damping_ns_per_m=0.5, declared_damping_trust=DAMPING_TRUST, energy_bound=False,
+                            **SET)
     e, _, _ = _press(2.3, on=True, settings=st)
     assert e > 1e-5
 
@@ -169,7 +170,7 @@ def test_active_wall_gives_energy_without_the_bound():
 def test_passive_wall_is_rendered_through_the_controller():
     """0.5 x 2b/T (passive by Colgate with the trusted half of b = 1): after the ramp the
     held force equals the wall's own force on the reading (the bound never binds)."""
-    st = ControllerSettings(device_damping_ns_per_m=1.0, **SET)
+    st = ControllerSettings(device_damping_ns_per_m=1.0, declared_damping_trust=DAMPING_TRUST, **SET)
     _, x, f = _press(1.0, on=True, b=1.0, settings=st)
     tail = slice(-500, None)
     np.testing.assert_allclose(f[tail], np.maximum(-x[tail], 0.0) * 1.0, rtol=0.02, atol=1e-3)
@@ -223,9 +224,12 @@ def test_affordable_force_is_the_largest_within_budget():
             assert lo <= a <= hi
 
 
-def test_scalar_controller_equals_batch():
-    """The loop's scalar controller and the benchmark's batch run the same law."""
-    st = ControllerSettings(device_damping_ns_per_m=0.3, position_resolution_mm=0.055, **SET)
+@pytest.mark.parametrize("trust", [DECLARED_DAMPING_TRUST, DAMPING_TRUST], ids=["default", "credited"])
+def test_scalar_controller_equals_batch(trust):
+    """The loop's scalar controller and the benchmark's batch run the same law, with the
+    declaration credited (a spring) or not (the default: the extra alone)."""
+    st = ControllerSettings(device_damping_ns_per_m=0.3, position_resolution_mm=0.055, declared_damping_trust=trust,
+                            **SET)
     rng = np.random.default_rng(1)
     xs = np.round(np.cumsum(rng.normal(-0.01, 0.05, 2000)) / 0.055) * 0.055
     pc = PassivityController(st)
@@ -248,7 +252,7 @@ def test_a_wall_or_applied_force_that_is_not_a_number_is_taken_as_0_n_by_both_fo
     +inf or -inf, which the scalar one takes as 0 N: the same outputs and the same book
     on a press whose wall and device report such values now and then."""
     st = ControllerSettings(device_damping_ns_per_m=0.3, position_resolution_mm=0.055, device_mass_kg=0.05,
-                            max_force_n=fmax)
+                            max_force_n=fmax, declared_damping_trust=DAMPING_TRUST)
     rng = np.random.default_rng(2)
     xs = np.round(np.cumsum(rng.normal(-0.01, 0.05, 400)) / 0.055) * 0.055
     bad = (np.nan, np.inf, -np.inf)
