@@ -13,8 +13,19 @@ loopback port (:mod:`hapticsdk_hardness.audio_loopback`).
 What it measures, on the same capture clock: (1) frequency error, amplitude error
 against ``amplitude x full_scale``, command-to-sound and stop-to-silence times, over 8
 runs at random frequencies (20..1000 Hz) and amplitudes (0.1..1; seeded) -- the worst of
-each is printed; times through the loopback, and with the output's reported latency
-added (``dac``); (2) underruns counted by the stream while a servo-like thread commands
+each is printed, and the median of the two times; times through the loopback, and with
+the output's reported latency added (``dac``). The clock is the capture stream's
+(PortAudio's stream time on JACK's frame clock: ``jack_frame_time`` when the capture
+callback runs); command-to-sound runs from just before the first command to the first
+loud captured sample, stop-to-silence from just after ``stop()`` returns to the last
+loud one. These two are the issue's latency goals, checked here and only here (the
+tests check that the sound starts after the command and stops, not how soon: the
+figures depend on how soon this machine runs the audio processes): command-to-sound
+with the output latency within 10 ms (the servo command period, 1 ms, + one audio
+period for the callback to pick the target up + one in the graph: 6.3 ms at 48 kHz and
+128 frames, the rest for scheduling), stop-to-silence with the output latency within
+20 ms (the block being rendered + one in the graph, the rest for scheduling); the worst
+of the 8 runs is held to each goal; (2) underruns counted by the stream while a servo-like thread commands
 the coil every 1 ms and (unless ``--no-busy``) another Python thread computes without
 pause, for ``--minutes``: output underflows PortAudio flagged to the callback (in the
 audio process, read from its shared counters) and the JACK server's own xrun count over
@@ -26,7 +37,9 @@ priority) for the whole run, a loaded machine made on purpose. The load average 
 processes' load is in these figures).
 
 What it does not measure: a sound card's converters (the dummy driver has none), an
-amplifier or the coil.
+amplifier or the coil; the servo loop's own delay before its command (the commands come
+from a plain loop here); and a machine other than this one at this moment: other
+processes' load is in every figure (see the load average printed).
 """
 
 from __future__ import annotations
@@ -36,10 +49,18 @@ import contextlib
 import json
 import os
 import random
+import statistics
 import subprocess
 import sys
 import threading
-import time
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from hapticsdk_hardness.audio import VoiceCoilAudio
+
+#: the issue's latency goals (ms, with the output latency; see the module doc), for the
+#: worst of the 8 runs
+GOALS_MS = {"latency_dac_ms": 10.0, "stop_dac_ms": 20.0}
 
 
 def main() -> int:
@@ -95,13 +116,18 @@ def _run(a, out, iso, other, new_coil, rng, hogs) -> int:
         for k in ("frequency_error_hz", "amplitude_rel_error", "latency_ms", "latency_dac_ms", "stop_ms",
                   "stop_dac_ms"):
             out[f"worst_{k}"] = max(r[k] for r in runs)
+        for k in ("latency_dac_ms", "stop_dac_ms"):
+            out[f"median_{k}"] = statistics.median(r[k] for r in runs)
+        out["clock"] = "capture stream time (JACK frame clock)"
+        out["goals_ms"] = dict(GOALS_MS)
+        out["goals_met"] = {k: bool(out[f"worst_{k}"] <= g) for k, g in GOALS_MS.items()}
         stop = threading.Event()
 
         def busy() -> None:
             while not stop.is_set():
                 sum(i * i for i in range(2000))
 
-        def underruns(c: VoiceCoilAudio, seconds: float) -> dict:
+        def underruns(c: "VoiceCoilAudio", seconds: float) -> dict:
             """Underruns of coil ``c`` over ``seconds`` of servo-like commands, with the
             busy thread (unless --no-busy) running from before to after. A coil in an
             audio process is measured with this process's PortAudio detached from the
@@ -150,10 +176,12 @@ def _run(a, out, iso, other, new_coil, rng, hogs) -> int:
               f"8 runs at random frequencies and amplitudes, worst of each:")
         print(f"  frequency error {out['worst_frequency_error_hz']:.4f} Hz, amplitude error "
               f"{out['worst_amplitude_rel_error'] * 100:.3f} %")
-        print(f"  command-to-sound {out['worst_latency_ms']:.2f} ms through the loopback "
-              f"({out['worst_latency_dac_ms']:.2f} ms with the output latency)")
-        print(f"  stop-to-silence {out['worst_stop_ms']:.2f} ms through the loopback "
-              f"({out['worst_stop_dac_ms']:.2f} ms with the output latency)")
+        print("  on the capture stream's clock (JACK frame time), worst (median) of the 8 runs:")
+        for k, what in (("latency", "command-to-sound"), ("stop", "stop-to-silence")):
+            goal, met = GOALS_MS[f"{k}_dac_ms"], out["goals_met"][f"{k}_dac_ms"]
+            print(f"  {what} {out[f'worst_{k}_ms']:.2f} ms through the loopback, "
+                  f"{out[f'worst_{k}_dac_ms']:.2f} ms ({out[f'median_{k}_dac_ms']:.2f} ms) with the output latency: "
+                  f"goal <= {goal:g} ms {'met' if met else 'MISSED'}")
         busy_txt = " with a busy Python thread in this process" if not a.no_busy else ""
         print(f"{a.minutes:g} min{busy_txt}, isolation {iso!r}: {out['underruns']} "
               f"underruns in {out['callbacks']} callbacks; the server counted {out['server_xruns_during']} xruns, "

@@ -235,6 +235,22 @@ class LoopbackCapture:
         with self._lock:
             self.blocks = []
 
+    def count(self) -> int:
+        """Samples captured so far (since the last :meth:`clear`). A count, not a time:
+        every sample counted was rendered before this call."""
+        with self._lock:
+            return sum(b.size for _, b in self.blocks)
+
+    def wait_for(self, samples: int, seconds: float = 10.0) -> bool:
+        """Wait until at least ``samples`` are captured (False if ``seconds`` passed
+        first: the capture stopped running, not a slow machine)."""
+        deadline = time.monotonic() + seconds
+        while self.count() < samples:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.002)
+        return True
+
     def signal(self) -> tuple[np.ndarray, np.ndarray]:
         """(t, y): every captured sample with its time on the capture clock."""
         with self._lock:
@@ -296,24 +312,51 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     then ``amplitude`` at ``frequency_hz`` for ``seconds``, then ``stop()``.
 
     Returns the frequency error (Hz), the amplitude against ``amplitude x full_scale``
-    (relative), command-to-sound and stop-to-silence times through the loopback (ms;
-    ``*_dac_ms`` adds the output's reported latency), and underruns counted by the
-    stream over the measurement."""
-    hold(act, 0.05, amplitude=0.0, frequency_hz=frequency_hz)
-    time.sleep(0.05)
+    (relative), command-to-sound and stop-to-silence times through the loopback (ms, on
+    the capture clock, see the module doc; ``*_dac_ms`` adds the output's reported
+    latency), and underruns counted by the stream over the measurement. These times
+    include how soon this machine scheduled the processes involved: figures for a
+    benchmark (``bench/bench_voicecoil_audio.py``), not for a pass/fail test.
+
+    Also, counted in samples rather than timed (so they do not depend on scheduling):
+    ``sound_before_command``, loud samples among those captured before the first
+    command (every one of them was rendered before it, while the coil was commanded
+    silence, not left to its dead-man's switch); ``samples_after_stop``, loud
+    samples captured after the blocks that can be in flight when ``stop()`` returns
+    (``in_flight_samples``: the block a stream may be rendering from the old target,
+    one more cycle for a stream read back by the capture's own client, and one period
+    per xrun the server reported meanwhile, a late cycle delaying or repeating a block);
+    ``samples_checked_after_stop``, how many samples that second count looked at."""
+    hold(act, 0.1, amplitude=0.0, frequency_hz=frequency_hz)
     cap.clear()
+    period = cap.server.period
+    deadline = time.monotonic() + 10.0
+    # two periods captured before the command, the coil commanded silence all along
+    while cap.count() < 2 * period and time.monotonic() < deadline:
+        hold(act, 0.002, amplitude=0.0, frequency_hz=frequency_hz)
+    n_cmd = cap.count()
+    x0 = cap.server.xruns()
     u0 = act.underruns
     t_cmd = cap.now()
     hold(act, seconds, frequency_hz=frequency_hz, amplitude=amplitude)
     act.stop()
     t_stop = cap.now()
+    n_stop = cap.count()
     time.sleep(0.1)
+    in_flight = (2 + (cap.server.xruns() - x0)) * period
+    cap.wait_for(n_stop + in_flight + 4 * period)   # some capture after those
+    in_flight = (2 + (cap.server.xruns() - x0)) * period
     t, y = cap.signal()
-    loud = np.nonzero(np.abs(y) > 1e-3 * amplitude * act.full_scale)[0]
+    is_loud = np.abs(y) > 1e-3 * amplitude * act.full_scale
+    loud = np.nonzero(is_loud)[0]
     out_lat = float(act.output_latency_s or 0.0)
+    counted = {"sound_before_command": int(np.count_nonzero(is_loud[:n_cmd])), "samples_before_command": n_cmd,
+               "samples_after_stop": int(np.count_nonzero(is_loud[n_stop + in_flight:])),
+               "samples_checked_after_stop": max(0, y.size - n_stop - in_flight), "in_flight_samples": in_flight}
     if loud.size == 0:
         return {"frequency_error_hz": float("nan"), "amplitude_rel_error": float("nan"),
-                "latency_ms": float("nan"), "stop_ms": float("nan"), "underruns": act.underruns - u0}
+                "latency_ms": float("nan"), "stop_ms": float("nan"), "latency_dac_ms": float("nan"),
+                "stop_dac_ms": float("nan"), "underruns": act.underruns - u0, **counted}
     on, off = t[loud[0]], t[loud[-1]]
     ramp = act.ramp_s
     steady = (t > on + ramp + 0.01) & (t < off - 0.01)
@@ -327,5 +370,4 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
             "amplitude": a, "amplitude_rel_error": abs(a / (amplitude * act.full_scale) - 1.0),
             "latency_ms": (on - t_cmd) * 1e3, "latency_dac_ms": (on - t_cmd + out_lat) * 1e3,
             "stop_ms": max(0.0, off - t_stop) * 1e3, "stop_dac_ms": (max(0.0, off - t_stop) + out_lat) * 1e3,
-            "output_latency_ms": out_lat * 1e3, "underruns": act.underruns - u0,
-            "samples_after_stop": int(np.count_nonzero(t[loud] > t_stop + 0.05))}
+            "output_latency_ms": out_lat * 1e3, "underruns": act.underruns - u0, **counted}
