@@ -163,7 +163,7 @@ def _run(a, out, iso, other, new_coil, rng, hogs) -> int:
                                                 **underruns(new_coil(other), a.reference_seconds)}
         with srv.portaudio_detached():   # the C client alone in the graph
             x0, late0 = srv.xruns(), srv.late_clients()
-            subprocess.run(["timeout", "30", "jack_simple_client"], capture_output=True,
+            subprocess.run(["timeout", "-k", "5", "30", "jack_simple_client"], capture_output=True,
                            env={**os.environ, "JACK_DEFAULT_SERVER": srv.name})
             out["reference_c_client_late"] = {k: v - late0.get(k, 0) for k, v in srv.late_clients().items()
                                               if v - late0.get(k, 0)}
