@@ -274,13 +274,26 @@ class RunLog:
         return atomic_savez(p, verify=load_run, **arrays)
 
     def summary(self) -> dict[str, Any]:
-        """Ticks, duration, rate, per-role command ranges and the header, JSON-ready."""
+        """Ticks, duration, rate, per-role command ranges and the header, as strict JSON
+        (no NaN or infinity: ``json.dumps(..., allow_nan=False)`` takes it). A figure
+        that is not a finite float -- a recorded infinity or NaN, or values near the float
+        range whose difference or speed overflows it -- is None, and ``not_finite`` names
+        it with the reason (``{"speed_mm_s_max": "overflow: ..."}``); a non-finite number
+        in the header is None there, named ``header.<path>``."""
         n = len(self)
-        out: dict[str, Any] = {"n_ticks": n, "duration_s": float(self.t[-1] - self.t[0]) if n > 1 else 0.0,
-                               "period_s": self.period_s, "roles": {}, "header": self.header}
-        if n and np.isfinite(self.position_mm).any():
-            out["penetration_mm_max"] = float(np.nanmax(-self.position_mm[:, 1]))
-            out["speed_mm_s_max"] = float(np.nanmax(np.linalg.norm(self.velocity_mm_s, axis=1)))
+        notes: dict[str, str] = {}
+        with np.errstate(over="ignore", invalid="ignore"):   # an overflow is reported in not_finite
+            out: dict[str, Any] = {"n_ticks": n,
+                                   "duration_s": _figure(self.t[-1] - self.t[0], "duration_s", notes) if n > 1
+                                   else 0.0,
+                                   "period_s": self.period_s, "roles": {},
+                                   "header": _nulled(self.header, "header", notes)}
+            if n and np.isfinite(self.position_mm).any():
+                out["penetration_mm_max"] = _figure(_max_not_nan(-self.position_mm[:, 1]), "penetration_mm_max",
+                                                    notes)
+                v = self.velocity_mm_s   # hypot: components up to the float range do not overflow their length
+                speed = np.hypot(np.hypot(v[:, 0], v[:, 1]), v[:, 2])
+                out["speed_mm_s_max"] = _figure(_max_not_nan(speed), "speed_mm_s_max", notes)
         for role, cols in self.commands.items():
             r: dict[str, Any] = {}
             for f, v in cols.items():
@@ -288,7 +301,38 @@ class RunLog:
                 if ok.any():
                     r[f] = {"min": float(v[ok].min()), "max": float(v[ok].max()), "ticks": int(ok.sum())}
             out["roles"][role] = r
+        if notes:
+            out["not_finite"] = notes
         return out
+
+
+def _max_not_nan(v: np.ndarray) -> float:
+    """The largest value of ``v`` that is not NaN (an infinity counts); NaN if none."""
+    v = v[~np.isnan(v)]
+    return float(v.max()) if v.size else math.nan
+
+
+def _figure(value: Any, name: str, notes: dict[str, str]) -> float | None:
+    """``value`` as a float when finite, else None with the reason in ``notes[name]``."""
+    v = float(value)
+    if math.isfinite(v):
+        return v
+    notes[name] = ("overflow: beyond the float range (a recorded infinity, or values near the float range)"
+                   if math.isinf(v) else "not a number: no finite value recorded")
+    return None
+
+
+def _nulled(o: Any, where: str, notes: dict[str, str]) -> Any:
+    """``o`` (parsed JSON) with every non-finite float as None, each named in ``notes``
+    by its path. The header's depth is bounded where a file is read (MAX_JSON_DEPTH)."""
+    if isinstance(o, float) and not math.isfinite(o):
+        notes[where] = f"{o!r} in the file (JSON has no such number)"
+        return None
+    if isinstance(o, dict):
+        return {k: _nulled(v, f"{where}.{k}", notes) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_nulled(v, f"{where}[{i}]", notes) for i, v in enumerate(o)]
+    return o
 
 
 def _json_default(o: Any) -> Any:

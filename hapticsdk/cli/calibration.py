@@ -323,10 +323,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
         emit(out, True)
     else:
         roles = ", ".join(f"{r} ({', '.join(sorted(v))})" for r, v in out["roles"].items()) or "none"
-        print(f"{args.runfile}: {out['n_ticks']} ticks over {out['duration_s']:.3f} s "
+        dur = "(not finite)" if out["duration_s"] is None else f"{out['duration_s']:.3f}"
+        print(f"{args.runfile}: {out['n_ticks']} ticks over {dur} s "
               f"(period {out['period_s'] or float('nan'):.6f} s); roles: {roles}; "
               f"playback {'ok' if mismatches == 0 else f'{mismatches} mismatching ticks'}")
         for role, fields in out["roles"].items():
             for f, r in fields.items():
                 print(f"  {role}.{f}: {r['min']:.4g} .. {r['max']:.4g} over {r['ticks']} ticks")
+        for name, why in out.get("not_finite", {}).items():
+            print(f"  {name}: not finite, {why}")
     return 0 if mismatches == 0 else 1

@@ -55,7 +55,35 @@ def _play(tmp_path, arrays):
         for _ in range(len(run)):
             dev.read_state()
             dev.step(run.period_s or 1e-3)
-    json.dumps(run.summary(), default=str)
+    json.dumps(run.summary(), default=str, allow_nan=False)   # strict JSON, as --json prints it
+
+
+def _no_constant(name):
+    raise ValueError(f"not JSON: {name}")
+
+
+@pytest.mark.parametrize("v,speed", [(1e308, 3 ** 0.5 * 1e308), (1.5e308, None)])
+def test_a_speed_near_the_float_range_is_strict_json(tmp_path, run_arrays, capsys, v, speed):
+    """A run whose recorded velocity is ``v`` mm/s on every axis at one tick: ``hapticsdk
+    replay --json`` prints strict JSON (it printed ``Infinity``, which JSON parsers refuse).
+    Components of 1e308 have a length of sqrt(3) x 1e308, still a float, so that is the
+    speed reported; components of 1.5e308 have one beyond the float range: null, named
+    in ``not_finite`` with the reason."""
+    from hapticsdk.cli import main
+    vel = run_arrays["velocity_mm_s"].astype(float)
+    vel[len(vel) // 2] = v
+    p = tmp_path / "fast.npz"
+    with open(p, "wb") as fh:
+        np.savez(fh, **{**run_arrays, "velocity_mm_s": vel})
+    assert main(["replay", str(p), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out, parse_constant=_no_constant)
+    if speed is None:
+        assert out["speed_mm_s_max"] is None and out["not_finite"]["speed_mm_s_max"].startswith("overflow")
+    else:
+        assert out["speed_mm_s_max"] == pytest.approx(speed, rel=1e-12) and "not_finite" not in out
+    assert main(["replay", str(p)]) == 0     # and the text summary says it
+    text = capsys.readouterr().out
+    assert ("speed_mm_s_max: not finite, overflow" in text) is (speed is None)
 
 
 def test_the_unchanged_run_plays(tmp_path, run_arrays):
