@@ -116,7 +116,9 @@ def test_state_force_gravity_and_limits_through_the_binding(standin):
         assert dev.read_back().force_n == 1.5
         sent = dev.command(ChannelCommand("force", force_n=50.0))
         assert sent.force_n == 12.0 and _force(lib)[2] == 12.0                  # declared omega.3 limit
-        time.sleep(0.3)                                                          # the loop stalls:
+        t0 = time.monotonic()                                                    # the loop stalls:
+        while time.monotonic() - t0 < 10.0 and not (_force(lib) == [0.0, 0.0, 0.0] and dev.watchdog_zeroed >= 1):
+            time.sleep(0.005)                                                    # (waits for what it asserts)
         assert _force(lib) == [0.0, 0.0, 0.0] and dev.watchdog_zeroed >= 1      # watchdog zeroed it
         dev.command(ChannelCommand("force", force_n=2.0))
         dev.stop()

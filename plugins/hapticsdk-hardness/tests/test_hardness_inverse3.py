@@ -120,7 +120,9 @@ def test_state_force_frames_and_stop(fake):
         assert dev.command(ChannelCommand("force", force_n=9.0)).force_n == 3.3
         dev.read_state()
         assert fake.forces[-1] == [0.0, 0.0, 3.3]                          # a read re-sends the force
-        time.sleep(0.3)
+        t0 = time.monotonic()                            # the loop stalls (waits for what it asserts)
+        while time.monotonic() - t0 < 10.0 and not (fake.forces[-1] == [0.0, 0.0, 0.0] and dev.watchdog_zeroed >= 1):
+            time.sleep(0.005)
         assert fake.forces[-1] == [0.0, 0.0, 0.0] and dev.watchdog_zeroed >= 1
         dev.command(ChannelCommand("force", force_n=1.0))
         dev.stop()
@@ -168,12 +170,17 @@ def test_watchdog_deadline_is_the_safety_layers_restart_gap(fake):
     assert dev.command_timeout_s == 0.03
     with dev:
         dev.command(ChannelCommand("force", force_n=0.5))
-        t_end = time.monotonic() + 0.3
-        while time.monotonic() < t_end:                  # the ramp reaches full force
+        # the ramp reaches full force (waits for it: on a busy machine a gap between two
+        # commands longer than restart_after_s, 30 ms, gates and ramps again, as it should)
+        t_end = time.monotonic() + 10.0
+        dev.command(ChannelCommand("force", force_n=2.0))
+        while fake.forces[-1] != [0.0, 0.0, 2.0] and time.monotonic() < t_end:
             dev.command(ChannelCommand("force", force_n=2.0))
             time.sleep(0.001)
         assert fake.forces[-1] == [0.0, 0.0, 2.0]
-        time.sleep(0.1)                                  # the servo stalls
+        t0 = time.monotonic()                            # the servo stalls (waits for what it asserts)
+        while time.monotonic() - t0 < 10.0 and not (fake.forces[-1] == [0.0, 0.0, 0.0] and dev.watchdog_zeroed >= 1):
+            time.sleep(0.005)
         assert fake.forces[-1] == [0.0, 0.0, 0.0] and dev.watchdog_zeroed >= 1
         sent = dev.command(ChannelCommand("force", force_n=2.0))
         assert sent.force_n < 0.5 and fake.forces[-1][2] < 0.5     # resumes from zero
