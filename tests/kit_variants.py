@@ -124,6 +124,27 @@ def coil_dimension(name: str, feature: str, renderer_cls: type, model: str) -> t
         "default_model": model, "renderer_cls": renderer_cls, "constraints": constraints, "renderer": renderer})
 
 
+def buzz_dimension(renderer_cls: type) -> type[PerceptionDimension]:
+    """The kit-buzz dimension (feature ``kit.b`` on the lagging coil, model
+    ``kit-buzz-model``: :class:`BuzzModel`) rendered by ``renderer_cls(x)``."""
+    return coil_dimension("kit-buzz", "kit.b", renderer_cls, "kit-buzz-model")
+
+
+def buzz_installed(renderer_cls: type) -> Iterator[None]:
+    """The lagging coil, :func:`buzz_dimension` of ``renderer_cls`` and its model
+    registered as if installed, for the duration of the generator (a fixture body:
+    ``yield from buzz_installed(...)``)."""
+    yield from registered([(registry_of("actuator"), LagCoil.name, LagCoil),
+                           (registry_of("dimension"), "kit-buzz", buzz_dimension(renderer_cls)),
+                           (registry_of("model"), "kit-buzz-model", BuzzModel)])
+
+
+def registry_of(kind: str) -> Any:
+    """``hapticsdk.plugins.registry(kind)``, imported on use."""
+    from hapticsdk.plugins import registry
+    return registry(kind)
+
+
 def registered(regs: Any) -> Iterator[None]:
     """Register ``(registry, name, object)`` triples as if installed, for the duration of
     the generator (a fixture body: ``yield from registered([...])``)."""

@@ -36,8 +36,7 @@ from hapticsdk.plugins import registry
 from hapticsdk.solvers import SolverOutput
 from hapticsdk.testing import check_device, check_dimension, check_solver
 from hapticsdk.testing.conformance import format_report
-from kit_variants import (LAG_COIL_MAX_V, BuzzModel, GoodSolver, LagCoil, OutputArm, coil_dimension, registered,
-                          rules_of)
+from kit_variants import LAG_COIL_MAX_V, GoodSolver, OutputArm, buzz_dimension, buzz_installed, rules_of
 
 
 # ---------------------------------------------------------------------------
@@ -239,15 +238,12 @@ class _MilliVolt(_Onset):
     scale: ClassVar[float] = 1000.0
 
 
-def _dim(renderer):
-    return coil_dimension("kit-buzz", "kit.b", renderer, "kit-buzz-model")
+_dim = buzz_dimension
 
 
 @pytest.fixture
 def installed():
-    yield from registered([(registry("actuator"), "kit-lag-coil", LagCoil),
-                           (registry("dimension"), "kit-buzz", _dim(_Onset)),
-                           (registry("model"), "kit-buzz-model", BuzzModel)])
+    yield from buzz_installed(_Onset)
 
 
 def test_the_correct_onset_renderer_conforms(installed):

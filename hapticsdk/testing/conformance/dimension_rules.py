@@ -291,6 +291,107 @@ def _commands_at_epoch(d: PerceptionDimension, feats: Mapping[str, float], epoch
     return out
 
 
+#: servo periods (s) the ``determinism`` rule ticks one scene at: the kit's 1 ms and a
+#: quarter of it (a scene's ``servo.period_s`` may be anything from 0.1 ms to 100 ms,
+#: :data:`hapticsdk.scene.limits.PERIOD_RANGE_S`). A renderer that advances an envelope, a
+#: ramp or an oscillator's phase by a fixed step per call, not by ``dt``, plays the scene
+#: 4 x faster at the second
+PERIODS_S = (1e-3, 2.5e-4)
+#: servo time (s) of that scene: 10 ms out of contact, 300 ms pressing and sliding (depth
+#: 0.5..1.5 mm, sliding 30..110 mm/s, both smooth), 20 ms out, 100 ms in again; every
+#: change of contact on a whole millisecond, so both periods tick it at the same time
+PERIOD_SCENE_S = 0.43
+_PERIOD_CONTACTS_S = ((0.01, 0.31), (0.33, 0.43))
+
+
+def _period_scene(period_s: float) -> list[TickInput]:
+    """The ticks of the ``determinism`` rule's period scene at ``period_s`` (a whole
+    fraction of :data:`KIT_PERIOD_S`): tick ``k`` at ``t = k * period_s``, with ``dt =
+    period_s``, its depth and velocity functions of ``t`` alone (read-only arrays, the
+    floats and the filtered velocity too, as the loop gives them)."""
+    out = []
+    for k in range(int(round(PERIOD_SCENE_S / period_s))):
+        t = k * period_s
+        ms = k * period_s * 1e3
+        touching = any(a * 1e3 - 1e-6 <= ms < b * 1e3 - 1e-6 for a, b in _PERIOD_CONTACTS_S)
+        pen = 1.0 + 0.5 * math.sin(2 * math.pi * 2.0 * t) if touching else -0.5
+        vel = (70.0 + 40.0 * math.sin(2 * math.pi * 1.5 * t), -0.5 * 2 * math.pi * 2.0 * math.cos(2 * math.pi * 2.0 * t),
+               0.0)
+        v = np.array(vel)
+        v.flags.writeable = False
+        out.append(TickInput(t=t, dt=period_s, penetration_mm=pen, velocity_mm_s=v, in_contact=touching,
+                             velocity_filtered_mm_s=vel, velocity_floats_mm_s=vel))
+    return out
+
+
+def _period_run(d: PerceptionDimension, feats: Mapping[str, float], period_s: float
+                ) -> tuple[list[TickInput], list[dict[tuple[str, str], float]]]:
+    """The period scene at ``period_s`` and, per tick, a new renderer's numeric command
+    fields (``(role, field) -> value``)."""
+    ticks = _period_scene(period_s)
+    r = d.renderer(dict(feats))
+    out = []
+    for inp in ticks:
+        row: dict[tuple[str, str], float] = {}
+        for c in r.tick(inp):
+            for k in ("force_n", "frequency_hz", "amplitude"):
+                v = getattr(c, k)
+                if v is not None:
+                    row[(c.role, k)] = float(v)
+        out.append(row)
+        _sim_advance(period_s)
+    return ticks, out
+
+
+def _fastest_change(ticks: list[TickInput], rows: list[dict[tuple[str, str], float]]) -> dict[tuple[str, str], float]:
+    """Per command field, the largest change between two consecutive ticks of one contact
+    (a change at the start or end of a contact is the scene's, not the renderer's pace)."""
+    out: dict[tuple[str, str], float] = {}
+    for i in range(1, len(rows)):
+        if ticks[i].in_contact != ticks[i - 1].in_contact:
+            continue
+        for key, v in rows[i].items():
+            u = rows[i - 1].get(key)
+            if u is not None and math.isfinite(u) and math.isfinite(v):
+                out[key] = max(out.get(key, 0.0), abs(v - u))
+    return out
+
+
+def _period_difference(d: PerceptionDimension, feats: Mapping[str, float]) -> str | None:
+    """Where the commands of the period scene at the two periods of :data:`PERIODS_S`
+    differ, at the times both tick, by more than a renderer that follows ``dt`` can, as
+    text; None when they agree.
+
+    A renderer that follows time renders, at each period, the same commands as functions
+    of time, each tick at most one period late (an event seen at the next tick, a state
+    integrated step by step lags or leads by at most that), so each run is within one of
+    its own ticks' largest change of that function, and the two runs are within the sum
+    of the two: the tolerance per field is its largest change between consecutive ticks
+    of a contact in the one run plus that in the other (plus 1e-9 of its scale for
+    rounding). A renderer stepping per call changes by the same step per tick at both
+    periods, so the tolerance stays one or two steps while the runs drift apart: after n
+    ticks of the coarse period the fine run is where the coarse one is after 4 n."""
+    coarse, fine = PERIODS_S
+    every = int(round(coarse / fine))
+    ta, ra = _period_run(d, feats, coarse)
+    tb, rb = _period_run(d, feats, fine)
+    tol = _fastest_change(ta, ra)
+    for key, v in _fastest_change(tb, rb).items():
+        tol[key] = tol.get(key, 0.0) + v
+    for i, (inp, a) in enumerate(zip(ta, ra)):
+        b = rb[i * every] if i * every < len(rb) else {}
+        for key, va in a.items():
+            vb = b.get(key)
+            if vb is None or not (math.isfinite(va) and math.isfinite(vb)):
+                continue
+            allowed = tol.get(key, 0.0) + 1e-9 * max(1.0, abs(va), abs(vb))
+            if abs(va - vb) > allowed:
+                return (f"{key[0]} {key[1]} {va:.6g} at {coarse * 1e3:g} ms and {vb:.6g} at {fine * 1e3:g} ms "
+                        f"at t = {inp.t:.4g} s ({'in' if inp.in_contact else 'out of'} contact), {abs(va - vb):.3g} "
+                        f"apart; one tick of its fastest change at each period allows {allowed:.3g}")
+    return None
+
+
 #: servo time (s) of the ``timing`` rule's long run of one renderer, and where its tick
 #: cost is measured (fastest of :data:`TIMING_CALLS`): after 1, 2, 4 and 8 s
 GROWTH_POINTS_S = (1.0, 2.0, 4.0, 8.0)
@@ -625,6 +726,15 @@ def _dimension_rules(ctx: _Ctx) -> None:
                  f"commands than each alone: the {which}, at {dict(feats)}, gave {_first_difference(got, want)}; "
                  f"renderers share state (a class attribute or module global changed in place, e.g. a filter "
                  f"state or a contact timer): keep state on the instance")
+        # the same scene at another servo period: the same commands at the same times,
+        # within what one tick's lateness at each period explains
+        diff = _period_difference(d, mid())
+        assert diff is None, \
+            (f"the same scene (the same depth and velocity at the same times) at servo periods "
+             f"{PERIODS_S[0] * 1e3:g} ms and {PERIODS_S[1] * 1e3:g} ms gave other commands: {diff}. The "
+             f"renderer advances its state by a step per tick (an envelope, a ramp, an oscillator's phase), "
+             f"so its time runs {PERIODS_S[0] / PERIODS_S[1]:g} x faster at the shorter period (a scene's "
+             f"servo.period_s may be 0.1..100 ms); advance it by TickInput.dt")
         for e in CLOCK_EPOCHS_S:
             assert _commands_at_epoch(d, mid(), e) == outs[0], \
                 (f"the same features and ticks gave other commands with the process clocks (time.time, "

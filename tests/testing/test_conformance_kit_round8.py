@@ -1,0 +1,151 @@
+"""Kit rules widened after round 8 of broken plugins, each broken variant passed by the
+kit before:
+
+* ``determinism`` (dimension): a renderer that ignores ``TickInput.dt`` and advances its
+  state by a fixed step per tick (an onset envelope, an attack ramp, a slow tremolo's
+  phase, a low-pass of the depth with a fixed coefficient): at a 0.25 ms servo period it
+  plays the scene 4 x faster than at 1 ms. The correct variants advance the same state by
+  ``dt`` (a forward-Euler low-pass too, whose error is of one tick) and conform, as do
+  the first-party renderers.
+
+The correct variants conform."""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+import pytest
+
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.plugins import registry
+from hapticsdk.testing import check, check_dimension
+from hapticsdk.testing.conformance import format_report
+from kit_variants import LAG_COIL_MAX_V, buzz_dimension, buzz_installed, rules_of
+
+
+# ---------------------------------------------------------------------------
+# dimensions: renderers that follow dt, and the same ignoring it
+# ---------------------------------------------------------------------------
+
+class _Paced(DimensionRenderer):
+    """100 Hz on the lagging coil in contact, amplitude from the depth and ``x`` times an
+    envelope of a state ``s`` that starts at 0 at each contact; ``per_call`` (s) is the
+    step a broken variant advances its clock by per tick instead of ``dt``."""
+    roles = ("buzz",)
+    per_call: ClassVar[float | None] = None
+
+    def __init__(self, x: float) -> None:
+        self.x, self.s = x, 0.0
+
+    def elapsed(self, inp) -> float:
+        return inp.dt if self.per_call is None else self.per_call
+
+    def advance(self, inp) -> None:
+        raise NotImplementedError
+
+    def envelope(self) -> float:
+        raise NotImplementedError
+
+    def tick(self, inp):
+        if not inp.in_contact:
+            self.s = 0.0
+            return [ChannelCommand("buzz", frequency_hz=100.0, amplitude=0.0)]
+        self.advance(inp)
+        a = 0.25 * LAG_COIL_MAX_V * (0.2 + 0.8 * self.x) * min(1.0, abs(inp.penetration_mm))
+        return [ChannelCommand("buzz", frequency_hz=100.0, amplitude=a * self.envelope())]
+
+
+class _Onset(_Paced):
+    """Doubled at the onset of a contact, the extra decaying with a 30 ms time constant."""
+
+    def advance(self, inp) -> None:
+        self.s += self.elapsed(inp)
+
+    def envelope(self) -> float:
+        return 1.0 + math.exp(-self.s / 0.03)
+
+
+class _Attack(_Paced):
+    """Rises linearly from 0 over the first 100 ms of a contact."""
+
+    def advance(self, inp) -> None:
+        self.s = min(1.0, self.s + self.elapsed(inp) / 0.1)
+
+    def envelope(self) -> float:
+        return self.s
+
+
+class _Tremolo(_Paced):
+    """A 5 Hz tremolo of +-40 % (its phase in ``s``)."""
+
+    def advance(self, inp) -> None:
+        self.s += 2 * math.pi * 5.0 * self.elapsed(inp)
+
+    def envelope(self) -> float:
+        return 0.6 + 0.4 * math.sin(self.s)
+
+
+class _Smoothed(_Paced):
+    """Follows the depth through a forward-Euler low-pass of 20 ms (``s += (p - s) dt /
+    tau``: one tick's error, not exact)."""
+
+    def advance(self, inp) -> None:
+        self.s += (abs(inp.penetration_mm) - self.s) * self.elapsed(inp) / 0.02
+
+    def envelope(self) -> float:
+        return self.s
+
+
+class _OneTickLate(_Paced):
+    """Renders the depth of the previous tick (a measurement one tick old): one period
+    late at each period, which the rule allows."""
+
+    def advance(self, inp) -> None:
+        self.s, self.now = getattr(self, "now", abs(inp.penetration_mm)), abs(inp.penetration_mm)
+
+    def envelope(self) -> float:
+        return self.s
+
+
+def _per_call(cls: type[_Paced]) -> type[_Paced]:
+    """``cls`` advancing by 1 ms per tick, whatever ``dt`` (written for a 1 kHz loop)."""
+    return type(cls.__name__ + "PerCall", (cls,), {"__doc__": f"{cls.__doc__} Advanced 1 ms per tick.",
+                                                  "per_call": 1e-3})
+
+
+_dim = buzz_dimension
+
+
+@pytest.fixture
+def installed():
+    yield from buzz_installed(_Onset)
+
+
+PACED = [_Onset, _Attack, _Tremolo, _Smoothed]
+
+
+@pytest.mark.parametrize("renderer", PACED + [_OneTickLate], ids=lambda c: c.__name__.strip("_").lower())
+def test_renderers_that_advance_by_dt_conform(installed, renderer):
+    v = check("dimension", _dim(renderer), rules=["determinism"])
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("renderer", PACED, ids=lambda c: c.__name__.strip("_").lower())
+def test_renderers_that_advance_per_tick_are_caught(installed, renderer):
+    v = check("dimension", _dim(_per_call(renderer)), rules=["determinism"])
+    assert rules_of(v) == {"determinism"}, format_report(v)
+    assert "at servo periods 1 ms and 0.25 ms gave other commands" in format_report(v)
+
+
+def test_a_renderer_advancing_per_tick_fails_only_determinism(installed):
+    v = check_dimension(_dim(_per_call(_Onset)))
+    assert rules_of(v) == {"determinism"}, format_report(v)
+
+
+@pytest.mark.parametrize("name", ["hardness", "roughness", "warmth"])
+def test_first_party_renderers_follow_the_servo_period(name):
+    if name not in registry("dimension"):
+        pytest.skip(f"dimension {name!r} not installed")
+    v = check("dimension", name, rules=["determinism"])
+    assert v == [], format_report(v)
