@@ -1,6 +1,12 @@
 """Kit rules widened after round 8 of broken plugins, each broken variant passed by the
 kit before:
 
+* ``output-follows-command`` (actuator): a simulated actuator whose output lag is advanced
+  by a fixed step per ``step()`` call, not by ``dt``: it settles within its declared
+  settle time at the kit's 1 ms period and takes twice as long (in seconds) at 2 ms;
+* ``constraints-vectorised`` (dimension): ``constraints()`` that takes no keyword facts
+  (the core passes every dimension of a problem its model's facts, ``df_hz`` and any
+  name of a ``constraint_context``, so a scene mixing it with such a model fails);
 * ``determinism`` (dimension): a renderer that ignores ``TickInput.dt`` and advances its
   state by a fixed step per tick (an onset envelope, an attack ramp, a slow tremolo's
   phase, a low-pass of the depth with a fixed coefficient): at a 0.25 ms servo period it
@@ -19,9 +25,9 @@ import pytest
 
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.plugins import registry
-from hapticsdk.testing import check, check_dimension
+from hapticsdk.testing import check, check_actuator, check_dimension
 from hapticsdk.testing.conformance import format_report
-from kit_variants import LAG_COIL_MAX_V, buzz_dimension, buzz_installed, rules_of
+from kit_variants import LAG_COIL_MAX_V, LagCoil, buzz_dimension, buzz_installed, rules_of
 
 
 # ---------------------------------------------------------------------------
@@ -149,3 +155,72 @@ def test_first_party_renderers_follow_the_servo_period(name):
         pytest.skip(f"dimension {name!r} not installed")
     v = check("dimension", name, rules=["determinism"])
     assert v == [], format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# actuators: a simulated output stepped per call
+# ---------------------------------------------------------------------------
+
+class _LagPerCall(LagCoil):
+    """The lagging coil advancing its lag by 1 ms per ``step()`` call, whatever ``dt``
+    (written for a 1 kHz loop): at 2 ms it settles in twice its declared settle time."""
+    name: ClassVar[str] = "kit-lag-per-call"
+
+    def step(self, dt: float) -> None:
+        super().step(1e-3)
+
+
+def test_a_simulated_output_stepped_per_call_is_caught():
+    v = check_actuator(_LagPerCall)
+    assert rules_of(v) == {"output-follows-command"}, format_report(v)
+    assert "at a 2 ms servo period" in format_report(v)
+
+
+def test_a_simulated_output_stepped_by_dt_conforms_at_both_periods():
+    v = check("actuator", LagCoil, rules=["output-follows-command"])
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("name", ["omni-virtual", "voicecoil-virtual", "piezo-virtual", "peltier-virtual",
+                                  "probe-virtual", "playback-virtual"])
+def test_first_party_simulated_actuators_settle_at_a_longer_period(name):
+    if name not in registry("actuator"):
+        pytest.skip(f"actuator {name!r} not installed")
+    from hapticsdk.devices.actuators import HapticDevice
+    kind = "device" if issubclass(registry("actuator").load(name), HapticDevice) else "actuator"
+    v = check(kind, name, rules=["output-follows-command"])
+    assert v == [], format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# dimensions: constraints() without the model's facts
+# ---------------------------------------------------------------------------
+
+def _no_context(self):
+    return []
+
+
+def test_constraints_that_take_no_facts_are_caught(installed):
+    dim = type("NoFacts", (buzz_dimension(_Onset),), {"constraints": _no_context})
+    v = check_dimension(dim)
+    assert rules_of(v) == {"constraints-vectorised"}, format_report(v)
+    assert "constraints(kit_unread_fact=1.0) raised TypeError" in format_report(v)
+
+
+def test_a_problem_passes_its_model_s_facts_to_every_dimension(monkeypatch):
+    """The contract the rule holds a dimension to: build_problem hands each dimension the
+    facts of the problem's model, also those of another dimension (the paper model's
+    df_hz, a roughness fact, reaches hardness, which does not read it)."""
+    if "hardness" not in registry("dimension"):
+        pytest.skip("hapticsdk-hardness not installed")
+    from hapticsdk.solvers.problems import build_problem
+    hardness = registry("dimension").load("hardness")
+    seen = []
+    original = hardness.constraints
+
+    def constraints(self, **context):
+        seen.append(dict(context))
+        return original(self, **context)
+    monkeypatch.setattr(hardness, "constraints", constraints)
+    build_problem({"hardness": 0.5})
+    assert seen and "df_hz" in seen[0], seen

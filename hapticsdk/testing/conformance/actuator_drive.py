@@ -155,14 +155,15 @@ def _reports_output(act: Any) -> bool:
 _tol = readback_tolerance
 
 
-def _settle_ticks(act: Actuator, *, ramp: bool = False) -> int:
-    """Kit ticks to hold a command before its read-back is judged: the actuator's declared
-    settle time (its own ramps and lag), plus the safety layer's start ramp time when
-    ``ramp``, plus two ticks (the command of the tick and the one that observes it)."""
+def _settle_ticks(act: Actuator, *, ramp: bool = False, period: float = KIT_PERIOD_S) -> int:
+    """Ticks of ``period`` (default the kit's) to hold a command before its read-back is
+    judged: the actuator's declared settle time (its own ramps and lag), plus the safety
+    layer's start ramp time when ``ramp``, plus two ticks (the command of the tick and the
+    one that observes it)."""
     t = float(getattr(act, "settle_time_s", 0.0) or 0.0)
     if ramp:
         t += float(getattr(act.safety.settings, "ramp_time_s", 0.0) or 0.0)
-    return int(math.ceil(t / KIT_PERIOD_S - 1e-9)) + 2
+    return int(math.ceil(t / period - 1e-9)) + 2
 
 
 #: kit time (s) a command is held at most while the safety layer's output still changes
@@ -170,32 +171,34 @@ def _settle_ticks(act: Actuator, *, ramp: bool = False) -> int:
 HOLD_LIMIT_S = 5.0
 
 
-def _hold(act: Actuator, cmd: ChannelCommand, t: float) -> tuple[ChannelCommand | None, float]:
-    """Send ``cmd`` every kit tick, advancing simulated time, for the safety layer's start
-    ramp plus the declared settle time (:func:`_settle_ticks`), and on while what the layer
-    lets through has changed within the last settle time (a declared
-    ``max_force_rate_n_per_tick`` still slewing; the layer is asked by its output), up to
-    :data:`HOLD_LIMIT_S`. Returns the command in force and the kit time."""
-    sent, _, t = _hold_both(act, cmd, None, None, t)
+def _hold(act: Actuator, cmd: ChannelCommand, t: float, period: float = KIT_PERIOD_S, *, ramp: bool = True
+          ) -> tuple[ChannelCommand | None, float]:
+    """Send ``cmd`` every tick of ``period`` (default the kit's), advancing simulated time,
+    for the safety layer's start ramp (unless ``ramp`` is False: the layer is past it)
+    plus the declared settle time (:func:`_settle_ticks`), and on while what the layer lets through has changed within the last settle time (a
+    declared ``max_force_rate_n_per_tick`` still slewing; the layer is asked by its output),
+    up to :data:`HOLD_LIMIT_S`. Returns the command in force and the kit time."""
+    sent, _, t = _hold_both(act, cmd, None, None, t, period, ramp=ramp)
     return sent, t
 
 
 def _hold_both(a: Actuator, ca: ChannelCommand, b: Actuator | None, cb: ChannelCommand | None,
-               t: float) -> tuple[ChannelCommand | None, ChannelCommand | None, float]:
+               t: float, period: float = KIT_PERIOD_S, *, ramp: bool = True
+               ) -> tuple[ChannelCommand | None, ChannelCommand | None, float]:
     """:func:`_hold` on two open actuators at once: ``ca`` sent to ``a`` and ``cb`` to
-    ``b`` every kit tick (``cb`` None: ``b`` only has its time advanced; ``b`` None: ``a``
+    ``b`` every tick (``cb`` None: ``b`` only has its time advanced; ``b`` None: ``a``
     alone), until each has been steady for its own settle time after both safety layers'
     ramps. Returns what each safety layer let through and the kit time."""
     pair = [(a, ca)] + ([(b, cb)] if b is not None else [])
-    least = max(_settle_ticks(x, ramp=True) for x, _ in pair)
-    settle = [_settle_ticks(x) for x, _ in pair]
+    least = max(_settle_ticks(x, ramp=ramp, period=period) for x, _ in pair)
+    settle = [_settle_ticks(x, period=period) for x, _ in pair]
     sent: list[ChannelCommand | None] = [None] * len(pair)
     steady = [0] * len(pair)
-    for i in range(max(least, int(math.ceil(HOLD_LIMIT_S / KIT_PERIOD_S)))):
-        t += KIT_PERIOD_S
+    for i in range(max(least, int(math.ceil(HOLD_LIMIT_S / period)))):
+        t += period
         for j, (x, c) in enumerate(pair):
             now = x.command(c, now=t) if c is not None else None
-            _advance(x)
+            _advance(x, period)
             steady[j] = steady[j] + 1 if now == sent[j] else 1
             sent[j] = now
         if i + 1 >= least and all(n >= m for n, m in zip(steady, settle)):
@@ -426,6 +429,44 @@ def _alternate_once(act: Actuator, t: float) -> None:
             prev = sent
     finally:
         act.safety.settings = settings
+
+#: servo period (s) at which ``output-follows-command`` holds the largest normal command
+#: again, on a new simulated instance: twice the kit's (a 500 Hz loop; a scene's
+#: ``servo.period_s`` may be 0.1..100 ms). A simulated output that is advanced by a fixed
+#: step per ``step()`` call, not by ``dt``, settles that much slower in seconds than it
+#: declares
+SLOW_PERIOD_S = 2e-3
+
+
+def _follows_at_period(make: Any, period: float = SLOW_PERIOD_S) -> None:
+    """On a new instance, commanded and stepped every ``period`` (its safety layer told that
+    period, ``set_period``): the largest normal command held through the start ramp, then
+    the smallest held for the declared settle time (a step from one to the other: the
+    safety layer's start ramp, which a slow output can follow, is over); the read-back
+    must then match the smallest as at the kit's period (:func:`_assert_matches`). Only for
+    a simulated actuator that has a ``step``: a real one moves on its own clock."""
+    act = make()
+    if not getattr(act, "simulated", False) or not callable(getattr(act, "step", None)):
+        return
+    cmds = sorted(_normal_commands(act), key=_drive_size, reverse=True)
+    if len(cmds) < 2 or _drive_size(cmds[0]) == _drive_size(cmds[-1]):
+        return
+    with act:
+        act.safety.set_period(period)
+        _, t = _hold(act, cmds[0], 0.0, period)
+        sent, _ = _hold(act, cmds[-1], t, period, ramp=False)
+        rb = act.read_back()
+        try:
+            _assert_matches(act, sent, rb)
+        except AssertionError as exc:
+            raise AssertionError(
+                f"at a {period * 1e3:g} ms servo period (commanded and stepped every {period * 1e3:g} ms; a step "
+                f"from the largest to the smallest normal command held for the declared settle time of "
+                f"{act.settle_time_s:g} s): {exc}. It follows "
+                f"at the kit's {KIT_PERIOD_S * 1e3:g} ms: the simulation advances by a fixed step per step() call, "
+                f"not by dt, so it settles slower in seconds at a longer period (a scene's servo.period_s may be "
+                f"0.1..100 ms); advance it by dt") from None
+
 
 def _reached_at_write(act: Actuator, prev: ChannelCommand | None, new: ChannelCommand | None,
                       rb: ChannelCommand | None) -> bool | None:

@@ -586,6 +586,16 @@ def _dimension_rules(ctx: _Ctx) -> None:
         d = holder["d"]
         cons = d.constraints()
         assert isinstance(cons, list), "constraints() must return a list"
+        # the core hands every dimension of a problem the facts of its model's data (df_hz,
+        # and any name a model's constraint_context carries): constraints(**context)
+        try:
+            d.constraints(kit_unread_fact=1.0)
+        except TypeError as exc:
+            raise AssertionError(
+                f"constraints(kit_unread_fact=1.0) raised TypeError ({exc}): the core passes every dimension of "
+                f"a problem the facts of its model's data as keywords (df_hz, a model's constraint_context), "
+                f"whatever dimension they are for; take them as **context and ignore the ones you do not "
+                f"read") from None
         space = d.feature_space()
         rng = np.random.default_rng(0)
         X = space.random(64, rng)
