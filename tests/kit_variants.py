@@ -25,6 +25,12 @@ from hapticsdk.solvers import Solver, SolverOutput
 API = ">=1.2,<2"
 
 
+def along_y(cmd: ChannelCommand) -> float:
+    """The force of ``cmd`` along y (N): ``force_n`` projected from its ``direction`` (the
+    contact normal; None is +y), as a device rendering on the y axis alone applies it."""
+    return (cmd.force_n or 0.0) * (1.0 if cmd.direction is None else float(cmd.direction[1]))
+
+
 class ForceArm(HapticDevice):
     """A correct force device: its motors saturate at ``saturation_n`` (the declared
     ``max_force_n``); it reads back the force they give."""
@@ -42,7 +48,7 @@ class ForceArm(HapticDevice):
         self.f, self.t = 0.0, 0.0
 
     def _command(self, cmd: ChannelCommand) -> None:
-        self.f = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+        self.f = float(np.clip(along_y(cmd), -self.saturation_n, self.saturation_n))
 
     def _stop(self) -> None:
         self.f = 0.0

@@ -15,7 +15,7 @@ from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import DeviceError
 from hapticsdk.testing import check, check_device
 from hapticsdk.testing.conformance import format_report
-from kit_variants import API, rules_of
+from kit_variants import API, along_y, rules_of
 from kit_variants import OutputArm as Arm
 
 
@@ -32,7 +32,7 @@ class SharedArm(Arm):
         self.t = 0.0
 
     def _command(self, cmd: ChannelCommand) -> None:
-        self._hw["f"] = float(np.clip(cmd.force_n or 0.0, -3.0, 3.0))
+        self._hw["f"] = float(np.clip(along_y(cmd), -3.0, 3.0))
 
     def _stop(self) -> None:
         self._hw["f"] = 0.0
@@ -52,7 +52,7 @@ class LastOpenedArm(Arm):
         self._current[0] = self
 
     def _command(self, cmd: ChannelCommand) -> None:
-        self._current[0].f = float(np.clip(cmd.force_n or 0.0, -3.0, 3.0))
+        self._current[0].f = float(np.clip(along_y(cmd), -3.0, 3.0))
 
 
 class FallbackArm(Arm):
@@ -149,7 +149,7 @@ class MovingArm(HapticDevice):
         self.y_meas, self.v_meas = 0.0, 0.0
 
     def _command(self, cmd: ChannelCommand) -> None:
-        self.f = float(np.clip(cmd.force_n or 0.0, -3.0, 3.0))
+        self.f = float(np.clip(along_y(cmd), -3.0, 3.0))
 
     def _stop(self) -> None:
         self.f = 0.0
@@ -318,7 +318,7 @@ class OneWriteLateArm(Arm):
         self.queued = 0.0
 
     def _command(self, cmd: ChannelCommand) -> None:
-        self.f, self.queued = self.queued, float(np.clip(cmd.force_n or 0.0, -3.0, 3.0))
+        self.f, self.queued = self.queued, float(np.clip(along_y(cmd), -3.0, 3.0))
 
 
 class PerWriteRampArm(Arm):
@@ -329,7 +329,7 @@ class PerWriteRampArm(Arm):
     limits = ActuatorLimits(max_force_n=3.0, settle_time_s=6 * 0.001)
 
     def _command(self, cmd: ChannelCommand) -> None:
-        target = float(np.clip(cmd.force_n or 0.0, -3.0, 3.0))
+        target = float(np.clip(along_y(cmd), -3.0, 3.0))
         self.f += float(np.clip(target - self.f, -0.5, 0.5))
 
 

@@ -23,7 +23,7 @@ from hapticsdk.plugins import registry
 from hapticsdk.solvers import Solver
 from hapticsdk.testing import RULES, check, check_actuator, check_device, check_dimension, check_model
 from hapticsdk.testing.conformance import KitResult, format_report
-from kit_variants import API, constraint, dishonest, never, registered, rules_of
+from kit_variants import API, along_y, constraint, dishonest, never, registered, rules_of
 from kit_variants import OutputArm as Arm
 
 needs_hardness = pytest.mark.skipif("omni-virtual" not in registry("actuator"),
@@ -406,7 +406,7 @@ class LagRateArm(Arm):
         self.drive = 0.0
 
     def _command(self, cmd: ChannelCommand) -> None:
-        self.drive = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+        self.drive = float(np.clip(along_y(cmd), -self.saturation_n, self.saturation_n))
 
     def _stop(self) -> None:
         self.drive, self.f = 0.0, 0.0

@@ -4,6 +4,11 @@ kit before:
 * ``output-follows-command`` (actuator): a simulated actuator whose output lag is advanced
   by a fixed step per ``step()`` call, not by ``dt``: it settles within its declared
   settle time at the kit's 1 ms period and takes twice as long (in seconds) at 2 ms;
+* ``output-follows-command`` (actuator, device): a force device that ignores
+  ``ChannelCommand.direction`` (the contact normal the force pushes along; None is +y)
+  and renders ``force_n`` along +y whatever the normal, so on the underside of an object
+  it pushes into it. A device on one axis rendering the projection, and one rendering the
+  whole vector (its read-back giving the direction), conform;
 * ``constraints-vectorised`` (dimension): ``constraints()`` that takes no keyword facts
   (the core passes every dimension of a problem its model's facts, ``df_hz`` and any
   name of a ``constraint_context``, so a scene mixing it with such a model fails);
@@ -21,13 +26,14 @@ from __future__ import annotations
 import math
 from typing import ClassVar
 
+import numpy as np
 import pytest
 
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.plugins import registry
-from hapticsdk.testing import check, check_actuator, check_dimension
+from hapticsdk.testing import check, check_actuator, check_device, check_dimension
 from hapticsdk.testing.conformance import format_report
-from kit_variants import LAG_COIL_MAX_V, LagCoil, buzz_dimension, buzz_installed, rules_of
+from kit_variants import LAG_COIL_MAX_V, ForceArm, LagCoil, OutputArm, buzz_dimension, buzz_installed, rules_of
 
 
 # ---------------------------------------------------------------------------
@@ -224,3 +230,43 @@ def test_a_problem_passes_its_model_s_facts_to_every_dimension(monkeypatch):
     monkeypatch.setattr(hardness, "constraints", constraints)
     build_problem({"hardness": 0.5})
     assert seen and "df_hz" in seen[0], seen
+
+
+# ---------------------------------------------------------------------------
+# devices: the direction a force pushes along
+# ---------------------------------------------------------------------------
+
+def _on_plus_y(arm: type[ForceArm]) -> type[ForceArm]:
+    """``arm`` rendering ``force_n`` along +y whatever ``direction`` says."""
+    def _command(self, cmd) -> None:
+        self.f = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+    return type(arm.__name__ + "OnPlusY", (arm,), {"__doc__": "Ignores the command's direction.",
+                                                  "name": arm.name + "-plus-y", "_command": _command})
+
+
+class _Vector3(OutputArm):
+    """A correct device rendering the whole force vector (3 motors): its read-back is the
+    force along the direction it was sent."""
+    name: ClassVar[str] = "kit-arm-3d"
+
+    def _command(self, cmd) -> None:
+        super()._command(cmd)
+        self.f = float(np.clip(cmd.force_n or 0.0, -self.saturation_n, self.saturation_n))
+        self.d = cmd.direction
+
+    def _read_back(self):
+        from hapticsdk.perception.dimensions import ChannelCommand
+        return ChannelCommand("force", force_n=self.f, direction=getattr(self, "d", None))
+
+
+@pytest.mark.parametrize("arm", [OutputArm, ForceArm], ids=["output", "drive-record"])
+def test_a_device_ignoring_the_direction_is_caught(arm):
+    v = check_device(_on_plus_y(arm))
+    assert rules_of(v) == {"output-follows-command"}, format_report(v)
+    assert "it ignores ChannelCommand.direction" in format_report(v)
+
+
+@pytest.mark.parametrize("arm", [OutputArm, ForceArm, _Vector3], ids=["output", "drive-record", "3d"])
+def test_devices_rendering_the_direction_conform(arm):
+    v = check("device", arm, rules=["output-follows-command"])
+    assert v == [], format_report(v)

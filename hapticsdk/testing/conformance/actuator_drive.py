@@ -468,6 +468,47 @@ def _follows_at_period(make: Any, period: float = SLOW_PERIOD_S) -> None:
                 f"0.1..100 ms); advance it by dt") from None
 
 
+#: contact normals (unit vectors, device coordinates) ``output-follows-command`` sends a
+#: force along (``ChannelCommand.direction``): the underside of an object (-y) and a
+#: slanted face (0.6, 0.8, 0)
+DIRECTIONS = ((0.0, -1.0, 0.0), (0.6, 0.8, 0.0))
+
+
+def _follows_direction(make: Any) -> None:
+    """On a new instance of an actuator that takes ``force_n``: half its declared
+    ``max_force_n`` (at most what the safety layer's start gate lets through) held from
+    rest along each of :data:`DIRECTIONS`, and the read-back's force along
+    y (its ``force_n`` times its own direction's y, +y when it gives none) must be the
+    command's projection on y, ``force_n * direction[1]``, within the force tolerance of
+    :func:`_assert_matches`. ``direction`` is the unit vector the force pushes along (the
+    contact normal; None is +y): a device rendering along one axis applies the projection
+    on its axis (the simulated Omni: y), a device rendering in 3-D the whole vector; both
+    give that y component. A device that declares no ``max_force_n`` is not judged (as
+    in :func:`_assert_matches`)."""
+    act = make()
+    lim = act.limits
+    if lim.max_force_n is None or "force_n" not in act.accepted_fields():
+        return
+    gate = getattr(act.safety.settings, "start_max_force_n", None)
+    f = 0.5 * float(lim.max_force_n) if gate is None else min(0.5 * float(lim.max_force_n), float(gate))
+    with act:
+        t = 0.0
+        for d in DIRECTIONS:
+            act.stop()   # from rest: the force the safety layer's start gate lets through
+            sent, t = _hold(act, ChannelCommand(act.channel, force_n=f, direction=d), t)
+            rb = act.read_back()
+            if sent is None or rb is None or sent.force_n is None:
+                continue
+            want = sent.force_n * (sent.direction[1] if sent.direction is not None else 1.0)
+            got = (rb.force_n or 0.0) * (rb.direction[1] if rb.direction is not None else 1.0)
+            tolf = _tol(act, getattr(lim, "force_resolution_n", None), _full_scale(act)[0])
+            assert abs(got - want) <= tolf, \
+                (f"commanded {sent.force_n:g} N along direction {d} (a contact normal), the device outputs "
+                 f"{got:g} N along y, expected the projection {want:g} N (tolerance {tolf:.3g} N): it ignores "
+                 f"ChannelCommand.direction, so on a face whose normal is not +y it pushes the wrong way; apply "
+                 f"force_n * direction (or its projection on the axis you render)")
+
+
 def _reached_at_write(act: Actuator, prev: ChannelCommand | None, new: ChannelCommand | None,
                       rb: ChannelCommand | None) -> bool | None:
     """Whether the read-back ``rb``, taken the instant ``new`` was written after ``prev`` had

@@ -17,7 +17,7 @@ from ...devices.actuators import CHANNELS, Actuator, ActuatorLimits, HapticDevic
 from ...errors import DeviceError, PluginError, ValidationError
 from ...perception.dimensions import ChannelCommand
 from .actuator_drive import (STALL_RUN_S, THREAD_GRACE_S, _Spy, _advance, _alternate_once, _assert_matches,
-                             _command_run, _follows_at_period,
+                             _command_run, _follows_at_period, _follows_direction,
                              _assert_rest, _drive, _drive_size, _edge_commands, _full_scale, _hold, _hold_both,
                              _in_servo_loop, _kinematics_error, _normal_commands, _over_limit_commands,
                              _reached_at_write, _reports_output, _rest_after, _sensed_run, _settle_ticks,
@@ -421,6 +421,8 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         # the same at a longer servo period, on a new instance: the declared settle time is in
         # seconds, whatever the period the simulation is stepped at
         _follows_at_period(ctx.make)
+        # a force along a contact normal other than +y: the device renders its projection
+        _follows_direction(ctx.make)
 
     def r_reopen() -> None:
         # one instance opened, driven, stopped and closed twice: its second life keeps
