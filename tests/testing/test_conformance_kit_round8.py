@@ -9,6 +9,9 @@ kit before:
   and renders ``force_n`` along +y whatever the normal, so on the underside of an object
   it pushes into it. A device on one axis rendering the projection, and one rendering the
   whole vector (its read-back giving the direction), conform;
+* ``state`` (device): a simulated device whose state reports a force other than the one
+  it applies (``DeviceState.force_n``, N): its sign flipped, or in mN. One that reports
+  no force at all (zeros: it does not sense it) is not judged;
 * ``constraints-vectorised`` (dimension): ``constraints()`` that takes no keyword facts
   (the core passes every dimension of a problem its model's facts, ``df_hz`` and any
   name of a ``constraint_context``, so a scene mixing it with such a model fails);
@@ -29,6 +32,7 @@ from typing import ClassVar
 import numpy as np
 import pytest
 
+from hapticsdk.devices.actuators import DeviceState
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_actuator, check_device, check_dimension
@@ -269,4 +273,30 @@ def test_a_device_ignoring_the_direction_is_caught(arm):
 @pytest.mark.parametrize("arm", [OutputArm, ForceArm, _Vector3], ids=["output", "drive-record", "3d"])
 def test_devices_rendering_the_direction_conform(arm):
     v = check("device", arm, rules=["output-follows-command"])
+    assert v == [], format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# devices: the force a state reports
+# ---------------------------------------------------------------------------
+
+def _sensing(scale: float, label: str) -> type[OutputArm]:
+    """:class:`OutputArm` whose state reports ``scale`` x the force it applies."""
+    def _read_state(self) -> DeviceState:
+        return DeviceState(t=self.t, position_mm=np.zeros(3), velocity_mm_s=np.zeros(3),
+                           force_n=np.array([0.0, scale * self.f, 0.0]))
+    return type(f"Arm_{label}", (OutputArm,), {"__doc__": f"Its state reports the force {label}.",
+                                              "name": f"kit-arm-{label}", "_read_state": _read_state})
+
+
+@pytest.mark.parametrize("scale, label", [(-1.0, "sign-flipped"), (1000.0, "in-mN")])
+def test_a_state_reporting_another_force_than_applied_is_caught(scale, label):
+    v = check_device(_sensing(scale, label))
+    assert rules_of(v) == {"state"}, format_report(v)
+    assert "is not the force applied" in format_report(v)
+
+
+@pytest.mark.parametrize("scale, label", [(1.0, "applied"), (0.0, "not-sensed")])
+def test_a_state_reporting_the_applied_force_or_none_conforms(scale, label):
+    v = check("device", _sensing(scale, label), rules=["state"])
     assert v == [], format_report(v)

@@ -509,6 +509,40 @@ def _follows_direction(make: Any) -> None:
                  f"force_n * direction (or its projection on the axis you render)")
 
 
+def _sensed_force_error(make: Any) -> str | None:
+    """What is wrong with the force a simulated device's state reports, as text (None:
+    nothing). On a new instance the largest normal command the start gate lets through is
+    held (:func:`_hold`); the state's ``force_n`` (the force currently applied, N) must
+    then be the read-back's force along y (as :func:`_follows_direction` reads it) within
+    two force tolerances of :func:`_assert_matches` (the read-back's resolution and the
+    state's). A state that reports no force (all zero) is not judged: a device may not
+    sense it. Only devices that declare ``max_force_n`` (as :func:`_assert_matches`)."""
+    act = make()
+    lim = act.limits
+    if lim.max_force_n is None or not isinstance(act, HapticDevice):
+        return None
+    cmds = [c for c in _startable_commands(act) if c.force_n]
+    if not cmds:
+        return None
+    with act:
+        sent, _ = _hold(act, cmds[-1], 0.0)
+        rb = act.read_back()
+        st = act.read_state()
+    if sent is None or rb is None:
+        return None
+    f = np.array(st.force_n, float).reshape(3)
+    if not f.any():
+        return None
+    want = (rb.force_n or 0.0) * (rb.direction[1] if rb.direction is not None else 1.0)
+    tolf = 2 * _tol(act, getattr(lim, "force_resolution_n", None), _full_scale(act)[0])
+    if abs(f[1] - want) <= tolf:
+        return None
+    return (f"holding {sent.force_n:g} N (settled: the read-back gives {want:g} N along y), read_state() reports "
+            f"force_n {f.tolist()} N: its y component {f[1]:g} N is not the force applied (tolerance {tolf:.3g} N); "
+            f"DeviceState.force_n is the force the device applies now, in N, in device coordinates (a sign "
+            f"flipped, mN, or the last command instead of the output?)")
+
+
 def _reached_at_write(act: Actuator, prev: ChannelCommand | None, new: ChannelCommand | None,
                       rb: ChannelCommand | None) -> bool | None:
     """Whether the read-back ``rb``, taken the instant ``new`` was written after ``prev`` had

@@ -20,7 +20,7 @@ from .actuator_drive import (STALL_RUN_S, THREAD_GRACE_S, _Spy, _advance, _alter
                              _command_run, _follows_at_period, _follows_direction,
                              _assert_rest, _drive, _drive_size, _edge_commands, _full_scale, _hold, _hold_both,
                              _in_servo_loop, _kinematics_error, _normal_commands, _over_limit_commands,
-                             _reached_at_write, _reports_output, _rest_after, _sensed_run, _settle_ticks,
+                             _reached_at_write, _reports_output, _rest_after, _sensed_force_error, _sensed_run, _settle_ticks,
                              _second_states, _stale_states, _stalls, _startable_commands, _takes_option,
                              _threads_left, _tol)
 from .runner import _Ctx, _run_rules
@@ -250,6 +250,9 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
         assert ts[-1] > ts[0], (f"device time stayed at {ts[0]:g} s over {len(dts)} steps of "
                                 f"{float(np.sum(dts)):g} s in all (step(dt) advances simulated time)")
         why = _kinematics_error(np.diff(ts), xs, vs, q)
+        assert why is None, why
+        # the force it reports is the force it applies (N, device coordinates)
+        why = _sensed_force_error(ctx.make)
         assert why is None, why
         # two simulated devices open at once keep separate physics: what the second senses
         # does not change when the first is driven (compared with two runs where the first
