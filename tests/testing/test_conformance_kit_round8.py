@@ -15,6 +15,11 @@ kit before:
 * ``constraints-vectorised`` (dimension): ``constraints()`` that takes no keyword facts
   (the core passes every dimension of a problem its model's facts, ``df_hz`` and any
   name of a ``constraint_context``, so a scene mixing it with such a model fails);
+* ``renderer`` (dimension): a renderer whose path for ``TickInput.velocity_floats_mm_s``
+  (the velocity as plain floats, which the servo loop always gives and the kit's ticks
+  did not) reads another component than its path for the array, and one that assumes
+  the version-1 plane (divides by ``normal[1]``), which turns infinite on a wall of a
+  spatial scene;
 * ``determinism`` (dimension): a renderer that ignores ``TickInput.dt`` and advances its
   state by a fixed step per tick (an onset envelope, an attack ramp, a slow tremolo's
   phase, a low-pass of the depth with a fixed coefficient): at a 0.25 ms servo period it
@@ -300,3 +305,60 @@ def test_a_state_reporting_another_force_than_applied_is_caught(scale, label):
 def test_a_state_reporting_the_applied_force_or_none_conforms(scale, label):
     v = check("device", _sensing(scale, label), rules=["state"])
     assert v == [], format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# dimensions: the velocity's float path, other contact normals
+# ---------------------------------------------------------------------------
+
+class _Slide(DimensionRenderer):
+    """Correct: amplitude from x and the sliding speed, read from the floats when the
+    caller gives them (as the servo loop does), else from the array."""
+    roles = ("buzz",)
+
+    def __init__(self, x: float) -> None:
+        self.x = x
+
+    def speed(self, inp) -> float:
+        vt = inp.velocity_floats_mm_s
+        return abs(vt[0]) if vt is not None else abs(float(inp.velocity_mm_s[0]))
+
+    def gain(self, inp) -> float:
+        return 1.0
+
+    def tick(self, inp):
+        if not inp.in_contact:
+            return [ChannelCommand("buzz", frequency_hz=100.0, amplitude=0.0)]
+        a = 0.25 * LAG_COIL_MAX_V * (0.2 + 0.8 * self.x) * min(1.0, self.speed(inp) / 100.0)
+        return [ChannelCommand("buzz", frequency_hz=100.0, amplitude=a * self.gain(inp))]
+
+
+class _FloatsOffByOne(_Slide):
+    """Reads the normal component (index 1) from the floats, the sliding one from the array."""
+
+    def speed(self, inp) -> float:
+        vt = inp.velocity_floats_mm_s
+        return abs(vt[1]) if vt is not None else abs(float(inp.velocity_mm_s[0]))
+
+
+class _PlaneOnly(_Slide):
+    """Scales by 1 / normal[1] (numpy: no exception, an infinity on a wall)."""
+
+    def gain(self, inp) -> float:
+        with np.errstate(divide="ignore"):
+            return float(np.float64(1.0) / np.float64(abs(inp.normal[1])))
+
+
+def test_a_renderer_reading_the_floats_and_the_array_alike_conforms(installed):
+    v = check_dimension(buzz_dimension(_Slide))
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("renderer, why", [
+    (_FloatsOffByOne, "with TickInput.velocity_floats_mm_s set to the velocity's three numbers"),
+    (_PlaneOnly, "at normal (1.0, 0.0, 0.0)"),
+], ids=["floats-path-reads-another-component", "divides-by-normal-y"])
+def test_renderers_broken_off_the_kit_s_old_ticks_are_caught(installed, renderer, why):
+    v = check_dimension(buzz_dimension(renderer))
+    assert rules_of(v) == {"renderer"}, format_report(v)
+    assert why in format_report(v)

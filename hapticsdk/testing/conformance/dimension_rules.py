@@ -10,7 +10,7 @@ import functools
 import json
 import math
 import time
-from dataclasses import fields
+from dataclasses import fields, replace
 from typing import Any, Callable, Mapping
 
 import numpy as np
@@ -216,6 +216,53 @@ def _check_commands(cmds: Any, inp: TickInput, r: DimensionRenderer, specs: Mapp
                 (f"amplitude {c.amplitude:g} commanded on the vibration role {c.role!r} out of contact "
                  f"{where}: nothing touches the surface, "
                  f"so nothing may vibrate; the loop sends amplitude 0 on it away from every object")
+
+
+#: contact normals (unit vectors, device coordinates) the ``renderer`` rule ticks a renderer
+#: at besides the version-1 plane's +y (``TickInput.normal``, the normal of the face under
+#: the probe in a spatial scene): a wall facing +x, an object's underside, a slanted face,
+#: a wall facing +z
+RENDER_NORMALS = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.6, 0.8, 0.0), (0.0, 0.0, 1.0))
+
+
+def _values(cmds: Any) -> list[tuple[Any, ...]]:
+    """A tick's commands as values (role, force, frequency, amplitude)."""
+    return [(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in cmds]
+
+
+def _same_values(a: list[tuple[Any, ...]], b: list[tuple[Any, ...]]) -> bool:
+    """Whether two ticks' commands (:func:`_values`) are the same: the same roles in the same
+    order and each field None in both or equal within float rounding (1e-9 relative: one
+    path may compute with numpy scalars, the other with floats)."""
+    if len(a) != len(b):
+        return False
+    for x, y in zip(a, b):
+        if x[0] != y[0]:
+            return False
+        for u, v in zip(x[1:], y[1:]):
+            if (u is None) != (v is None):
+                return False
+            if u is not None and not (u == v or abs(u - v) <= 1e-9 * max(abs(u), abs(v))):
+                return False
+    return True
+
+
+def _floats_path_difference(d: PerceptionDimension, feats: Mapping[str, float]) -> str | None:
+    """Where two new renderers of ``feats`` differ, one ticked through the kit's ticks and
+    the sweep as given (``velocity_floats_mm_s`` None: the velocity is read from the
+    array), then one (made after that run) through the same ticks with
+    ``velocity_floats_mm_s`` the array's three numbers (as the servo loop gives them), as
+    text; None when every tick agrees."""
+    ticks = _TICKS + list(_sweep_inputs())
+    plain = d.renderer(dict(feats))
+    without = [_values(plain.tick(inp)) for inp in ticks]
+    floats = d.renderer(dict(feats))   # made after the first run: one renderer alive at a time
+    for k, (inp, a) in enumerate(zip(ticks, without)):
+        v = np.asarray(inp.velocity_mm_s, float)
+        b = _values(floats.tick(replace(inp, velocity_floats_mm_s=(float(v[0]), float(v[1]), float(v[2])))))
+        if not _same_values(a, b):
+            return f"{b} with the floats against {a} without ({_where(inp, feats, k)})"
+    return None
 
 
 def _where(inp: TickInput, feats: Mapping[str, float], k: int | None = None) -> str:
@@ -699,6 +746,20 @@ def _dimension_rules(ctx: _Ctx) -> None:
             inp = TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
                             velocity_mm_s=base.velocity_mm_s, in_contact=base.in_contact)
             _check_commands(r.tick(inp), inp, r, specs, _where(inp, feats, k))
+        # the face under the probe need not be the version-1 plane: the same checks at the
+        # contact normals of a spatial scene (TickInput is in the contact frame)
+        for normal in RENDER_NORMALS:
+            r = d.renderer(feats)
+            for inp in _tick_inputs(read_only=True):
+                inp = replace(inp, normal=normal)
+                _check_commands(_tick_unchanged(r, inp), inp, r, specs, f"{_where(inp, feats)} at normal {normal}")
+        # the velocity as plain floats (the servo loop gives them) is the same velocity: the
+        # same commands as when it is read from the array (the kit's other ticks)
+        diff = _floats_path_difference(d, feats)
+        assert diff is None, \
+            (f"the same ticks gave other commands with TickInput.velocity_floats_mm_s set to the velocity's three "
+             f"numbers, as the servo loop sets it: {diff}; it holds velocity_mm_s as plain floats, so a renderer "
+             f"reading it must read the same components (vt[0] is velocity_mm_s[0])")
         # and holds bounded memory: what it keeps per tick outgrows any machine within a
         # render (which may last 24 h)
         held = _memory_growth(lambda: d.renderer(feats))
