@@ -19,7 +19,9 @@ kit before:
   (the velocity as plain floats, which the servo loop always gives and the kit's ticks
   did not) reads another component than its path for the array, and one that assumes
   the version-1 plane (divides by ``normal[1]``), which turns infinite on a wall of a
-  spatial scene;
+  spatial scene, and one whose speed gate goes wrong only with the filtered velocity and
+  an encoder's speed step (``speed_step_mm_s > 0``, which the loop gives for a device
+  declaring an encoder count and the kit's ticks never did);
 * ``determinism`` (dimension): a renderer that ignores ``TickInput.dt`` and advances its
   state by a fixed step per tick (an onset envelope, an attack ramp, a slow tremolo's
   phase, a low-pass of the depth with a fixed coefficient): at a 0.25 ms servo period it
@@ -349,6 +351,17 @@ class _PlaneOnly(_Slide):
             return float(np.float64(1.0) / np.float64(abs(inp.normal[1])))
 
 
+class _SoftGate(_Slide):
+    """Fades in over one count's speed step above the gate, on the filtered speed when the
+    loop gives a step, as ``(|v| - step) / |v|``: negative below one step."""
+
+    def gain(self, inp) -> float:
+        step, vf = inp.speed_step_mm_s, inp.velocity_filtered_mm_s
+        if step <= 0.0 or vf is None:
+            return 1.0
+        return (abs(vf[0]) - step) / max(abs(vf[0]), 1e-9)
+
+
 def test_a_renderer_reading_the_floats_and_the_array_alike_conforms(installed):
     v = check_dimension(buzz_dimension(_Slide))
     assert v == [], format_report(v)
@@ -357,7 +370,8 @@ def test_a_renderer_reading_the_floats_and_the_array_alike_conforms(installed):
 @pytest.mark.parametrize("renderer, why", [
     (_FloatsOffByOne, "with TickInput.velocity_floats_mm_s set to the velocity's three numbers"),
     (_PlaneOnly, "at normal (1.0, 0.0, 0.0)"),
-], ids=["floats-path-reads-another-component", "divides-by-normal-y"])
+    (_SoftGate, "with a filtered velocity and speed step"),
+], ids=["floats-path-reads-another-component", "divides-by-normal-y", "negative-below-one-speed-step"])
 def test_renderers_broken_off_the_kit_s_old_ticks_are_caught(installed, renderer, why):
     v = check_dimension(buzz_dimension(renderer))
     assert rules_of(v) == {"renderer"}, format_report(v)

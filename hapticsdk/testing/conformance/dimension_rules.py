@@ -225,6 +225,13 @@ def _check_commands(cmds: Any, inp: TickInput, r: DimensionRenderer, specs: Mapp
 RENDER_NORMALS = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.6, 0.8, 0.0), (0.0, 0.0, 1.0))
 
 
+#: speed steps (mm/s) of one encoder count (``TickInput.speed_step_mm_s``: ``a q / dt``)
+#: the ``renderer`` rule ticks with, the filtered velocity given: a fine encoder at 1 kHz
+#: (q = 1 um, a = 0.17: 0.17 mm/s) and a coarse one (q = 0.05 mm: 9 mm/s) and beyond
+#: (50 mm/s: the count-level chatter the filter is there for)
+ENCODER_SPEED_STEPS_MM_S = (0.17, 9.0, 50.0)
+
+
 def _values(cmds: Any) -> list[tuple[Any, ...]]:
     """A tick's commands as values (role, force, frequency, amplitude)."""
     return [(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in cmds]
@@ -753,6 +760,16 @@ def _dimension_rules(ctx: _Ctx) -> None:
             for inp in _tick_inputs(read_only=True):
                 inp = replace(inp, normal=normal)
                 _check_commands(_tick_unchanged(r, inp), inp, r, specs, f"{_where(inp, feats)} at normal {normal}")
+        # and as the loop gives them on a device that declares an encoder count: the
+        # filtered velocity and the speed step of one count (TickInput.speed_step_mm_s > 0),
+        # which a speed gate uses as its hysteresis (the kit's other ticks give neither)
+        for step in ENCODER_SPEED_STEPS_MM_S:
+            r = d.renderer(feats)
+            for inp in _TICKS + list(_sweep_inputs()):
+                v = np.asarray(inp.velocity_mm_s, float)
+                inp = replace(inp, velocity_filtered_mm_s=(float(v[0]), float(v[1]), float(v[2])), speed_step_mm_s=step)
+                _check_commands(_tick_unchanged(r, inp), inp, r, specs,
+                                f"{_where(inp, feats)} with a filtered velocity and speed step {step:g} mm/s")
         # the velocity as plain floats (the servo loop gives them) is the same velocity: the
         # same commands as when it is read from the array (the kit's other ticks)
         diff = _floats_path_difference(d, feats)
