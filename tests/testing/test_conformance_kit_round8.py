@@ -12,6 +12,9 @@ kit before:
 * ``state`` (device): a simulated device whose state reports a force other than the one
   it applies (``DeviceState.force_n``, N): its sign flipped, or in mN. One that reports
   no force at all (zeros: it does not sense it) is not judged;
+* ``constraints-vectorised`` (dimension): a constraint of device-aware solving
+  (``device_constraints``, for the default actuators' capabilities) whose bound is NaN over
+  part of the feature box: the rule checked only ``constraints()``;
 * ``constraints-vectorised`` (dimension): ``constraints()`` that takes no keyword facts
   (the core passes every dimension of a problem its model's facts, ``df_hz`` and any
   name of a ``constraint_context``, so a scene mixing it with such a model fails);
@@ -44,7 +47,7 @@ from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_actuator, check_device, check_dimension
 from hapticsdk.testing.conformance import format_report
-from kit_variants import LAG_COIL_MAX_V, ForceArm, LagCoil, OutputArm, buzz_dimension, buzz_installed, rules_of
+from kit_variants import LAG_COIL_MAX_V, ForceArm, constraint, LagCoil, OutputArm, buzz_dimension, buzz_installed, rules_of
 
 
 # ---------------------------------------------------------------------------
@@ -376,3 +379,34 @@ def test_renderers_broken_off_the_kit_s_old_ticks_are_caught(installed, renderer
     v = check_dimension(buzz_dimension(renderer))
     assert rules_of(v) == {"renderer"}, format_report(v)
     assert why in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# dimensions: constraints of device-aware solving
+# ---------------------------------------------------------------------------
+
+def _with_device_constraint(bound_and_value):
+    """kit-buzz whose device_constraints() gives ``bound_and_value(x, max_drive)`` (the
+    default coil's largest drive, V) as one constraint on kit.b."""
+    def device_constraints(self, capabilities, **options):
+        cap = capabilities.get("buzz")
+        if cap is None or cap.max_drive is None:
+            return []
+        drive = float(cap.max_drive)
+        return [constraint("kit-buzz.drive", "kit.b", lambda x: bound_and_value(x, drive))()]
+    return type("DeviceAware", (buzz_dimension(_Onset),), {"device_constraints": device_constraints})
+
+
+def test_a_vectorised_device_constraint_conforms(installed):
+    # x <= drive / 2.5: the coil's 2 V reach 0.8 of the scale
+    dim = _with_device_constraint(lambda x, drive: (x, np.full_like(x, drive / 2.5)))
+    v = check("dimension", dim, rules=["constraints-vectorised"])
+    assert v == [], format_report(v)
+
+
+def test_a_device_constraint_with_a_nan_bound_is_caught(installed):
+    # a reach table looked up past its last entry (x > 0.9) gives NaN: read as met there
+    dim = _with_device_constraint(lambda x, drive: (np.where(x <= 0.9, x, np.nan), np.full_like(x, drive / 2.5)))
+    v = check_dimension(dim)
+    assert rules_of(v) == {"constraints-vectorised"}, format_report(v)
+    assert "constraint 'kit-buzz.drive': bound nan" in format_report(v)

@@ -272,6 +272,26 @@ def _floats_path_difference(d: PerceptionDimension, feats: Mapping[str, float]) 
     return None
 
 
+def _device_constraints(d: PerceptionDimension) -> list[Constraint]:
+    """``d.device_constraints`` for the capabilities of its installed default actuators
+    (``capability_for(None)`` of each role's class; roles without one left out), with the
+    renderer options ``capability_options`` takes from them, as the compiler calls it for a
+    scene that maps the defaults; [] when no role has a capability. A list is required."""
+    from ...plugins import registry
+    caps: dict[str, Any] = {}
+    for role, name in d.default_actuators.items():
+        if name in registry("actuator"):
+            cap = registry("actuator").load(name).capability_for(None)
+            if cap is not None:
+                caps[role] = cap
+    if not caps:
+        return []
+    out = d.device_constraints(caps, **d.capability_options(caps))
+    assert isinstance(out, list), \
+        f"device_constraints() returned {type(out).__name__}, not a list (of the default actuators' capabilities {caps})"
+    return out
+
+
 def _where(inp: TickInput, feats: Mapping[str, float], k: int | None = None) -> str:
     """Which tick: penetration, velocity, features (and its index in a run)."""
     at = f"at tick {k + 1} of a run, " if k is not None else ""
@@ -656,7 +676,11 @@ def _dimension_rules(ctx: _Ctx) -> None:
         cols = {n: X[:, i].copy() for i, n in enumerate(space.names)}    # what the constraints are handed
         E = np.vstack([X, np.asarray(space.lower, float), np.asarray(space.upper, float)])
         edge_cols = {n: E[:, i].copy() for i, n in enumerate(space.names)}
-        for c in cons:
+        # the constraints of device-aware solving (device_constraints, from the default
+        # actuators' capabilities, with the renderer options they supply) are solved with
+        # these: the same rules
+        device = _device_constraints(d)
+        for c in cons + device:
             assert isinstance(c, Constraint), f"{c!r} is not a Constraint"
             missing = [f for f in c.features if f not in space]
             assert not missing, f"constraint {c.name!r} reads features {missing} the dimension does not contribute"
