@@ -9,6 +9,9 @@ kit before:
   and renders ``force_n`` along +y whatever the normal, so on the underside of an object
   it pushes into it. A device on one axis rendering the projection, and one rendering the
   whole vector (its read-back giving the direction), conform;
+* ``limits-declared`` (actuator): ``capability_for()`` (what device-aware solving solves
+  within) beyond the declared limits the safety layer clamps to: a wider band, a larger
+  drive (3000 mV against 2 V), a drive in a unit of another quantity;
 * ``state`` (device): a simulated device whose state reports a force other than the one
   it applies (``DeviceState.force_n``, N): its sign flipped, or in mN. One that reports
   no force at all (zeros: it does not sense it) is not judged;
@@ -410,3 +413,37 @@ def test_a_device_constraint_with_a_nan_bound_is_caught(installed):
     v = check_dimension(dim)
     assert rules_of(v) == {"constraints-vectorised"}, format_report(v)
     assert "constraint 'kit-buzz.drive': bound nan" in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# actuators: what capability_for() says it can produce
+# ---------------------------------------------------------------------------
+
+def _capable(band, drive, unit, label):
+    """The lagging coil (30..300 Hz, 2 V) whose capability_for() gives ``band``, ``drive`` ``unit``."""
+    from hapticsdk.devices.actuators import DriveCapability
+
+    @classmethod
+    def capability_for(cls, options=None):
+        return DriveCapability(channel="vibration", frequency_range_hz=band, max_drive=drive, drive_unit=unit,
+                               source=label)
+    return type(f"Coil_{label}", (LagCoil,), {"__doc__": f"capability: {label}", "name": f"kit-lag-{label}",
+                                             "capability_for": capability_for})
+
+
+@pytest.mark.parametrize("band, drive, unit, label", [
+    ((140.0, 260.0), 1.5, "V", "narrower-band"), ((30.0, 300.0), 2000.0, "mV", "same-drive-in-mV")])
+def test_a_capability_within_the_limits_conforms(band, drive, unit, label):
+    v = check("actuator", _capable(band, drive, unit, label), rules=["limits-declared"])
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("band, drive, unit, label, why", [
+    ((10.0, 1000.0), 2.0, "V", "wider-band", "beyond the declared frequency_range_hz 30..300 Hz"),
+    ((30.0, 300.0), 3000.0, "mV", "larger-drive", "above the declared max_amplitude 2 V"),
+    ((30.0, 300.0), 2.0, "N", "drive-in-newtons", "not a unit of the amplitude"),
+])
+def test_a_capability_beyond_the_limits_is_caught(band, drive, unit, label, why):
+    v = check_actuator(_capable(band, drive, unit, label))
+    assert rules_of(v) == {"limits-declared"}, format_report(v)
+    assert why in format_report(v)

@@ -28,6 +28,49 @@ from .timing import COMMAND_BUDGET, KIT_PERIOD_S, TIMING_CALLS, _fastest, _sim_a
 from .values import _finite, _refuses
 
 
+def _capability_error(cls: Any) -> str | None:
+    """What is wrong with ``cls.capability_for(conformance options)`` against the class's
+    declared limits, as text (None: nothing). The compiler solves a dimension's features
+    within it (``device_constraints``); the safety layer clamps every command to the limits,
+    so a capability beyond them is something the actuator cannot output: its channel must
+    be the actuator's, its band within ``frequency_range_hz``, its ``max_drive`` at most
+    ``max_amplitude`` (compared in one unit where ``drive_unit`` and ``amplitude_unit``
+    parse as units of one quantity: a drive in mV against limits in V is converted; units
+    of two quantities fail). Only what both declare is compared."""
+    from ...devices.actuators import DriveCapability
+    from ...units import parse_unit
+    opts = cls.conformance_options() if hasattr(cls, "conformance_options") else {}
+    cap = cls.capability_for(opts)
+    if cap is None:
+        return None
+    if not isinstance(cap, DriveCapability):
+        return f"capability_for() returned {type(cap).__name__}, not a DriveCapability (or None)"
+    lim = cls.limits
+    if cap.channel != cls.channel:
+        return f"capability_for() describes channel {cap.channel!r}; the actuator's channel is {cls.channel!r}"
+    band, declared = cap.frequency_range_hz, lim.frequency_range_hz
+    if band is not None and declared is not None:
+        lo, hi = (float(v) for v in band)
+        dlo, dhi = (float(v) for v in declared)
+        if not (lo >= dlo - 1e-9 * dhi and hi <= dhi * (1 + 1e-9)):
+            return (f"capability_for() gives the band {lo:g}..{hi:g} Hz, beyond the declared frequency_range_hz "
+                    f"{dlo:g}..{dhi:g} Hz the safety layer clamps to: the compiler would solve for frequencies "
+                    f"it cannot play")
+    if cap.max_drive is not None and lim.max_amplitude is not None:
+        pc, pl = parse_unit(cap.drive_unit or lim.amplitude_unit), parse_unit(lim.amplitude_unit)
+        if isinstance(pc, tuple) and isinstance(pl, tuple):
+            if pc[1] != pl[1]:
+                return (f"capability_for() gives max_drive in {cap.drive_unit!r}, not a unit of the amplitude "
+                        f"({lim.amplitude_unit!r}, limits.amplitude_unit)")
+            drive = float(cap.max_drive) * pc[0] / pl[0]
+            if drive > float(lim.max_amplitude) * (1 + 1e-9):
+                return (f"capability_for() gives max_drive {cap.max_drive:g} {cap.drive_unit} ({drive:g} "
+                        f"{lim.amplitude_unit}), above the declared max_amplitude {lim.max_amplitude:g} "
+                        f"{lim.amplitude_unit} the safety layer clamps to: the compiler would solve for "
+                        f"amplitudes it cannot output")
+    return None
+
+
 def _actuator_rules(ctx: _Ctx, device: bool) -> None:
     cls = ctx.obj
 
@@ -84,6 +127,10 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
             assert same_unit(acc["amplitude"], lim.amplitude_unit), \
                 (f"accepts amplitude in {acc['amplitude']!r} but declares its limits in {lim.amplitude_unit!r} "
                  f"(limits.amplitude_unit): one of them is wrong")
+        # what it says it can produce (device-aware solving) is within what the safety
+        # layer lets it output
+        why = _capability_error(cls)
+        assert why is None, why
 
     def r_options() -> None:
         base = cls.conformance_options() if hasattr(cls, "conformance_options") else {}
