@@ -12,6 +12,9 @@ kit before:
 * ``limits-declared`` (actuator): ``capability_for()`` (what device-aware solving solves
   within) beyond the declared limits the safety layer clamps to: a wider band, a larger
   drive (3000 mV against 2 V), a drive in a unit of another quantity;
+* ``metadata`` (model): a fact build_problem hands every dimension's constraints
+  (``df_hz``, a ``constraint_context`` entry) that is NaN, infinite or not a number: a NaN
+  bound reads as met whatever the features;
 * ``state`` (device): a simulated device whose state reports a force other than the one
   it applies (``DeviceState.force_n``, N): its sign flipped, or in mN. One that reports
   no force at all (zeros: it does not sense it) is not judged;
@@ -50,7 +53,7 @@ from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.plugins import registry
 from hapticsdk.testing import check, check_actuator, check_device, check_dimension
 from hapticsdk.testing.conformance import format_report
-from kit_variants import LAG_COIL_MAX_V, ForceArm, constraint, LagCoil, OutputArm, buzz_dimension, buzz_installed, rules_of
+from kit_variants import LAG_COIL_MAX_V, BuzzModel, ForceArm, constraint, LagCoil, OutputArm, buzz_dimension, buzz_installed, rules_of
 
 
 # ---------------------------------------------------------------------------
@@ -447,3 +450,30 @@ def test_a_capability_beyond_the_limits_is_caught(band, drive, unit, label, why)
     v = check_actuator(_capable(band, drive, unit, label))
     assert rules_of(v) == {"limits-declared"}, format_report(v)
     assert why in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# models: the facts handed to the constraints
+# ---------------------------------------------------------------------------
+
+def _with_facts(facts):
+    """BuzzModel carrying ``facts`` in its metadata (``df_hz`` and ``constraint_context``)."""
+    def __init__(self):
+        BuzzModel.__init__(self)
+        self.metadata.update(facts)
+    return type("FactsModel", (BuzzModel,), {"__init__": __init__})
+
+
+def test_a_model_with_finite_facts_conforms(installed):
+    v = check("model", _with_facts({"df_hz": 0.4, "constraint_context": {"kit.b_max": 0.9}}))
+    assert v == [], format_report(v)
+
+
+@pytest.mark.parametrize("facts", [{"df_hz": float("nan")}, {"df_hz": 0.0},
+                                   {"constraint_context": {"kit.b_max": float("inf")}},
+                                   {"constraint_context": {"kit.b_max": "high"}}],
+                         ids=["df-nan", "df-zero", "context-inf", "context-text"])
+def test_a_model_with_a_fact_that_is_no_finite_number_is_caught(installed, facts):
+    v = check("model", _with_facts(facts))
+    assert rules_of(v) == {"metadata"}, format_report(v)
+    assert "metadata fact" in format_report(v)

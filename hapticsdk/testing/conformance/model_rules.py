@@ -5,6 +5,7 @@ and that every output responds to the features."""
 from __future__ import annotations
 
 import json
+import math
 from typing import Any, Mapping, cast
 
 import numpy as np
@@ -233,6 +234,21 @@ def _model_rules(ctx: _Ctx) -> None:
         json.dumps(m.describe(), default=str)
         assert m.feature_space is not None, "the model declares no feature_space (training range bounds)"
         assert tuple(m.feature_space.names) == m.feature_names, "feature_space names differ from inputs"
+        # the facts build_problem hands every dimension's constraints (float() of each): a
+        # NaN makes a bound NaN, which reads as met whatever the features
+        facts = dict(m.metadata.get("constraint_context") or {})
+        if m.metadata.get("df_hz") is not None:
+            facts["df_hz"] = m.metadata["df_hz"]
+        for k, v in facts.items():
+            try:
+                x = float(v)
+            except (TypeError, ValueError) as exc:
+                raise AssertionError(f"metadata fact {k}={v!r} is not a number ({exc}): build_problem passes "
+                                     f"float() of it to every dimension's constraints") from None
+            assert math.isfinite(x) and not (k == "df_hz" and x <= 0), \
+                (f"metadata fact {k}={v!r} is not a finite number{' > 0 (an FFT resolution, Hz)' if k == 'df_hz' else ''}: "
+                 f"build_problem passes it to every dimension's constraints, and a NaN bound reads as met whatever "
+                 f"the features")
         defaults = m.metadata.get("feature_defaults")
         if defaults is not None:
             for k, v in defaults.items():
