@@ -12,6 +12,9 @@ kit before:
 * ``limits-declared`` (actuator): ``capability_for()`` (what device-aware solving solves
   within) beyond the declared limits the safety layer clamps to: a wider band, a larger
   drive (3000 mV against 2 V), a drive in a unit of another quantity;
+* ``hookimpls`` (hooks): a hook module pluggy refuses to register (a ``hookwrapper=True``
+  implementation that is not a generator function): the core records it as a failed hook
+  plugin and never calls it;
 * ``metadata`` (model): a fact build_problem hands every dimension's constraints
   (``df_hz``, a ``constraint_context`` entry) that is NaN, infinite or not a number: a NaN
   bound reads as met whatever the features;
@@ -477,3 +480,33 @@ def test_a_model_with_a_fact_that_is_no_finite_number_is_caught(installed, facts
     v = check("model", _with_facts(facts))
     assert rules_of(v) == {"metadata"}, format_report(v)
     assert "metadata fact" in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# hook modules: what pluggy registers
+# ---------------------------------------------------------------------------
+
+def _wrapper_hooks(impl):
+    import types
+    from hapticsdk.hookspecs import hookimpl
+    from kit_variants import API
+    mod = types.ModuleType("kit_hooks_wrapper")
+    mod.hapticsdk_api = API   # type: ignore[attr-defined]
+    impl.__name__ = "hapticsdk_render_started"
+    mod.hapticsdk_render_started = hookimpl(hookwrapper=True)(impl)   # type: ignore[attr-defined]
+    return mod
+
+
+def test_a_hookwrapper_that_is_a_generator_conforms():
+    def started(plan):
+        yield
+    v = check("hooks", _wrapper_hooks(started))
+    assert v == [], format_report(v)
+
+
+def test_a_hookwrapper_that_is_not_a_generator_is_caught():
+    def started(plan):
+        return None
+    v = check("hooks", _wrapper_hooks(started))
+    assert rules_of(v) == {"hookimpls"}, format_report(v)
+    assert "pluggy refuses to register the module" in format_report(v)

@@ -96,6 +96,16 @@ def _hooks_rules(ctx: _Ctx) -> None:
             allowed = set(inspect.signature(spec).parameters) - {"self"}
             extra = set(inspect.signature(f).parameters) - allowed
             assert not extra, f"{n} takes {sorted(extra)}, which the hook does not pass (it passes {sorted(allowed)})"
+        # and pluggy itself takes the module, as the core registers it (a hookwrapper or
+        # wrapper that is not a generator function, a spec option it refuses)
+        import pluggy
+        pm = pluggy.PluginManager(hookspecs.PROJECT)
+        pm.add_hookspecs(hookspecs)
+        try:
+            pm.register(mod, name="kit-hooks-under-test")
+        except pluggy.PluginValidationError as exc:
+            raise AssertionError(f"pluggy refuses to register the module ({exc}): the core would record it as a "
+                                 f"failed hook plugin and never call it") from None
         # the hooks that take nothing are called, and their answers must be what the
         # hookspec says (the core skips a plugin whose answer is not, at run time)
         if "hapticsdk_materials" in impls:
