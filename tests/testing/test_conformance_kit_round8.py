@@ -34,6 +34,9 @@ kit before:
   spatial scene, and one whose speed gate goes wrong only with the filtered velocity and
   an encoder's speed step (``speed_step_mm_s > 0``, which the loop gives for a device
   declaring an encoder count and the kit's ticks never did);
+* ``determinism`` (dimension): a dimension whose ``renderer()`` hands out one cached
+  renderer per features: two objects of one material share it, and the loop ticks it
+  twice a tick (its onset runs at double speed);
 * ``determinism`` (dimension): a renderer that ignores ``TickInput.dt`` and advances its
   state by a fixed step per tick (an onset envelope, an attack ramp, a slow tremolo's
   phase, a low-pass of the depth with a fixed coefficient): at a 0.25 ms servo period it
@@ -510,3 +513,19 @@ def test_a_hookwrapper_that_is_not_a_generator_is_caught():
     v = check("hooks", _wrapper_hooks(started))
     assert rules_of(v) == {"hookimpls"}, format_report(v)
     assert "pluggy refuses to register the module" in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# dimensions: one renderer per renderer() call
+# ---------------------------------------------------------------------------
+
+def test_a_dimension_handing_out_cached_renderers_is_caught(installed):
+    cache: dict[float, _Onset] = {}
+    base = buzz_dimension(_Onset)
+
+    def renderer(self, features, **options):
+        made = base.renderer(self, features, **options)   # validates the features
+        return cache.setdefault(made.x, made)
+    v = check_dimension(type("Cached", (base,), {"renderer": renderer}))
+    assert rules_of(v) == {"determinism"}, format_report(v)
+    assert "or two objects of one material" in format_report(v)

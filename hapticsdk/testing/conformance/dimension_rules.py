@@ -829,15 +829,20 @@ def _dimension_rules(ctx: _Ctx) -> None:
         assert outs[0] == outs[1], "two renderers of the same features gave different commands"
         # two renderers alive at once (a scene with two materials of this dimension: the loop
         # ticks each every tick): each gives what a renderer of its features gives alone
+        # (and two of the same features: two objects of one material, each its own renderer)
         other = {f.name: float(f.lower) for f in d.features}
-        both = _commands_side_by_side(d, mid(), other)
-        alone = (outs[0], _commands_of(d, other))
-        for which, feats, got, want in (("first", mid(), both[0], alone[0]), ("second", other, both[1], alone[1])):
-            assert got == want, \
-                (f"two renderers ticked in turn (a scene with two materials of this dimension) gave other "
-                 f"commands than each alone: the {which}, at {dict(feats)}, gave {_first_difference(got, want)}; "
-                 f"renderers share state (a class attribute or module global changed in place, e.g. a filter "
-                 f"state or a contact timer): keep state on the instance")
+        for pair in ((mid(), other), (mid(), mid())):
+            both = _commands_side_by_side(d, *pair)
+            alone = (outs[0], _commands_of(d, pair[1]))
+            for which, feats, got, want in (("first", pair[0], both[0], alone[0]),
+                                            ("second", pair[1], both[1], alone[1])):
+                assert got == want, \
+                    (f"two renderers ticked in turn (a scene with two materials of this dimension"
+                     f"{'' if pair[1] is other else ', or two objects of one material'}) gave other commands than "
+                     f"each alone: the {which}, at {dict(feats)}, gave {_first_difference(got, want)}; renderers "
+                     f"share state (a class attribute or module global changed in place, e.g. a filter state or "
+                     f"a contact timer{'' if pair[1] is other else ', or one renderer handed out again for the same features'}): "
+                     f"keep state on the instance, and make a new renderer per renderer() call")
         # the same scene at another servo period: the same commands at the same times,
         # within what one tick's lateness at each period explains
         diff = _period_difference(d, mid())
