@@ -34,6 +34,9 @@ kit before:
   spatial scene, and one whose speed gate goes wrong only with the filtered velocity and
   an encoder's speed step (``speed_step_mm_s > 0``, which the loop gives for a device
   declaring an encoder count and the kit's ticks never did);
+* ``renderer`` (dimension): ``renderer()`` refusing features that are not its own (a
+  strict check of its input): the render builds each dimension's renderer from all of
+  the material's solved features, so every material with a second dimension failed;
 * ``determinism`` (dimension): a dimension whose ``renderer()`` hands out one cached
   renderer per features: two objects of one material share it, and the loop ticks it
   twice a tick (its onset runs at double speed);
@@ -53,6 +56,8 @@ from typing import ClassVar
 
 import numpy as np
 import pytest
+
+from hapticsdk.errors import ValidationError
 
 from hapticsdk.devices.actuators import DeviceState
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
@@ -529,3 +534,46 @@ def test_a_dimension_handing_out_cached_renderers_is_caught(installed):
     v = check_dimension(type("Cached", (base,), {"renderer": renderer}))
     assert rules_of(v) == {"determinism"}, format_report(v)
     assert "or two objects of one material" in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# dimensions: a material's features, other dimensions' too
+# ---------------------------------------------------------------------------
+
+def test_a_renderer_refusing_other_dimensions_features_is_caught(installed):
+    base = buzz_dimension(_Onset)
+
+    def renderer(self, features, **options):
+        unknown = sorted(set(features) - {f.name for f in self.features})
+        if unknown:
+            raise ValidationError(f"unknown features {unknown}", field="features")
+        return base.renderer(self, features, **options)
+    v = check_dimension(type("Strict", (base,), {"renderer": renderer}))
+    assert rules_of(v) == {"renderer"}, format_report(v)
+    assert "refused the features of a material that has another dimension too" in format_report(v)
+
+
+def test_the_render_hands_a_renderer_the_material_s_other_features():
+    """What the rule holds a renderer to: a material with hardness and roughness builds the
+    hardness renderer from GS, W and the roughness features."""
+    if not {"hardness", "roughness"} <= set(registry("dimension").names()):
+        pytest.skip("hapticsdk-hardness and hapticsdk-roughness not installed")
+    from hapticsdk.compiler import compile_scene
+    from hapticsdk.runtime.render import build_renderers
+    from hapticsdk.scene import Scene
+    plan = compile_scene(Scene.for_material({"hardness": 0.3, "roughness": 0.8}))
+    mp = next(iter(plan.materials.values()))
+    assert {"GS", "Fpeak"} <= set(mp.features) and len(mp.dimensions) == 2, mp.features
+    seen = []
+    hardness = registry("dimension").load("hardness")
+    original = hardness.renderer
+
+    def spy(self, features, **options):
+        seen.append(sorted(features))
+        return original(self, features, **options)
+    hardness.renderer = spy
+    try:
+        build_renderers(mp, plan.settings)
+    finally:
+        hardness.renderer = original
+    assert seen and "Fpeak" in seen[0], seen

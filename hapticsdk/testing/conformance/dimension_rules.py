@@ -225,6 +225,10 @@ def _check_commands(cmds: Any, inp: TickInput, r: DimensionRenderer, specs: Mapp
 RENDER_NORMALS = ((1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.6, 0.8, 0.0), (0.0, 0.0, 1.0))
 
 
+#: a feature of another dimension the ``renderer`` rule adds to a renderer's features (the
+#: render hands each renderer all of the material's solved features)
+OTHER_FEATURE = "kit-other-dimension.feature"
+
 #: speed steps (mm/s) of one encoder count (``TickInput.speed_step_mm_s``: ``a q / dt``)
 #: the ``renderer`` rule ticks with, the filtered velocity given: a fine encoder at 1 kHz
 #: (q = 1 um, a = 0.17: 0.17 mm/s) and a coarse one (q = 0.05 mm: 9 mm/s) and beyond
@@ -777,6 +781,21 @@ def _dimension_rules(ctx: _Ctx) -> None:
             inp = TickInput(t=k * KIT_PERIOD_S, dt=KIT_PERIOD_S, penetration_mm=base.penetration_mm,
                             velocity_mm_s=base.velocity_mm_s, in_contact=base.in_contact)
             _check_commands(r.tick(inp), inp, r, specs, _where(inp, feats, k))
+        # the render builds each renderer from the material's features, those of its other
+        # dimensions too: a renderer takes them and renders what it renders without them
+        extra = {**feats, OTHER_FEATURE: 0.5}
+        try:
+            with_other = _commands_of(d, extra)
+        except ValidationError as exc:
+            raise AssertionError(
+                f"renderer() refused the features of a material that has another dimension too ({exc}): the render "
+                f"builds each dimension's renderer from all of the material's solved features (e.g. GS, W, "
+                f"Fpeak, AFpeak of a material with hardness and roughness); take what you render and ignore the "
+                f"rest") from None
+        alone_cmds = _commands_of(d, feats)
+        assert with_other == alone_cmds, \
+            (f"renderer() given another dimension's feature as well ({OTHER_FEATURE!r}: 0.5) gave other commands: "
+             f"{_first_difference(with_other, alone_cmds)}: it reads a feature that is not its own")
         # the face under the probe need not be the version-1 plane: the same checks at the
         # contact normals of a spatial scene (TickInput is in the contact frame)
         for normal in RENDER_NORMALS:
