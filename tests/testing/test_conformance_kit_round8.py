@@ -15,6 +15,9 @@ kit before:
 * ``hookimpls`` (hooks): a hook module pluggy refuses to register (a ``hookwrapper=True``
   implementation that is not a generator function): the core records it as a failed hook
   plugin and never calls it;
+* ``hookimpls`` (hooks): ``hapticsdk_materials`` adding its materials to a module-level
+  list on every call: the second call (the core calls it on every load of the library)
+  repeats a name, and the core skips the plugin's materials from there on;
 * ``metadata`` (model): a fact build_problem hands every dimension's constraints
   (``df_hz``, a ``constraint_context`` entry) that is NaN, infinite or not a number: a NaN
   bound reads as met whatever the features;
@@ -577,3 +580,30 @@ def test_the_render_hands_a_renderer_the_material_s_other_features():
     finally:
         hardness.renderer = original
     assert seen and "Fpeak" in seen[0], seen
+
+
+def _materials_hooks(answer):
+    import types
+    from hapticsdk.hookspecs import hookimpl
+    from kit_variants import API
+    mod = types.ModuleType("kit_hooks_materials")
+    mod.hapticsdk_api = API   # type: ignore[attr-defined]
+    answer.__name__ = "hapticsdk_materials"
+    mod.hapticsdk_materials = hookimpl(answer)   # type: ignore[attr-defined]
+    return mod
+
+
+def test_materials_built_anew_on_each_call_conform():
+    v = check("hooks", _materials_hooks(lambda: [{"name": "kit-fresh", "intensities": {"hardness": 0.5}}]))
+    assert v == [], format_report(v)
+
+
+def test_materials_added_to_a_kept_list_on_each_call_are_caught():
+    kept: list[dict] = []
+
+    def materials():
+        kept.append({"name": "kit-kept", "intensities": {"hardness": 0.5}})
+        return kept
+    v = check("hooks", _materials_hooks(materials))
+    assert rules_of(v) == {"hookimpls"}, format_report(v)
+    assert "on the second call" in format_report(v)
