@@ -9,6 +9,9 @@ kit before:
   and renders ``force_n`` along +y whatever the normal, so on the underside of an object
   it pushes into it. A device on one axis rendering the projection, and one rendering the
   whole vector (its read-back giving the direction), conform;
+* ``template`` (actuator, device): a backend that loosens its own safety layer (its
+  ``_open`` turns the start ramp off and the start gate's force check off): the settings
+  are the application's; tightening them conforms;
 * ``limits-declared`` (actuator): ``capability_for()`` (what device-aware solving solves
   within) beyond the declared limits the safety layer clamps to: a wider band, a larger
   drive (3000 mV against 2 V), a drive in a unit of another quantity;
@@ -607,3 +610,27 @@ def test_materials_added_to_a_kept_list_on_each_call_are_caught():
     v = check("hooks", _materials_hooks(materials))
     assert rules_of(v) == {"hookimpls"}, format_report(v)
     assert "on the second call" in format_report(v)
+
+
+# ---------------------------------------------------------------------------
+# actuators: the safety settings are the application's
+# ---------------------------------------------------------------------------
+
+def _configuring(label, **settings):
+    """:class:`OutputArm` whose ``_open`` reconfigures its own safety layer with ``settings``."""
+    def _open(self) -> None:
+        OutputArm._open(self)
+        self.safety.configure(**settings)
+    return type(f"Arm_{label}", (OutputArm,), {"__doc__": f"safety settings {settings} in _open",
+                                              "name": f"kit-arm-{label}", "_open": _open})
+
+
+def test_a_backend_loosening_its_safety_layer_is_caught():
+    v = check_device(_configuring("no-ramp", ramp_time_s=0.0, start_max_force_n=None))
+    assert rules_of(v) == {"template"}, format_report(v)
+    assert "its safety layer's ramp_time_s is 0.0 after open(), looser than the default 0.2" in format_report(v)
+
+
+def test_a_backend_tightening_its_safety_layer_conforms():
+    v = check("device", _configuring("longer-ramp", ramp_time_s=0.4, start_max_force_n=0.5), rules=["template"])
+    assert v == [], format_report(v)

@@ -28,6 +28,49 @@ from .timing import COMMAND_BUDGET, KIT_PERIOD_S, TIMING_CALLS, _fastest, _sim_a
 from .values import _finite, _refuses
 
 
+#: the safety settings a plugin may not loosen, and which way is looser: a shorter ramp, a
+#: later stale or restart gap, a start gate that lets more through (or none: None), a later
+#: knee of the speed-dependent force limit, more force on top of the stiffness limit
+_LOOSER = {"ramp_time_s": "lower", "stale_after_s": "higher", "restart_after_s": "higher",
+           "start_max_penetration_mm": "higher", "start_max_force_n": "higher", "velocity_knee": "higher",
+           "stiffness_offset_n": "higher"}
+
+
+def _safety_loosened(cls: Any) -> str | None:
+    """Which safety setting an instance built without a ``safety`` argument (its
+    ``conformance_options()`` only) has looser than :class:`SafetySettings`' defaults, after
+    construction and, for a simulated actuator, after ``open()``, as text (None: none). The
+    settings are the application's (a scene's, the user's, the defaults); a plugin may
+    tighten them, never loosen them: a ramp of 0 s or no start gate lets a full force step
+    reach the hardware at start."""
+    from ...devices.safety import SafetySettings
+    if not isinstance(cls, type):
+        return None
+    default = SafetySettings()
+    try:
+        a = cls(**(cls.conformance_options() if hasattr(cls, "conformance_options") else {}))
+    except Exception:   # noqa: BLE001 - needs options only the application has (a port): the other rules build it
+        return None
+
+    def looser(when: str) -> str | None:
+        s = a.safety.settings
+        for k, way in _LOOSER.items():
+            v, d = getattr(s, k), getattr(default, k)
+            if v == d:
+                continue
+            if (v is None and d is not None) or (d is not None and v is not None and
+                                                 (v < d if way == "lower" else v > d)):
+                return (f"its safety layer's {k} is {v!r} {when}, looser than the default {d!r}: the safety "
+                        f"settings are the application's (a scene, the user, SafetySettings' defaults); a plugin "
+                        f"may tighten them, never loosen them")
+        return None
+    why = looser("after construction")
+    if why is None and getattr(cls, "simulated", False):
+        with a:
+            why = looser("after open()")
+    return why
+
+
 def _capability_error(cls: Any) -> str | None:
     """What is wrong with ``cls.capability_for(conformance options)`` against the class's
     declared limits, as text (None: nothing). The compiler solves a dimension's features
@@ -332,6 +375,9 @@ def _actuator_rules(ctx: _Ctx, device: bool) -> None:
                      and not getattr(cls, "simulated", False)]
         assert not over, (f"overrides the public method(s) {over}: implement the backend's _{over[0]} instead, "
                           f"so the core's checks and safety layer run")
+        # nor loosens its safety layer: the settings are the application's
+        why = _safety_loosened(cls)
+        assert why is None, why
 
     def r_close() -> None:
         a = ctx.make()
