@@ -789,7 +789,8 @@ class Session:
         was still setting up is not lost; a callback added later gets them from then on. ``"servo_died"`` is delivered once when the
         servo process ends without :meth:`close` (``message`` says why). Callbacks run
         one at a time, in the order given; one that raises is logged and skipped."""
-        if kind != "*" and kind not in EVENT_KINDS:
+        if not isinstance(kind, str) or (kind != "*" and kind not in EVENT_KINDS):
+            # a string first: an array compared with a string warns on older numpy
             raise ValidationError(f"kind must be one of {list(EVENT_KINDS)} or '*', got {kind!r}", field="kind")
         if not callable(callback):
             raise ValidationError(f"callback must be callable, got {callback!r}", field="callback")
