@@ -31,11 +31,11 @@ from hapticsdk.passivity import DAMPING_TRUST, DECLARED_DAMPING_TRUST, Controlle
 def run(cells: int, seed: int, declared: float) -> list[dict]:
     out = []
     for arms in ("right", "wrong"):
+        drawn = draw_cells(cells, seed)
+        if arms == "wrong":
+            for c in drawn:
+                c["damping_true_ns_per_m"], c["damping_declared_ns_per_m"] = 0.0, declared
         for share in (DECLARED_DAMPING_TRUST, DAMPING_TRUST):
-            drawn = draw_cells(cells, seed)
-            if arms == "wrong":
-                for c in drawn:
-                    c["damping_true_ns_per_m"], c["damping_declared_ns_per_m"] = 0.0, declared
             res = run_cells(drawn, controllers=("sdk_declared",),
                             settings=ControllerSettings(declared_damping_trust=share))
             e = np.array([c["results"]["sdk_declared"]["energy_to_user_j"] for c in res])

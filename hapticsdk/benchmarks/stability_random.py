@@ -411,13 +411,13 @@ def _damping_summary(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
     cal = [(c["damping_calibration"], c["damping_true_ns_per_m"], c["damping_declared_ns_per_m"])
            for c in cells if "damping_calibration" in c]
     pos = [(d["trusted_damping_ns_per_m"] / b, t / b) for d, b, t in cal if b > 0]
+    declared_over_true = float(np.median([p[1] for p in pos])) if pos else float("nan")
     return {"cells_calibrated": len(cal),
             "cells_trusted_above_true": sum(d["trusted_damping_ns_per_m"] > b for d, b, _ in cal),
             "calibrations_failed": sum(not d["success"] for d, _, _ in cal),
             "median_trusted_over_true": float(np.median([p[0] for p in pos])) if pos else float("nan"),
-            "median_declared_over_true": float(np.median([p[1] for p in pos])) if pos else float("nan"),
-            "median_declared_share_over_true": float(np.median([p[1] for p in pos])) * DECLARED_DAMPING_TRUST
-            if pos else float("nan")}
+            "median_declared_over_true": declared_over_true,
+            "median_declared_share_over_true": declared_over_true * DECLARED_DAMPING_TRUST}
 
 
 def summarise(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:
