@@ -306,7 +306,7 @@ def _where(inp: TickInput, feats: Mapping[str, float], k: int | None = None) -> 
 def _commands_of(d: PerceptionDimension, feats: Mapping[str, float]) -> list[Any]:
     """The commands of a new renderer of ``feats`` over the kit's ticks, as values."""
     r = d.renderer(dict(feats))
-    return [[(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)] for i in _tick_inputs()]
+    return [_values(r.tick(i)) for i in _tick_inputs()]
 
 
 def _commands_side_by_side(d: PerceptionDimension, a: Mapping[str, float], b: Mapping[str, float]
@@ -318,7 +318,7 @@ def _commands_side_by_side(d: PerceptionDimension, a: Mapping[str, float], b: Ma
     out: tuple[list[Any], list[Any]] = ([], [])
     for i in _tick_inputs():
         for r, o in ((ra, out[0]), (rb, out[1])):
-            o.append([(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(i)])
+            o.append(_values(r.tick(i)))
     return out
 
 
@@ -362,7 +362,7 @@ def _commands_at_epoch(d: PerceptionDimension, feats: Mapping[str, float], epoch
             setattr(time, n, f)
         for inp in _tick_inputs():
             now[0] = epoch + inp.t
-            out.append([(c.role, c.force_n, c.frequency_hz, c.amplitude) for c in r.tick(inp)])
+            out.append(_values(r.tick(inp)))
     finally:
         for n, f in saved.items():
             setattr(time, n, f)
