@@ -189,6 +189,7 @@ def cmd_play(args: argparse.Namespace) -> int:
                piezo_table=args.piezo_table, piezo_full_scale=is_ahap, actuator_options=dev_opts)
     if is_ahap:
         rep.not_played = pat.not_played + rep.not_played
+        rep.notes = [f"read beyond strict JSON: {r['path']}: {r['change']}" for r in pat.relaxed] + rep.notes
     if args.json:
         print(json.dumps(rep.to_dict(), indent=2, default=str))
     else:

@@ -19,7 +19,11 @@ The structure (Apple, "Representing haptic patterns in AHAP files", Core Haptics
   ``Time``.
 
 Apple's loader sets missing entries to defaults, clamps out-of-range values and ignores
-unknown keys. The SDK does the same for values (every clamp is reported by JSON path) and
+unknown keys. Apple's own published sample files (the AHAP samples of its Core Haptics
+Unity plug-in) put a comma after the last member of an object or array, which strict JSON
+refuses and the plug-in's reader accepts: the SDK reads such a file too, and says so
+(:attr:`AhapPattern.relaxed`). Only a comma between a value and the ``}`` or ``]`` that
+closes it is dropped; any other JSON error is reported as it is. The SDK does the same for values (every clamp is reported by JSON path) and
 keys, and refuses wrong types and missing required fields with a
 :class:`~hapticsdk.errors.FormatError` naming the path (``Pattern[3].Event.Time``).
 
@@ -44,6 +48,7 @@ from __future__ import annotations
 import bisect
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -154,6 +159,8 @@ class AhapPattern:
     controls: list[AhapControl]
     not_played: list[dict[str, str]] = field(default_factory=list)
     clamped: list[dict[str, str]] = field(default_factory=list)
+    #: what was read beyond strict JSON (trailing commas), with where
+    relaxed: list[dict[str, str]] = field(default_factory=list)
 
     def control(self, parameter: str, t: float, *, before: bool = False) -> float:
         """Value of control ``parameter`` at ``t`` (``before``: just before ``t``): the
@@ -200,8 +207,57 @@ def read_ahap(path: str | os.PathLike[str], *, max_bytes: int = MAX_FILE_BYTES) 
 
 def parse_ahap_text(text: str, *, source: str = "ahap") -> AhapPattern:
     """Parse AHAP JSON text (duplicate keys are read as Apple's JSON reader reads them:
-    the last one counts)."""
-    return parse_ahap(load_json(text, source=source, unique_keys=False))
+    the last one counts). Text that is JSON once the commas before a closing ``}`` or ``]``
+    are dropped is read, and the pattern's ``relaxed`` says where the first one was and how
+    many there were; otherwise the strict parser's error stands."""
+    try:
+        return parse_ahap(load_json(text, source=source, unique_keys=False))
+    except FormatError as exc:
+        if exc.field != source:     # a field's error: the JSON itself was read
+            raise
+        strict = exc
+    stripped, dropped = _without_trailing_commas(text)
+    if not dropped:
+        raise strict
+    try:
+        doc = load_json(stripped, source=source, unique_keys=False)
+    except FormatError:
+        raise strict from None
+    pat = parse_ahap(doc)
+    line = text.count("\n", 0, dropped[0]) + 1
+    col = dropped[0] - (text.rfind("\n", 0, dropped[0]) + 1) + 1
+    pat.relaxed.append({"path": f"line {line} column {col}",
+                        "change": f"{len(dropped)} trailing comma{'s' if len(dropped) > 1 else ''} before a "
+                                  "closing } or ] ignored (not JSON; Apple's Core Haptics Unity plug-in reads it)"})
+    return pat
+
+
+#: a JSON string (skipped whole), or a comma followed by whitespace and a closing bracket
+_TRAILING = re.compile(r'"(?:[^"\\]|\\.)*"|,(?=[ \t\r\n]*[}\]])')
+#: what a JSON value ends with: a string's quote, a number's digit, true/false/null, } or ]
+_VALUE_END = frozenset('"0123456789eEl}]')
+
+
+def _without_trailing_commas(text: str) -> tuple[str, list[int]]:
+    """``text`` without the commas that follow a value and precede a ``}`` or ``]`` (strings
+    left as they are), and the offsets of the commas dropped. A comma after ``[``, ``{``
+    or another comma is not a trailing comma and stays (the strict error then stands)."""
+    dropped: list[int] = []
+    parts: list[str] = []
+    last = 0
+    for m in _TRAILING.finditer(text):
+        if m.group(0) != ",":
+            continue
+        i = m.start() - 1
+        while i >= 0 and text[i] in " \t\r\n":
+            i -= 1
+        if i < 0 or text[i] not in _VALUE_END:
+            continue
+        parts.append(text[last:m.start()])
+        last = m.end()
+        dropped.append(m.start())
+    parts.append(text[last:])
+    return "".join(parts), dropped
 
 
 def _num(obj: Mapping[str, Any], key: str, path: str, *, required: bool = True, default: float = 0.0) -> float:
@@ -390,7 +446,7 @@ def summary(pat: AhapPattern, *, source: str | None = None) -> dict[str, Any]:
             "events": {k: sum(e.kind == k for e in pat.events) for k in HAPTIC_EVENTS},
             "controls": {k: sum(c.parameter == k for c in pat.controls) for k in CONTROLS},
             "duration_s": end, "sharpness_to_frequency_hz": list(SHARPNESS_HZ),
-            "clamped": list(pat.clamped), "not_played": list(pat.not_played)}
+            "clamped": list(pat.clamped), "not_played": list(pat.not_played), "relaxed": list(pat.relaxed)}
 
 
 def format_summary(s: dict[str, Any]) -> str:
@@ -398,6 +454,7 @@ def format_summary(s: dict[str, Any]) -> str:
     ev = ", ".join(f"{v} {k}" for k, v in s["events"].items())
     lines = [f"{s.get('file') or 'ahap'}: Apple AHAP version {s['version']:g}, {ev}, {s['duration_s']:.3f} s; "
              f"sharpness 0..1 -> {s['sharpness_to_frequency_hz'][0]:g}..{s['sharpness_to_frequency_hz'][1]:g} Hz"]
+    lines += [f"  read beyond strict JSON: {r['path']}: {r['change']}" for r in s.get("relaxed", [])]
     lines += [f"  clamped: {c['path']}: {c['change']}" for c in s["clamped"]]
     lines += [f"  not played: {u['path']}: {u['what']}: {u['reason']}" for u in s["not_played"]]
     return "\n".join(lines)
