@@ -3,11 +3,14 @@ extra (:class:`PassivityController`)."""
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any
 
 from .plan import _HIST, _affordable_scalar
 from .settings import ControllerSettings, _spring_stiffness_and_step
+
+_log = logging.getLogger(__name__)
 
 _INF = math.inf
 
@@ -99,12 +102,13 @@ class PassivityController:
     next tick with both books the whole span since the last reading.
     """
 
-    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "_q1", "_q2", "_hist", "_hp",
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_kc", "_full", "_jw", "_j3w",
                  "_a1", "_a2", "_a3", "_sent", "_pending", "_o")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
+        self._said = False          # the spent bound was logged (once per controller)
         self.reset()
 
     def reset(self) -> None:
@@ -113,6 +117,7 @@ class PassivityController:
         self.active_ticks = 0       # ticks where the output was below the wall's force
         self.withheld_n_ticks = 0.0 # sum over ticks of the force withheld (N)
         self.overdrawn_j = 0.0      # largest U - E0 seen (J): motion beyond the prediction
+        self.spent_ticks = 0        # ticks held below the wall's force with the bound spent (U >= E0)
         self._q1 = self._q2 = 0.0
         self._hist = [0.0] * _HIST    # the last readings (mm), a ring; _hp the newest
         self._hp = 0
@@ -349,10 +354,26 @@ class PassivityController:
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a
+            if u >= e0:
+                self.spent_ticks += 1
+                if not self._said:
+                    self._say_spent(u, e0)
         out = spring + sg * a
         self._out = out
         self._sent = out
         return out
+
+    def _say_spent(self, u: float, e0: float) -> None:
+        """Log, once per controller, that its bound is spent: from here on the force above
+        the spring waits for credit (docs/runtime.md, Passivity item 7)."""
+        self._said = True
+        b = self.settings.trusted_damping_ns_per_m()
+        _log.warning(
+            "stiff-wall controller: its energy bound is spent (%.3g uJ booked of the %.3g uJ allowed), so the force "
+            "above the Colgate spring is held back until the hand's motion earns credit; %s (docs/runtime.md, "
+            "Passivity item 7)", u * 1e6, e0 * 1e6,
+            "no damping is credited, so the spring is 0 and the arm renders no wall: measure the arm's damping hands "
+            "off (hapticsdk calibrate damping)" if not b else f"the spring takes {b:g} N s/m of credited damping")
 
     def commit(self, f_applied: float) -> None:
         """Record the force the device actually held over the coming interval (N). Without
@@ -372,6 +393,11 @@ class PassivityController:
         """``energy_bound_j`` (U, J: upper bound of the energy given to the user over the
         current contact; the credit is dropped between contacts), ``overdrawn_j`` (largest
         ``U - E0``, J: > 0 only when the motion outran the one-tick prediction),
-        ``withheld_n_ticks`` (N), ``active_ticks``."""
+        ``withheld_n_ticks`` (N), ``active_ticks``, ``spent_ticks`` (the ticks of
+        ``active_ticks`` on which the bound was spent, ``U >= E0``: the force above the
+        spring waits for credit; with no damping credited the spring is 0 and the wall is
+        gone until then). The first such tick is logged as a warning (once per
+        controller)."""
         return {"energy_bound_j": self.energy_j, "overdrawn_j": self.overdrawn_j,
-                "withheld_n_ticks": self.withheld_n_ticks, "active_ticks": self.active_ticks}
+                "withheld_n_ticks": self.withheld_n_ticks, "active_ticks": self.active_ticks,
+                "spent_ticks": self.spent_ticks}
