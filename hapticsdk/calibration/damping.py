@@ -105,6 +105,58 @@ def _basis(alpha: float, dt: float, f: np.ndarray) -> np.ndarray:
     return cols
 
 
+def _hg_steps(alpha: float, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_hg` of every step of durations ``dt`` (s): arrays ``a``, ``h``, ``g``."""
+    x = alpha * dt
+    a = np.exp(-x)
+    h = dt * (1.0 - x / 2.0 + x * x / 6.0)
+    g = dt * dt * (0.5 - x / 6.0 + x * x / 24.0)
+    big = x >= 1e-4
+    if big.any():
+        h[big] = -np.expm1(-x[big]) / alpha
+        g[big] = (dt[big] - h[big]) / alpha
+    return a, h, g
+
+
+def _scan(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``x_0 = 0``, ``x_{k+1} = a_k x_k + b_k``: the ``len(a) + 1`` values (a recurrence
+    whose coefficient changes per step, which ``lfilter`` does not take)."""
+    from itertools import accumulate
+
+    return np.fromiter(accumulate(zip(a.tolist(), b.tolist()), lambda x, ab: ab[0] * x + ab[1], initial=0.0),
+                       float, count=a.size + 1)
+
+
+def _basis_steps(alpha: float, dt: np.ndarray, f: np.ndarray, on: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_basis` of a run whose steps last ``dt`` (s, one per force), force ``k`` held
+    for ``on[k] <= dt[k]`` (s; default the whole step) and then 0 N: the readings' columns,
+    and the velocities at the readings (same columns: start, start velocity, force/m,
+    1/m). With every ``dt`` equal and the forces held it is :func:`_basis` to rounding."""
+    a, h, g = _hg_steps(alpha, dt)
+    n = f.size
+    cols = np.zeros((n + 1, 4))
+    vel = np.zeros((n + 1, 4))
+    cols[:, 0] = 1.0
+    vel[0, 1] = 1.0
+    vel[1:, 1] = np.cumprod(a)              # unit start velocity, no force
+    cols[1:, 1] = np.cumsum(h * vel[:-1, 1])
+    # a force held for p of a step of T, then 0: v gains exp(-alpha (T - p)) h(p) u, y
+    # gains (g(p) + h(p) h(T - p)) u (the semigroup of the hold's response)
+    if on is None:
+        hf, gf = h, g
+    else:
+        _, hp, gp = _hg_steps(alpha, on)
+        ar, hr, _ = _hg_steps(alpha, dt - on)
+        hf, gf = ar * hp, gp + hp * hr
+    for j, u, hu, gu in ((2, f, hf, gf), (3, np.ones(n), h, g)):
+        # v_{k+1} = a_k v_k + hu_k u_k (v_0 = 0), y_{k+1} = y_k + h_k v_k + gu_k u_k
+        v = _scan(a, hu * u)
+        vel[:, j] = v
+        cols[1:, j] = np.cumsum(h * v[:-1] + gu * u)
+    return cols, vel
+
+
 @dataclass
 class DampingFit:
     """Result of :func:`fit_damping` (scipy.optimize style: ``x``, ``fun``, ``success``,
@@ -123,6 +175,9 @@ class DampingFit:
             is ``(1 + rho)/(1 - rho)`` for ``rho > 0``).
         readings: number of readings fitted.
         runtime_s: wall time of the fit (s).
+        timing_error_ns_per_m: the part of ``worst_error_ns_per_m`` that covers a run's
+            timing: forces reaching the arm late, readings sampled off their timestamps,
+            forces dropped as stale (0 for a run without timestamps).
     """
 
     x: np.ndarray
@@ -136,6 +191,7 @@ class DampingFit:
     residual_correlation: float = 0.0
     readings: int = 0
     runtime_s: float = 0.0
+    timing_error_ns_per_m: float = 0.0
 
     @property
     def mass_kg(self) -> float:
@@ -159,11 +215,112 @@ class DampingFit:
         return d
 
 
-def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm: float = 0.0) -> DampingFit:
+def _per_step(v: Any, n: int, name: str) -> np.ndarray:
+    """A timing bound given once for the run or once per step/reading: ``n`` values >= 0
+    (NaN or inf: not bounded, which the fit reports)."""
+    a = np.asarray(number_array(v, name, ndim=(0, 1), finite=False), float)
+    if a.ndim == 0:
+        a = np.full(n, float(a))
+    if a.size != n:
+        raise ValidationError(f"needs one value or {n}, got {a.size}", field=name)
+    if (a < 0).any():
+        raise ValidationError("must be >= 0 s", field=name)
+    return a
+
+
+def _window_max(x: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """``max(x[lo_k .. hi_k])`` for each k (``lo <= k <= hi``, windows of a few entries)."""
+    n = x.size
+    k = np.arange(n)
+    out = x.copy()
+    for d in range(1, int(max((k - lo).max(initial=0), (hi - k).max(initial=0))) + 1):
+        i = np.clip(k - d, 0, n - 1)
+        out = np.where(k - d >= lo, np.maximum(out, x[i]), out)
+        i = np.clip(k + d, 0, n - 1)
+        out = np.where(k + d <= hi, np.maximum(out, x[i]), out)
+    return out
+
+
+def timing_error_ns_per_m(w: np.ndarray, kappa: float, alpha: float, t: np.ndarray, f: np.ndarray,
+                          speed: np.ndarray, force_delay_s: np.ndarray, reading_delay_s: np.ndarray,
+                          may_drop_after_s: float | None = None) -> float:
+    """The most the fitted damping can exceed the truth (first order, as the readings'
+    term) because forces reached the arm later than their ticks' timestamps, readings were
+    sampled off theirs, or forces were dropped as stale (docs/calibration.md, "A run timed
+    by the loop's clock").
+
+    ``w``: the fit's sensitivity of the damping to each reading (N s/m per m); ``kappa``,
+    ``alpha``: the fitted ``1/m`` and ``b/m``; ``t``: the readings' timestamps (s, one more
+    than the forces ``f``, N); ``speed``: the model's |velocity| at each reading (m/s);
+    ``force_delay_s`` (per force): the most force k may lag its timestamp (forces arrive in
+    order); ``reading_delay_s`` (per reading): the most a reading's sample instant may be
+    off its timestamp, either way; ``may_drop_after_s``: a force not followed within this
+    may have been dropped to 0 N (None: it was held).
+
+    A force error ``c`` lasting ``l`` inside step ``i`` changes the velocity at
+    ``t_{i+1}`` by ``kappa c [0, l]`` and the position by ``kappa c [0, l h_i]``; both
+    then move freely, so the fitted damping rises by at most ``|c| l sigma_i`` with
+    ``sigma_i = kappa (h_i (s W_{i+1})^+ + (s S_{i+1})^+)``, ``s`` the sign of ``c``,
+    ``W_m = sum_{j>=m} w_j``, ``S_m = sum_{j>=m} w_j G(t_j - t_m)``, ``G(u) = (1 -
+    exp(-alpha u))/alpha``. Force k's switch from ``f_{k-1}`` (``f_{-1}`` = 0 N: the run
+    starts from the held 0 N) is such an error, ``c = f_{k-1} - f_k``, for at most
+    ``force_delay_s[k]``; a dropped force is one of ``c = -f_k`` for at most ``dt_k +
+    force_delay_s[k+1] - may_drop_after_s``. Both signs are known, so only the rise
+    counts. A reading sampled up to ``rho`` off its timestamp is off by at most ``rho``
+    times the largest model speed within ``rho`` of it (within a step the speed is
+    monotone: the ends of the steps there bound it), either sign."""
+    n = f.size
+    dt = np.diff(t)
+    a, h, _ = _hg_steps(alpha, dt)
+    W = np.concatenate([np.cumsum(w[::-1])[::-1], [0.0]])     # W_m, m = 0..n+1
+    # S_m = h_m W_{m+1} + a_m S_{m+1}, S_n = 0: a scan run backwards
+    S = _scan(a[::-1], (h * W[1:n + 1])[::-1])[::-1]          # S_m, m = 0..n
+    Wn, Sn = W[1:n + 1], S[1:]
+    rise = {1.0: kappa * (h * np.maximum(Wn, 0.0) + np.maximum(Sn, 0.0)),    # per step i = 0..n-1
+            -1.0: kappa * (h * np.maximum(-Wn, 0.0) + np.maximum(-Sn, 0.0))}
+    steps = np.arange(n)
+
+    def pulses(c: np.ndarray, length: np.ndarray, span: np.ndarray) -> float:
+        # error k lies within [t_k, t_k + span_k]: the largest rise of the steps there
+        last = np.clip(np.searchsorted(t, t[:-1] + span, side="left") - 1, steps, n - 1)
+        worst = np.where(c >= 0.0, _window_max(rise[1.0], steps, last), _window_max(rise[-1.0], steps, last))
+        return float(np.sum(np.abs(c) * length * worst))
+
+    f_prev = np.concatenate([[0.0], f[:-1]])
+    err = pulses(f_prev - f, force_delay_s, force_delay_s)
+    if may_drop_after_s is not None:
+        d_next = np.concatenate([force_delay_s[1:], [force_delay_s.max(initial=0.0)]])
+        lost = np.maximum(dt + d_next - may_drop_after_s, 0.0)
+        if lost.any():
+            err += pulses(-f, lost, dt + d_next)
+    if reading_delay_s.any():
+        # the steps within rho of the reading: their ends' speeds bound the speed there
+        lo = np.clip(np.searchsorted(t, t - reading_delay_s, side="right") - 1, 0, n)
+        hi = np.clip(np.searchsorted(t, t + reading_delay_s, side="left"), 0, n)
+        err += float(np.sum(np.abs(w) * reading_delay_s * _window_max(speed, lo, hi)))
+    return err
+
+
+def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm: float = 0.0, *,
+                times_s: Any = None, force_delay_s: Any = 0.0, reading_delay_s: Any = 0.0,
+                hold_s: float | None = None, may_drop_after_s: float | None = None) -> DampingFit:
     """Fit a hands-off run: ``forces_n`` (N, one per period, as applied) and the encoder
     readings ``readings_mm`` (mm, ``len(forces_n) + 1``: before each force, then the last),
     ``period_s`` (s), the encoder resolution ``resolution_mm`` (mm; 0 = exact). See the
-    module docstring for the model and the bound."""
+    module docstring for the model and the bound.
+
+    A run paced on a clock (:func:`measure_damping` with ``realtime=True``) gives the
+    readings' timestamps ``times_s`` (s, one per reading): each step then lasts as
+    measured, and the bound also covers what the timestamps do not pin down
+    (:func:`timing_error_ns_per_m`): ``force_delay_s`` (one, or one per force), the most
+    a force may reach the arm after its tick's timestamp; ``reading_delay_s`` (one, or
+    one per reading), the most a reading's sample instant may be off its timestamp;
+    ``hold_s``, the time after which the device drops a force not followed by another
+    (a simulated device's safety layer drops a stale command; modelled, and only with
+    no force delay); ``may_drop_after_s``, the same where it is not known whether the
+    device drops it (bounded). A delay that is not finite is not bounded: the fit then
+    fails and credits nothing. Without ``times_s`` every step lasts ``period_s`` (the result
+    is the one of a fit without these arguments, bit for bit)."""
     # scipy's modules are imported here, lazily (not at the calibration package's import,
     # which a render pays) and before the clock: runtime_s is the fit's, not the import's
     import scipy.optimize  # noqa: F401
@@ -180,11 +337,38 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
     number(resolution_mm, "resolution_mm", lo=0.0)
     q = resolution_mm * 1e-3
     nfev = 0
+    if times_s is None:
+        tt = None
+        dur = f.size * period_s
+
+        def basis(alpha: float) -> np.ndarray:
+            return _basis(alpha, period_s, f)
+    else:
+        tt = number_array(times_s, "times_s", ndim=(1,))
+        dts = np.diff(tt)
+        if tt.size != y.size or not (dts > 0).all():
+            raise ValidationError(f"needs one increasing timestamp per reading ({y.size}), got {tt.size}",
+                                  field="times_s")
+        fd = _per_step(force_delay_s, f.size, "force_delay_s")
+        rd = _per_step(reading_delay_s, y.size, "reading_delay_s")
+        on = None
+        if hold_s is not None:
+            number(hold_s, "hold_s", lo=0.0)
+            if fd.any():
+                raise ValidationError("a drop is modelled only where forces reach the arm at their timestamps "
+                                      "(force_delay_s 0); give may_drop_after_s instead", field="hold_s")
+            on = np.minimum(dts, hold_s)
+        if may_drop_after_s is not None:
+            number(may_drop_after_s, "may_drop_after_s", lo=0.0)
+        dur = float(tt[-1] - tt[0])
+
+        def basis(alpha: float) -> np.ndarray:
+            return _basis_steps(alpha, dts, f, on)[0]
 
     def solve(alpha: float) -> tuple[float, np.ndarray, np.ndarray]:
         nonlocal nfev
         nfev += 1
-        B = _basis(alpha, period_s, f)
+        B = basis(alpha)
         c, *_ = np.linalg.lstsq(B, y, rcond=None)
         r = y - B @ c
         return float(r @ r), c, B
@@ -194,9 +378,11 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
                           damping_se_ns_per_m=float("nan"), trusted_damping_ns_per_m=0.0,
                           readings=int(y.size), runtime_s=time.perf_counter() - t0)
 
+    if tt is not None and not (np.isfinite(fd).all() and np.isfinite(rd).all()):
+        return failed("the timing of the forces or the readings is not bounded (no latency declared or "
+                      "measured): the damping cannot be bounded")
     if np.ptp(y) < 4.0 * max(q, 1e-12):
         return failed("the arm did not move by 4 encoder counts: nothing to fit (is it held or blocked?)")
-    dur = f.size * period_s
     # alpha = b/m: 0, then a log grid from a decay too slow to see in the run to one within a tick
     grid = np.concatenate([[0.0], np.geomspace(1e-2 / dur, 2.0 / period_s, 60)])
     ss = np.array([solve(a)[0] for a in grid])
@@ -218,7 +404,7 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
     # covariance of (alpha, start, v0, kappa, kappa F0): the Jacobian with d/d alpha by
     # central differences of the model at the fitted linear coefficients
     d_a = max(abs(alpha), 1.0 / dur) * 1e-4
-    model = lambda a: _basis(a, period_s, f) @ c  # noqa: E731
+    model = lambda a: basis(a) @ c  # noqa: E731
     ja = (model(alpha + d_a) - model(max(alpha - d_a, 0.0))) / (alpha + d_a - max(alpha - d_a, 0.0))
     J = np.column_stack([ja, B])
     r = y - B @ c
@@ -247,12 +433,17 @@ def fit_damping(forces_n: Any, readings_mm: Any, period_s: float, resolution_mm:
     w = J @ z
     e_max = max(0.5 * q, float(np.abs(r).max()))
     worst = e_max * float(np.abs(w).sum())
+    timing = 0.0
+    if tt is not None:
+        speed = np.abs(_basis_steps(alpha, dts, f, on)[1] @ c)
+        timing = timing_error_ns_per_m(w, kappa, alpha, tt, f, speed, fd, rd, may_drop_after_s)
+        worst += timing
     trusted = max(0.0, b - worst)
     return DampingFit(x=np.array([1.0 / kappa, b, float(c[3]) / kappa]), fun=math.sqrt(sse / y.size),
                       success=True, message="fitted", nfev=nfev, damping_se_ns_per_m=se,
                       trusted_damping_ns_per_m=trusted, worst_error_ns_per_m=worst,
                       residual_correlation=rho,
-                      readings=int(y.size), runtime_s=time.perf_counter() - t0)
+                      readings=int(y.size), runtime_s=time.perf_counter() - t0, timing_error_ns_per_m=timing)
 
 
 @dataclass
@@ -410,38 +601,55 @@ def read_run_csv(path: Any) -> tuple[np.ndarray, np.ndarray]:
             _column(rows, at["position_mm"], "position_mm", path, "run"))
 
 
-def measure_damping(device: Any, *, period_s: float = 1e-3, axis: int = 1, role: str = "force",
-                    mass_kg: float | None = None, max_force_n: float | None = None) -> tuple[DampingFit, np.ndarray,
-                                                                                            np.ndarray]:
-    """Run :func:`excitation` on a *simulated* force device nobody holds and fit it:
-    returns ``(fit, forces_n, readings_mm)``, the forces as the device applied them (its
-    safety layer's read-back) and its readings along ``axis`` (0, 1, 2: x, y, z; 1 is the
-    simulated Omni's normal).
+def declared_limits(device: Any, mass_kg: float | None = None, max_force_n: float | None = None
+                    ) -> tuple[float, float]:
+    """``(mass_kg, max_force_n)`` that size a device's hands-off run: those given, else the
+    device's ``apparent_mass_kg`` and ``limits.max_force_n``; a :class:`ValidationError`
+    naming them when one is neither given nor declared."""
+    m = mass_kg if mass_kg is not None else getattr(device, "apparent_mass_kg", None)
+    fm = max_force_n if max_force_n is not None else getattr(getattr(device, "limits", None), "max_force_n", None)
+    if m is None or fm is None:
+        raise ValidationError("the device declares no apparent_mass_kg or limits.max_force_n; pass mass_kg= and "
+                              "max_force_n=", field="device")
+    return float(m), float(fm)
 
-    The device advances in simulated time (``device.step(period_s)`` per period); its
-    class must declare ``simulated = True``. A real arm is not driven from here: a Python
-    loop cannot hold a servo period, and the fit assumes the period held. On a real arm,
-    play the forces of ``hapticsdk calibrate damping --write-excitation`` in your servo
-    loop and fit the recording (``--run``). Before the run the device is held at 0 N for
-    its safety layer's start ramp (``ramp_time_s``) plus 0.1 s; after it, on every exit
-    path, it is sent 0 N, and closed if this function opened it."""
+
+def measure_damping(device: Any, *, period_s: float = 1e-3, axis: int = 1, role: str = "force",
+                    mass_kg: float | None = None, max_force_n: float | None = None, realtime: bool = False,
+                    latency_s: float | None = None) -> tuple[DampingFit, np.ndarray, np.ndarray]:
+    """Run :func:`excitation` on a force device nobody holds and fit it: returns ``(fit,
+    forces_n, readings_mm)``, the forces as the device applied them (its safety layer's
+    read-back) and its readings along ``axis`` (0, 1, 2: x, y, z; 1 is the simulated
+    Omni's normal).
+
+    ``realtime=True`` plays the run in real time, paced on the machine's clock, on any
+    device, real or simulated (a simulated one is stepped by the time that really
+    passed), and fits it with each step's measured length and a bound that covers the
+    run's timing: :func:`hapticsdk.calibration.damping_run.play_damping_run` (which also
+    returns the timestamps), ``latency_s`` as there. The default plays a *simulated*
+    device in simulated time (``device.step(period_s)`` per period; its class must
+    declare ``simulated = True``), every step exactly a period. Before the run the
+    device is held at 0 N for its safety layer's start ramp (``ramp_time_s``) plus 0.1
+    s; after it, on every exit path, it is sent 0 N, and closed if this function opened
+    it."""
+    if realtime:
+        from .damping_run import play_damping_run
+
+        run = play_damping_run(device, period_s=period_s, axis=axis, role=role, mass_kg=mass_kg,
+                               max_force_n=max_force_n, latency_s=latency_s)
+        return run.fit, run.forces_n, run.readings_mm
     from ..errors import ValidationError as _VE
     from ..perception.dimensions import ChannelCommand
 
     if not getattr(type(device), "simulated", False):
-        raise _VE(f"{type(device).__name__} is not a simulated device: measure_damping drives only simulated "
-                  "devices in simulated time. On a real arm, write the excitation (hapticsdk calibrate damping "
-                  "--write-excitation), play it hands off in your servo loop and fit the recording (--run)",
-                  field="device")
+        raise _VE(f"{type(device).__name__} is not a simulated device: in simulated time measure_damping drives "
+                  "only simulated devices. On a real arm, pass realtime=True (hapticsdk calibrate damping --device "
+                  "NAME), or write the excitation (--write-excitation), play it hands off in your servo loop and "
+                  "fit the recording (--run)", field="device")
     if axis not in (0, 1, 2):
         raise _VE(f"must be 0, 1 or 2, got {axis!r}", field="axis")
-    m = mass_kg if mass_kg is not None else getattr(device, "apparent_mass_kg", None)
-    lim = getattr(device, "limits", None)
-    fm = max_force_n if max_force_n is not None else getattr(lim, "max_force_n", None)
-    if m is None or fm is None:
-        raise _VE("the device declares no apparent_mass_kg or limits.max_force_n; pass mass_kg= and max_force_n=",
-                  field="device")
-    forces = excitation(period_s, float(fm), float(m))
+    m, fm = declared_limits(device, mass_kg, max_force_n)
+    forces = excitation(period_s, fm, m)
     ramp = float(getattr(getattr(getattr(device, "safety", None), "settings", None), "ramp_time_s", 0.0) or 0.0)
     settle = int(math.ceil((ramp + 0.1) / period_s))
     e = [0.0, 0.0, 0.0]

@@ -25,6 +25,7 @@ the default ``b`` is an assumption and a parameter.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 from typing import Any, Sequence
 
@@ -272,3 +273,60 @@ def free_arm_readings_mm(period_s: float, arm: ArmParams, forces_n: Any, y0_mm: 
         sim.step(dt, fk, 0.0, 0.0)
         y.append(sim.measured_mm())
     return np.array(y)
+
+
+def timed_free_arm_readings_mm(times_s: Any, forces_n: Any, arm: ArmParams, *, force_delays_s: Any = 0.0,
+                               reading_offsets_s: Any = 0.0, hold_s: float | None = None,
+                               y0_mm: float = 0.0) -> np.ndarray:
+    """:func:`free_arm_readings_mm` of a run paced on a clock that does not hold its period:
+    force ``k`` (N, saturated) is sent at ``times_s[k]`` and reaches the arm
+    ``force_delays_s[k]`` later (in order: never before the force sent before it); a
+    force not followed within ``hold_s`` (s; None: never) is dropped to 0 N, as a safety
+    layer drops a stale command; reading ``k`` is sampled at ``times_s[k] +
+    reading_offsets_s[k]`` (either sign). The arm starts at rest at ``y0_mm``, at 0 N.
+    Exact between the instants where the force changes (the closed-form step of ``m y'' =
+    F - b y'``; with no delays, offsets or drops it gives :func:`free_arm_readings_mm`'s
+    readings, whose step is :func:`transition_matrices`' ``expm``: tested)."""
+    t = np.asarray(times_s, float)
+    f = np.clip(np.asarray(forces_n, float), -arm.max_force_n, arm.max_force_n)
+    if t.ndim != 1 or f.size != t.size - 1 or not (np.diff(t) > 0).all():
+        raise ValidationError("needs increasing times, one more than the forces", field="times_s")
+    lam = np.broadcast_to(np.asarray(force_delays_s, float), f.shape)
+    rho = np.broadcast_to(np.asarray(reading_offsets_s, float), t.shape)
+    arrive = np.maximum.accumulate(t[:-1] + lam)
+    # the force as breakpoints (instant, value): each arrival, then its drop when stale
+    brk: list[tuple[float, float]] = []
+    for k in range(f.size):
+        brk.append((float(arrive[k]), float(f[k])))
+        nxt = float(arrive[k + 1]) if k + 1 < f.size else math.inf
+        if hold_s is not None and arrive[k] + hold_s < nxt:
+            brk.append((float(arrive[k] + hold_s), 0.0))
+    m, b = arm.mass_kg, arm.damping_ns_per_m
+    alpha = b / m
+    # the step of m y'' = F - b y' over s seconds at constant F (exact)
+    def step(y: float, v: float, F: float, s: float) -> tuple[float, float]:
+        if s <= 0.0:
+            return y, v
+        x = alpha * s
+        h = s * (1.0 - x / 2.0 + x * x / 6.0 - x ** 3 / 24.0) if x < 1e-3 else -math.expm1(-x) / alpha
+        gg = s * s * (0.5 - x / 6.0 + x * x / 24.0 - x ** 3 / 120.0) if x < 1e-3 else (s - h) / alpha
+        u = F / m
+        return y + v * h + u * gg, v * math.exp(-x) + u * h
+
+    q_at = t + rho
+    order = np.argsort(q_at, kind="stable")
+    out = np.empty(t.size)
+    y, v, F, now = float(y0_mm) * 1e-3, 0.0, 0.0, -math.inf
+    i = 0
+    for j in order.tolist():
+        tq = float(q_at[j])
+        while i < len(brk) and brk[i][0] <= tq:
+            if now > -math.inf:
+                y, v = step(y, v, F, brk[i][0] - now)
+            now, F = brk[i]
+            i += 1
+        if now > -math.inf:
+            y, v = step(y, v, F, tq - now)
+            now = tq
+        out[j] = y * 1e3
+    return quantise(out, arm.encoder_resolution_mm)  # type: ignore[return-value]

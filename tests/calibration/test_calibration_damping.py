@@ -259,25 +259,10 @@ def test_every_exit_of_a_measurement_leaves_the_device_at_zero_and_closed():
     from hapticsdk.calibration.damping import measure_damping
     from hapticsdk.sim.finger import FingerParams
 
+    from damping_faults import fail_at_step
+
     dev = _omni(finger=FingerParams(0.0, 0.0, 0.0))
-    calls = [0]
-    real_step = dev.step
-
-    def failing_step(dt):
-        calls[0] += 1
-        if calls[0] == 310:   # 0.3 s of settling at 1 ms, then the first +F segment
-            raise RuntimeError("simulated fault mid-run")
-        real_step(dt)
-
-    dev.step = failing_step
-    sent = []
-    real_command = dev.command
-
-    def record(cmd, **kw):
-        sent.append(cmd.force_n)
-        return real_command(cmd, **kw)
-
-    dev.command = record
+    sent = fail_at_step(dev, 310, RuntimeError)   # 0.3 s of settling at 1 ms, then the first +F segment
     with pytest.raises(RuntimeError, match="mid-run"):
         measure_damping(dev)
     assert sent[-1] == 0.0 and not dev.is_open
