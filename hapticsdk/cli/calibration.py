@@ -50,12 +50,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                              "--damping, --period, --resolution)")
     src.add_argument("--write-excitation", metavar="CSV", help="write the excitation's forces (column force_n, "
                                                                "one per period) for --period, --mass, --max-force")
+    src.add_argument("--device", metavar="NAME", help="play the run on this force device (an actuator plugin, "
+                                                      "e.g. omni-virtual) in real time, nobody holding it, and "
+                                                      "fit it; its serial is the device's own, else --serial")
+    p.add_argument("--device-option", action="append", default=[], metavar="KEY=VALUE",
+                   help="--device: an option of the device (repeatable; VALUE read as JSON when it parses), e.g. "
+                        "finger=none for the simulated Omni nobody holds; merged over the user's device "
+                        "configuration and $HAPTICSDK_DEVICE_OPTIONS")
+    p.add_argument("--latency", type=nonneg_float,
+                   help="--device: the most time (s) between a position's sample and the read returning it, and "
+                        "between a command returning and its force at the motor, where the device declares no "
+                        "transport_latency_s (a real device with neither is refused)")
+    p.add_argument("--axis", type=bounded_int(0, 2), default=1, help="--device: the axis driven and read, 0-2 "
+                                                                     "(x, y, z; default 1)")
     p.add_argument("--period", type=positive_float, default=0.001, help="servo period of the run (s, default 0.001)")
-    p.add_argument("--resolution", type=nonneg_float, default=0.055,
-                   help="encoder resolution (mm, default 0.055, the Omni's)")
-    p.add_argument("--mass", type=positive_float, default=0.045,
-                   help="the arm's declared apparent mass (kg, default 0.045): sizes the excitation")
-    p.add_argument("--max-force", type=positive_float, default=3.3, help="the arm's force limit (N, default 3.3)")
+    p.add_argument("--resolution", type=nonneg_float,
+                   help="encoder resolution (mm, default 0.055, the Omni's; --device: the device's own)")
+    p.add_argument("--mass", type=positive_float,
+                   help="the arm's declared apparent mass (kg, default 0.045; --device: the device's own): sizes "
+                        "the excitation")
+    p.add_argument("--max-force", type=positive_float,
+                   help="the arm's force limit (N, default 3.3; --device: the device's own)")
     p.add_argument("--damping", type=nonneg_float, default=0.5,
                    help="--simulate: the simulated arm's true damping (N*s/m, default 0.5)")
     p.add_argument("--serial", type=serial, help="device serial number the calibration belongs to (the "
@@ -208,9 +223,13 @@ def cmd_damping(args: argparse.Namespace) -> int:
     """``calibrate damping``: fit a hands-off run (or a GENERATED one), print the damping and
     its lower bound, optionally save the calibration; or write the excitation to play.
     Returns the exit status."""
-    from ..calibration.damping import (DampingCalibration, excitation, fit_damping, read_run_csv, simulated_run,
-                                       write_excitation_csv)
+    from ..calibration.damping import excitation, fit_damping, read_run_csv, simulated_run, write_excitation_csv
 
+    if args.device:
+        return _damping_on_device(args)
+    for name, default in (("resolution", 0.055), ("mass", 0.045), ("max_force", 3.3)):
+        if getattr(args, name) is None:
+            setattr(args, name, default)
     if args.write_excitation:
         from ..fileio import check_output_path
         check_output_path(args.write_excitation, field="--write-excitation")
@@ -231,13 +250,22 @@ def cmd_damping(args: argparse.Namespace) -> int:
         f, y = read_run_csv(args.run)
         generated, source = False, f"hands-off run {args.run}"
     fit = fit_damping(f, y, args.period, args.resolution)
+    return _report_damping(args, fit, args.serial, generated, source, args.resolution)
+
+
+def _report_damping(args: argparse.Namespace, fit: Any, serial: str | None, generated: bool, source: str,
+                    resolution_mm: float, extra: dict[str, Any] | None = None) -> int:
+    """Save (``--save``/``--out``) a successful fit as the serial's damping calibration and
+    print it; the exit status (1 when the fit failed)."""
+    from ..calibration.damping import DampingCalibration
+
     saved = None
     if fit.success:
-        cal = DampingCalibration.from_fit(fit, period_s=args.period, resolution_mm=args.resolution,
-                                          serial=args.serial, generated=generated, source=source)
+        cal = DampingCalibration.from_fit(fit, period_s=args.period, resolution_mm=resolution_mm,
+                                          serial=serial, generated=generated, source=source)
         saved = _save(args, cal)
-    out = {"kind": "damping", "serial": args.serial, "generated": generated, "source": source, **fit.to_dict(),
-           "mass_kg": fit.mass_kg, "damping_ns_per_m": fit.damping_ns_per_m, "saved": saved}
+    out = {"kind": "damping", "serial": serial, "generated": generated, "source": source, **fit.to_dict(),
+           "mass_kg": fit.mass_kg, "damping_ns_per_m": fit.damping_ns_per_m, **(extra or {}), "saved": saved}
     if args.json:
         emit(out, True)
     else:
@@ -245,10 +273,41 @@ def cmd_damping(args: argparse.Namespace) -> int:
         if fit.success:
             head += (f"\n  fitted {fit.damping_ns_per_m:.4g} N*s/m (mass {fit.mass_kg:.4g} kg, offset "
                      f"{fit.offset_n:.3g} N); lower bound {fit.trusted_damping_ns_per_m:.4g} N*s/m (worst-case "
-                     f"reading error {fit.worst_error_ns_per_m:.3g}; standard error {fit.damping_se_ns_per_m:.2g}); "
+                     f"reading error {fit.worst_error_ns_per_m:.3g}, of it timing "
+                     f"{fit.timing_error_ns_per_m:.3g}; standard error {fit.damping_se_ns_per_m:.2g}); "
                      f"rms residual {fit.fun * 1e3:.3g} mm; {fit.runtime_s * 1e3:.1f} ms")
+        if extra:
+            head += "\n  " + "; ".join(f"{k} {v}" for k, v in extra.items())
         print(head + (f"\n  saved to {saved}" if saved else ""))
     return 0 if fit.success else 1
+
+
+def _damping_on_device(args: argparse.Namespace) -> int:
+    """``calibrate damping --device NAME``: open the device, play the hands-off run on it in
+    real time (:func:`~hapticsdk.calibration.damping_run.play_damping_run`: 0 N through
+    the start ramp, 0 N and closed on every exit), fit, report, save."""
+    from ..calibration.damping_run import play_damping_run
+    from ..devices.actuators import create_actuator
+    from ..devices.device_options import parse_device_option, trusted_options
+    from ..errors import ValidationError
+
+    _check_save(args)
+    opts = trusted_options(args.device)
+    for item in args.device_option:
+        _, key, value = parse_device_option(f"device.{item}")
+        opts[key] = value
+    dev = create_actuator(args.device, **opts)
+    if getattr(dev, "channel", None) != "force" or not callable(getattr(dev, "read_state", None)):
+        raise ValidationError(f"{args.device!r} is not a force device that reads its position", field="--device")
+    serial = getattr(dev, "serial_number", None) or args.serial
+    run = play_damping_run(dev, period_s=args.period, axis=args.axis, mass_kg=args.mass, max_force_n=args.max_force,
+                           latency_s=args.latency)
+    res = float(getattr(dev, "encoder_resolution_mm", 0.0) or 0.0) if args.resolution is None else args.resolution
+    source = (f"{'GENERATED: simulated device' if run.simulated else 'device'} {args.device}, hands off, played "
+              f"in real time at {args.period:g} s ({run.late_ticks} late ticks), latency {run.latency_s:g} s")
+    extra = {"late_ticks": run.late_ticks, "latency_s": run.latency_s,
+             "longest_step_s": float(max(run.times_s[1:] - run.times_s[:-1]))}
+    return _report_damping(args, run.fit, serial, run.simulated, source, res, extra)
 
 
 def cmd_answers(args: argparse.Namespace) -> int:

@@ -55,6 +55,9 @@ FINGERS: dict[str, FingerParams] = {
     "soft": FingerParams(mass_kg=0.005, stiffness_n_per_m=100.0, damping_ns_per_m=0.2),
     "medium": FingerParams(mass_kg=0.01, stiffness_n_per_m=300.0, damping_ns_per_m=0.5),
     "stiff": FingerParams(mass_kg=0.02, stiffness_n_per_m=1000.0, damping_ns_per_m=1.0),
+    # nobody holds the stylus: the hands-off damping run (hapticsdk calibrate damping
+    # --device omni-virtual --device-option finger=none)
+    "none": FingerParams(mass_kg=0.0, stiffness_n_per_m=0.0, damping_ns_per_m=0.0),
 }
 
 
