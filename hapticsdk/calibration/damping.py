@@ -22,6 +22,12 @@ simulated arms; the worst case in none (docs/runtime.md, "Measured damping"). Th
 standard error is reported (``damping_se_ns_per_m``: residual variance at least
 ``Delta^2/12``, inflated by the residuals' lag-1 correlation ``(1 + rho)/(1 - rho)``).
 
+A run paced on a clock (:func:`measure_damping` with ``realtime=True``,
+:mod:`hapticsdk.calibration.damping_run`) is fitted with each step as long as it was
+measured, and the margin also covers what the timestamps leave open: forces reaching the
+arm late, readings sampled off their timestamps, forces dropped as stale
+(:func:`timing_error_ns_per_m`; docs/calibration.md, "A run timed by the loop's clock").
+
 What the fit does not see: Coulomb friction (a viscous fit to a Coulomb decay over-states
 the damping at speed: the residuals grow, so the bound shrinks, but it is not proved to
 stay below), a damping that changes over the workspace, a hand on the stylus. The

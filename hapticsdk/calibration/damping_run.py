@@ -85,7 +85,9 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
     the most time between a position's sample and the read returning it, and between a
     command returning and its force at the motor, where the device declares no
     ``transport_latency_s`` (a real device with neither is refused before it is opened);
-    ``clock``: the pacing clock (default :class:`~hapticsdk.runtime.clock.MonotonicClock`).
+    ``clock``: the pacing clock (default :class:`~hapticsdk.runtime.clock.MonotonicClock`;
+    a :class:`~hapticsdk.runtime.clock.SimulatedClock` with stalls makes late ticks on
+    purpose).
 
     The device is opened if it is not open (and then closed), held at 0 N for its safety
     layer's start ramp plus :data:`SETTLE_EXTRA_S`, driven along ``axis`` through its
@@ -165,6 +167,7 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
             elif k < n:
                 applied[k] = send(float(forces[k]), t)
                 command_s[k] = 0.0 if simulated else now() - origin - t
+            clock.work(i, 0.0)     # a simulated clock charges the tick here (a test's stalls)
             deadline += period_s
             if now() > deadline + period_s:
                 deadline = now()   # behind by more than a period: on from now (the fit takes any step)

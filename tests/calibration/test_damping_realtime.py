@@ -54,6 +54,23 @@ def test_the_run_records_each_tick_s_timestamp_on_the_loop_s_clock():
     assert run.fit.trusted_damping_ns_per_m <= 0.5
 
 
+def test_late_ticks_are_fitted_as_they_were():
+    """Ticks made late on purpose (a simulated clock with stalls: one 3 periods late, one
+    past the safety layer's restart gap, which ramps the force again): the steps are
+    fitted as measured and the stale forces as dropped, so the fit is within its margin
+    and the bound stays worth having."""
+    from hapticsdk.runtime.clock import SimulatedClock
+
+    clock = SimulatedClock(compute_s=20e-6, stalls={350: 3e-3, 420: 0.5e-3, 600: 0.06})
+    dev = _omni()
+    run = play_damping_run(dev, clock=clock)
+    fit, b = run.fit, dev.arm.damping_ns_per_m
+    assert run.late_ticks >= 2 and max(np.diff(run.times_s)) > 0.05
+    assert dev.safety.events["faults"] == 1 and dev.safety.events["stale_zeroed"] >= 2   # the ramp ran again
+    assert fit.success and abs(fit.damping_ns_per_m - b) <= fit.worst_error_ns_per_m
+    assert 0.5 * b < fit.trusted_damping_ns_per_m <= b
+
+
 class _Stop(Exception):
     pass
 
