@@ -140,11 +140,15 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
     opened = not device.is_open
     gc_was = gc.isenabled()
     origin = now()
+    t_dev = 0.0
     if opened:
         device.open()
     try:
         if safety is not None and hasattr(safety, "set_period"):
             safety.set_period(period_s)   # a command older than a period is stale, as in the servo loop
+        # a simulated device's own clock (its state's t) may not start at 0 (opened and
+        # stepped before): commands carry its time, so its safety layer ages them right
+        t_dev = float(getattr(device.read_state(), "t", 0.0) or 0.0) if simulated else 0.0
         gc.collect()
         gc.disable()                      # no collection pauses a tick
         deadline = origin = now()
@@ -163,9 +167,9 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
                 readings[k] = float(st.position_mm[axis])
                 read_s[k] = 0.0 if simulated else now() - origin - t
             if k < 0:
-                send(0.0, t)
+                send(0.0, t_dev + t)
             elif k < n:
-                applied[k] = send(float(forces[k]), t)
+                applied[k] = send(float(forces[k]), t_dev + t)
                 command_s[k] = 0.0 if simulated else now() - origin - t
             clock.work(i, 0.0)     # a simulated clock charges the tick here (a test's stalls)
             deadline += period_s
@@ -176,7 +180,7 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
             gc.enable()
         try:
             try:
-                send(0.0, now() - origin)
+                send(0.0, t_dev + now() - origin)
             except Exception:
                 device.stop()      # the safe state when even a 0 N command fails
         finally:

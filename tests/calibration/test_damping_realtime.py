@@ -54,6 +54,24 @@ def test_the_run_records_each_tick_s_timestamp_on_the_loop_s_clock():
     assert run.fit.trusted_damping_ns_per_m <= 0.5
 
 
+def test_a_simulated_device_opened_and_stepped_before_is_timed_on_its_own_clock():
+    """The caller opened the device and ran it for a while: its own clock is not at 0, and
+    the commands carry its time, so its safety layer does not take them for stale (or
+    for fresh ones too long) and the drops the fit models are the ones it makes."""
+    from hapticsdk.runtime.clock import SimulatedClock
+
+    dev = _omni()
+    dev.open()
+    for _ in range(1234):
+        dev.step(1e-3)
+    run = play_damping_run(dev, clock=SimulatedClock(compute_s=20e-6, stalls={350: 3e-3}))
+    fit, b = run.fit, dev.arm.damping_ns_per_m
+    assert fit.success and abs(fit.damping_ns_per_m - b) <= fit.worst_error_ns_per_m
+    assert 0.5 * b < fit.trusted_damping_ns_per_m <= b
+    assert dev.is_open and dev.read_back().force_n == 0.0
+    dev.close()
+
+
 def test_late_ticks_are_fitted_as_they_were():
     """Ticks made late on purpose (a simulated clock with stalls: one 3 periods late, one
     past the safety layer's restart gap, which ramps the force again): the steps are
