@@ -284,9 +284,9 @@ def _report_damping(args: argparse.Namespace, fit: Any, serial: str | None, gene
 
 def _damping_on_device(args: argparse.Namespace) -> int:
     """``calibrate damping --device NAME``: open the device, play the hands-off run on it in
-    real time (:func:`~hapticsdk.calibration.damping_run.play_damping_run`: 0 N through
+    real time (:func:`~hapticsdk.calibration.damping.play_damping_run`: 0 N through
     the start ramp, 0 N and closed on every exit), fit, report, save."""
-    from ..calibration.damping_run import play_damping_run
+    from ..calibration.damping import play_damping_run
     from ..devices.actuators import create_actuator
     from ..devices.device_options import parse_device_option, trusted_options
     from ..errors import ValidationError

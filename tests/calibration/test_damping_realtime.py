@@ -1,5 +1,5 @@
 """The hands-off damping run played in real time (``measure_damping(device,
-realtime=True)``, :func:`hapticsdk.calibration.damping_run.play_damping_run`): paced on the
+realtime=True)``, :func:`hapticsdk.calibration.damping.play_damping_run`): paced on the
 machine's clock, through the device's safety layer, fitted with the steps as measured.
 
 The simulated Omni is stepped by the time that really passed between ticks, so these
@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from damping_faults import fail_at_step
-from hapticsdk.calibration.damping import DampingCalibration, excitation, measure_damping
-from hapticsdk.calibration.damping_run import play_damping_run
+from hapticsdk.calibration.damping import DampingCalibration, excitation, measure_damping, play_damping_run
 from hapticsdk.calibration.store import load_calibration, save_calibration
 from hapticsdk.errors import ValidationError
 from hapticsdk.passivity import ControllerSettings
