@@ -299,7 +299,13 @@ def _damping_on_device(args: argparse.Namespace) -> int:
     dev = create_actuator(args.device, **opts)
     if getattr(dev, "channel", None) != "force" or not callable(getattr(dev, "read_state", None)):
         raise ValidationError(f"{args.device!r} is not a force device that reads its position", field="--device")
-    serial = getattr(dev, "serial_number", None) or args.serial
+    own = getattr(dev, "serial_number", None)
+    if own and args.serial and args.serial != own:
+        # the loop looks a calibration up by the serial the device reports: one saved
+        # under another would never be credited
+        raise ValidationError(f"{args.device!r} reports serial {own!r}; a calibration saved for {args.serial!r} "
+                              "would not be used for it (leave --serial out)", field="--serial")
+    serial = own or args.serial
     run = play_damping_run(dev, period_s=args.period, axis=args.axis, mass_kg=args.mass, max_force_n=args.max_force,
                            latency_s=args.latency)
     res = float(getattr(dev, "encoder_resolution_mm", 0.0) or 0.0) if args.resolution is None else args.resolution

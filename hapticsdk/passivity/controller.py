@@ -373,7 +373,7 @@ class PassivityController:
             "above the Colgate spring is held back until the hand's motion earns credit; %s (docs/runtime.md, "
             "Passivity item 7)", u * 1e6, e0 * 1e6,
             "no damping is credited, so the spring is 0 and the arm renders no wall: measure the arm's damping hands "
-            "off (hapticsdk calibrate damping)" if not b else f"the spring takes {b:g} N s/m of credited damping")
+            "off (hapticsdk calibrate damping --device NAME --save)" if not b else f"the spring takes {b:.3g} N s/m of credited damping")
 
     def commit(self, f_applied: float) -> None:
         """Record the force the device actually held over the coming interval (N). Without

@@ -476,7 +476,7 @@ class ServoLoop:
                     and passivity_settings.trusted_damping_ns_per_m() == 0.0
                     and passivity_settings.device_damping_ns_per_m > 0.0):
                 _log.info("%s declares a damping of %g N s/m, which the stiff-wall controller does not credit until "
-                          "it is measured hands off (hapticsdk calibrate damping; docs/runtime.md, Passivity item 2): "
+                          "it is measured hands off (hapticsdk calibrate damping --device NAME --save; docs/runtime.md, Passivity item 2): "
                           "a stiff wall is what the energy bound allows an undamped arm",
                           getattr(device, "label", type(device).__name__), passivity_settings.device_damping_ns_per_m)
         if passivity_settings.period_s is None:

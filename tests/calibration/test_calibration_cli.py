@@ -105,19 +105,25 @@ def test_calibrate_damping_on_a_device_in_real_time(tmp_path, capsys):
     """``calibrate damping --device NAME``: the run played on the named device (the
     simulated Omni nobody holds, stepped by the real elapsed time), fitted, saved for the
     serial, listed; held by a finger, the bound does not rise above the truth."""
+    from hapticsdk_hardness.omni import OmniVirtual
+
     cal = tmp_path / "cal"
+    sn = OmniVirtual().serial_number          # the simulated arm's serial: its physics
+    assert main(["calibrate", "damping", "--device", "omni-virtual", "--device-option", "finger=none",
+                 "--serial", "SIM-7", "--save", str(cal)]) == 2
+    assert "reports serial" in capsys.readouterr().err and not cal.exists()
     code, out = run_json(capsys, ["calibrate", "damping", "--device", "omni-virtual", "--device-option",
-                                  "finger=none", "--serial", "SIM-7", "--save", str(cal)])
+                                  "finger=none", "--serial", sn, "--save", str(cal)])
     assert code == 0 and out["success"] and out["generated"] is True
     assert 0.0 < out["trusted_damping_ns_per_m"] <= 0.5           # the simulated Omni's damping
     # every step as measured and the stale drops modelled: the fit is within its margin
     assert abs(out["damping_ns_per_m"] - 0.5) <= out["worst_error_ns_per_m"]
-    assert out["saved"].endswith("damping-SIM-7.json") and out["latency_s"] == 0.0
+    assert out["saved"].endswith(f"damping-{sn}.json") and out["latency_s"] == 0.0 and out["serial"] == sn
     from hapticsdk.calibration.store import load_calibration
-    got = load_calibration("damping", "SIM-7", directory=cal).calibration
+    got = load_calibration("damping", sn, directory=cal).calibration
     assert got.resolution_mm == 0.055 and got.generated and got.trusted_damping_ns_per_m == out[
         "trusted_damping_ns_per_m"]                                  # the device's own encoder
-    code, out = run_json(capsys, ["calibrate", "list", "--dir", str(cal), "--serial", "damping=SIM-7"])
+    code, out = run_json(capsys, ["calibrate", "list", "--dir", str(cal), "--serial", f"damping={sn}"])
     assert code == 0 and {u["kind"]: u for u in out["in_use"]}["damping"]["origin"] == "file"
     code, out = run_json(capsys, ["calibrate", "damping", "--device", "omni-virtual"])   # the default finger holds it
     assert out["trusted_damping_ns_per_m"] <= 0.5

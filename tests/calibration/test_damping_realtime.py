@@ -35,11 +35,11 @@ def test_measured_in_real_time_on_the_simulated_omni_then_stored_and_credited(tm
     assert forces.size == f.size and readings.size == f.size + 1
     assert np.all(np.abs(forces) <= np.abs(f) + 1e-12)       # the safety layer's read-back, never more
     cal = DampingCalibration.from_fit(fit, period_s=1e-3, resolution_mm=dev.encoder_resolution_mm,
-                                      serial="SIM-OMNI-1", generated=True, source="test: real-time run, simulated")
+                                      serial=dev.serial_number, generated=True,
+                                      source="test: real-time run, simulated")
     save_calibration(cal, tmp_path)
-    got = load_calibration("damping", "SIM-OMNI-1", directory=tmp_path)
+    got = load_calibration("damping", dev.serial_number, directory=tmp_path)
     assert got.calibration == cal
-    dev.serial_number = "SIM-OMNI-1"
     assert ControllerSettings.for_device(dev, directory=tmp_path).measured_damping_ns_per_m == \
         fit.trusted_damping_ns_per_m
 

@@ -101,3 +101,23 @@ def test_a_ramp_that_holds_back_is_not_a_spent_bound():
     assert rep["active_ticks"] >= 2 and f < 1.5
     assert rep["energy_bound_j"] < ControllerSettings.for_device(OmniVirtual()).energy_budget_j(1e-3)
     assert rep["spent_ticks"] == 0
+
+
+def test_the_remedy_the_warning_names_works_on_the_simulated_arm(tmp_path, monkeypatch, capsys, caplog):
+    # the command the warning names, on the simulated Omni nobody holds, saved where the
+    # loop looks: S7's wall is then delivered on every press, and nothing is spent
+    from hapticsdk.cli import main
+    from hapticsdk_hardness.omni import OmniVirtual
+
+    monkeypatch.setenv("HAPTICSDK_CALIBRATION_DIR", str(tmp_path))
+    assert main(["calibrate", "damping", "--device", "omni-virtual", "--device-option", "finger=none",
+                 "--save", "--json"]) == 0
+    capsys.readouterr()
+    caplog.set_level(logging.WARNING, logger=LOGGER)
+    rep, f_last, pen = _presses(0.16, 6)
+    assert rep.passivity["force"]["spent_ticks"] == 0 and _spent_records(caplog) == []
+    np.testing.assert_allclose(f_last, 0.16 * pen, rtol=0.1)
+    # the calibration is the arm's: an arm with other physics is another serial, not credited
+    assert ControllerSettings.for_device(OmniVirtual()).measured_damping_ns_per_m is not None
+    assert ControllerSettings.for_device(OmniVirtual(damping_ns_per_m=0.0)).measured_damping_ns_per_m is None
+    assert OmniVirtual(finger="stiff").serial_number == OmniVirtual(finger="soft").serial_number

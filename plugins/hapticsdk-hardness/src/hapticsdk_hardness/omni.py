@@ -197,6 +197,17 @@ class OmniVirtual(HapticDevice):
         return self.arm.damping_ns_per_m
 
     @property
+    def serial_number(self) -> str:
+        """The simulated arm's serial number: its physics (mass, damping, force limit,
+        encoder), so a damping calibration saved for it (``hapticsdk calibrate damping
+        --device omni-virtual --device-option finger=none --save``) is credited on every
+        simulated arm with the same physics and on no other (one with another damping
+        is another arm). The finger is the user, not the arm, and is not part of it."""
+        a = self.arm
+        return (f"sim-omni-{a.mass_kg:.6g}kg-{a.damping_ns_per_m:.6g}Nsm-{a.max_force_n:.6g}N-"
+                f"{a.encoder_resolution_mm:.6g}mm")
+
+    @property
     def encoder_resolution_mm(self) -> float:
         """Position quantum of the encoder (mm)."""
         return self.arm.encoder_resolution_mm
