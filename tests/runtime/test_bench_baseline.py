@@ -117,12 +117,18 @@ def test_live_cli_refuses_what_the_comparison_does_not_take():
 
 
 def test_live_cli_runs_both_trees_and_reports_both_sessions():
+    """Both trees' children run a live session and a reference loop and the CLI reports
+    both. With no application load: a busy application thread (the default) cost each
+    child about 5 s of CPU (the main thread waits for the interpreter lock after each of
+    its sleeps) and measures nothing this test reads; the loads themselves are tested in
+    test_session.py (``test_benchmark_application_load_keeps_a_cpu_busy_until_stopped``)."""
     _need_git_checkout()
     out = subprocess.run([sys.executable, "-m", "hapticsdk", "bench", "live", "--baseline", "HEAD",
-                          "--seconds", "0.3", "--rounds", "1", "--record", "none"],
+                          "--seconds", "0.3", "--rounds", "1", "--record", "none", "--app-load", "none"],
                          capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     text = out.stdout
+    assert "application load none" in text
     assert "baseline HEAD (" in text and "this code" in text and "reference loop" in text
     assert "paired by round: jitter p99" in text and "perf_counter" in text and "goal" not in text.lower()
 

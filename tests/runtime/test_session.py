@@ -613,6 +613,29 @@ def test_benchmark_reference_loop_is_paced():
     assert {"p50_us", "p99_us", "max_us", "missed_tick_rate"} <= set(ref)
 
 
+@pytest.mark.parametrize("kind", ["python-thread", "numpy-thread"])
+def test_benchmark_application_load_keeps_a_cpu_busy_until_stopped(kind):
+    """``hapticsdk bench live --app-load``'s application loads (the CLI test in
+    test_bench_baseline.py runs with ``none``): the thread takes CPU time while it runs and
+    returns once told to stop. The 30 s are only how long a broken load may hang the test."""
+    import threading
+
+    from hapticsdk.benchmarks.live import _load
+    if not hasattr(time, "pthread_getcpuclockid"):
+        pytest.skip("needs a thread's CPU clock (POSIX)")
+    stop = threading.Event()
+    th = threading.Thread(target=_load, args=(kind, stop), daemon=True)
+    th.start()
+    clock = time.pthread_getcpuclockid(th.ident)
+    give_up = time.monotonic() + 30.0
+    while th.is_alive() and time.clock_gettime(clock) < 0.02 and time.monotonic() < give_up:
+        time.sleep(0.005)
+    assert th.is_alive() and time.clock_gettime(clock) >= 0.02   # the thread's own CPU time
+    stop.set()
+    th.join(30.0)
+    assert not th.is_alive()
+
+
 def test_serving_clock_serves_commands_in_the_sleep_and_keeps_the_deadline():
     """The servo's clock calls serve() before it sleeps (so a command is taken up
     while the servo would otherwise sleep), never returns before the deadline, and
