@@ -69,24 +69,23 @@ def test_random_cells_are_reproducible_and_span_the_space():
     assert {c["trajectory"] for c in a} == {"press_hold", "tap", "bumpy_slide", "plain_slide", "creep"}
 
 
-def test_a_tap_reversing_over_many_short_ticks_is_foreseen():
+def test_a_tap_reversing_over_many_short_ticks_is_foreseen(seed1_sdk):
     """Drawn cell 1308 of seed 1: a 1.4 m/s tap on a 0.6 N/mm wall at T = 0.46 ms, no
     damping, a 0.034 mm encoder. The hand's reversal takes ~17 ticks; per tick its second
     difference (0.06 mm) is below the two counts quantisation alone can make, so only a
     longer span sees it. Without it the held force met the outward motion: 1.35 mJ."""
     cell = draw_cells(2000, seed=1)[1308]
     assert cell["trajectory"] == "tap" and cell["damping_declared_ns_per_m"] == 0.0
-    r = run_cells([cell], controllers=("sdk",))[0]["results"]["sdk"]
+    r = seed1_sdk[1308]["results"]["sdk"]
     assert r["energy_to_user_j"] <= 1e-4
     assert r["contact_ticks"] > 0
 
 
-def _sdk_energy(cells, idx, settings=None):
-    return [run_cells([cells[i]], controllers=("sdk",), settings=settings)[0]["results"]["sdk"]["energy_to_user_j"]
-            for i in idx]
+def _sdk_energy(runs, idx):
+    return [runs[i]["results"]["sdk"]["energy_to_user_j"] for i in idx]
 
 
-def test_a_hand_that_reversed_recently_is_expected_to_reverse_again():
+def test_a_hand_that_reversed_recently_is_expected_to_reverse_again(seed1_sdk):
     """Drawn cells 259 and 1907 of seed 1: taps at T = 7.8 and 4.9 ms, no damping, fine
     encoders. Between reversals the hand moves at a steady speed, so this tick's change
     of motion reads 0, and the finger-and-arm resonance (~8 ticks per cycle) reverses it
@@ -95,10 +94,10 @@ def test_a_hand_that_reversed_recently_is_expected_to_reverse_again():
     cells = draw_cells(2000, seed=1)
     assert [cells[i]["trajectory"] for i in (259, 1907)] == ["tap", "tap"]
     assert all(cells[i]["damping_true_ns_per_m"] == 0.0 and cells[i]["period_s"] > 4e-3 for i in (259, 1907))
-    assert max(_sdk_energy(cells, (259, 1907))) <= 1e-4
+    assert max(_sdk_energy(seed1_sdk, (259, 1907))) <= 1e-4
 
 
-def test_a_change_of_the_change_of_motion_is_foreseen():
+def test_a_change_of_the_change_of_motion_is_foreseen(seed1_sdk):
     """Drawn cells 468, 1191 and 1919 of seed 1: taps at T = 7.2, 4.8 and 9.0 ms with
     little or no damping. The hand's acceleration changes between ticks (the finger and
     the arm ring at a few ticks per cycle), so extrapolating the reading with its velocity
@@ -109,10 +108,10 @@ def test_a_change_of_the_change_of_motion_is_foreseen():
     idx = (468, 1191, 1919)
     assert [cells[i]["trajectory"] for i in idx] == ["tap"] * 3
     assert all(cells[i]["period_s"] > 4e-3 and cells[i]["damping_true_ns_per_m"] < 0.1 for i in idx)
-    assert max(_sdk_energy(cells, idx)) <= 1e-4
+    assert max(_sdk_energy(seed1_sdk, idx)) <= 1e-4
 
 
-def test_the_held_force_s_push_on_the_free_arm_is_foreseen_under_quantisation():
+def test_the_held_force_s_push_on_the_free_arm_is_foreseen_under_quantisation(seed1_sdk):
     """Drawn cells 516, 990 and 1137 of seed 1: presses and a bumpy slide at T = 9.3, 3.1
     and 2.9 ms with 0.06-0.08 mm encoders. At the first ticks of contact a new force
     (about 1 N on a 24-71 g arm) changes the arm's motion by up to ``dF T^2 / m`` per tick,
@@ -124,22 +123,23 @@ def test_the_held_force_s_push_on_the_free_arm_is_foreseen_under_quantisation():
     idx = (516, 990, 1137)
     assert [cells[i]["trajectory"] for i in idx] == ["press_hold", "press_hold", "bumpy_slide"]
     assert all(cells[i]["period_s"] > 2.5e-3 and 0.05 < cells[i]["resolution_mm"] < 0.1 for i in idx)
-    assert max(_sdk_energy(cells, idx)) <= 1e-4
+    assert max(_sdk_energy(seed1_sdk, idx)) <= 1e-4
 
 
-def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give():
+def test_a_coarse_encoder_s_allowance_is_capped_by_the_energy_a_contact_may_give(seed1_sdk):
     """Drawn cells 122 and 580 of seed 1: creeps with 0.18 mm encoders, where
     ``F_max Delta / 2`` is 0.3 mJ. The allowance is capped at ``energy_allowance_j``
     (0.1 mJ); uncapped they gave 0.21 and 0.24 mJ. A lower allowance lowers the energy."""
     cells = draw_cells(2000, seed=1)
     assert all(cells[i]["resolution_mm"] > 0.15 for i in (122, 580))
-    e = _sdk_energy(cells, (122, 580))
+    e = _sdk_energy(seed1_sdk, (122, 580))
     assert max(e) <= 1e-4
-    strict = _sdk_energy(cells, (122, 580), settings=ControllerSettings(energy_allowance_j=2e-5))
+    strict = [c["results"]["sdk"]["energy_to_user_j"] for c in run_cells(
+        [seed1_sdk[i] for i in (122, 580)], controllers=("sdk",), settings=ControllerSettings(energy_allowance_j=2e-5))]
     assert all(b < a for a, b in zip(e, strict)), (e, strict)
 
 
-def test_with_a_measured_damping_the_spring_keeps_half_of_it_for_the_encoder():
+def test_with_a_measured_damping_the_spring_keeps_half_of_it_for_the_encoder(seed1_sdk):
     """Seed 1 (2000 cells), cell 1935: a creep on a 0.18 mm encoder, 1 ms, true damping
     0.57 N*s/m, measured hands off to a bound of 0.46. A spring at Colgate's limit of that
     bound (2 b_lo / T) leaves the arm's damping little for the count crossings: arm and
@@ -149,6 +149,15 @@ def test_with_a_measured_damping_the_spring_keeps_half_of_it_for_the_encoder():
     and the run stays within 0.1 mJ."""
     cell = draw_cells(2000, seed=1)[1935]
     assert cell["trajectory"] == "creep" and cell["resolution_mm"] > 0.15
-    c = run_cells([cell], controllers=("sdk",))[0]
+    c = seed1_sdk[1935]
     assert c["damping_calibration"]["trusted_damping_ns_per_m"] <= cell["damping_true_ns_per_m"]
     assert c["results"]["sdk"]["energy_to_user_j"] <= 1e-4, c["results"]["sdk"]
+
+
+def test_a_batch_gives_each_cell_what_it_gets_alone(seed1_sdk):
+    """The shared batch (tests/sim/conftest.py) stands in for a run of each cell alone in
+    the tests above: one of its cells (108, its shortest run) run alone gives the same
+    floats, to the last bit (compared as JSON, which writes a float's shortest repr)."""
+    import json
+    alone = run_cells([draw_cells(2000, seed=1)[108]], controllers=("sdk",))[0]
+    assert json.dumps(alone, sort_keys=True) == json.dumps(seed1_sdk[108], sort_keys=True)

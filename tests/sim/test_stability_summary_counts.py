@@ -70,16 +70,16 @@ def test_the_counts_follow_the_goal_cell_by_cell(cells):
     assert [s["sdk_delivered_vs_best_shaped_peer"], s["cells_with_a_shaped_peer"]] == want[True]
 
 
-def test_the_spring_only_share_sees_a_spent_bound_and_only_then():
+def test_the_spring_only_share_sees_a_spent_bound_and_only_then(seed1_sdk):
     """Seed 1 (2000 cells), cell 33: a press-and-hold whose first contact spends the
     extra's bound; from then on the controller can send only the Colgate spring, on most
     of the contact ticks. With the bound removed the extra follows the wall, and the share
     is 0."""
-    from hapticsdk.benchmarks.stability_random import draw_cells, run_cells
+    from hapticsdk.benchmarks.stability_random import run_cells
     from hapticsdk.passivity import ControllerSettings
-    cell = draw_cells(2000, seed=1)[33]
+    cell = seed1_sdk[33]   # tests/sim/conftest.py: draw_cells(2000, seed=1)[33] run with the defaults
     assert cell["trajectory"] == "press_hold"
-    on = run_cells([cell], controllers=("sdk",))[0]["results"]["sdk"]
+    on = cell["results"]["sdk"]
     off = run_cells([cell], controllers=("sdk",), settings=ControllerSettings(energy_bound=False))[0]["results"]["sdk"]
     assert on["spring_only_share"] > 0.5
     assert off["spring_only_share"] == 0.0
