@@ -10,10 +10,9 @@ reached at its new place for one minor version, removed in 0.3).
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from pathlib import Path
-
-import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PKG = ROOT / "hapticsdk"
@@ -69,13 +68,21 @@ def _imports(tree: ast.Module, module: str, is_pkg: bool, known: set[str]) -> se
     return out
 
 
-def import_graph() -> dict[str, set[str]]:
+@functools.lru_cache(maxsize=None)
+def _parsed_graph() -> dict[str, frozenset[str]]:
+    """The graph, each file of the core parsed once per session (the tests below all read
+    it; the files do not change while the suite runs)."""
     files = {_module_name(p): p for p in PKG.rglob("*.py")}
-    graph: dict[str, set[str]] = {}
+    graph: dict[str, frozenset[str]] = {}
     for mod, path in files.items():
         deps = _imports(ast.parse(path.read_text(encoding="utf-8")), mod, path.name == "__init__.py", set(files))
-        graph[mod] = {d for d in deps if d in files and d != mod}
+        graph[mod] = frozenset(d for d in deps if d in files and d != mod)
     return graph
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the core's modules it imports; a fresh copy for each caller."""
+    return {mod: set(deps) for mod, deps in _parsed_graph().items()}
 
 
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
