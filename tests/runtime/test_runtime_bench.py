@@ -31,6 +31,26 @@ def test_stability_controller_on_never_gives_energy(quick_matrix):
     assert max(c["peak_commanded_force_n"] for c in off) > 3.3
 
 
+def test_a_run_with_the_controller_off_everywhere_gives_what_those_cells_give_beside_one_on():
+    """``run_period`` skips the controller's tick when no cell runs it (``passive_stiffness``'s
+    runs, most of ``run_matrix``'s time); the off cells then give the same floats as beside
+    a cell that is on, where the tick runs and passes their wall force through. An active
+    wall (2.3 N/mm at 1 ms against 0.5 N s/m) and a stiff one, so the figures are not 0."""
+    import numpy as np
+
+    from hapticsdk.benchmarks.stability import run_period
+    K, b, fingers = np.array([2.3, 100.0, 2.3]), np.array([0.5, 0.0, 0.5]), ["medium", "stiff", "medium"]
+    mixed = run_period(1e-3, K, b, fingers, np.array([False, False, True]), 3.0)
+    off = run_period(1e-3, K[:2], b[:2], fingers[:2], np.zeros(2, bool), 3.0)
+    assert off["energy_to_user_j"][0] > ENERGY_J and off["peak_force_n"][1] > 3.0
+    assert set(off) == set(mixed)
+    for key, value in off.items():
+        if key == "energy_bound_j":
+            assert (value == 0.0).all()        # no controller ran
+        else:
+            np.testing.assert_array_equal(value, np.broadcast_to(mixed[key], (3,))[:2], err_msg=key)
+
+
 def test_stability_summary_counts_each_goal():
     """The per-goal counts of the summary, on hand-made cells: energy <= 0.1 mJ, delivered
     >= 90 % of min(K, K_pass) x pen, felt floor met / missed / never that deep (NaN)."""
