@@ -51,6 +51,7 @@ import math
 import os
 import statistics
 import time
+from typing import Any
 
 for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(var, "1")
@@ -97,32 +98,43 @@ _READ_CHECK = """
 """
 # the plane hit test with the contact hysteresis, the velocity filter and both renderers
 _RENDER = """
-    pen_in = pen
-    in_contact = pen > 0.0
-    if not in_contact and st_s["contact"] == 0 and pen > -h:
-        in_contact = True
-        pen_in = 0.0
-    st_s["contact"] = 0 if in_contact else -1
-    vf0 = st_s["vf0"] = st_s["vf0"] + vf_a * (v0 - st_s["vf0"])
-    f_wall = k_spring * pen_in if in_contact else 0.0
-    amp_c = a_coil if in_contact else 0.0
-    thr = vgate - v_step if st_s["gate"] else vgate
-    gate = st_s["gate"] = abs(vf0) >= thr and in_contact
-    if gate:
-        fr = fpeak * abs(v0) / vref
-        if fr < flo or fr > fhi:
-            fr = flo if fr < flo else fhi
-        st_s["last_f"] = fr
-        amp_v = vout
-    else:
+    if bad:
+        # no object under a refused state: nothing rendered, the vibration roles silent
+        st_s["contact"] = -1
+        in_contact = False
+        f_wall = 0.0
+        amp_c = 0.0
         fr = st_s["last_f"]
         amp_v = 0.0
+    else:
+        pen_in = pen
+        in_contact = pen > 0.0
+        if not in_contact and st_s["contact"] == 0 and pen > -h:
+            in_contact = True
+            pen_in = 0.0
+        st_s["contact"] = 0 if in_contact else -1
+        vf0 = st_s["vf0"] = st_s["vf0"] + vf_a * (v0 - st_s["vf0"])
+        f_wall = k_spring * pen_in if in_contact else 0.0
+        amp_c = a_coil if in_contact else 0.0
+        thr = vgate - v_step if st_s["gate"] else vgate
+        gate = st_s["gate"] = abs(vf0) >= thr and in_contact
+        if gate:
+            fr = fpeak * abs(v0) / vref
+            if fr < flo or fr > fhi:
+                fr = flo if fr < flo else fhi
+            st_s["last_f"] = fr
+            amp_v = vout
+        else:
+            fr = st_s["last_f"]
+            amp_v = 0.0
 """
 _PLANE_SPRING = """
     f_wall = k_spring * pen if pen > 0.0 else 0.0
 """
 _CONTROLLER = """
-    f = pc.step(-pen, T, f_wall)
+    if not bad:
+        st_s["x"] = -pen
+    f = pc.step(st_s["x"], T, f_wall)
 """
 _NO_CONTROLLER = """
     f = f_wall
@@ -184,8 +196,10 @@ def _floor_source(variant: str) -> str:
     return "def tick(k, t):" + "".join(body) + "    return tt() - q0\n"
 
 
-def _scene(seconds: float) -> tuple[ServoLoop, int]:
+def _scene(seconds: float, setup: Any = None) -> tuple[ServoLoop, int]:
     dev, renderers, acts = build_scene(seconds + 1.0)
+    if setup is not None:
+        setup(dev, acts)   # (tests: a state read replaced, other limits)
     loop = ServoLoop(dev, renderers, acts, period_s=T)
     loop.start(seconds)
     for _ in range(WARM):
@@ -193,24 +207,30 @@ def _scene(seconds: float) -> tuple[ServoLoop, int]:
     return loop, int(round(seconds / T))
 
 
-def _close(loop: ServoLoop) -> None:
+def _close(loop: ServoLoop, n: int, log: list | None) -> None:
+    if log is not None:
+        log.append(loop._log[:n].copy())   # the log ring's rows (a run shorter than the ring)
     loop.finish()
     for a in {id(a): a for a in [loop.device, *loop.actuators.values()]}.values():
         a.close()
 
 
-def run_loop(seconds: float) -> np.ndarray:
-    loop, n = _scene(seconds)
+def run_loop(seconds: float, log: list | None = None, setup: Any = None) -> np.ndarray:
+    """The loop's own ticks: per-tick CPU ns after WARM (``log``: its log rows appended;
+    ``setup(device, actuators)``: called on the scene before the run)."""
+    loop, n = _scene(seconds, setup)
     while loop.tick():
         pass
     cpu = loop._window(loop._log[:, loop._ncol - 2], loop._k)[WARM:n]
-    _close(loop)
+    _close(loop, n, log)
     return cpu * 1e9
 
 
-def run_floor(seconds: float, variant: str) -> np.ndarray:
-    """``variant``: ``full``, ``force_pc`` or ``force``; per-tick CPU ns after WARM."""
-    loop, n = _scene(seconds)
+def run_floor(seconds: float, variant: str, log: list | None = None, setup: Any = None) -> np.ndarray:
+    """``variant``: ``full``, ``force_pc`` or ``force``; per-tick CPU ns after WARM
+    (``log``: the loop's log rows appended, the floor's own from WARM on: ``full`` writes
+    its row there as the loop does; ``setup`` as for :func:`run_loop`)."""
+    loop, n = _scene(seconds, setup)
     dev = loop.device
     slots = loop._slots
     force, coil, vib = slots
@@ -247,7 +267,8 @@ def run_floor(seconds: float, variant: str) -> np.ndarray:
     ncol = loop._ncol
     cap = loop._cap
     st_s = {"last_vel": list(loop._last_vel), "good": loop._good_state, "contact": loop.contact,
-            "vf0": loop._vf0, "gate": rough._gate_open, "last_f": rough._last_f, "hits": 0, "events": 0}
+            "vf0": loop._vf0, "gate": rough._gate_open, "last_f": rough._last_f, "hits": 0, "events": 0,
+            "x": loop._last_x}
     last_vel = st_s["last_vel"]
     out = np.empty(n - WARM, np.int64)
 
@@ -261,7 +282,7 @@ def run_floor(seconds: float, variant: str) -> np.ndarray:
         for step in steps:
             step(T)
     loop._k = n
-    _close(loop)
+    _close(loop, n, log)
     return out
 
 
