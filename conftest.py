@@ -6,6 +6,11 @@ temporary folder for the session, inherited by every subprocess a test starts; i
 removed at the end. The SDK's own path and option variables (``HAPTICSDK_CACHE_DIR``,
 ``HAPTICSDK_CALIBRATION_DIR``, ``HAPTICSDK_DEVICE_CONFIG``, ...) are unset, so the tests
 see the per-user defaults, inside that folder, whatever the developer's shell sets. ``tests/packaging/test_test_home.py`` checks it.
+
+Property-based tests (hypothesis) draw the same examples on every run (profile
+``derandomized``, the default), so the README's test command passes or fails the same way on
+every machine. ``HYPOTHESIS_PROFILE=explore python -m pytest`` draws new examples each run
+(a search for counterexamples, by hand; a failure it finds becomes a fixed example).
 """
 
 from __future__ import annotations
@@ -35,8 +40,16 @@ for _var in ("HAPTICSDK_CACHE_DIR", "HAPTICSDK_CACHE_MAX_MB", "HAPTICSDK_CALIBRA
     os.environ.pop(_var, None)
 
 
+from hypothesis import settings as _hyp_settings  # noqa: E402
+
+_hyp_settings.register_profile("derandomized", derandomize=True)
+_hyp_settings.register_profile("explore", derandomize=False)
+_hyp_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "derandomized"))
+
+
 def pytest_report_header(config):  # noqa: ANN001, ANN201 - pytest hook
-    return f"hapticsdk tests: HOME and XDG folders in {TEST_HOME} (not {_REAL_HOME})"
+    return (f"hapticsdk tests: HOME and XDG folders in {TEST_HOME} (not {_REAL_HOME}); "
+            f"hypothesis profile {os.environ.get('HYPOTHESIS_PROFILE', 'derandomized')}")
 
 
 def pytest_unconfigure(config):  # noqa: ANN001, ANN201 - pytest hook
