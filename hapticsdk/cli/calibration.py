@@ -277,7 +277,9 @@ def _report_damping(args: argparse.Namespace, fit: Any, serial: str | None, gene
                      f"{fit.timing_error_ns_per_m:.3g}; standard error {fit.damping_se_ns_per_m:.2g}); "
                      f"rms residual {fit.fun * 1e3:.3g} mm; {fit.runtime_s * 1e3:.1f} ms")
         if extra:
-            head += "\n  " + "; ".join(f"{k} {v}" for k, v in extra.items())
+            head += (f"\n  played in real time: {extra['late_ticks']} late ticks (over 1.5 periods) of "
+                     f"{fit.readings - 1}, longest step {extra['longest_step_s'] * 1e3:.3g} ms, latency "
+                     f"{extra['latency_s'] * 1e3:g} ms (all in the bound)")
         print(head + (f"\n  saved to {saved}" if saved else ""))
     return 0 if fit.success else 1
 

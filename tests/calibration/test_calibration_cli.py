@@ -129,6 +129,18 @@ def test_calibrate_damping_on_a_device_in_real_time(tmp_path, capsys):
     assert out["trusted_damping_ns_per_m"] <= 0.5
 
 
+def test_the_real_time_run_is_summed_up_in_words(capsys):
+    import re
+
+    assert main(["calibrate", "damping", "--device", "omni-virtual", "--device-option", "finger=none"]) == 0
+    out = capsys.readouterr().out
+    m = re.search(r"played in real time: (\d+) late ticks \(over 1.5 periods\) of (\d+), longest step ([\d.]+) ms, "
+                  r"latency 0 ms", out)
+    assert m, out
+    late, steps, longest = int(m[1]), int(m[2]), float(m[3])
+    assert 0 <= late <= steps and steps > 500 and longest >= 1.0 - 1e-6   # the longest step is at least the period (1 ms)
+
+
 def test_calibrate_damping_names_a_device_it_cannot_drive(capsys):
     assert main(["calibrate", "damping", "--device", "voicecoil-virtual"]) != 0
     assert "not a force device" in capsys.readouterr().err
