@@ -13,14 +13,15 @@ the servo records every tick to a file (``record=``), which the figure is drawn 
 data: no real device, finger or material was measured).
 
 Reading the figure: the force panel draws every tick in grey and its 20 ms running mean
-in black. On the rubber (S12, the library's hardest sample: the arm's full
-2.3 N/mm plus the voice coil) the simulated finger rests only 0.17-0.22 mm deep, a few
-of the simulated Omni's 0.055 mm encoder counts. The force then steps between count
-levels (2.3 N/mm x 0.055 mm = 0.13 N), and at each count change the passivity
-controller's dither damper adds a pulse of at most 3 N*s/m x one count per tick
-(0.17 N): the bounded count-level cycle of a quantised stiff wall, which those pulses
-keep from growing (docs/runtime.md, "count-level limit cycle"), not an instability.
-A softer object is held several counts deep and shows a smooth trace.
+in black. This script does not measure the simulated Omni's damping, so the stiff-wall
+controller credits none of it (docs/runtime.md, Passivity item 2): each wall is rendered
+within the controller's energy bound, which covers the whole session; the first contacts
+spend it, the controller logs a warning, and from then on the arm holds back the force
+above its Colgate spring, which is 0 without a measured damping. What the finger feels
+after that is the voice coil's share. Measure the simulated arm once, nobody holding it,
+before running this (``hapticsdk calibrate damping --device omni-virtual --device-option
+finger=none --save``), and the arm keeps a Colgate spring of about 0.5 N/mm at 1 kHz on
+every contact (docs/runtime.md, Passivity item 7).
 """
 
 import sys
