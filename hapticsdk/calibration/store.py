@@ -251,7 +251,7 @@ class LoadedCalibration:
         if self.calibration is None:
             if self.kind == "damping":
                 return ("none (no damping measured for this serial: the stiff-wall controller credits none of "
-                        "the declared damping; measure it hands off with hapticsdk calibrate damping)")
+                        "the declared damping; measure it hands off with hapticsdk calibrate damping --device NAME --save)")
             return "none (no calibration file and no default)"
         if self.path is None:
             return f"default, no calibration file saved: {self.calibration.source}"
