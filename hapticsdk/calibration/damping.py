@@ -621,6 +621,33 @@ def declared_limits(device: Any, mass_kg: float | None = None, max_force_n: floa
     return float(m), float(fm)
 
 
+#: Time held at 0 N before the run beyond the safety layer's start ramp (s): the arm
+#: settles, and the layer is past its gate and ramp before the first force.
+SETTLE_EXTRA_S = 0.1
+
+
+def _settle_ticks(device: Any, period_s: float) -> int:
+    """Ticks held at 0 N before a run: the device's safety layer's start ramp plus
+    :data:`SETTLE_EXTRA_S`."""
+    ramp = float(getattr(getattr(getattr(device, "safety", None), "settings", None), "ramp_time_s", 0.0) or 0.0)
+    return int(math.ceil((ramp + SETTLE_EXTRA_S) / period_s))
+
+
+def _send_along(device: Any, role: str, axis: int, f: float, now: float) -> float:
+    """Command force ``f`` (N, signed) along ``axis`` at ``now``; the force the device
+    applied along the axis (its read-back, signed: projected where the read-back names a
+    direction, else already along the device's axis; 0 N without one)."""
+    from ..perception.dimensions import ChannelCommand
+
+    e = [0.0, 0.0, 0.0]
+    e[axis] = 1.0 if f >= 0.0 else -1.0
+    device.command(ChannelCommand(role, force_n=abs(f), direction=(e[0], e[1], e[2])), now=now)
+    back = device.read_back()
+    if back is None or back.force_n is None:
+        return 0.0
+    return float(back.force_n) * (1.0 if back.direction is None else back.direction[axis])
+
+
 def measure_damping(device: Any, *, period_s: float = 1e-3, axis: int = 1, role: str = "force",
                     mass_kg: float | None = None, max_force_n: float | None = None, realtime: bool = False,
                     latency_s: float | None = None) -> tuple[DampingFit, np.ndarray, np.ndarray]:
@@ -643,55 +670,36 @@ def measure_damping(device: Any, *, period_s: float = 1e-3, axis: int = 1, role:
         run = play_damping_run(device, period_s=period_s, axis=axis, role=role, mass_kg=mass_kg,
                                max_force_n=max_force_n, latency_s=latency_s)
         return run.fit, run.forces_n, run.readings_mm
-    from ..errors import ValidationError as _VE
-    from ..perception.dimensions import ChannelCommand
-
     if not getattr(type(device), "simulated", False):
-        raise _VE(f"{type(device).__name__} is not a simulated device: in simulated time measure_damping drives "
-                  "only simulated devices. On a real arm, pass realtime=True (hapticsdk calibrate damping --device "
-                  "NAME), or write the excitation (--write-excitation), play it hands off in your servo loop and "
-                  "fit the recording (--run)", field="device")
+        raise ValidationError(f"{type(device).__name__} is not a simulated device: in simulated time measure_damping "
+                              "drives only simulated devices. On a real arm, pass realtime=True (hapticsdk calibrate "
+                              "damping --device NAME), or write the excitation (--write-excitation), play it hands "
+                              "off in your servo loop and fit the recording (--run)", field="device")
     if axis not in (0, 1, 2):
-        raise _VE(f"must be 0, 1 or 2, got {axis!r}", field="axis")
+        raise ValidationError(f"must be 0, 1 or 2, got {axis!r}", field="axis")
     m, fm = declared_limits(device, mass_kg, max_force_n)
     forces = excitation(period_s, fm, m)
-    ramp = float(getattr(getattr(getattr(device, "safety", None), "settings", None), "ramp_time_s", 0.0) or 0.0)
-    settle = int(math.ceil((ramp + 0.1) / period_s))
-    e = [0.0, 0.0, 0.0]
+    settle = _settle_ticks(device, period_s)
     opened = not device.is_open
     applied = np.empty(forces.size)
     readings = np.empty(forces.size + 1)
-
-    t = [0.0]   # simulated time (s): the safety layer's ramp and staleness run on it
-
-    def send(f: float) -> float:
-        e[axis] = 1.0 if f >= 0.0 else -1.0
-        device.command(ChannelCommand(role, force_n=abs(f), direction=(e[0], e[1], e[2])), now=t[0])
-        back = device.read_back()
-        if back is None or back.force_n is None:
-            return 0.0
-        # the applied force along the axis: projected where the read-back names a
-        # direction, else already the force along the device's axis (signed)
-        return float(back.force_n) * (1.0 if back.direction is None else back.direction[axis])
-
-    def step() -> None:
-        device.step(period_s)
-        t[0] += period_s
-
+    t = 0.0   # simulated time (s): the safety layer's ramp and staleness run on it
     if opened:
         device.open()
     try:
         for _ in range(settle):
-            send(0.0)
-            step()
+            _send_along(device, role, axis, 0.0, t)
+            device.step(period_s)
+            t += period_s
         for k, f in enumerate(forces.tolist()):
             readings[k] = float(device.read_state().position_mm[axis])
-            applied[k] = send(f)
-            step()
+            applied[k] = _send_along(device, role, axis, f, t)
+            device.step(period_s)
+            t += period_s
         readings[-1] = float(device.read_state().position_mm[axis])
     finally:
         try:
-            send(0.0)
+            _send_along(device, role, axis, 0.0, t)
         finally:
             if opened:
                 device.close()
@@ -711,11 +719,6 @@ def measure_damping(device: Any, *, period_s: float = 1e-3, axis: int = 1, role:
 # SafetyLayer.current, the layer's contract), which the fit models. A real device may or
 # may not drop a stale command; the bound covers both.
 # ----------------------------------------------------------------------
-
-#: Time held at 0 N before the run beyond the safety layer's start ramp (s): the arm
-#: settles, and the layer is past its gate and ramp before the first force.
-SETTLE_EXTRA_S = 0.1
-
 
 @dataclass
 class DampingRun:
@@ -769,7 +772,6 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
     command path, and on every exit path (an error, ``KeyboardInterrupt``) sent 0 N
     (stopped if that fails). A failed fit is returned, not raised: ``fit.success`` is
     False and it credits nothing."""
-    from ..perception.dimensions import ChannelCommand
     from ..runtime.clock import MonotonicClock
 
     number(period_s, "period_s", lo=0.0, lo_open=True)
@@ -788,27 +790,19 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
         lat = float(number(lat_d, "latency_s", lo=0.0))
     forces = excitation(period_s, fm, m)
     safety = getattr(device, "safety", None)
-    ramp = float(getattr(getattr(safety, "settings", None), "ramp_time_s", 0.0) or 0.0)
-    settle = int(math.ceil((ramp + SETTLE_EXTRA_S) / period_s))
+    settle = _settle_ticks(device, period_s)
     n = forces.size
     clock = clock if clock is not None else MonotonicClock()
     now = clock.now
-    e = [0.0, 0.0, 0.0]
     applied = np.zeros(n)
     readings = np.zeros(n + 1)
     times = np.zeros(n + 1)
     read_s = np.zeros(n + 1)
     command_s = np.zeros(n)
-    t_last = [0.0]
+    t_last = 0.0
 
     def send(f: float, t: float) -> float:
-        e[axis] = 1.0 if f >= 0.0 else -1.0
-        device.command(ChannelCommand(role, force_n=abs(f), direction=(e[0], e[1], e[2])), now=t)
-        back = device.read_back()
-        if back is None or back.force_n is None:
-            return 0.0
-        # the applied force along the axis (signed), as measure_damping reads it
-        return float(back.force_n) * (1.0 if back.direction is None else back.direction[axis])
+        return _send_along(device, role, axis, f, t)
 
     observe = getattr(safety, "observe", None)
     opened = not device.is_open
@@ -830,8 +824,8 @@ def play_damping_run(device: Any, *, period_s: float = 1e-3, axis: int = 1, role
             clock.wait_until(deadline)
             t = now() - origin
             if i and simulated:
-                device.step(t - t_last[0])   # physics advances by the time that really passed
-            t_last[0] = t
+                device.step(t - t_last)   # physics advances by the time that really passed
+            t_last = t
             k = i - settle
             st = device.read_state()
             if observe is not None:
