@@ -290,14 +290,12 @@ def _damping_on_device(args: argparse.Namespace) -> int:
     the start ramp, 0 N and closed on every exit), fit, report, save."""
     from ..calibration.damping import play_damping_run
     from ..devices.actuators import create_actuator
-    from ..devices.device_options import parse_device_option, trusted_options
+    from ..devices.device_options import parse_option, trusted_options
     from ..errors import ValidationError
 
     _check_save(args)
     opts = trusted_options(args.device)
-    for item in args.device_option:
-        _, key, value = parse_device_option(f"device.{item}")
-        opts[key] = value
+    opts.update(parse_option(item) for item in args.device_option)
     dev = create_actuator(args.device, **opts)
     if getattr(dev, "channel", None) != "force" or not callable(getattr(dev, "read_state", None)):
         raise ValidationError(f"{args.device!r} is not a force device that reads its position", field="--device")

@@ -56,6 +56,7 @@ MAX_CONFIG_BYTES = 1 << 20
 
 __all__ = ["ENV_OPTIONS", "ENV_CONFIG", "PrivilegedOptionError", "privileged_options",
            "check_data_options", "check_data_settings", "check_data_model", "PRIVILEGED_SETTINGS", "energy_option_ceilings", "device_config_path", "trusted_options", "parse_device_option",
+           "parse_option",
            "WHERE_TO_SET", "parse_device"]
 
 #: the sentence every refusal ends with
@@ -303,6 +304,17 @@ def trusted_options(actuator: str) -> dict[str, Any]:
     return out
 
 
+def _option_value(raw: str, where: str) -> Any:
+    """An option's VALUE: read as JSON when it parses (numbers, ``true``, objects), else
+    kept as a string; a number that is not finite is refused, naming ``where``."""
+    try:
+        value: Any = json.loads(raw)
+    except (ValueError, RecursionError):
+        value = raw
+    _refuse_non_finite(value, where)
+    return value
+
+
 def parse_device_option(text: str) -> tuple[str, str, Any]:
     """``"ROLE.KEY=VALUE"`` -> ``(role, key, value)``; VALUE is read as JSON when it parses
     (numbers, ``true``, objects), else kept as a string."""
@@ -311,12 +323,16 @@ def parse_device_option(text: str) -> tuple[str, str, Any]:
     if not sep or not dot or not role.strip() or not key.strip():
         raise ValidationError(f"expected ROLE.KEY=VALUE (e.g. force.library=/opt/libHD.so), got {text!r}",
                               field="device-option")
-    try:
-        value: Any = json.loads(raw)
-    except (ValueError, RecursionError):
-        value = raw
-    _refuse_non_finite(value, f"device-option {role.strip()}.{key.strip()}")
-    return role.strip(), key.strip(), value
+    return role.strip(), key.strip(), _option_value(raw, f"device-option {role.strip()}.{key.strip()}")
+
+
+def parse_option(text: str) -> tuple[str, Any]:
+    """``"KEY=VALUE"`` (one device's option, no role) -> ``(key, value)``; VALUE as in
+    :func:`parse_device_option`."""
+    key, sep, raw = str(text).partition("=")
+    if not sep or not key.strip():
+        raise ValidationError(f"expected KEY=VALUE (e.g. finger=none), got {text!r}", field="device-option")
+    return key.strip(), _option_value(raw, f"device-option {key.strip()}")
 
 
 def parse_device(text: str) -> tuple[str, str]:

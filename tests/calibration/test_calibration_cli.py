@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 import numpy as np
 
 from hapticsdk.devices.actuators import DeviceState
@@ -139,6 +141,15 @@ def test_the_real_time_run_is_summed_up_in_words(capsys):
     assert m, out
     late, steps, longest = int(m[1]), int(m[2]), float(m[3])
     assert 0 <= late <= steps and steps > 500 and longest >= 1.0 - 1e-6   # the longest step is at least the period (1 ms)
+
+
+@pytest.mark.parametrize("bad", ["finger", "=none", "force.finger"])
+def test_a_device_option_without_a_role_is_read_as_key_value(capsys, bad):
+    # --device names one device: its options are KEY=VALUE, and a bad one is named as such
+    # ("force.finger" has no "=": not an option at all)
+    assert main(["calibrate", "damping", "--device", "omni-virtual", "--device-option", bad]) == 2
+    err = capsys.readouterr().err
+    assert "expected KEY=VALUE" in err and repr(bad) in err and "ROLE" not in err
 
 
 def test_calibrate_damping_names_a_device_it_cannot_drive(capsys):
