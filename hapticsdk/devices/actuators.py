@@ -22,7 +22,7 @@ import weakref
 from collections import deque
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
-from typing import Any, ClassVar, Mapping, TypeVar
+from typing import Any, ClassVar, Mapping, NoReturn, TypeVar
 
 import numpy as np
 
@@ -482,13 +482,78 @@ class Actuator(ABC):
         try:
             self._command(safe)
         except Exception as exc:
-            self.fault = exc
-            self.stop()
-            if isinstance(exc, DeviceError):
-                raise
-            raise DeviceError(f"command failed: {type(exc).__name__}: {exc}", device=self.label) from exc
+            self._command_failed(exc)
         self.last_command = safe
         return safe
+
+    def _command_failed(self, exc: Exception) -> NoReturn:
+        """The backend's ``_command`` raised ``exc``: keep it as :attr:`fault`, put the
+        device in its safe state and raise it as a :class:`DeviceError`."""
+        self.fault = exc
+        self.stop()
+        if isinstance(exc, DeviceError):
+            raise exc
+        raise DeviceError(f"command failed: {type(exc).__name__}: {exc}", device=self.label) from exc
+
+    def _steady_sender(self, force: bool) -> Any:
+        """A send for a servo loop's steady-state tick, compiled now from this actuator
+        and the safety layer it has now, or None when this actuator does not offer one
+        (its class or the instance replaces :meth:`command` or :meth:`_servo_command`,
+        or its safety layer offers no :meth:`~hapticsdk.devices.safety.SafetyLayer._steady_filter`).
+
+        ``force`` True: ``send(role, force_n, direction, now, pen)`` (``pen``: the
+        penetration of the state the safety layer observed this tick); False:
+        ``send(role, frequency_hz, amplitude, now)``. Either does what
+        :meth:`_servo_command` does with the command of those fields (the other fields
+        None), the same checks, filter, backend call and :attr:`last_command`, and
+        returns what was sent; or returns None, having changed nothing, when the
+        command would not take the steady path: the actuator is closed, faulted or has
+        another safety layer than when the send was built, a value is not finite, or the
+        layer is not in its steady state. The caller then sends through
+        :meth:`_servo_command`, which raises or takes the general path as always. The
+        backend's ``_command`` is looked up on every call (as :meth:`_servo_command`
+        does)."""
+        if (type(self)._servo_command is not Actuator._servo_command
+                or getattr(self.command, "__func__", None) is not Actuator.command
+                or type(self)._command_failed is not Actuator._command_failed):
+            return None
+        layer = self.safety
+        steady = getattr(layer, "_steady_filter", None)
+        filt = steady(force) if steady is not None else None
+        if filt is None:
+            return None
+        act = self
+        failed = self._command_failed
+
+        if force:
+            def send_force(role: str, f: float, direction: Any, now: float, pen: float) -> ChannelCommand | None:
+                if not act._is_open or act.fault is not None or act.safety is not layer or not _isfinite(f):
+                    return None
+                safe = filt(role, f, direction, now, pen)
+                if safe is None:
+                    return None
+                try:
+                    act._command(safe)
+                except Exception as exc:
+                    failed(exc)
+                act.last_command = safe
+                return safe   # type: ignore[no-any-return]
+            return send_force
+
+        def send_vibration(role: str, fr: float | None, am: float | None, now: float) -> ChannelCommand | None:
+            if (not act._is_open or act.fault is not None or act.safety is not layer
+                    or (fr is not None and not _isfinite(fr)) or (am is not None and not _isfinite(am))):
+                return None
+            safe = filt(role, fr, am, now)
+            if safe is None:
+                return None
+            try:
+                act._command(safe)
+            except Exception as exc:
+                failed(exc)
+            act.last_command = safe
+            return safe   # type: ignore[no-any-return]
+        return send_vibration
 
     def stop(self) -> bool:
         """Put the hardware in its safe state (zero force, vibration off). Never raises

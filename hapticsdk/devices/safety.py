@@ -153,6 +153,9 @@ class SafetyLayer:
     """
 
     def __init__(self, limits: Any, settings: SafetySettings | None = None, **overrides: Any) -> None:
+        #: called (no arguments) when the configuration or the phase changes: what a
+        #: compiled send (:meth:`_steady_filter`) captured may be out of date
+        self._watchers: tuple = ()
         self._limits = limits
         base = settings if settings is not None else SafetySettings()
         try:
@@ -219,6 +222,29 @@ class SafetyLayer:
         # the same sums the comparisons made on every call before
         self._restart_limit = s.restart_after_s + _TIME_EPS
         self._stale_limit = s.stale_after_s + _TIME_EPS
+        self._changed()
+
+    def _changed(self) -> None:
+        """Tell the watchers (a servo loop's steady-state tick) that the limits, the
+        settings or the phase changed."""
+        for w in getattr(self, "_watchers", ()):
+            w()
+
+    def _watch(self, fn: Any) -> None:
+        """Call ``fn()`` on every change of configuration or phase (once per ``fn``)."""
+        w = getattr(self, "_watchers", ())
+        if fn not in w:
+            self._watchers = (*w, fn)
+
+    def _unwatch(self, fn: Any) -> None:
+        """Stop calling ``fn`` (no error when it was not watching)."""
+        self._watchers = tuple(w for w in getattr(self, "_watchers", ()) if w != fn)
+
+    def __getstate__(self) -> dict[str, Any]:
+        # a copy or a pickle of the layer is not watched by the loop watching this one
+        state = dict(self.__dict__)
+        state["_watchers"] = ()
+        return state
 
     def configure(self, **changes: Any) -> None:
         """Change settings (fields of :class:`SafetySettings`)."""
@@ -256,6 +282,7 @@ class SafetyLayer:
         self._stale_counted = False
         self._ramp_t0 = None
         self._prev_force = 0.0
+        self._changed()
 
     def observe(self, state: Any) -> None:
         """Called by the servo loop once per tick with the device state
@@ -392,6 +419,122 @@ class SafetyLayer:
         self._stale_counted = False
         return out
 
+    def _steady_filter(self, force: bool) -> Any:
+        """A compiled :meth:`filter` for the layer's steady state (``running``, not over
+        speed), built from the limits and settings in force now, or None when this class
+        replaces :meth:`filter`, :meth:`observe` or :meth:`_envelope` (a subclass's own
+        rules: the servo loop then sends through :meth:`filter` every tick).
+
+        ``force`` True: ``f(role, force_n, direction, now, pen)`` for a force command
+        (``force_n`` a float; no frequency or amplitude); ``pen``: the
+        ``penetration_mm`` of the state the layer observed this tick. False:
+        ``f(role, frequency_hz, amplitude, now)`` for a vibration command (no force, no
+        direction). Either returns the record :meth:`filter` would return for that
+        command, with the same counts and state changes, or None, having changed
+        nothing, when the layer is not in its steady state at ``now`` (another phase,
+        over speed, no command yet, or a command gap longer than ``restart_after_s``):
+        the caller then calls :meth:`filter`.
+
+        Moved to configuration time (this call): which of the declared limits exist and
+        their values, the settings the running phase reads, and the phase branches of
+        :meth:`filter`. Still checked on every call: the phase, over speed, the command
+        gap and every clamp of a declared limit (they depend on the command, the time or
+        the observed state). What the function captured is out of date after the limits
+        or the settings change: the layer's watchers (:meth:`_watch`) are told, and the
+        caller builds a new one."""
+        cls = type(self)
+        if (cls.filter is not SafetyLayer.filter or cls.observe is not SafetyLayer.observe
+                or cls._envelope is not SafetyLayer._envelope):
+            return None
+        layer = self
+        restart = self._restart_limit
+        hit = self._hit
+        if force:
+            fmax, vmax, kmax, rate = self._fmax, self._vmax, self._kmax, self._rate
+            knee = self._knee * vmax if vmax is not None else 0.0
+            koff = self._k_offset
+            speed_of = self._speed
+
+            def steady_force(role: str, f: float, direction: Any, now: float, pen: float) -> ChannelCommand | None:
+                if layer._overspeed or layer.phase != "running":
+                    return None
+                t_last = layer._t_last
+                if t_last is None or now - t_last > restart:
+                    return None
+                # the clamps of filter(), in its order, on the declared limits only
+                if fmax is not None and abs(f) > fmax:
+                    hit("max_force_n")
+                    f = math.copysign(fmax, f)
+                if layer._state is not None:
+                    if vmax is not None:
+                        sp = layer._speed_now
+                        speed = sp if sp is not None else speed_of()
+                        if speed > vmax:
+                            f = 0.0
+                        elif fmax is not None and speed > knee:
+                            cap = fmax * (vmax - speed) / (vmax - knee)
+                            if abs(f) > cap:
+                                hit("max_velocity_mm_s")
+                                f = math.copysign(cap, f)
+                    if kmax is not None:
+                        if pen < 0.0:  # noqa: PLR1730 -- as filter()
+                            pen = 0.0
+                        cap = kmax * pen + koff
+                        if abs(f) > cap:
+                            hit("max_stiffness_n_per_mm")
+                            f = math.copysign(cap, f)
+                if rate is not None:
+                    prev = layer._prev_force
+                    if abs(f - prev) > rate:
+                        hit("max_force_rate_n_per_tick")
+                        f = prev + math.copysign(rate, f - prev)
+                layer._prev_force = f
+                out = _new(ChannelCommand)
+                out.role = role
+                out.force_n = f
+                out.frequency_hz = None
+                out.amplitude = None
+                out.direction = direction
+                layer._last = out
+                layer._t_last = now
+                layer._stale_counted = False
+                return out
+            return steady_force
+        amax, frange, amin = self._amax, self._frange, self._amin
+        lo, hi = frange if frange is not None else (0.0, 0.0)
+
+        def steady_vibration(role: str, freq: float | None, amp: float | None, now: float) -> ChannelCommand | None:
+            if layer._overspeed or layer.phase != "running":
+                return None
+            t_last = layer._t_last
+            if t_last is None or now - t_last > restart:
+                return None
+            if amp is not None:
+                amp = float(amp)
+                if amp < 0.0:
+                    hit("negative_amplitude")
+                    amp = 0.0
+                if amax is not None and amp > amax:
+                    hit("max_amplitude")
+                    amp = amax
+            if freq is not None and frange is not None and not lo <= freq <= hi:
+                hit("frequency_range_hz")
+                freq = lo if freq < lo else hi if freq > hi else freq
+            if amp is not None and amin is not None and amp < amin:
+                hit("min_amplitude")
+                amp = amin
+            out = _new(ChannelCommand)
+            out.role = role
+            out.force_n = None
+            out.frequency_hz = freq
+            out.amplitude = amp
+            out.direction = None
+            layer._last = out
+            layer._t_last = now
+            layer._stale_counted = False
+            return out
+        return steady_vibration
+
     def _envelope(self, force: float | None, now: float) -> float:
         """Gate and ramp gain (0..1) for this command; advances the phase machine."""
         s = self._settings
@@ -410,12 +553,14 @@ class SafetyLayer:
         if self.phase == "ramping":
             if s.ramp_time_s <= 0:
                 self.phase = "running"
+                self._changed()
                 return 1.0
             if self._ramp_t0 is None or now < self._ramp_t0:  # clock went backwards: restart the ramp from here
                 self._ramp_t0 = now
             g = (now - self._ramp_t0) / s.ramp_time_s
             if g >= 1.0 - _TIME_EPS:
                 self.phase = "running"
+                self._changed()
                 return 1.0
             self.events["ramp_ticks"] += 1
             return max(g, 0.0)

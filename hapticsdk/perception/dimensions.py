@@ -239,6 +239,42 @@ class DimensionRenderer(ABC):
     def tick(self, inp: TickInput) -> list[ChannelCommand]:
         """Commands for this tick."""
 
+    def _fast_law(self) -> Any:
+        """Optional: the per-tick law on plain floats, for the servo loop's steady-state
+        tick (:class:`~hapticsdk.runtime.loop.ServoLoop`, ``fast_tick``). Default None
+        (not offered): the loop calls :meth:`tick` every tick, as always.
+
+        A renderer that offers one returns a callable
+        ``law(t, dt, penetration_mm, in_contact, v0, v1, v2, vf0, vf1, vf2, speed_step_mm_s)``
+        taking the fields of :class:`TickInput` as plain floats (``v*`` is
+        ``velocity_floats_mm_s``, ``vf*`` ``velocity_filtered_mm_s``, ``in_contact`` a
+        bool) and returning a flat tuple of three values per role of :attr:`roles`, in
+        that order: the ``force_n``, ``frequency_hz`` and ``amplitude`` (each a float or
+        None) of the one command :meth:`tick` returns for that role on the same input.
+        The contract, which the loop relies on for outputs equal bit for bit to
+        :meth:`tick`'s:
+
+        * the same values, computed with the same operations in the same order, as the
+          commands :meth:`tick` returns (one per role, in ``roles`` order, no
+          ``direction``; the loop sets the force's);
+        * the same state: ``law`` and :meth:`tick` may be called in any mix, tick by
+          tick (the loop goes back to :meth:`tick` whenever its steady state ends), so
+          whatever the renderer keeps from tick to tick (a gate, a phase, counters) the
+          law reads and writes in the same attributes :meth:`tick` uses;
+        * what it captures when it is made is only what the renderer never changes
+          after it was built (its derived parameters); the loop asks for a new law
+          whenever it rebuilds its steady-state tick;
+        * it does not depend on ``TickInput.normal``, ``object`` or the input object
+          itself, which it does not get.
+
+        The loop does not use the law of a renderer whose ``tick`` is replaced on the
+        instance, or by a subclass below the class that defines ``_fast_law`` (the law
+        would skip the new ``tick``): it calls ``tick`` for those, every tick.
+
+        The built-in hardness and roughness renderers offer one; the equality is tested
+        by running scenes through both paths (``tests/runtime/test_fused_tick.py``)."""
+        return None
+
     def describe(self) -> dict:
         """Parameters the renderer derived from the features (for reports)."""
         return {}

@@ -147,6 +147,20 @@ class HardnessRenderer(DimensionRenderer):
                     ChannelCommand("coil", None, self._f, self._amp)]
         return [ChannelCommand("force", 0.0), ChannelCommand("coil", None, self._f, 0.0)]
 
+    def _fast_law(self) -> Any:
+        """:meth:`tick` on plain floats (the servo loop's steady-state tick; see
+        ``DimensionRenderer._fast_law``): ``(force_n, None, None, None, frequency_hz,
+        amplitude)`` for the roles ``force``, ``coil``. Stateless; the spring and the
+        coil's drive are fixed when the renderer is built."""
+        k, fc, amp = self._k, self._f, self._amp
+
+        def law(t: float, dt: float, pen: float, in_contact: bool, v0: float, v1: float, v2: float,
+                vf0: float, vf1: float, vf2: float, step: float) -> tuple:
+            if in_contact:
+                return (k * pen, None, None, None, fc, amp)
+            return (0.0, None, None, None, fc, 0.0)
+        return law
+
     def rendered_stiffness_n_per_mm(self) -> float:
         """Total stiffness of formula (8): arm spring + calibrated coil stiffness (N/mm)."""
         if self._f is None:

@@ -144,6 +144,37 @@ class RoughnessRenderer(DimensionRenderer):
             self.table_clamps += 1
         return [ChannelCommand("vibration", None, f, self.v_out)]
 
+    def _fast_law(self) -> Any:
+        """:meth:`tick` on plain floats (the servo loop's steady-state tick; see
+        ``DimensionRenderer._fast_law``): ``(None, frequency_hz, amplitude)`` for the
+        role ``vibration``. The gate, the last frequency and the counters are the
+        renderer's own attributes, shared with :meth:`tick`; formula (9)'s parameters
+        are fixed when the renderer is built."""
+        r = self
+        fpeak, vref, vgate = self.fpeak_hz, self.v_ref_mm_s, self.v_gate_mm_s
+        lo, hi, vout = self.f_lo, self.f_hi, self.v_out
+        req, clamped = self.require_contact, not self.in_table
+
+        def law(t: float, dt: float, pen: float, in_contact: bool, v0: float, v1: float, v2: float,
+                vf0: float, vf1: float, vf2: float, step: float) -> tuple:
+            r.ticks += 1
+            avx = abs(v0)
+            gate_v = abs(vf0) if step > 0.0 else avx
+            thr = vgate - step if r._gate_open else vgate
+            gate = r._gate_open = gate_v >= thr and (in_contact or not req)
+            if not gate:
+                return (None, r._last_f, 0.0)
+            f = fpeak * avx / vref  # formula (9), as tick()
+            if f < lo or f > hi:
+                r.frequency_clamps += 1
+                f = lo if f < lo else hi
+            r._last_f = f
+            r.active_ticks += 1
+            if clamped:
+                r.table_clamps += 1
+            return (None, f, vout)
+        return law
+
     def describe(self) -> dict:
         return {"Fpeak_hz": self.fpeak_hz, "AFpeak_m_s2": self.afpeak_m_s2, "v_out_v": self.v_out,
                 "table_in_range": self.in_table, "table_clamped": not self.in_table,
