@@ -220,7 +220,7 @@ class _Slot:
     """Per-role bookkeeping."""
 
     __slots__ = ("role", "act", "force", "pc", "col", "is_force", "pending", "cmd", "send", "log_n", "log_f",
-                 "log_a", "f_in", "v_in")
+                 "log_a", "f_in", "v_in", "v_fast")
     #: what the role was sent, by tick: (cap,) views of the loop's log ring (set by start)
     log_n: np.ndarray
     log_f: np.ndarray
@@ -234,6 +234,8 @@ class _Slot:
         #: the sum of the force commands (N), the vibration command (None: none)
         self.f_in = 0.0
         self.v_in: ChannelCommand | None = None
+        #: the steady-state tick's vibration command, ``(force_n, frequency_hz, amplitude)``
+        self.v_fast: tuple | None = None
         self.pc: PassivityController | None = None
         self.pending: deque | None = None
         #: first of this role's three log columns (force_n, frequency_hz, amplitude)
@@ -335,6 +337,53 @@ class _LoopInput(TickInput):
         self._va = value
 
 
+def _rendered_force(f: float | None, events: dict) -> float | None:
+    """A force a renderer commanded, as the loop adds it to its role: None for none (not
+    commanded, or not finite: counted), a negative one counted and taken as 0."""
+    if f is None:
+        return None
+    if f != f or f in _INFS:
+        events["nonfinite_command"] += 1
+        return None
+    if f < 0.0:
+        events["negative_force"] += 1
+        return 0.0
+    return f
+
+
+def _rendered_vibration_ok(fr: float | None, am: float | None, events: dict) -> bool:
+    """Whether a vibration command's frequency and amplitude are finite (or absent); a
+    command that is not is counted (the loop then sends amplitude 0)."""
+    if (fr is not None and not _isfinite(fr)) or (am is not None and not _isfinite(am)):
+        events["nonfinite_command"] += 1
+        return False
+    return True
+
+
+def _defined_in(cls: type, name: str) -> type | None:
+    """The class of ``cls``'s method resolution order that defines ``name``."""
+    for c in cls.__mro__:
+        if name in c.__dict__:
+            return c
+    return None
+
+
+def _law_of(r: DimensionRenderer) -> Any:
+    """``r``'s law on plain floats (``_fast_law()``) when it stands for the ``tick`` the
+    loop would call: None when ``r`` offers none, when a subclass replaces ``tick``
+    below the class that defines ``_fast_law`` (the law would skip the new ``tick``), or
+    when ``tick`` is replaced on the instance (a wrapper, a test double)."""
+    cls = type(r)
+    law_cls, tick_cls = _defined_in(cls, "_fast_law"), _defined_in(cls, "tick")
+    if law_cls is None or tick_cls is None or not issubclass(law_cls, tick_cls):
+        return None
+    # (not vars(r): reading an instance's __dict__ slows every later attribute access)
+    tick = r.tick
+    if getattr(tick, "__func__", None) is not tick_cls.__dict__["tick"] or getattr(tick, "__self__", None) is not r:
+        return None
+    return r._fast_law()
+
+
 def _check_renderers(renderers: Sequence[DimensionRenderer], actuators: Mapping[str, Actuator],
                      drop_unmapped: bool) -> list[DimensionRenderer]:
     out = list(renderers)
@@ -413,7 +462,8 @@ class ServoLoop:
                  objects: Sequence[tuple[str, Sequence[DimensionRenderer]]] | None = None,
                  hit_tester: Any = None, log_seconds: float = DEFAULT_LOG_SECONDS,
                  switch_ramp_s: float = DEFAULT_SWITCH_RAMP_S, velocity_filter_hz: float = 30.0,
-                 switch_rule: str = "passive", switch_max_step_n: float = DEFAULT_SWITCH_MAX_STEP_N) -> None:
+                 switch_rule: str = "passive", switch_max_step_n: float = DEFAULT_SWITCH_MAX_STEP_N,
+                 fast_tick: bool = True) -> None:
         if not isinstance(device, HapticDevice):
             raise ValidationError("device must be a HapticDevice", field="device")
         if not (isinstance(period_s, (int, float)) and math.isfinite(period_s) and 1e-5 <= period_s <= 1.0):
@@ -442,6 +492,14 @@ class ServoLoop:
             if hit_tester is None and len(objs) != 1:
                 raise ValidationError("several objects need a hit_tester", field="hit_tester")
         self._objs = objs
+        #: the steady-state parts of the tick (None: the general parts run; see
+        #: _build_steady), whether to try building them at the end of the next tick, and
+        #: the count of changes that made them out of date (see _try_fuse)
+        self._steady: tuple | None = None
+        self._fuse_want = False
+        self._fuse_gen = 0
+        self._watched: list = []
+        self.fast_tick = bool(fast_tick)
         self.hit_tester = hit_tester
         self.renderers = objs[0].renderers if objs else []
         self.period_s = float(period_s)
@@ -641,6 +699,8 @@ class ServoLoop:
                     self.hit_tester.set_pose(self._index(a), b)
             elif kind == "call":
                 b()
+        # renderers, objects or poses changed (or a call may have changed anything)
+        self._unfuse()
 
     # ------------------------------------------------------------------
     def start(self, seconds: float | None = None) -> None:
@@ -746,6 +806,14 @@ class ServoLoop:
                 self.clock.reset()   # its busy share follows the policy just applied
             self._t_origin = self.clock.now()
             self._deadline = self._t_origin
+        # the steady-state tick: built at the end of a general tick once the safety layers
+        # run; each layer tells the loop when its configuration or phase changes
+        self._steady = None
+        self._watched = [a.safety for a in _distinct([device, *self.actuators.values()])
+                         if hasattr(a.safety, "_watch")]
+        for layer in self._watched:
+            layer._watch(self._unfuse)
+        self._fuse_want = True
         self._running = True
 
     @property
@@ -783,7 +851,10 @@ class ServoLoop:
         if not self._running or self._k >= self._n_max or self._fault is not None:
             return False
         try:
-            return self._tick()
+            more = self._tick()
+            if self._fuse_want and more:
+                self._try_fuse()
+            return more
         except BaseException as exc:
             # safety (issue 13, item 3): ANY exception leaving the loop -- KeyboardInterrupt,
             # SystemExit, SafeStop (SIGTERM/SIGHUP), an OSError from a sink or a device
@@ -842,6 +913,9 @@ class ServoLoop:
             q0 = time.thread_time_ns()
         if self._ops:
             self._apply_ops(t)
+        # the steady-state parts (None: the general ones), read once the operations,
+        # which drop them, were applied
+        steady = self._steady
         # ---- 1. sense -------------------------------------------------
         try:
             # the backend read: the loop does its own checks of the values
@@ -938,30 +1012,53 @@ class ServoLoop:
             f0 = self._vf0 = self._vf0 + a * (w0 - self._vf0)
             f1 = self._vf1 = self._vf1 + a * (w1 - self._vf1)
             f2 = self._vf2 = self._vf2 + a * (w2 - self._vf2)
-            # Every renderer of the object gets this one input; its velocity array
-            # (read-only) is built on the first read. Its fields are stored here as
-            # TickInput's __init__ stores them, in its order (the array as the unbuilt
-            # _va, which the velocity_mm_s setter stores): the same object without the
-            # call through the class, which runs __init__ and the setter in frames of
-            # their own (~1.7k instructions a tick; tests/runtime/test_tick_fast_paths.py)
-            inp = _new(_LoopInput)
-            inp.t = t
-            inp.dt = dt
-            inp.penetration_mm = pen_in
-            inp._va = None
-            inp.in_contact = in_contact
-            inp.normal = normal
-            inp.object = o.name
-            inp.velocity_filtered_mm_s = (f0, f1, f2)
-            inp.speed_step_mm_s = self._v_step
-            inp.velocity_floats_mm_s = (w0, w1, w2)
-            if o.sw is None:
-                self._render(o.renderers, inp, events)
+            if steady is not None:
+                # the steady state: each renderer's law on the same input as floats;
+                # what it commands goes to the role's slot, checked and counted as
+                # _render does (a role's force summed, its vibration as (force_n,
+                # frequency_hz, amplitude))
+                vstep = self._v_step
+                for law, outs in steady[0][idx]:
+                    try:
+                        out = law(t, dt, pen_in, in_contact, w0, w1, w2, f0, f1, f2, vstep)
+                    except Exception:
+                        events["renderer_error"] += 1
+                        continue
+                    for slot, j, is_force in outs:
+                        if is_force:
+                            f = _rendered_force(out[j], events)
+                            if f is not None:
+                                slot.f_in += f
+                        elif _rendered_vibration_ok(out[j + 1], out[j + 2], events):
+                            slot.v_fast = (out[j], out[j + 1], out[j + 2])
+                        else:
+                            slot.v_fast = (None, None, 0.0)
             else:
-                over, forces, vib = self._law(o.renderers, o.sw, inp, events, t)
-                self._give(forces, vib)
-                if over:
-                    o.sw = None   # the switch is over: the new law alone
+                # Every renderer of the object gets this one input; its velocity array
+                # (read-only) is built on the first read. Its fields are stored here as
+                # TickInput's __init__ stores them, in its order (the array as the unbuilt
+                # _va, which the velocity_mm_s setter stores): the same object without the
+                # call through the class, which runs __init__ and the setter in frames of
+                # their own (~1.7k instructions a tick; tests/runtime/test_tick_fast_paths.py)
+                inp = _new(_LoopInput)
+                inp.t = t
+                inp.dt = dt
+                inp.penetration_mm = pen_in
+                inp._va = None
+                inp.in_contact = in_contact
+                inp.normal = normal
+                inp.object = o.name
+                inp.velocity_filtered_mm_s = (f0, f1, f2)
+                inp.speed_step_mm_s = self._v_step
+                inp.velocity_floats_mm_s = (w0, w1, w2)
+                if o.sw is None:
+                    self._render(o.renderers, inp, events)
+                else:
+                    over, forces, vib = self._law(o.renderers, o.sw, inp, events, t)
+                    self._give(forces, vib)
+                    if over:
+                        o.sw = None   # the switch is over: the new law alone
+                        self._fuse_want = True
         # ---- 4. passivity + send --------------------------------------
         if bad or (ht is not None and idx < 0):
             # a spatial scene out of contact: the distance to the nearest object jumps
@@ -981,50 +1078,100 @@ class ServoLoop:
         recorder = self.recorder
         sent: dict[str, ChannelCommand] | None = {} if recorder is not None else None
         f_sent = 0.0
-        row = []
-        for s in self._slots:
-            cmd = s.cmd
-            if s.is_force:
-                f = s.f_in
-                s.f_in = 0.0
-                if s.pending is not None:
-                    s.pending.append(f)
-                    f = s.pending.popleft()
-                if s.pc is not None:
-                    f = s.pc.step(x_n, dt, f)
-                if bad:
-                    f = 0.0   # an unknown position gets no force (the controller ramps from what was applied)
-                # the role's own record, refilled (the actuator keeps only its safety
-                # layer's output)
-                cmd.force_n = f
-                cmd.direction = direction
-            else:
-                c = s.v_in
-                if c is not None:
-                    s.v_in = None
-                    cmd = c
+        if steady is not None:
+            # the steady state: each role through its compiled send, or, when that
+            # declines (its part is not in its steady state now), through the general one
+            row = steady[2]
+            pen_obs = -st.py if obs_state is st else pen   # what the safety layers observed
+            for s, role, is_force, send, pc, act, general, cmd, j in steady[1]:
+                if is_force:
+                    f = s.f_in
+                    s.f_in = 0.0
+                    if pc is not None:
+                        f = pc.step(x_n, dt, f)
+                    if bad:
+                        f = 0.0
+                    try:
+                        out = send(role, f, direction, t, pen_obs)
+                        if out is None:
+                            cmd.force_n = f
+                            cmd.direction = direction
+                            out = general(cmd, t)
+                    except Exception as exc:
+                        return self._rejected(exc, act)
                 else:
-                    last = s.act.last_command
-                    cmd.frequency_hz = last.frequency_hz if last is not None else None
-            try:
-                out = s.send(cmd, t)
-            except DeviceError as exc:
-                self._set_fault(exc, s.act.label)
-                return False
-            except Exception as exc:  # validation of a value we should have caught
-                self._set_fault(DeviceError(f"command rejected: {type(exc).__name__}: {exc}",
-                                            device=s.act.label), s.act.label)
-                return False
-            fn, fr = out.force_n, out.frequency_hz
-            if sent is not None:
-                sent[s.role] = out
-            if s.is_force:
-                if s.pc is not None:
-                    s.pc.commit(fn if fn is not None else 0.0)
-                f_sent = fn or 0.0
-            row.append(fn if fn is not None else _NAN)
-            row.append(fr if fr is not None else _NAN)
-            row.append(out.amplitude or 0.0)
+                    v = s.v_fast
+                    try:
+                        if v is not None:
+                            s.v_fast = None
+                            fn, fr, am = v
+                            out = send(role, fr, am, t) if fn is None else None
+                            if out is None:
+                                out = general(ChannelCommand(role, fn, fr, am), t)
+                        else:
+                            last = act.last_command
+                            fr = last.frequency_hz if last is not None else None
+                            out = send(role, fr, cmd.amplitude, t)
+                            if out is None:
+                                cmd.frequency_hz = fr
+                                out = general(cmd, t)
+                    except Exception as exc:
+                        return self._rejected(exc, act)
+                fn, fr = out.force_n, out.frequency_hz
+                if sent is not None:
+                    sent[role] = out
+                if is_force:
+                    if pc is not None:
+                        pc.commit(fn if fn is not None else 0.0)
+                    f_sent = fn or 0.0
+                row[j] = fn if fn is not None else _NAN
+                row[j + 1] = fr if fr is not None else _NAN
+                row[j + 2] = out.amplitude or 0.0
+        else:
+            row = []
+            for s in self._slots:
+                cmd = s.cmd
+                if s.is_force:
+                    f = s.f_in
+                    s.f_in = 0.0
+                    if s.pending is not None:
+                        s.pending.append(f)
+                        f = s.pending.popleft()
+                    if s.pc is not None:
+                        f = s.pc.step(x_n, dt, f)
+                    if bad:
+                        f = 0.0   # an unknown position gets no force (the controller ramps from what was applied)
+                    # the role's own record, refilled (the actuator keeps only its safety
+                    # layer's output)
+                    cmd.force_n = f
+                    cmd.direction = direction
+                else:
+                    c = s.v_in
+                    if c is not None:
+                        s.v_in = None
+                        cmd = c
+                    else:
+                        last = s.act.last_command
+                        cmd.frequency_hz = last.frequency_hz if last is not None else None
+                try:
+                    out = s.send(cmd, t)
+                except DeviceError as exc:
+                    self._set_fault(exc, s.act.label)
+                    return False
+                except Exception as exc:  # validation of a value we should have caught
+                    self._set_fault(DeviceError(f"command rejected: {type(exc).__name__}: {exc}",
+                                                device=s.act.label), s.act.label)
+                    return False
+                fn, fr = out.force_n, out.frequency_hz
+                if sent is not None:
+                    sent[s.role] = out
+                if s.is_force:
+                    if s.pc is not None:
+                        s.pc.commit(fn if fn is not None else 0.0)
+                    f_sent = fn or 0.0
+                row.append(fn if fn is not None else _NAN)
+                row.append(fr if fr is not None else _NAN)
+                row.append(out.amplitude or 0.0)
         if recorder is not None:
             try:
                 recorder.record(t, st, sent)
@@ -1074,6 +1221,120 @@ class ServoLoop:
         self._k = k + 1
         return self._k < self._n_max
 
+    def _rejected(self, exc: Exception, act: Actuator) -> bool:
+        """A send of the steady state raised ``exc``: as the general send's handling in
+        :meth:`_tick`, a :class:`DeviceError` stops the run; any other error is a command
+        the checks should have caught."""
+        if isinstance(exc, DeviceError):
+            self._set_fault(exc, act.label)
+        else:
+            self._set_fault(DeviceError(f"command rejected: {type(exc).__name__}: {exc}", device=act.label),
+                            act.label)
+        return False
+
+    # -- the steady-state tick ------------------------------------------------
+    def _unwatch(self) -> None:
+        """The run is over: no steady-state tick, the safety layers no longer tell the loop."""
+        self._steady = None
+        for layer in self._watched:
+            layer._unwatch(self._unfuse)
+        self._watched = []
+
+    def _unfuse(self) -> None:
+        """Something the steady-state tick was built from changed (or may have): drop it;
+        the general tick runs and tries to build a new one at its end."""
+        self._fuse_gen += 1
+        self._steady = None
+        self._fuse_want = True
+
+    def _try_fuse(self) -> None:
+        """At the end of a general tick, when a change may have made the steady-state
+        tick possible: build it (:meth:`_build_steady`) and use it from the next tick on.
+        A change made meanwhile by another thread (it counts ``_fuse_gen``) leaves it
+        unused."""
+        self._fuse_want = False
+        if not self._running:
+            return
+        gen = self._fuse_gen
+        try:
+            steady = self._build_steady()
+        except Exception as exc:   # a plugin's hook that fails: the general tick, as always
+            _log.warning("steady-state tick not built (%s: %s); the general tick runs", type(exc).__name__, exc)
+            return
+        if steady is None:
+            return
+        self._steady = steady
+        if self._fuse_gen != gen:
+            self._steady = None
+            self._fuse_want = True
+
+    def _build_steady(self) -> tuple | None:
+        """The steady-state parts of the tick for the configuration in force, or None
+        when some part does not offer them or the loop is not in a steady state.
+
+        With them :meth:`_tick` renders each object through its renderers' laws on plain
+        floats (:meth:`~hapticsdk.perception.dimensions.DimensionRenderer._fast_law`)
+        instead of their ``tick`` and the records it returns, and sends each role
+        through its actuator's compiled send
+        (:meth:`~hapticsdk.devices.actuators.Actuator._steady_sender`, the safety
+        layer's limits captured) instead of ``command``; everything else is the same
+        code, and the outputs are the general parts' bit for bit (log rows, every sent
+        record and ``last_command``, what the recorder gets, events, clamp counts, the
+        passivity controllers' and the safety layers' state). Built only when
+        ``fast_tick`` is on, no operation is queued, there is no extra delay, no material
+        switch is in progress, every object's renderers offer a law whose roles all have
+        an actuator and no vibration role is commanded twice on one object, and every
+        actuator offers a compiled send, with a safety layer the loop observes that is
+        ``running``. A part that leaves its steady state during a tick (a safety layer's
+        phase, a command gap, a value that is not finite, an actuator closed or faulted
+        or given another safety layer) is sent through its general path that tick; every
+        change of configuration (:meth:`_unfuse`: the safety layers tell the loop, and so
+        do its operations) drops them, and the general parts run until they are built
+        again at the end of a tick.
+
+        Returns ``(laws by object index, sends, row)``: each law with its outputs
+        ``(slot, index, is_force)``; each send ``(slot, role, is_force, steady send, pc,
+        actuator, general send, the role's record, first log column)``; the roles' log
+        values, refilled every tick."""
+        if not self.fast_tick or self._ops or self.delay_ticks or not self._objs:
+            return None
+        by_role = self._by_role
+        laws_of: list = []
+        for o in self._objs:
+            if o.sw is not None:
+                return None
+            laws = []
+            vib_roles: set[str] = set()
+            for r in o.renderers:
+                law = _law_of(r)
+                if law is None:
+                    return None
+                outs = []
+                for j, role in enumerate(r.roles):
+                    slot = by_role.get(role)
+                    if slot is None:
+                        return None
+                    if not slot.is_force:
+                        if role in vib_roles:
+                            return None
+                        vib_roles.add(role)
+                    outs.append((slot, 3 * j, slot.is_force))
+                laws.append((law, tuple(outs)))
+            laws_of.append(tuple(laws))
+        observed = self._observers
+        sends: list[tuple] = []
+        for s in self._slots:
+            act = s.act
+            layer = act.safety
+            if (s.send != act._servo_command or not any(layer is o for o in observed)
+                    or layer.phase != "running" or layer._overspeed):
+                return None
+            steady = act._steady_sender(s.is_force)
+            if steady is None:
+                return None
+            sends.append((s, s.role, s.is_force, steady, s.pc, act, s.send, s.cmd, 3 * len(sends)))
+        return tuple(laws_of), tuple(sends), [0.0] * (3 * len(sends))
+
     def _take(self) -> tuple[dict[str, float], dict[str, ChannelCommand]]:
         """What the slots hold from the renderers (every force role's sum, each vibration
         command rendered), as ``(forces, vib)`` by role; the slots are emptied."""
@@ -1101,6 +1362,7 @@ class ServoLoop:
         for s in self._slots:
             s.f_in = 0.0
             s.v_in = None
+            s.v_fast = None
 
     def _law(self, renderers: list, sw: _Switch, inp: TickInput, events: dict,
              t: float) -> tuple[bool, dict[str, float], dict[str, ChannelCommand]]:
@@ -1218,25 +1480,16 @@ class ServoLoop:
                     events["role_conflict"] += 1
                     continue
                 if slot.is_force:
-                    f = c.force_n
-                    if f is None:
-                        continue
-                    if f != f or f in _INFS:
-                        events["nonfinite_command"] += 1
-                        continue
-                    if f < 0.0:
-                        events["negative_force"] += 1
-                        f = 0.0
-                    slot.f_in += f
-                else:
-                    fr, am = c.frequency_hz, c.amplitude
-                    if (fr is not None and not _isfinite(fr)) or (am is not None and not _isfinite(am)):
-                        events["nonfinite_command"] += 1
-                        c = ChannelCommand(c.role, frequency_hz=None, amplitude=0.0)
-                    if slot.v_in is not None:
-                        events["role_conflict"] += 1
-                        continue
-                    slot.v_in = c
+                    f = _rendered_force(c.force_n, events)
+                    if f is not None:
+                        slot.f_in += f
+                    continue
+                if not _rendered_vibration_ok(c.frequency_hz, c.amplitude, events):
+                    c = ChannelCommand(c.role, frequency_hz=None, amplitude=0.0)
+                if slot.v_in is not None:
+                    events["role_conflict"] += 1
+                    continue
+                slot.v_in = c
 
     def _window(self, a: np.ndarray, n: int) -> np.ndarray:
         """The logged ticks of ``a`` (a column or columns of the log ring), oldest first
@@ -1254,6 +1507,7 @@ class ServoLoop:
         if not self._running:
             raise ValidationError("finish() without start()", field="loop")
         self._running = False
+        self._unwatch()
         fault = self._fault
         try:
             self._rt_restore()
@@ -1355,6 +1609,7 @@ class ServoLoop:
 
     def _finish_quietly(self) -> None:
         self._running = False
+        self._unwatch()
         try:
             self._rt_restore()
         finally:
