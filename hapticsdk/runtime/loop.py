@@ -41,6 +41,11 @@ Each tick:
 6. simulated devices are stepped (``device.step(dt)``, then every other simulated
    actuator with a ``step`` method).
 
+In a steady state (every renderer offers a law on plain floats, every actuator a compiled
+send, its safety layer running, nothing switching or queued) steps 3 and 5 run through
+those instead of ``tick`` and ``command``, with the same outputs bit for bit
+(``fast_tick``, :meth:`ServoLoop._build_steady`; docs/runtime.md, "Tick cost, round 11").
+
 Delay accounting: the force computed from the state of tick ``n`` is held from tick
 ``n`` to ``n+1``, so the loop's computational delay is ``d = 0`` (one zero-order hold);
 ``delay_ticks`` adds ``d`` more ticks for tests of the delay law.
@@ -448,6 +453,10 @@ class ServoLoop:
         switch_max_step_n: the cross-fade of a switch moves a force by at most this much
             per tick (N, default 0.1): a ramp that would step more is slowed (lasts
             longer than ``ramp_s``).
+        fast_tick: use the steady-state parts of the tick where every part offers them
+            (renderers' laws on plain floats, actuators' compiled sends; default on; the
+            outputs are the same bit for bit, see :meth:`_build_steady`); False: the
+            general parts on every tick.
     """
 
     def __init__(self, device: HapticDevice, renderers: Sequence[DimensionRenderer] = (),
