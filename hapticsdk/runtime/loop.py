@@ -1035,13 +1035,22 @@ class ServoLoop:
                         continue
                     for slot, j, is_force in outs:
                         if is_force:
-                            f = _rendered_force(out[j], events)
-                            if f is not None:
+                            f = out[j]
+                            # an ordinary force (finite, >= 0) as it is; anything else
+                            # through the rules of _rendered_force
+                            if f is not None and f - f == 0.0 and f >= 0.0:
                                 slot.f_in += f
-                        elif _rendered_vibration_ok(out[j + 1], out[j + 2], events):
-                            slot.v_fast = (out[j], out[j + 1], out[j + 2])
+                            else:
+                                f = _rendered_force(f, events)
+                                if f is not None:
+                                    slot.f_in += f
                         else:
-                            slot.v_fast = (None, None, 0.0)
+                            fr, am = out[j + 1], out[j + 2]
+                            if ((fr is None or fr - fr == 0.0) and (am is None or am - am == 0.0)
+                                    or _rendered_vibration_ok(fr, am, events)):
+                                slot.v_fast = (out[j], fr, am)
+                            else:
+                                slot.v_fast = (None, None, 0.0)
             else:
                 # Every renderer of the object gets this one input; its velocity array
                 # (read-only) is built on the first read. Its fields are stored here as
@@ -1489,11 +1498,19 @@ class ServoLoop:
                     events["role_conflict"] += 1
                     continue
                 if slot.is_force:
-                    f = _rendered_force(c.force_n, events)
-                    if f is not None:
+                    f = c.force_n
+                    # an ordinary force (finite, >= 0) as it is; anything else through
+                    # the rules of _rendered_force
+                    if f is not None and f - f == 0.0 and f >= 0.0:
                         slot.f_in += f
+                    else:
+                        f = _rendered_force(f, events)
+                        if f is not None:
+                            slot.f_in += f
                     continue
-                if not _rendered_vibration_ok(c.frequency_hz, c.amplitude, events):
+                fr, am = c.frequency_hz, c.amplitude
+                if not ((fr is None or fr - fr == 0.0) and (am is None or am - am == 0.0)
+                        or _rendered_vibration_ok(fr, am, events)):
                     c = ChannelCommand(c.role, frequency_hz=None, amplitude=0.0)
                 if slot.v_in is not None:
                     events["role_conflict"] += 1

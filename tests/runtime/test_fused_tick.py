@@ -493,7 +493,8 @@ class _Wild(DimensionRenderer):
 
     roles = ("force", "vibration")
     CYCLE = ((0.3, 120.0, 0.5), (math.nan, 120.0, 0.5), (-0.2, math.inf, 0.4), (None, 130.0, None),
-             (math.inf, None, 0.2), (0.1, 140.0, math.nan), (-math.inf, 150.0, -0.3), (0.2, None, None))
+             (math.inf, None, 0.2), (0.1, 140.0, math.nan), (-math.inf, 150.0, -0.3), (0.2, None, None),
+             (0.25, 110.0, math.inf), (0.15, -math.inf, -math.inf))
 
     def __init__(self) -> None:
         self.n = 0
