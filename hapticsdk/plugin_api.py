@@ -56,7 +56,7 @@ RULES_SINCE: dict[str, str] = {
     "read-back": "1.1", "output-follows-command": "1.1", "reopen": "1.1", "timing": "1.1",
     "roles-declared": "1.1", "constraints-feasible": "1.1", "model-match": "1.1", "renderer-commands": "1.1",
     "plugin-api-declared": "1.2", "privileged-options": "1.2", "model-dimensions": "1.2", "constraints-cost": "1.2",
-    "instances": "1.2", "servo-loop": "1.2",
+    "instances": "1.2", "servo-loop": "1.2", "renderer-fast-law": "1.2",
 }
 
 

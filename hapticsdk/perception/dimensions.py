@@ -344,6 +344,31 @@ class PerceptionDimension(ABC):
                 "roles": {r: spec.to_dict() for r, spec in self.roles.items()}}
 
 
+def _defined_in(cls: type, name: str) -> type | None:
+    """The class of ``cls``'s method resolution order that defines ``name``."""
+    for c in cls.__mro__:
+        if name in c.__dict__:
+            return c
+    return None
+
+
+def _steady_law_of(r: "DimensionRenderer") -> Any:
+    """``r``'s law on plain floats (:meth:`DimensionRenderer._fast_law`) when it stands for
+    the ``tick`` a caller would call (the servo loop's steady-state tick, the conformance
+    kit's ``renderer-fast-law`` rule): None when ``r`` offers none, when a subclass replaces ``tick``
+    below the class that defines ``_fast_law`` (the law would skip the new ``tick``), or
+    when ``tick`` is replaced on the instance (a wrapper, a test double)."""
+    cls = type(r)
+    law_cls, tick_cls = _defined_in(cls, "_fast_law"), _defined_in(cls, "tick")
+    if law_cls is None or tick_cls is None or not issubclass(law_cls, tick_cls):
+        return None
+    # (not vars(r): reading an instance's __dict__ slows every later attribute access)
+    tick = r.tick
+    if getattr(tick, "__func__", None) is not tick_cls.__dict__["tick"] or getattr(tick, "__self__", None) is not r:
+        return None
+    return r._fast_law()
+
+
 def declared_roles(dim: Any) -> dict[str, RoleSpec]:
     """The typed roles of a dimension (class or instance): its ``roles`` where it declares
     them (plugin API 1.1); otherwise, for a 1.0-style dimension, one per default actuator,

@@ -91,7 +91,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from ..devices.actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3, servo_sender
-from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput
+from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput, _steady_law_of
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
 from ..quantiles import median
@@ -363,30 +363,6 @@ def _rendered_vibration_ok(fr: float | None, am: float | None, events: dict) -> 
         events["nonfinite_command"] += 1
         return False
     return True
-
-
-def _defined_in(cls: type, name: str) -> type | None:
-    """The class of ``cls``'s method resolution order that defines ``name``."""
-    for c in cls.__mro__:
-        if name in c.__dict__:
-            return c
-    return None
-
-
-def _law_of(r: DimensionRenderer) -> Any:
-    """``r``'s law on plain floats (``_fast_law()``) when it stands for the ``tick`` the
-    loop would call: None when ``r`` offers none, when a subclass replaces ``tick``
-    below the class that defines ``_fast_law`` (the law would skip the new ``tick``), or
-    when ``tick`` is replaced on the instance (a wrapper, a test double)."""
-    cls = type(r)
-    law_cls, tick_cls = _defined_in(cls, "_fast_law"), _defined_in(cls, "tick")
-    if law_cls is None or tick_cls is None or not issubclass(law_cls, tick_cls):
-        return None
-    # (not vars(r): reading an instance's __dict__ slows every later attribute access)
-    tick = r.tick
-    if getattr(tick, "__func__", None) is not tick_cls.__dict__["tick"] or getattr(tick, "__self__", None) is not r:
-        return None
-    return r._fast_law()
 
 
 def _check_renderers(renderers: Sequence[DimensionRenderer], actuators: Mapping[str, Actuator],
@@ -1324,7 +1300,7 @@ class ServoLoop:
             laws = []
             vib_roles: set[str] = set()
             for r in o.renderers:
-                law = _law_of(r)
+                law = _steady_law_of(r)
                 if law is None:
                     return None
                 outs = []

@@ -882,6 +882,8 @@ COVERED_ELSEWHERE = {
     ("actuator", "instances"),
     # tests/testing/test_conformance_kit_in_use.py
     ("actuator", "servo-loop"),
+    # tests/testing/test_conformance_kit_fast_law.py
+    ("dimension", "renderer-fast-law"),
 }
 
 

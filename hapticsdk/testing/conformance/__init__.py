@@ -18,7 +18,7 @@ plugin-api-declared):
   when read).
 * ``dimension``: class, features, roles-declared, constraints-vectorised,
   constraints-cost, constraints-feasible, model-match, renderer, renderer-commands,
-  renderer-bad-input, determinism, timing.
+  renderer-bad-input, renderer-fast-law, determinism, timing.
 * ``model``: shapes, model-dimensions, vectorised, determinism, bad-input, jacobian,
   metadata, responds.
 * ``solver``: class, template, options, solves, result, constraints, determinism, batch,

@@ -18,7 +18,8 @@ import numpy as np
 from ...devices.actuators import ActuatorLimits
 from ...devices.safety import SafetySettings
 from ...errors import ValidationError
-from ...perception.dimensions import ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput
+from ...perception.dimensions import (ChannelCommand, Constraint, DimensionRenderer, PerceptionDimension, TickInput,
+                                      _steady_law_of)
 from ...perception.features import Feature, FeatureSpace
 from ...perception.models import PerceptionModel
 from .actuator_drive import STALL_RUN_S
@@ -273,6 +274,83 @@ def _floats_path_difference(d: PerceptionDimension, feats: Mapping[str, float]) 
         b = _values(floats.tick(replace(inp, velocity_floats_mm_s=(float(v[0]), float(v[1]), float(v[2])))))
         if not _same_values(a, b):
             return f"{b} with the floats against {a} without ({_where(inp, feats, k)})"
+    return None
+
+
+def _law_inputs() -> list[TickInput]:
+    """The ticks the ``renderer-fast-law`` rule runs: the kit's ticks and the sweep, as the
+    servo loop hands them (the velocity also as plain floats, a filtered velocity, the speed
+    step of one count: 0 and each of :data:`ENCODER_SPEED_STEPS_MM_S`), in one run."""
+    out = []
+    for step in (0.0,) + ENCODER_SPEED_STEPS_MM_S:
+        for inp in _TICKS + list(_sweep_inputs()):
+            v = np.asarray(inp.velocity_mm_s, float)
+            w = (float(v[0]), float(v[1]), float(v[2]))
+            out.append(replace(inp, velocity_floats_mm_s=w, velocity_filtered_mm_s=w, speed_step_mm_s=step))
+    return out
+
+
+def _bits(x: Any) -> Any:
+    """A command field as the servo loop logs it, for an exact comparison: None, or the
+    float's hex text (so -0.0 and 0.0, and every NaN payload's sign, are told apart)."""
+    return None if x is None else float(x).hex()
+
+
+def _law_call(law: Any, inp: TickInput) -> Any:
+    """``law`` on ``inp``'s fields, as the servo loop calls it."""
+    w, f = inp.velocity_floats_mm_s, inp.velocity_filtered_mm_s
+    assert w is not None and f is not None, "the kit's law inputs carry both velocities"
+    return law(inp.t, inp.dt, inp.penetration_mm, inp.in_contact, w[0], w[1], w[2], f[0], f[1], f[2],
+               inp.speed_step_mm_s)
+
+
+def _tick_as_law(r: DimensionRenderer, cmds: Any, where: str) -> tuple[Any, ...]:
+    """What a law standing for ``r.tick`` must return for the commands ``cmds``: the
+    ``force_n, frequency_hz, amplitude`` of the one command of each role of ``r.roles``."""
+    out: list[Any] = []
+    for role in r.roles:
+        mine = [c for c in cmds if c.role == role]
+        assert len(mine) == 1, \
+            (f"_fast_law() is offered, but tick() returned {len(mine)} commands for role {role!r} ({where}): a law "
+             f"gives the fields of exactly one command per role, so offer it only where tick() always returns one "
+             f"command per role")
+        c = mine[0]
+        out += [c.force_n, c.frequency_hz, c.amplitude]
+    return tuple(out)
+
+
+def _fast_law_difference(d: PerceptionDimension, feats: Mapping[str, float]) -> str | None:
+    """Where a renderer's law on plain floats (``_fast_law``, which the servo loop runs
+    instead of ``tick`` in its steady state) differs from ``tick`` on the same ticks, as
+    text; None when the renderer offers no law or every tick agrees bit for bit. Three new
+    renderers of ``feats`` run :func:`_law_inputs`: one through ``tick`` alone, one through
+    its law alone, one through ``tick`` and its law in turn (the loop mixes them tick by
+    tick, so whatever the renderer keeps between ticks must be shared)."""
+    ref = d.renderer(dict(feats))
+    if _steady_law_of(ref) is None:
+        return None
+    runs = [("its law alone", d.renderer(dict(feats)), lambda k: True),
+            ("tick() and its law in turn", d.renderer(dict(feats)), lambda k: k % 2 == 1)]
+    laws = [_steady_law_of(r) for _, r, _ in runs]
+    for (label, r, _), law in zip(runs, laws):
+        assert callable(law), f"_fast_law() returned {law!r}, not None or a callable ({label})"
+    n = 3 * len(ref.roles)
+    for k, inp in enumerate(_law_inputs()):
+        where = _where(inp, feats, k)
+        want = _tick_as_law(ref, ref.tick(inp), where)
+        for (label, r, use_law), law in zip(runs, laws):
+            if use_law(k):
+                try:
+                    got = tuple(_law_call(law, inp))
+                except Exception as exc:   # noqa: BLE001 - reported as the rule's finding
+                    return f"the law raised {type(exc).__name__}: {exc} where tick() did not, {label} {where}"
+                if len(got) != n:
+                    return (f"the law returned {len(got)} values, not 3 per role of {tuple(ref.roles)} ({n}) "
+                            f"{label} {where}")
+            else:
+                got = _tick_as_law(r, r.tick(inp), where)
+            if [_bits(x) for x in got] != [_bits(x) for x in want]:
+                return f"{got} from {label} against {want} from tick() alone {where}"
     return None
 
 
@@ -1031,6 +1109,18 @@ def _dimension_rules(ctx: _Ctx) -> None:
              f"passes its {TICK_BUDGET * KIT_PERIOD_S * 1e3:.3f} ms budget within a render; keep bounded state "
              f"(a running sum, a fixed-size buffer)")
 
+    def r_fast_law() -> None:
+        d = holder["d"]
+        low = {f.name: float(f.lower) for f in d.features}
+        high = {f.name: float(f.upper) for f in d.features}
+        for feats in (mid(), low, high):
+            diff = _fast_law_difference(d, feats)
+            assert diff is None, \
+                (f"the renderer's law on plain floats (_fast_law) is not its tick(): {diff}. The servo loop runs "
+                 f"the law instead of tick() in its steady state and goes back to tick() whenever that ends, so "
+                 f"the law must give the same values bit for bit (the same operations in the same order) and "
+                 f"read and write the same state as tick(); or offer no law (return None)")
+
     def r_cost() -> None:
         d = holder["d"]
         space = d.feature_space()
@@ -1047,5 +1137,6 @@ def _dimension_rules(ctx: _Ctx) -> None:
                      ("constraints-vectorised", r_constraints), ("constraints-one-row", r_one_row),
                      ("constraints-cost", r_cost), ("constraints-feasible", r_feasible),
                      ("model-match", r_model_match), ("renderer", r_renderer), ("renderer-commands", r_commands),
-                     ("renderer-bad-input", r_renderer_bad), ("determinism", r_determinism), ("timing", r_timing)],
+                     ("renderer-bad-input", r_renderer_bad), ("renderer-fast-law", r_fast_law),
+                     ("determinism", r_determinism), ("timing", r_timing)],
                always=("class",), stop_after=("class", "features"))

@@ -27,7 +27,7 @@ RULES: dict[str, tuple[str, ...]] = {
                "output-follows-command", "reopen", "instances", "servo-loop", "determinism", "timing", "state"),
     "dimension": ("import", "plugin-api-declared", "class", "features", "roles-declared", "constraints-vectorised",
                   "constraints-one-row", "constraints-cost", "constraints-feasible", "model-match", "renderer", "renderer-commands",
-                  "renderer-bad-input", "determinism", "timing"),
+                  "renderer-bad-input", "renderer-fast-law", "determinism", "timing"),
     "model": ("import", "plugin-api-declared", "shapes", "model-dimensions", "vectorised", "determinism",
               "bad-input", "jacobian", "metadata", "responds"),
     "solver": ("import", "plugin-api-declared", "class", "template", "options", "solves", "result", "constraints",
