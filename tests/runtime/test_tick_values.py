@@ -1,5 +1,6 @@
-"""The per-tick code (safety filter, actuator command, hardness and roughness renderer
-ticks, piezo-virtual command) gives exactly the values of the documented rules.
+"""The per-tick code (safety filter and its compiled form for the servo loop's steady-state
+tick, actuator command, hardness and roughness renderer ticks, piezo-virtual command)
+gives exactly the values of the documented rules.
 
 A fixed sequence of states and commands covers every branch of the safety layer (start
 gate, ramp, running, every clamp, the force rate limit, overspeed fault, command gap,
@@ -194,14 +195,36 @@ def _force_script():
     return out
 
 
-def test_safety_filter_force_path_matches_the_rules_exactly():
+def _through(steady, lay, cmd_args, now, used):
+    """The command through the layer's compiled filter where it takes it (its steady
+    state), else through ``filter`` (as the servo loop's steady-state tick sends); counts
+    the compiled ones in ``used``."""
+    out = steady(*cmd_args) if steady is not None else None
+    if out is None:
+        role, force, freq, amp, direction = cmd_args[0], None, None, None, None
+        if len(cmd_args) == 5:
+            force, direction = cmd_args[1], cmd_args[2]
+        else:
+            freq, amp = cmd_args[1], cmd_args[2]
+        return lay.filter(ChannelCommand(role, force, freq, amp, direction), now)
+    used[0] += 1
+    return out
+
+
+@pytest.mark.parametrize("compiled", [False, True], ids=["filter", "compiled-filter"])
+def test_safety_filter_force_path_matches_the_rules_exactly(compiled):
+    """``compiled``: through ``SafetyLayer._steady_filter`` (built once, its limits
+    captured at configuration time) wherever the layer is running, as the servo loop's
+    steady-state tick sends: every clamp must still happen, per command."""
     lay = SafetyLayer(FORCE_LIMITS, **SETTINGS)
     lay.reset(0.0)
+    steady = lay._steady_filter(True) if compiled else None
+    used = [0]
     ref = _Reference(FORCE_LIMITS)
     for now, pen, vx, vy, f in _force_script():
         lay.observe(_state(pen, vx, vy))
         ref.observe(pen, (vx, vy, 0.0))
-        out = lay.filter(ChannelCommand("force", f, None, None, (0.0, 1.0, 0.0)), now)
+        out = _through(steady, lay, ("force", f, (0.0, 1.0, 0.0), now, pen), now, used)
         exp = ref.filter(f, None, None, now)
         assert (out.force_n, out.frequency_hz, out.amplitude) == exp, now
         assert type(out.force_n) is float
@@ -216,27 +239,32 @@ def test_safety_filter_force_path_matches_the_rules_exactly():
     assert set(ref.hits) == {"max_force_n", "max_velocity_mm_s", "max_stiffness_n_per_mm",
                              "max_force_rate_n_per_tick"}
     assert ref.events["faults"] == 2 and ref.events["ramp_ticks"] > 0 and ref.events["start_hold_ticks"] > 5
+    assert (used[0] > 250) is compiled, used   # the running phase's ticks went through it
 
 
+@pytest.mark.parametrize("compiled", [False, True], ids=["filter", "compiled-filter"])
 @pytest.mark.parametrize("ramp_amplitude", [False, True])
-def test_safety_filter_vibration_path_matches_the_rules_exactly(ramp_amplitude):
+def test_safety_filter_vibration_path_matches_the_rules_exactly(ramp_amplitude, compiled):
     rng = np.random.default_rng(11)
     lay = SafetyLayer(VIB_LIMITS, **SETTINGS, ramp_amplitude=ramp_amplitude)
     lay.reset(0.0)
+    steady = lay._steady_filter(False) if compiled else None
+    used = [0]
     ref = _Reference(VIB_LIMITS, ramp_amplitude)
     for k in range(200):
-        now = k * 0.001
+        now = k * 0.001 + (0.08 if k >= 150 else 0.0)   # a command gap > restart_after_s at k = 150
         fr = float(rng.uniform(0.0, 150.0))
         am = float(rng.uniform(-3.0, 30.0))
         fr_in = np.float64(fr) if k % 3 == 0 else fr     # numpy scalars pass through unchanged in range
         lay.observe(_state(0.2, 30.0))
         ref.observe(0.2, (30.0, 0.0, 0.0))
-        out = lay.filter(ChannelCommand("vibration", None, fr_in, am), now)
+        out = _through(steady, lay, ("vibration", fr_in, am, now), now, used)
         exp = ref.filter(None, fr_in, am, now)
         assert (out.force_n, out.frequency_hz, out.amplitude) == exp, k
         assert type(out.frequency_hz) is type(exp[1])
     assert lay.hits == ref.hits and lay.events == ref.events
     assert set(ref.hits) == {"frequency_range_hz", "negative_amplitude", "max_amplitude", "min_amplitude"}
+    assert (used[0] > 150) is compiled, used
 
 
 def test_limits_assigned_after_construction_are_enforced():
