@@ -251,6 +251,27 @@ def test_a_backend_fault_during_the_steady_state_tick_ends_the_run_as_the_genera
     assert paths["fused"] > 600
 
 
+@pytest.mark.parametrize("role", ["force", "coil", "vibration"])
+@pytest.mark.parametrize("how", ["closed", "faulted"])
+def test_an_actuator_closed_or_faulted_from_outside_is_not_sent_to_by_the_steady_state_tick(role, how):
+    """Another thread closes an actuator, or its failed stop leaves it faulted, while the
+    steady-state tick runs: the next command must not reach its backend (the general
+    send refuses a closed or faulted actuator, and the run ends on that fault), on both
+    paths alike."""
+    seen = []
+
+    def outside(loop, acts):
+        seen.append(loop._steady is not None)
+        a = acts[role]
+        if how == "closed":
+            a.close()
+        else:
+            a.fault = RuntimeError("test: a stop that failed on another thread")
+
+    _same(ticks=1500, actions={1000: outside})
+    assert seen == [False, True]
+
+
 class _NanAfter:
     """The loop's passivity controller, handing back NaN from its ``n``-th step on."""
 
