@@ -9,7 +9,7 @@ import pytest
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer, _steady_law_of
 from hapticsdk.testing.conformance import check, format_report
 
-from ..kit_variants import LAG_COIL_MAX_V, buzz_dimension, buzz_installed, rules_of
+from kit_variants import LAG_COIL_MAX_V, buzz_dimension, buzz_installed, rules_of
 
 
 def _level(x: float, speed: float, n: int, in_contact: bool) -> float:
