@@ -1290,7 +1290,9 @@ class ServoLoop:
         ``(slot, index, is_force)``; each send ``(slot, role, is_force, steady send, pc,
         actuator, general send, the role's record, first log column)``; the roles' log
         values, refilled every tick."""
-        if not self.fast_tick or self._ops or self.delay_ticks or not self._objs:
+        if (not self.fast_tick or self._ops or self.delay_ticks or not self._objs
+                or any(s.pending is not None for s in self._slots)):
+            # (the delay line the run started with, whatever delay_ticks says now)
             return None
         by_role = self._by_role
         laws_of: list = []

@@ -99,7 +99,8 @@ class _Glitches:
 
 
 def _run(fast: bool, *, ticks: int, period_s: float = 0.001, material=(3.0, 150.0, 5.0), glitches=None,
-         actions=None, spatial: bool = False, rt_clock=None, stiffness_cap: float | None = None) -> tuple[list[str], dict[str, int]]:
+         actions=None, spatial: bool = False, rt_clock=None, stiffness_cap: float | None = None,
+         delay_ticks: int = 0) -> tuple[list[str], dict[str, int]]:
     """Run the timing scene for ``ticks`` ticks; return everything it produced, as text,
     and how many ticks each path ran."""
     dev, _, acts = build_scene(ticks * period_s + 1.0, period_s)
@@ -126,7 +127,8 @@ def _run(fast: bool, *, ticks: int, period_s: float = 0.001, material=(3.0, 150.
     if stiffness_cap is not None:
         f = acts["force"]
         f.safety.limits = dataclasses.replace(f.limits, max_stiffness_n_per_mm=stiffness_cap)
-    loop = ServoLoop(dev, renderers, acts, period_s=period_s, fast_tick=fast, raise_on_fault=False, **kw)
+    loop = ServoLoop(dev, renderers, acts, period_s=period_s, fast_tick=fast, raise_on_fault=False,
+                     delay_ticks=delay_ticks, **kw)
     loop.start(ticks * period_s)
     paths = {"fused": 0, "general": 0}
     sent_ids: list = []
@@ -270,6 +272,18 @@ def test_an_actuator_closed_or_faulted_from_outside_is_not_sent_to_by_the_steady
 
     _same(ticks=1500, actions={1000: outside})
     assert seen == [False, True]
+
+
+def test_a_delay_line_started_with_the_run_keeps_the_general_tick_whatever_delay_ticks_says_later():
+    """The force path's extra delay (``delay_ticks``) is a line of forces made when the run
+    starts; the steady-state tick has none, so it is never built while that line exists,
+    even after ``delay_ticks`` is set to 0 and the loop rebuilds (an operation)."""
+    def undelay(loop, acts):
+        loop.delay_ticks = 0
+        loop.call_in_loop(lambda: None)
+
+    paths = _same(ticks=1200, delay_ticks=2, actions={600: undelay})
+    assert paths["fused"] == 0
 
 
 class _NanAfter:
