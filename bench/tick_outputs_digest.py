@@ -28,6 +28,7 @@ import dataclasses
 import hashlib
 import math
 import os
+from typing import Any
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -63,17 +64,25 @@ class _Rec:
         self.out.append(_h(t) + ";" + ";".join(f"{r}={_cmd(sent[r])}" for r in sorted(sent)))
 
 
-def _run(seconds: float, fault_at: int | None, record: bool = True) -> str:
-    dims = registry("dimension")
-    dev, renderers, acts = build_scene(seconds + 1.0)
-    lines: list[str] = []
+def log_backend_commands(acts: dict, lines: list[str], fmt: Any = None) -> None:
+    """Wrap each actuator's backend ``_command`` (on the instance) so every command it
+    receives is appended to ``lines`` as ``role>`` and its text (``fmt(command)``, default
+    :func:`_cmd`), then passed on."""
+    fmt = fmt or _cmd
     for role, a in acts.items():
         inner = a._command
 
         def wrapped(c, inner=inner, role=role):
-            lines.append(f"{role}>{_cmd(c)}")
+            lines.append(f"{role}>{fmt(c)}")
             return inner(c)
         a._command = wrapped
+
+
+def _run(seconds: float, fault_at: int | None, record: bool = True) -> str:
+    dims = registry("dimension")
+    dev, renderers, acts = build_scene(seconds + 1.0)
+    lines: list[str] = []
+    log_backend_commands(acts, lines)
     read = dev._read_state
     k_box = [0]
 

@@ -106,13 +106,7 @@ def _run(fast: bool, *, ticks: int, period_s: float = 0.001, material=(3.0, 150.
     dev, _, acts = build_scene(ticks * period_s + 1.0, period_s)
     renderers = _material(*material)
     out: list[str] = []
-    for role, a in acts.items():
-        inner = a._command
-
-        def spy(c, inner=inner, role=role):
-            out.append(f"{role}>{_cmd(c)}")
-            return inner(c)
-        a._command = spy
+    _digest.log_backend_commands(acts, out, _cmd)
     g = _Glitches(dev, glitches or {}, acts)
     dev._read_state = g
     kw = {}

@@ -195,18 +195,13 @@ def _force_script():
     return out
 
 
-def _through(steady, lay, cmd_args, now, used):
-    """The command through the layer's compiled filter where it takes it (its steady
-    state), else through ``filter`` (as the servo loop's steady-state tick sends); counts
-    the compiled ones in ``used``."""
-    out = steady(*cmd_args) if steady is not None else None
+def _through(steady, args, lay, cmd, now, used):
+    """The command through the layer's compiled filter ``steady(*args)`` where it takes it
+    (its steady state), else ``cmd`` through ``filter`` (as the servo loop's steady-state
+    tick sends); counts the compiled ones in ``used``."""
+    out = steady(*args) if steady is not None else None
     if out is None:
-        role, force, freq, amp, direction = cmd_args[0], None, None, None, None
-        if len(cmd_args) == 5:
-            force, direction = cmd_args[1], cmd_args[2]
-        else:
-            freq, amp = cmd_args[1], cmd_args[2]
-        return lay.filter(ChannelCommand(role, force, freq, amp, direction), now)
+        return lay.filter(cmd, now)
     used[0] += 1
     return out
 
@@ -224,7 +219,8 @@ def test_safety_filter_force_path_matches_the_rules_exactly(compiled):
     for now, pen, vx, vy, f in _force_script():
         lay.observe(_state(pen, vx, vy))
         ref.observe(pen, (vx, vy, 0.0))
-        out = _through(steady, lay, ("force", f, (0.0, 1.0, 0.0), now, pen), now, used)
+        out = _through(steady, ("force", f, (0.0, 1.0, 0.0), now, pen), lay,
+                       ChannelCommand("force", f, None, None, (0.0, 1.0, 0.0)), now, used)
         exp = ref.filter(f, None, None, now)
         assert (out.force_n, out.frequency_hz, out.amplitude) == exp, now
         assert type(out.force_n) is float
@@ -258,7 +254,8 @@ def test_safety_filter_vibration_path_matches_the_rules_exactly(ramp_amplitude, 
         fr_in = np.float64(fr) if k % 3 == 0 else fr     # numpy scalars pass through unchanged in range
         lay.observe(_state(0.2, 30.0))
         ref.observe(0.2, (30.0, 0.0, 0.0))
-        out = _through(steady, lay, ("vibration", fr_in, am, now), now, used)
+        out = _through(steady, ("vibration", fr_in, am, now), lay, ChannelCommand("vibration", None, fr_in, am),
+                       now, used)
         exp = ref.filter(None, fr_in, am, now)
         assert (out.force_n, out.frequency_hz, out.amplitude) == exp, k
         assert type(out.frequency_hz) is type(exp[1])

@@ -277,17 +277,19 @@ def _floats_path_difference(d: PerceptionDimension, feats: Mapping[str, float]) 
     return None
 
 
-def _law_inputs() -> list[TickInput]:
+@functools.lru_cache(maxsize=1)
+def _law_inputs() -> tuple[TickInput, ...]:
     """The ticks the ``renderer-fast-law`` rule runs: the kit's ticks and the sweep, as the
     servo loop hands them (the velocity also as plain floats, a filtered velocity, the speed
-    step of one count: 0 and each of :data:`ENCODER_SPEED_STEPS_MM_S`), in one run."""
+    step of one count: 0 and each of :data:`ENCODER_SPEED_STEPS_MM_S`), in one run; built
+    once (the inputs' arrays are read-only, and the kit fails a renderer that changes them)."""
     out = []
     for step in (0.0,) + ENCODER_SPEED_STEPS_MM_S:
         for inp in _TICKS + list(_sweep_inputs()):
             v = np.asarray(inp.velocity_mm_s, float)
             w = (float(v[0]), float(v[1]), float(v[2]))
             out.append(replace(inp, velocity_floats_mm_s=w, velocity_filtered_mm_s=w, speed_step_mm_s=step))
-    return out
+    return tuple(out)
 
 
 def _bits(x: Any) -> Any:
