@@ -293,6 +293,36 @@ def sdk_settings(cell: dict[str, Any], lane: str) -> Any:
     return ControllerSettings(**kw)
 
 
+def drive(cell: dict[str, Any], ref: Callable[[float], float], duration_s: float,
+          send: Callable[[float, float], float], commit: Callable[[float], None]) -> dict[str, Any]:
+    """A cell's arm and finger (:class:`CellPlant`) driven through the hand's reference
+    ``ref(t)`` (mm) for ``duration_s``: each tick ``send(reading_mm, wall_force_n)`` gives
+    the command, the plant holds it (clamped) and ``commit(applied_force_n)`` is told what
+    it held. Returns ``energy_to_user_j`` (device side, largest over the ticks),
+    ``delivered_ratio`` (the benchmark's definition) and ``min_contact_force_n``."""
+    T, res, K = float(cell["period_s"]), float(cell["resolution_mm"]), float(cell["stiffness_n_per_mm"])
+    plant = CellPlant(T, cell["arm_mass_kg"], cell["damping_true_ns_per_m"], cell["finger_mass_kg"],
+                      cell["finger_stiffness_n_per_m"], cell["finger_damping_ns_per_m"])
+    r0 = ref(0.0)
+    plant.start(r0, r0)
+    worst = given = asked = fneg = 0.0
+    for k in range(int(math.ceil(duration_s / T))):
+        r1 = ref((k + 1) * T)
+        x = plant.reading_mm(res)
+        fw = K * -x if x < 0 else 0.0
+        f = plant.step(send(x, fw), r0, r1)
+        commit(f)
+        if x < 0:
+            tgt = min(fw, FORCE_LIMIT_N)
+            given += min(max(f, 0.0), tgt)
+            asked += tgt
+            fneg = min(fneg, f)
+        worst = max(worst, plant.energy_device_j())
+        r0 = r1
+    return {"energy_to_user_j": worst, "delivered_ratio": given / asked if asked else float("nan"),
+            "min_contact_force_n": fneg}
+
+
 def run_cell(cell: dict[str, Any], lane: str, *, log: bool = False, controller: str = "scalar",
              substeps: int = 1, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """One cell with ``lane`` ``"plain"`` (the wall ``K x pen`` of the reading, no

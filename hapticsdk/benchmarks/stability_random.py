@@ -34,8 +34,12 @@ beyond the wall's law, e.g. a damper's, is not counted as delivered), ``max_forc
 (most negative applied force on a contact tick; 0 if none); for ``sdk`` and ``sdk_declared`` also
 ``ramp_step_n`` (the controller's own step at that period) and ``bound_shortfall_j``
 (largest ``true energy - U - (Delta/2) |F|`` over the ticks: <= 0 when the controller's
-bound ``U`` held as an upper bound of the truth) and ``spring_only_share`` (share of the
-contact ticks on which the controller sent the Colgate spring alone, the extra held at 0,
+bound ``U`` held as an upper bound of the truth), ``max_step_beyond_spring_n`` (largest
+change of the force beyond the Colgate spring's, ``K_c |dq|``),
+``max_step_beyond_spring_where_ramp_kept_n`` (the same over the ticks on which the
+controller did not fall below its ramp), ``below_ramp_ticks`` (ticks on which its book
+was overdrawn and the extra fell below its ramp, the energy goal put first:
+docs/runtime.md, Passivity item 3) and ``spring_only_share`` (share of the contact ticks on which the controller sent the Colgate spring alone, the extra held at 0,
 while the wall asked for more: where its energy bound had nothing left for the extra).
 Not modelled: Coulomb friction, computation
 delay, jitter, multi-axis coupling, a reacting hand.
@@ -271,6 +275,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     rmax = np.zeros(L)      # largest rise of the applied force between two ticks
     fmax_fall = np.zeros(L)   # largest fall
     dspring = np.zeros(L)   # sdk: largest step beyond the Colgate spring (K_c |dq|)
+    dspring_held = np.zeros(L)   # the same over the ticks the controller did not fall below its ramp
+    below = np.zeros(L, int)     # sdk: ticks the extra fell below its ramp (the book overdrawn)
     x_last = None
     fneg = np.zeros(L)
     contact = np.zeros(L, int)
@@ -292,6 +298,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd_ctrl, resolution_mm=plant.res_mm,
                                       max_force_n=plant.fmax, mass_kg=m_decl, trusted_damping_ns_per_m=b_tr)
         f_cmd = np.where(sdk, f_sdk, f_peer)
+        dropped = cst["below_ramp"] & sdk & live
+        below += dropped
         tgt = np.minimum(fw, plant.fmax)   # the wall's force the device can give
         # the extra held at 0 (the output is the Colgate spring) while the wall asks for more
         spr = cst["spring"]
@@ -315,6 +323,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         if x_last is not None:
             beyond = np.abs(f - f_last) - kc * np.abs(x - x_last) * 1e-3
             dspring = np.maximum(dspring, np.where(live & sdk, beyond, 0.0))
+            dspring_held = np.maximum(dspring_held, np.where(live & sdk & ~dropped, beyond, 0.0))
         x_last = x
         f_last = f
         e_max = np.maximum(e_max, plant.energy_to_user_j())
@@ -334,6 +343,8 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
             if name in SDK_LANES:
                 d[name]["ramp_step_n"] = float(step[ln])
                 d[name]["max_step_beyond_spring_n"] = float(dspring[ln])
+                d[name]["max_step_beyond_spring_where_ramp_kept_n"] = float(dspring_held[ln])
+                d[name]["below_ramp_ticks"] = int(below[ln])
                 d[name]["bound_shortfall_j"] = float(unsound[ln])
                 d[name]["spring_only_share"] = float(spring_only[ln] / contact[ln]) if contact[ln] else 0.0
         out.append(d)
@@ -387,6 +398,10 @@ def cell_verdicts(cell: dict[str, Any], lane: str = "sdk") -> dict[str, Any]:
             "rise_ok": _within_ramp(me.get("max_force_rise_n", me["max_force_step_n"]), me["ramp_step_n"]),
             "step_ok_plus_spring": _within_ramp(me.get("max_step_beyond_spring_n", me["max_force_step_n"]),
                                                 me["ramp_step_n"]),
+            "step_ok_plus_spring_where_ramp_kept": _within_ramp(
+                me.get("max_step_beyond_spring_where_ramp_kept_n", me.get("max_step_beyond_spring_n", me["max_force_step_n"])),
+                me["ramp_step_n"]),
+            "fell_below_ramp": me.get("below_ramp_ticks", 0) > 0,
             "delivered_ok": _at_least(mine, best), "best_passive_peer_ratio": max(best) if best else float("nan"),
             "delivered_ok_shaped": _at_least(mine, shaped),
             "best_shaped_peer_ratio": max(shaped) if shaped else float("nan")}
@@ -398,6 +413,8 @@ def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, int]:
             "sdk_no_pull": sum(x["no_pull"] for x in v),
             "sdk_step_within_ramp": sum(x["step_ok"] for x in v),
             "sdk_step_within_ramp_plus_spring": sum(x["step_ok_plus_spring"] for x in v),
+            "sdk_step_within_ramp_plus_spring_where_ramp_kept": sum(x["step_ok_plus_spring_where_ramp_kept"] for x in v),
+            "sdk_cells_below_ramp": sum(x["fell_below_ramp"] for x in v),
             "sdk_rise_within_ramp": sum(x["rise_ok"] for x in v),
             "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] is True for x in v),
             "cells_with_a_passive_peer": sum(x["delivered_ok"] is not None for x in v),

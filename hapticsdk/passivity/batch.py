@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ValidationError
-from .plan import _HIST, _SCALES, affordable_force
+from .plan import _HIST, _ROUNDING_SLACK, _SCALES, affordable_force, below_ramp_force, plan_cost_j
 from .settings import ControllerSettings
 
 
@@ -21,7 +21,8 @@ def controller_state_batch(n: int) -> dict[str, np.ndarray]:
             "overdrawn": z.copy(), "still": z.copy(),
             "spring": z.copy(), "kf": z.copy(), "kc": z.copy(), "full": z.copy(), "hist": np.zeros((_HIST, n)),
             "jh": np.zeros((_HIST, n)), "j3h": np.zeros((_HIST, n)),
-            "hp": np.zeros(1, int), "sent": z.copy(), "pending": np.zeros(1, bool), "anchor": z.copy()}
+            "hp": np.zeros(1, int), "sent": z.copy(), "pending": np.zeros(1, bool), "anchor": z.copy(),
+            "below_ramp": np.zeros(n, bool)}
 
 
 def _colgate_n_per_m(b_lo: Any, dt: Any, step_n: Any, q_m: Any) -> np.ndarray:
@@ -136,6 +137,11 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     held = (spring > lim) & (kc > 0.0)
     spring = np.where(held, lim, spring)
     o = np.where(held, depth - spring / np.where(held, kc, 1.0), o)
+    # and only as the reading moves in (the scalar tick's rule: a spring born compressed)
+    inward = np.where(dq < 0.0, state["spring"] - kc * dq, state["spring"])
+    held = (spring > inward * _ROUNDING_SLACK) & (kc > 0.0)
+    spring = np.where(held, inward, spring)
+    o = np.where(held, depth - spring / np.where(held, kc, 1.0), o)
     # the damping credited to the extra: b_lo less the spring's need, its secant stiffness
     # at the interval's start, or its full slope K_c on an interval entering from outside
     # (the scalar tick's rule)
@@ -167,9 +173,17 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     fall = np.maximum(state["spring"] - spring, 0.0)
     hi = np.where(p > 0.0, np.maximum(hi, np.minimum(p - step + fall, p)), hi)
     a = hi
+    if "below_ramp" in state:
+        state["below_ramp"] = np.zeros(x.shape, bool)
     if s.energy_bound:
         lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
+        # the book overdrawn and even the ramp down unaffordable: below the ramp (the scalar tick's rule)
+        stuck = (a == lo) & (lo > 0.0) & (u > e0) & (plan_cost_j(lo, p, lead, c_m, step, 0.5 * q) > e0 - u)
+        if stuck.any():
+            a = np.where(stuck, below_ramp_force(e0 - u, lo, p, lead, c_m, step, 0.5 * q), a)
+        if "below_ramp" in state:
+            state["below_ramp"] = stuck & started & ~idle
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring
     if "anchor" in state:

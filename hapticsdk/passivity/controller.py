@@ -7,7 +7,7 @@ import logging
 import math
 from typing import Any
 
-from .plan import _HIST, _affordable_scalar
+from .plan import _HIST, _ROUNDING_SLACK, _affordable_scalar, _below_ramp_scalar, _cost_scalar
 from .settings import ControllerSettings, _spring_stiffness_and_step
 
 _log = logging.getLogger(__name__)
@@ -65,7 +65,9 @@ class PassivityController:
     o)``, ``o`` 0 at first; where a reading jumps several counts the spring rises by one
     ramp step and ``o`` moves in to match (stored energy kept back, never handed over),
     where the reading is above ``o`` it follows the reading out, and out of the wall it is
-    0. The extra gives way to the spring's rise, so the force rises by at most ``s`` per
+    0. It rises only as the reading moves in (by at most ``K_c`` times the inward change
+    of a tick; ``o`` moves in where that binds): a wall that appears around a resting
+    stylus stores nothing. The extra gives way to the spring's rise, so the force rises by at most ``s`` per
     tick; on a release it takes up the spring's fall (never above what it held) where the
     plan affords it, so the force falls by at most ``s``, else by at most ``s`` plus the
     spring's fall ``K_c |dq|``.
@@ -88,8 +90,10 @@ class PassivityController:
     changing by up to the largest change of motion seen over the last ``_HIST`` ticks
     (counting, as far as the readings allow, what a change of the held force gives the
     free arm) plus the largest third difference (:func:`affordable_force`).
-    If the motion outruns that prediction the extra ramps down at ``s`` and the excess
-    is booked (``overdrawn_j``).
+    If the motion outruns that prediction the excess is booked (``overdrawn_j``), and the
+    extra ramps down at ``s``; where the book is overdrawn (``U > E0``) and even that ramp
+    does not fit, it falls below it to the largest force the plan affords
+    (``below_ramp_ticks``).
 
     **Release.** The spring follows the reading out; the extra ramps to 0 at ``s`` per
     tick, charged to the same bound, and once the bound is spent only the spring is
@@ -102,7 +106,7 @@ class PassivityController:
     next tick with both books the whole span since the last reading.
     """
 
-    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "below_ramp_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_kc", "_full", "_jw", "_j3w",
                  "_a1", "_a2", "_a3", "_sent", "_pending", "_o")
 
@@ -118,6 +122,7 @@ class PassivityController:
         self.withheld_n_ticks = 0.0 # sum over ticks of the force withheld (N)
         self.overdrawn_j = 0.0      # largest U - E0 seen (J): motion beyond the prediction
         self.spent_ticks = 0        # ticks held below the wall's force with the bound spent (U >= E0)
+        self.below_ramp_ticks = 0   # ticks the extra fell below its ramp: the book overdrawn (U > E0)
         self._q1 = self._q2 = 0.0
         self._hist = [0.0] * _HIST    # the last readings (mm), a ring; _hp the newest
         self._hp = 0
@@ -272,6 +277,18 @@ class PassivityController:
                 # (K_c (depth - o)^2 / 2 falls), so the spring stays passive (item 0)
                 spring = self._spring + sp
                 o = depth - spring / kc
+            if dq < 0.0:
+                inward = self._spring - kc * dq
+            else:
+                inward = self._spring
+            if spring > inward * _ROUNDING_SLACK and kc > 0.0:
+                # and only as the reading moves in: a spring that rises where the stylus
+                # stays (a wall that appears around it, a first reading inside, a wall law
+                # that stiffens) stores energy no motion paid for; it rises by at most K_c
+                # times the reading's inward change, and its anchor moves in to match
+                # (item 0, "a spring born compressed")
+                spring = inward
+                o = depth - spring / kc
         self._o = o
         if spring > 0.0:
             # its secant stiffness, or K_c where the anchor has moved in (a spring that is 0
@@ -351,6 +368,13 @@ class PassivityController:
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (self._still if self._still > 2 else 2))
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
+            if a == lo and lo > 0.0 and u > e0 and _cost_scalar(lo, p, lead, c_m, step, h) > e0 - u:
+                # the book is overdrawn (the hand outran the plan) and even the ramp down
+                # does not fit: the energy goal before the ramp, the extra falls to the
+                # largest force that fits, else to the one of least cost (item 3, "when the
+                # book is overdrawn")
+                a = _below_ramp_scalar(e0 - u, lo, p, lead, c_m, step, h)
+                self.below_ramp_ticks += 1
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a
@@ -396,8 +420,10 @@ class PassivityController:
         ``withheld_n_ticks`` (N), ``active_ticks``, ``spent_ticks`` (the ticks of
         ``active_ticks`` on which the bound was spent, ``U >= E0``: the force above the
         spring waits for credit; with no damping credited the spring is 0 and the wall is
-        gone until then). The first such tick is logged as a warning (once per
-        controller)."""
+        gone until then), ``below_ramp_ticks`` (ticks on which the book was overdrawn, ``U >
+        E0``, and the extra fell below its ramp to a force the plan affords: a step beyond
+        the ramp, taken for the energy bound). The first spent tick is logged as a warning
+        (once per controller)."""
         return {"energy_bound_j": self.energy_j, "overdrawn_j": self.overdrawn_j,
                 "withheld_n_ticks": self.withheld_n_ticks, "active_ticks": self.active_ticks,
-                "spent_ticks": self.spent_ticks}
+                "spent_ticks": self.spent_ticks, "below_ramp_ticks": self.below_ramp_ticks}

@@ -17,6 +17,14 @@ _SCALES = (1, 2, 4, 8, 16)   # (the scalar tick unrolls these five)
 #: Length of the reading ring (2 x the longest span + 1).
 _HIST = 2 * _SCALES[-1] + 1
 
+#: Relative slack of the spring's inward-rise rule (item 0, "a spring born compressed"):
+#: the spring from its anchor, ``K_c (depth - o)``, and the cap from the last spring plus
+#: the inward change, ``P + K_c |dq|``, are the same number in exact arithmetic wherever
+#: the spring follows the reading; each is a few roundings (2^-53 relative each) from it,
+#: so the rule acts only beyond 2^-44 (a relative margin of 512 roundings: float error, no
+#: physics).
+_ROUNDING_SLACK = 1.0 + 2.0 ** -44
+
 
 #: Bisection steps of :func:`_affordable_bisect`, the fallback of the closed form
 #: (2^-30 of the ramp step: far below any force a device resolves).
@@ -206,6 +214,19 @@ def affordable_force(avail_j: Any, lo: Any, hi: Any, p: Any, lead_m: Any, push_m
     return out if out.ndim else float(out)
 
 
+def below_ramp_force(avail_j: Any, lo: Any, p: Any, lead_m: Any, push_m_per_n: Any, s: Any,
+                     half_count_m: Any) -> Any:
+    """Where even the ramp's lower end ``lo`` does not fit (vectorised): the largest ``a`` in
+    ``[0, lo]`` that fits, else the one of least cost there."""
+    A, lo, p, d, c_m, s, c = np.broadcast_arrays(*(np.asarray(v, float) for v in (
+        avail_j, lo, p, lead_m, push_m_per_n, s, half_count_m)))
+    a = np.asarray(affordable_force(A, np.zeros_like(lo), lo, p, d, c_m, s, c), float)
+    fits = plan_cost_j(a, p, d, c_m, s, c) <= A
+    with np.errstate(invalid="ignore", divide="ignore"):
+        least = np.where(c_m > 0.0, _largest_ramp_start(-d / (2.0 * c_m), s), np.where(d > 0.0, 0.0, lo))
+    return np.where(fits, a, np.clip(least, 0.0, lo))
+
+
 def _affordable_bisect(A: Any, lo: Any, hi: Any, p: Any, d: Any, c_m: Any, s: Any, c: Any) -> Any:
     """:func:`affordable_force` by bisection: the cost's minimiser on ``[lo, hi]`` (on the
     slope), then the crossing between it and ``hi``; ``lo`` when nothing fits. The fallback
@@ -301,6 +322,20 @@ def _affordable_scalar(A: float, lo: float, hi: float, p: float, d: float, c_m: 
     if a == a:
         return _checked_scalar(a, A, lo, hi, p, d, c_m, s, c)
     return _nothing_fits_scalar(A, lo, hi, p, d, c_m, s, c)
+
+
+def _below_ramp_scalar(A: float, lo: float, p: float, d: float, c_m: float, s: float, c: float) -> float:
+    """Where even the ramp's lower end ``lo`` does not fit: the largest ``a`` in ``[0, lo]``
+    that fits, else the one of least cost there."""
+    a = _affordable_scalar(A, 0.0, lo, p, d, c_m, s, c)
+    if _cost_scalar(a, p, d, c_m, s, c) <= A:
+        return a
+    if c_m > 0.0:
+        S = -d / (2.0 * c_m)
+        a = S if S < s else (s if S < 1.125 * s else 0.5 * (math.sqrt(8.0 * s * S) - s))
+    else:
+        a = 0.0 if d > 0.0 else lo
+    return 0.0 if a < 0.0 else (lo if a > lo else a)
 
 
 def _root_force(r: float, slope: float, c_m: float, s: float) -> float:

@@ -67,9 +67,12 @@ def _motion(draw: st.DrawFn, exact: bool) -> dict:
     # displacement by a count must hold then as well)
     res = draw(st.one_of(st.just(0.0), _lu(0.001, 0.2))) if exact else draw(_lu(0.001, 0.2))
     n = draw(st.integers(20, 160))
-    # with exact readings the spring is in play: the stylus starts outside the wall, where
-    # the spring holds no energy (started inside, it would rightly hand back what it holds)
-    start = draw(st.floats(0.0, 2.0) if exact else st.floats(-3.0, 2.0))
+    # the stylus starts anywhere, inside the wall too: a spring born compressed around a
+    # stylus that did not move stores nothing (item 0), so its energy is the motion's alone
+    start = draw(st.floats(-3.0, 2.0))
+    # the wall is there from the start, or appears at a later tick around the stylus (an
+    # object put there, a material switched on): its force is 0 before that tick
+    wall_from = draw(st.one_of(st.just(0), st.integers(0, n)))
     # moves in counts (or in 0.01 mm where the readings are exact), the big ones capped at 10 mm
     unit = res if res else 0.01
     steps = [max(-10.0, min(10.0, m * unit)) for m in draw(st.lists(_MOVES, min_size=n, max_size=n))]
@@ -84,7 +87,7 @@ def _motion(draw: st.DrawFn, exact: bool) -> dict:
     # overruns (a late tick holds the force longer than the spring was sized for)
     jitter = draw(st.one_of(st.just([1.0] * (n + 1)),
                             st.lists(st.one_of(st.just(1.0), st.floats(0.5, 3.0)), min_size=n + 1, max_size=n + 1)))
-    return {"res": res, "y": y, "e": e, "share": share, "jitter": np.array(jitter),
+    return {"res": res, "y": y, "e": e, "share": share, "jitter": np.array(jitter), "wall_from": wall_from,
             "T": draw(_lu(0.25e-3, 10e-3)), "K": draw(_lu(0.01, 1000.0)),
             "fmax": draw(st.sampled_from((None, 3.3))) or None, "mass": draw(st.sampled_from((None, 0.02, 0.045, 0.1)))}
 
@@ -123,7 +126,7 @@ def _run(case: dict, cs: ControllerSettings, b_true: float, batch: bool) -> list
             w += held * dy - b_true * dy * dy / T
             scale = max(scale, abs(held * dy), b_true * dy * dy / T)
         q = float(y[k] + e[k])
-        f, u, x_held = step(q, T, K * max(-q, 0.0))
+        f, u, x_held = step(q, T, K * max(-q, 0.0) if k >= case.get("wall_from", 0) else 0.0)
         out.append((w, u, x_held, scale))
         held = f * float(share[k])
         commit(held)

@@ -537,23 +537,26 @@ def test_one_count_of_the_colgate_spring_is_within_one_ramp_step(b, dt, res, fma
     step, and the spring's gain per crossing, ``(K_c Delta)^2 T / 4b``, is at most
     ``s^2 T / 4b``. With no allowance and the hand at rest the extra stays 0 and the
     output is the spring alone; the scalar controller, the batch and
-    ``colgate_stiffness_n_per_mm`` agree. The wall appears around the resting stylus, so
-    the spring rises by at most one ramp step (its anchor moves in, item 0)."""
+    ``colgate_stiffness_n_per_mm`` agree. The hand takes its first reading at the surface and
+    crosses one count inward: the spring is ``K_c Delta``. A wall that appears around a
+    stylus resting at ``depth`` stores nothing: no motion paid for it, so the spring stays 0
+    (item 0, "a spring born compressed")."""
     cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             energy_allowance_j=0.0)
     s = fmax * min(dt / cs.ramp_time_s, 1.0)
     kc = min(2 * cs.damping_trust * b / dt, s / (res * 1e-3))   # N/m, from the derivation
     assert kc * res * 1e-3 <= s * (1 + 1e-12)
     assert colgate_stiffness_n_per_mm(cs, dt) * 1000 == pytest.approx(kc, rel=1e-12)
-    pc = PassivityController(cs)
-    bs = controller_state_batch(1)
-    for _ in range(2):   # the first call takes the position; the hand rests at the depth
-        a = pc.step(-depth, dt, 1e6)
-        pc.commit(a)
-        f = controller_step_batch(bs, np.array([-depth]), dt, np.array([1e6]), True, cs)[0]
-        controller_commit_batch(bs, np.array([f]))
-        assert a == f
-    assert a == pytest.approx(min(kc * depth * 1e-3, fmax, s), rel=1e-12)
+    for xs, want in (((0.0, -res), min(kc * res * 1e-3, fmax, s)), ((-depth, -depth), 0.0)):
+        pc = PassivityController(cs)
+        bs = controller_state_batch(1)
+        for x in xs:   # the first call takes the position
+            a = pc.step(x, dt, 1e6)
+            pc.commit(a)
+            f = controller_step_batch(bs, np.array([x]), dt, np.array([1e6]), True, cs)[0]
+            controller_commit_batch(bs, np.array([f]))
+            assert a == f
+        assert a == pytest.approx(want, rel=1e-12)
 
 
 @hsettings(max_examples=50, deadline=None)

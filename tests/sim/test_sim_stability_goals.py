@@ -31,7 +31,11 @@ def _check_sdk(cells):
         r = c["results"]["sdk"]
         assert r["bound_shortfall_j"] <= 1e-9, c
         assert r["min_contact_force_n"] >= 0.0, c
-        assert r["max_step_beyond_spring_n"] <= r["ramp_step_n"] * (1 + 1e-9), c
+        # beyond the ramp plus the spring only on ticks where the book was overdrawn and the
+        # extra fell below its ramp for the energy bound (docs/runtime.md, Passivity item 3)
+        assert r["max_step_beyond_spring_where_ramp_kept_n"] <= r["ramp_step_n"] * (1 + 1e-9), c
+        if r["max_step_beyond_spring_n"] > r["ramp_step_n"] * (1 + 1e-9):
+            assert r["below_ramp_ticks"] > 0, c
 
 
 def test_grid_cells_keep_the_bound_no_pull_and_the_ramp(grid):
@@ -51,7 +55,7 @@ def test_drawn_cells_keep_the_bound_no_pull_and_the_ramp():
     cells = run_cells(draw_cells(12, seed=7))
     _check_sdk(cells)
     s = summarise(cells)
-    assert s["sdk_no_pull"] == s["sdk_step_within_ramp_plus_spring"] == 12
+    assert s["sdk_no_pull"] == s["sdk_step_within_ramp_plus_spring_where_ramp_kept"] == 12
     assert set(s["controllers"]) == {"plain", "popc", "eb", "vc", "sdk", "sdk_declared"}
     assert np.isfinite(s["controllers"]["sdk"]["median_delivered_ratio"])
 
