@@ -15,30 +15,6 @@ _log = logging.getLogger(__name__)
 _INF = math.inf
 
 
-class _WindowMax:
-    """The values of the reading ring's last ``_HIST`` ticks and their largest, kept as the
-    ring turns (a full search only when the largest leaves the window)."""
-
-    __slots__ = ("ring", "top", "at")
-
-    def __init__(self) -> None:
-        self.ring = [0.0] * _HIST
-        self.top = 0.0
-        self.at = 0
-
-    def push(self, i: int, v: float) -> float:
-        """Store ``v`` at ring index ``i`` (the oldest value's); return the window's largest."""
-        ring = self.ring
-        ring[i] = v
-        if v >= self.top:
-            self.top = v
-            self.at = i
-        elif self.at == i:   # the largest left the window: find the next one
-            self.top = max(ring)
-            self.at = ring.index(self.top)
-        return self.top
-
-
 class PassivityController:
     """Passive wall from the device's declared parameters: a Colgate spring plus an
     energy-bounded extra.
@@ -106,8 +82,9 @@ class PassivityController:
     next tick with both books the whole span since the last reading.
     """
 
-    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "below_ramp_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
-                 "_f1", "_f2", "_out", "_started", "_still", "_spring", "_kf", "_kc", "_full", "_jw", "_j3w",
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
+                 "_f1", "_f2", "_started", "_still", "_spring", "_kf", "_kc", "_full",
+                 "_jw", "_jw_top", "_jw_at", "_j3w", "_j3w_top", "_j3w_at",
                  "_a1", "_a2", "_a3", "_sent", "_pending", "_o")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
@@ -126,11 +103,20 @@ class PassivityController:
         self._q1 = self._q2 = 0.0
         self._hist = [0.0] * _HIST    # the last readings (mm), a ring; _hp the newest
         self._hp = 0
-        self._jw = _WindowMax()       # the change-of-motion estimates of the same ticks, and their largest
-        self._j3w = _WindowMax()      # the third differences of the same ticks, and their largest
-        self._a1 = self._a2 = self._a3 = 0.0   # the forces applied over the last three ticks (N)
+        # two windows over the same ticks as the ring: the values of its last _HIST ticks
+        # (a ring of their own, written at the same index), their largest and its index,
+        # kept as the ring turns (a full search only when the largest leaves the window;
+        # written out in step, the servo tick)
+        self._jw = [0.0] * _HIST      # the change-of-motion estimates of the same ticks
+        self._jw_top = 0.0
+        self._jw_at = 0
+        self._j3w = [0.0] * _HIST     # the third differences of the same ticks
+        self._j3w_top = 0.0
+        self._j3w_at = 0
+        # the forces applied over the last three ticks (N): _a1 the one the last commit
+        # recorded, held over the coming interval (a step commits its own where none came)
+        self._a1 = self._a2 = self._a3 = 0.0
         self._f1 = self._f2 = 0.0   # the extra (applied force minus the spring) over the last two ticks
-        self._out = 0.0
         self._started = False
         self._still = 0             # ticks since the reading last changed
         self._spring = 0.0          # the Colgate spring sent this tick (N)
@@ -153,7 +139,7 @@ class PassivityController:
         if c is None:
             c = self.settings._derive_tick_constants()
         q, h, c2, b_lo, b_s, m, fm, ramp_time, period, allowance, energy_bound, kc_p, sp_p, e0_p = c
-        if f_wall != f_wall or f_wall in (math.inf, -math.inf):
+        if not -_INF < f_wall < _INF:   # NaN or infinite: no wall
             f_wall = 0.0
         if not self._started or not dt > 0 or not -_INF < x_mm < _INF:
             if not -_INF < x_mm < _INF:
@@ -163,7 +149,7 @@ class PassivityController:
                 self._q1 = self._q2 = x_mm
                 self._hist = [x_mm] * _HIST
                 self._started = True
-            r = 0.0 if not dt > 0 else self._out
+            r = 0.0 if not dt > 0 else self._a1
             self._sent = r
             return r
         dq = (x_mm - self._q1) * 1e-3
@@ -182,26 +168,31 @@ class PassivityController:
             hp = 0
         self._hp = hp
         hist[hp] = x_mm
-        d1 = abs(x_mm - 2.0 * hist[hp - 1] + hist[hp - 2])   # this tick's second difference (mm)
+        x1 = hist[hp - 1]
+        x2 = hist[hp - 2]
+        d1 = abs(x_mm - 2.0 * x1 + x2)   # this tick's second difference (mm)
         jerk = d1 - c2
-        d = (abs(x_mm - 2.0 * hist[hp - 2] + hist[hp - 4]) - c2) * 0.25
+        x4 = hist[hp - 4]
+        d = (abs(x_mm - 2.0 * x2 + x4) - c2) * 0.25
         if d > jerk:
             jerk = d
-        d = (abs(x_mm - 2.0 * hist[hp - 4] + hist[hp - 8]) - c2) * 0.0625
+        x8 = hist[hp - 8]
+        d = (abs(x_mm - 2.0 * x4 + x8) - c2) * 0.0625
         if d > jerk:
             jerk = d
-        d = (abs(x_mm - 2.0 * hist[hp - 8] + hist[hp - 16]) - c2) * 0.015625
+        x16 = hist[hp - 16]
+        d = (abs(x_mm - 2.0 * x8 + x16) - c2) * 0.015625
         if d > jerk:
             jerk = d
-        d = (abs(x_mm - 2.0 * hist[hp - 16] + hist[hp - 32]) - c2) * 0.00390625
+        d = (abs(x_mm - 2.0 * x16 + hist[hp - 32]) - c2) * 0.00390625
         if d > jerk:
             jerk = d
         jerk = jerk * 1e-3 if jerk > 0.0 else 0.0
+        a1 = self._a1   # the force applied over the last interval (N)
         if m:   # the trusted mass (ControllerSettings.trusted_mass_kg)
             # the largest change of motion the readings allow (2 counts above the second
             # difference), up to what the held force's change over the last two ticks
             # gives the free arm (docs/runtime.md, Passivity item 5)
-            a1 = self._a1
             d = abs(a1 - self._a2)
             d3 = abs(a1 - self._a3)
             if d3 > d:
@@ -216,14 +207,35 @@ class PassivityController:
         # the largest change of motion over the ring's window (_HIST ticks): a hand that
         # reversed within it can reverse again; the estimate of this tick alone is blind
         # between reversals (taps, the finger-and-arm resonance at long periods)
-        jerk = self._jw.push(hp, jerk)
+        # (stored at the ring's index, the oldest value's; the window's largest kept)
+        w = self._jw
+        w[hp] = jerk
+        if jerk >= self._jw_top:
+            self._jw_top = jerk
+            self._jw_at = hp
+        elif self._jw_at == hp:   # the largest left the window: find the next one
+            jerk = self._jw_top = max(w)
+            self._jw_at = w.index(jerk)
+        else:
+            jerk = self._jw_top
         # the third difference beyond what quantisation alone makes (1 + 3 + 3 + 1 half
         # counts = 4 counts): the term after the acceleration in the extrapolation to the
         # next tick, exact for a cubic motion (docs/runtime.md, Passivity item 5); its
         # largest over the same window
-        j3 = abs(x_mm - 3.0 * (hist[hp - 1] - hist[hp - 2]) - hist[hp - 3]) - 2.0 * c2
-        j3 = self._j3w.push(hp, j3 * 1e-3 if j3 > 0.0 else 0.0)
-        self._still = self._still + 1 if dq == 0.0 else 0
+        j3 = abs(x_mm - 3.0 * (x1 - x2) - hist[hp - 3]) - 2.0 * c2
+        j3 = j3 * 1e-3 if j3 > 0.0 else 0.0
+        w = self._j3w
+        w[hp] = j3
+        if j3 >= self._j3w_top:
+            self._j3w_top = j3
+            self._j3w_at = hp
+        elif self._j3w_at == hp:   # as above: the largest left the window
+            j3 = self._j3w_top = max(w)
+            self._j3w_at = w.index(j3)
+        else:
+            j3 = self._j3w_top
+        still = self._still + 1 if dq == 0.0 else 0
+        self._still = still
         self._q2 = self._q1
         self._q1 = x_mm
         # the Colgate spring: the wall up to the stiffness its damping makes passive
@@ -233,12 +245,13 @@ class PassivityController:
             # no declared limit: the largest force seen so far is the full scale (a fixed
             # step, so a ramp to 0 ends; a scale that followed the output would shrink
             # with it and never reach 0)
-            full = max(self._full, abs(f_wall), abs(self._out))
+            full = max(self._full, abs(f_wall), abs(a1))
             self._full = full
         else:
             full = fm
         step = full * (dt / ramp_time if dt < ramp_time else 1.0)
         depth = -x_mm * 1e-3
+        s0 = self._spring   # the spring sent last tick (N)
         spring = 0.0
         kf = 0.0
         kc = 0.0
@@ -253,12 +266,13 @@ class PassivityController:
             else:
                 # sized on the servo's period where declared; the ramp step at that period
                 kc, sp = _spring_stiffness_and_step(b_s, period or dt, full, ramp_time, q)
-            if period is not None and self._kc > 0.0 and kc > self._kc:
+            kc0 = self._kc
+            if period is not None and kc0 > 0.0 and kc > kc0:
                 # and never stiffer while compressed: a rise of K_c stores (dK/2) d^2 that
                 # no motion paid for (a full scale that grows without a declared limit, a
                 # setting assigned mid-contact); without a declared period the spring
                 # follows each measured one, as documented on ControllerSettings.period_s
-                kc = self._kc
+                kc = kc0
             # the spring is K_c (depth - o), o its anchor: 0 at first, moved in where the
             # spring's rise is held to one ramp step (below), and following the reading
             # out where the reading is above it (the spring then stays at 0)
@@ -270,12 +284,12 @@ class PassivityController:
                 spring = f_wall
             if fm is not None and spring > fm:
                 spring = fm
-            if spring > self._spring + sp and kc > 0.0:
+            if spring > s0 + sp and kc > 0.0:
                 # a reading that jumped several counts in one tick: the spring rises by one
                 # ramp step (at its own period, like its cap) and its anchor moves in to
                 # match. Moving the anchor in while compressed takes stored energy out
                 # (K_c (depth - o)^2 / 2 falls), so the spring stays passive (item 0)
-                spring = self._spring + sp
+                spring = s0 + sp
                 o = depth - spring / kc
             if dq < 0.0:
                 inward = self._spring - kc * dq
@@ -308,26 +322,25 @@ class PassivityController:
             ex = abs(dq) + q         # the deficit: the largest displacement the readings allow
         if ex > 0.0:
             u -= b_x * ex * ex / dt
-        rise = spring - self._spring   # the spring's change since the last tick
+        rise = spring - s0   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf
         self._kc = kc if spring > 0.0 else 0.0   # 0 where the spring is 0 (out of the wall, no damping, at its anchor)
-        c_m = dt * dt / (2.0 * m) if m else 0.0
+        if f_wall == 0.0 and a1 == 0.0 and f1 == 0.0:
+            self.energy_j = u if u > 0.0 else 0.0
+            self._sent = 0.0
+            return 0.0
+        self.energy_j = u
         if e0_p is not None:
             e0 = e0_p
         else:
             e0 = full * h
             if e0 > allowance:
                 e0 = allowance
-        if f_wall == 0.0 and self._out == 0.0 and f1 == 0.0:
-            self.energy_j = u if u > 0.0 else 0.0
-            self._sent = 0.0
-            return 0.0
-        self.energy_j = u
         if u - e0 > self.overdrawn_j:
             self.overdrawn_j = u - e0
         # work in the direction of the wall's force (the last output's when the wall is 0)
-        sg = 1.0 if (f_wall > 0.0 or (f_wall == 0.0 and self._out >= 0.0)) else -1.0
+        sg = 1.0 if (f_wall > 0.0 or (f_wall == 0.0 and a1 >= 0.0)) else -1.0
         target = sg * f_wall
         if fm is not None and target > fm:
             target = fm
@@ -366,7 +379,8 @@ class PassivityController:
             # largest change of motion of the window carried through the ramp (with what a
             # change of the held force gives the free arm), and the third difference
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
-                    + q / (self._still if self._still > 2 else 2))
+                    + q / (still if still > 2 else 2))
+            c_m = dt * dt / (2.0 * m) if m else 0.0
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
             if a == lo and lo > 0.0 and u > e0 and _cost_scalar(lo, p, lead, c_m, step, h) > e0 - u:
                 # the book is overdrawn (the hand outran the plan) and even the ramp down
@@ -383,7 +397,6 @@ class PassivityController:
                 if not self._said:
                     self._say_spent(u, e0)
         out = spring + sg * a
-        self._out = out
         self._sent = out
         return out
 
@@ -404,14 +417,13 @@ class PassivityController:
         a commit before the next :meth:`step`, that step takes the force the last one
         returned as applied."""
         self._pending = False
-        if f_applied != f_applied or f_applied in (math.inf, -math.inf):
+        if not -_INF < f_applied < _INF:   # NaN or infinite: none applied
             f_applied = 0.0
         self._f2 = self._f1
         self._f1 = f_applied - self._spring   # the extra actually held (the ramp starts from it)
         self._a3 = self._a2
         self._a2 = self._a1
         self._a1 = f_applied
-        self._out = f_applied
 
     def report(self) -> dict[str, float]:
         """``energy_bound_j`` (U, J: upper bound of the energy given to the user over the
