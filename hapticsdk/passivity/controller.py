@@ -381,14 +381,18 @@ class PassivityController:
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (still if still > 2 else 2))
             c_m = dt * dt / (2.0 * m) if m else 0.0
-            a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
-            if a == lo and lo > 0.0 and u > e0 and _cost_scalar(lo, p, lead, c_m, step, h) > e0 - u:
-                # the book is overdrawn (the hand outran the plan) and even the ramp down
-                # does not fit: the energy goal before the ramp, the extra falls to the
-                # largest force that fits, else to the one of least cost (item 3, "when the
-                # book is overdrawn")
-                a = _below_ramp_scalar(e0 - u, lo, p, lead, c_m, step, h)
-                self.below_ramp_ticks += 1
+            A = e0 - u
+            if p == 0.0 and lo == 0.0 and A < 0.0 and 0.0 < lead + 2.0 * h < _INF and c_m < _INF:
+                # the bound spent and no extra held, the common tick of a spent book: the
+                # plan's answer is lo (the second exit of _affordable_scalar), decided here
+                # without the call. Its cost is 0 at lo = p = 0 and rises from there (lead + 2 h
+                # > 0 per unit of the ramp's sum, plus c_m >= 0 times its square), so no force
+                # fits under A < 0. A slope or c_m that overflowed takes the plan's other paths
+                # (a reading that overflows the slope overflows the book first, so A is not
+                # finite then)
+                a = lo
+            else:
+                a = _affordable_scalar(A, lo, hi, p, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a
