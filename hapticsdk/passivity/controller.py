@@ -82,7 +82,7 @@ class PassivityController:
     next tick with both books the whole span since the last reading.
     """
 
-    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
+    __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "below_ramp_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_started", "_still", "_spring", "_kf", "_kc", "_full",
                  "_jw", "_jw_top", "_jw_at", "_j3w", "_j3w_top", "_j3w_at",
                  "_a1", "_a2", "_a3", "_sent", "_pending", "_o")
@@ -393,6 +393,13 @@ class PassivityController:
                 a = lo
             else:
                 a = _affordable_scalar(A, lo, hi, p, lead, c_m, step, h)
+                if a == lo and lo > 0.0 and A < 0.0 and _cost_scalar(lo, p, lead, c_m, step, h) > A:
+                    # the book is overdrawn (the hand outran the plan) and even the ramp down
+                    # does not fit: the energy goal before the ramp, the extra falls to the
+                    # largest force that fits, else to the one of least cost (item 3, "when
+                    # the book is overdrawn")
+                    a = _below_ramp_scalar(A, lo, p, lead, c_m, step, h)
+                    self.below_ramp_ticks += 1
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a

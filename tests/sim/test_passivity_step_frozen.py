@@ -2,8 +2,9 @@
 made cheaper in round 12 of issue 30 (the window maxima written out in the step, the
 controller's fields read once, the applied force kept once, a spent book's tick decided
 without calling the plan),
-against a frozen copy of the step and commit as they were before (commit ba2e7f0),
-bit for bit, on input sequences hypothesis draws:
+against a frozen copy of the step and commit as they were before (commit ba2e7f0, with the
+two rules of caa970d added: the spring's inward rise and the fall below the ramp with the
+book overdrawn), bit for bit, on input sequences hypothesis draws:
 
 * readings that dwell, move by fractions of a count or jump by millimetres, reverse, and
   are now and then NaN, infinite or huge (1e308: the step's arithmetic overflows);
@@ -35,13 +36,14 @@ hyp = pytest.importorskip("hypothesis", reason="hypothesis (the test extra) is n
 from hypothesis import given, settings, strategies as st  # noqa: E402
 
 from hapticsdk.passivity import ControllerSettings, PassivityController  # noqa: E402
-from hapticsdk.passivity.plan import _HIST, _affordable_scalar  # noqa: E402
+from hapticsdk.passivity.plan import (_HIST, _ROUNDING_SLACK, _affordable_scalar, _below_ramp_scalar,  # noqa: E402
+                                      _cost_scalar)
 from hapticsdk.passivity.settings import _spring_stiffness_and_step  # noqa: E402
 
 _INF = math.inf
 
 
-# ---- the frozen copy (ba2e7f0), not to be edited ----------------------------------------
+# ---- the frozen copy (ba2e7f0 with caa970d's two rules), not to be edited ----------------------------------------
 
 class _WindowMax:
     __slots__ = ('ring', 'top', 'at')
@@ -63,7 +65,8 @@ class _WindowMax:
         return self.top
 
 class _FrozenController:
-    __slots__ = ('settings', 'energy_j', 'active_ticks', 'withheld_n_ticks', 'overdrawn_j', 'spent_ticks', '_said',
+    __slots__ = ('settings', 'energy_j', 'active_ticks', 'withheld_n_ticks', 'overdrawn_j', 'spent_ticks',
+                 'below_ramp_ticks', '_said',
                  '_q1', '_q2', '_hist', '_hp', '_f1', '_f2', '_out', '_started', '_still', '_spring', '_kf', '_kc',
                  '_full', '_jw', '_j3w', '_a1', '_a2', '_a3', '_sent', '_pending', '_o')
 
@@ -78,6 +81,7 @@ class _FrozenController:
         self.withheld_n_ticks = 0.0
         self.overdrawn_j = 0.0
         self.spent_ticks = 0
+        self.below_ramp_ticks = 0
         self._q1 = self._q2 = 0.0
         self._hist = [0.0] * _HIST
         self._hp = 0
@@ -191,6 +195,13 @@ class _FrozenController:
             if spring > self._spring + sp and kc > 0.0:
                 spring = self._spring + sp
                 o = depth - spring / kc
+            if dq < 0.0:
+                inward = self._spring - kc * dq
+            else:
+                inward = self._spring
+            if spring > inward * _ROUNDING_SLACK and kc > 0.0:
+                spring = inward
+                o = depth - spring / kc
         self._o = o
         if spring > 0.0:
             kf = spring / depth if o == 0.0 else kc
@@ -249,6 +260,9 @@ class _FrozenController:
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (self._still if self._still > 2 else 2))
             a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
+            if a == lo and lo > 0.0 and u > e0 and _cost_scalar(lo, p, lead, c_m, step, h) > e0 - u:
+                a = _below_ramp_scalar(e0 - u, lo, p, lead, c_m, step, h)
+                self.below_ramp_ticks += 1
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a
@@ -344,7 +358,7 @@ def _bits(v: Any) -> Any:
 
 def _book(pc: Any) -> tuple:
     return tuple(_bits(getattr(pc, k)) for k in ("energy_j", "overdrawn_j", "active_ticks", "withheld_n_ticks",
-                                                  "spent_ticks", "_said"))
+                                                  "spent_ticks", "below_ramp_ticks", "_said"))
 
 
 class _Said(logging.Handler):
