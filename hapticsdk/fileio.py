@@ -15,7 +15,11 @@ and Windows). So:
   systems the rename alone keeps readers safe);
 - a symbolic link at the target is replaced by the new regular file; its old target
   is not written through (a link planted in a calibration folder cannot redirect a
-  write elsewhere).
+  write elsewhere);
+- a target that is neither a regular file nor a link (a device such as ``/dev/null``, a
+  named pipe, a socket) is refused before anything is written: a replace would put a
+  regular file where the device or pipe was (run as root with ``--out /dev/null``, that
+  removed the machine's ``/dev/null``).
 
 - with ``verify=`` (every writer of a file the SDK reads back passes its reader), the
   finished temporary file is read back by that reader, with the reader's own limits,
@@ -36,6 +40,7 @@ import io
 import json
 import os
 import re
+import stat
 import tempfile
 from pathlib import Path
 from typing import IO, Any, Callable, Iterator
@@ -69,6 +74,24 @@ def _verify(verify: Callable[[Path], Any], tmp: str, name: str) -> None:
                                    reason=reason) from None
 
 
+def _special_file(p: Path) -> bool:
+    """Whether ``p`` exists and is neither a regular file nor a symbolic link (a device such
+    as ``/dev/null``, a named pipe, a socket). The SDK writes a file by replacing it whole,
+    and a replace puts a regular file where the device or pipe was."""
+    try:
+        mode = os.lstat(p).st_mode
+    except OSError:
+        return False
+    return not (stat.S_ISREG(mode) or stat.S_ISLNK(mode) or stat.S_ISDIR(mode))
+
+
+def _refuse_special(p: Path, field: str) -> None:
+    if _special_file(p):
+        raise FileWriteError(f"{str(p)!r} is not a regular file (a device, a pipe or a socket): the SDK writes "
+                             "a file by replacing it whole, which would put a file in its place; give a file "
+                             "path", field=field)
+
+
 def check_output_path(path: str | os.PathLike[str], *, field: str = "output", overwrite: bool = True) -> Path:
     """Check, before any work is done, that ``path`` can be written.
 
@@ -91,6 +114,7 @@ def check_output_path(path: str | os.PathLike[str], *, field: str = "output", ov
         raise FileWriteError(f"{str(parent)!r} is not a directory", field=field)
     if p.is_dir():
         raise FileWriteError(f"{str(p)!r} is a directory", field=field)
+    _refuse_special(p, field)
     if not overwrite and (p.exists() or p.is_symlink()):
         raise FileWriteError(f"{str(p)!r} exists already (refusing to overwrite)", field=field)
     if not os.access(parent, os.W_OK):
@@ -154,6 +178,7 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
         raise FileWriteError(f"directory {str(parent)!r} does not exist", field=name)
     if target.is_dir() and not target.is_symlink():
         raise FileWriteError(f"{str(target)!r} is a directory", field=name)
+    _refuse_special(target, name)
     with _lock(target) as held:
         if held:
             _remove_orphans(parent, target.name)

@@ -332,3 +332,33 @@ def test_a_refused_json_or_npz_names_the_path_when_no_field_is_given(tmp_path):
     with pytest.raises(FileWriteError) as ei:
         atomic_savez(q, a=np.array([object()], dtype=object))
     assert ei.value.field == str(q) and not q.exists()
+
+
+@pytest.mark.parametrize("writer", ["bytes", "check"])
+def test_a_device_or_pipe_at_the_target_is_refused_and_left_in_place(tmp_path, writer):
+    """A write replaces its target whole, so a target that is not a regular file (a named
+    pipe here; a device such as /dev/null is the same case) is refused by name before
+    anything is written, and stays what it was. (Replacing /dev/null, as root, removed the
+    machine's /dev/null.)"""
+    import stat as st
+
+    from hapticsdk.fileio import atomic_write_bytes, check_output_path
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    with pytest.raises(FileWriteError, match="not a regular file"):
+        if writer == "bytes":
+            atomic_write_bytes(fifo, b"data")
+        else:
+            check_output_path(fifo)
+    assert st.S_ISFIFO(os.lstat(fifo).st_mode)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe"]   # no temporary file left
+
+
+def test_the_cli_refuses_a_pipe_as_its_output_with_status_2(tmp_path):
+    fifo = tmp_path / "out.json"
+    os.mkfifo(fifo)
+    r = subprocess.run([sys.executable, "-m", "hapticsdk", "export", "S7", "-o", str(fifo)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "not a regular file" in r.stderr
+    assert os.path.exists(fifo) and not os.path.isfile(fifo)
