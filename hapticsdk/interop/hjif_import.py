@@ -10,13 +10,13 @@ checks it against the values the perceptions themselves carry.
 
 from __future__ import annotations
 
-import json
 import os
 from typing import Any
 
 from ..errors import FormatError
 from .hjif_export import META_FORMAT, META_MARKER
-from .hjif_model import HapticFile, Perception, read_hjif
+from ..schemas_io import non_finite_at
+from .hjif_model import HapticFile, Perception, load_json, read_hjif
 from .hjif_synth import (
     SYNTH_BAND_TYPES,
     effect_length_ticks,
@@ -40,13 +40,32 @@ def split_description(text: str, *, field: str = "description") -> tuple[str, di
     i = text.find(META_MARKER)
     if i < 0:
         return text, None
-    try:
-        meta = json.loads(text[i + len(META_MARKER):])
-    except ValueError as exc:
-        raise FormatError(f"hapticsdk metadata is not valid JSON: {exc}", field=field) from None
+    try:  # the file reader's JSON rules: bounded depth, no NaN/Infinity, no duplicate key
+        meta = load_json(text[i + len(META_MARKER):], source=field)
+    except FormatError as exc:
+        raise FormatError(f"hapticsdk metadata is not valid JSON: {exc.reason}", field=field) from None
     if not isinstance(meta, dict):
         raise FormatError("hapticsdk metadata must be a JSON object", field=field)
+    bad = non_finite_at(meta)
+    if bad is not None:
+        raise FormatError(f"hapticsdk metadata: {bad[1]} at {bad[0][1:]} is not a finite number", field=field)
     return text[:i], meta
+
+
+def _meta_entry(m: Any, field: str) -> dict[str, Any]:
+    """A material entry of the top-level metadata, checked where the SDK uses it: an
+    object with a string ``name``; ``features`` / ``targets`` objects of numbers;
+    ``generated`` a bool."""
+    if not isinstance(m, dict) or not isinstance(m.get("name"), str):
+        raise FormatError("hapticsdk metadata: a material entry is not an object with a string name", field=field)
+    for key in ("features", "targets"):
+        v = m.get(key)
+        if v is not None and not (isinstance(v, dict) and all(
+                isinstance(x, (int, float)) and not isinstance(x, bool) for x in v.values())):
+            raise FormatError(f"hapticsdk metadata: {m['name']!r}.{key} is not an object of numbers", field=field)
+    if not isinstance(m.get("generated", False), bool):
+        raise FormatError(f"hapticsdk metadata: {m['name']!r}.generated is not true or false", field=field)
+    return m
 
 
 def _signal_value(p: Perception) -> float | None:
@@ -80,17 +99,21 @@ def sdk_materials(hfile: HapticFile) -> dict[str, dict[str, Any]]:
     if not top or top.get("format") != META_FORMAT:
         return {}
     out: dict[str, dict[str, Any]] = {}
-    for m in top.get("materials", []):
-        if not isinstance(m, dict) or "name" not in m:
-            raise FormatError("hapticsdk metadata: a material entry has no name", field="description")
-        out[str(m["name"])] = {**m, "parts": {}}
+    materials = top.get("materials", [])
+    if not isinstance(materials, list):
+        raise FormatError("hapticsdk metadata: materials is not a list", field="description")
+    for m in materials:
+        m = _meta_entry(m, "description")
+        out[m["name"]] = {**m, "parts": {}}
     for p in hfile.perceptions:
-        _, meta = split_description(p.description, field=f"{p.path}.description")
+        field = f"{p.path}.description"
+        _, meta = split_description(p.description, field=field)
         if not meta or "material" not in meta:
             continue
-        name = str(meta["material"])
+        name, role = meta["material"], meta.get("role", p.perception_modality)
+        if not isinstance(name, str) or not isinstance(role, str):
+            raise FormatError("hapticsdk metadata: material and role must be strings", field=field)
         entry = out.setdefault(name, {"name": name, "parts": {}})
-        role = str(meta.get("role", p.perception_modality))
         part = {"perception": p.path, "modality": p.perception_modality, **meta}
         value = _signal_value(p)
         if role == "stiffness":
