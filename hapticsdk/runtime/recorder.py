@@ -182,10 +182,10 @@ def _read_part(part: Path) -> tuple[dict[str, Any], np.ndarray]:
             (h,) = struct.unpack("<Q", head[8:])
             if h > 1 << 20:
                 raise RecordingError(f"{part}: header of {h} bytes", field="record")
-            header = json.loads(fh.read(h))
-    except (OSError, ValueError) as exc:
+            raw = fh.read(h)
+    except OSError as exc:
         raise RecordingError(f"{part}: unreadable recording stream ({exc})", field="record") from None
-    header = layout.check_header(header, part)
+    header = layout.check_header(layout.parse_header(raw, part), part)
     width = len(header["columns"])
     off = 16 + h
     n = max(os.path.getsize(part) - off, 0) // (8 * width)

@@ -168,7 +168,7 @@ def read_part_header(part: Path) -> tuple[dict[str, Any], int]:
     h5py = h5py_module()
     with _open_part(h5py, part) as f:
         try:
-            header = layout.check_header(json.loads(f.attrs["stream_header_json"]), part)
+            header = layout.check_header(layout.parse_header(f.attrs["stream_header_json"], part), part)
             rows = int(f["rows"][0])
             shortest = min(f[name].shape[0] for name in layout.stored(header["columns"], header["roles"]))
         except RecordingError:   # the header's own check names the field

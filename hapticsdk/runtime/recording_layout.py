@@ -53,6 +53,42 @@ def take(a: Any, idx: tuple[int, ...]) -> Any:
     return a[:, idx[0]] if len(idx) == 1 else a[:, idx[0]:idx[-1] + 1]
 
 
+#: the largest object id a stream maps to a name: ids travel in the float64
+#: ``object_id`` column of every row, and a float64 holds each integer up to 2**53
+#: exactly (53-bit significand), none above it
+MAX_OBJECT_ID = 2 ** 53
+
+
+def parse_header(raw: Any, part: Any) -> Any:
+    """The JSON text of a stream header (``bytes`` of an ``.npz`` stream, the ``str``
+    attribute of an HDF5 one) parsed with the rules of every SDK JSON reader
+    (:func:`hapticsdk.schemas_io.parse_json`: bounded nesting, no ``NaN`` / ``Infinity``);
+    anything else raises :class:`~hapticsdk.errors.RecordingError` naming the file and
+    ``record`` plus the JSON path."""
+    from ..errors import RecordingError
+    from ..schemas_io import parse_json
+
+    if isinstance(raw, (bytes, bytearray, memoryview)):
+        try:
+            raw = bytes(raw).decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise RecordingError(f"{part}: damaged recording stream header: not UTF-8 text (byte {exc.start})",
+                                 field="record.header") from None
+    if not isinstance(raw, str):
+        raise RecordingError(f"{part}: damaged recording stream header: {type(raw).__name__}, not JSON text",
+                             field="record.header")
+    return parse_json(raw, part, field="record", error=RecordingError)
+
+
+def _is_object_id(key: Any) -> bool:
+    """``key`` spells an object id: ASCII digits with an optional minus, within
+    :data:`MAX_OBJECT_ID` (``str.isdigit`` also takes ``"\u00b2"``, which ``int`` does not)."""
+    import re
+
+    return (isinstance(key, str) and re.fullmatch(r"-?[0-9]{1,16}", key) is not None
+            and abs(int(key)) <= MAX_OBJECT_ID)
+
+
 def check_header(header: Any, part: Any) -> dict[str, Any]:
     """The header of a recording stream (``.part``, both writers), checked before its
     fields are used: an object whose ``roles`` are distinct names, whose ``columns`` are
@@ -84,7 +120,7 @@ def check_header(header: Any, part: Any) -> dict[str, Any]:
         raise bad(f"period_s {exc.reason}", "period_s") from None
     objects = header.get("objects", {})
     if not isinstance(objects, Mapping) or not all(
-            isinstance(k, str) and k.lstrip("-").isdigit() and isinstance(v, str) for k, v in objects.items()):
+            _is_object_id(k) and isinstance(v, str) for k, v in objects.items()):
         raise bad(f"objects must map object ids to names, got {objects!r:.80}", "objects")
     return dict(header)
 
