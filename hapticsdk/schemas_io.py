@@ -329,8 +329,21 @@ def parse_json(text: str, p: str | Path, *, field: str, error: type[ValidationEr
         where = json_path_at(text, _deep_position(text, max_depth))
         raise error(f"{p}: JSON nested {depth} levels deep, more than the {max_depth} accepted (from "
                     f"{field}{where})", field=f"{field}{where}")
+    twice: list[tuple[dict[str, Any], str]] = []
+
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        obj = dict(items)
+        if len(obj) != len(items) and not twice:  # the first object found, named after the parse
+            seen: set[str] = set()
+            for k, _ in items:
+                if k in seen:
+                    twice.append((obj, k))
+                    break
+                seen.add(k)
+        return obj
+
     try:
-        data = json.loads(text, parse_constant=_Constant)
+        data = json.loads(text, parse_constant=_Constant, object_pairs_hook=pairs)
     except json.JSONDecodeError as exc:
         where = json_path_at(text, exc.pos)
         raise error(f"{p}: not valid JSON: {exc}", field=f"{field}{where}") from None
@@ -340,7 +353,25 @@ def parse_json(text: str, p: str | Path, *, field: str, error: type[ValidationEr
     bad = _find_constant(data) if ("NaN" in text or "Infinity" in text) else None
     if bad is not None:
         raise error(f"{p}: {bad[1]} is not a JSON number (at {field}{bad[0]})", field=f"{field}{bad[0]}")
+    if twice:
+        where = f"{field}{_path_of(data, twice[0][0])}.{twice[0][1]}"
+        raise error(f"{p}: key {twice[0][1]!r} appears twice in one object (at {where}); JSON readers differ "
+                    "on which value they keep", field=where)
     return data
+
+
+def _path_of(data: Any, target: Any) -> str:
+    """The JSON path of the object ``target`` (by identity) in parsed ``data``; iterative."""
+    stack: list[tuple[Any, str]] = [(data, "")]
+    while stack:
+        node, where = stack.pop()
+        if node is target:
+            return where
+        if isinstance(node, dict):
+            stack.extend((v, f"{where}.{k}") for k, v in node.items())
+        elif isinstance(node, list):
+            stack.extend((v, f"{where}[{i}]") for i, v in enumerate(node))
+    return ""
 
 
 def _deep_position(text: str, max_depth: int) -> int:
