@@ -163,6 +163,15 @@ def file_path(value: Any, field: str = "path") -> "Path":
         raise ValidationError(f"must be a file path, got {value!r:.60}", field=field)
     if "\x00" in text:   # the operating system's calls raise ValueError on it
         raise ValidationError(f"must not contain a NUL character, got {text!r:.60}", field=field)
+    try:  # the file system's own limits (NAME_MAX per name, PATH_MAX), asked once here:
+        os.lstat(text)  # pathlib's exists() / is_file() raise OSError on them instead of answering
+    except OSError as exc:
+        import errno
+        if exc.errno == errno.ENAMETOOLONG:
+            raise ValidationError(f"file name too long for the file system ({len(os.fsencode(text))} bytes, "
+                                  f"a name longer than its limit): {text[:60]!r}...", field=field) from None
+    except (ValueError, UnicodeError):  # a lone surrogate the file system encoding cannot hold
+        raise ValidationError(f"not a file name this system can encode: {text[:60]!r}", field=field) from None
     return Path(text)
 
 

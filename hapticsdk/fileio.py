@@ -46,7 +46,7 @@ from pathlib import Path
 from typing import IO, Any, Callable, Iterator
 
 from .cache import cache_dir, prune
-from .errors import FileWriteError
+from .errors import FileWriteError, ValidationError
 
 __all__ = ["UnreadableWriteError", "cache_dir", "atomic_writer", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_savez",
            "check_output_path", "FileWriteError"]
@@ -104,9 +104,13 @@ def check_output_path(path: str | os.PathLike[str], *, field: str = "output", ov
     Raises:
         FileWriteError: naming ``field`` and the reason.
     """
-    p = Path(os.fspath(path))
-    if str(p) == "":
+    if isinstance(path, str) and path == "":
         raise FileWriteError("empty output path", field=field)
+    from .argcheck import file_path
+    try:
+        p = file_path(path, field)
+    except ValidationError as exc:
+        raise FileWriteError(exc.reason, field=field) from None
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
         raise FileWriteError(f"directory {str(parent)!r} does not exist", field=field)
@@ -171,7 +175,11 @@ def atomic_writer(path: str | os.PathLike[str], mode: str = "wb", *, encoding: s
     """
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_writer mode must be 'wb' or 'w', got {mode!r}")
-    target = Path(os.fspath(path))
+    from .argcheck import file_path
+    try:
+        target = file_path(path, field or "path")
+    except ValidationError as exc:
+        raise FileWriteError(exc.reason, field=field or str(path)[:200]) from None
     name = field or str(target)
     parent = target.parent if str(target.parent) else Path(".")
     if not parent.is_dir():

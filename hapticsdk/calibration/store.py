@@ -179,7 +179,8 @@ class CalibrationEntry:
 def _scan(directory: str | Path | None) -> list[tuple[CalibrationEntry, Calibration | None]]:
     """Every ``*.json`` file of the calibration directory: its entry and the loaded
     calibration (``None`` when it does not load)."""
-    d = Path(directory) if directory is not None else calibration_dir()
+    from ..argcheck import file_path
+    d = file_path(directory, "directory") if directory is not None else calibration_dir()
     out: list[tuple[CalibrationEntry, Calibration | None]] = []
     if not d.is_dir():
         return out

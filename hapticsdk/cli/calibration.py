@@ -115,8 +115,12 @@ def _check_save(args: argparse.Namespace) -> None:
     if args.out:
         check_output_path(args.out, field="--out")
     if args.save:
-        from pathlib import Path
-        d = Path(args.save)
+        from ..argcheck import file_path
+        from ..errors import ValidationError
+        try:
+            d = file_path(args.save, "--save")
+        except ValidationError as exc:
+            raise FileWriteError(exc.reason, field="--save") from None
         if d.exists() and not d.is_dir():
             raise FileWriteError(f"{str(d)!r} is not a directory", field="--save")
 

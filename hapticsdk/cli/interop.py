@@ -65,8 +65,10 @@ def register(sub: Any) -> None:
 def _plan_from_arg(text: str, *, no_importance: bool, seed: int | None) -> Any:
     from ..plan import RenderPlan
 
+    from .scene import _is_path
+
     path = Path(text)
-    if path.is_file():
+    if _is_path(text) and path.is_file():
         from ..schemas_io import read_json
         data = read_json(path, field="plan")
         if isinstance(data, dict) and "plan_version" in data:

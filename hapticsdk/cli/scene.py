@@ -37,12 +37,24 @@ def register(sub: Any) -> None:
     p.set_defaults(func=cmd_plan)
 
 
+def _is_path(text: str) -> bool:
+    """``text`` names an existing file or folder (a name the file system cannot hold,
+    e.g. longer than its limit, names none: it is then read as a material name)."""
+    from ..argcheck import file_path
+    from ..errors import ValidationError
+
+    try:
+        return file_path(text).exists()
+    except ValidationError:
+        return False
+
+
 def _scene_from_arg(text: str) -> Any:
     from ..errors import ValidationError
     from ..scene import Scene
 
     path = Path(text)
-    if path.suffix.lower() == ".json" or path.exists():
+    if path.suffix.lower() == ".json" or _is_path(text):
         return Scene.load(path)
     from ..perception.materials import load_library
     lib = load_library()

@@ -111,9 +111,14 @@ def cmd_generate(args: argparse.Namespace) -> int:
 def _check_generate_out(out: Path) -> None:
     """The output of ``dataset generate`` is a directory: refuse an existing file (it
     would be replaced by a directory's worth of files) and a missing parent directory."""
-    from ..errors import FileWriteError
+    from ..errors import FileWriteError, ValidationError
     from ..fileio import check_output_path
 
+    from ..argcheck import file_path
+    try:
+        file_path(out, "out")
+    except ValidationError as exc:
+        raise FileWriteError(exc.reason, field="out") from None
     if out.exists() and not out.is_dir():
         raise FileWriteError(f"{str(out)!r} exists and is not a directory (refusing to overwrite it)",
                              field="out")

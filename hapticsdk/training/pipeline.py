@@ -144,6 +144,11 @@ def _mkdir(d: Path) -> None:
 
 
 def _read_trial_features(path: Path) -> FeatureTable:
+    from ..argcheck import file_path
+    try:
+        path = file_path(path, "file")
+    except ValidationError as exc:
+        raise RecordingError(exc.reason, field="file") from None
     if not path.is_file():
         raise RecordingError(f"{path}: trial feature table not found", field="file")
     from ..schemas_io import read_csv_rows
@@ -181,7 +186,11 @@ def _read_trial_features(path: Path) -> FeatureTable:
 
 def load_table(path: Path | str) -> TrainingTable:
     """Load a training table from a feature data set or a recording set (directory or its JSON)."""
-    p = Path(path)
+    from ..argcheck import file_path
+    try:
+        p = file_path(path, "dataset")
+    except ValidationError as exc:
+        raise RecordingError(exc.reason, field="dataset") from None
     if p.is_file():
         p = p.parent
     if (p / MANIFEST_NAME).is_file():

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import RecordingError
+from ..errors import RecordingError, ValidationError
 from ..schemas_io import load_schema, non_finite_at, read_json
 
 #: Columns of one trial file, in file order.
@@ -135,7 +135,11 @@ def read_trial_file(path: Path, *, suffix: str | None = None) -> dict[str, np.nd
     """Read the columns of one trial file; missing file/columns or bad values raise RecordingError.
     ``suffix`` (``".npz"`` / ``".csv"``) overrides the path's own (a writer reading back
     its temporary file)."""
-    path = Path(path)
+    from ..argcheck import file_path
+    try:
+        path = file_path(path, "file")
+    except ValidationError as exc:
+        raise RecordingError(exc.reason, field="file") from None
     kind = path.suffix if suffix is None else suffix
     if not path.is_file():
         raise RecordingError(f"{path}: trial file not found", field="file")
@@ -344,7 +348,11 @@ def path_inside(root: Path | str, name: Any, *, field: str, where: str = "") -> 
 
 def _read_checked(path: Path | str, default_name: str, schema: str) -> tuple[Path, Any]:
     """Read a JSON file (or ``default_name`` inside a directory) and validate it."""
-    p = Path(path)
+    from ..argcheck import file_path
+    try:
+        p = file_path(path, "file")
+    except ValidationError as exc:
+        raise RecordingError(exc.reason, field="file") from None
     if p.is_dir():
         p = p / default_name
     doc = read_json(p, field="file", error=RecordingError)
