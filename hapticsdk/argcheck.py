@@ -197,8 +197,10 @@ def call_with_options(fn: Any, *args: Any, options: Any, field: str) -> Any:
     """``fn(*args, **options)``, where ``options`` came from a file or a caller: not an
     object, or a keyword ``fn`` (or the class it forwards to) does not take, raises a
     :class:`ValidationError` naming the option (``plan.settings.renderer_options.hardness.sink``)
-    instead of a raw ``TypeError``; so does a ``TypeError`` or ``ValueError`` that ``fn``
-    raises on a value of the options (a plugin that did not check one), naming ``field``."""
+    instead of a raw ``TypeError``; so does a ``TypeError``, ``ValueError``, ``LookupError``
+    (an index or key of an option value) or ``ArithmeticError`` (``OverflowError`` of a
+    float that became an infinite int, ``decimal.InvalidOperation``) that ``fn`` raises on
+    a value of the options (a plugin that did not check one), naming ``field``."""
     import re
     from collections.abc import Mapping
 
@@ -211,11 +213,13 @@ def call_with_options(fn: Any, *args: Any, options: Any, field: str) -> Any:
         if head and head in options:
             raise type(exc)(exc.reason, field=f"{field}.{exc.field}") if type(exc) is ValidationError else exc
         raise
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, LookupError, ArithmeticError) as exc:
         m = re.search(r"unexpected keyword argument '([^']*)'", str(exc)) if isinstance(exc, TypeError) else None
         if m is not None:
             key = m.group(1)
             raise ValidationError(f"unknown option {key!r} ({exc})", field=f"{field}.{key}") from None
+        if not options and not isinstance(exc, (TypeError, ValueError)):
+            raise  # no option to blame: a bug of the callee
         # the callee (often a plugin) choked on a value of these options instead of
         # naming it: the options are the input at fault, so the error names them
         name = getattr(fn, "__qualname__", None) or type(fn).__name__
