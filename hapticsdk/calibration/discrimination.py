@@ -56,6 +56,30 @@ def read_commented_csv(path: str | Path, what: str) -> tuple[Path, list[str], li
     return p, comments, rows
 
 
+#: the largest whole number a column of answers holds: the float64 a CSV cell is read
+#: as holds every integer up to 2**53 exactly
+_MAX_WHOLE = 2.0 ** 53
+
+
+def _whole_numbers(values: Any, name: str) -> np.ndarray:
+    """``values`` as int64, each one a whole number as it was given: a fraction, a NaN,
+    an infinity or more than 2**53 raises :class:`CalibrationError` naming ``name``
+    (``astype(int)`` truncated 0.5 to 0 and turned NaN into -2**63)."""
+    a = np.asarray(values)
+    if a.dtype.kind in "biu":
+        return a.astype(np.int64).reshape(-1)
+    try:
+        f = np.asarray(a, float).reshape(-1)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"answers: {name} must hold whole numbers, got {a.dtype} values") from None
+    bad = ~(np.isfinite(f) & (np.abs(f) <= _MAX_WHOLE))
+    bad[~bad] = f[~bad] != np.round(f[~bad])
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise CalibrationError(f"answers: {name} must hold whole numbers, got {f[i]!r} in row {i + 1}")
+    return f.astype(np.int64)
+
+
 @dataclass
 class DiscriminationAnswers:
     """One row per answer.
@@ -77,10 +101,10 @@ class DiscriminationAnswers:
     source: str = ""
 
     def __post_init__(self) -> None:
-        self.person = np.asarray(self.person, int).reshape(-1)
+        self.person = _whole_numbers(self.person, "person")
         self.frequency_hz = np.asarray(self.frequency_hz, float).reshape(-1)
         self.spring_n_per_mm = np.asarray(self.spring_n_per_mm, float).reshape(-1)
-        self.spring_stiffer = np.asarray(self.spring_stiffer, int).reshape(-1)
+        self.spring_stiffer = _whole_numbers(self.spring_stiffer, "spring_stiffer")
         n = self.person.size
         for name in ("frequency_hz", "spring_n_per_mm", "spring_stiffer"):
             if getattr(self, name).size != n:
@@ -142,9 +166,9 @@ class DiscriminationAnswers:
                     cols[j].append(float(r[k]))
             except (ValueError, IndexError):
                 raise CalibrationError(f"{p}: line {i}: bad row {r!r}") from None
-        return cls(person=np.asarray(cols[0]).astype(int), frequency_hz=np.asarray(cols[1]),
+        return cls(person=np.asarray(cols[0]), frequency_hz=np.asarray(cols[1]),  # whole numbers checked there
                    spring_n_per_mm=np.asarray(cols[2]),
-                   spring_stiffer=np.asarray(cols[3]).astype(int),
+                   spring_stiffer=np.asarray(cols[3]),
                    generated=any("GENERATED" in c for c in comments), source="; ".join(comments) or str(p))
 
 
