@@ -206,6 +206,20 @@ def read_csv_rows(path: str | Path, *, field: str, error: type[ValidationError] 
     return notes, rows
 
 
+def csv_header(row: list[str], path: Any, *, field: str, error: type[ValidationError] = ValidationError
+               ) -> list[str]:
+    """The column names of a CSV header row, stripped; a name given twice raises ``error``
+    naming it (each reader looked one up by the first or the last of the two, so which
+    column's numbers were used depended on the reader)."""
+    header = [h.strip() for h in row]
+    seen: set[str] = set()
+    for h in header:
+        if h and h in seen:
+            raise error(f"{path}: column {h!r} appears twice in the header", field=f"{field}.{h}")
+        seen.add(h)
+    return header
+
+
 def check_depth(data: Any, field: str, *, max_depth: int = MAX_JSON_DEPTH) -> None:
     """Refuse data built in memory (a dict given to ``Scene.from_dict``, a plan's dict)
     nested deeper than ``max_depth`` -- the bound :func:`read_json` puts on a file -- with

@@ -562,13 +562,14 @@ MAX_RUN_TICKS = MAX_CSV_BYTES // 50
 def _csv_table(path: Any, field_name: str, columns: tuple[str, ...]) -> tuple[dict[str, int], list[list[str]]]:
     """``(column -> index, rows below the header)`` of a CSV that has ``columns`` (read by
     :func:`hapticsdk.schemas_io.read_csv_rows`: UTF-8, bounded, well-formed)."""
-    from ..schemas_io import read_csv_rows
+    from ..schemas_io import csv_header, read_csv_rows
 
     _, rows = read_csv_rows(path, field=field_name, max_bytes=MAX_CSV_BYTES)
-    if len(rows) < 2 or not set(columns) <= set(rows[0]):
+    header = csv_header(rows[0], path, field=field_name) if rows else []
+    if len(rows) < 2 or not set(columns) <= set(header):
         raise ValidationError(f"{path}: needs the column(s) {', '.join(columns)} and one row at least",
                               field=field_name)
-    return {c: rows[0].index(c) for c in columns}, rows[1:]
+    return {c: header.index(c) for c in columns}, rows[1:]
 
 
 def _column(rows: list[list[str]], i: int, col: str, path: Any, field_name: str) -> np.ndarray:

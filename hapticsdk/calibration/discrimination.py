@@ -24,7 +24,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
-from ..errors import CalibrationError
+from ..errors import CalibrationError, ValidationError
 from .voicecoil import VoiceCoilCalibration
 
 #: Table 4 of the paper: reference springs (N/mm)
@@ -39,7 +39,6 @@ def read_commented_csv(path: str | Path, what: str) -> tuple[Path, list[str], li
     """``(path, comments, rows)`` of a CSV file whose ``#`` lines are comments (their text
     without ``#``; blank lines skipped, ``rows[0]`` is the header). A missing file raises
     :class:`CalibrationError` "<what> file not found"."""
-    from ..errors import ValidationError
     from ..schemas_io import read_csv_rows
 
     from ..argcheck import file_path
@@ -154,7 +153,11 @@ class DiscriminationAnswers:
         p, comments, rows = read_commented_csv(path, "answers")
         if not rows:
             raise CalibrationError(f"{p}: empty answers file")
-        header = [h.strip() for h in rows[0]]
+        from ..schemas_io import csv_header
+        try:
+            header = csv_header(rows[0], p, field="answers")
+        except ValidationError as exc:
+            raise CalibrationError(exc.reason) from None
         missing = [c for c in CSV_COLUMNS if c not in header]
         if missing:
             raise CalibrationError(f"{p}: missing column(s) {missing}; expected {list(CSV_COLUMNS)}")

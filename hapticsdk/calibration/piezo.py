@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CalibrationError
+from ..errors import CalibrationError, ValidationError
 
 #: relative slack when deciding whether a request lies inside the measured range
 _RANGE_RTOL = 1e-9
@@ -321,10 +321,15 @@ def read_measurements_csv(path: Any) -> PiezoTable:
     from .discrimination import read_commented_csv
 
     p, comments, rows = read_commented_csv(path, "measurements")
+    from ..schemas_io import csv_header
+
     cols = ("frequency_hz", "voltage_v", "acceleration_m_s2")
-    if not rows or any(c not in [h.strip() for h in rows[0]] for c in cols):
+    try:
+        header = csv_header(rows[0], p, field="measurements") if rows else []
+    except ValidationError as exc:
+        raise CalibrationError(exc.reason) from None
+    if any(c not in header for c in cols):
         raise CalibrationError(f"{p}: needs a header with columns {list(cols)}")
-    header = [h.strip() for h in rows[0]]
     idx = [header.index(c) for c in cols]
     try:
         data = np.array([[float(r[k]) for k in idx] for r in rows[1:]], float).reshape(-1, 3)

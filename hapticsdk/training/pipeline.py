@@ -151,11 +151,11 @@ def _read_trial_features(path: Path) -> FeatureTable:
         raise RecordingError(exc.reason, field="file") from None
     if not path.is_file():
         raise RecordingError(f"{path}: trial feature table not found", field="file")
-    from ..schemas_io import read_csv_rows
+    from ..schemas_io import csv_header, read_csv_rows
     _, rows = read_csv_rows(path, field="file", error=RecordingError)  # UTF-8, bounded, well-formed
     if not rows:
         raise RecordingError(f"{path}: empty file", field="rows")
-    head = rows[0]
+    head = csv_header(rows[0], path, field="file", error=RecordingError)
     need = ["sample", "trial", *FEATURE_NAMES, "df_hz"]
     missing = [c for c in need if c not in head]
     if missing:

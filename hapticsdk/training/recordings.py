@@ -161,11 +161,11 @@ def read_trial_file(path: Path, *, suffix: str | None = None) -> dict[str, np.nd
                    else f"{type(exc).__name__}: {exc}")
             raise RecordingError(f"{path}: unreadable npz ({why})", field="file") from None
     elif kind == ".csv":
-        from ..schemas_io import read_csv_rows
+        from ..schemas_io import csv_header, read_csv_rows
         _, rows = read_csv_rows(path, field="file", error=RecordingError)  # UTF-8, bounded, well-formed
         if not rows:
             raise RecordingError(f"{path}: empty file (no header)", field="rows")
-        header = [h.strip() for h in rows[0]]
+        header = csv_header(rows[0], path, field="file", error=RecordingError)
         body = [r for r in rows[1:] if r]
         cols = {}
         for j, name in enumerate(header):
