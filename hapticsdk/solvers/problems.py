@@ -57,13 +57,21 @@ def load_model(spec: str | PerceptionModel) -> PerceptionModel:
     return model
 
 
+def _items(value: Any, field: str, what: str) -> tuple[Any, ...]:
+    """The items of a list argument: a string, bytes, a non-iterable, or an object that is
+    iterable by its type and not by its value (a 0-d numpy array) raise ValidationError."""
+    if not isinstance(value, (str, bytes)) and isinstance(value, Iterable):
+        try:
+            return tuple(value)
+        except TypeError:
+            pass
+    raise ValidationError(f"must be {what}, got {type(value).__name__} {value!r:.60}", field=field)
+
+
 def _dimension_names(dimensions: Any) -> tuple[str, ...]:
     """``dimensions=`` as a tuple of names: a list or tuple, not one name (a string would
     be read as its letters) nor a number."""
-    if isinstance(dimensions, (str, bytes)) or not isinstance(dimensions, Iterable):
-        raise ValidationError(f"must be a list of dimension names, got {type(dimensions).__name__} "
-                              f"{dimensions!r:.60}", field="dimensions")
-    names = tuple(dimensions)
+    names = _items(dimensions, "dimensions", "a list of dimension names")
     for i, n in enumerate(names):   # a name is looked up in dicts: a list or an array is none
         if not isinstance(n, str) or not n:
             raise ValidationError(f"must be a dimension name, got {type(n).__name__} {n!r:.60}",
@@ -156,10 +164,7 @@ def build_problem(targets: Mapping[str, float] | np.ndarray | Sequence[Any], *,
         raise ValidationError(f"must be an object {{feature: value}}, got {type(fixed).__name__}", field="fixed")
     if not isinstance(data_support, (bool, np.bool_)):
         raise ValidationError(f"must be True or False, got {data_support!r:.60}", field="data_support")
-    if isinstance(extra_constraints, (str, bytes)) or not isinstance(extra_constraints, Iterable):
-        raise ValidationError(f"must be a list of Constraint objects, got {type(extra_constraints).__name__}",
-                              field="extra_constraints")
-    extra_constraints = tuple(extra_constraints)
+    extra_constraints = _items(extra_constraints, "extra_constraints", "a list of Constraint objects")
     for i, c in enumerate(extra_constraints):
         if not isinstance(c, Constraint):
             raise ValidationError(f"must be a Constraint, got {type(c).__name__} {c!r:.60}",

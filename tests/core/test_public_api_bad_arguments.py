@@ -15,6 +15,8 @@ dimensions=<array>)`` (ambiguous truth value), ``render_plan(plan, material=[...
 
 from __future__ import annotations
 
+from decimal import Decimal
+
 import numpy as np
 import pytest
 
@@ -24,7 +26,10 @@ from hapticsdk.errors import HapticSDKError
 BAD = [float("nan"), float("inf"), -float("inf"), 10 ** 400, -1, 0, 1e308, True, None, "", "x" * 10000, "\x00",
        "a\x00b.json", "../../etc/passwd", [0.5], {"a": 1}, {"hardness": float("nan")}, {float("nan"): 0.5},
        {None: 0.5}, {"hardness": True}, {"hardness": 10 ** 400}, np.float32("nan"), np.array([np.nan]),
-       np.array([[0.5, np.inf]]), [[0.5, "x"]], object(), b"bytes", 2 ** 63, -2 ** 63, 1j]
+       np.array([[0.5, np.inf]]), [[0.5, "x"]], object(), b"bytes", 2 ** 63, -2 ** 63, 1j,
+       # a 0-d array passes isinstance(x, Iterable) and fails to iterate; the decimal NaN
+       # that raises on every comparison
+       np.array(0.5), np.array("S7"), Decimal("sNaN"), Decimal("1e400")]
 
 
 @pytest.fixture(scope="module")
@@ -47,6 +52,7 @@ def _calls(plan):
         "solve.tolerance": lambda v: hs.solve({"hardness": 0.5}, tolerance=v, **quick),
         "solve.fixed": lambda v: hs.solve({"hardness": 0.5}, fixed=v, **quick),
         "solve.dimensions": lambda v: hs.solve([0.5], dimensions=v, **quick),
+        "build_problem.extra_constraints": lambda v: hs.build_problem({"hardness": 0.5}, extra_constraints=v),
         "solve.model": lambda v: hs.solve({"hardness": 0.5}, model=v, **quick),
         "solve.penalty_weight": lambda v: hs.solve({"hardness": 0.5}, penalty_weight=v, **quick),
         "solve.data_support": lambda v: hs.solve({"hardness": 0.5}, data_support=v, **quick),
