@@ -74,19 +74,16 @@ def _verify(verify: Callable[[Path], Any], tmp: str, name: str) -> None:
                                    reason=reason) from None
 
 
-def _special_file(p: Path) -> bool:
-    """Whether ``p`` exists and is neither a regular file nor a symbolic link (a device such
-    as ``/dev/null``, a named pipe, a socket). The SDK writes a file by replacing it whole,
-    and a replace puts a regular file where the device or pipe was."""
+def _refuse_special(p: Path, field: str) -> None:
+    """Refuse ``p`` where it exists and is neither a regular file, a symbolic link nor a
+    directory (a device such as ``/dev/null``, a named pipe, a socket): the SDK writes a
+    file by replacing it whole, and a replace puts a regular file where the device or pipe
+    was."""
     try:
         mode = os.lstat(p).st_mode
     except OSError:
-        return False
-    return not (stat.S_ISREG(mode) or stat.S_ISLNK(mode) or stat.S_ISDIR(mode))
-
-
-def _refuse_special(p: Path, field: str) -> None:
-    if _special_file(p):
+        return
+    if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode) or stat.S_ISDIR(mode)):
         raise FileWriteError(f"{str(p)!r} is not a regular file (a device, a pipe or a socket): the SDK writes "
                              "a file by replacing it whole, which would put a file in its place; give a file "
                              "path", field=field)

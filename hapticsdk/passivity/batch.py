@@ -173,8 +173,7 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     fall = np.maximum(state["spring"] - spring, 0.0)
     hi = np.where(p > 0.0, np.maximum(hi, np.minimum(p - step + fall, p)), hi)
     a = hi
-    if "below_ramp" in state:
-        state["below_ramp"] = np.zeros(x.shape, bool)
+    stuck = np.zeros(x.shape, bool)
     if s.energy_bound:
         lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)
         a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
@@ -182,8 +181,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         stuck = (a == lo) & (lo > 0.0) & (u > e0) & (plan_cost_j(lo, p, lead, c_m, step, 0.5 * q) > e0 - u)
         if stuck.any():
             a = np.where(stuck, below_ramp_force(e0 - u, lo, p, lead, c_m, step, 0.5 * q), a)
-        if "below_ramp" in state:
-            state["below_ramp"] = stuck & started & ~idle
+    if "below_ramp" in state:
+        state["below_ramp"] = stuck & started & ~idle
     spring = np.where(started & ~idle, spring, 0.0)
     state["spring"] = spring
     if "anchor" in state:

@@ -291,10 +291,7 @@ class PassivityController:
                 # (K_c (depth - o)^2 / 2 falls), so the spring stays passive (item 0)
                 spring = s0 + sp
                 o = depth - spring / kc
-            if dq < 0.0:
-                inward = self._spring - kc * dq
-            else:
-                inward = self._spring
+            inward = s0 - kc * dq if dq < 0.0 else s0
             if spring > inward * _ROUNDING_SLACK and kc > 0.0:
                 # and only as the reading moves in: a spring that rises where the stylus
                 # stays (a wall that appears around it, a first reading inside, a wall law
