@@ -539,15 +539,16 @@ def test_one_count_of_the_colgate_spring_is_within_one_ramp_step(b, dt, res, fma
     output is the spring alone; the scalar controller, the batch and
     ``colgate_stiffness_n_per_mm`` agree. The hand takes its first reading at the surface and
     crosses one count inward: the spring is ``K_c Delta``. A wall that appears around a
-    stylus resting at ``depth`` stores nothing: no motion paid for it, so the spring stays 0
-    (item 0, "a spring born compressed")."""
+    stylus resting at ``depth``, or moving out by a count, stores nothing: no inward motion
+    paid for it, so the spring stays 0 (item 0, "a spring born compressed")."""
     cs = ControllerSettings(declared_damping_trust=DAMPING_TRUST, device_damping_ns_per_m=b, position_resolution_mm=res, max_force_n=fmax,
                             energy_allowance_j=0.0)
     s = fmax * min(dt / cs.ramp_time_s, 1.0)
     kc = min(2 * cs.damping_trust * b / dt, s / (res * 1e-3))   # N/m, from the derivation
     assert kc * res * 1e-3 <= s * (1 + 1e-12)
     assert colgate_stiffness_n_per_mm(cs, dt) * 1000 == pytest.approx(kc, rel=1e-12)
-    for xs, want in (((0.0, -res), min(kc * res * 1e-3, fmax, s)), ((-depth, -depth), 0.0)):
+    for xs, want in (((0.0, -res), min(kc * res * 1e-3, fmax, s)), ((-depth, -depth), 0.0),
+                     ((-depth - res, -depth), 0.0)):   # nor one that moves out
         pc = PassivityController(cs)
         bs = controller_state_batch(1)
         for x in xs:   # the first call takes the position
