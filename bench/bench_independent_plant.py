@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
@@ -33,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import independent_plant as ip  # noqa: E402
 
 from hapticsdk.benchmarks.stability_random import ENERGY_BOUND_J, draw_cells, run_cells  # noqa: E402
+from hapticsdk.fileio import atomic_write_text  # noqa: E402
 
 LANES = ("plain", "sdk", "sdk_declared")
 KEYS = ("energy_to_user_j", "delivered_ratio", "max_force_step_n", "min_contact_force_n")
@@ -97,7 +97,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{time.perf_counter() - t1:.0f} s", flush=True)
     report(rows)
     if a.json:
-        Path(a.json).write_text(json.dumps(rows, indent=1))
+        atomic_write_text(a.json, json.dumps(rows, indent=1))
     return 0
 
 
@@ -113,7 +113,6 @@ def report(rows: list[dict]) -> None:
             d = np.abs(x[ok] - y[ok])
             rel = d / np.maximum(np.maximum(np.abs(x[ok]), np.abs(y[ok])), 1e-300)
             rel = np.where(d == 0, 0.0, rel)
-            j = int(np.argmax(d)) if d.size else 0
             print(f"  {k:22s} max |diff| {d.max():.3e}  max rel {rel.max():.3e}  "
                   f"cells differing by >1e-9 rel: {(rel > 1e-9).sum()}  nan mismatch {nan_mismatch}")
         sure = [r for r in rs if r["count_margin_mm"] > 0]
