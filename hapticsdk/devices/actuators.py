@@ -360,6 +360,12 @@ class Actuator(ABC):
     #: conformance kit checks the output itself only for ``"output"`` and says so in its
     #: report for ``"drive"``.
     readback_source: ClassVar[str] = "drive"
+    #: the SDK axes (0 x, 1 y, 2 z) along which a force command's ``direction`` is
+    #: rendered: ``(0, 1, 2)``, the whole vector (a 3-D arm); ``(1,)``, the projection on
+    #: y alone (a device with one physical axis, the simulated Omni). The servo loop's
+    #: stiff-wall controller books the work of the force on the motion along these axes
+    #: (docs/runtime.md, Passivity, "A force rendered along one axis")
+    force_axes: ClassVar[tuple[int, ...]] = (0, 1, 2)
 
     @classmethod
     def capability_for(cls, options: Mapping[str, Any] | None = None) -> DriveCapability | None:

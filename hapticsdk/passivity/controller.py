@@ -90,11 +90,18 @@ class PassivityController:
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
         self._said = False          # the spent bound was logged (once per controller)
+        self.energy_j: float = 0.0
         self.reset()
 
-    def reset(self) -> None:
-        """Forget the energy observed so far (a new run or a new object)."""
-        self.energy_j = 0.0         # U: upper bound of the energy given to the user (J)
+    def reset(self, keep_debt: bool = False) -> None:
+        """Forget the energy observed so far (a new run). With ``keep_debt`` (another object
+        of the same run, the servo loop's restart) the controller starts afresh on the new
+        object's readings but keeps a debt, ``U = max(U, 0)``: the bound covers the run, and
+        a restart that forgave it would hand a hand that moves from object to object one
+        allowance per object (docs/runtime.md, Passivity, "A bound per run, not per
+        object")."""
+        debt = self.energy_j if keep_debt and self.energy_j > 0.0 else 0.0
+        self.energy_j = debt        # U: upper bound of the energy given to the user (J)
         self.active_ticks = 0       # ticks where the output was below the wall's force
         self.withheld_n_ticks = 0.0 # sum over ticks of the force withheld (N)
         self.overdrawn_j = 0.0      # largest U - E0 seen (J): motion beyond the prediction

@@ -756,6 +756,11 @@ class ServoLoop:
         self._fault_exc: BaseException | None = None
         self._last_vel = [0.0, 0.0, 0.0]
         self._last_x = 0.0
+        self._x_off = 0.0    # the reading's offset from -pen (a force rendered along some axes)
+        self._last_p: tuple[float, float, float] | None = None
+        self._held_n: tuple[float, float, float] | None = None   # the direction sent last tick (None: +y)
+        axes = next((tuple(getattr(s.act, "force_axes", (0, 1, 2))) for s in slots if s.is_force), (0, 1, 2))
+        self._force_axes: tuple[int, ...] | None = None if sorted(axes) == [0, 1, 2] else axes
         self._have_good = False
         self._vf0 = self._vf1 = self._vf2 = 0.0
         self._vf_dt = -1.0   # the filter's coefficient and speed step: computed on the first tick
@@ -1061,13 +1066,37 @@ class ServoLoop:
             x_n = self._last_x
         else:
             x_n = -pen
+            axes = self._force_axes
+            if axes is not None and ht is not None:
+                # a device that renders the force only along some axes (the simulated
+                # Omni: y) does work on the motion along those axes alone: the reading's
+                # change is the held direction's part on them times the displacement, not
+                # the distance's change (docs/runtime.md, Passivity, "A force rendered
+                # along one axis"). The offset from -pen starts at 0 with each object and
+                # where no force is held out of contact; on a +y normal held and seen it
+                # does not change (the version-1 plane's reading, bit for bit)
+                lp = self._last_p
+                hn = self._held_n
+                if idx != self._pc_obj or lp is None or (pen <= 0.0 and self.last_force_n == 0.0):
+                    self._x_off = 0.0
+                elif hn is not None or direction is not None:
+                    n = hn if hn is not None else _UP
+                    dp = (p0 - lp[0], p1 - lp[1], p2 - lp[2])
+                    w = 0.0
+                    for i in axes:
+                        w += n[i] * dp[i]
+                    self._x_off = self._last_x + w - x_n   # the reading moves by w
+                x_n += self._x_off
+                self._last_p = (p0, p1, p2)
             self._last_x = x_n
+        self._held_n = direction
         if idx != self._pc_obj and idx >= 0:
             if self._pc_obj != -2:
-                # another object: its observer starts afresh, as a wall met from outside
+                # another object: its observer starts afresh, as a wall met from outside,
+                # keeping a debt (a bound per run, not per object)
                 for s in self._slots:
                     if s.pc is not None:
-                        s.pc.reset()
+                        s.pc.reset(keep_debt=True)
             self._pc_obj = idx
         recorder = self.recorder
         sent: dict[str, ChannelCommand] | None = {} if recorder is not None else None

@@ -49,6 +49,8 @@ class OmniVirtual(HapticDevice):
     channel: ClassVar[str] = "force"
     accepts: ClassVar[dict[str, str]] = {"force_n": "N"}
     simulated: ClassVar[bool] = True
+    #: one physical axis: a force along a contact normal is rendered as its projection on y
+    force_axes: ClassVar[tuple[int, ...]] = (1,)
     limits = ActuatorLimits(max_force_n=3.3, max_stiffness_n_per_mm=2.3)
     sources: ClassVar[dict[str, str]] = OMNI_SOURCES
 

@@ -1,0 +1,195 @@
+"""Issue 23: the stiff-wall controller through the servo loop in a spatial scene, where the
+hand moves from one object to another and the contact normal turns while pressed.
+
+Two classes found by driving motions the stability benchmark does not draw (its plant is a
+plane): a hand sliding at depth across two abutting boxes, and a hand tapping them in turn,
+on the simulated Omni (45 g, 0.055 mm encoder, 3.3 N; generated data). What each must show
+is the issue's bound: the energy the arm gave the finger (``OmniVirtual.energy_to_user_j``,
+its largest over the run) within 0.1 mJ. The damping is the loop's default (declared, none
+credited: no Colgate spring), so the whole force is the energy-bounded extra and the bound
+is the controller's alone (with a measured damping, the spring's encoder term of
+docs/runtime.md, Passivity item 0, shows on one object as on two).
+
+* **A force rendered along one axis.** The simulated Omni renders a force along a contact
+  normal as its projection on y. Near the side face of a box (and wherever the normal is
+  slanted) the distance to the surface changes with the hand's lateral motion, on which
+  that device does no work: booked as the distance's change, a slide into the side face
+  earned credit that the force then spent along y when the normal turned back. Before the
+  loop booked the motion along the device's ``force_axes``: 147 of 200 drawn slides over
+  0.1 mJ, up to 90 mJ (docs/runtime.md, Passivity, "A force rendered along one axis").
+* **A bound per run, not per object.** The loop restarts the controller on another object;
+  the restart forgave the debt, so a hand tapping two objects in turn got one allowance per
+  tap: 15 of 200 drawn tap runs over 0.1 mJ, up to 0.61 mJ. The restart now keeps a debt.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hapticsdk.passivity import PassivityController
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.runtime import ServoLoop
+from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
+from hapticsdk.sim.finger import Trajectory
+
+ENERGY_J = 1e-4          # the issue's bound on the energy to the user
+
+
+class Spring(DimensionRenderer):
+    """``F = K x penetration`` on the force role."""
+    roles = ("force",)
+
+    def __init__(self, k: float) -> None:
+        self.k = k
+
+    def tick(self, inp):
+        return [ChannelCommand("force", force_n=self.k * inp.penetration_mm if inp.in_contact else 0.0)]
+
+
+def slide(depth: float, crossings: int, speed_mm_s: float, press_s: float, dwell_s: float) -> Trajectory:
+    """Press 10 mm left of the seam between the boxes, slide across it and back at depth."""
+    pts, t, x = [(0.0, -10.0, 1.0)], press_s, -10.0
+    pts.append((t, x, -depth))
+    for _ in range(crossings):
+        x = -x
+        t += 20.0 / speed_mm_s
+        pts.append((t, x, -depth))
+        t += dwell_s
+        pts.append((t, x, -depth))
+    t += press_s
+    pts += [(t, x, 1.0), (t + 0.1, x, 1.0)]
+    return Trajectory(pts)
+
+
+def taps(depth: float, n: int, in_s: float, hold_s: float, out_s: float) -> Trajectory:
+    """Tap the two boxes in turn, each 10 mm from the seam."""
+    pts, t, x = [(0.0, -10.0, 1.0)], 0.0, -10.0
+    for _ in range(n):
+        t += in_s
+        pts.append((t, x, -depth))
+        t += hold_s
+        pts.append((t, x, -depth))
+        t += out_s
+        pts.append((t, x, 1.0))
+        x = -x
+        t += 0.05
+        pts.append((t, x, 1.0))
+    return Trajectory(pts + [(t + 0.1, x, 1.0)])
+
+
+def over_a_ball(radius: float, depth: float, half_width: float, passes: int, speed_mm_s: float) -> Trajectory:
+    """Slide back and forth over the top of a ball of ``radius`` (its top at y = 0),
+    ``depth`` below its surface, ``half_width`` either side of the top."""
+    xs = np.linspace(-half_width, half_width, 25)
+
+    def y(x: float) -> float:
+        return float(np.sqrt(radius * radius - x * x) - radius - depth)
+
+    t = 0.1
+    pts = [(0.0, -half_width, y(-half_width) + depth + 1.0), (t, -half_width, y(-half_width))]
+    for i in range(passes):
+        for x in (xs[1:] if i % 2 == 0 else xs[-2::-1]):
+            t += (xs[1] - xs[0]) / speed_mm_s
+            pts.append((t, float(x), y(x)))
+    x = float(xs[-1] if passes % 2 else xs[0])
+    return Trajectory(pts + [(t + 0.1, x, y(x) + depth + 1.0), (t + 0.2, x, y(x) + depth + 1.0)])
+
+
+def run(trajectory: Trajectory, k: float, period_s: float, damping: float, finger: str, two: bool = True,
+        ball: float = 0.0) -> float:
+    """The largest energy to the finger (J) over the run, through ``ServoLoop`` with the
+    loop's default controller; two abutting boxes (or one as wide as both), or a ball of
+    radius ``ball`` (mm) with its top at y = 0."""
+    from hapticsdk_hardness.omni import OmniVirtual
+
+    dev = OmniVirtual(trajectory=trajectory, finger=finger, damping_ns_per_m=damping)
+    if ball:
+        objs = [("ball", [Spring(k)])]
+        ht = HitTester([("ball", Sphere(ball, pose=Pose((0.0, -ball, 0.0))))])
+    elif two:
+        objs = [("A", [Spring(k)]), ("B", [Spring(k)])]
+        ht = HitTester([("A", Box((10.0, 10.0, 10.0), pose=Pose((-10.0, -10.0, 0.0)))),
+                        ("B", Box((10.0, 10.0, 10.0), pose=Pose((10.0, -10.0, 0.0))))])
+    else:
+        objs = [("A", [Spring(k)])]
+        ht = HitTester([("A", Box((20.0, 10.0, 10.0), pose=Pose((0.0, -10.0, 0.0))))])
+    loop = ServoLoop(dev, (), {"force": dev}, period_s=period_s, passivity=True, objects=objs, hit_tester=ht)
+    loop.start(trajectory.duration_s)
+    worst = -np.inf
+    while True:
+        more = loop.tick()
+        worst = max(worst, dev.energy_to_user_j())
+        if not more:
+            break
+    loop.finish()
+    return float(worst)
+
+
+def test_a_slide_across_two_boxes_at_depth_stays_within_the_bound():
+    """A 3.6 N/mm wall at 0.5 ms, no damping, four crossings of the seam at 1.2 mm: 5.4 mJ
+    with neither rule of this file (the side face of the box the hand slides onto turns the
+    normal to x, on which the simulated Omni renders nothing, and the restart forgave the
+    debt); 0.015 mJ with both (and with the restart's rule alone: the axis rule is guarded
+    by the ball below and the property)."""
+    tr = slide(depth=1.2, crossings=4, speed_mm_s=180.0, press_s=0.12, dwell_s=0.1)
+    assert run(tr, 3.59, 5e-4, 0.0, "medium") <= ENERGY_J
+    # and one box as wide as both: no side face under the hand, the same bound
+    assert run(tr, 3.59, 5e-4, 0.0, "medium", two=False) <= ENERGY_J
+
+
+def test_a_slide_over_a_ball_stays_within_the_bound():
+    """The normal turns with the hand over a ball: the distance's change is the motion along
+    the normal, of which the simulated Omni renders the y part only. A 1.1 N/mm wall at 1 ms,
+    a 38 mm ball, 0.25 N s/m (none credited): 2.4 mJ before the loop booked the motion along
+    the device's axis, 0.10 mJ with the sign of the axis term flipped."""
+    tr = over_a_ball(38.0, 1.5, 25.0, 4, 120.0)
+    assert run(tr, 1.08, 1e-3, 0.25, "medium", ball=38.0) <= ENERGY_J
+
+
+def test_taps_on_two_objects_in_turn_share_one_bound():
+    """Ten taps, the boxes in turn (a 1.2 N/mm wall at 1 ms, no damping, 0.8 mm at 27 mm/s):
+    0.236 mJ while each object's restart forgave the debt the last tap left (0.058 mJ on one
+    box as wide as both)."""
+    tr = taps(depth=0.8, n=10, in_s=0.03, hold_s=0.05, out_s=0.03)
+    assert run(tr, 1.2, 1e-3, 0.0, "medium") <= ENERGY_J
+
+
+def test_a_restart_on_another_object_keeps_a_debt_and_drops_credit():
+    pc = PassivityController()
+    pc.energy_j = 5e-5
+    pc.reset(keep_debt=True)
+    assert pc.energy_j == 5e-5
+    pc.energy_j = -5e-5
+    pc.reset(keep_debt=True)
+    assert pc.energy_j == 0.0
+    pc.energy_j = 5e-5
+    pc.reset()
+    assert pc.energy_j == 0.0
+
+
+@settings(max_examples=100, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(kind=st.sampled_from(["slide", "taps", "ball"]),
+       k=st.floats(0.3, 50.0), period_s=st.sampled_from([2.5e-4, 5e-4, 1e-3, 2e-3]),
+       damping=st.sampled_from([0.0, 0.25, 0.5]), finger=st.sampled_from(["soft", "medium", "stiff"]),
+       depth=st.floats(0.3, 3.0), n=st.integers(2, 8), speed=st.floats(20.0, 300.0),
+       a=st.floats(0.005, 0.3), b=st.floats(0.001, 0.3), c=st.floats(0.005, 0.3))
+def test_moving_between_objects_stays_within_the_bound(kind, k, period_s, damping, finger, depth, n, speed, a, b, c):
+    """Periods up to 2 ms: at 4 ms and beyond a tap's reversal within one tick is the known
+    class of docs/runtime.md, Passivity, "The reversal within one tick" (on one box as on
+    two: 0.23 mJ for ten 1.6 mm taps of the stiff finger at 4 ms on a 3 N/mm wall)."""
+    if kind == "ball":
+        radius = 8.0 + 100.0 * c                    # 8.5-38 mm
+        tr = over_a_ball(radius, depth, radius * (0.2 + 2.0 * b), n, speed)
+        e = run(tr, k, period_s, damping, finger, ball=radius)
+    else:
+        tr = slide(depth, n, speed, a, b) if kind == "slide" else taps(depth, n, a, b, c)
+        e = run(tr, k, period_s, damping, finger)
+    assert e <= ENERGY_J, (kind, e)
+
+
+if __name__ == "__main__":
+    pytest.main([__file__, "-q"])
