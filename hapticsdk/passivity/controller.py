@@ -85,7 +85,7 @@ class PassivityController:
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "below_ramp_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_started", "_still", "_spring", "_kf", "_kc", "_full",
                  "_jw", "_jw_top", "_jw_at", "_j3w", "_j3w_top", "_j3w_at",
-                 "_a1", "_a2", "_a3", "_sent", "_pending", "_o")
+                 "_a1", "_a2", "_a3", "_sent", "_pending", "_o", "_gap")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -133,6 +133,7 @@ class PassivityController:
         self._full = 0.0            # full scale without a declared force limit: the largest force so far
         self._sent = 0.0            # the force the last step returned
         self._pending = False       # a step returned a force that no commit has recorded yet
+        self._gap = 0.0             # time (s) of the ticks since the last booked one that had no reading
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
@@ -150,6 +151,13 @@ class PassivityController:
             f_wall = 0.0
         if not self._started or not dt > 0 or not -_INF < x_mm < _INF:
             if not -_INF < x_mm < _INF:
+                if self._started and 0.0 < dt < _INF:
+                    # the next booking spans this tick too: its damping credit is for the
+                    # whole span (docs/runtime.md, Passivity, "A tick without a period or a
+                    # reading")
+                    self._gap += dt
+                # the device gets 0: no spring (its next rise is from the next reading)
+                self._spring = self._kf = self._kc = self._o = 0.0
                 self._sent = 0.0
                 return 0.0           # a reading that is not a number: nothing to book, no force
             if not self._started:
@@ -298,7 +306,9 @@ class PassivityController:
                 # (K_c (depth - o)^2 / 2 falls), so the spring stays passive (item 0)
                 spring = s0 + sp
                 o = depth - spring / kc
-            inward = s0 - kc * dq if dq < 0.0 else s0
+            # (not after ticks without a reading: the motion over them met no force, so it
+            # paid for no spring; the spring starts from where the reading is found)
+            inward = s0 - kc * dq if dq < 0.0 and not self._gap else s0
             if spring > inward * _ROUNDING_SLACK and kc > 0.0:
                 # and only as the reading moves in: a spring that rises where the stylus
                 # stays (a wall that appears around it, a first reading inside, a wall law
@@ -321,11 +331,17 @@ class PassivityController:
         ks = self._kf
         if ks == 0.0 and spring > 0.0:
             ks = kc
-        b_x = b_lo - 0.5 * ks * dt
+        span = dt
+        if self._gap:
+            # the reading's change spans the ticks without a reading since the last one: the
+            # damper took at least b dy^2 over the whole span, not over this tick
+            span += self._gap
+            self._gap = 0.0
+        b_x = b_lo - 0.5 * ks * span
         if b_x < 0.0:
             ex = abs(dq) + q         # the deficit: the largest displacement the readings allow
         if ex > 0.0:
-            u -= b_x * ex * ex / dt
+            u -= b_x * ex * ex / span
         rise = spring - s0   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf

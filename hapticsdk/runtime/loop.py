@@ -1059,7 +1059,11 @@ class ServoLoop:
                         o.sw = None   # the switch is over: the new law alone
                         self._fuse_want = True
         # ---- 4. passivity + send --------------------------------------
-        if bad or (ht is not None and idx < 0):
+        if bad:
+            # no position: the controller books nothing and sends 0; its next booking spans
+            # this tick too (the damping credit over the whole span)
+            x_n = _NAN
+        elif ht is not None and idx < 0:
             # a spatial scene out of contact: the distance to the nearest object jumps
             # when another object becomes the nearest, so the observer holds its last
             # in-contact position (no motion booked, no damping in free space)

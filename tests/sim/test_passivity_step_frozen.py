@@ -68,7 +68,7 @@ class _FrozenController:
     __slots__ = ('settings', 'energy_j', 'active_ticks', 'withheld_n_ticks', 'overdrawn_j', 'spent_ticks',
                  'below_ramp_ticks', '_said',
                  '_q1', '_q2', '_hist', '_hp', '_f1', '_f2', '_out', '_started', '_still', '_spring', '_kf', '_kc',
-                 '_full', '_jw', '_j3w', '_a1', '_a2', '_a3', '_sent', '_pending', '_o')
+                 '_full', '_jw', '_j3w', '_a1', '_a2', '_a3', '_sent', '_pending', '_o', '_gap')
 
     def __init__(self, settings: ControllerSettings) -> None:
         self.settings = settings
@@ -99,6 +99,7 @@ class _FrozenController:
         self._full = 0.0
         self._sent = 0.0
         self._pending = False
+        self._gap = 0.0
 
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         if self._pending:
@@ -112,6 +113,9 @@ class _FrozenController:
             f_wall = 0.0
         if not self._started or not dt > 0 or (not -_INF < x_mm < _INF):
             if not -_INF < x_mm < _INF:
+                if self._started and 0.0 < dt < _INF:
+                    self._gap += dt
+                self._spring = self._kf = self._kc = self._o = 0.0
                 self._sent = 0.0
                 return 0.0
             if not self._started:
@@ -195,7 +199,7 @@ class _FrozenController:
             if spring > self._spring + sp and kc > 0.0:
                 spring = self._spring + sp
                 o = depth - spring / kc
-            if dq < 0.0:
+            if dq < 0.0 and (not self._gap):
                 inward = self._spring - kc * dq
             else:
                 inward = self._spring
@@ -208,11 +212,15 @@ class _FrozenController:
         ks = self._kf
         if ks == 0.0 and spring > 0.0:
             ks = kc
-        b_x = b_lo - 0.5 * ks * dt
+        span = dt
+        if self._gap:
+            span += self._gap
+            self._gap = 0.0
+        b_x = b_lo - 0.5 * ks * span
         if b_x < 0.0:
             ex = abs(dq) + q
         if ex > 0.0:
-            u -= b_x * ex * ex / dt
+            u -= b_x * ex * ex / span
         rise = spring - self._spring
         self._spring = spring
         self._kf = kf
