@@ -1,0 +1,220 @@
+"""The stiff-wall controller through the real servo loop (``ServoLoop``, the simulated Omni
+of ``plugins/hapticsdk-hardness``: 45 g, 0.055 mm encoder, 3.3 N; generated data) on motions
+and events the stability benchmark does not draw (issue 23). Energy to the finger:
+``OmniVirtual.energy_to_user_j`` (motor work on the true positions less the arm's kinetic
+energy and damper loss), its largest over the run; a cell fails above 0.1 mJ.
+
+    python bench/bench_servo_paths.py KIND [--cells N] [--seed S]
+
+KIND (drawn per cell: period, the arm's damping 0-0.5 N s/m declared or measured hands
+off, a spring wall of 0.3-50 N/mm, the finger preset, the motion's parameters):
+
+* ``slide``: pressed 0.3-3 mm, sliding across the seam of two abutting boxes and back
+  (2-11 crossings at 20-300 mm/s), against one box as wide as both;
+* ``taps``: 2-11 taps on the two boxes in turn, against one box;
+* ``ball``: sliding back and forth over the top of a ball of 8-40 mm at depth;
+* ``nan``, ``switch``, ``pause``, ``delay``, ``moving``: a press and hold on the plane
+  (a box for ``moving``) with, during the press or the hold, 1-19 ticks of NaN readings,
+  a material 1.5-20 times stiffer switched in, a pause of 1-19 ticks, a force delayed by
+  1-3 ticks, or the box moving 0.2-3 mm at 1-20 Hz; each cell run with and without the
+  event, and the cells failing with the event only counted.
+
+Statistic: counts of cells over 0.1 mJ and the largest energy; no clock is involved
+(simulated time). Figures: docs/runtime.md, Passivity, "A force rendered along one axis",
+"A bound per run, not per object", "A tick without a period or a reading" and "Other events
+in a press, through the loop".
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+
+import numpy as np
+
+from hapticsdk.passivity import ControllerSettings
+from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
+from hapticsdk.runtime import ServoLoop
+from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
+from hapticsdk.sim.finger import Trajectory, press_slide
+from hapticsdk_hardness.omni import OmniVirtual
+
+
+class Spring(DimensionRenderer):
+    """``F = K x penetration`` on the force role."""
+    roles = ("force",)
+
+    def __init__(self, k):
+        self.k = k
+
+    def tick(self, inp):
+        return [ChannelCommand("force", force_n=self.k * inp.penetration_mm if inp.in_contact else 0.0)]
+
+
+@functools.lru_cache(maxsize=None)
+def measured_damping(damping):
+    """The arm's damping measured hands off (the simulated Omni with no finger)."""
+    from hapticsdk.calibration.damping import DampingCalibration, measure_damping
+    from hapticsdk.sim.finger import FingerParams
+
+    free = OmniVirtual(finger=FingerParams(0.0, 0.0, 0.0), damping_ns_per_m=damping)
+    fit, _, _ = measure_damping(free)
+    return DampingCalibration.from_fit(fit, period_s=1e-3, resolution_mm=free.encoder_resolution_mm,
+                                       generated=True, source="bench: simulated Omni, hands off")
+
+
+def traj(rng, kind):
+    d = rng.uniform(0.3, 3.0); n = int(rng.integers(2, 12))
+    pts = [(0.0, -10.0, 1.0)]; t = 0.0
+    if kind == "slide":   # press on A, slide across to B and back n times at depth d
+        v = rng.uniform(20, 300)  # mm/s
+        t += rng.uniform(0.02, 0.3); pts.append((t, -10.0, -d))
+        x = -10.0
+        for i in range(n):
+            x = 10.0 if x < 0 else -10.0
+            t += 20.0 / v; pts.append((t, x, -d))
+            t += rng.uniform(0.0, 0.2); pts.append((t, x, -d))
+        t += rng.uniform(0.02, 0.3); pts.append((t, x, 1.0))
+    else:   # alternate taps on A and B
+        x = -10.0
+        for i in range(n):
+            tin = rng.uniform(0.005, 0.3); hold = rng.uniform(0.0, 0.3); tout = rng.uniform(0.005, 0.3)
+            t += tin; pts.append((t, x, -d)); t += hold; pts.append((t, x, -d))
+            t += tout; pts.append((t, x, 1.0))
+            x = 10.0 if x < 0 else -10.0
+            t += 0.05; pts.append((t, x, 1.0))
+    t += 0.1; pts.append((t, pts[-1][1], 1.0))
+    return Trajectory(pts)
+
+def run(rng, kind, two):
+    T = float(rng.choice([0.5e-3, 1e-3, 2e-3, 4e-3]))
+    b = float(rng.choice([0.0, 0.25, 0.5]))
+    K = float(np.exp(rng.uniform(np.log(0.3), np.log(50))))
+    src = rng.choice(["declared", "measured"])
+    tr = traj(rng, kind)
+    dev = OmniVirtual(trajectory=tr, finger=str(rng.choice(["soft", "medium", "stiff"])), damping_ns_per_m=b)
+    st = ControllerSettings.for_device(dev, damping=measured_damping(b)) if src == "measured" else None
+    if two:
+        a = Box((10.0, 10.0, 10.0), pose=Pose((-10.0, -10.0, 0.0)))
+        bb = Box((10.0, 10.0, 10.0), pose=Pose((10.0, -10.0, 0.0)))
+        objs = [("A", [Spring(K)]), ("B", [Spring(K)])]; ht = HitTester([("A", a), ("B", bb)])
+    else:
+        a = Box((20.0, 10.0, 10.0), pose=Pose((0.0, -10.0, 0.0)))
+        objs = [("A", [Spring(K)])]; ht = HitTester([("A", a)])
+    loop = ServoLoop(dev, (), {"force": dev}, period_s=T, passivity=True, passivity_settings=st,
+                     objects=objs, hit_tester=ht)
+    loop.start(tr.duration_s)
+    worst = -np.inf
+    while True:
+        more = loop.tick(); worst = max(worst, dev.energy_to_user_j())
+        if not more: break
+    loop.finish()
+    return worst, dict(T=T, b=b, K=K, src=str(src))
+
+
+def ball_traj(rng):
+    R = rng.uniform(8, 40); d = rng.uniform(0.3, 3.0); X = rng.uniform(0.2, 0.9) * R
+    v = rng.uniform(20, 300); n = int(rng.integers(2, 8))
+    xs = np.linspace(-X, X, 25)
+    pts = [(0.0, -X, 1.0 + np.sqrt(R*R - X*X) - R)]; t = rng.uniform(0.02, 0.3)
+    def y(x): return np.sqrt(R*R - x*x) - R - d
+    pts.append((t, -X, y(-X)))
+    seq = xs
+    for i in range(n):
+        for x in seq[1:]:
+            t += (seq[1]-seq[0]) / v if i % 2 == 0 else (seq[0]-seq[1]) / v
+            t = abs(t)
+            pts.append((t, x, y(x)))
+        seq = seq[::-1]
+    t += 0.1; pts.append((t, seq[0], y(seq[0]) + d + 1.0)); pts.append((t + 0.1, seq[0], y(seq[0]) + d + 1.0))
+    return Trajectory(pts), R
+
+def run_ball(rng):
+    T = float(rng.choice([2.5e-4, 5e-4, 1e-3, 2e-3])); b = float(rng.choice([0.0, 0.25, 0.5]))
+    K = float(np.exp(rng.uniform(np.log(0.3), np.log(50)))); fing = str(rng.choice(["soft", "medium", "stiff"]))
+    tr, R = ball_traj(rng)
+    dev = OmniVirtual(trajectory=tr, finger=fing, damping_ns_per_m=b)
+    loop = ServoLoop(dev, (), {"force": dev}, period_s=T, passivity=True, objects=[("ball", [Spring(K)])],
+                     hit_tester=HitTester([("ball", Sphere(R, pose=Pose((0.0, -R, 0.0))))]))
+    loop.start(tr.duration_s); w = -np.inf
+    while True:
+        more = loop.tick(); w = max(w, dev.energy_to_user_j())
+        if not more: break
+    loop.finish()
+    return w, dict(T=T, b=b, K=round(K, 3), R=round(R, 1), f=fing)
+
+
+def cell(rng, kind, perturb):
+    T = float(rng.choice([2.5e-4, 5e-4, 1e-3, 2e-3])); b = float(rng.choice([0.0, 0.25, 0.5]))
+    K = float(np.exp(rng.uniform(np.log(0.3), np.log(50)))); fing = str(rng.choice(["soft", "medium", "stiff"]))
+    src = str(rng.choice(["declared", "measured"]))
+    d = rng.uniform(0.5, 3.0); ps = rng.uniform(0.05, 0.4); hs = rng.uniform(0.2, 0.6); rs = rng.uniform(0.05, 0.4)
+    tr = press_slide(depth_mm=d, press_s=ps, hold_s=hs, slide_s=0.0, release_s=rs, rest_s=0.1)
+    t_ev = ps + rng.uniform(-0.3, 1.0) * hs          # the event: during the press or the hold
+    K2 = K * float(np.exp(rng.uniform(np.log(1.5), np.log(20))))
+    dticks = int(rng.integers(1, 4)); nbad = int(rng.integers(1, 20)); amp = rng.uniform(0.2, 3.0); fhz = rng.uniform(1, 20)
+    dev = OmniVirtual(trajectory=tr, finger=fing, damping_ns_per_m=b)
+    st = ControllerSettings.for_device(dev, damping=measured_damping(b)) if src == "measured" else None
+    kw = {}
+    if kind == "delay" and perturb: kw["delay_ticks"] = dticks
+    if kind == "moving":
+        box = Box((20.0, 10.0, 10.0), pose=Pose((0.0, -10.0, 0.0)))
+        kw.update(objects=[("A", [Spring(K)])], hit_tester=HitTester([("A", box)]))
+        loop = ServoLoop(dev, (), {"force": dev}, period_s=T, passivity=True, passivity_settings=st, **kw)
+    else:
+        loop = ServoLoop(dev, [Spring(K)], {"force": dev}, period_s=T, passivity=True, passivity_settings=st, **kw)
+    if kind == "nan" and perturb:
+        real = dev._read_state
+        def rs_(t0=[None]):
+            s = real()
+            if t_ev <= dev.t < t_ev + nbad * T:
+                from hapticsdk.devices.actuators import SensedState
+                return SensedState.of(s.t, s.px, float("nan"), s.pz, s.vx, s.vy, s.vz, 0.0, 0.0, 0.0)
+            return s
+        dev._read_state = rs_
+    loop.start(tr.duration_s); w = -np.inf; switched = paused = False
+    while True:
+        t = loop.ticks * T
+        if perturb and not switched and t >= t_ev:
+            switched = True
+            if kind == "switch": loop.set_renderers(0, [Spring(K2)])
+            if kind == "pause": loop.paused = True; paused = True
+        if kind == "pause" and paused and t >= t_ev + nbad * T: loop.paused = False; paused = False
+        if kind == "moving" and perturb and t >= t_ev:
+            loop.set_pose(0, Pose((0.0, -10.0 + amp * np.sin(2 * np.pi * fhz * (t - t_ev)), 0.0)))
+        more = loop.tick(); w = max(w, dev.energy_to_user_j())
+        if not more: break
+    loop.finish()
+    return w, dict(T=T, b=b, K=round(K, 2), K2=round(K2, 2), src=src, f=fing)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("kind", choices=["slide", "taps", "ball", "nan", "switch", "pause", "delay", "moving"])
+    ap.add_argument("--cells", type=int, default=150)
+    ap.add_argument("--seed", type=int, default=1)
+    a = ap.parse_args()
+    if a.kind in ("slide", "taps"):
+        for two in (False, True):
+            rng = np.random.default_rng(a.seed)
+            es = np.array([run(rng, a.kind, two)[0] for _ in range(a.cells)])
+            print(f"{a.kind}, {'two objects' if two else 'one object'}: over 0.1 mJ {int(np.sum(es > 1e-4))}/{a.cells}, "
+                  f"largest {es.max() * 1e3:.3f} mJ")
+    elif a.kind == "ball":
+        rng = np.random.default_rng(a.seed)
+        es = np.array([run_ball(rng)[0] for _ in range(a.cells)])
+        print(f"ball: over 0.1 mJ {int(np.sum(es > 1e-4))}/{a.cells}, largest {es.max() * 1e3:.3f} mJ")
+    else:
+        runs = {}
+        for perturb in (False, True):
+            rng = np.random.default_rng(a.seed)
+            runs[perturb] = np.array([cell(rng, a.kind, perturb)[0] for _ in range(a.cells)])
+        e0, e1 = runs[False], runs[True]
+        only = (e1 > 1e-4) & (e0 <= 1e-4)
+        print(f"{a.kind}: over 0.1 mJ with the event only {int(only.sum())}/{a.cells} "
+              f"(largest {e1[e0 <= 1e-4].max() * 1e3:.3f} mJ); without the event {int(np.sum(e0 > 1e-4))}, "
+              f"with it {int(np.sum(e1 > 1e-4))} (largest {e1.max() * 1e3:.3f} mJ)")
+
+
+if __name__ == "__main__":
+    main()
