@@ -4,7 +4,9 @@ controller's fields read once, the applied force kept once, a spent book's tick 
 without calling the plan),
 against a frozen copy of the step and commit as they were before (commit ba2e7f0, with the
 two rules of caa970d added: the spring's inward rise and the fall below the ramp with the
-book overdrawn), bit for bit, on input sequences hypothesis draws:
+book overdrawn; and issue 23's rule for ticks without a reading: the next booking's damping
+credit over the whole span, no spring over those ticks and none from their motion), bit for
+bit, on input sequences hypothesis draws:
 
 * readings that dwell, move by fractions of a count or jump by millimetres, reverse, and
   are now and then NaN, infinite or huge (1e308: the step's arithmetic overflows);
