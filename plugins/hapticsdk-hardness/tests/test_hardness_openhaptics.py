@@ -123,12 +123,12 @@ def stub_lib(tmp_path_factory):
     return str(out)
 
 
-def _hold(dev, force_n, seconds):
+def _hold(dev, force_n, seconds, direction=None):
     """Command like a 1 kHz servo loop for ``seconds``; returns the last command sent."""
     end = time.monotonic() + seconds
     sent = None
     while True:
-        sent = dev.command(ChannelCommand("force", force_n=force_n))
+        sent = dev.command(ChannelCommand("force", force_n=force_n, direction=direction))
         if time.monotonic() >= end:
             return sent
         time.sleep(0.001)
@@ -145,7 +145,7 @@ def _force(lib):
     return list(v)
 
 
-def _held_force(dev, lib, force_n, seconds, expected_n):
+def _held_force(dev, lib, force_n, seconds, expected_n, direction=None):
     """Hold ``force_n`` for ``seconds`` as a servo loop would, then the force the device
     wrote, from a hold that no stall of this thread disturbed. On a busy machine this
     thread can stall past 50 ms: within the hold, the safety layer then counts a command
@@ -159,7 +159,7 @@ def _held_force(dev, lib, force_n, seconds, expected_n):
     while True:
         _hold(dev, 0.5, 0.01)
         zeroed = dev.watchdog_zeroed
-        sent = _hold(dev, force_n, seconds)
+        sent = _hold(dev, force_n, seconds, direction)
         f = _force(lib)
         # the servo counts a zeroing before it writes the zero force, so a force read with
         # the count unchanged was written from a fresh command
@@ -195,6 +195,22 @@ def test_stub_servo_loop_limits_state_force(stub_lib):
             time.sleep(0.005)                                               # (waits for what it asserts)
         assert _force(lib)[1] == 0.0 and dev.watchdog_zeroed >= 1          # device-side watchdog
     assert lib.stub_scheduler_running() == 0 and _force(lib) == [0.0, 0.0, 0.0]
+
+
+def test_stub_force_along_a_slanted_normal_is_the_whole_vector(stub_lib):
+    """A spatial scene's contact normal (``ChannelCommand.direction``) is rendered as the
+    vector ``F n`` in the servo frame: the Omni has three force axes. (It was written along
+    y whatever the normal: a box's side face pushed the stylus up.)"""
+    dev = _dev(stub_lib, surface_y_mm=5.0)
+    with dev:
+        lib = dev.lib
+        n = (0.6, 0.0, 0.8)
+        sent, f = _held_force(dev, lib, 1.5, 0.02, 1.5, direction=n)
+        assert f == pytest.approx([0.9, 0.0, 1.2])
+        sent, f = _held_force(dev, lib, 1.0, 0.02, 1.0, direction=(-1.0, 0.0, 0.0))
+        assert f == pytest.approx([-1.0, 0.0, 0.0])
+        assert dev.read_back().force_n == pytest.approx(0.0)     # its y component
+    assert _force(lib) == [0.0, 0.0, 0.0]
 
 
 def test_stub_hd_error_stops_and_names_device(stub_lib):

@@ -383,11 +383,17 @@ class OmniOpenHaptics(HapticDevice):
     def _command(self, cmd: ChannelCommand) -> None:
         self._check()
         if cmd.force_n is not None:
+            # the whole vector along the command's direction (the contact normal of a
+            # spatial scene; +y, the version-1 plane's normal, when it has none): the device
+            # renders three axes, and the servo frame's axes are the SDK's
+            f = float(cmd.force_n)
+            d = cmd.direction
             self._force_t = time.monotonic()
-            self._force = (0.0, float(cmd.force_n), 0.0)
+            self._force = (0.0, f, 0.0) if d is None else (f * float(d[0]), f * float(d[1]), f * float(d[2]))
 
     def _read_back(self) -> ChannelCommand:
-        """The force the servo callback hands to ``hdSetDoublev(HD_CURRENT_FORCE)`` (N)."""
+        """The force the servo callback hands to ``hdSetDoublev(HD_CURRENT_FORCE)``, its y
+        component (N): along the version-1 plane's normal, as the force arms report it."""
         return ChannelCommand("force", force_n=float(self._force[1]))
 
     def _stop(self) -> None:
