@@ -47,7 +47,9 @@ API_HISTORY: dict[str, tuple[str, ...]] = {
             "privileged_options: any collection of option names (dict, tuple, list, set, frozenset)",
             "a 1.0-style dimension gets typed roles from its default actuators' channels "
             "(hapticsdk.perception.dimensions.declared_roles)",
-            "hapticsdk_api ranges are PEP 440 specifiers (~=, wildcards)"),
+            "hapticsdk_api ranges are PEP 440 specifiers (~=, wildcards)",
+            "Actuator.force_axes: the SDK axes along which a force command's direction is rendered "
+            "((0, 1, 2), the default: the whole vector; (1,) for a device with one physical axis)"),
 }
 
 #: Conformance-kit rules by the plugin API version that introduced them (rules not listed

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..perception.channels import CHANNELS  # the channel kinds an actuator can serve (also hapticsdk.devices.actuators.CHANNELS)
 from ..perception.dimensions import ChannelCommand
-from ..errors import DeviceError, HapticSDKError, ValidationError
+from ..errors import DeviceError, HapticSDKError, PluginError, ValidationError
 
 log = logging.getLogger("hapticsdk.actuators")  # the 0.1 name: users configure logging by it
 
@@ -735,6 +735,27 @@ class HapticDevice(Actuator):
 
     def _step(self, dt: float) -> None:
         """Simulated devices integrate here; real ones ignore it."""
+
+
+def force_axes_of(act: Any) -> tuple[int, ...]:
+    """The SDK axes ``act`` renders a force's direction along (``Actuator.force_axes``),
+    checked: distinct axes of 0 (x), 1 (y), 2 (z), at least one, in increasing order.
+
+    Raises:
+        PluginError: anything else (a name such as ``"y"``, an axis 3, a repeated axis, an
+            empty tuple), naming the actuator: the servo loop reads it on every tick of a
+            spatial contact and books the stiff-wall controller's work on it.
+    """
+    axes = getattr(act, "force_axes", (0, 1, 2))
+    try:
+        out = tuple(axes)
+    except TypeError:
+        out = ()
+    if (not out or len(set(out)) != len(out)
+            or not all(type(a) is int and 0 <= a <= 2 for a in out) or list(out) != sorted(out)):
+        raise PluginError(f"{type(act).__name__}.force_axes must be distinct SDK axes 0, 1, 2 in increasing order "
+                          f"(e.g. (0, 1, 2) or (1,)), got {axes!r}", plugin=type(act).__name__, kind="actuators")
+    return out
 
 
 def servo_sender(act: Actuator) -> Any:

@@ -90,7 +90,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ..devices.actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3, servo_sender
+from ..devices.actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3, force_axes_of, servo_sender
 from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput, _steady_law_of
 from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
@@ -705,6 +705,8 @@ class ServoLoop:
             n_max = max(1, int(math.floor(seconds / T + 1e-9)))
         cap = max(2, min(n_max, int(math.ceil(self.log_seconds / T)), MAX_LOG_TICKS))
         device = self.device
+        # the axes the force role renders a direction along, checked before anything opens
+        axes = next((force_axes_of(a) for a in self.actuators.values() if a.channel == "force"), (0, 1, 2))
         # open everything (idempotent); commands older than one period become stale
         for act in _distinct([device, *self.actuators.values()]):
             act.open()
@@ -759,8 +761,7 @@ class ServoLoop:
         self._x_off = 0.0    # the reading's offset from -pen (a force rendered along some axes)
         self._last_p: tuple[float, float, float] | None = None
         self._held_n: tuple[float, float, float] | None = None   # the direction sent last tick (None: +y)
-        axes = next((tuple(getattr(s.act, "force_axes", (0, 1, 2))) for s in slots if s.is_force), (0, 1, 2))
-        self._force_axes: tuple[int, ...] | None = None if sorted(axes) == [0, 1, 2] else axes
+        self._force_axes: tuple[int, ...] | None = None if axes == (0, 1, 2) else axes
         self._have_good = False
         self._vf0 = self._vf1 = self._vf2 = 0.0
         self._vf_dt = -1.0   # the filter's coefficient and speed step: computed on the first tick

@@ -315,3 +315,32 @@ def test_unread_ticks_in_a_press_stay_within_the_bound(k, period_s, damping, fin
 
 if __name__ == "__main__":
     pytest.main([__file__, "-q"])
+
+
+@pytest.mark.parametrize("axes", ["y", (3,), (1, 1), (), (2, 0), (1.0,), None, (True,)])
+def test_a_force_axes_declaration_that_is_not_axes_is_refused_before_anything_opens(axes):
+    """``Actuator.force_axes`` is read on every tick of a spatial contact: a declaration that
+    is not distinct axes 0-2 in order is a ``PluginError`` naming the actuator, raised by
+    ``start()`` before any actuator is opened (nothing driving, nothing to close)."""
+    from hapticsdk.errors import PluginError
+    from hapticsdk_hardness.omni import OmniVirtual
+
+    class Broken(OmniVirtual):
+        force_axes = axes
+
+    dev = Broken()
+    loop = ServoLoop(dev, [], {"force": dev}, period_s=0.001)
+    with pytest.raises(PluginError, match="Broken.force_axes"):
+        loop.start(0.01)
+    assert not dev.is_open
+
+
+@pytest.mark.parametrize("axes", [(0, 1, 2), (1,), (0, 2)])
+def test_declared_force_axes_are_read_as_declared(axes):
+    from hapticsdk.devices.actuators import force_axes_of
+    from hapticsdk_hardness.omni import OmniVirtual
+
+    class Dev(OmniVirtual):
+        force_axes = axes
+
+    assert force_axes_of(Dev()) == axes
