@@ -251,6 +251,18 @@ class LoopbackCapture:
             time.sleep(0.002)
         return True
 
+    def loud_since(self, start: int, level: float) -> int:
+        """How many samples captured from index ``start`` on (since the last
+        :meth:`clear`) exceed ``level`` in magnitude."""
+        with self._lock:
+            blocks = list(self.blocks)
+        n, i = 0, 0
+        for _, b in blocks:
+            if i + b.size > start:
+                n += int(np.count_nonzero(np.abs(b[max(0, start - i):]) > level))
+            i += b.size
+        return n
+
     def signal(self) -> tuple[np.ndarray, np.ndarray]:
         """(t, y): every captured sample with its time on the capture clock."""
         with self._lock:
@@ -309,7 +321,10 @@ def hold(act: Any, seconds: float, period_s: float = 0.001, *, frequency_hz: flo
 def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, amplitude: float = 0.5,
             seconds: float = 1.0) -> dict[str, float]:
     """One measurement on an open ``voicecoil-audio`` through the loopback: silence,
-    then ``amplitude`` at ``frequency_hz`` for ``seconds``, then ``stop()``.
+    then ``amplitude`` at ``frequency_hz`` commanded like a servo loop until ``seconds``
+    of sound are captured (counted in loud samples, not timed: a servo stalled past the
+    coil's ``command_timeout_s`` is rightly silenced meanwhile, and is held longer; at
+    most ``seconds`` + 10 s), then ``stop()``.
 
     Returns the frequency error (Hz), the amplitude against ``amplitude x full_scale``
     (relative), command-to-sound and stop-to-silence times through the loopback (ms, on
@@ -338,7 +353,19 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     x0 = cap.server.xruns()
     u0 = act.underruns
     t_cmd = cap.now()
-    hold(act, seconds, frequency_hz=frequency_hz, amplitude=amplitude)
+    level = 1e-3 * amplitude * act.full_scale
+    # the sound is held until ``seconds`` of it are captured, counted in loud samples: a
+    # servo (this thread) that a busy machine stalls past the coil's command_timeout_s
+    # is silenced by the coil's dead-man's switch (as it must be), and a stall of
+    # ``seconds`` may come before the first command; timing the hold on the wall clock
+    # then captured too little sound to measure, or none. A coil that does not sound at
+    # all is given 10 s (a broken coil, not a slow machine) and measures as NaN.
+    want = int(round(seconds * cap.server.rate))
+    hold_deadline = time.monotonic() + seconds + 10.0
+    while time.monotonic() < hold_deadline:
+        hold(act, min(seconds, 0.01), frequency_hz=frequency_hz, amplitude=amplitude)
+        if cap.loud_since(n_cmd, level) >= want:
+            break
     act.stop()
     t_stop = cap.now()
     n_stop = cap.count()
@@ -347,7 +374,7 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     cap.wait_for(n_stop + in_flight + 4 * period)   # some capture after those
     in_flight = (2 + (cap.server.xruns() - x0)) * period
     t, y = cap.signal()
-    is_loud = np.abs(y) > 1e-3 * amplitude * act.full_scale
+    is_loud = np.abs(y) > level
     loud = np.nonzero(is_loud)[0]
     out_lat = float(act.output_latency_s or 0.0)
     counted = {"sound_before_command": int(np.count_nonzero(is_loud[:n_cmd])), "samples_before_command": n_cmd,
