@@ -321,6 +321,47 @@ def test_sine_fit_on_silence_gaps_and_exact_zeros(f0):
     assert np.isnan(sine_fit(t, np.zeros_like(t))[0])
 
 
+def test_thread_callback_keeps_a_command_that_lands_during_it(monkeypatch):
+    """Thread isolation: the audio callback renders a block from a target older than
+    command_timeout_s (silence: the dead-man's switch), and the servo's next command
+    lands while the callback still runs (the coil lowers the switch interval to 0.1 ms,
+    so the servo thread can take the interpreter lock between any two bytecodes of the
+    callback). That fresh command is read back and the next block sounds: the callback
+    writes nothing the servo writes (it once set the silence flag after the render,
+    over the command's own write, which silenced the command and its read-back until the
+    next command came). Clock and interleaving made here, no audio server needed."""
+    from hapticsdk_hardness import audio
+    clock = [100.0]
+    monkeypatch.setattr(audio, "time", type("T", (), {"monotonic": staticmethod(lambda: clock[0])}))
+    coil = audio.VoiceCoilAudio(isolation="thread", command_timeout_s=0.05)
+    coil._renderer = renderer = coil._new_renderer(48000.0)
+    c = ChannelCommand("vibration", frequency_hz=200.0, amplitude=0.5)
+    out = np.zeros((128, 1), np.float32)
+    status = type("S", (), {"output_underflow": False})()
+    coil._command(c)
+    coil._callback(out, 128, None, status)
+    assert np.abs(out).max() > 0.1                      # a fresh command sounds
+    clock[0] += 0.2                                      # the servo stalls past the timeout
+
+    class ServoRunsDuring:                               # the next command lands mid-callback
+        timed_out, error = property(lambda s: renderer.timed_out), property(lambda s: renderer.error)
+
+        def __call__(self, *a):
+            renderer(*a)
+            coil._command(c)
+    coil._renderer = ServoRunsDuring()
+    coil._callback(out, 128, None, status)
+    assert not np.abs(out).any() and renderer.timeouts == 1   # the stale target: silence
+    coil._renderer = renderer
+    assert coil._read_back().amplitude == 0.5           # the fresh command is the target
+    coil._callback(out, 128, None, status)
+    assert np.abs(out).max() > 0.1                      # and the next block plays it
+    clock[0] += 0.2                                      # stalled again, no command meanwhile
+    assert coil._read_back().amplitude == 0.0           # the switch's rule, on the same clock
+    coil._callback(out, 128, None, status)
+    assert not np.abs(out).any() and renderer.timeouts == 2
+
+
 # -- the audio process (isolation="process", the default) ------------------------------
 def test_seqlock_keeps_the_previous_target_during_a_write():
     """The callback's read of the shared target (two mappings of one file, as the two

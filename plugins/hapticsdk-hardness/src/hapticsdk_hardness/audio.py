@@ -268,9 +268,11 @@ class VoiceCoilAudio(Actuator):
             out.fill(0.0)
             return
         freq, amp, t_cmd = self._target
+        # reads only: the servo thread is the one writer of the target and the silence
+        # flag (a write here, after the render, could land over a command the servo made
+        # meanwhile -- the switch interval is 0.1 ms -- and silence it); a timeout or an
+        # error silences each block by the renderer's own rules, and _read_back applies them
         r(out, frames, status.output_underflow, freq, amp, t_cmd, self._silent, time.monotonic())
-        if r.timed_out or r.error is not None:
-            self._silent = True
 
     # -- backend ------------------------------------------------------------------------------
     def _new_renderer(self, fs: float) -> BlockRenderer:
@@ -453,15 +455,17 @@ class VoiceCoilAudio(Actuator):
         """The target the audio callback renders (Hz, amplitude 0..1; 0 when silenced:
         stopped, timed out, or no audio process any more)."""
         freq, amp, t_cmd = self._target
-        silent = self._silent
+        # the callback's own dead-man rule, judged here on the same clock (time.monotonic()
+        # is system-wide): what the callback last did describes its last block, which may
+        # predate the newest command by a period or more on a busy machine, so it would
+        # report a fresh command as silenced
+        silent = self._silent or time.monotonic() - t_cmd > self.command_timeout_s
         if self.isolation == "process":
             sh, p = self._shared, self._proc
-            # the callback's own dead-man rule, judged here on the same clock
-            # (time.monotonic() is system-wide): the process's TIMED_OUT flag describes its
-            # last block, which may predate the newest command by a period or more on a
-            # busy machine, so it would report a fresh command as silenced
-            silent = (silent or sh is None or p is None or p.poll() is not None
-                      or time.monotonic() - t_cmd > self.command_timeout_s)
+            silent = silent or sh is None or p is None or p.poll() is not None
+        else:
+            r = self._renderer
+            silent = silent or r is None or r.error is not None
         return ChannelCommand("vibration", frequency_hz=freq, amplitude=0.0 if silent else amp)
 
     def _stop(self) -> None:
