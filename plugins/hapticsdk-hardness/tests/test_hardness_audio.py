@@ -300,6 +300,30 @@ class TestVoiceCoilAudioConformance(ActuatorConformance):
         return lambda: VoiceCoilAudio(device="system")
 
 
+def test_loud_since_counts_what_a_full_count_counts():
+    """LoopbackCapture.loud_since reads only new blocks when asked again: its counts
+    equal a count over everything captured, as blocks arrive, for another start or
+    level, and after clear() (no audio server: blocks put in as the callback does)."""
+    import threading
+    from hapticsdk_hardness.audio_loopback import LoopbackCapture
+    cap = object.__new__(LoopbackCapture)
+    cap.blocks, cap._lock, cap._cleared, cap._loud = [], threading.Lock(), 0, ((), 0, 0, 0)
+    rng = np.random.default_rng(0)
+
+    def full(start, level):
+        y = np.concatenate([b for _, b in cap.blocks]) if cap.blocks else np.zeros(0)
+        return int(np.count_nonzero(np.abs(y[start:]) > level))
+    for start, level in ((0, 0.5), (137, 0.5), (137, 1.5)):
+        for step in range(40):                    # as measure() asks: the same question
+            cap.blocks.append((0.0, rng.normal(size=int(rng.integers(1, 200))).astype(np.float32)))
+            assert cap.loud_since(start, level) == full(start, level)
+            if step == 20:
+                cap.clear()
+                assert cap.loud_since(start, level) == 0
+        assert cap.loud_since(0, 0.5) == full(0, 0.5)          # another question
+        assert cap.loud_since(start, level) == full(start, level)
+
+
 @pytest.mark.parametrize("f0", [109.889, 997.0])
 def test_sine_fit_on_silence_gaps_and_exact_zeros(f0):
     """The estimator of these measurements: exact for a sine with gaps of silence (a

@@ -38,8 +38,15 @@ import numpy as np
 from hapticsdk.perception.dimensions import ChannelCommand
 
 
+#: how long a JACK command-line tool may take (s): a hang guard for a wedged server, not a
+#: timing figure (on an idle machine one takes a few ms; a test process at nice 19 next to
+#: five CPU-bound ones, whose children and server inherit its niceness, saw jack_lsp take
+#: more than 10 s)
+TOOL_WAIT_S = 60.0
+
+
 def _jack(cmd: list[str], server: str) -> subprocess.CompletedProcess:
-    return subprocess.run([cmd[0], "-s", server, *cmd[1:]], capture_output=True, text=True, timeout=10)
+    return subprocess.run([cmd[0], "-s", server, *cmd[1:]], capture_output=True, text=True, timeout=TOOL_WAIT_S)
 
 
 class JackServer:
@@ -197,6 +204,8 @@ class LoopbackCapture:
         self.server = server
         self.blocks: list[tuple[float, np.ndarray]] = []
         self._lock = threading.Lock()
+        self._cleared = 0   # clear() calls so far
+        self._loud: tuple = ((), 0, 0, 0)   # loud_since's count so far (key, blocks, samples, loud)
         self.stream = sd.InputStream(samplerate=server.rate, channels=1, dtype="float32", callback=self._cb)
         self.in_port: str | None = None
         #: JACK cycles between rendering and capture (see the module doc): 1 when the
@@ -234,6 +243,7 @@ class LoopbackCapture:
         """Forget what was captured."""
         with self._lock:
             self.blocks = []
+            self._cleared += 1
 
     def count(self) -> int:
         """Samples captured so far (since the last :meth:`clear`). A count, not a time:
@@ -253,14 +263,19 @@ class LoopbackCapture:
 
     def loud_since(self, start: int, level: float) -> int:
         """How many samples captured from index ``start`` on (since the last
-        :meth:`clear`) exceed ``level`` in magnitude."""
+        :meth:`clear`) exceed ``level`` in magnitude. Called again with the same
+        ``start`` and ``level``, it reads only the blocks captured since (the capture's
+        callback shares this thread's interpreter lock: a long count here makes it late)."""
         with self._lock:
-            blocks = list(self.blocks)
-        n, i = 0, 0
-        for _, b in blocks:
+            blocks = self.blocks
+            key = (self._cleared, start, level)
+            _, k, i, n = self._loud if self._loud[0] == key else (key, 0, 0, 0)
+            new = blocks[k:]
+        for _, b in new:
             if i + b.size > start:
                 n += int(np.count_nonzero(np.abs(b[max(0, start - i):]) > level))
             i += b.size
+        self._loud = (key, k + len(new), i, n)
         return n
 
     def signal(self) -> tuple[np.ndarray, np.ndarray]:
@@ -370,9 +385,16 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     t_stop = cap.now()
     n_stop = cap.count()
     time.sleep(0.1)
-    in_flight = (2 + (cap.server.xruns() - x0)) * period
-    cap.wait_for(n_stop + in_flight + 4 * period)   # some capture after those
-    in_flight = (2 + (cap.server.xruns() - x0)) * period
+    # four periods captured after those in flight; each xrun reported meanwhile adds one
+    # to those in flight, so the goal moves while we wait (a busy machine: thousands of
+    # xruns over one measurement seen at nice 19): waited for until reached, the capture
+    # outrunning the xruns, with a hang guard (the capture stopped: 0 samples checked)
+    after_deadline = time.monotonic() + TOOL_WAIT_S
+    while True:
+        in_flight = (2 + (cap.server.xruns() - x0)) * period
+        if cap.count() >= n_stop + in_flight + 4 * period or time.monotonic() > after_deadline:
+            break
+        time.sleep(0.01)
     t, y = cap.signal()
     is_loud = np.abs(y) > level
     loud = np.nonzero(is_loud)[0]
