@@ -17,7 +17,15 @@ off, a spring wall of 0.3-50 N/mm, the finger preset, the motion's parameters):
   (a box for ``moving``) with, during the press or the hold, 1-19 ticks of NaN readings,
   a material 1.5-20 times stiffer switched in, a pause of 1-19 ticks, a force delayed by
   1-3 ticks, or the box moving 0.2-3 mm at 1-20 Hz; each cell run with and without the
-  event, and the cells failing with the event only counted.
+  event, and the cells failing with the event only counted;
+* ``plain``: the same presses without any event (the runs the five kinds above compare
+  with), with the median delivered ratio ``sum F / sum min(K pen, F_max)`` over the contact
+  ticks (F the force sent, pen the loop's penetration).
+
+``--start-ramp-s S`` gives the Omni's safety layer a start ramp of S seconds in every kind
+but ``ball`` (default: the layer's own, 0.2 s; docs/safety.md): presses and taps start within it, and a spring pressed under
+its envelope is active by itself (docs/runtime.md, "Other events in a press, through the
+loop").
 
 Statistic: counts of cells over 0.1 mJ and the largest energy; no clock is involved
 (simulated time). Figures: docs/runtime.md, Passivity, "A force rendered along one axis",
@@ -32,12 +40,17 @@ import functools
 
 import numpy as np
 
+from hapticsdk.devices.safety import SafetyLayer
 from hapticsdk.passivity import ControllerSettings
 from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
 from hapticsdk_hardness.omni import OmniVirtual
+
+
+#: the safety layer's start ramp (s) of the devices of ``cell``; None: the layer's default
+START_RAMP_S = None
 
 
 class Spring(DimensionRenderer):
@@ -92,7 +105,9 @@ def run(rng, kind, two):
     K = float(np.exp(rng.uniform(np.log(0.3), np.log(50))))
     src = rng.choice(["declared", "measured"])
     tr = traj(rng, kind)
-    dev = OmniVirtual(trajectory=tr, finger=str(rng.choice(["soft", "medium", "stiff"])), damping_ns_per_m=b)
+    safety = None if START_RAMP_S is None else SafetyLayer(OmniVirtual.limits, ramp_time_s=START_RAMP_S)
+    dev = OmniVirtual(trajectory=tr, finger=str(rng.choice(["soft", "medium", "stiff"])), damping_ns_per_m=b,
+                      safety=safety)
     st = ControllerSettings.for_device(dev, damping=measured_damping(b)) if src == "measured" else None
     if two:
         a = Box((10.0, 10.0, 10.0), pose=Pose((-10.0, -10.0, 0.0)))
@@ -153,7 +168,8 @@ def cell(rng, kind, perturb):
     t_ev = ps + rng.uniform(-0.3, 1.0) * hs          # the event: during the press or the hold
     K2 = K * float(np.exp(rng.uniform(np.log(1.5), np.log(20))))
     dticks = int(rng.integers(1, 4)); nbad = int(rng.integers(1, 20)); amp = rng.uniform(0.2, 3.0); fhz = rng.uniform(1, 20)
-    dev = OmniVirtual(trajectory=tr, finger=fing, damping_ns_per_m=b)
+    safety = None if START_RAMP_S is None else SafetyLayer(OmniVirtual.limits, ramp_time_s=START_RAMP_S)
+    dev = OmniVirtual(trajectory=tr, finger=fing, damping_ns_per_m=b, safety=safety)
     st = ControllerSettings.for_device(dev, damping=measured_damping(b)) if src == "measured" else None
     kw = {}
     if kind == "delay" and perturb: kw["delay_ticks"] = dticks
@@ -173,6 +189,7 @@ def cell(rng, kind, perturb):
             return s
         dev._read_state = rs_
     loop.start(tr.duration_s); w = -np.inf; switched = paused = False
+    sent = asked = 0.0; fmax = dev.limits.max_force_n
     while True:
         t = loop.ticks * T
         if perturb and not switched and t >= t_ev:
@@ -183,17 +200,24 @@ def cell(rng, kind, perturb):
         if kind == "moving" and perturb and t >= t_ev:
             loop.set_pose(0, Pose((0.0, -10.0 + amp * np.sin(2 * np.pi * fhz * (t - t_ev)), 0.0)))
         more = loop.tick(); w = max(w, dev.energy_to_user_j())
+        if loop.last_penetration_mm > 0.0:
+            sent += loop.last_force_n; asked += min(K * loop.last_penetration_mm, fmax)
         if not more: break
     loop.finish()
-    return w, dict(T=T, b=b, K=round(K, 2), K2=round(K2, 2), src=src, f=fing)
+    return w, dict(T=T, b=b, K=round(K, 2), K2=round(K2, 2), src=src, f=fing,
+                   delivered=sent / asked if asked > 0.0 else float("nan"))
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("kind", choices=["slide", "taps", "ball", "nan", "switch", "pause", "delay", "moving"])
+    ap.add_argument("kind", choices=["slide", "taps", "ball", "nan", "switch", "pause", "delay", "moving", "plain"])
     ap.add_argument("--cells", type=int, default=150)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--start-ramp-s", type=float, default=None,
+                    help="the safety layer's start ramp (s), all kinds but ball (default: the layer's own)")
     a = ap.parse_args()
+    global START_RAMP_S
+    START_RAMP_S = a.start_ramp_s
     if a.kind in ("slide", "taps"):
         for two in (False, True):
             rng = np.random.default_rng(a.seed)
@@ -204,6 +228,12 @@ def main() -> None:
         rng = np.random.default_rng(a.seed)
         es = np.array([run_ball(rng)[0] for _ in range(a.cells)])
         print(f"ball: over 0.1 mJ {int(np.sum(es > 1e-4))}/{a.cells}, largest {es.max() * 1e3:.3f} mJ")
+    elif a.kind == "plain":
+        rng = np.random.default_rng(a.seed)
+        rs = [cell(rng, "switch", False) for _ in range(a.cells)]
+        es = np.array([r[0] for r in rs])
+        print(f"plain presses: over 0.1 mJ {int(np.sum(es > 1e-4))}/{a.cells}, largest {es.max() * 1e3:.3f} mJ, "
+              f"median delivered {np.nanmedian([r[1]['delivered'] for r in rs]):.4f}")
     else:
         runs = {}
         for perturb in (False, True):
