@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ValidationError
-from .plan import _HIST, _ROUNDING_SLACK, _SCALES, affordable_force, below_ramp_force, plan_cost_j
+from .plan import _BRANCH_TOL, _HIST, _ROUNDING_SLACK, _SCALES, affordable_force, below_ramp_force, plan_cost_j
 from .settings import ControllerSettings
 
 
@@ -204,6 +204,24 @@ def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray)
     if "pending" in state:
         state["pending"][0] = False
     f = np.nan_to_num(np.asarray(f_applied, float), nan=0.0, posinf=0.0, neginf=0.0)
+    sp = state["spring"]
+    low = (sp > 0.0) & (f < sp)
+    if low.any():
+        # a spring the device did not apply (the scalar commit's rule): lowered to the force
+        # applied, its anchor moved in, the energy the move took out credited on its K_c branch
+        kc = state["kc"]
+        depth = -state["q1"] * 1e-3
+        fa = np.maximum(f, 0.0)
+        kc1 = np.where(low, kc, 1.0)
+        o = state.get("anchor", np.zeros_like(sp))
+        branch = low & (np.abs(sp - kc * (depth - o)) <= _BRANCH_TOL * sp)
+        state["energy"] = state["energy"] - np.where(branch, (sp * sp - fa * fa) / (2.0 * kc1), 0.0)
+        pos = low & (fa > 0.0)
+        if "anchor" in state:
+            state["anchor"] = np.where(pos, depth - fa / kc1, np.where(low, np.maximum(depth, 0.0), o))
+        state["kf"] = np.where(pos, kc, np.where(low, 0.0, state["kf"]))
+        state["kc"] = np.where(low & ~pos, 0.0, kc)
+        state["spring"] = np.where(low, fa, sp)
     state["f2"] = state["f1"]
     state["app3"] = state["app2"]
     state["app2"] = state["app1"]

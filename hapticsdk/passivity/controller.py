@@ -7,7 +7,7 @@ import logging
 import math
 from typing import Any
 
-from .plan import _HIST, _ROUNDING_SLACK, _affordable_scalar, _below_ramp_scalar, _cost_scalar
+from .plan import _BRANCH_TOL, _HIST, _ROUNDING_SLACK, _affordable_scalar, _below_ramp_scalar, _cost_scalar
 from .settings import ControllerSettings, _spring_stiffness_and_step
 
 _log = logging.getLogger(__name__)
@@ -43,7 +43,9 @@ class PassivityController:
     where the reading is above ``o`` it follows the reading out, and out of the wall it is
     0. It rises only as the reading moves in (by at most ``K_c`` times the inward change
     of a tick; ``o`` moves in where that binds): a wall that appears around a resting
-    stylus stores nothing. The extra gives way to the spring's rise, so the force rises by at most ``s`` per
+    stylus stores nothing. It is at most the force the device applied: a commit below it (a
+    safety layer's start ramp or clamp) lowers it to that force and moves ``o`` in, and the
+    energy that took out is credited to ``U`` where the spring is on its ``K_c`` branch. The extra gives way to the spring's rise, so the force rises by at most ``s`` per
     tick; on a release it takes up the spring's fall (never above what it held) where the
     plan affords it, so the force falls by at most ``s``, else by at most ``s`` plus the
     spring's fall ``K_c |dq|``.
@@ -450,6 +452,25 @@ class PassivityController:
         self._pending = False
         if not -_INF < f_applied < _INF:   # NaN or infinite: none applied
             f_applied = 0.0
+        sp = self._spring
+        if 0.0 < sp and f_applied < sp:
+            # the device applied less than the spring (a safety layer's start ramp or clamp):
+            # the spring held over the coming interval is the force applied, its anchor moved
+            # in to match. Its stored energy only falls, and where it is on its K_c branch
+            # what the move took out is credit: the spring's true work is at most minus it
+            # (docs/runtime.md, Passivity item 0, "A spring the device did not apply")
+            kc = self._kc
+            depth = -self._q1 * 1e-3
+            fa = f_applied if f_applied > 0.0 else 0.0
+            if abs(sp - kc * (depth - self._o)) <= _BRANCH_TOL * sp:
+                self.energy_j -= (sp * sp - fa * fa) / (2.0 * kc)
+            self._spring = fa
+            if fa > 0.0:
+                self._o = depth - fa / kc
+                self._kf = kc
+            else:
+                self._kf = self._kc = 0.0
+                self._o = depth if depth > 0.0 else 0.0
         self._f2 = self._f1
         self._f1 = f_applied - self._spring   # the extra actually held (the ramp starts from it)
         self._a3 = self._a2

@@ -24,6 +24,10 @@ _HIST = 2 * _SCALES[-1] + 1
 #: so the rule acts only beyond 2^-44 (a relative margin of 512 roundings: float error, no
 #: physics).
 _ROUNDING_SLACK = 1.0 + 2.0 ** -44
+#: relative tolerance of "the Colgate spring is on its K_c branch" (``K_c (depth - o)`` up to a few
+#: roundings, the margin of _ROUNDING_SLACK; docs/runtime.md, Passivity item 0, "A spring the device
+#: did not apply")
+_BRANCH_TOL = _ROUNDING_SLACK - 1.0
 
 
 #: Bisection steps of :func:`_affordable_bisect`, the fallback of the closed form

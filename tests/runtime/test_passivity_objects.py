@@ -9,8 +9,9 @@ on the simulated Omni (45 g, 0.055 mm encoder, 3.3 N; generated data). What each
 is the issue's bound: the energy the arm gave the finger (``OmniVirtual.energy_to_user_j``,
 its largest over the run) within 0.1 mJ. The damping is the loop's default (declared, none
 credited: no Colgate spring), so the whole force is the energy-bounded extra and the bound
-is the controller's alone (with a measured damping, the spring's encoder term of
-docs/runtime.md, Passivity item 0, shows on one object as on two).
+is the controller's alone (with a measured damping, a press made inside the safety layer's
+start ramp showed on one object as on two: docs/runtime.md, Passivity item 0, "A spring the
+device did not apply", and the tests at the end of this file).
 
 * **A force rendered along one axis.** The simulated Omni renders a force along a contact
   normal as its projection on y. Near the side face of a box (and wherever the normal is
@@ -344,3 +345,85 @@ def test_declared_force_axes_are_read_as_declared(axes):
         force_axes = axes
 
     assert force_axes_of(Dev()) == axes
+# -- a spring the device did not apply ---------------------------------------------------------
+# The safety layer's start ramp (0.2 s from the opening, docs/safety.md) scales every command,
+# the Colgate spring's too: a hand that presses within it compresses the spring against the
+# scaled force and, without the rule, got the whole spring back on the release (through the
+# loop, 2, 2 and 5 of 150 drawn presses of seeds 7-9 over 0.1 mJ, up to 0.83 mJ; docs/runtime.md,
+# Passivity item 0, "A spring the device did not apply").
+
+
+def test_a_press_inside_the_safety_start_ramp_gets_back_only_the_spring_applied():
+    """0.198 mJ without the rule: a 2.16 N/mm wall at 0.25 ms, the damping measured (K_c 1
+    N/mm), the stiff finger pressing 1.5 mm from 0 to 150 ms, inside the start ramp."""
+    from hapticsdk_hardness.omni import OmniVirtual
+
+    tr = press_slide(depth_mm=1.5, press_s=0.15, hold_s=0.4, slide_s=0.0, release_s=0.15, rest_s=0.1)
+    dev = OmniVirtual(trajectory=tr, finger="stiff", damping_ns_per_m=0.25)
+    loop = ServoLoop(dev, [Spring(2.16)], {"force": dev}, period_s=2.5e-4, passivity=True,
+                     passivity_settings=ControllerSettings.for_device(dev, damping=measured(0.25)))
+    e = largest_energy(loop, dev, tr.duration_s)
+    assert e <= ENERGY_J, e
+
+
+def _wall_controller(batch: bool, k_wall: float):
+    """``(step, commit, book)`` of one controller on a ``k_wall`` N/mm wall at 1 ms, ``K_c`` 1
+    N/mm (a measured damping of 1 N s/m, the spring's share half of it), the servo's scalar
+    controller or the benchmark's vectorised one; ``book()`` is (spring N, anchor m, U J)."""
+    from hapticsdk.passivity import controller_commit_batch, controller_state_batch, controller_step_batch
+
+    s = ControllerSettings(period_s=1e-3, max_force_n=3.3, position_resolution_mm=0.055, device_damping_ns_per_m=1.0,
+                           measured_damping_ns_per_m=1.0)   # b_s = 0.5 N s/m: K_c = 2 b_s / T = 1 N/mm
+    if batch:
+        state = controller_state_batch(1)
+
+        def step(x: float) -> float:
+            wall = np.array([k_wall * max(-x, 0.0)])
+            return float(controller_step_batch(state, np.array([x]), 1e-3, wall, True, s)[0])
+
+        def commit(f: float) -> None:
+            controller_commit_batch(state, np.array([f]))
+
+        def book() -> tuple[float, float, float]:
+            return float(state["spring"][0]), float(state["anchor"][0]), float(state["energy"][0])
+        return step, commit, book
+    pc = PassivityController(s)
+    return (lambda x: pc.step(x, 1e-3, k_wall * max(-x, 0.0))), pc.commit, (lambda: (pc._spring, pc._o, pc.energy_j))
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_commit_below_the_spring_lowers_it_and_credits_what_it_took_out(batch):
+    """The controller alone (the servo's scalar one and the benchmark's vectorised one): a
+    spring of ``K_c`` 1 N/mm pressed slowly to 1 mm (1 N, a 2 N/mm wall), of which the device
+    applied 0.4 N, is 0.4 N from then on with its anchor at 0.6 mm, and ``U`` falls by what
+    the move took out, ``(1^2 - 0.4^2) / (2 K_c)`` = 0.42 mJ; a reading that stays keeps it
+    there (it rises again only as the reading moves in)."""
+    step, commit, book = _wall_controller(batch, 2.0)
+    for x in [0.5] + [-0.05 * i for i in range(1, 21)]:   # from above the surface to 1 mm, 0.05 mm a tick
+        commit(step(x))
+    step(-1.0)
+    spring, anchor, u = book()
+    assert math.isclose(spring, 1.0, rel_tol=1e-9) and anchor == 0.0, (spring, anchor)
+    commit(0.4)
+    spring, anchor, u2 = book()
+    assert math.isclose(spring, 0.4, rel_tol=1e-9) and math.isclose(anchor, 0.6e-3, rel_tol=1e-9), (spring, anchor)
+    assert math.isclose(u - u2, (1.0 - 0.16) / 2000.0, rel_tol=1e-9), (u, u2)
+    step(-1.0)
+    assert math.isclose(book()[0], 0.4, rel_tol=1e-9)
+
+
+@pytest.mark.parametrize("batch", [False, True])
+def test_a_spring_capped_by_the_wall_is_lowered_without_credit(batch):
+    """A 0.5 N/mm wall below ``K_c`` (1 N/mm): the spring is the wall's law, 0.5 N at 1 mm, not
+    ``K_c`` times its depth, and the potential of a capped law is not known from one force, so
+    the commit of 0.2 N lowers the spring (anchor at 0.8 mm) and credits nothing."""
+    step, commit, book = _wall_controller(batch, 0.5)
+    for x in [0.5] + [-0.05 * i for i in range(1, 21)]:
+        commit(step(x))
+    step(-1.0)
+    spring, _, u = book()
+    assert math.isclose(spring, 0.5, rel_tol=1e-9), spring
+    commit(0.2)
+    spring, anchor, u2 = book()
+    assert math.isclose(spring, 0.2, rel_tol=1e-9) and math.isclose(anchor, 0.8e-3, rel_tol=1e-9), (spring, anchor)
+    assert u2 == u, (u, u2)

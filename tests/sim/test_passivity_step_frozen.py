@@ -5,7 +5,9 @@ without calling the plan),
 against a frozen copy of the step and commit as they were before (commit ba2e7f0, with the
 two rules of caa970d added: the spring's inward rise and the fall below the ramp with the
 book overdrawn; and issue 23's rule for ticks without a reading: the next booking's damping
-credit over the whole span, no spring over those ticks and none from their motion), bit for
+credit over the whole span, no spring over those ticks and none from their motion; and the
+rule of a spring the device did not apply: a commit below the spring lowers it to the force
+applied, its anchor moved in, the energy taken out credited on its K_c branch), bit for
 bit, on input sequences hypothesis draws:
 
 * readings that dwell, move by fractions of a count or jump by millimetres, reverse, and
@@ -38,7 +40,7 @@ hyp = pytest.importorskip("hypothesis", reason="hypothesis (the test extra) is n
 from hypothesis import given, settings, strategies as st  # noqa: E402
 
 from hapticsdk.passivity import ControllerSettings, PassivityController  # noqa: E402
-from hapticsdk.passivity.plan import (_HIST, _ROUNDING_SLACK, _affordable_scalar, _below_ramp_scalar,  # noqa: E402
+from hapticsdk.passivity.plan import (_BRANCH_TOL, _HIST, _ROUNDING_SLACK, _affordable_scalar, _below_ramp_scalar,  # noqa: E402
                                       _cost_scalar)
 from hapticsdk.passivity.settings import _spring_stiffness_and_step  # noqa: E402
 
@@ -292,6 +294,20 @@ class _FrozenController:
         self._pending = False
         if f_applied != f_applied or f_applied in (math.inf, -math.inf):
             f_applied = 0.0
+        sp = self._spring
+        if sp > 0.0 and f_applied < sp:
+            kc = self._kc
+            depth = -self._q1 * 1e-3
+            fa = f_applied if f_applied > 0.0 else 0.0
+            if abs(sp - kc * (depth - self._o)) <= _BRANCH_TOL * sp:
+                self.energy_j -= (sp * sp - fa * fa) / (2.0 * kc)
+            self._spring = fa
+            if fa > 0.0:
+                self._o = depth - fa / kc
+                self._kf = kc
+            else:
+                self._kf = self._kc = 0.0
+                self._o = depth if depth > 0.0 else 0.0
         self._f2 = self._f1
         self._f1 = f_applied - self._spring
         self._a3 = self._a2
