@@ -95,7 +95,7 @@ class PassivityController:
         self.energy_j: float = 0.0
         self.reset()
 
-    def reset(self, keep_debt: bool = False) -> None:
+    def reset(self, *, keep_debt: bool = False) -> None:
         """Forget the energy observed so far (a new run). With ``keep_debt`` (another object
         of the same run, the servo loop's restart) the controller starts afresh on the new
         object's readings but keeps a debt, ``U = max(U, 0)``: the bound covers the run, and
