@@ -37,31 +37,25 @@ from __future__ import annotations
 
 import argparse
 import functools
+import sys
+from pathlib import Path
 
 import numpy as np
 
 from hapticsdk.devices.safety import SafetyLayer
 from hapticsdk.passivity import ControllerSettings
-from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
 from hapticsdk_hardness.omni import OmniVirtual
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
+from renderers import Spring  # noqa: E402
+
 
 #: the safety layer's start ramp (s) of the devices of ``cell``; None: the layer's default
 START_RAMP_S = None
-
-
-class Spring(DimensionRenderer):
-    """``F = K x penetration`` on the force role."""
-    roles = ("force",)
-
-    def __init__(self, k):
-        self.k = k
-
-    def tick(self, inp):
-        return [ChannelCommand("force", force_n=self.k * inp.penetration_mm if inp.in_contact else 0.0)]
 
 
 @functools.lru_cache(maxsize=None)

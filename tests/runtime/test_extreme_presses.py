@@ -42,9 +42,9 @@ import numpy as np
 import pytest
 
 from hapticsdk.passivity import ControllerSettings, colgate_stiffness_n_per_mm
-from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.sim.finger import Trajectory, press_slide
+from renderers import Spring
 
 K_N_PER_MM = 50.0
 F_MAX_N = 3.3            # the simulated Omni's force limit
@@ -57,17 +57,6 @@ SOURCES = ("declared", "measured", "wrong")
 PRESS = press_slide(depth_mm=2.0, press_s=0.3, hold_s=0.5, slide_s=0.0, release_s=0.3, rest_s=0.2)
 #: from 3 mm above the surface to 3 mm in over 12 ms (0.5 m/s), held, and out at 0.5 m/s
 IMPACT = Trajectory([(0.0, 0.0, 3.0), (0.012, 0.0, -3.0), (0.5, 0.0, -3.0), (0.512, 0.0, 3.0), (0.7, 0.0, 3.0)])
-
-
-class RawSpring(DimensionRenderer):
-    """``F = K x penetration`` on the force role, nothing else (no voice coil)."""
-    roles = ("force",)
-
-    def __init__(self, k: float) -> None:
-        self.k = k
-
-    def tick(self, inp):
-        return [ChannelCommand("force", force_n=self.k * inp.penetration_mm if inp.in_contact else 0.0)]
 
 
 @functools.lru_cache(maxsize=None)
@@ -101,7 +90,7 @@ def run_case(kind: str, period_s: float, damping: float, trajectory: Trajectory,
     else:                                        # what a device declaring `damping` gives
         settings = dataclasses.replace(ControllerSettings.for_device(dev), device_damping_ns_per_m=damping)
     if kind == "raw":
-        loop = ServoLoop(dev, [RawSpring(K_N_PER_MM)], {"force": dev}, period_s=period_s, passivity=True,
+        loop = ServoLoop(dev, [Spring(K_N_PER_MM)], {"force": dev}, period_s=period_s, passivity=True,
                          passivity_settings=settings)
     else:
         loop = ServoLoop(dev, [HardnessRenderer(K_N_PER_MM)], {"force": dev, "coil": VoiceCoilVirtual()},
@@ -153,7 +142,6 @@ def test_an_impact_at_half_a_metre_a_second_stays_passive(kind, damping, source)
     assert r["delivered"] > 0, r
 
 
-
 def test_the_loop_says_when_a_declared_damping_is_not_credited(caplog):
     """The default controller credits none of a declared damping; the loop says so once,
     at INFO, naming the way to a measurement, and says nothing once one is given."""
@@ -162,16 +150,16 @@ def test_the_loop_says_when_a_declared_damping_is_not_credited(caplog):
 
     with caplog.at_level(logging.INFO, logger="hapticsdk.runtime.loop"):
         dev = OmniVirtual(trajectory=PRESS, damping_ns_per_m=0.5)
-        ServoLoop(dev, [RawSpring(1.0)], {"force": dev}, period_s=1e-3)
+        ServoLoop(dev, [Spring(1.0)], {"force": dev}, period_s=1e-3)
     said = [r.getMessage() for r in caplog.records if "not credit" in r.getMessage()]
     assert len(said) == 1 and "0.5 N s/m" in said[0] and "calibrate damping" in said[0]
     caplog.clear()
     with caplog.at_level(logging.INFO, logger="hapticsdk.runtime.loop"):
         dev = OmniVirtual(trajectory=PRESS, damping_ns_per_m=0.5)
-        ServoLoop(dev, [RawSpring(1.0)], {"force": dev}, period_s=1e-3,
+        ServoLoop(dev, [Spring(1.0)], {"force": dev}, period_s=1e-3,
                   passivity_settings=ControllerSettings.for_device(dev, damping=measured_damping(0.5)))
         dev = OmniVirtual(trajectory=PRESS, damping_ns_per_m=0.0)
-        ServoLoop(dev, [RawSpring(1.0)], {"force": dev}, period_s=1e-3)
+        ServoLoop(dev, [Spring(1.0)], {"force": dev}, period_s=1e-3)
     assert not [r for r in caplog.records if "not credit" in r.getMessage()]
 
 if __name__ == "__main__":

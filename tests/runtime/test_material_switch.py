@@ -12,18 +12,9 @@ from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose
 from hapticsdk.sim.finger import Trajectory
 from hapticsdk.sim.probe import VirtualProbe
+from renderers import Spring
 
 T = 1e-3
-
-
-class Spring(DimensionRenderer):
-    roles = ("force",)
-
-    def __init__(self, k):
-        self.k = k
-
-    def tick(self, inp):
-        return [ChannelCommand("force", force_n=self.k * inp.penetration_mm if inp.in_contact else 0.0)]
 
 
 class Tone(DimensionRenderer):

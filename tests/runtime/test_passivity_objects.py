@@ -37,23 +37,12 @@ from hypothesis import strategies as st
 
 from hapticsdk.devices.actuators import SensedState
 from hapticsdk.passivity import ControllerSettings, PassivityController
-from hapticsdk.perception.dimensions import ChannelCommand, DimensionRenderer
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
+from renderers import Spring
 
 ENERGY_J = 1e-4          # the issue's bound on the energy to the user
-
-
-class Spring(DimensionRenderer):
-    """``F = K x penetration`` on the force role."""
-    roles = ("force",)
-
-    def __init__(self, k: float) -> None:
-        self.k = k
-
-    def tick(self, inp):
-        return [ChannelCommand("force", force_n=self.k * inp.penetration_mm if inp.in_contact else 0.0)]
 
 
 def slide(depth: float, crossings: int, speed_mm_s: float, press_s: float, dwell_s: float) -> Trajectory:

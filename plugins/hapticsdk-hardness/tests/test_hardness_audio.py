@@ -324,6 +324,29 @@ def test_loud_since_counts_what_a_full_count_counts():
         assert cap.loud_since(start, level) == full(start, level)
 
 
+def test_wait_for_follows_a_goal_that_moves():
+    """LoopbackCapture.wait_for with a callable goal asks for it on every look (measure()'s
+    wait after stop(): the samples in flight grow with each xrun the server reports), and
+    returns once the capture has reached the goal as last asked (no audio server: a
+    capture that grows by 100 samples a look, a goal that grows by 50)."""
+    from hapticsdk_hardness.audio_loopback import LoopbackCapture
+    cap = object.__new__(LoopbackCapture)
+    captured = [0]
+
+    def count():
+        captured[0] += 100
+        return captured[0]
+    cap.count = count
+    asked = []
+
+    def goal():
+        asked.append(300 + 50 * len(asked))
+        return asked[-1]
+    assert cap.wait_for(goal, 5.0)
+    assert len(asked) == 5 and captured[0] == 500 == asked[-1]
+    assert cap.wait_for(700, 5.0) and captured[0] == 700     # a plain count as before
+
+
 @pytest.mark.parametrize("f0", [109.889, 997.0])
 def test_sine_fit_on_silence_gaps_and_exact_zeros(f0):
     """The estimator of these measurements: exact for a sine with gaps of silence (a

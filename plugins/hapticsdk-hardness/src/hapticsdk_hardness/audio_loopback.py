@@ -31,7 +31,7 @@ import shutil
 import subprocess
 import threading
 import time
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -251,11 +251,13 @@ class LoopbackCapture:
         with self._lock:
             return sum(b.size for _, b in self.blocks)
 
-    def wait_for(self, samples: int, seconds: float = 10.0) -> bool:
+    def wait_for(self, samples: "int | Callable[[], int]", seconds: float = 10.0) -> bool:
         """Wait until at least ``samples`` are captured (False if ``seconds`` passed
-        first: the capture stopped running, not a slow machine)."""
+        first: the capture stopped running, not a slow machine). ``samples`` may be a
+        callable, asked again on each look: a goal that moves while the capture runs."""
+        goal = samples if callable(samples) else (lambda: samples)
         deadline = time.monotonic() + seconds
-        while self.count() < samples:
+        while self.count() < goal():
             if time.monotonic() > deadline:
                 return False
             time.sleep(0.002)
@@ -389,12 +391,14 @@ def measure(act: Any, cap: LoopbackCapture, *, frequency_hz: float = 250.0, ampl
     # to those in flight, so the goal moves while we wait (a busy machine: thousands of
     # xruns over one measurement seen at nice 19): waited for until reached, the capture
     # outrunning the xruns, with a hang guard (the capture stopped: 0 samples checked)
-    after_deadline = time.monotonic() + TOOL_WAIT_S
-    while True:
+    in_flight = 0
+
+    def after_stop() -> int:
+        nonlocal in_flight
         in_flight = (2 + (cap.server.xruns() - x0)) * period
-        if cap.count() >= n_stop + in_flight + 4 * period or time.monotonic() > after_deadline:
-            break
-        time.sleep(0.01)
+        return n_stop + in_flight + 4 * period
+
+    cap.wait_for(after_stop, TOOL_WAIT_S)
     t, y = cap.signal()
     is_loud = np.abs(y) > level
     loud = np.nonzero(is_loud)[0]
