@@ -48,6 +48,7 @@ from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
 from hapticsdk_hardness.omni import OmniVirtual
+from hapticsdk_hardness.omni3 import Omni3Virtual
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
@@ -202,16 +203,120 @@ def cell(rng, kind, perturb):
                    delivered=sent / asked if asked > 0.0 else float("nan"))
 
 
+# ---- three axes (--axes 3): the simulated Omni with x, y and z actuated ----------------
+KINDS3 = ("face", "edge", "corner", "ball", "two", "taps", "random")
+
+
+def _box_spot(rng, where, h=10.0):
+    """A point on the surface of the box of half size ``h`` whose top face is y = 0 (centre
+    (0, -h, 0)) and the unit vector into the box there: on a face, an edge or a corner."""
+    s = rng.choice([-1.0, 1.0], 3)
+    if where == "face":
+        a = int(rng.integers(3)); p = rng.uniform(-0.6 * h, 0.6 * h, 3); p[a] = s[a] * h
+        n = np.zeros(3); n[a] = -s[a]
+    elif where == "edge":
+        a = int(rng.integers(3)); p = s * h; p[a] = rng.uniform(-0.6 * h, 0.6 * h)
+        n = -s.copy(); n[a] = 0.0
+    else:
+        p = s * h; n = -s.copy()
+    p = p + np.array([0.0, -h, 0.0])
+    return p, n / np.linalg.norm(n)
+
+
+def traj3(rng, kind):
+    """A 3-D finger path about a spot of the scene: knots drawn at random within a cube of
+    0.5-5 mm about the spot, up to 0.3-3 mm inside along the inward normal, at 5-1500 mm/s
+    (log-uniform) in random directions with holds of 0-0.1 s; ``taps`` goes in and out
+    through the spot. Starts and ends 2 mm outside. Returns the trajectory and the scene
+    (objects for the hit tester)."""
+    if kind == "ball":
+        R = rng.uniform(8, 40); u = rng.normal(size=3); u /= np.linalg.norm(u)
+        c = np.array([0.0, -R, 0.0]); p, n = c + R * u, -u
+        scene = [("ball", Sphere(R, pose=Pose(tuple(c))))]
+    elif kind == "two":
+        # on the seam of two abutting boxes: its top edge line, or where it meets a side edge
+        z = rng.choice([rng.uniform(-6, 6), 10.0 * rng.choice([-1.0, 1.0])])
+        p = np.array([0.0, 0.0, z]); n = np.array([0.0, -1.0, -np.sign(z) if abs(z) == 10.0 else 0.0])
+        n /= np.linalg.norm(n)
+        scene = [("A", Box((10.0, 10.0, 10.0), pose=Pose((-10.0, -10.0, 0.0)))),
+                 ("B", Box((10.0, 10.0, 10.0), pose=Pose((10.0, -10.0, 0.0))))]
+    else:
+        where = str(rng.choice(["face", "edge", "corner"])) if kind in ("random", "taps") else kind
+        p, n = _box_spot(rng, where)
+        scene = [("A", Box((10.0, 10.0, 10.0), pose=Pose((0.0, -10.0, 0.0))))]
+    spread = rng.uniform(0.5, 5.0); d = rng.uniform(0.3, 3.0); m = int(rng.integers(3, 15))
+    out = p - 2.0 * n
+    pts = [(0.0, *out)]; t = rng.uniform(0.02, 0.3); q = out
+    for i in range(m):
+        if kind == "taps":
+            nxt = [p + rng.uniform(-spread, spread, 3) * 0.3 + n * d * rng.uniform(0.2, 1.0), out]
+        else:
+            nxt = [p + rng.uniform(-spread, spread, 3) + n * d * rng.uniform(-0.5, 1.0)]
+        for r in nxt:
+            v = float(np.exp(rng.uniform(np.log(5.0), np.log(1500.0))))
+            t += max(float(np.linalg.norm(r - q)) / v, 1e-4); pts.append((t, *r)); q = r
+            if rng.uniform() < 0.3:
+                t += rng.uniform(0.0, 0.1); pts.append((t, *r))
+    v = float(np.exp(rng.uniform(np.log(5.0), np.log(1500.0))))
+    t += max(float(np.linalg.norm(out - q)) / v, 1e-4); pts.append((t, *out))
+    t += 0.1; pts.append((t, *out))
+    return Trajectory([(k[0], k[1], k[2], k[3]) for k in pts]), scene
+
+
+def run3(rng, kind, passivity=True):
+    """One cell of ``--axes 3``: the energy to the finger (J, largest over the run), the
+    cell's draws and the delivered ratio."""
+    T = float(rng.choice([2.5e-4, 5e-4, 1e-3, 2e-3, 4e-3])); b = float(rng.choice([0.0, 0.25, 0.5]))
+    K = float(np.exp(rng.uniform(np.log(0.3), np.log(50)))); fing = str(rng.choice(["soft", "medium", "stiff"]))
+    src = str(rng.choice(["declared", "measured"]))
+    tr, scene = traj3(rng, kind)
+    safety = None if START_RAMP_S is None else SafetyLayer(Omni3Virtual.limits, ramp_time_s=START_RAMP_S)
+    dev = Omni3Virtual(trajectory=tr, finger=fing, damping_ns_per_m=b, safety=safety)
+    st = ControllerSettings.for_device(dev, damping=measured_damping(b)) if src == "measured" and passivity else None
+    loop = ServoLoop(dev, (), {"force": dev}, period_s=T, passivity=passivity, passivity_settings=st,
+                     objects=[(name, [Spring(K)]) for name, _ in scene], hit_tester=HitTester(scene))
+    loop.start(tr.duration_s); w = -np.inf
+    sent = asked = 0.0; fmax = dev.limits.max_force_n
+    while True:
+        more = loop.tick(); w = max(w, dev.energy_to_user_j())
+        if loop.last_penetration_mm > 0.0:
+            sent += loop.last_force_n; asked += min(K * loop.last_penetration_mm, fmax)
+        if not more: break
+    loop.finish()
+    return w, dict(T=T, b=b, K=round(K, 3), src=src, f=fing,
+                   delivered=sent / asked if asked > 0.0 else float("nan"))
+
+
+def main3(kind, cells, seed):
+    """``--axes 3``: every kind of KINDS3 (or the one asked), with the controller on and,
+    as the control, off."""
+    for k in (KINDS3 if kind == "all" else (kind,)):
+        for on in (True, False):
+            rng = np.random.default_rng(seed)
+            rs = [run3(rng, k, on) for _ in range(cells)]
+            es = np.array([r[0] for r in rs])
+            worst = rs[int(np.argmax(es))][1]
+            print(f"3 axes, {k}, controller {'on' if on else 'off'}: over 0.1 mJ {int(np.sum(es > 1e-4))}/{cells}, "
+                  f"largest {es.max() * 1e3:.3f} mJ ({worst}), "
+                  f"median delivered {np.nanmedian([r[1]['delivered'] for r in rs]):.4f}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("kind", choices=["slide", "taps", "ball", "nan", "switch", "pause", "delay", "moving", "plain"])
+    ap.add_argument("kind", choices=["slide", "taps", "ball", "nan", "switch", "pause", "delay", "moving", "plain",
+                                     *KINDS3[:3], "two", "random", "all"])
     ap.add_argument("--cells", type=int, default=150)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--axes", type=int, choices=[1, 3], default=1,
+                    help="1: the simulated Omni's y axis (omni-virtual); 3: x, y and z (omni3-virtual)")
     ap.add_argument("--start-ramp-s", type=float, default=None,
                     help="the safety layer's start ramp (s), all kinds but ball (default: the layer's own)")
     a = ap.parse_args()
     global START_RAMP_S
     START_RAMP_S = a.start_ramp_s
+    if a.axes == 3:
+        main3(a.kind, a.cells, a.seed)
+        return
     if a.kind in ("slide", "taps"):
         for two in (False, True):
             rng = np.random.default_rng(a.seed)

@@ -15,3 +15,7 @@ class TestOmniVirtual(DeviceConformance):
 
 class TestVoiceCoilVirtual(ActuatorConformance):
     plugin_name = "voicecoil-virtual"
+
+
+class TestOmni3Virtual(DeviceConformance):
+    plugin_name = "omni3-virtual"
