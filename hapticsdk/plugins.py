@@ -44,7 +44,8 @@ GROUPS: dict[str, str] = {
 FIRST_PARTY: dict[str, dict[str, str]] = {
     "dimension": {"hardness": "hapticsdk-hardness", "roughness": "hapticsdk-roughness"},
     "actuator": {
-        "omni-virtual": "hapticsdk-hardness", "voicecoil-virtual": "hapticsdk-hardness",
+        "omni-virtual": "hapticsdk-hardness", "omni3-virtual": "hapticsdk-hardness",
+        "voicecoil-virtual": "hapticsdk-hardness",
         "omni-openhaptics": "hapticsdk-hardness", "piezo-virtual": "hapticsdk-roughness",
         "piezo-serial": "hapticsdk-roughness", "piezo-mcp2221": "hapticsdk-roughness",
         "voicecoil-audio": "hapticsdk-hardness", "dhd": "hapticsdk-hardness", "inverse3": "hapticsdk-hardness",

@@ -137,6 +137,23 @@ class PassivityController:
         self._pending = False       # a step returned a force that no commit has recorded yet
         self._gap = 0.0             # time (s) of the ticks since the last booked one that had no reading
 
+    def rebase(self, readings_mm: "list[float]") -> None:
+        """Replace the newest readings the controller holds (mm): ``readings_mm[0]`` the
+        last one, which the next :meth:`step` books from, ``readings_mm[j]`` the one ``j``
+        ticks before it; older ones are kept. The servo loop's turn of a contact normal on
+        a device that renders the force on all three axes (docs/runtime.md, Passivity, "A
+        normal that turns"): the history re-read along the new normal, so the plan's
+        prediction is of the motion the new force meets. A controller that has no reading
+        yet keeps none."""
+        if not self._started or not readings_mm:
+            return
+        hist = self._hist
+        hp = self._hp
+        for j in range(min(len(readings_mm), _HIST)):
+            hist[hp - j] = readings_mm[j]
+        self._q1 = hist[hp]
+        self._q2 = hist[hp - 1]
+
     def step(self, x_mm: float, dt: float, f_wall: float) -> float:
         """Book the last interval, then return the force (N) to command this tick."""
         if self._pending:

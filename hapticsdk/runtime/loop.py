@@ -96,6 +96,7 @@ from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
 from ..quantiles import median
 from .clock import MonotonicClock, RealtimeSettings, apply_realtime, thread_cpu_clock_cost_s
+from .turns import NormalTurns
 from .stats import PREEMPT_THRESHOLD_S, jitter_stats, preemption_stats, tick_stats
 
 _log = logging.getLogger(__name__)
@@ -546,6 +547,8 @@ class ServoLoop:
         self.last_state: DeviceState | None = None
         self.last_penetration_mm = 0.0
         self.last_force_n = 0.0
+        self._pcs: list[PassivityController] = []
+        self._turns: NormalTurns | None = None
         #: servo time (s) of the last tick (None before the first), the hit test's object
         #: index (-1 none) and the compute time (s) of that tick
         self.last_t: float | None = None
@@ -762,6 +765,8 @@ class ServoLoop:
         self._last_p: tuple[float, float, float] | None = None
         self._held_n: tuple[float, float, float] | None = None   # the direction sent last tick (None: +y)
         self._force_axes: tuple[int, ...] | None = None if axes == (0, 1, 2) else axes
+        self._pcs = [s.pc for s in slots if s.pc is not None]
+        self._turns = NormalTurns() if axes == (0, 1, 2) and self._pcs else None
         self._have_good = False
         self._vf0 = self._vf1 = self._vf2 = 0.0
         self._vf_dt = -1.0   # the filter's coefficient and speed step: computed on the first tick
@@ -1060,6 +1065,7 @@ class ServoLoop:
                         o.sw = None   # the switch is over: the new law alone
                         self._fuse_want = True
         # ---- 4. passivity + send --------------------------------------
+        last_x = self._last_x
         if bad:
             # no position: the controller books nothing and sends 0; its next booking spans
             # this tick too (the damping credit over the whole span)
@@ -1094,6 +1100,15 @@ class ServoLoop:
                 x_n += self._x_off
                 self._last_p = (p0, p1, p2)
             self._last_x = x_n
+        turns = self._turns
+        if turns is not None and ht is not None:
+            # all three axes rendered: the held force's work booked out of contact, the
+            # history re-read along a normal that turns (hapticsdk.runtime.turns)
+            if bad:
+                turns.forget()
+            else:
+                x_n = self._last_x = turns.reading(self._pcs, x_n, last_x, idx >= 0, idx == self._pc_obj,
+                                                   (p0, p1, p2), direction, self._held_n, self.last_force_n)
         self._held_n = direction
         if idx != self._pc_obj and idx >= 0:
             if self._pc_obj != -2:

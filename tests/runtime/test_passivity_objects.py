@@ -40,7 +40,7 @@ from hapticsdk.passivity import ControllerSettings, PassivityController
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
-from renderers import Spring
+from renderers import Spring, largest_energy
 
 ENERGY_J = 1e-4          # the issue's bound on the energy to the user
 
@@ -114,19 +114,6 @@ def run(trajectory: Trajectory, k: float, period_s: float, damping: float, finge
         ht = HitTester([("A", Box((20.0, 10.0, 10.0), pose=Pose((0.0, -10.0, 0.0))))])
     loop = ServoLoop(dev, (), {"force": dev}, period_s=period_s, passivity=True, objects=objs, hit_tester=ht)
     return largest_energy(loop, dev, trajectory.duration_s)
-
-
-def largest_energy(loop: ServoLoop, dev, seconds: float) -> float:
-    """Run ``loop`` for ``seconds``; the largest energy the arm gave the finger (J)."""
-    loop.start(seconds)
-    worst = -np.inf
-    while True:
-        more = loop.tick()
-        worst = max(worst, dev.energy_to_user_j())
-        if not more:
-            break
-    loop.finish()
-    return float(worst)
 
 
 def test_a_slide_across_two_boxes_at_depth_stays_within_the_bound():

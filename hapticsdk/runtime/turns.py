@@ -1,0 +1,95 @@
+"""The stiff-wall controller's reading on a device that renders the force on all three
+axes, in a spatial scene (docs/runtime.md, Passivity, "A normal that turns").
+
+In contact the reading is the distance to the surface, ``x = -pen`` (the loop's own). The
+force held over an interval is ``F n``, ``n`` the normal sent with it; its work per newton
+on the measured motion is ``n . dp``. Two places where that reading alone misleads the
+controller:
+
+* **A normal that turns** (a box's edge or corner, met from inside: the nearest face
+  changes while the distance is continuous). The reading's rate jumps from ``n_old . v``
+  to ``n_new . v``, by up to ``|n_new - n_old| |v|`` in one tick, a change of motion no
+  earlier reading foretold: the plan, sized on the motion along the old normal, sends
+  the new force against a motion it did not predict (traced: a hand moving in along the
+  bottom face of a box, earning credit, then out along the side face as the nearest face
+  changed: 0.9 mJ given in one 4 ms tick). At a turn the controller's history is re-read
+  along the new normal, ``q_(k-j) = q_k - n_new . (p_k - p_(k-j))`` from the measured
+  positions of the ticks since the contact began (older ones as the oldest of them), so
+  its prediction is of the motion the new force meets.
+* **A force held out of contact** (the release's ramp after the stylus left, or the
+  interval in which it left). The loop holds the reading out of contact (the distance
+  jumps where another object becomes the nearest), so the held force's work went
+  unbooked; it is now booked along its normal, ``x += n_held . dp``.
+
+The booking stays an upper bound. At a turn the interval last booked (its force along
+the old normal) is booked from ``q' = min(q_(k-1), x_k - n_new . dp)``. Inside a convex
+shape (every shape of :mod:`hapticsdk.scene.geometry`) the signed distance is convex, so
+``n_old . dp <= x_k - x_(k-1) <= n_new . dp`` (each normal its gradient at its end of the
+interval): the change booked, ``n_new . dp``, is at least the distance's change, which
+already bounded the held force's work per newton (the extra over the spring is >= 0); a
+larger change booked only lowers the force the plan affords and the spring's rise (it
+rises only as the reading moves in). The plan's damping credit then uses the
+displacement's projection on a unit normal, within what the arm's damper dissipates
+(``b |v|^2 >= b (n . v)^2``), as the distance's change did.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+from ..passivity.plan import _HIST
+
+_UP = (0.0, 1.0, 0.0)
+
+
+class NormalTurns:
+    """Measured positions since the contact began, and the readings of each tick."""
+
+    __slots__ = ("_ring", "_at", "_n")
+
+    def __init__(self) -> None:
+        self._ring: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * _HIST
+        self._at = 0
+        self._n = 0     # positions known, newest at _at (0: none)
+
+    def reading(self, pcs: Sequence[Any], x: float, last_x: float, in_contact: bool, same: bool,
+                p: tuple[float, float, float], d: "tuple[float, float, float] | None",
+                held: "tuple[float, float, float] | None", f_held: float) -> float:
+        """This tick's reading (mm) for the controllers ``pcs`` (rebased where due, before
+        their step): ``x`` the loop's (``-pen`` in contact, the last reading out of it),
+        ``last_x`` the reading of the last tick, ``same`` the object the controllers
+        observe, ``p`` the measured position, ``d`` this tick's normal, ``held`` and
+        ``f_held`` the normal and force held over the last interval (None: +y)."""
+        ring = self._ring
+        at = self._at
+        n = self._n if same or not in_contact else 0
+        h = _UP if held is None else held
+        lp = ring[at]
+        if not in_contact:
+            if n and f_held:
+                # the held force's work per newton, along its normal
+                x = last_x + h[0] * (p[0] - lp[0]) + h[1] * (p[1] - lp[1]) + h[2] * (p[2] - lp[2])
+        elif n:
+            dn = _UP if d is None else d
+            if dn != h:
+                # a turn: the history along the new normal, booked from at most the last
+                # reading (the same on a convex shape)
+                q1 = min(last_x, x - (dn[0] * (p[0] - lp[0]) + dn[1] * (p[1] - lp[1]) + dn[2] * (p[2] - lp[2])))
+                back = [q1]
+                for j in range(1, _HIST):
+                    if j < n:
+                        r = ring[at - j]
+                        back.append(q1 - (dn[0] * (lp[0] - r[0]) + dn[1] * (lp[1] - r[1]) + dn[2] * (lp[2] - r[2])))
+                    else:
+                        back.append(back[-1])
+                for pc in pcs:
+                    pc.rebase(back)
+        at = at + 1 if at + 1 < _HIST else 0
+        ring[at] = p
+        self._at = at
+        self._n = n + 1 if n < _HIST else _HIST
+        return x
+
+    def forget(self) -> None:
+        """No position this tick: the next one starts afresh."""
+        self._n = 0
