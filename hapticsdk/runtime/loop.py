@@ -1107,7 +1107,10 @@ class ServoLoop:
             if bad:
                 turns.forget()
             else:
-                x_n = self._last_x = turns.reading(self._pcs, x_n, last_x, idx >= 0, idx == self._pc_obj,
+                # (the first object of a run: the controllers go on from the readings out
+                # of contact, as on the object they observe)
+                x_n = self._last_x = turns.reading(self._pcs, x_n, last_x, idx >= 0, idx == self._pc_obj or
+                                                   self._pc_obj == -2,
                                                    (p0, p1, p2), direction, self._held_n, self.last_force_n)
         self._held_n = direction
         if idx != self._pc_obj and idx >= 0:

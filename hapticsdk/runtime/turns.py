@@ -72,8 +72,9 @@ class NormalTurns:
         elif n:
             dn = _UP if d is None else d
             if dn != h:
-                # a turn: the history along the new normal, booked from at most the last
-                # reading (the same on a convex shape)
+                # a turn (also at an entry where the nearest face outside was another):
+                # the history along the new normal, booked from at most the last reading
+                # (the same on a convex shape)
                 q1 = min(last_x, x - (dn[0] * (p[0] - lp[0]) + dn[1] * (p[1] - lp[1]) + dn[2] * (p[2] - lp[2])))
                 back = [q1]
                 for j in range(1, _HIST):

@@ -98,3 +98,36 @@ def test_the_force_held_as_the_stylus_leaves_is_booked(T: float, K: float, fing:
     ``bench/bench_servo_paths.py taps --axes 3``: 1 of 100, 0.12 mJ); it is now booked
     along the held normal."""
     assert _taps(T, K, fing, d, n, v_in, v_out, hold) <= BOUND_J
+
+
+#: the path of ``bench/bench_servo_paths.py corner --axes 3 --seed 202``, cell 25 (drawn
+#: knots ``(t, x, y, z)``, s and mm): from below the box, in through its bottom face near
+#: the bottom-front edge and on
+CORNER_202_25 = [
+    (0.0, -11.154700538379252, -21.154700538379252, 11.154700538379252),
+    (0.9074477560447041, -10.18056195856354, -23.025236193740703, 4.776279950624589),
+    (0.9495290897194145, -6.711480651348478, -15.65316684146989, 13.174938802435793),
+    (1.1718601061299307, -5.967536463758638, -21.77777268229009, 8.586436285701506),
+    (1.199640831585942, -13.080095914788995, -16.710762808410387, 13.623563278396873),
+    (1.5593428476318767, -6.445660767407518, -15.697855642621205, 6.7023882697941595),
+    (1.5878994697452342, -12.039160050892868, -14.785085678078659, 10.708943348286798),
+    (1.5981887286182266, -12.015488658430924, -21.77370227038116, 11.268116456164849),
+    (1.602510963721219, -11.154700538379252, -21.154700538379252, 11.154700538379252),
+    (1.702510963721219, -11.154700538379252, -21.154700538379252, 11.154700538379252),
+]
+
+
+def test_the_first_contact_of_a_run_through_an_edge_is_read_along_its_normal() -> None:
+    """The first object a run touches: its controller has stepped on the readings held out
+    of contact (no restart, as on any later object), so at the entry its history was those
+    held readings, and the first reading inside looked like a motion in (0.49 mm). The hand
+    came in near the edge, the side face the nearest, moving out along it at 0.36 m/s: the
+    one ramp step the plan afforded gave it 0.15 mJ in one 4 ms tick (4.68 N/mm, no damping,
+    the stiff finger). The entry is a turn of the normal held out of contact (the bottom
+    face's) to the side face's, and the history is now re-read along it there too."""
+    tr = Trajectory(CORNER_202_25)
+    dev = Omni3Virtual(trajectory=tr, finger="stiff", damping_ns_per_m=0.0)
+    box = Box((10.0, 10.0, 10.0), pose=Pose((0.0, -10.0, 0.0)))
+    loop = ServoLoop(dev, (), {"force": dev}, period_s=0.004, passivity=True,
+                     objects=[("A", [Spring(4.678804160911861)])], hit_tester=HitTester([("A", box)]))
+    assert largest_energy(loop, dev, tr.duration_s) <= BOUND_J
