@@ -35,6 +35,27 @@ def _colgate_n_per_m(b_lo: Any, dt: Any, step_n: Any, q_m: Any) -> np.ndarray:
     return np.where(cap, np.minimum(kc, step_n / np.where(cap, q_m, 1.0)), kc)
 
 
+def _moving_wall_credit_batch(b_lo: Any, b_x: np.ndarray, ks: np.ndarray, span: np.ndarray, a: np.ndarray,
+                              c: np.ndarray, q: Any) -> np.ndarray:
+    """:func:`~hapticsdk.passivity.controller._moving_wall_credit` per cell: ``min_d b_lo (a +
+    d)^2 / span - K_s (a + d) (c + d) / 2`` over ``d`` in ``[-q, q]`` (J)."""
+    q = np.broadcast_to(np.asarray(q, float), a.shape)
+    qa = b_x / span
+    qb = 2.0 * b_lo * a / span - 0.5 * ks * (a + c)
+    qc = b_lo * a * a / span - 0.5 * ks * a * c
+    best = np.minimum(qc - qb * q + qa * q * q, qc + qb * q + qa * q * q)
+    convex = qa > 0.0
+    d = np.where(convex, -qb / (2.0 * np.where(convex, qa, 1.0)), 0.0)
+    inside = convex & (np.abs(d) < q)
+    best = np.where(inside, np.minimum(best, qc + d * (qb + qa * d)), best)
+    finite = np.isfinite(a)
+    if not finite.all():
+        # a reading that is not a number earns no credit: the deficit alone
+        ex = np.abs(c) + q
+        best = np.where(finite, best, np.where(b_x < 0.0, b_x * ex * ex / span, 0.0))
+    return best
+
+
 def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "float | np.ndarray",
                           f_wall: np.ndarray, on: "np.ndarray | bool" = True,
                           settings: ControllerSettings | None = None,
@@ -42,13 +63,16 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
                           resolution_mm: "np.ndarray | float | None" = None,
                           max_force_n: "np.ndarray | float | None" = None,
                           mass_kg: "np.ndarray | float | None" = None,
-                          trusted_damping_ns_per_m: "np.ndarray | float | None" = None) -> np.ndarray:
+                          trusted_damping_ns_per_m: "np.ndarray | float | None" = None,
+                          own_mm: "np.ndarray | None" = None) -> np.ndarray:
     """Vectorised :class:`PassivityController` over many independent cells (same law;
     forces equal to the scalar controller's to rounding, about 1e-8 N, not bit for bit).
     ``dt``, ``damping_ns_per_m`` (declared), ``resolution_mm`` and ``max_force_n`` may be
     per cell and override ``settings``; ``trusted_damping_ns_per_m`` (per cell or one
     number) is the damping credited in place of the settings' (a measured lower bound,
-    :meth:`ControllerSettings.trusted_damping_ns_per_m`). Cells where ``on`` is False pass
+    :meth:`ControllerSettings.trusted_damping_ns_per_m`). ``own_mm`` (per cell), where the
+    objects moved: the stylus's own displacement since the last reading (mm; the scalar
+    step's ``own_mm``, its damping credit on it). Cells where ``on`` is False pass
     the wall force through. Call :func:`controller_commit_batch` after (without it, the next
     step takes the forces this one returned as applied). A period that is not
     > 0 (or NaN) in any cell raises :class:`~hapticsdk.errors.ValidationError` (field
@@ -149,8 +173,16 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     b_x = b_lo - 0.5 * ks * dt
     # a deficit (a late tick: the spring needs more than b_lo) is charged with the largest
     # displacement the readings allow
-    ex = np.where(b_x < 0.0, np.abs(dq) + q, ex)
-    u = u - b_x * ex * ex / dt
+    if own_mm is None:
+        ex = np.where(b_x < 0.0, np.abs(dq) + q, ex)
+        u = u - b_x * ex * ex / dt
+        if "dw" in state:
+            state["dw"] = np.zeros_like(x)   # at rest this tick
+    else:
+        # a moving object: the credit on the stylus's own motion (the scalar tick's rule)
+        own = np.asarray(own_mm, float) * 1e-3
+        u = u - _moving_wall_credit_batch(b_lo, b_x, ks, dt, own, dq, q)
+        state["dw"] = np.nan_to_num(own - dq, nan=0.0, posinf=0.0, neginf=0.0)   # the wall's move (the scalar tick's)
     c_m = 0.0 if m is None else dt * dt / (2.0 * np.asarray(m, float))
     e0 = np.minimum(full * 0.5 * q, s.energy_allowance_j)
     idle = (fw == 0.0) & (out_prev == 0.0) & (f1 == 0.0)
@@ -216,6 +248,11 @@ def controller_commit_batch(state: dict[str, np.ndarray], f_applied: np.ndarray)
         o = state.get("anchor", np.zeros_like(sp))
         branch = low & (np.abs(sp - kc * (depth - o)) <= _BRANCH_TOL * sp)
         state["energy"] = state["energy"] - np.where(branch, (sp * sp - fa * fa) / (2.0 * kc1), 0.0)
+        dw = state.get("dw")
+        if dw is not None:
+            # the part of the spring's rise the wall's move did not pay (the scalar commit's rule)
+            unpaid = np.where(branch | (dw > 0.0), 0.5 * (sp - fa) * dw, 0.0)
+            state["energy"] = state["energy"] + np.where(low, unpaid, 0.0)
         pos = low & (fa > 0.0)
         if "anchor" in state:
             state["anchor"] = np.where(pos, depth - fa / kc1, np.where(low, np.maximum(depth, 0.0), o))

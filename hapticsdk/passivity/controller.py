@@ -15,6 +15,36 @@ _log = logging.getLogger(__name__)
 _INF = math.inf
 
 
+def _moving_wall_credit(b_lo: float, b_x: float, ks: float, span: float, a: float, c: float, q: float) -> float:
+    """The damping credit (J) of an interval over which the object moved: the arm's damper
+    dissipates at least ``b_lo a_t^2 / span`` (``a_t`` the stylus's true displacement along
+    the force), and the spring held over it needs ``K_s a_t c_t / 2`` (``c_t`` the true
+    change of the depth's reading; the wall's move taken at the mean of the forces held
+    before and after it), at the least over the readings' error ``d`` in ``[-q, q]``, which
+    is the same in both (the same stylus reading): ``min_d b_lo (a + d)^2 / span - K_s (a + d)
+    (c + d) / 2``, ``a``, ``c`` the readings' values (m). With ``a == c`` (an object at rest)
+    it is the still wall's ``b_x max(|c| - q, 0)^2 / span``, or with ``b_x < 0`` the deficit
+    ``b_x (|c| + q)^2 / span`` (docs/runtime.md, Passivity, "A moving wall"). A reading
+    that is not a number earns no credit: the deficit alone, on the reading's change."""
+    if not -_INF < a < _INF:
+        ex = abs(c) + q
+        return b_x * ex * ex / span if b_x < 0.0 else 0.0
+    qa = b_x / span                                   # the quadratic in d: qa d^2 + qb d + qc
+    qb = 2.0 * b_lo * a / span - 0.5 * ks * (a + c)
+    qc = b_lo * a * a / span - 0.5 * ks * a * c
+    best = qc - qb * q + qa * q * q
+    hi = qc + qb * q + qa * q * q
+    if hi < best:
+        best = hi
+    if qa > 0.0:
+        d = -qb / (2.0 * qa)
+        if -q < d < q:
+            mid = qc + d * (qb + qa * d)
+            if mid < best:
+                best = mid
+    return best
+
+
 class PassivityController:
     """Passive wall from the device's declared parameters: a Colgate spring plus an
     energy-bounded extra.
@@ -87,7 +117,7 @@ class PassivityController:
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "below_ramp_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_started", "_still", "_spring", "_kf", "_kc", "_full",
                  "_jw", "_jw_top", "_jw_at", "_j3w", "_j3w_top", "_j3w_at",
-                 "_a1", "_a2", "_a3", "_sent", "_pending", "_o", "_gap")
+                 "_a1", "_a2", "_a3", "_sent", "_pending", "_o", "_gap", "_dw")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -136,6 +166,7 @@ class PassivityController:
         self._sent = 0.0            # the force the last step returned
         self._pending = False       # a step returned a force that no commit has recorded yet
         self._gap = 0.0             # time (s) of the ticks since the last booked one that had no reading
+        self._dw = 0.0              # the wall's move into the depth over the last booking (m; 0: at rest)
 
     def rebase(self, readings_mm: "list[float]") -> None:
         """Replace the newest readings the controller holds (mm): ``readings_mm[0]`` the
@@ -154,8 +185,16 @@ class PassivityController:
         self._q1 = hist[hp]
         self._q2 = hist[hp - 1]
 
-    def step(self, x_mm: float, dt: float, f_wall: float) -> float:
-        """Book the last interval, then return the force (N) to command this tick."""
+    def step(self, x_mm: float, dt: float, f_wall: float, own_mm: float | None = None) -> float:
+        """Book the last interval, then return the force (N) to command this tick.
+
+        ``own_mm``: where the object moved since the last reading, the stylus's own
+        displacement along the force's direction over the same span (mm, outward +; the
+        device reading's change, not the distance's): the arm's damper dissipates the
+        stylus's motion, not the wall's, so the damping credit is taken on it, and the
+        spring's need on the product of it and the reading's change (docs/runtime.md,
+        Passivity, "A moving wall"). None (the default): an object at rest, the reading's
+        change is the stylus's. A value that is not a finite number earns no credit."""
         if self._pending:
             # no commit since the last step: the force it returned is taken as applied
             self.commit(self._sent)
@@ -357,10 +396,17 @@ class PassivityController:
             span += self._gap
             self._gap = 0.0
         b_x = b_lo - 0.5 * ks * span
-        if b_x < 0.0:
-            ex = abs(dq) + q         # the deficit: the largest displacement the readings allow
-        if ex > 0.0:
-            u -= b_x * ex * ex / span
+        if own_mm is not None:
+            # a moving object: the credit on the stylus's own motion (item 1, "A moving wall")
+            u -= _moving_wall_credit(b_lo, b_x, ks, span, own_mm * 1e-3, dq, q)
+            dw = own_mm * 1e-3 - dq
+            self._dw = dw if -_INF < dw < _INF else 0.0
+        else:
+            self._dw = 0.0
+            if b_x < 0.0:
+                ex = abs(dq) + q         # the deficit: the largest displacement the readings allow
+            if ex > 0.0:
+                u -= b_x * ex * ex / span
         rise = spring - s0   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf
@@ -479,8 +525,16 @@ class PassivityController:
             kc = self._kc
             depth = -self._q1 * 1e-3
             fa = f_applied if f_applied > 0.0 else 0.0
+            dw = self._dw
             if abs(sp - kc * (depth - self._o)) <= _BRANCH_TOL * sp:
                 self.energy_j -= (sp * sp - fa * fa) / (2.0 * kc)
+                if dw:
+                    # where the wall moved the depth by dw, the scene's move paid the spring's
+                    # rise at the mean of the forces applied, not of the spring: the part of
+                    # the stored energy above is unpaid ("A moving wall")
+                    self.energy_j += 0.5 * (sp - fa) * dw
+            elif dw > 0.0:
+                self.energy_j += 0.5 * (sp - fa) * dw
             self._spring = fa
             if fa > 0.0:
                 self._o = depth - fa / kc

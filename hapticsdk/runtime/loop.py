@@ -685,6 +685,7 @@ class ServoLoop:
             elif kind == "pose":
                 if self.hit_tester is not None and self._index(a) >= 0:
                     self.hit_tester.set_pose(self._index(a), b)
+                    self._moved = True
             elif kind == "call":
                 b()
         # renderers, objects or poses changed (or a call may have changed anything)
@@ -764,6 +765,10 @@ class ServoLoop:
         self._x_off = 0.0    # the reading's offset from -pen (a force rendered along some axes)
         self._last_p: tuple[float, float, float] | None = None
         self._held_n: tuple[float, float, float] | None = None   # the direction sent last tick (None: +y)
+        # an object moved since the last reading in contact (set_pose): the controller gets
+        # the stylus's own motion since _own_p, the position at that reading
+        self._moved = False
+        self._own_p: tuple[float, float, float] | None = None
         self._force_axes: tuple[int, ...] | None = None if axes == (0, 1, 2) else axes
         self._pcs = [s.pc for s in slots if s.pc is not None]
         self._turns = NormalTurns() if axes == (0, 1, 2) and self._pcs else None
@@ -1066,6 +1071,7 @@ class ServoLoop:
                         self._fuse_want = True
         # ---- 4. passivity + send --------------------------------------
         last_x = self._last_x
+        own: float | None = None   # the stylus's own motion (mm) where an object moved, else None
         if bad:
             # no position: the controller books nothing and sends 0; its next booking spans
             # this tick too (the damping credit over the whole span)
@@ -1100,6 +1106,23 @@ class ServoLoop:
                 x_n += self._x_off
                 self._last_p = (p0, p1, p2)
             self._last_x = x_n
+            op = self._own_p
+            if self._moved:
+                # an object moved since the last reading: the reading's change is the
+                # stylus's and the wall's, and the arm's damper dissipates only the
+                # stylus's; its own motion along the force (on the axes the device renders
+                # it along), for the damping credit (docs/runtime.md, Passivity, "A moving
+                # wall")
+                self._moved = False
+                if op is not None:
+                    n = self._held_n if self._held_n is not None else (direction if direction is not None else _UP)
+                    dp = (p0 - op[0], p1 - op[1], p2 - op[2])
+                    own = 0.0
+                    for i in (axes or (0, 1, 2)):
+                        own += n[i] * dp[i]
+        if not bad:
+            # (also out of contact: the booking spans one tick, or the ticks without a reading)
+            self._own_p = (p0, p1, p2)
         turns = self._turns
         if turns is not None and ht is not None:
             # all three axes rendered: the held force's work booked out of contact, the
@@ -1134,7 +1157,7 @@ class ServoLoop:
                     f = s.f_in
                     s.f_in = 0.0
                     if pc is not None:
-                        f = pc.step(x_n, dt, f)
+                        f = pc.step(x_n, dt, f, own)
                     if bad:
                         f = 0.0
                     try:
@@ -1184,7 +1207,7 @@ class ServoLoop:
                         s.pending.append(f)
                         f = s.pending.popleft()
                     if s.pc is not None:
-                        f = s.pc.step(x_n, dt, f)
+                        f = s.pc.step(x_n, dt, f, own)
                     if bad:
                         f = 0.0   # an unknown position gets no force (the controller ramps from what was applied)
                     # the role's own record, refilled (the actuator keeps only its safety

@@ -27,7 +27,6 @@ device did not apply", and the tests at the end of this file).
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -40,6 +39,7 @@ from hapticsdk.passivity import ControllerSettings, PassivityController
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
 from hapticsdk.sim.finger import Trajectory, press_slide
+from omni_fits import measured
 from renderers import Spring, largest_energy
 
 ENERGY_J = 1e-4          # the issue's bound on the energy to the user
@@ -199,18 +199,6 @@ def test_moving_between_objects_stays_within_the_bound(kind, k, period_s, dampin
 # within the issue's 0.1 mJ. Drawn through the loop (press and hold, 0.25-2 ms, 1-19 unread
 # ticks during the press or the hold; 450 cells), the unread ticks alone put 5 cells over 0.1
 # mJ (up to 0.48 mJ) before, none after (largest 0.073 mJ).
-
-
-@functools.lru_cache(maxsize=None)
-def measured(damping: float):
-    from hapticsdk.calibration.damping import DampingCalibration, measure_damping
-    from hapticsdk.sim.finger import FingerParams
-    from hapticsdk_hardness.omni import OmniVirtual
-
-    free = OmniVirtual(finger=FingerParams(0.0, 0.0, 0.0), damping_ns_per_m=damping)
-    fit, _, _ = measure_damping(free)
-    return DampingCalibration.from_fit(fit, period_s=1e-3, resolution_mm=free.encoder_resolution_mm,
-                                       generated=True, source="test: simulated Omni, hands off")
 
 
 def run_press(k: float, period_s: float, damping: float, finger: str, depth: float, press_s: float, hold_s: float,
