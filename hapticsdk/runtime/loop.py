@@ -766,9 +766,9 @@ class ServoLoop:
         self._last_p: tuple[float, float, float] | None = None
         self._held_n: tuple[float, float, float] | None = None   # the direction sent last tick (None: +y)
         # an object moved since the last reading in contact (set_pose): the controller gets
-        # the stylus's own motion since _own_p, the position at that reading
+        # the stylus's own motion since _own_st, the state read at the last good reading
         self._moved = False
-        self._own_p: tuple[float, float, float] | None = None
+        self._own_st: SensedState | None = None
         self._force_axes: tuple[int, ...] | None = None if axes == (0, 1, 2) else axes
         self._pcs = [s.pc for s in slots if s.pc is not None]
         self._turns = NormalTurns() if axes == (0, 1, 2) and self._pcs else None
@@ -1106,7 +1106,6 @@ class ServoLoop:
                 x_n += self._x_off
                 self._last_p = (p0, p1, p2)
             self._last_x = x_n
-            op = self._own_p
             if self._moved:
                 # an object moved since the last reading: the reading's change is the
                 # stylus's and the wall's, and the arm's damper dissipates only the
@@ -1114,15 +1113,17 @@ class ServoLoop:
                 # it along), for the damping credit (docs/runtime.md, Passivity, "A moving
                 # wall")
                 self._moved = False
+                op = self._own_st
                 if op is not None:
                     n = self._held_n if self._held_n is not None else (direction if direction is not None else _UP)
-                    dp = (p0 - op[0], p1 - op[1], p2 - op[2])
+                    dp = (p0 - op.px, p1 - op.py, p2 - op.pz)
                     own = 0.0
                     for i in (axes or (0, 1, 2)):
                         own += n[i] * dp[i]
         if not bad:
-            # (also out of contact: the booking spans one tick, or the ticks without a reading)
-            self._own_p = (p0, p1, p2)
+            # (also out of contact: the booking spans one tick, or the ticks without a reading;
+            # the state itself, not a tuple of it: nothing allocated a tick)
+            self._own_st = st
         turns = self._turns
         if turns is not None and ht is not None:
             # all three axes rendered: the held force's work booked out of contact, the
@@ -1157,7 +1158,9 @@ class ServoLoop:
                     f = s.f_in
                     s.f_in = 0.0
                     if pc is not None:
-                        f = pc.step(x_n, dt, f, own)
+                        # (the stylus's own motion only where an object moved: a still scene
+                        # calls the controller as before)
+                        f = pc.step(x_n, dt, f) if own is None else pc.step(x_n, dt, f, own)
                     if bad:
                         f = 0.0
                     try:
@@ -1207,7 +1210,7 @@ class ServoLoop:
                         s.pending.append(f)
                         f = s.pending.popleft()
                     if s.pc is not None:
-                        f = s.pc.step(x_n, dt, f, own)
+                        f = s.pc.step(x_n, dt, f) if own is None else s.pc.step(x_n, dt, f, own)
                     if bad:
                         f = 0.0   # an unknown position gets no force (the controller ramps from what was applied)
                     # the role's own record, refilled (the actuator keeps only its safety
