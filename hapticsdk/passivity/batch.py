@@ -103,6 +103,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     b_lo = s.trusted_damping_ns_per_m(bd) if trusted_damping_ns_per_m is None \
         else np.asarray(trusted_damping_ns_per_m, float)
     u = state["energy"] + f1 * dq + 0.5 * q * np.abs(f1 - state["f2"])
+    if "dw" in state:
+        u = u + 0.5 * (state["f2"] - f1) * state["dw"]   # the last wall move at the mean extra (the scalar tick's)
     ex = np.maximum(np.abs(dq) - q, 0.0)
     ahead = 0.5 * (x - q2) * 1e-3
     hist = state["hist"]

@@ -91,7 +91,8 @@ class PassivityController:
     plus ``Delta/2 |X|`` at the end; ``b_x = b_lo - K_s dt / 2`` is the damping the spring
     leaves, ``K_s`` its secant stiffness at the interval's start, or ``K_c`` on an
     interval entering the wall from outside; it dissipates at least ``b_x dy^2 / dt`` per
-    interval with ``|dy| >= |dq| - Delta``). It sends the largest extra, between 0 and
+    interval with ``|dy| >= |dq| - Delta``; where the object moved, on the stylus's own
+    motion, :meth:`step`'s ``own_mm``). It sends the largest extra, between 0 and
     ``F_wall - P``, within one ramp step ``s`` of the last, whose plan "hold it one tick,
     then ramp to 0 at ``s`` per tick" keeps ``U`` below ``E0 = min(F_max Delta / 2,
     energy_allowance_j)`` if the reading keeps moving at the rate of the last two ticks,
@@ -236,6 +237,11 @@ class PassivityController:
         # per newton of change (summation by parts); the damping the Colgate spring does
         # not need is credited below, once this tick's spring is known
         u = self.energy_j + f1 * dq + h * abs(f1 - self._f2)
+        if self._dw:
+            # the last booking's wall move dw, paired with the extra held before it: its work
+            # in the wall's frame is at the mean of the extras held before and after it, the
+            # difference known now ("A moving wall")
+            u += 0.5 * (self._f2 - f1) * self._dw
         ex = abs(dq) - q
         ahead = 0.5 * (x_mm - self._q2) * 1e-3
         # the change of the per-tick motion beyond what quantisation alone makes (2 counts),

@@ -634,7 +634,9 @@ class ServoLoop:
 
     def set_pose(self, obj: "int | str", pose: Any) -> None:
         """Move object ``obj`` (index or name; the hit tester's ``set_pose``). Callable
-        from any thread."""
+        from any thread. The move is the scene's: on the next reading the stiff-wall
+        controller gets the stylus's own motion and takes its damping credit on it
+        (docs/runtime.md, Passivity, "A moving wall")."""
         self._ops.append(("pose", obj, pose, None))
 
     def call_in_loop(self, fn: Callable[[], None]) -> None:
@@ -1114,8 +1116,17 @@ class ServoLoop:
                 # wall")
                 self._moved = False
                 op = self._own_st
-                if op is not None:
-                    n = self._held_n if self._held_n is not None else (direction if direction is not None else _UP)
+                hn = self._held_n
+                # only where the reading is the distance to one surface of one object: the
+                # normal held and the one seen less than a right angle apart (another face of
+                # a box is a right angle or more away, and the reading that switches to it
+                # jumps with no wall move), and not the reading of "A force rendered along
+                # one axis" off the +y normal (the stylus's own motion already, which no
+                # wall move enters)
+                n = hn if hn is not None else _UP
+                m = direction if direction is not None else _UP
+                if (op is not None and idx == self._pc_obj and n[0] * m[0] + n[1] * m[1] + n[2] * m[2] > 0.0
+                        and (axes is None or direction is None)):
                     dp = (p0 - op.px, p1 - op.py, p2 - op.pz)
                     own = 0.0
                     for i in (axes or (0, 1, 2)):

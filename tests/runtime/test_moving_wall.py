@@ -113,13 +113,14 @@ def test_a_still_stylus_earns_no_damping_credit_from_a_moving_wall(batch):
     """The stylus held still (its own motion 0) in a 5 N/mm wall that moves 1 mm up and down
     at 20 Hz (0.13 mm a tick at most, over two counts): the reading's change is the wall's
     alone, which the arm's damper does not dissipate. Each booking is at least what the
-    extra held gave over the reading's change plus its half-count term (no credit); the
-    spring's need may add to it. Read as a still wall's, the same readings earn up to
+    extra held gave over the reading's change plus its half-count term and the last move's
+    work at the mean extra (no credit); the spring's need may add to it. Read as a still wall's, the same readings earn up to
     0.7 uJ a tick."""
     step, book = _controller(batch, 5.0)
     q = 0.055
     h = 0.5 * q * 1e-3
     x_prev = None
+    dw = 0.0             # the wall's move into the depth over the last booking (m)
     booked = 0
     for k in range(400):
         x = q * round((-1.5 + 1.0 * math.sin(2.0 * math.pi * 20.0 * k * 1e-3)) / q)   # a reading: whole counts
@@ -127,11 +128,15 @@ def test_a_still_stylus_earns_no_damping_credit_from_a_moving_wall(batch):
         step(x, 0.0)
         u1 = book()[0]
         if x_prev is not None:
-            least = u0 + f1 * (x - x_prev) * 1e-3 + h * abs(f1 - f2)
+            # the extra's work over the reading's change, its half-count term, and the last
+            # move's work taken at the mean of the extras held before and after it
+            terms = (f1 * (x - x_prev) * 1e-3, h * abs(f1 - f2), 0.5 * (f2 - f1) * dw)
+            least = u0 + sum(terms)
             # the step sums the same terms in floats: rounding of a few ulp of them
-            tol = 1e-12 * (abs(u0) + abs(f1 * (x - x_prev) * 1e-3) + h * abs(f1 - f2)) + 1e-18
+            tol = 1e-12 * (abs(u0) + sum(abs(v) for v in terms)) + 1e-18
             assert u1 >= least - tol, (k, u1, least)
             booked += 1
+            dw = -(x - x_prev) * 1e-3   # the stylus still: the reading's change is the wall's
         x_prev = x
     assert booked == 399
 
