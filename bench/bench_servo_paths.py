@@ -4,7 +4,7 @@ and events the stability benchmark does not draw (issue 23). Energy to the finge
 ``OmniVirtual.energy_to_user_j`` (motor work on the true positions less the arm's kinetic
 energy and damper loss), its largest over the run; a cell fails above 0.1 mJ.
 
-    python bench/bench_servo_paths.py KIND [--cells N] [--seed S]
+    python bench/bench_servo_paths.py KIND [--cells N] [--seed S] [--axes 3]
 
 KIND (drawn per cell: period, the arm's damping 0-0.5 N s/m declared or measured hands
 off, a spring wall of 0.3-50 N/mm, the finger preset, the motion's parameters):
@@ -27,6 +27,17 @@ off, a spring wall of 0.3-50 N/mm, the finger preset, the motion's parameters):
 * ``plain``: the same presses without any event (the runs the five kinds above compare
   with), with the median delivered ratio ``sum F / sum min(K pen, F_max)`` over the contact
   ticks (F the force sent, pen the loop's penetration).
+
+``--axes 3`` runs the same loop on ``omni3-virtual`` (the simulated Omni with x, y and z
+actuated, ``force_axes = (0, 1, 2)``; its exact ``energy_to_user_j``), KIND one of ``face``,
+``edge``, ``corner``, ``ball``, ``two``, ``taps``, ``random`` or ``all``: a 3-D finger path about a
+spot of the scene (a box's face, edge or corner drawn at random for ``random`` and ``taps``; a
+ball of 8-40 mm; the seam of two abutting boxes), knots within a cube of 0.5-5 mm about the
+spot and up to 0.3-3 mm inside, at 5-1500 mm/s (log-uniform) in random directions, holds of
+0-0.1 s, ``taps`` in and out through the spot; periods 0.25-4 ms, damping 0-0.5 N s/m
+declared or measured, walls of 0.3-50 N/mm, the three fingers. Each kind with the controller
+on and, as the control, off: cells over 0.1 mJ, the largest, the median delivered ratio
+(docs/runtime.md, Passivity, "A normal that turns").
 
 ``--start-ramp-s S`` gives the Omni's safety layer a start ramp of S seconds in every kind
 but ``ball`` (default: the layer's own, 0.2 s; docs/safety.md): presses and taps start within it, and a spring pressed under
