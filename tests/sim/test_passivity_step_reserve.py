@@ -74,3 +74,32 @@ def test_a_rest_then_one_count_out_falls_by_at_most_one_ramp_step(res, T, fmax, 
     assume(f_rest == f_rest0 and spring_out < spring_rest)
     assert f_rest - f_out <= s * (1 + 1e-9) + 1e-12, (f_rest, f_out, spring_rest, spring_out, s)
 
+
+
+# The plan's extra ramps by s - K_c lead where the spring falls with the reading (the second
+# rule of "A reserve for the step"): without it, these three drawn cells of seed 1 (a tap on
+# a 0.19 mm encoder at 0.47 ms, a bumpy slide at 0.43 ms, a tap at 0.32 ms) step by 1.53,
+# 1.27 and 1.36 ramp steps: the extra ramps down by s on the tick the spring falls by K_c
+# times a motion the plan foresaw. They are run on the independent plant
+# (tests/independent_plant.py), through the servo's scalar controller and the benchmark's
+# vectorised one, with the damping the benchmark measured for each.
+RAMP_CELLS = (1078, 784, 1923)
+
+
+@pytest.fixture(scope="module")
+def ramp_cells():
+    from hapticsdk.benchmarks.stability_random import draw_cells, run_cells
+    drawn = draw_cells(2000, 1)
+    return run_cells([drawn[i] for i in RAMP_CELLS], controllers=("sdk",))
+
+
+@pytest.mark.parametrize("controller", ["scalar", "batch"])
+@pytest.mark.parametrize("at", range(len(RAMP_CELLS)))
+def test_the_plans_extra_leaves_room_for_the_springs_fall(ramp_cells, at, controller):
+    import independent_plant as ip
+    from hapticsdk.benchmarks.stability_random import _within_ramp
+    cell = ramp_cells[at]
+    ramp = cell["results"]["sdk"]["ramp_step_n"]
+    got = ip.run_cell(cell, "sdk", controller=controller)
+    assert got["energy_to_user_j"] <= 1e-4
+    assert _within_ramp(got["max_force_step_n"], ramp), (RAMP_CELLS[at], got["max_force_step_n"] / ramp)
