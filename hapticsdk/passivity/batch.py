@@ -205,34 +205,16 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     # and falls by at most s where the book affords it: the extra takes up what the spring
     # gave up this tick, never above what it held (the scalar tick's rule, item 7)
     fall = np.maximum(state["spring"] - spring, 0.0)
-    hold = np.minimum(p - step + fall, p)
-    taken = (p > 0.0) & (fall > 0.0)
-    hi = np.where(p > 0.0, np.maximum(hi, hold), hi)
-    keep = np.where(taken, np.maximum(hold, lo), lo)   # the extra that keeps the fall within the ramp step
+    hi = np.where(p > 0.0, np.maximum(hi, np.minimum(p - step + fall, p)), hi)
     a = hi
     stuck = np.zeros(x.shape, bool)
     if s.energy_bound:
         lead = sg * ahead + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3 + q / np.maximum(still, 2.0)
-        # where there is a spring, the plan's extra ramps by s - K_c lead, and a force above
-        # the one that keeps the step is priced at the lead of a next reading one count out
-        # (the scalar tick's rules: item 3, "A reserve for the step")
-        sprung = spring > 0.0
-        r = kc * lead
-        ramp = np.where(sprung & (r > 0.0) & (r < step), step - r, step)
-        nxt = 0.5 * sg * dq + q + (1.5 + 0.5 * hi / np.where(step > 0, step, 1.0)) * jerk + j3
-        up = sprung & (nxt > lead)
-        res = np.where(up, nxt, lead)
-        r = kc * nxt
-        rres = np.where(up, np.where((r > 0.0) & (r < step), step - r, step), ramp)
-        a = affordable_force(e0 - u, lo, hi, p, res, c_m, rres, 0.5 * q)
-        need = up & (a < keep)
-        if need.any():
-            b = affordable_force(e0 - u, a, np.maximum(keep, a), p, lead, c_m, ramp, 0.5 * q)
-            a = np.where(need & (b > a), b, a)
+        a = affordable_force(e0 - u, lo, hi, p, lead, c_m, step, 0.5 * q)
         # the book overdrawn and even the ramp down unaffordable: below the ramp (the scalar tick's rule)
-        stuck = (a == lo) & (lo > 0.0) & (u > e0) & (plan_cost_j(lo, p, lead, c_m, ramp, 0.5 * q) > e0 - u)
+        stuck = (a == lo) & (lo > 0.0) & (u > e0) & (plan_cost_j(lo, p, lead, c_m, step, 0.5 * q) > e0 - u)
         if stuck.any():
-            a = np.where(stuck, below_ramp_force(e0 - u, lo, p, lead, c_m, ramp, 0.5 * q), a)
+            a = np.where(stuck, below_ramp_force(e0 - u, lo, p, lead, c_m, step, 0.5 * q), a)
     if "below_ramp" in state:
         state["below_ramp"] = stuck & started & ~idle
     spring = np.where(started & ~idle, spring, 0.0)

@@ -99,11 +99,6 @@ class PassivityController:
     changing by up to the largest change of motion seen over the last ``_HIST`` ticks
     (counting, as far as the readings allow, what a change of the held force gives the
     free arm) plus the largest third difference (:func:`affordable_force`).
-    Where the spring is above 0, the plan's extra ramps by ``s - K_c lead`` (the whole force
-    falls by ``s`` while the spring falls with the reading), and a force above the one that
-    keeps the step is priced at the lead of a next reading one count out: a reserve, so that
-    one count out of a rest falls by at most ``s`` (docs/runtime.md, Passivity item 3, "A
-    reserve for the step").
     If the motion outruns that prediction the excess is booked (``overdrawn_j``), and the
     extra ramps down at ``s``; where the book is overdrawn (``U > E0``) and even that ramp
     does not fit, it falls below it to the largest force the plan affords
@@ -460,7 +455,6 @@ class PassivityController:
             hi = target
         if hi < lo:
             hi = lo
-        keep = lo   # the extra that keeps the whole force's fall within the ramp step
         if rise < 0.0 < p:
             # and falls by at most that step where the book affords it: the extra takes up
             # what the spring gave up this tick, never above what it held (item 7)
@@ -469,8 +463,6 @@ class PassivityController:
                 hold = p
             if hold > hi:
                 hi = hold
-            if hold > keep:
-                keep = hold
         a = hi
         if energy_bound and hi > lo:
             # the arm's motion over the next tick: the last two ticks' mean, its reading
@@ -479,25 +471,6 @@ class PassivityController:
             # change of the held force gives the free arm), and the third difference
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (still if still > 2 else 2))
-            # where there is a spring, the plan's extra ramps by s - K_c lead: the whole force
-            # falls by s a tick while the spring falls with the reading by up to K_c lead (its
-            # own s where the spring alone falls by s or more: no ramp of the extra keeps the
-            # step then); and a force above the one that keeps the step is priced at the lead
-            # of the next tick should its reading move out by one count (from rest too: a
-            # stylus at a count's edge), so that the force the step then asks for still fits
-            # (item 3, "A reserve for the step")
-            ramp = step
-            res, rres = lead, step
-            if spring > 0.0:
-                r = kc * lead
-                if 0.0 < r < step:
-                    ramp = step - r
-                rres = ramp
-                nxt = 0.5 * sg * dq + q + (1.5 + 0.5 * hi / step) * jerk + j3
-                if nxt > lead:
-                    res = nxt
-                    r = kc * nxt
-                    rres = step - r if 0.0 < r < step else step
             c_m = dt * dt / (2.0 * m) if m else 0.0
             A = e0 - u
             if p == 0.0 and lo == 0.0 and A < 0.0 and 0.0 < lead + 2.0 * h < _INF and c_m < _INF:
@@ -510,19 +483,13 @@ class PassivityController:
                 # finite then)
                 a = lo
             else:
-                a = _affordable_scalar(A, lo, hi, p, res, c_m, rres, h)
-                if a < keep and (res != lead or rres != ramp):
-                    # the force that keeps the step, at the plain lead: the reserve the last
-                    # tick kept for it
-                    b = _affordable_scalar(A, a, keep, p, lead, c_m, ramp, h)
-                    if b > a:
-                        a = b
-                if a == lo and lo > 0.0 and A < 0.0 and _cost_scalar(lo, p, lead, c_m, ramp, h) > A:
+                a = _affordable_scalar(A, lo, hi, p, lead, c_m, step, h)
+                if a == lo and lo > 0.0 and A < 0.0 and _cost_scalar(lo, p, lead, c_m, step, h) > A:
                     # the book is overdrawn (the hand outran the plan) and even the ramp down
                     # does not fit: the energy goal before the ramp, the extra falls to the
                     # largest force that fits, else to the one of least cost (item 3, "when
                     # the book is overdrawn")
-                    a = _below_ramp_scalar(A, lo, p, lead, c_m, ramp, h)
+                    a = _below_ramp_scalar(A, lo, p, lead, c_m, step, h)
                     self.below_ramp_ticks += 1
         if a < target:
             self.active_ticks += 1

@@ -7,10 +7,7 @@ two rules of caa970d added: the spring's inward rise and the fall below the ramp
 book overdrawn; and issue 23's rule for ticks without a reading: the next booking's damping
 credit over the whole span, no spring over those ticks and none from their motion; and the
 rule of a spring the device did not apply: a commit below the spring lowers it to the force
-applied, its anchor moved in, the energy taken out credited on its K_c branch; and issue 23's
-reserve for the step where the spring is above 0: the plan's extra ramping by ``s - K_c lead``
-where that is above 0, and a force above the one that keeps the step priced at least at the
-lead of a one-count outward next reading), bit for
+applied, its anchor moved in, the energy taken out credited on its K_c branch), bit for
 bit, on input sequences hypothesis draws:
 
 * readings that dwell, move by fractions of a count or jump by millimetres, reverse, and
@@ -50,7 +47,7 @@ from hapticsdk.passivity.settings import _spring_stiffness_and_step  # noqa: E40
 _INF = math.inf
 
 
-# ---- the frozen copy (ba2e7f0 with caa970d's two rules and the later rules the docstring lists), not to be edited ----------------------------------------
+# ---- the frozen copy (ba2e7f0 with caa970d's two rules), not to be edited ----------------------------------------
 
 class _WindowMax:
     __slots__ = ('ring', 'top', 'at')
@@ -264,38 +261,19 @@ class _FrozenController:
             hi = target
         if hi < lo:
             hi = lo
-        keep = lo
         if rise < 0.0 < p:
             hold = p - step - rise
             if hold > p:
                 hold = p
             if hold > hi:
                 hi = hold
-            if hold > keep:
-                keep = hold
         a = hi
         if energy_bound and hi > lo:
             lead = (sg * ahead + (1.5 + 0.5 * hi / step) * jerk + j3
                     + q / (self._still if self._still > 2 else 2))
-            ramp = step
-            res, rres = (lead, step)
-            if spring > 0.0:
-                r = kc * lead
-                if 0.0 < r < step:
-                    ramp = step - r
-                rres = ramp
-                nxt = 0.5 * sg * dq + q + (1.5 + 0.5 * hi / step) * jerk + j3
-                if nxt > lead:
-                    res = nxt
-                    r = kc * nxt
-                    rres = step - r if 0.0 < r < step else step
-            a = _affordable_scalar(e0 - u, lo, hi, p, res, c_m, rres, h)
-            if a < keep and (res != lead or rres != ramp):
-                b = _affordable_scalar(e0 - u, a, keep, p, lead, c_m, ramp, h)
-                if b > a:
-                    a = b
-            if a == lo and lo > 0.0 and u > e0 and _cost_scalar(lo, p, lead, c_m, ramp, h) > e0 - u:
-                a = _below_ramp_scalar(e0 - u, lo, p, lead, c_m, ramp, h)
+            a = _affordable_scalar(e0 - u, lo, hi, p, lead, c_m, step, h)
+            if a == lo and lo > 0.0 and u > e0 and _cost_scalar(lo, p, lead, c_m, step, h) > e0 - u:
+                a = _below_ramp_scalar(e0 - u, lo, p, lead, c_m, step, h)
                 self.below_ramp_ticks += 1
         if a < target:
             self.active_ticks += 1

@@ -648,19 +648,18 @@ def test_a_drawn_release_falls_within_the_ramp_where_the_book_affords_it(index, 
 def test_an_arm_lighter_than_declared_stays_within_the_energy_goal(controller):
     """The plan's free-arm terms divide by the arm's mass, and a lighter arm moves further
     under the same force: the controller takes half the declared mass (``mass_trust``,
-    docs/runtime.md, Passivity item 2a). Seed 303's cell 1688 of ``draw_cells(2000, 303)``
-    (a tap at 9.5 ms on a 0.14 mm encoder, no damping, the arm 1.42 times lighter than
-    declared): taking the declaration at face value puts more than 0.1 mJ into the hand
-    (0.36 mJ, checked here too, so the cell keeps exercising the rule); with half of it, the
-    energy stays within the goal. (Until issue 23's reserve for the step this was seed 101's
-    cell 45 declared at twice its mass, which has damping: the reserve, priced where there is
-    a spring, keeps it within the goal at face value too, 0 mJ, so it no longer exercises the
-    rule.) The vectorised controller through the benchmark's plant, the scalar one (the
-    servo's) through the independent simulator of ``tests/independent_plant.py``."""
+    docs/runtime.md, Passivity item 2a). Seed 101's cell 45 of ``draw_cells(2000, 101)``
+    (a press and hold at 7.1 ms on a 0.045 mm encoder, no damping) with its mass declared
+    at twice the true one, the edge of the band the benchmark draws: taking the
+    declaration at face value puts more than 0.1 mJ into the hand (0.14 mJ, checked here
+    too, so the cell keeps exercising the rule); with half of it, the energy stays within
+    the goal. The vectorised controller through the benchmark's plant, the scalar one
+    (the servo's) through the independent simulator of ``tests/independent_plant.py``."""
     import independent_plant as ip
     from hapticsdk.benchmarks.stability_random import draw_cells, run_cells
 
-    cell = dict(draw_cells(2000, 303)[1688])
+    cell = dict(draw_cells(2000, 101)[45])
+    cell["arm_mass_declared_kg"] = 2.0 * cell["arm_mass_kg"]
 
     def energy(**overrides):   # the controller's default settings, or with overrides
         if controller == "batch":

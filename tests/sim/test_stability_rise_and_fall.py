@@ -20,7 +20,7 @@ def press():
     # (0.165 N). Out: 200 mm/s is 0.05 mm a tick; the Colgate spring, half of the measured
     # 1 N s/m at this period (2 x 0.5 / 0.25 ms = 4 N/mm, well under one ramp step a count,
     # 16.5 N/mm), follows the reading out by 0.2 N a tick below its 3.3 N cap, more than a
-    # ramp step, which the extra takes up. The wall, 1000 N/mm, is 10 N a count: the plain wall steps to the 3.3 N
+    # ramp step. The wall, 1000 N/mm, is 10 N a count: the plain wall steps to the 3.3 N
     # limit within one count, in and out.
     cell = dict(draw_cells(1, seed=3)[0], trajectory="press_hold", period_s=T, resolution_mm=0.01,
                 speed_in_mm_s=5.0, speed_out_mm_s=200.0, depth_mm=1.5, hold_s=0.1, stiffness_n_per_mm=1000.0,
@@ -38,10 +38,7 @@ def test_the_sdk_force_rises_within_its_ramp_and_falls_with_the_spring(press):
     sdk, plain = press["results"]["sdk"], press["results"]["plain"]
     assert sdk["ramp_step_n"] == pytest.approx(STEP)
     assert sdk["max_force_rise_n"] <= STEP * (1 + 1e-9)
-    # the spring falls by 0.2 N a tick against the step's 0.165, and the extra takes up the
-    # rest within the book: the whole force falls by one ramp step (docs/runtime.md, Passivity
-    # item 3, "A reserve for the step"; 1.24 ramp steps before that reserve)
-    assert sdk["max_force_fall_n"] <= STEP * (1 + 1e-9)
+    assert sdk["max_force_fall_n"] > 1.1 * STEP       # the spring's 0.2 N a tick against 0.165
     # the metric sees a rise beyond the ramp where there is one
     assert plain["max_force_rise_n"] > 2 * STEP and plain["max_force_fall_n"] > 2 * STEP
 
