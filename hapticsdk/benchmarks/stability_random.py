@@ -23,7 +23,11 @@ the declared damping at face value), ``sdk`` (:class:`~hapticsdk.passivity.Passi
 with the damping measured hands off on the cell's own arm, :func:`measure_cell_damping`:
 the fit's lower bound trusted and the fit as the device's damping; the declared
 resolution and force limit) and ``sdk_declared`` (the same controller on a device never
-calibrated: ``declared_damping_trust`` of the declared damping, none by default).
+calibrated: ``declared_damping_trust`` of the declared damping, none by default), and
+``eb_measured`` and ``vc_measured`` (:data:`MEASURED_DAMPING_PEERS`: energy bounding and
+the virtual coupling once more, on the damping the ``sdk`` lane trusts, the calibration's
+lower bound ``trusted_damping_ns_per_m``, instead of the declaration; PO/PC takes no
+damping, so its one run serves both sets).
 
 Per cell and controller: ``energy_to_user_j`` (max over time of the energy given to the
 finger), ``delivered_ratio`` (over the contact ticks, i.e. reading inside the wall:
@@ -51,7 +55,21 @@ bound in that cell), counted over the cells that have such a peer
 (``sdk_delivered_vs_best_passive_peer`` of ``cells_with_a_passive_peer``); and the same
 against the best such peer that also kept the force-shape goals the SDK is held to, never
 pulling and no step beyond the SDK's ramp step (``sdk_delivered_vs_best_shaped_peer`` of
-``cells_with_a_shaped_peer``). A cell with no such peer counts in neither.
+``cells_with_a_shaped_peer``). A cell with no such peer counts in neither. The step measure
+is the SDK's own (``sdk_step_within_ramp``): the peer's ``max_force_step_n`` (largest
+change of the applied force between two ticks) within the ramp step of the SDK lane in
+that cell; never pulling is ``min_contact_force_n >= 0`` (``sdk_no_pull``).
+
+The goal's comparison is the one above, against the peers on the declared damping (the
+benchmark draws it at 0.5x-2x the truth, so a peer sized on it may sit beyond the true
+Colgate limit and still stay within the bound by the motion's luck). As context, like for
+like with the ``sdk`` lane, ``peers_on_trusted_damping`` gives the same two counts against
+:data:`LIKE_FOR_LIKE_PEERS` (``popc``, ``eb_measured``, ``vc_measured``: the peers on the
+damping the ``sdk`` lane trusts): ``sdk_delivered_vs_best_passive_peer`` of
+``cells_with_a_passive_peer`` and ``sdk_delivered_vs_best_shaped_peer`` of
+``cells_with_a_shaped_peer``, with ``peers`` naming the set (the ``sdk`` lane only; the
+``sdk_declared`` lane credits none of a declaration by default, which would leave these
+peers no force). Every controller's median delivered ratio is under ``controllers``.
 ``sdk_spring_only_over_half`` counts the cells whose ``spring_only_share`` exceeds 1/2;
 ``sdk_rise_within_ramp`` the cells whose largest rise is within the ramp step (the force
 rises by at most one ramp step a tick; it falls by up to that plus the Colgate spring's
@@ -73,13 +91,22 @@ from ..sim.arm import ArmParams
 from ..sim.finger import FINGERS, FingerParams
 from ..sim.plant import PlantBatch
 
-CONTROLLERS = (*P.PEERS, "sdk", "sdk_declared")
+#: The peers run a second time on the damping the ``sdk`` lane trusts (the hands-off
+#: calibration's lower bound, ``trusted_damping_ns_per_m`` of :func:`measure_cell_damping`)
+#: instead of the declared damping: lane -> the peer of :data:`hapticsdk.sim.peers.PEERS`
+#: it runs. PO/PC takes no damping, so its one run belongs to both sets.
+MEASURED_DAMPING_PEERS = {"eb_measured": "eb", "vc_measured": "vc"}
+CONTROLLERS = (*P.PEERS, "sdk", "sdk_declared", *MEASURED_DAMPING_PEERS)
 #: The SDK controller's lanes: ``sdk`` credits the damping measured hands off on the
 #: cell's own arm (:mod:`hapticsdk.calibration.damping`), ``sdk_declared`` only the share
 #: ``declared_damping_trust`` of the declared damping (a device never calibrated; none by
 #: default).
 SDK_LANES = ("sdk", "sdk_declared")
 PASSIVE_PEERS = ("popc", "eb", "vc")
+#: The passive peers like for like with the ``sdk`` lane: on the damping it trusts
+#: (:data:`MEASURED_DAMPING_PEERS`; context next to the goal's comparison, which is against
+#: :data:`PASSIVE_PEERS` on the declared damping).
+LIKE_FOR_LIKE_PEERS = ("popc", *MEASURED_DAMPING_PEERS)
 KINDS = ("press_hold", "tap", "bumpy_slide", "plain_slide", "creep", "knots")
 #: Energy to the user a cell may show (J), the issue's bound (0.1 mJ over a run).
 ENERGY_BOUND_J = 1.0e-4
@@ -93,9 +120,11 @@ def _lu(rng: np.random.Generator, lo: float, hi: float, n: int) -> np.ndarray:
     return np.exp(rng.uniform(np.log(lo), np.log(hi), n))
 
 
-#: Most cells one ``--random`` run draws: a cell's results take 4.1 KiB in memory (measured
-#: on 2000 cells) and 2.3 kB of JSON, so 50 000 cells stay within 500 MB (the memory a batch
-#: job of the SDK may take, issue 30); at about 75 ms of CPU per cell that is an hour.
+#: Most cells one ``--random`` run draws: a cell's results take 6.1 KiB in memory (the
+#: summed ``sys.getsizeof`` of a cell's dicts, keys and values, 30 cells of seed 1; 5.3 KiB
+#: before the two lanes on the trusted damping) and 3.4 kB of compact JSON (2000 cells), so
+#: 50 000 cells stay within 500 MB (the memory a batch job of the SDK may take, issue 30); at
+#: about 75 ms of CPU per cell that is an hour.
 MAX_RANDOM_CELLS = 50_000
 
 
@@ -211,9 +240,10 @@ def run_cells(cells: Sequence[dict[str, Any]], *, knots: Any = None, chunk_lanes
               progress: Any = None) -> list[dict[str, Any]]:
     """Run every cell with every controller; returns one dict per cell (the cell's
     parameters plus ``results[controller]`` with the metrics of the module docstring, and
-    ``damping_calibration``, :func:`measure_cell_damping`, where the ``sdk`` lane runs)."""
+    ``damping_calibration``, :func:`measure_cell_damping`, where the ``sdk`` lane or a peer
+    of :data:`MEASURED_DAMPING_PEERS` runs)."""
     cells = [dict(c) for c in cells]
-    if "sdk" in controllers:
+    if any(k == "sdk" or k in MEASURED_DAMPING_PEERS for k in controllers):
         for c in cells:
             if "damping_calibration" not in c:
                 c["damping_calibration"] = measure_cell_damping(c)
@@ -245,6 +275,9 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     ref = _Ref(cells, knots)
     rows = np.repeat(np.arange(n), nc)
     kind = np.tile(np.array([CONTROLLERS.index(k) for k in controllers]), n)
+    # the peer each lane runs (a measured-damping lane its base peer); the sdk lanes' values are unused
+    peer_kind = np.tile(np.array([P.PEERS.index(MEASURED_DAMPING_PEERS[k]) if k in MEASURED_DAMPING_PEERS
+                                  else CONTROLLERS.index(k) for k in controllers]), n)
     T = np.array([c["period_s"] for c in cells])[rows]
     K = np.array([c["stiffness_n_per_mm"] for c in cells])[rows]
     bd = np.array([c["damping_declared_ns_per_m"] for c in cells])[rows]
@@ -260,12 +293,17 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     # sdk, the fit's lower bound and the fit; sdk_declared, the declared share (none by default) and the declaration
     b_tr = np.asarray(s.trusted_damping_ns_per_m(bd), float) * np.ones(rows.size)
     bd_ctrl = bd
+    bd_peer = bd   # the damping each peer is sized on: declared, or the sdk lane's trusted bound
     if "sdk" in controllers:
         on_sdk = kind == CONTROLLERS.index("sdk")
         meas = np.array([c["damping_calibration"]["trusted_damping_ns_per_m"] for c in cells])[rows]
         fit = np.array([c["damping_calibration"]["damping_ns_per_m"] for c in cells])[rows]
         b_tr = np.where(on_sdk, meas, b_tr)
         bd_ctrl = np.where(on_sdk, np.nan_to_num(fit), bd)
+    if any(k in MEASURED_DAMPING_PEERS for k in controllers):
+        on_meas = np.isin(kind, [CONTROLLERS.index(k) for k in MEASURED_DAMPING_PEERS])
+        trusted = np.array([c["damping_calibration"]["trusted_damping_ns_per_m"] for c in cells])[rows]
+        bd_peer = np.where(on_meas, trusted, bd)
     m_decl = np.array([declared_mass_kg(c) for c in cells])[rows]   # what the controller is told
     lane_ref = _Ref([cells[int(i)] for i in rows], knots)
     n_ticks = np.ceil(dur / T).astype(int)
@@ -294,7 +332,7 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
         pen = -x
         touching = pen > 0
         fw = np.where(touching, K * pen, 0.0)
-        f_peer = P.step(kind, pst, x, T, fw, K, pen, bd)
+        f_peer = P.step(peer_kind, pst, x, T, fw, K, pen, bd_peer)
         f_sdk = controller_step_batch(cst, x, T, fw, True, s, damping_ns_per_m=bd_ctrl, resolution_mm=plant.res_mm,
                                       max_force_n=plant.fmax, mass_kg=m_decl, trusted_damping_ns_per_m=b_tr)
         f_cmd = np.where(sdk, f_sdk, f_peer)
@@ -356,21 +394,21 @@ def _within_ramp(step_n: float, ramp_step_n: float) -> bool:
     return step_n <= ramp_step_n * (1 + 1e-9) + 1e-12
 
 
-def _peer_ratios(r: dict[str, Any]) -> tuple[list[float], list[float]]:
-    """Delivered ratios of the passive peers (:data:`PASSIVE_PEERS`) that stayed within the
-    energy bound in one cell, and of those of them that also kept the force-shape goals the
-    SDK controller is held to (never pulled, no step beyond the SDK controller's ramp step
-    in that cell)."""
-    lane = next((k for k in SDK_LANES if k in r), None)
-    ramp = r[lane]["ramp_step_n"] if lane else float("inf")
+def _peer_ratios(r: dict[str, Any], ramp_step_n: float,
+                 peers: Sequence[str] = PASSIVE_PEERS) -> tuple[list[float], list[float]]:
+    """Delivered ratios of the passive peers ``peers`` (:data:`PASSIVE_PEERS` by default)
+    that stayed within the energy bound in one cell, and of those of them that also kept the
+    force-shape goals the SDK controller is held to: never pulled (``min_contact_force_n >=
+    0``, the SDK's ``no_pull``) and no step beyond the SDK controller's ramp step
+    ``ramp_step_n`` in that cell (``max_force_step_n`` within it, the SDK's ``step_ok``)."""
     passive: list[float] = []
     shaped: list[float] = []
-    for p in PASSIVE_PEERS:
+    for p in peers:
         q = r.get(p)
         if q is None or not q["energy_to_user_j"] <= ENERGY_BOUND_J or q["delivered_ratio"] != q["delivered_ratio"]:
             continue
         passive.append(q["delivered_ratio"])
-        if q["min_contact_force_n"] >= 0.0 and _within_ramp(q["max_force_step_n"], ramp):
+        if q["min_contact_force_n"] >= 0.0 and _within_ramp(q["max_force_step_n"], ramp_step_n):
             shaped.append(q["delivered_ratio"])
     return passive, shaped
 
@@ -388,12 +426,14 @@ def cell_verdicts(cell: dict[str, Any], lane: str = "sdk") -> dict[str, Any]:
     energy, no pull, step within its ramp, delivered ratio against the best peer that stayed
     within the energy bound (``delivered_ok``; None when no peer did) and against the best
     such peer that also kept the force-shape goals (``delivered_ok_shaped``; None when none
-    did)."""
+    did). For the ``sdk`` lane in a cell with a peer of :data:`MEASURED_DAMPING_PEERS`, the
+    same two against :data:`LIKE_FOR_LIKE_PEERS` (``delivered_ok_like_for_like``,
+    ``delivered_ok_like_for_like_shaped``)."""
     r = cell["results"]
     me = r[lane]
-    best, shaped = _peer_ratios(r)
+    best, shaped = _peer_ratios(r, me["ramp_step_n"])
     mine = me["delivered_ratio"]
-    return {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
+    out = {"energy_ok": me["energy_to_user_j"] <= ENERGY_BOUND_J, "no_pull": me["min_contact_force_n"] >= 0.0,
             "step_ok": _within_ramp(me["max_force_step_n"], me["ramp_step_n"]),
             "rise_ok": _within_ramp(me.get("max_force_rise_n", me["max_force_step_n"]), me["ramp_step_n"]),
             "step_ok_plus_spring": _within_ramp(me.get("max_step_beyond_spring_n", me["max_force_step_n"]),
@@ -405,9 +445,27 @@ def cell_verdicts(cell: dict[str, Any], lane: str = "sdk") -> dict[str, Any]:
             "delivered_ok": _at_least(mine, best), "best_passive_peer_ratio": max(best) if best else float("nan"),
             "delivered_ok_shaped": _at_least(mine, shaped),
             "best_shaped_peer_ratio": max(shaped) if shaped else float("nan")}
+    if lane == "sdk" and any(p in r for p in MEASURED_DAMPING_PEERS):
+        # context: the same two comparisons against the peers on the damping this lane trusts
+        best_m, shaped_m = _peer_ratios(r, me["ramp_step_n"], LIKE_FOR_LIKE_PEERS)
+        out.update({"delivered_ok_like_for_like": _at_least(mine, best_m),
+                    "best_like_for_like_peer_ratio": max(best_m) if best_m else float("nan"),
+                    "delivered_ok_like_for_like_shaped": _at_least(mine, shaped_m),
+                    "best_like_for_like_shaped_peer_ratio": max(shaped_m) if shaped_m else float("nan")})
+    return out
 
 
-def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, int]:
+def _like_for_like_counts(v: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """The ``sdk`` lane's delivered counts against :data:`LIKE_FOR_LIKE_PEERS` (context:
+    the goal's comparison is ``sdk_delivered_vs_best_passive_peer``)."""
+    return {"peers": list(LIKE_FOR_LIKE_PEERS),
+            "sdk_delivered_vs_best_passive_peer": sum(x.get("delivered_ok_like_for_like") is True for x in v),
+            "cells_with_a_passive_peer": sum(x.get("delivered_ok_like_for_like") is not None for x in v),
+            "sdk_delivered_vs_best_shaped_peer": sum(x.get("delivered_ok_like_for_like_shaped") is True for x in v),
+            "cells_with_a_shaped_peer": sum(x.get("delivered_ok_like_for_like_shaped") is not None for x in v)}
+
+
+def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, Any]:
     v = [cell_verdicts(c, lane) for c in cells]
     return {"sdk_energy_within_bound": sum(x["energy_ok"] for x in v),
             "sdk_no_pull": sum(x["no_pull"] for x in v),
@@ -420,7 +478,9 @@ def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, int]:
             "cells_with_a_passive_peer": sum(x["delivered_ok"] is not None for x in v),
             "sdk_delivered_vs_best_shaped_peer": sum(x["delivered_ok_shaped"] is True for x in v),
             "cells_with_a_shaped_peer": sum(x["delivered_ok_shaped"] is not None for x in v),
-            "sdk_spring_only_over_half": sum(c["results"][lane].get("spring_only_share", 0.0) > 0.5 for c in cells)}
+            "sdk_spring_only_over_half": sum(c["results"][lane].get("spring_only_share", 0.0) > 0.5 for c in cells),
+            **({"peers_on_trusted_damping": _like_for_like_counts(v)}
+               if any("delivered_ok_like_for_like" in x for x in v) else {})}
 
 
 def _damping_summary(cells: Sequence[dict[str, Any]]) -> dict[str, Any]:

@@ -153,11 +153,26 @@ def _stability(args: argparse.Namespace) -> int:
             f"within the energy bound, and of the best such peer that never pulls and steps within the sdk's "
             f"ramp in {s['sdk_delivered_vs_best_shaped_peer']}/{s['cells_with_a_shaped_peer']}; "
             f"the spring alone (the energy bound spent) on more than half the contact ticks in "
-            f"{s['sdk_spring_only_over_half']}/{n}" + _lanes_text(s, n)
+            f"{s['sdk_spring_only_over_half']}/{n}" + _like_for_like_text(s) + _lanes_text(s, n)
             + (f"\nfigure saved to {args.plot}" if args.plot else ""))
     emit(res, args.json, text)
     declared_met = s.get("declared_damping", {}).get("sdk_energy_within_bound", n) == n
     return 0 if s["sdk_energy_within_bound"] == n and declared_met else 1
+
+
+def _like_for_like_text(s: dict[str, Any]) -> str:
+    """The ``sdk`` lane's delivered counts against the peers on the damping it trusts: context
+    next to the goal's comparison (the peers on the declared damping)."""
+    d = s.get("peers_on_trusted_damping")
+    if d is None:
+        return ""
+    med = s["controllers"]
+    peers = ", ".join(f"{p} {med[p]['median_delivered_ratio']:.3f}" for p in d["peers"] if p in med)
+    return (f"\n  (the goal's comparison is the one above, the peers on the declared damping; as context, like for "
+            f"like, the peers on the damping the sdk lane trusts, the measured lower bound: at the best passive "
+            f"peer in {d['sdk_delivered_vs_best_passive_peer']}/{d['cells_with_a_passive_peer']}, at the best "
+            f"shaped peer in {d['sdk_delivered_vs_best_shaped_peer']}/{d['cells_with_a_shaped_peer']}; median "
+            f"delivered {peers}, sdk {med['sdk']['median_delivered_ratio']:.3f})")
 
 
 def _lanes_text(s: dict[str, Any], n: int) -> str:

@@ -98,7 +98,7 @@ def test_cli_handlers(capsys):
     met = sm["sdk_energy_within_bound"] == sm["declared_damping"]["sdk_energy_within_bound"] == sm["cells"]
     assert rc == (0 if met else 1)
     assert {"cells", "summary", "mode"} <= set(out) and out["mode"] == "grid"
-    assert set(sm["controllers"]) == {"plain", "popc", "eb", "vc", "sdk", "sdk_declared"}
+    assert set(sm["controllers"]) == {"plain", "popc", "eb", "vc", "sdk", "sdk_declared", "eb_measured", "vc_measured"}
     assert sm["damping_calibration"]["cells_trusted_above_true"] == 0
     args = parser.parse_args(["fidelity", "--periods", "0.001", "0.004", "--json"])
     assert args.func(args) == 0

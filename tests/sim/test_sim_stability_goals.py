@@ -56,7 +56,8 @@ def test_drawn_cells_keep_the_bound_no_pull_and_the_ramp():
     _check_sdk(cells)
     s = summarise(cells)
     assert s["sdk_no_pull"] == s["sdk_step_within_ramp_plus_spring_where_ramp_kept"] == 12
-    assert set(s["controllers"]) == {"plain", "popc", "eb", "vc", "sdk", "sdk_declared"}
+    assert set(s["controllers"]) == {"plain", "popc", "eb", "vc", "sdk", "sdk_declared", "eb_measured", "vc_measured"}
+    assert s["peers_on_trusted_damping"]["peers"] == ["popc", "eb_measured", "vc_measured"]
     assert np.isfinite(s["controllers"]["sdk"]["median_delivered_ratio"])
 
 
