@@ -96,7 +96,7 @@ from ..errors import DeviceError, ValidationError
 from ..passivity import ControllerSettings, PassivityController
 from ..quantiles import median
 from .clock import MonotonicClock, RealtimeSettings, apply_realtime, thread_cpu_clock_cost_s
-from .turns import NormalTurns
+from .turns import NormalTurns, carrier
 from .stats import PREEMPT_THRESHOLD_S, jitter_stats, preemption_stats, tick_stats
 
 _log = logging.getLogger(__name__)
@@ -549,6 +549,7 @@ class ServoLoop:
         self.last_force_n = 0.0
         self._pcs: list[PassivityController] = []
         self._turns: NormalTurns | None = None
+        self._last_p: tuple[float, float, float] | None = None   # the last position of the one-axis reading
         #: servo time (s) of the last tick (None before the first), the hit test's object
         #: index (-1 none) and the compute time (s) of that tick
         self.last_t: float | None = None
@@ -685,9 +686,21 @@ class ServoLoop:
                     self._pc_obj = -2 if self._pc_obj == i else (
                         self._pc_obj - 1 if self._pc_obj > i else self._pc_obj)
             elif kind == "pose":
-                if self.hit_tester is not None and self._index(a) >= 0:
-                    self.hit_tester.set_pose(self._index(a), b)
+                i = self._index(a)
+                if self.hit_tester is not None and i >= 0:
+                    was = self.hit_tester.shapes[i].pose
+                    self.hit_tester.set_pose(i, b)
                     self._moved = True
+                    if i == self._pc_obj or (self._pc_obj == -2 and len(self._objs) == 1):
+                        # the object the controllers observe (or the only one, before the
+                        # first contact): the positions remembered are carried with it, so
+                        # a reading built from them is of the stylus's motion relative to
+                        # it, as the distance is (docs/runtime.md, Passivity, "A moving wall")
+                        move = carrier(was, b)
+                        if self._last_p is not None:
+                            self._last_p = move(self._last_p)
+                        if self._turns is not None:
+                            self._turns.carry(move)
             elif kind == "call":
                 b()
         # renderers, objects or poses changed (or a call may have changed anything)
@@ -765,7 +778,7 @@ class ServoLoop:
         self._last_vel = [0.0, 0.0, 0.0]
         self._last_x = 0.0
         self._x_off = 0.0    # the reading's offset from -pen (a force rendered along some axes)
-        self._last_p: tuple[float, float, float] | None = None
+        self._last_p = None
         self._held_n: tuple[float, float, float] | None = None   # the direction sent last tick (None: +y)
         # an object moved since the last reading in contact (set_pose): the controller gets
         # the stylus's own motion since _own_st, the state read at the last good reading
@@ -1120,13 +1133,12 @@ class ServoLoop:
                 # only where the reading is the distance to one surface of one object: the
                 # normal held and the one seen less than a right angle apart (another face of
                 # a box is a right angle or more away, and the reading that switches to it
-                # jumps with no wall move), and not the reading of "A force rendered along
-                # one axis" off the +y normal (the stylus's own motion already, which no
-                # wall move enters)
+                # jumps with no wall move); the reading of "A force rendered along one axis"
+                # off the +y normal is the motion relative to the object there (its last
+                # position carried with the move, _apply_ops)
                 n = hn if hn is not None else _UP
                 m = direction if direction is not None else _UP
-                if (op is not None and idx == self._pc_obj and n[0] * m[0] + n[1] * m[1] + n[2] * m[2] > 0.0
-                        and (axes is None or direction is None)):
+                if op is not None and idx == self._pc_obj and n[0] * m[0] + n[1] * m[1] + n[2] * m[2] > 0.0:
                     dp = (p0 - op.px, p1 - op.py, p2 - op.pz)
                     own = 0.0
                     for i in (axes or (0, 1, 2)):

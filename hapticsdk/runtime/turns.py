@@ -35,11 +35,30 @@ displacement's projection on a unit normal, within what the arm's damper dissipa
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 from ..passivity.plan import _HIST
 
 _UP = (0.0, 1.0, 0.0)
+
+
+def carrier(old: Any, new: Any) -> "Callable[[tuple[float, float, float]], tuple[float, float, float]]":
+    """The map a rigid move of an object from pose ``old`` to ``new`` (each with
+    ``position_mm`` and the rotation ``matrix``, rows) applies to the points fixed in it:
+    ``q -> R_new R_old^T (q - t_old) + t_new``. A position the loop remembers, carried so,
+    is the same point of the object: the displacement to it from a later position is the
+    stylus's motion relative to the object, in the object's frame (docs/runtime.md,
+    Passivity, "A moving wall")."""
+    a, b = old.matrix, new.matrix
+    m = [[b[i][0] * a[j][0] + b[i][1] * a[j][1] + b[i][2] * a[j][2] for j in range(3)] for i in range(3)]
+    t0, t1 = old.position_mm, new.position_mm
+
+    def carry(q: tuple[float, float, float]) -> tuple[float, float, float]:
+        d0, d1, d2 = q[0] - t0[0], q[1] - t0[1], q[2] - t0[2]
+        return (m[0][0] * d0 + m[0][1] * d1 + m[0][2] * d2 + t1[0],
+                m[1][0] * d0 + m[1][1] * d1 + m[1][2] * d2 + t1[1],
+                m[2][0] * d0 + m[2][1] * d1 + m[2][2] * d2 + t1[2])
+    return carry
 
 
 class NormalTurns:
@@ -90,6 +109,15 @@ class NormalTurns:
         self._at = at
         self._n = n + 1 if n < _HIST else _HIST
         return x
+
+    def carry(self, move: "Callable[[tuple[float, float, float]], tuple[float, float, float]]") -> None:
+        """The object the controllers observe moved (:func:`carrier`): the positions known
+        are carried with it, so the re-read and the held force's booking are of the
+        stylus's motion relative to the object."""
+        ring = self._ring
+        for j in range(self._n):
+            i = self._at - j
+            ring[i] = move(ring[i])
 
     def forget(self) -> None:
         """No position this tick: the next one starts afresh."""
