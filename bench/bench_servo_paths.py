@@ -37,7 +37,12 @@ spot and up to 0.3-3 mm inside, at 5-1500 mm/s (log-uniform) in random direction
 0-0.1 s, ``taps`` in and out through the spot; periods 0.25-4 ms, damping 0-0.5 N s/m
 declared or measured, walls of 0.3-50 N/mm, the three fingers. Each kind with the controller
 on and, as the control, off: cells over 0.1 mJ, the largest, the median delivered ratio
-(docs/runtime.md, Passivity, "A normal that turns").
+(docs/runtime.md, Passivity, "A normal that turns"). ``moving --axes 3``: the ``random``
+paths with the box moved 0.2-3 mm along a random direction at 1-20 Hz from a time drawn in
+the first 70% of the path, each cell run with the box still and moving (the controller
+on): the world-frame figure, and the energy in the wall's frame as the one-axis ``moving``
+computes it, the move's work through the force vector applied (docs/runtime.md, Passivity,
+"A moving wall", "Positions carried with the object").
 
 ``--start-ramp-s S`` gives the Omni's safety layer a start ramp of S seconds in every kind
 but ``ball`` (default: the layer's own, 0.2 s; docs/safety.md): presses and taps start within it, and a spring pressed under
@@ -298,33 +303,69 @@ def traj3(rng, kind):
     return Trajectory([(k[0], k[1], k[2], k[3]) for k in pts]), scene
 
 
-def run3(rng, kind, passivity=True):
+def run3(rng, kind, passivity=True, perturb=True):
     """One cell of ``--axes 3``: the energy to the finger (J, largest over the run), the
-    cell's draws and the delivered ratio."""
+    cell's draws and the delivered ratio (``moving``: also the energy in the wall's frame,
+    ``own``; ``perturb`` False: the same cell with the box still)."""
     T = float(rng.choice([2.5e-4, 5e-4, 1e-3, 2e-3, 4e-3])); b = float(rng.choice([0.0, 0.25, 0.5]))
     K = float(np.exp(rng.uniform(np.log(0.3), np.log(50)))); fing = str(rng.choice(["soft", "medium", "stiff"]))
     src = str(rng.choice(["declared", "measured"]))
-    tr, scene = traj3(rng, kind)
+    tr, scene = traj3(rng, "random" if kind == "moving" else kind)
+    mv = None
+    if kind == "moving":
+        # the box moves amp mm along a random direction u at fhz from t_ev on
+        u = rng.normal(size=3); u /= np.linalg.norm(u)
+        mv = (rng.uniform(0.2, 3.0), rng.uniform(1, 20), u, rng.uniform(0.0, 0.7) * tr.duration_s)
     safety = None if START_RAMP_S is None else SafetyLayer(Omni3Virtual.limits, ramp_time_s=START_RAMP_S)
     dev = Omni3Virtual(trajectory=tr, finger=fing, damping_ns_per_m=b, safety=safety)
     st = ControllerSettings.for_device(dev, damping=measured_damping(b)) if src == "measured" and passivity else None
     loop = ServoLoop(dev, (), {"force": dev}, period_s=T, passivity=passivity, passivity_settings=st,
                      objects=[(name, [Spring(K)]) for name, _ in scene], hit_tester=HitTester(scene))
-    loop.start(tr.duration_s); w = -np.inf
+    loop.start(tr.duration_s); w = own = -np.inf
     sent = asked = 0.0; fmax = dev.limits.max_force_n
+    c0 = np.array(scene[0][1].pose.position_mm); at = c0; jump = np.zeros(3); f_prev = np.zeros(3); work = 0.0
     while True:
-        more = loop.tick(); w = max(w, dev.energy_to_user_j())
+        if mv is not None and perturb and loop.ticks * T >= mv[3]:
+            amp, fhz, u, t_ev = mv
+            c = c0 + u * amp * np.sin(2 * np.pi * fhz * (loop.ticks * T - t_ev))
+            jump = (c - at) * 1e-3; at = c
+            loop.set_pose(0, Pose(tuple(c)))
+        more = loop.tick(); e = dev.energy_to_user_j(); w = max(w, e)
+        if mv is not None:
+            # the move's work through the force applied, at the mean of the forces held
+            # before and after it (the scene's, as the one-axis ``moving``)
+            n = loop._held_n
+            f_now = loop.last_force_n * np.array((0.0, 1.0, 0.0) if n is None else n)
+            work += 0.5 * float(np.dot(f_prev + f_now, jump))
+            f_prev = f_now; jump = np.zeros(3)
+            own = max(own, e - work)
         if loop.last_penetration_mm > 0.0:
             sent += loop.last_force_n; asked += min(K * loop.last_penetration_mm, fmax)
         if not more: break
     loop.finish()
-    return w, dict(T=T, b=b, K=round(K, 3), src=src, f=fing,
-                   delivered=sent / asked if asked > 0.0 else float("nan"))
+    r = dict(T=T, b=b, K=round(K, 3), src=src, f=fing, delivered=sent / asked if asked > 0.0 else float("nan"))
+    if mv is not None:
+        r["own"] = own
+    return w, r
 
 
 def main3(kind, cells, seed):
     """``--axes 3``: every kind of KINDS3 (or the one asked), with the controller on and,
     as the control, off."""
+    if kind == "moving":
+        runs = {}
+        for perturb in (False, True):
+            rng = np.random.default_rng(seed)
+            runs[perturb] = [run3(rng, kind, True, perturb) for _ in range(cells)]
+        e0 = np.array([r[0] for r in runs[False]]); e1 = np.array([r[0] for r in runs[True]])
+        o1 = np.array([r[1]["own"] for r in runs[True]])
+        worst = runs[True][int(np.argmax(o1))][1]
+        print(f"3 axes, moving: world frame over 0.1 mJ {int(np.sum(e1 > 1e-4))}/{cells} (still box "
+              f"{int(np.sum(e0 > 1e-4))}, largest {e0.max() * 1e3:.3f} mJ); in the wall's frame over 0.1 mJ "
+              f"{int(np.sum(o1 > 1e-4))}, of those with the still box under it {int(np.sum((o1 > 1e-4) & (e0 <= 1e-4)))} "
+              f"(largest {o1.max() * 1e3:.3f} mJ, cell {int(np.argmax(o1))}: {worst}); median delivered with the "
+              f"move {np.nanmedian([r[1]['delivered'] for r in runs[True]]):.4f}", flush=True)
+        return
     for k in (KINDS3 if kind == "all" else (kind,)):
         for on in (True, False):
             rng = np.random.default_rng(seed)
