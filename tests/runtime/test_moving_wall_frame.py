@@ -26,6 +26,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from hapticsdk.passivity import PassivityController
 from hapticsdk.runtime import ServoLoop
 from hapticsdk.runtime.turns import NormalTurns, carrier
 from hapticsdk.scene.geometry import Box, HitTester, Pose
@@ -154,3 +155,43 @@ def test_the_loop_carries_the_positions_of_the_three_axis_re_read_with_the_box()
             break
     loop.finish()
     assert checked > 100
+
+
+def test_past_the_middle_the_damping_credit_is_taken_on_the_stylus_s_own_motion(monkeypatch: pytest.MonkeyPatch) -> None:
+    """That reading now holds the wall's move, so where the box moved the controller gets
+    the stylus's own motion along the force for its damping credit (the arm's damper
+    dissipates the stylus's motion, not the wall's): ``own = n_y dp_y``, ``dp`` the
+    reading's change of position over the interval. Without it the credit is taken on the
+    reading's change, the wall's move in it."""
+    tr = Trajectory([(0.0, 0.0, 1.0), (0.1, 0.0, -3.0), (0.4, 0.0, -3.0)])
+    dev = OmniVirtual(trajectory=tr, finger="stiff", damping_ns_per_m=0.5)
+    box = Box((20.0, 2.0, 20.0), pose=Pose((0.0, -2.0, 0.0)))
+    loop = ServoLoop(dev, (), {"force": dev}, period_s=1e-3, passivity=True,
+                     objects=[("A", [Spring(5.0)])], hit_tester=HitTester([("A", box)]))
+    loop.start(tr.duration_s)
+    seen: list[float | None] = []
+    step = PassivityController.step
+
+    def spy(self: PassivityController, x: float, dt: float, f: float, own: float | None = None) -> float:
+        seen.append(own)
+        return step(self, x, dt, f) if own is None else step(self, x, dt, f, own)
+    monkeypatch.setattr(PassivityController, "step", spy)
+    checked = 0
+    y = None
+    while True:
+        t = loop.ticks * 1e-3
+        if t > 0.15:
+            loop.set_pose(0, Pose((0.0, -2.0 + 0.4 * math.sin(2.0 * math.pi * 8.0 * (t - 0.15)), 0.0)))
+        held = loop._held_n
+        seen.clear()
+        more = loop.tick()
+        y1 = float(loop.last_state.position_mm[1]) if loop.last_state is not None else None
+        if t > 0.15 and held == DOWN and loop._held_n == DOWN and loop.contact == 0 and y is not None and y1 is not None:
+            assert seen and seen[0] is not None
+            assert abs(seen[0] - (-(y1 - y))) <= 1e-9      # n_y dp_y, n = -y
+            checked += 1
+        y = y1
+        if not more:
+            break
+    loop.finish()
+    assert checked > 50
