@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import logging
 import sys
 from pathlib import Path
 
@@ -388,6 +389,9 @@ def main() -> None:
     ap.add_argument("--start-ramp-s", type=float, default=None,
                     help="the safety layer's start ramp (s), all kinds but ball (default: the layer's own)")
     a = ap.parse_args()
+    # the controller's spent-bound warning is for a live loop's user (once per controller);
+    # here it would print once per cell among the results
+    logging.getLogger("hapticsdk.passivity.controller").setLevel(logging.ERROR)
     global START_RAMP_S
     START_RAMP_S = a.start_ramp_s
     if a.axes == 3:
