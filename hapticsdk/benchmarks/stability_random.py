@@ -123,8 +123,9 @@ def _lu(rng: np.random.Generator, lo: float, hi: float, n: int) -> np.ndarray:
 #: Most cells one ``--random`` run draws: a cell's results take 6.1 KiB in memory (the
 #: summed ``sys.getsizeof`` of a cell's dicts, keys and values, 30 cells of seed 1; 5.3 KiB
 #: before the two lanes on the trusted damping) and 3.4 kB of compact JSON (2000 cells), so
-#: 50 000 cells stay within 500 MB (the memory a batch job of the SDK may take, issue 30); at
-#: about 75 ms of CPU per cell that is an hour.
+#: 50 000 cells stay within 500 MB (the memory a batch job of the SDK may take, issue 30; the
+#: ``--json`` text, about 4.6 kB a cell indented, is written as it is encoded, ``cli.emit``,
+#: not held beside the results); at about 75 ms of CPU per cell that is an hour.
 MAX_RANDOM_CELLS = 50_000
 
 
