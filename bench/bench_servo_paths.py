@@ -24,6 +24,10 @@ off, a spring wall of 0.3-50 N/mm, the finger preset, the motion's parameters):
   (docs/runtime.md, Passivity, "A moving wall"), with the cells whose probe went past the
   box's middle (its bottom face the nearest, a reading that case leaves open) counted
   apart, and the median delivered ratio;
+* ``thin``: the same presses into a plate of half-thickness 0.2-1.5 mm (a box 40 mm wide),
+  so most go past its middle, where the nearest face turns from the top to the bottom and
+  the force along -y (a pop-through: the one-axis reading's turn, docs/runtime.md,
+  "Positions carried with the object");
 * ``plain``: the same presses without any event (the runs the five kinds above compare
   with), with the median delivered ratio ``sum F / sum min(K pen, F_max)`` over the contact
   ticks (F the force sent, pen the loop's penetration).
@@ -175,6 +179,26 @@ def run_ball(rng):
         if not more: break
     loop.finish()
     return w, dict(T=T, b=b, K=round(K, 3), R=round(R, 1), f=fing)
+
+
+def run_thin(rng):
+    """A press and hold into a plate of half-thickness 0.2-1.5 mm (``thin``)."""
+    T = float(rng.choice([2.5e-4, 5e-4, 1e-3, 2e-3])); b = float(rng.choice([0.0, 0.25, 0.5]))
+    K = float(np.exp(rng.uniform(np.log(0.3), np.log(50)))); fing = str(rng.choice(["soft", "medium", "stiff"]))
+    src = str(rng.choice(["declared", "measured"])); h = rng.uniform(0.2, 1.5); d = rng.uniform(0.3, 3.0)
+    tr = press_slide(depth_mm=d, press_s=rng.uniform(0.05, 0.4), hold_s=rng.uniform(0.2, 0.6), slide_s=0.0,
+                     release_s=rng.uniform(0.05, 0.4), rest_s=0.1)
+    dev = OmniVirtual(trajectory=tr, finger=fing, damping_ns_per_m=b)
+    st = ControllerSettings.for_device(dev, damping=measured_damping(b)) if src == "measured" else None
+    plate = Box((20.0, h, 20.0), pose=Pose((0.0, -h, 0.0)))
+    loop = ServoLoop(dev, (), {"force": dev}, period_s=T, passivity=True, passivity_settings=st,
+                     objects=[("plate", [Spring(K)])], hit_tester=HitTester([("plate", plate)]))
+    loop.start(tr.duration_s); w = -np.inf
+    while True:
+        more = loop.tick(); w = max(w, dev.energy_to_user_j())
+        if not more: break
+    loop.finish()
+    return w, dict(T=T, b=b, K=round(K, 3), h=round(h, 2), d=round(d, 2), f=fing, src=src)
 
 
 def cell(rng, kind, perturb):
@@ -380,7 +404,7 @@ def main3(kind, cells, seed):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("kind", choices=["slide", "taps", "ball", "nan", "switch", "pause", "delay", "moving", "plain",
+    ap.add_argument("kind", choices=["slide", "taps", "ball", "nan", "switch", "pause", "delay", "moving", "plain", "thin",
                                      *KINDS3[:3], "two", "random", "all"])
     ap.add_argument("--cells", type=int, default=150)
     ap.add_argument("--seed", type=int, default=1)
@@ -407,6 +431,13 @@ def main() -> None:
         rng = np.random.default_rng(a.seed)
         es = np.array([run_ball(rng)[0] for _ in range(a.cells)])
         print(f"ball: over 0.1 mJ {int(np.sum(es > 1e-4))}/{a.cells}, largest {es.max() * 1e3:.3f} mJ")
+    elif a.kind == "thin":
+        rng = np.random.default_rng(a.seed)
+        rs = [run_thin(rng) for _ in range(a.cells)]
+        es = np.array([r[0] for r in rs])
+        past = np.array([r[1]["d"] > r[1]["h"] for r in rs])
+        print(f"thin plates: over 0.1 mJ {int(np.sum(es > 1e-4))}/{a.cells} ({int(np.sum((es > 1e-4) & past))} "
+              f"of the {int(past.sum())} pressed past the middle), largest {es.max() * 1e3:.3f} mJ")
     elif a.kind == "plain":
         rng = np.random.default_rng(a.seed)
         rs = [cell(rng, "switch", False) for _ in range(a.cells)]
