@@ -31,6 +31,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..argcheck import number
 from ..errors import ValidationError
 from ..linalg import expm
 from .finger import FingerParams
@@ -69,12 +70,11 @@ class ArmParams:
     rated_stable_stiffness_n_per_mm: float = 0.7
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.mass_kg) and self.mass_kg > 0):
-            raise ValidationError(f"must be > 0, got {self.mass_kg!r}", field="arm.mass_kg")
+        # a number of any other type (a list, a string, None) is refused by name too, not
+        # left to numpy's TypeError or ValueError
+        number(self.mass_kg, "arm.mass_kg", lo=0.0, lo_open=True)
         for k in ("damping_ns_per_m", "max_force_n", "encoder_resolution_mm"):
-            v = getattr(self, k)
-            if not np.isfinite(v) or v < 0:
-                raise ValidationError(f"must be finite and >= 0, got {v!r}", field=f"arm.{k}")
+            number(getattr(self, k), f"arm.{k}", lo=0.0)
 
     def with_(self, **kw: float) -> "ArmParams":
         """A copy with the given parameters changed (same units as the fields)."""

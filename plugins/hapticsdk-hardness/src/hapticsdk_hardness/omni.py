@@ -20,8 +20,8 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-import numpy as np
 
+from hapticsdk.argcheck import number
 from hapticsdk.devices.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
 from hapticsdk.perception.dimensions import ChannelCommand
 from hapticsdk.errors import ValidationError
@@ -72,9 +72,11 @@ class OmniVirtual(HapticDevice):
         self.arm = arm.with_(**over) if over else arm
         self.finger = _finger(finger)
         self.trajectory = trajectory or press_slide()
-        if velocity_filter_hz is not None and (not np.isfinite(velocity_filter_hz) or velocity_filter_hz <= 0):
-            raise ValidationError("must be > 0 Hz", field="velocity_filter_hz")
+        if velocity_filter_hz is not None:
+            number(velocity_filter_hz, "velocity_filter_hz", lo=0.0, lo_open=True)
         self.velocity_filter_hz = velocity_filter_hz
+        if y0_mm is not None:
+            number(y0_mm, "y0_mm")
         self._y0 = y0_mm
         self._reset()
 
