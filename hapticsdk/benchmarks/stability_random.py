@@ -295,16 +295,16 @@ def _run_chunk(cells: Sequence[dict[str, Any]], knots: Any, settings: Controller
     b_tr = np.asarray(s.trusted_damping_ns_per_m(bd), float) * np.ones(rows.size)
     bd_ctrl = bd
     bd_peer = bd   # the damping each peer is sized on: declared, or the sdk lane's trusted bound
+    if any(k == "sdk" or k in MEASURED_DAMPING_PEERS for k in controllers):   # run_cells measured it
+        meas = np.array([c["damping_calibration"]["trusted_damping_ns_per_m"] for c in cells])[rows]
     if "sdk" in controllers:
         on_sdk = kind == CONTROLLERS.index("sdk")
-        meas = np.array([c["damping_calibration"]["trusted_damping_ns_per_m"] for c in cells])[rows]
         fit = np.array([c["damping_calibration"]["damping_ns_per_m"] for c in cells])[rows]
         b_tr = np.where(on_sdk, meas, b_tr)
         bd_ctrl = np.where(on_sdk, np.nan_to_num(fit), bd)
     if any(k in MEASURED_DAMPING_PEERS for k in controllers):
         on_meas = np.isin(kind, [CONTROLLERS.index(k) for k in MEASURED_DAMPING_PEERS])
-        trusted = np.array([c["damping_calibration"]["trusted_damping_ns_per_m"] for c in cells])[rows]
-        bd_peer = np.where(on_meas, trusted, bd)
+        bd_peer = np.where(on_meas, meas, bd)
     m_decl = np.array([declared_mass_kg(c) for c in cells])[rows]   # what the controller is told
     lane_ref = _Ref([cells[int(i)] for i in rows], knots)
     n_ticks = np.ceil(dur / T).astype(int)
@@ -456,14 +456,14 @@ def cell_verdicts(cell: dict[str, Any], lane: str = "sdk") -> dict[str, Any]:
     return out
 
 
-def _like_for_like_counts(v: Sequence[dict[str, Any]]) -> dict[str, Any]:
-    """The ``sdk`` lane's delivered counts against :data:`LIKE_FOR_LIKE_PEERS` (context:
-    the goal's comparison is ``sdk_delivered_vs_best_passive_peer``)."""
-    return {"peers": list(LIKE_FOR_LIKE_PEERS),
-            "sdk_delivered_vs_best_passive_peer": sum(x.get("delivered_ok_like_for_like") is True for x in v),
-            "cells_with_a_passive_peer": sum(x.get("delivered_ok_like_for_like") is not None for x in v),
-            "sdk_delivered_vs_best_shaped_peer": sum(x.get("delivered_ok_like_for_like_shaped") is True for x in v),
-            "cells_with_a_shaped_peer": sum(x.get("delivered_ok_like_for_like_shaped") is not None for x in v)}
+def _delivered_counts(v: Sequence[dict[str, Any]], key: str) -> dict[str, int]:
+    """Cells at the best passive peer's force and at the best shaped peer's, each of the cells
+    that have such a peer, from the verdicts ``key`` and ``key + "_shaped"`` of
+    :func:`cell_verdicts` (None: no such peer in that cell)."""
+    return {"sdk_delivered_vs_best_passive_peer": sum(x.get(key) is True for x in v),
+            "cells_with_a_passive_peer": sum(x.get(key) is not None for x in v),
+            "sdk_delivered_vs_best_shaped_peer": sum(x.get(key + "_shaped") is True for x in v),
+            "cells_with_a_shaped_peer": sum(x.get(key + "_shaped") is not None for x in v)}
 
 
 def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, Any]:
@@ -475,12 +475,10 @@ def _goal_counts(cells: Sequence[dict[str, Any]], lane: str) -> dict[str, Any]:
             "sdk_step_within_ramp_plus_spring_where_ramp_kept": sum(x["step_ok_plus_spring_where_ramp_kept"] for x in v),
             "sdk_cells_below_ramp": sum(x["fell_below_ramp"] for x in v),
             "sdk_rise_within_ramp": sum(x["rise_ok"] for x in v),
-            "sdk_delivered_vs_best_passive_peer": sum(x["delivered_ok"] is True for x in v),
-            "cells_with_a_passive_peer": sum(x["delivered_ok"] is not None for x in v),
-            "sdk_delivered_vs_best_shaped_peer": sum(x["delivered_ok_shaped"] is True for x in v),
-            "cells_with_a_shaped_peer": sum(x["delivered_ok_shaped"] is not None for x in v),
+            **_delivered_counts(v, "delivered_ok"),
             "sdk_spring_only_over_half": sum(c["results"][lane].get("spring_only_share", 0.0) > 0.5 for c in cells),
-            **({"peers_on_trusted_damping": _like_for_like_counts(v)}
+            **({"peers_on_trusted_damping": {"peers": list(LIKE_FOR_LIKE_PEERS),
+                                             **_delivered_counts(v, "delivered_ok_like_for_like")}}
                if any("delivered_ok_like_for_like" in x for x in v) else {})}
 
 
