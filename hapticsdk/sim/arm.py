@@ -92,7 +92,18 @@ def transition_matrices(period_s: float, arms: Sequence[ArmParams],
     for i, (a, f) in enumerate(zip(arms, fingers)):
         key = (a.mass_kg, a.damping_ns_per_m, f.mass_kg, f.stiffness_n_per_m, f.damping_ns_per_m)
         if key not in cache:
-            cache[key] = expm(_augmented(a, f) * period_s)[:2]
+            m = _augmented(a, f) * period_s
+            with np.errstate(over="ignore", invalid="ignore"):
+                rows = expm(m)[:2] if np.isfinite(m).all() else m[:2]
+            if not np.isfinite(rows).all():
+                # finite parameters whose rates overflow over one period (a damping of
+                # 1e308 N s/m): no exact hold exists in floating point, so no simulation
+                raise ValidationError(
+                    f"the arm (mass {a.mass_kg!r} kg, damping {a.damping_ns_per_m!r} N s/m) and "
+                    f"finger (mass {f.mass_kg!r} kg, stiffness {f.stiffness_n_per_m!r} N/m, "
+                    f"damping {f.damping_ns_per_m!r} N s/m) have no finite transition over "
+                    f"{period_s!r} s", field="arm")
+            cache[key] = rows
         out[i] = cache[key]
     return out
 
@@ -152,7 +163,11 @@ def readings_mm(y_m: np.ndarray, res_mm: np.ndarray) -> np.ndarray:
     """Encoder readings (mm) of true positions ``y_m`` (m): rounded to each lane's
     resolution (exact where the resolution is 0)."""
     y = y_m * 1e3
-    return np.where(res_mm > 0, np.round(y / np.where(res_mm > 0, res_mm, 1.0)) * res_mm, y)
+    with np.errstate(over="ignore"):
+        q = y / np.where(res_mm > 0, res_mm, 1.0)
+    # where the count is not a finite number (an encoder finer than the float's spacing
+    # there) the reading is the position itself, as for a resolution of 0
+    return np.where((res_mm > 0) & np.isfinite(q), np.round(q) * res_mm, y)
 
 
 def zoh_step(P: np.ndarray, z: np.ndarray, y: np.ndarray, v: np.ndarray, f: np.ndarray, r_mm: Any,
@@ -220,13 +235,26 @@ class ArmBatch:
         return self.motor_work_j - 0.5 * self.m * self.v ** 2 - self.damper_j
 
 
+def start_m(arm: ArmParams, fing: FingerParams, y0_mm: float) -> float:
+    """A stylus's start ``y0_mm`` (mm) in metres, refused with a
+    :class:`~hapticsdk.errors.ValidationError` naming ``y0_mm`` where the finger's spring
+    energy at that distance, ``k y0^2 / 2``, is not a finite number (a finite but absurd
+    start such as 1e308 mm): the simulation books every energy it exchanges, so one it cannot
+    represent would give the servo loop NaN readings."""
+    y = float(y0_mm) * 1e-3
+    if not math.isfinite(0.5 * float(fing.stiffness_n_per_m) * y * y):
+        raise ValidationError(f"y0_mm={y0_mm!r}: a start this far gives the finger's spring an energy "
+                              f"beyond floating point", field="y0_mm")
+    return y
+
+
 class ArmSim:
     """One arm + finger axis with a scalar, allocation-free exact step (for the servo loop)."""
 
     def __init__(self, arm: ArmParams, fing: FingerParams, period_s: float = 0.001, y0_mm: float = 0.0) -> None:
         self.arm = arm
         self.finger = fing
-        self.y = float(y0_mm) * 1e-3
+        self.y = start_m(arm, fing, y0_mm)
         self.v = 0.0
         self._rows: dict[float, tuple[tuple[float, ...], tuple[float, ...]]] = {}
         self._rows_for(period_s)
@@ -257,7 +285,11 @@ class ArmSim:
         """
         res = self.arm.encoder_resolution_mm
         y = self.y * 1e3
-        return round(y / res) * res if res > 0 else y
+        if res > 0:
+            q = y / res
+            if q - q == 0.0:   # finite; an encoder finer than the float's spacing reads y itself
+                return round(q) * res
+        return y
 
 
 def free_arm_readings_mm(period_s: float, arm: ArmParams, forces_n: Any, y0_mm: float = 0.0) -> np.ndarray:

@@ -26,7 +26,7 @@ import numpy as np
 
 from hapticsdk.devices.actuators import DeviceState, SensedState
 from hapticsdk.perception.dimensions import ChannelCommand
-from hapticsdk.sim.arm import dissipation_gramians, readings_mm, transition_matrices
+from hapticsdk.sim.arm import dissipation_gramians, readings_mm, start_m, transition_matrices
 
 from .omni import OmniVirtual
 
@@ -51,7 +51,7 @@ class Omni3Virtual(OmniVirtual):
         y0 = y if self._y0 is None else float(self._y0)
         self.t = 0.0
         #: true stylus position (m) and velocity (m/s), per axis x, y, z
-        self.p = np.array([x, y0, z]) * 1e-3
+        self.p = np.array([x, start_m(self.arm, self.finger, y0) * 1e3, z]) * 1e-3
         self.v = np.zeros(3)
         self._res = np.full(3, self.arm.encoder_resolution_mm)
         self._p_meas = readings_mm(self.p, self._res)
@@ -61,6 +61,7 @@ class Omni3Virtual(OmniVirtual):
         self._d_set: tuple[float, float, float] | None = None
         self._z = np.zeros((3, 5))
         self._mats: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._matrices(0.001)  # parameters with no finite hold are refused here, by name
         #: work done by the motor force on the stylus (J), exact under the hold
         self.motor_work_j = 0.0
         #: energy the arm's own damping dissipated (J), exact (Van Loan's Gramian)
