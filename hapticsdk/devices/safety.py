@@ -419,6 +419,27 @@ class SafetyLayer:
         self._stale_counted = False
         return out
 
+    @staticmethod
+    def _steady_observer(layers: tuple) -> Any:
+        """One call doing :meth:`observe` of every layer of ``layers``, in their order,
+        for a servo loop's steady-state tick, or None when some layer's ``observe`` does
+        more than store the state: a speed limit is declared (the speed is computed and
+        judged every tick), the class or the instance replaces :meth:`observe`, or it is
+        not a :class:`SafetyLayer`. Moved to configuration time (this call): the
+        ``max_velocity_mm_s is None`` test of each layer. What it captured is out of date
+        when a layer's limits change: the layer tells its watchers (:meth:`_watch`), and
+        the caller builds a new one."""
+        for layer in layers:
+            if (not isinstance(layer, SafetyLayer) or layer._vmax is not None
+                    or getattr(layer.observe, "__func__", None) is not SafetyLayer.observe):
+                return None
+
+        def observe_all(state: Any) -> None:
+            for layer in layers:
+                layer._state = state
+                layer._speed_now = None
+        return observe_all
+
     def _steady_filter(self, force: bool) -> Any:
         """A compiled :meth:`filter` for the layer's steady state (``running``, not over
         speed), built from the limits and settings in force now, or None when this class

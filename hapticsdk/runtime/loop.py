@@ -90,6 +90,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from ..devices.safety import SafetyLayer
 from ..devices.actuators import Actuator, DeviceState, HapticDevice, SensedState, _frozen3, force_axes_of, servo_sender
 from ..perception.dimensions import ChannelCommand, DimensionRenderer, TickInput, _steady_law_of
 from ..errors import DeviceError, ValidationError
@@ -1006,8 +1007,13 @@ class ServoLoop:
                 sw_prev.end_contact()
             self.contact = contact
         obs_state = st if (direction is None and ht is None) or bad else _ContactState.at(st, pen)
-        for obs in self._observers:
-            obs.observe(obs_state)
+        if steady is not None and steady[3] is not None:
+            # the steady state's observers: each layer stores the state (no speed limit
+            # declared, SafetyLayer._steady_observer), in one call
+            steady[3](obs_state)
+        else:
+            for obs in self._observers:
+                obs.observe(obs_state)
         # ---- 3. render ------------------------------------------------
         if idx >= 0 and not self.paused:
             o = self._objs[idx]
@@ -1387,10 +1393,12 @@ class ServoLoop:
         do its operations) drops them, and the general parts run until they are built
         again at the end of a tick.
 
-        Returns ``(laws by object index, sends, row)``: each law with its outputs
-        ``(slot, index, is_force)``; each send ``(slot, role, is_force, steady send, pc,
-        actuator, general send, the role's record, first log column)``; the roles' log
-        values, refilled every tick."""
+        Returns ``(laws by object index, sends, row, observe_all)``: each law with its
+        outputs ``(slot, index, is_force)``; each send ``(slot, role, is_force, steady
+        send, pc, actuator, general send, the role's record, first log column)``; the
+        roles' log values, refilled every tick; one call observing every safety layer
+        (:meth:`~hapticsdk.devices.safety.SafetyLayer._steady_observer`), or None: each
+        layer's ``observe`` is called."""
         if (not self.fast_tick or self._ops or self.delay_ticks or not self._objs
                 or any(s.pending is not None for s in self._slots)):
             # (the delay line the run started with, whatever delay_ticks says now)
@@ -1430,7 +1438,8 @@ class ServoLoop:
             if steady is None:
                 return None
             sends.append((s, s.role, s.is_force, steady, s.pc, act, s.send, s.cmd, 3 * len(sends)))
-        return tuple(laws_of), tuple(sends), [0.0] * (3 * len(sends))
+        observe_all = SafetyLayer._steady_observer(tuple(observed))
+        return tuple(laws_of), tuple(sends), [0.0] * (3 * len(sends)), observe_all
 
     def _take(self) -> tuple[dict[str, float], dict[str, ChannelCommand]]:
         """What the slots hold from the renderers (every force role's sum, each vibration

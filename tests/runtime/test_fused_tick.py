@@ -634,3 +634,67 @@ def test_the_built_in_laws_return_floats_or_none_per_role(law_of):
         out = law(0.0, 0.001, pen, inc, v, 0.0, 0.0, v, 0.0, 0.0, 0.0)
         assert len(out) == 3 * len(r.roles)
         assert all(x is None or type(x) is float for x in out)
+
+
+def test_the_steady_state_tick_observes_every_layer_in_one_call_when_none_declares_a_speed_limit():
+    """Moved to configuration time: each layer's ``max_velocity_mm_s is None`` test of
+    ``observe``. The steady-state tick stores the state in every layer (one call), and
+    each layer holds this tick's state, as ``observe`` leaves it."""
+    loop, acts = _loop()
+    loop.start(2.0)
+    while loop._steady is None:
+        loop.tick()
+    assert loop._steady[3] is not None
+    loop.tick()
+    for a in acts.values():
+        assert a.safety._state is loop.last_state and a.safety._speed_now is None
+    loop.finish()
+
+
+def test_a_speed_limit_assigned_during_the_run_is_judged_on_the_very_next_tick():
+    """The layers' one-call observe is built without a speed check: a speed limit
+    assigned during the run drops it (the layer tells the loop), so the next tick's
+    observe computes the speed and judges it (over speed: counted and faulted)."""
+    loop, acts = _loop()
+    loop.start(2.0)
+    while loop._steady is None or abs(loop.last_state.vx) < 1.0:   # sliding
+        loop.tick()
+    coil = acts["coil"].safety
+    hits = coil.hits.get("max_velocity_mm_s", 0)
+    coil.limits = dataclasses.replace(acts["coil"].limits, max_velocity_mm_s=1e-3)
+    loop.tick()
+    assert abs(loop.last_state.vx) >= 1.0
+    assert coil._speed_now == loop.last_state.speed_mm_s
+    assert coil.hits["max_velocity_mm_s"] == hits + 1 and coil._overspeed and coil.phase != "running"
+    loop.finish()
+
+
+def test_a_layer_whose_observe_is_replaced_is_called_every_tick():
+    """Decided when the steady state is built: an ``observe`` replaced on the instance is
+    called on every tick (no one-call observe then)."""
+    loop, acts = _loop()
+    layer = acts["coil"].safety
+    calls = []
+    inner = layer.observe
+    layer.observe = lambda st: (calls.append(st), inner(st))[1]
+    rep = loop.run(1.0)
+    assert len(calls) == rep.ticks == 1000
+    assert SafetyLayer._steady_observer((layer,)) is None
+
+
+def test_a_layer_with_a_speed_limit_is_observed_through_observe_in_the_steady_state():
+    """A layer declaring a speed limit computes the speed on every tick of the steady
+    state too (its ``observe`` is called)."""
+    dev, rs, acts = build_scene(2.0)
+    layer = acts["coil"].safety
+    layer.limits = dataclasses.replace(acts["coil"].limits, max_velocity_mm_s=1e6)
+    loop = ServoLoop(dev, rs, acts, period_s=0.001)
+    loop.start(2.0)
+    n = 0
+    while n < 300:
+        n += loop._steady is not None
+        loop.tick()
+        assert layer._speed_now == loop.last_state.speed_mm_s
+    loop.finish()
+    assert SafetyLayer._steady_observer((acts["force"].safety, layer)) is None
+    assert SafetyLayer._steady_observer((acts["force"].safety,)) is not None
