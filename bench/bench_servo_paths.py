@@ -22,7 +22,8 @@ off, a spring wall of 0.3-50 N/mm, the finger preset, the motion's parameters):
   work the box's motion did through the force applied (each move at the mean of the forces
   held before and after it), the scene's work, which the rendering does not bound
   (docs/runtime.md, Passivity, "A moving wall"), with the cells whose probe went past the
-  box's middle (its bottom face the nearest, a reading that case leaves open) counted
+  box's middle (its bottom face the nearest: the one-axis turn, docs/runtime.md,
+  Passivity, "A turn on a device that renders one axis") counted
   apart, and the median delivered ratio;
 * ``thin``: the same presses into a plate of half-thickness 0.2-1.5 mm (a box 40 mm wide),
   so most go past its middle, where the nearest face turns from the top to the bottom and

@@ -118,7 +118,7 @@ class PassivityController:
     __slots__ = ("settings", "energy_j", "active_ticks", "withheld_n_ticks", "overdrawn_j", "spent_ticks", "below_ramp_ticks", "_said", "_q1", "_q2", "_hist", "_hp",
                  "_f1", "_f2", "_started", "_still", "_spring", "_kf", "_kc", "_full",
                  "_jw", "_jw_top", "_jw_at", "_j3w", "_j3w_top", "_j3w_at",
-                 "_a1", "_a2", "_a3", "_sent", "_pending", "_o", "_gap", "_dw")
+                 "_a1", "_a2", "_a3", "_sent", "_pending", "_o", "_gap", "_dw", "_tw")
 
     def __init__(self, settings: ControllerSettings | None = None, **kw: Any) -> None:
         self.settings = settings or ControllerSettings(**kw)
@@ -168,25 +168,30 @@ class PassivityController:
         self._pending = False       # a step returned a force that no commit has recorded yet
         self._gap = 0.0             # time (s) of the ticks since the last booked one that had no reading
         self._dw = 0.0              # the wall's move into the depth over the last booking (m; 0: at rest)
+        self._tw = 0.0              # a turn's part of that move the commit books (m; 0: none)
 
-    def rebase(self, readings_mm: "list[float]") -> None:
+    def rebase(self, readings_mm: "list[float]", booked_mm: float | None = None) -> None:
         """Replace the newest readings the controller holds (mm): ``readings_mm[0]`` the
-        last one, which the next :meth:`step` books from, ``readings_mm[j]`` the one ``j``
-        ticks before it; older ones are kept. The servo loop's turn of a contact normal on
-        a device that renders the force on all three axes (docs/runtime.md, Passivity, "A
-        normal that turns"): the history re-read along the new normal, so the plan's
-        prediction is of the motion the new force meets. A controller that has no reading
-        yet keeps none."""
+        last one, ``readings_mm[j]`` the one ``j`` ticks before it; older ones are kept. The
+        next :meth:`step` books the last interval from ``booked_mm`` (None: from
+        ``readings_mm[0]``) and predicts the motion from the readings. The servo loop's turn
+        of a contact normal (docs/runtime.md, Passivity, "A normal that turns"): the history
+        re-read along the new normal, so the plan's prediction is of the motion the new
+        force meets; on a device that renders all three axes the last interval is booked
+        from the re-read reading where that is lower, on one that renders fewer (whose
+        reading is the held force's work per newton, exactly) from the reading as it was.
+        A controller that has no reading yet keeps none."""
         if not self._started or not readings_mm:
             return
         hist = self._hist
         hp = self._hp
         for j in range(min(len(readings_mm), _HIST)):
             hist[hp - j] = readings_mm[j]
-        self._q1 = hist[hp]
+        self._q1 = hist[hp] if booked_mm is None else booked_mm
         self._q2 = hist[hp - 1]
 
-    def step(self, x_mm: float, dt: float, f_wall: float, own_mm: float | None = None) -> float:
+    def step(self, x_mm: float, dt: float, f_wall: float, own_mm: float | None = None,
+             turned_mm: float = 0.0) -> float:
         """Book the last interval, then return the force (N) to command this tick.
 
         ``own_mm``: where the object moved since the last reading, the stylus's own
@@ -195,7 +200,15 @@ class PassivityController:
         stylus's motion, not the wall's, so the damping credit is taken on it, and the
         spring's need on the product of it and the reading's change (docs/runtime.md,
         Passivity, "A moving wall"). None (the default): an object at rest, the reading's
-        change is the stylus's. A value that is not a finite number earns no credit."""
+        change is the stylus's. A value that is not a finite number earns no credit.
+
+        ``turned_mm`` (with ``own_mm``): where the force's direction turned over that span on
+        a device that renders it along fewer than three axes, ``(n_held - n_new) . dw`` on
+        those axes (mm, ``dw`` the object's move at the stylus). The frame's move is taken
+        at the mean of the force vectors held before and after it, and the book pairs it
+        with the held direction: the difference, half the force applied this tick times
+        ``turned_mm``, is booked on :meth:`commit` and priced in this tick's plan
+        (docs/runtime.md, Passivity, "A turn on a device that renders one axis")."""
         if self._pending:
             # no commit since the last step: the force it returned is taken as applied
             self.commit(self._sent)
@@ -315,7 +328,7 @@ class PassivityController:
             j3 = self._j3w_top
         still = self._still + 1 if dq == 0.0 else 0
         self._still = still
-        self._q2 = self._q1
+        self._q2 = x1   # (the last reading, as re-read at a turn: the one booked from otherwise)
         self._q1 = x_mm
         # the Colgate spring: the wall up to the stiffness its damping makes passive
         # (K_c = 2 b_s / T, at most one ramp step per count), as a function of the depth
@@ -402,17 +415,23 @@ class PassivityController:
             span += self._gap
             self._gap = 0.0
         b_x = b_lo - 0.5 * ks * span
+        tw = 0.0
         if own_mm is not None:
             # a moving object: the credit on the stylus's own motion (item 1, "A moving wall")
             u -= _moving_wall_credit(b_lo, b_x, ks, span, own_mm * 1e-3, dq, q)
             dw = own_mm * 1e-3 - dq
             self._dw = dw if -_INF < dw < _INF else 0.0
+            if turned_mm:
+                tw = turned_mm * 1e-3
+                if not -_INF < tw < _INF:
+                    tw = 0.0
         else:
             self._dw = 0.0
             if b_x < 0.0:
                 ex = abs(dq) + q         # the deficit: the largest displacement the readings allow
             if ex > 0.0:
                 u -= b_x * ex * ex / span
+        self._tw = tw
         rise = spring - s0   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf
@@ -473,6 +492,12 @@ class PassivityController:
                     + q / (still if still > 2 else 2))
             c_m = dt * dt / (2.0 * m) if m else 0.0
             A = e0 - u
+            if tw > 0.0:
+                # a turn's part of the move, half the force held this tick times tw, booked
+                # on the commit: the spring's share off the budget, the extra's per newton
+                # on the tick it is held (the plan's sum of the ramp is at least it)
+                A -= 0.5 * spring * tw
+                lead += 0.5 * tw
             if p == 0.0 and lo == 0.0 and A < 0.0 and 0.0 < lead + 2.0 * h < _INF and c_m < _INF:
                 # the bound spent and no extra held, the common tick of a spent book: the
                 # plan's answer is lo (the second exit of _affordable_scalar), decided here
@@ -521,6 +546,10 @@ class PassivityController:
         self._pending = False
         if not -_INF < f_applied < _INF:   # NaN or infinite: none applied
             f_applied = 0.0
+        if self._tw:
+            # the turn's part of the move, at half the force applied (step's turned_mm)
+            self.energy_j += 0.5 * f_applied * self._tw
+            self._tw = 0.0
         sp = self._spring
         if 0.0 < sp and f_applied < sp:
             # the device applied less than the spring (a safety layer's start ramp or clamp):

@@ -787,7 +787,7 @@ class ServoLoop:
         self._own_st: SensedState | None = None
         self._force_axes: tuple[int, ...] | None = None if axes == (0, 1, 2) else axes
         self._pcs = [s.pc for s in slots if s.pc is not None]
-        self._turns = NormalTurns() if axes == (0, 1, 2) and self._pcs else None
+        self._turns = NormalTurns(axes) if self._pcs else None
         self._have_good = False
         self._vf0 = self._vf1 = self._vf2 = 0.0
         self._vf_dt = -1.0   # the filter's coefficient and speed step: computed on the first tick
@@ -1093,6 +1093,7 @@ class ServoLoop:
         # ---- 4. passivity + send --------------------------------------
         last_x = self._last_x
         own: float | None = None   # the stylus's own motion (mm) where an object moved, else None
+        turned = 0.0               # and where the force's direction turned, the move's part that turn takes
         if bad:
             # no position: the controller books nothing and sends 0; its next booking spans
             # this tick too (the damping credit over the whole span)
@@ -1105,6 +1106,7 @@ class ServoLoop:
         else:
             x_n = -pen
             axes = self._force_axes
+            lpc = None   # the last position on the object, carried with it (the reading of fewer axes)
             if axes is not None and ht is not None:
                 # a device that renders the force only along some axes (the simulated
                 # Omni: y) does work on the motion along those axes alone: the reading's
@@ -1118,6 +1120,7 @@ class ServoLoop:
                 if idx != self._pc_obj or lp is None or (pen <= 0.0 and self.last_force_n == 0.0):
                     self._x_off = 0.0
                 elif hn is not None or direction is not None:
+                    lpc = lp
                     n = hn if hn is not None else _UP
                     dp = (p0 - lp[0], p1 - lp[1], p2 - lp[2])
                     w = 0.0
@@ -1140,23 +1143,32 @@ class ServoLoop:
                 # normal held and the one seen less than a right angle apart (another face of
                 # a box is a right angle or more away, and the reading that switches to it
                 # jumps with no wall move); the reading of "A force rendered along one axis"
-                # off the +y normal is the motion relative to the object there (its last
-                # position carried with the move, _apply_ops)
+                # is the held force's work on the motion relative to the object (its last
+                # position carried with the move, _apply_ops), continuous at any turn
                 n = hn if hn is not None else _UP
                 m = direction if direction is not None else _UP
-                if op is not None and idx == self._pc_obj and n[0] * m[0] + n[1] * m[1] + n[2] * m[2] > 0.0:
+                if op is not None and idx == self._pc_obj and (
+                        lpc is not None or n[0] * m[0] + n[1] * m[1] + n[2] * m[2] > 0.0):
                     dp = (p0 - op.px, p1 - op.py, p2 - op.pz)
                     own = 0.0
                     for i in (axes or (0, 1, 2)):
                         own += n[i] * dp[i]
+                    if lpc is not None and axes is not None and n != m:
+                        # a turn on fewer axes: the move of the object's point at the stylus,
+                        # dw = lpc - op, taken by the frame at the mean of the force vectors
+                        # before and after it; the book pairs it with the held one
+                        # (docs/runtime.md, Passivity, "A turn on a device that renders one axis")
+                        for i in axes:
+                            turned += (n[i] - m[i]) * (lpc[i] - (op.px, op.py, op.pz)[i])
         if not bad:
             # (also out of contact: the booking spans one tick, or the ticks without a reading;
             # the state itself, not a tuple of it: nothing allocated a tick)
             self._own_st = st
         turns = self._turns
         if turns is not None and ht is not None:
-            # all three axes rendered: the held force's work booked out of contact, the
-            # history re-read along a normal that turns (hapticsdk.runtime.turns)
+            # the history re-read along a normal that turns (on the axes rendered: a device
+            # that renders fewer keeps its book, the held force's exact work); with all
+            # three, the held force's work booked out of contact (hapticsdk.runtime.turns)
             if bad:
                 turns.forget()
             else:
@@ -1189,7 +1201,7 @@ class ServoLoop:
                     if pc is not None:
                         # (the stylus's own motion only where an object moved: a still scene
                         # calls the controller as before)
-                        f = pc.step(x_n, dt, f) if own is None else pc.step(x_n, dt, f, own)
+                        f = pc.step(x_n, dt, f) if own is None else pc.step(x_n, dt, f, own, turned)
                     if bad:
                         f = 0.0
                     try:
@@ -1239,7 +1251,7 @@ class ServoLoop:
                         s.pending.append(f)
                         f = s.pending.popleft()
                     if s.pc is not None:
-                        f = s.pc.step(x_n, dt, f) if own is None else s.pc.step(x_n, dt, f, own)
+                        f = s.pc.step(x_n, dt, f) if own is None else s.pc.step(x_n, dt, f, own, turned)
                     if bad:
                         f = 0.0   # an unknown position gets no force (the controller ramps from what was applied)
                     # the role's own record, refilled (the actuator keeps only its safety

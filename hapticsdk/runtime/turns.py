@@ -1,5 +1,8 @@
-"""The stiff-wall controller's reading on a device that renders the force on all three
-axes, in a spatial scene (docs/runtime.md, Passivity, "A normal that turns").
+"""The stiff-wall controller's reading at a turn of the force's direction, in a spatial
+scene: on a device that renders the force on all three axes (docs/runtime.md, Passivity,
+"A normal that turns"), and on one that renders fewer ("A turn on a device that renders
+one axis": there the loop's reading is the held force's work per newton already, the book
+is exact, and only the history the plan predicts from is re-read, on the rendered axes).
 
 In contact the reading is the distance to the surface, ``x = -pen`` (the loop's own). The
 force held over an interval is ``F n``, ``n`` the normal sent with it; its work per newton
@@ -62,29 +65,61 @@ def carrier(old: Any, new: Any) -> "Callable[[tuple[float, float, float]], tuple
 
 
 class NormalTurns:
-    """Measured positions since the contact began, and the readings of each tick."""
+    """Measured positions since the contact began, and the readings of each tick.
 
-    __slots__ = ("_ring", "_at", "_n")
+    ``axes``: the SDK axes the device renders the force along (``Actuator.force_axes``).
+    On all three the reading is the distance: a turn also books the last interval from the
+    re-read reading where that is lower, and a force held out of contact is booked along
+    its normal. On fewer (the simulated Omni: ``(1,)``) the loop's reading already is the
+    held force's work per newton, ``sum_(i in axes) n_i dp_i`` a tick (docs/runtime.md,
+    Passivity, "A force rendered along one axis"; out of contact the loop books the held
+    force at the re-entry): a turn is a change of the direction's part on those axes, and
+    only the history the plan predicts from is re-read, on them, while the last interval is
+    booked from the last reading as it was (docs/runtime.md, Passivity, "A normal that
+    turns", "A turn on a device that renders one axis").
+    """
 
-    def __init__(self) -> None:
+    __slots__ = ("_ring", "_at", "_n", "_axes")
+
+    def __init__(self, axes: Sequence[int] = (0, 1, 2)) -> None:
         self._ring: list[tuple[float, float, float]] = [(0.0, 0.0, 0.0)] * _HIST
         self._at = 0
         self._n = 0     # positions known, newest at _at (0: none)
+        self._axes: tuple[int, ...] | None = None if tuple(axes) == (0, 1, 2) else tuple(axes)
 
     def reading(self, pcs: Sequence[Any], x: float, last_x: float, in_contact: bool, same: bool,
                 p: tuple[float, float, float], d: "tuple[float, float, float] | None",
                 held: "tuple[float, float, float] | None", f_held: float) -> float:
         """This tick's reading (mm) for the controllers ``pcs`` (rebased where due, before
-        their step): ``x`` the loop's (``-pen`` in contact, the last reading out of it),
-        ``last_x`` the reading of the last tick, ``same`` the object the controllers
-        observe, ``p`` the measured position, ``d`` this tick's normal, ``held`` and
-        ``f_held`` the normal and force held over the last interval (None: +y)."""
+        their step): ``x`` the loop's (``-pen`` in contact, the last reading out of it; on a
+        device that renders fewer axes, the last reading plus the held force's work per
+        newton), ``last_x`` the reading of the last tick, ``same`` the object the
+        controllers observe, ``p`` the measured position, ``d`` this tick's normal, ``held``
+        and ``f_held`` the normal and force held over the last interval (None: +y)."""
         ring = self._ring
         at = self._at
         n = self._n if same or not in_contact else 0
         h = _UP if held is None else held
         lp = ring[at]
-        if not in_contact:
+        axes = self._axes
+        if axes is not None:
+            if in_contact and n:
+                dn = _UP if d is None else d
+                if any(dn[i] != h[i] for i in axes):
+                    # a turn of the force as rendered: the history the plan predicts from,
+                    # re-read along the new direction on the rendered axes back from this
+                    # reading; the last interval booked from the last reading (exact)
+                    q1 = x - sum(dn[i] * (p[i] - lp[i]) for i in axes)
+                    back = [q1]
+                    for j in range(1, _HIST):
+                        if j < n:
+                            r = ring[at - j]
+                            back.append(q1 - sum(dn[i] * (lp[i] - r[i]) for i in axes))
+                        else:
+                            back.append(back[-1])
+                    for pc in pcs:
+                        pc.rebase(back, last_x)
+        elif not in_contact:
             if n and f_held:
                 # the held force's work per newton, along its normal
                 x = last_x + h[0] * (p[0] - lp[0]) + h[1] * (p[1] - lp[1]) + h[2] * (p[2] - lp[2])

@@ -29,11 +29,7 @@ from hypothesis import strategies as st
 from hapticsdk.passivity import ControllerSettings, PassivityController
 from hapticsdk.passivity.batch import _moving_wall_credit_batch
 from hapticsdk.passivity.controller import _moving_wall_credit
-from hapticsdk.runtime import ServoLoop
-from hapticsdk.scene.geometry import Box, HitTester, Pose
-from hapticsdk.sim.finger import press_slide
-from omni_fits import measured
-from renderers import Spring
+from moving_slabs import moving_slab
 
 ENERGY_J = 1e-4          # the issue's bound on the energy to the user
 
@@ -44,37 +40,8 @@ def moving_press(k: float, period_s: float, damping: float, finger: str, depth: 
     and hold on a box that, from ``t_move`` (s), moves ``amp_mm`` up and down along y at
     ``hz``, through ``ServoLoop`` with a measured damping; and the largest of it less the
     work the box's motion did through the force applied."""
-    from hapticsdk_hardness.omni import OmniVirtual
-
-    tr = press_slide(depth_mm=depth, press_s=0.1, hold_s=hold_s, slide_s=0.0, release_s=0.1, rest_s=0.1)
-    dev = OmniVirtual(trajectory=tr, finger=finger, damping_ns_per_m=damping)
-    box = Box((20.0, 10.0, 10.0), pose=Pose((0.0, -10.0, 0.0)))
-    loop = ServoLoop(dev, (), {"force": dev}, period_s=period_s, passivity=True, objects=[("A", [Spring(k)])],
-                     hit_tester=HitTester([("A", box)]),
-                     passivity_settings=ControllerSettings.for_device(dev, damping=measured(damping)))
-    loop.start(tr.duration_s)
-    world = frame = -math.inf
-    scene = 0.0          # the work of the box's motion through the force (J)
-    wall = -10.0
-    f_prev = 0.0
-    while True:
-        t = loop.ticks * period_s
-        jump = 0.0
-        if t >= t_move:
-            y = -10.0 + amp_mm * math.sin(2.0 * math.pi * hz * (t - t_move))
-            jump, wall = (y - wall) * 1e-3, y
-            loop.set_pose(0, Pose((0.0, y, 0.0)))
-        more = loop.tick()
-        n = loop._held_n
-        f_now = loop.last_force_n * (1.0 if n is None else n[1])   # along y, the box's motion
-        scene += 0.5 * (f_prev + f_now) * jump
-        f_prev = f_now
-        e = dev.energy_to_user_j()
-        world = max(world, e)
-        frame = max(frame, e - scene)
-        if not more:
-            break
-    loop.finish()
+    world, frame, _ = moving_slab(k, period_s, damping, finger, depth, (20.0, 10.0, 10.0), amp_mm, hz, t_move,
+                                  hold_s=hold_s)
     return world, frame
 
 

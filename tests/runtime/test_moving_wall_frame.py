@@ -172,9 +172,10 @@ def test_past_the_middle_the_damping_credit_is_taken_on_the_stylus_s_own_motion(
     seen: list[float | None] = []
     step = PassivityController.step
 
-    def spy(self: PassivityController, x: float, dt: float, f: float, own: float | None = None) -> float:
+    def spy(self: PassivityController, x: float, dt: float, f: float, own: float | None = None,
+            turned: float = 0.0) -> float:
         seen.append(own)
-        return step(self, x, dt, f) if own is None else step(self, x, dt, f, own)
+        return step(self, x, dt, f) if own is None else step(self, x, dt, f, own, turned)
     monkeypatch.setattr(PassivityController, "step", spy)
     checked = 0
     y = None
