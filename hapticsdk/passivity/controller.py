@@ -207,8 +207,10 @@ class PassivityController:
         those axes (mm, ``dw`` the object's move at the stylus). The frame's move is taken
         at the mean of the force vectors held before and after it, and the book pairs it
         with the held direction: the difference, half the force applied this tick times
-        ``turned_mm``, is booked on :meth:`commit` and priced in this tick's plan
-        (docs/runtime.md, Passivity, "A turn on a device that renders one axis")."""
+        ``turned_mm``, is booked on :meth:`commit` and priced in this tick's plan, the
+        Colgate spring's share too: on a turn with ``turned_mm > 0`` the spring is at most
+        ``2 (E0 - U) / turned`` (docs/runtime.md, Passivity, "A turn on a device that
+        renders one axis", "The spring at a turn")."""
         if self._pending:
             # no commit since the last step: the force it returned is taken as applied
             self.commit(self._sent)
@@ -432,6 +434,25 @@ class PassivityController:
             if ex > 0.0:
                 u -= b_x * ex * ex / span
         self._tw = tw
+        if e0_p is not None:
+            e0 = e0_p
+        else:
+            e0 = full * h
+            if e0 > allowance:
+                e0 = allowance
+        if tw > 0.0 and spring > 0.0 and energy_bound:
+            # a turn's part of the move, half the force applied times tw, is no change of the
+            # spring's stored energy (its passivity is along one direction): the spring's
+            # share is priced like the extra's, the spring at most what the budget left
+            # affords, 2 (E0 - U) / tw, its anchor moved in to match (stored energy kept
+            # back, as at a new contact; docs/runtime.md, Passivity, "A turn on a device
+            # that renders one axis", the spring at a turn)
+            cap = 2.0 * (e0 - u) / tw
+            if spring > cap:
+                spring = cap if cap > 0.0 else 0.0
+                o = depth - spring / kc
+                self._o = o
+                kf = kc if spring > 0.0 else 0.0
         rise = spring - s0   # the spring's change since the last tick
         self._spring = spring
         self._kf = kf
@@ -441,12 +462,6 @@ class PassivityController:
             self._sent = 0.0
             return 0.0
         self.energy_j = u
-        if e0_p is not None:
-            e0 = e0_p
-        else:
-            e0 = full * h
-            if e0 > allowance:
-                e0 = allowance
         if u - e0 > self.overdrawn_j:
             self.overdrawn_j = u - e0
         # work in the direction of the wall's force (the last output's when the wall is 0)
