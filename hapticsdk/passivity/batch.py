@@ -133,7 +133,8 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
     j3h = state["j3h"]
     j3h[hp] = np.maximum(np.abs(x - 3.0 * (hist[hp - 1] - hist[hp - 2]) - hist[hp - 3]) * 1e-3 - 4.0 * q, 0.0)
     j3 = j3h.max(axis=0)
-    still = np.where(dq == 0.0, state["still"] + 1.0, 0.0)
+    rest = state["still"]   # ticks the reading had rested before this one
+    still = np.where(dq == 0.0, rest + 1.0, 0.0)
     state["still"] = still
     state["q2"] = q1
     state["q1"] = x.copy()
@@ -215,6 +216,19 @@ def controller_step_batch(state: dict[str, np.ndarray], x_mm: np.ndarray, dt: "f
         stuck = (a == lo) & (lo > 0.0) & (u > e0) & (plan_cost_j(lo, p, lead, c_m, step, 0.5 * q) > e0 - u)
         if stuck.any():
             a = np.where(stuck, below_ramp_force(e0 - u, lo, p, lead, c_m, step, 0.5 * q), a)
+        # one count out after a rest of more than 2 ticks and nothing fits, not even the ramp
+        # down (taken anyway): the take-up of the spring's fall priced at what it adds to
+        # that ramp, within what is left of the allowance (the scalar tick's rule, item 3,
+        # "the count crossing")
+        one = np.abs(dq) <= q + _BRANCH_TOL * (np.abs(x) + np.abs(q1)) * 1e-3
+        cross = ~stuck & (a == lo) & (p > 0.0) & (fall > 0.0) & (u < e0) & one & (rest > 2.0)
+        if cross.any():
+            base = plan_cost_j(lo, p, lead, c_m, step, 0.5 * q)
+            hold = np.minimum(p - step + fall, p)
+            cross &= (base > e0 - u) & (hold > lo)
+            if cross.any():
+                a = np.where(cross, affordable_force(e0 - u + base, lo, np.where(cross, hold, hi), p, lead, c_m, step,
+                                                     0.5 * q), a)
     if "below_ramp" in state:
         state["below_ramp"] = stuck & started & ~idle
     spring = np.where(started & ~idle, spring, 0.0)

@@ -77,8 +77,9 @@ class PassivityController:
     safety layer's start ramp or clamp) lowers it to that force and moves ``o`` in, and the
     energy that took out is credited to ``U`` where the spring is on its ``K_c`` branch. The extra gives way to the spring's rise, so the force rises by at most ``s`` per
     tick; on a release it takes up the spring's fall (never above what it held) where the
-    plan affords it, so the force falls by at most ``s``, else by at most ``s`` plus the
-    spring's fall ``K_c |dq|``.
+    plan affords it (on a move out by one count after a rest, where not even the ramp down fits: priced
+    at what the take-up adds to that ramp, within what is left of the allowance), so the
+    force falls by at most ``s``, else by at most ``s`` plus the spring's fall ``K_c |dq|``.
 
     **The extra** ``X = F - P`` carries the rest of the wall. The controller keeps ``U``,
     an *upper bound* of the energy the extra has given the user, from the readings ``q``
@@ -328,7 +329,8 @@ class PassivityController:
             self._j3w_at = w.index(j3)
         else:
             j3 = self._j3w_top
-        still = self._still + 1 if dq == 0.0 else 0
+        rest = self._still          # ticks the reading had rested before this one
+        still = rest + 1 if dq == 0.0 else 0
         self._still = still
         self._q2 = x1   # (the last reading, as re-read at a turn: the one booked from otherwise)
         self._q1 = x_mm
@@ -531,6 +533,21 @@ class PassivityController:
                     # the book is overdrawn")
                     a = _below_ramp_scalar(A, lo, p, lead, c_m, step, h)
                     self.below_ramp_ticks += 1
+                elif (a == lo and rise < 0.0 < p and A > 0.0 and rest > 2
+                      and abs(dq) <= q + _BRANCH_TOL * (abs(x_mm) + abs(x1)) * 1e-3):
+                    # the reading moved out by one count after a rest long enough for the
+                    # plan's speed estimate to shrink below half a count (more than 2
+                    # ticks), and nothing fits, not even the ramp down, which is taken
+                    # anyway: the extra's take-up of the spring's fall is priced at what it
+                    # adds to that ramp (the same encoder term; the work of holding more),
+                    # within what is left of the allowance, so that the whole force falls
+                    # by at most s (item 3, "the count crossing")
+                    base = _cost_scalar(lo, p, lead, c_m, step, h)
+                    hold = p - step - rise
+                    if hold > p:
+                        hold = p
+                    if base > A and hold > lo:
+                        a = _affordable_scalar(A + base, lo, hold, p, lead, c_m, step, h)
         if a < target:
             self.active_ticks += 1
             self.withheld_n_ticks += target - a
