@@ -8,6 +8,7 @@ untimed case is checked here against :func:`~hapticsdk.sim.arm.free_arm_readings
 (``expm`` of the arm's own system), so an error in the fit's response shows.
 """
 
+import functools
 import math
 
 import numpy as np
@@ -110,24 +111,39 @@ def _switches(f):
     return np.flatnonzero(np.diff(np.concatenate([[0.0], f])))
 
 
+@functools.lru_cache(maxsize=None)
+def _one_late_force(T, m, b):
+    """The excitation's run of an exact-reading arm timed at k T, and per switch k of the
+    force, that switch alone late by L = 0.02 T: ``(forces, timestamps, arm, L, base,
+    [(k, readings, d_k)])``, d_k the fitted damping (timestamps, no timing terms) less
+    ``base`` (the fit of the run with nothing late). A pure function of (T, m, b), computed
+    once for the two tests below that both need every d_k (read-only: the arrays are not
+    writable)."""
+    L = 0.02 * T
+    f = excitation(T, 3.3, m)
+    t = np.arange(f.size + 1) * T
+    arm = _arm(m, b, 0.0)
+    base = fit_damping(f, timed_free_arm_readings_mm(t, f, arm), T, 0.0, times_s=t).damping_ns_per_m
+    late = []
+    for k in _switches(f):
+        lam = np.zeros(f.size)
+        lam[k] = L
+        y = timed_free_arm_readings_mm(t, f, arm, force_delays_s=lam)
+        y.flags.writeable = False
+        late.append((k, y, fit_damping(f, y, T, 0.0, times_s=t).damping_ns_per_m - base))
+    f.flags.writeable = t.flags.writeable = False
+    return f, t, arm, L, base, tuple(late)
+
+
 @pytest.mark.parametrize("T, m, b", [(1e-3, 0.045, 0.5), (0.5e-3, 0.1, 1.5), (4e-3, 0.02, 0.1)])
 def test_the_latency_term_is_the_worst_delay_pattern_to_first_order(T, m, b):
     """The force-latency term is a worst case that is reached: delaying each switch of the
     force alone moves the fitted damping by d_k; delaying just those that raise it (the
     worst pattern within the spread) raises it by sum(d_k^+), which the term bounds and
     is not far above (a small spread, so first order; exact readings)."""
-    L = 0.02 * T
-    f = excitation(T, 3.3, m)
-    t = np.arange(f.size + 1) * T
-    arm = _arm(m, b, 0.0)
-    base = fit_damping(f, timed_free_arm_readings_mm(t, f, arm), T, 0.0, times_s=t).damping_ns_per_m
-    sw = _switches(f)
-    d = []
-    for k in sw:
-        lam = np.zeros(f.size)
-        lam[k] = L
-        d.append(fit_damping(f, timed_free_arm_readings_mm(t, f, arm, force_delays_s=lam), T, 0.0,
-                             times_s=t).damping_ns_per_m - base)
+    f, t, arm, L, base, late = _one_late_force(T, m, b)
+    sw = np.array([k for k, _, _ in late])
+    d = [dk for _, _, dk in late]
     worst = np.zeros(f.size)
     worst[sw[np.array(d) > 0]] = L
     y = timed_free_arm_readings_mm(t, f, arm, force_delays_s=worst)
@@ -150,18 +166,13 @@ def test_each_late_force_and_a_late_reading_are_bounded_one_by_one(T, m, b):
     late force only ever counts against the bound one way). A late step whose force was
     dropped is covered by the term of a device that may drop it. Readings all sampled late by
     P raise the damping by less than the readings' timing term; early, they lower it."""
-    L = P = 0.02 * T
-    f = excitation(T, 3.3, m)
+    f, t, arm, L, base, late = _one_late_force(T, m, b)
+    P = L
     n = f.size
-    t = np.arange(n + 1) * T
-    arm = _arm(m, b, 0.0)
-    base = fit_damping(f, timed_free_arm_readings_mm(t, f, arm), T, 0.0, times_s=t).damping_ns_per_m
-    for k in _switches(f):
+    for k, y, d in late:
         lam = np.zeros(n)
         lam[k] = L
-        y = timed_free_arm_readings_mm(t, f, arm, force_delays_s=lam)
         fit = fit_damping(f, y, T, 0.0, times_s=t, force_delay_s=lam)
-        d = fit_damping(f, y, T, 0.0, times_s=t).damping_ns_per_m - base
         assert d <= fit.timing_error_ns_per_m, k
     for k in _switches(f)[:8] + 3:
         # step k 2 % longer than a period, its force dropped after one (first order, as
