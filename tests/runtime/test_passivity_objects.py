@@ -27,6 +27,7 @@ device did not apply", and the tests at the end of this file).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -259,6 +260,15 @@ def test_the_span_without_readings_is_credited_once_over_its_length():
     assert math.isclose(gap.energy_j, one.energy_j / 11.0, rel_tol=1e-9), (one.energy_j, gap.energy_j)
 
 
+@functools.lru_cache(maxsize=None)
+def _clean_press(k: float, period_s: float, damping: float, finger: str, depth: float, press_s: float, hold_s: float,
+                 release_s: float) -> float:
+    """:func:`run_press` without unread ticks: a deterministic simulation, so a press that
+    hypothesis draws again with other unread ticks (its mutations keep a drawn press and
+    vary the rest: 26 of the 200 presses below) is run once."""
+    return run_press(k, period_s, damping, finger, depth, press_s, hold_s, release_s, 0.0, 0)
+
+
 @settings(max_examples=200, deadline=None, derandomize=True, database=None,
           suppress_health_check=[HealthCheck.too_slow])
 @given(k=st.floats(0.3, 50.0), period_s=st.sampled_from([2.5e-4, 5e-4, 1e-3, 2e-3]),
@@ -271,7 +281,7 @@ def test_unread_ticks_in_a_press_stay_within_the_bound(k, period_s, damping, fin
     the loop with a measured damping can be over it by itself: the Colgate spring's encoder
     term, docs/runtime.md, Passivity item 0), the unread ticks keep it so."""
     t_bad = press_s + at * hold_s
-    clean = run_press(k, period_s, damping, finger, depth, press_s, hold_s, release_s, 0.0, 0)
+    clean = _clean_press(k, period_s, damping, finger, depth, press_s, hold_s, release_s)
     if clean > ENERGY_J:
         return
     e = run_press(k, period_s, damping, finger, depth, press_s, hold_s, release_s, t_bad, n_bad)
