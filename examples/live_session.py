@@ -90,12 +90,19 @@ def main() -> None:
             finally:
                 handled.set()
 
+    def on_any(e) -> None:
+        show(e)
+        if e.kind == "contact_enter":
+            on_contact(e)
+
     with hs.Session(scene, trajectory=finger, record=record, view=args.view is not None) as s:
         print(f"servo running in process {s.servo_pid}; objects: {s.objects}")
         if s.view is not None:
             print(f"live view: {s.view.url}  (open it in a browser)")
-        s.on_event("*", show)
-        s.on_event("contact_enter", on_contact)
+        # one callback for every event: the first one registered also gets the events
+        # published since the session started (a contact made while this script was still
+        # setting up, on a busy machine), a second one only those after it was registered
+        s.on_event("*", on_any)
         time.sleep(finger.duration_s + 0.3 + (args.view or 0.0))
         # the walk is over; on a busy machine the event thread may still be in the
         # handler: let it finish, and let the servo render the new material, before closing
