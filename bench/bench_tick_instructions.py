@@ -3,6 +3,7 @@ cachegrind: figures that do not move with the machine's load, optionally side by
 with a git ref.
 
     OMP_NUM_THREADS=1 python bench/bench_tick_instructions.py [--ticks 4000] [--baseline REF] [--json]
+                                                              [--scene timing|ball3|face3]
 
 What it measures: the scene of ``hapticsdk bench timing`` (hardness + roughness on the
 simulated Omni, voice coil and piezo; 1 ms period, simulated clock). A child of this
@@ -23,6 +24,16 @@ misses of cachegrind's simulated caches (its model of this CPU's caches, not the
 counters, which this virtual machine does not expose). Misses matter: the tick's CPU
 time in ``bench timing`` is about twice its time when run hot, because the simulation
 (numpy code) evicts the interpreter's code and data from the caches between ticks.
+
+``--scene ball3`` and ``--scene face3``: a stylus on ``omni3-virtual`` (x, y and z
+actuated, so the loop re-reads the controller's history where the contact normal turns:
+``hapticsdk/runtime/turns.py``) pressed 1 mm into a plain spring wall of 0.5 N/mm and
+sliding back and forth along x over +-5 mm at 20 mm/s, 1 ms period, the medium finger, 0.5
+N s/m of damping declared: over the top of a ball of 20 mm radius (the normal turns on
+every tick that the reading moves) or along the top face of a box (the normal never
+turns). The frozen rows do not apply there (a frozen stylus reads the same position every
+tick, so the normal never turns): two rows, ``tick + simulation`` with the controller on
+and off.
 
 What it does not measure: time; the real CPU's caches, branch predictor or frequency;
 the import and start-up of a process. With ``--baseline REF`` the files of ``REF`` are
@@ -63,12 +74,54 @@ for _ in range(ticks):
 os._exit(0)
 '''
 
+#: the 3-axis scenes (``--scene ball3|face3``); argv: ticks, scene, passivity
+CHILD3 = r'''
+import gc, math, os, sys
+from pathlib import Path
+import hapticsdk
+sys.path.insert(0, str(Path(hapticsdk.__file__).resolve().parents[1] / "tests"))
+from renderers import Spring
+from hapticsdk.runtime import ServoLoop
+from hapticsdk.scene.geometry import Box, HitTester, Pose, Sphere
+from hapticsdk.sim.finger import Trajectory
+from hapticsdk_hardness.omni3 import Omni3Virtual
+ticks, scene, passivity = int(sys.argv[1]), sys.argv[2], sys.argv[3] == "1"
+R, depth, half, speed = 20.0, 1.0, 5.0, 20.0
+if scene == "ball3":
+    shape = Sphere(R, pose=Pose((0.0, -R, 0.0)))
+    top = lambda x: math.sqrt(R * R - x * x) - R
+else:
+    shape = Box((R, R, R), pose=Pose((0.0, -R, 0.0)))
+    top = lambda x: 0.0
+xs = [-half + 0.25 * i for i in range(int(4 * half) * 2 + 1)]
+knots = [(0.0, -half, 1.0, 0.0), (0.2, -half, top(-half) - depth, 0.0)]
+t = 0.2
+for leg in range(12):
+    for x in (xs[1:] if leg % 2 == 0 else xs[-2::-1]):
+        t += 0.25 / speed
+        knots.append((t, x, top(x) - depth, 0.0))
+dev = Omni3Virtual(trajectory=Trajectory(knots), finger="medium", damping_ns_per_m=0.5)
+loop = ServoLoop(dev, (), {"force": dev}, period_s=0.001, passivity=passivity, objects=[("o", [Spring(0.5)])],
+                 hit_tester=HitTester([("o", shape)]))
+loop.start(t)
+gc.disable()
+for _ in range(500):
+    loop.tick()
+for _ in range(ticks):
+    loop.tick()
+os._exit(0)
+'''
+
 ROWS = (("tick + simulation", False, True), ("tick alone", True, True),
         ("tick + simulation, passivity off", False, False), ("tick alone, passivity off", True, False))
 _COUNT = re.compile(r"==\d+==\s+(I\s+refs|I1\s+misses|D1\s+misses):\s+([\d,]+)")
 
 
-def count(tree: Path | None, ticks: int, frozen: bool, passivity: bool) -> dict[str, int]:
+ROWS3 = (("tick + simulation", False, True), ("tick + simulation, passivity off", False, False))
+SCENES = ("timing", "ball3", "face3")
+
+
+def count(tree: Path | None, ticks: int, frozen: bool, passivity: bool, scene: str = "timing") -> dict[str, int]:
     """cachegrind's totals of one child (``ticks`` after the warm-up)."""
     from hapticsdk.benchmarks.baseline import PRELUDE, _child_env
     env = _child_env(tree)
@@ -78,7 +131,8 @@ def count(tree: Path | None, ticks: int, frozen: bool, passivity: bool) -> dict[
     else:
         env.pop("HAPTICSDK_BASELINE_TREE", None)
     cmd = ["valgrind", "--tool=cachegrind", "--cache-sim=yes", "--cachegrind-out-file=/dev/null",
-           sys.executable, "-c", PRELUDE + CHILD, str(ticks), "1" if frozen else "0", "1" if passivity else "0"]
+           sys.executable, "-c", PRELUDE + (CHILD if scene == "timing" else CHILD3), str(ticks),
+           ("1" if frozen else "0") if scene == "timing" else scene, "1" if passivity else "0"]
     out = subprocess.run(cmd, env=env, cwd=tree, capture_output=True, text=True, timeout=1800)
     if out.returncode != 0:
         raise RuntimeError(f"child failed: {out.stderr.strip().splitlines()[-1:]}")
@@ -86,11 +140,11 @@ def count(tree: Path | None, ticks: int, frozen: bool, passivity: bool) -> dict[
     return {"instructions": got["I refs"], "i1_misses": got["I1 misses"], "d1_misses": got["D1 misses"]}
 
 
-def per_tick(tree: Path | None, ticks: int) -> dict[str, dict[str, float]]:
+def per_tick(tree: Path | None, ticks: int, scene: str = "timing") -> dict[str, dict[str, float]]:
     out = {}
-    for name, frozen, passivity in ROWS:
-        a = count(tree, 0, frozen, passivity)
-        b = count(tree, ticks, frozen, passivity)
+    for name, frozen, passivity in (ROWS if scene == "timing" else ROWS3):
+        a = count(tree, 0, frozen, passivity, scene)
+        b = count(tree, ticks, frozen, passivity, scene)
         out[name] = {k: (b[k] - a[k]) / ticks for k in a}
     return out
 
@@ -98,6 +152,10 @@ def per_tick(tree: Path | None, ticks: int) -> dict[str, dict[str, float]]:
 def main(argv: list[str]) -> int:
     ticks = int(argv[argv.index("--ticks") + 1]) if "--ticks" in argv else 4000
     ref = argv[argv.index("--baseline") + 1] if "--baseline" in argv else None
+    scene = argv[argv.index("--scene") + 1] if "--scene" in argv else "timing"
+    if scene not in SCENES:
+        print(f"--scene: one of {', '.join(SCENES)}", file=sys.stderr)
+        return 2
     if shutil.which("valgrind") is None:
         print("valgrind not found: install the Debian package valgrind", file=sys.stderr)
         return 2
@@ -108,17 +166,17 @@ def main(argv: list[str]) -> int:
         repo = repository_of(Path(hapticsdk.__file__).parent)
         commit = resolve(repo, ref)
         with exported_tree(repo, commit) as tree:
-            results[f"baseline {ref} ({commit[:10]})"] = per_tick(tree, ticks)
-    results["this code"] = per_tick(None, ticks)
+            results[f"baseline {ref} ({commit[:10]})"] = per_tick(tree, ticks, scene)
+    results["this code"] = per_tick(None, ticks, scene)
     if "--json" in argv:
-        print(json.dumps({"ticks": ticks, "per_tick": results}, indent=1))
+        print(json.dumps({"ticks": ticks, "scene": scene, "per_tick": results}, indent=1))
         return 0
     print(f"per servo tick, cachegrind (valgrind {subprocess.run(['valgrind', '--version'], capture_output=True, text=True).stdout.strip()}), "
           f"{ticks} ticks after 500 warm-up ticks, PYTHONHASHSEED=0, Python {sys.version.split()[0]}; "
-          "simulated level-1 caches, not the CPU's counters")
+          f"simulated level-1 caches, not the CPU's counters; scene {scene}")
     print(f"{'':34s} {'':40s} {'instructions':>13s} {'I1 misses':>10s} {'D1 misses':>10s}")
     names = list(results)
-    for row, _, _ in ROWS:
+    for row, _, _ in (ROWS if scene == "timing" else ROWS3):
         for n in names:
             d = results[n][row]
             print(f"{row:34s} {n:40s} {d['instructions']:13.0f} {d['i1_misses']:10.0f} {d['d1_misses']:10.0f}")

@@ -186,8 +186,14 @@ class PassivityController:
             return
         hist = self._hist
         hp = self._hp
-        for j in range(min(len(readings_mm), _HIST)):
-            hist[hp - j] = readings_mm[j]
+        if len(readings_mm) >= _HIST:
+            # the whole ring (the servo loop's re-read): the newest from hp back to 0, then
+            # the rest from the ring's end
+            hist[hp::-1] = readings_mm[:hp + 1]
+            hist[:hp:-1] = readings_mm[hp + 1:_HIST]
+        else:
+            for j in range(len(readings_mm)):
+                hist[hp - j] = readings_mm[j]
         self._q1 = hist[hp] if booked_mm is None else booked_mm
         self._q2 = hist[hp - 1]
 
