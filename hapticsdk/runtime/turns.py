@@ -64,6 +64,17 @@ def carrier(old: Any, new: Any) -> "Callable[[tuple[float, float, float]], tuple
     return carry
 
 
+def _re_read(q1: float, dn: Any, lp: Any, older: Any) -> list[float]:
+    """``q1 - dn . (lp - r)`` for each position ``r`` of ``older``, the three products summed
+    in that order. A turn comes on every tick that a curved surface's reading moves, so this
+    is one comprehension (docs/runtime.md, "A normal that turns", its cost); it is a function
+    of its own so that the names it closes over are cells of this call only, not of every
+    :meth:`NormalTurns.reading`."""
+    d0, d1, d2 = dn
+    l0, l1, l2 = lp
+    return [q1 - (d0 * (l0 - r0) + d1 * (l1 - r1) + d2 * (l2 - r2)) for r0, r1, r2 in older]
+
+
 class NormalTurns:
     """Measured positions since the contact began, and the readings of each tick.
 
@@ -129,17 +140,12 @@ class NormalTurns:
                 # a turn (also at an entry where the nearest face outside was another):
                 # the history along the new normal, booked from at most the last reading
                 # (the same on a convex shape)
-                d0, d1, d2 = dn
-                l0, l1, l2 = lp
-                q1 = min(last_x, x - (d0 * (p[0] - l0) + d1 * (p[1] - l1) + d2 * (p[2] - l2)))
-                # the positions 1 .. n-1 ticks before lp, newest first (ring[at - j]), each
-                # re-read with the same sums in the same order; older ones as the oldest
-                # (a turn comes on every tick that a curved surface's reading moves, so
-                # this is one comprehension over slices: docs/runtime.md, "A normal that
-                # turns", its cost)
+                q1 = min(last_x, x - (dn[0] * (p[0] - lp[0]) + dn[1] * (p[1] - lp[1]) + dn[2] * (p[2] - lp[2])))
+                # the positions 1 .. n-1 ticks before lp, newest first (ring[at - j]); older
+                # ones as the oldest
                 older = ring[at - 1::-1] + ring[:at:-1] if at else ring[:0:-1]
                 back = [q1]
-                back += [q1 - (d0 * (l0 - r0) + d1 * (l1 - r1) + d2 * (l2 - r2)) for r0, r1, r2 in older[:n - 1]]
+                back += _re_read(q1, dn, lp, older[:n - 1])
                 if n < _HIST:
                     back += [back[-1]] * (_HIST - n)
                 for pc in pcs:
