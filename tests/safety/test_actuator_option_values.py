@@ -6,7 +6,8 @@ configuration, ``--device-option`` and code, and reach the plugin's constructor 
 ``argcheck.call_with_options``, which named a plugin's TypeError / ValueError on a value
 but let its other failures through: a scene's ``"frequency_range_hz": []`` raised
 IndexError, ``{"a": 1}`` KeyError, ``"keep_s": 1e308`` / ``"y0_mm": 1e308`` /
-``"encoder_resolution_mm": 5e-324`` OverflowError (a float that became an infinite int),
+``"encoder_resolution_mm": 5e-324`` OverflowError (a float that became an infinite int; such
+an encoder now reads the position itself, as one of resolution 0),
 and from code ``Decimal("sNaN")`` decimal.InvalidOperation.
 
 A property test over the class: hypothesis draws an installed actuator, one of its keyword
@@ -77,16 +78,28 @@ def test_any_value_of_any_actuator_option(option, value):
 
 @pytest.mark.parametrize("role, actuator, key, value", [
     ("vibration", "piezo-virtual", "frequency_range_hz", []), ("vibration", "piezo-virtual", "frequency_range_hz", {"a": 1}),
-    ("vibration", "piezo-virtual", "keep_s", 1e308), ("force", "omni-virtual", "y0_mm", 1e308),
-    ("force", "omni-virtual", "encoder_resolution_mm", 5e-324)])
+    ("vibration", "piezo-virtual", "keep_s", 1e308), ("force", "omni-virtual", "y0_mm", 1e308)])
 def test_a_scene_file_with_such_an_option_is_refused_by_its_path(tmp_path, role, actuator, key, value):
+    with pytest.raises(ValidationError) as err:
+        _render_with(tmp_path, role, actuator, key, value)
+    assert key in err.value.field or err.value.field.endswith(f"{role}.options") or "options" in err.value.field
+
+
+def test_an_encoder_finer_than_the_float_renders_as_an_exact_one(tmp_path):
+    # 5e-324 mm (was an OverflowError, named as the option's): a count that is no finite
+    # number reads the position itself, as a resolution of 0 does (hapticsdk.sim.arm.readings_mm)
+    fine = _render_with(tmp_path, "force", "omni-virtual", "encoder_resolution_mm", 5e-324)
+    exact = _render_with(tmp_path, "force", "omni-virtual", "encoder_resolution_mm", 0.0)
+    assert fine.fault is None and exact.fault is None
+    assert fine.ticks == exact.ticks > 0
+
+
+def _render_with(tmp_path, role, actuator, key, value):
     d = json.loads((ROOT / "examples/scenes/desk-spatial.json").read_text())
     d.setdefault("devices", {})[role] = {"actuator": actuator, "options": {key: value}}
     d["settings"]["solver"]["method"] = "polish"
     (tmp_path / "s.json").write_text(json.dumps(d))
-    with pytest.raises(ValidationError) as err:
-        hs.render_plan(hs.compile_scene(hs.load_scene(tmp_path / "s.json")), seconds=0.005)
-    assert key in err.value.field or err.value.field.endswith(f"{role}.options") or "options" in err.value.field
+    return hs.render_plan(hs.compile_scene(hs.load_scene(tmp_path / "s.json")), seconds=0.005)
 
 
 def test_a_bug_of_the_callee_without_options_is_not_hidden():
