@@ -1149,7 +1149,8 @@ class ServoLoop:
                 m = direction if direction is not None else _UP
                 if op is not None and idx == self._pc_obj and (
                         lpc is not None or n[0] * m[0] + n[1] * m[1] + n[2] * m[2] > 0.0):
-                    dp = (p0 - op.px, p1 - op.py, p2 - op.pz)
+                    o3 = (op.px, op.py, op.pz)
+                    dp = (p0 - o3[0], p1 - o3[1], p2 - o3[2])
                     own = 0.0
                     for i in (axes or (0, 1, 2)):
                         own += n[i] * dp[i]
@@ -1159,7 +1160,7 @@ class ServoLoop:
                         # before and after it; the book pairs it with the held one
                         # (docs/runtime.md, Passivity, "A turn on a device that renders one axis")
                         for i in axes:
-                            turned += (n[i] - m[i]) * (lpc[i] - (op.px, op.py, op.pz)[i])
+                            turned += (n[i] - m[i]) * (lpc[i] - o3[i])
         if not bad:
             # (also out of contact: the booking spans one tick, or the ticks without a reading;
             # the state itself, not a tuple of it: nothing allocated a tick)

@@ -118,16 +118,12 @@ class NormalTurns:
                 dn = _UP if d is None else d
                 if any(dn[i] != h[i] for i in axes):
                     # a turn of the force as rendered: the history the plan predicts from,
-                    # re-read along the new direction on the rendered axes back from this
-                    # reading; the last interval booked from the last reading (exact)
-                    q1 = x - sum(dn[i] * (p[i] - lp[i]) for i in axes)
-                    back = [q1]
-                    for j in range(1, _HIST):
-                        if j < n:
-                            r = ring[at - j]
-                            back.append(q1 - sum(dn[i] * (lp[i] - r[i]) for i in axes))
-                        else:
-                            back.append(back[-1])
+                    # re-read along the new direction on the rendered axes (its part off
+                    # them taken as 0) back from this reading; the last interval booked
+                    # from the last reading (exact)
+                    dr = (dn[0] if 0 in axes else 0.0, dn[1] if 1 in axes else 0.0, dn[2] if 2 in axes else 0.0)
+                    back = self._history(x - (dr[0] * (p[0] - lp[0]) + dr[1] * (p[1] - lp[1])
+                                              + dr[2] * (p[2] - lp[2])), dr, lp, at, n)
                     for pc in pcs:
                         pc.rebase(back, last_x)
         elif not in_contact:
@@ -141,13 +137,7 @@ class NormalTurns:
                 # the history along the new normal, booked from at most the last reading
                 # (the same on a convex shape)
                 q1 = min(last_x, x - (dn[0] * (p[0] - lp[0]) + dn[1] * (p[1] - lp[1]) + dn[2] * (p[2] - lp[2])))
-                # the positions 1 .. n-1 ticks before lp, newest first (ring[at - j]); older
-                # ones as the oldest
-                older = ring[at - 1::-1] + ring[:at:-1] if at else ring[:0:-1]
-                back = [q1]
-                back += _re_read(q1, dn, lp, older[:n - 1])
-                if n < _HIST:
-                    back += [back[-1]] * (_HIST - n)
+                back = self._history(q1, dn, lp, at, n)
                 for pc in pcs:
                     pc.rebase(back)
         at = at + 1 if at + 1 < _HIST else 0
@@ -155,6 +145,18 @@ class NormalTurns:
         self._at = at
         self._n = n + 1 if n < _HIST else _HIST
         return x
+
+    def _history(self, q1: float, dn: Any, lp: Any, at: int, n: int) -> list[float]:
+        """The readings re-read along ``dn`` back from ``q1``, newest first, ``_HIST`` of them:
+        each of the positions 1 .. n-1 ticks before ``lp`` (``ring[at - j]``) by
+        :func:`_re_read`, older ones as the oldest known."""
+        ring = self._ring
+        older = ring[at - 1::-1] + ring[:at:-1] if at else ring[:0:-1]
+        back = [q1]
+        back += _re_read(q1, dn, lp, older[:n - 1])
+        if n < _HIST:
+            back += [back[-1]] * (_HIST - n)
+        return back
 
     def carry(self, move: "Callable[[tuple[float, float, float]], tuple[float, float, float]]") -> None:
         """The object the controllers observe moved (:func:`carrier`): the positions known

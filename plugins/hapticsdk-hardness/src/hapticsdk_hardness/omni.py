@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 from typing import Any, ClassVar
 
-
 from hapticsdk.argcheck import number
 from hapticsdk.devices.actuators import ActuatorLimits, DeviceState, HapticDevice, SensedState
 from hapticsdk.perception.dimensions import ChannelCommand

@@ -51,7 +51,8 @@ class Omni3Virtual(OmniVirtual):
         y0 = y if self._y0 is None else float(self._y0)
         self.t = 0.0
         #: true stylus position (m) and velocity (m/s), per axis x, y, z
-        self.p = np.array([x, start_m(self.arm, self.finger, y0) * 1e3, z]) * 1e-3
+        start_m(self.arm, self.finger, y0)   # a start that far is refused by name
+        self.p = np.array([x, y0, z]) * 1e-3
         self.v = np.zeros(3)
         self._res = np.full(3, self.arm.encoder_resolution_mm)
         self._p_meas = readings_mm(self.p, self._res)
